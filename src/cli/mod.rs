@@ -1,0 +1,106 @@
+//! Command line: argument definitions (clap) and dispatch to one module per subcommand.
+//!
+//! Exit codes (documented in the README):
+//! - 0: success (also: stdin EOF, SIGTERM/SIGINT after flushing, stdout closed by the reader)
+//! - 1: a runtime error in `trace` mode (decreasing timestamps, multiple events, error values)
+//! - 2: a spec error (parse, type, include ...) or a bad command line
+//! - 3: an I/O error that stops the run (input file unreadable, UDP address not bindable)
+
+use clap::{Args, Parser, Subcommand};
+use std::path::PathBuf;
+
+pub const EXIT_OK: i32 = 0;
+pub const EXIT_RUNTIME: i32 = 1;
+pub const EXIT_SPEC: i32 = 2;
+pub const EXIT_IO: i32 = 3;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "tessla-telegraf",
+    version,
+    about = "Runtime verification of TeSSLa specifications as a Telegraf processors.execd plugin",
+    args_conflicts_with_subcommands = true
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+    /// `run` is the default subcommand: its options may be given without the word `run`.
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Read line protocol (stdin, or UDP), check it against the spec, write verdicts (default).
+    Run(RunArgs),
+    /// Parse and check a spec; print its inputs and outputs with types and annotations.
+    Check(CheckArgs),
+    /// Run a spec over a TeSSLa input trace and print TeSSLa's output trace format.
+    Trace(TraceArgs),
+}
+
+/// Options shared by every subcommand that loads a spec.
+#[derive(Debug, Args, Clone, Default)]
+pub struct SpecOptions {
+    /// Base time unit of time literals, in TeSSLa's form (`1 ns`, `1 ms`, `33333 µs`).
+    #[arg(long, value_name = "UNIT", default_value = "1 ns")]
+    pub base_time: String,
+    /// Override a top-level constant of the spec: `--set delta=0.05` (repeatable).
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    pub set: Vec<String>,
+}
+
+#[derive(Debug, Args, Clone, Default)]
+pub struct CheckArgs {
+    /// The `.tessla` file.
+    pub spec: PathBuf,
+    #[command(flatten)]
+    pub spec_options: SpecOptions,
+}
+
+#[derive(Debug, Args, Clone, Default)]
+pub struct TraceArgs {
+    /// The `.tessla` file.
+    pub spec: PathBuf,
+    /// The input trace (`TS: name = value` lines); stdin when absent.
+    pub trace: Option<PathBuf>,
+    #[command(flatten)]
+    pub spec_options: SpecOptions,
+}
+
+#[derive(Debug, Args, Clone, Default)]
+pub struct RunArgs {
+    /// The `.tessla` file; without it the bundled robot monitors run.
+    #[arg(long)]
+    pub spec: Option<PathBuf>,
+    #[command(flatten)]
+    pub spec_options: SpecOptions,
+}
+
+pub fn main() -> i32 {
+    let cli = Cli::parse();
+    match cli.command {
+        None => run(cli.run),
+        Some(Command::Run(a)) => run(a),
+        Some(Command::Check(a)) => check(a),
+        Some(Command::Trace(a)) => trace(a),
+    }
+}
+
+fn run(args: RunArgs) -> i32 {
+    let _ = args;
+    eprintln!("E! run: not implemented yet");
+    EXIT_SPEC
+}
+
+fn check(args: CheckArgs) -> i32 {
+    let _ = args;
+    eprintln!("E! check: not implemented yet");
+    EXIT_SPEC
+}
+
+fn trace(args: TraceArgs) -> i32 {
+    let _ = args;
+    eprintln!("E! trace: not implemented yet");
+    EXIT_SPEC
+}
