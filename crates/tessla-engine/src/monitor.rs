@@ -1,12 +1,11 @@
-//! The evaluation engine: runs a compiled specification ([`Program`]) over timestamped input events.
+//! Monitor instances: runs a compiled specification ([`Program`]) over timestamped input events.
 //!
 //! Owns: monitor state and the step semantics (synchronous steps per timestamp, the implicit step
 //! at the origin, `last`/`delay` timing, error values). Data flows one way: the front end
-//! (`crate::spec`) lowers a checked spec into a [`Program`]; callers (the trace runner, the
-//! Telegraf binding) create one [`Monitor`] per instance, push input events and receive output
+//! (`crate::check`) lowers a checked spec into a [`Program`]; callers (the trace runner, the Telegraf binding) create one [`Monitor`] per instance, push input events and receive output
 //! events through a sink callback. This module never parses text and never does I/O.
 //!
-//! API contract (used by `crate::trace` and `crate::telegraf`):
+//! API contract (used by the trace runner and the Telegraf binding):
 //! - [`Monitor::new`] starts at TeSSLa time 0; [`Monitor::starting_at`] puts the implicit first
 //!   step (constants, `count`'s 0, `period`'s first tick) at `t0` instead, so a Telegraf run whose
 //!   first record is at epoch-ns `t0` does not replay 1970..t0.
@@ -22,11 +21,8 @@
 //! - Runtime errors (division by zero, overflow, `getSome(None)`) are values: an output whose value
 //!   is [`Value::Error`] reaches the sink like any other event; the caller reports it.
 
-pub mod ir;
-pub mod value;
-
-pub use ir::{Annotation, InputInfo, OutputInfo, Program, Type};
-pub use value::{RuntimeError, Value};
+use crate::ir::Program;
+use crate::value::Value;
 
 use std::sync::Arc;
 

@@ -4,7 +4,7 @@
 //! types, scopes or evaluation; the checker (`spec::check`) consumes it. Every node that can be
 //! the subject of a diagnostic carries a [`Span`].
 
-use crate::spec::source::Span;
+use crate::source::Span;
 
 /// A parsed source file: its includes (already listed, not yet loaded) and its statements.
 #[derive(Debug, Clone, PartialEq)]

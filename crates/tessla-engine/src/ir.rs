@@ -3,7 +3,7 @@
 //! Owns: [`Program`] (what the front end produces and the evaluator runs), the metadata the
 //! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s.
 
-use crate::engine::value::Value;
+use crate::value::Value;
 
 /// A value type, as reported by `check` and used by bindings to convert inputs.
 #[derive(Debug, Clone, PartialEq)]

@@ -5,7 +5,7 @@
 //! match "an error of the right kind"), and rendering with `codespan-reporting` (file, line,
 //! column, the source line with a caret, and a `help:` line when a fix is known).
 
-use crate::spec::source::{FileId, SourceMap, Span};
+use crate::source::{FileId, SourceMap, Span};
 use codespan_reporting::diagnostic::{Diagnostic as CsDiagnostic, Label, Severity};
 use codespan_reporting::files::{Error as FilesError, Files};
 use codespan_reporting::term::{self, termcolor};

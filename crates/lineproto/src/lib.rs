@@ -1,0 +1,1 @@
+//! lineproto: InfluxDB line protocol as Telegraf writes and reads it.

@@ -1,0 +1,12 @@
+//! tessla-engine: checks a parsed TeSSLa spec, lowers it to a flat core IR and evaluates it.
+//!
+//! Owns: name resolution, macro expansion and type checking (front-end semantics), the IR
+//! (`ir`), values (`value`) and monitor instances (`monitor`).
+
+pub mod ir;
+pub mod monitor;
+pub mod value;
+
+pub use ir::{Annotation, InputInfo, OutputInfo, Program, Type};
+pub use monitor::{InputError, Monitor, OutputEvent};
+pub use value::{RuntimeError, Value};

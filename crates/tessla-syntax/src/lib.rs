@@ -1,0 +1,8 @@
+//! tessla-syntax: TeSSLa 1.2 source text -> AST with spans, and the diagnostics every phase uses.
+//!
+//! Owns: source files and spans (`source`), diagnostics and their rendering (`diag`), the AST
+//! (`ast`), and parsing. It knows nothing about types or evaluation (see `tessla-engine`).
+
+pub mod ast;
+pub mod diag;
+pub mod source;
