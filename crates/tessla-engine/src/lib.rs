@@ -4,9 +4,12 @@
 //! (`ir`), values (`value`) and monitor instances (`monitor`).
 
 pub mod ir;
+pub mod load;
+pub mod natives;
 pub mod monitor;
 pub mod value;
 
 pub use ir::{Annotation, InputInfo, OutputInfo, Program, Type};
 pub use monitor::{InputError, Monitor, OutputEvent};
-pub use value::{RuntimeError, Value};
+pub use load::{LoadError, LoadOptions, Loaded, load_file, load_with};
+pub use value::{Callable, RuntimeError, Value};

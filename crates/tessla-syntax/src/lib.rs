@@ -5,4 +5,5 @@
 
 pub mod ast;
 pub mod diag;
+pub mod include;
 pub mod source;

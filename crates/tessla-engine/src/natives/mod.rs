@@ -1,0 +1,32 @@
+//! The registry of native (Rust) functions a spec reaches with `extern("name")`.
+//!
+//! Owns: the name -> implementation table. Types are not here: each native is declared with its
+//! TeSSLa signature in a prelude or library spec (`def f(a: Int): Int = extern("f")`), and the
+//! checker types calls from that declaration. Natives are strict: the evaluator passes no
+//! `Value::Error` argument to a native (it propagates the first error itself), so an
+//! implementation only handles well-typed, error-free values. Natives that take functions call
+//! them through [`crate::value::Callable`].
+
+use crate::value::Value;
+
+/// A native implementation: well-typed, error-free arguments in, a value (maybe an error) out.
+pub type NativeFn = fn(&[Value]) -> Value;
+
+/// One entry of the registry.
+#[derive(Debug, Clone, Copy)]
+pub struct Native {
+    pub name: &'static str,
+    pub func: NativeFn,
+}
+
+/// The native named `name`, if any.
+pub fn lookup(name: &str) -> Option<&'static Native> {
+    REGISTRY.iter().find(|n| n.name == name)
+}
+
+/// Every native, for diagnostics that list the known names.
+pub fn all() -> &'static [Native] {
+    REGISTRY
+}
+
+static REGISTRY: &[Native] = &[];
