@@ -8,3 +8,5 @@
 //! subcommands.
 
 pub mod cli;
+pub mod replay;
+pub mod report;

@@ -7,6 +7,9 @@
 //! - 3: an I/O error that stops the run (input file unreadable, UDP address not bindable)
 
 use clap::{Args, Parser, Subcommand};
+
+pub mod replay;
+pub mod report;
 use std::path::PathBuf;
 
 pub const EXIT_OK: i32 = 0;
@@ -37,6 +40,10 @@ pub enum Command {
     Check(CheckArgs),
     /// Run a spec over a TeSSLa input trace and print TeSSLa's output trace format.
     Trace(TraceArgs),
+    /// Publish a recorded robot run to MQTT as the robot's JSON messages.
+    Replay(replay::ReplayArgs),
+    /// Render a run's line protocol (pass-through and verdicts) as an HTML report with SVG plots.
+    Report(report::ReportArgs),
 }
 
 /// Options shared by every subcommand that loads a spec.
@@ -84,6 +91,8 @@ pub fn main() -> i32 {
         Some(Command::Run(a)) => run(a),
         Some(Command::Check(a)) => check(a),
         Some(Command::Trace(a)) => trace(a),
+        Some(Command::Replay(a)) => replay::run(a),
+        Some(Command::Report(a)) => report::run(a),
     }
 }
 

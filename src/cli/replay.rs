@@ -1,0 +1,166 @@
+//! `tessla-telegraf replay`: publish a recorded robot run to MQTT as the robot's JSON messages.
+//!
+//! Reads the whole file (line protocol or CSV), reports skipped records on stderr, connects
+//! (an unreachable broker is an error naming it, exit 3), then publishes each message when it is
+//! due, with a progress bar on a terminal, and prints one summary line.
+
+use crate::cli::{EXIT_IO, EXIT_OK, EXIT_SPEC};
+use crate::replay::message::{MessageOptions, to_json};
+use crate::replay::mqtt::{Broker, Publisher, parse_qos};
+use crate::replay::{Recording, pacing, read_csv, read_lp};
+use clap::{Args, ValueEnum};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum, Default)]
+pub enum InputFormat {
+    /// `.csv` files are CSV, anything else line protocol.
+    #[default]
+    Auto,
+    /// InfluxDB line protocol, as in tests/fixtures.
+    Lp,
+    /// CSV with a header row.
+    Csv,
+}
+
+#[derive(Debug, Args, Clone)]
+pub struct ReplayArgs {
+    /// The recorded run: line protocol (as in our fixtures) or CSV with a header.
+    pub file: PathBuf,
+    /// The MQTT broker.
+    #[arg(long, value_name = "mqtt://HOST:PORT", default_value = "mqtt://127.0.0.1:1883")]
+    pub broker: String,
+    /// The topic the robot publishes on.
+    #[arg(long, default_value = "tessla")]
+    pub topic: String,
+    /// Replay speed: 1 = recorded pacing, 2 = twice as fast, 0 = as fast as possible.
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Input format.
+    #[arg(long, value_enum, default_value_t = InputFormat::Auto)]
+    pub format: InputFormat,
+    /// Line protocol: replay only records of this measurement (e.g. `mqtt_consumer`).
+    #[arg(long, value_name = "NAME")]
+    pub measurement: Option<String>,
+    /// Publish this field as a JSON string, as the paper's robot does with `actualSpeed` (repeatable).
+    #[arg(long = "string-field", value_name = "NAME")]
+    pub string_fields: Vec<String>,
+    /// Add the recorded timestamp (integer ns) under this JSON key (Telegraf: `json_time_key`
+    /// with `json_time_format = "unix_ns"`).
+    #[arg(long, value_name = "KEY")]
+    pub time_key: Option<String>,
+    /// Pause between records that have no timestamp, in milliseconds (5 Hz scans: 200).
+    #[arg(long, value_name = "MS", default_value_t = 200)]
+    pub interval_ms: u64,
+    /// MQTT quality of service: 0, 1 (default: every message acknowledged by the broker) or 2.
+    #[arg(long, default_value_t = 1)]
+    pub qos: u8,
+    /// MQTT client id (default: tessla-replay-<pid>).
+    #[arg(long)]
+    pub client_id: Option<String>,
+}
+
+/// Run the subcommand; returns the exit code.
+pub fn run(args: ReplayArgs) -> i32 {
+    match replay(&args) {
+        Ok(()) => EXIT_OK,
+        Err((code, message)) => {
+            eprintln!("E! replay: {message}");
+            code
+        }
+    }
+}
+
+type Failure = (i32, String);
+
+fn replay(args: &ReplayArgs) -> Result<(), Failure> {
+    let speed = pacing::check_speed(args.speed).map_err(|e| (EXIT_SPEC, e))?;
+    let qos = parse_qos(args.qos).map_err(|e| (EXIT_SPEC, e))?;
+    let broker: Broker = args.broker.parse().map_err(|e| (EXIT_SPEC, e))?;
+    let recording = read_recording(&args.file, args.format, args.measurement.as_deref())?;
+    for skipped in &recording.skipped {
+        eprintln!("W! replay: {}: skipped {skipped}", args.file.display());
+    }
+    if recording.samples.is_empty() {
+        return Err((
+            EXIT_IO,
+            format!("{}: no records to replay", args.file.display()),
+        ));
+    }
+    let options = MessageOptions {
+        string_fields: args.string_fields.clone(),
+        time_key: args.time_key.clone(),
+    };
+    let times: Vec<Option<i64>> = recording.samples.iter().map(|s| s.time_ns).collect();
+    let due = pacing::offsets(&times, speed, Duration::from_millis(args.interval_ms));
+
+    let client_id = args
+        .client_id
+        .clone()
+        .unwrap_or_else(|| format!("tessla-replay-{}", std::process::id()));
+    let mut publisher = Publisher::connect(&broker, &client_id, qos, Duration::from_secs(10))
+        .map_err(|e| (EXIT_IO, e))?;
+
+    let bar = progress_bar(recording.samples.len());
+    let start = Instant::now();
+    for (sample, offset) in recording.samples.iter().zip(&due) {
+        let wait = offset.saturating_sub(start.elapsed());
+        if !wait.is_zero() {
+            std::thread::sleep(wait);
+        }
+        let payload = to_json(sample, &options).to_string().into_bytes();
+        publisher
+            .publish(&args.topic, payload)
+            .map_err(|e| (EXIT_IO, e))?;
+        bar.inc(1);
+    }
+    let published = publisher
+        .finish(Duration::from_secs(30))
+        .map_err(|e| (EXIT_IO, e))?;
+    bar.finish_and_clear();
+    eprintln!(
+        "I! replay: published {published} messages from {} to {broker} topic {:?} in {:.1} s ({} skipped)",
+        args.file.display(),
+        args.topic,
+        start.elapsed().as_secs_f64(),
+        recording.skipped.len()
+    );
+    Ok(())
+}
+
+fn read_recording(
+    path: &Path,
+    format: InputFormat,
+    measurement: Option<&str>,
+) -> Result<Recording, Failure> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| (EXIT_IO, format!("cannot read {}: {e}", path.display())))?;
+    let is_csv = match format {
+        InputFormat::Csv => true,
+        InputFormat::Lp => false,
+        InputFormat::Auto => path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("csv")),
+    };
+    if is_csv {
+        read_csv::read(&text).map_err(|e| (EXIT_IO, format!("{}: {e}", path.display())))
+    } else {
+        Ok(read_lp::read(&text, measurement))
+    }
+}
+
+/// A progress bar on stderr when it is a terminal, hidden otherwise.
+fn progress_bar(len: usize) -> ProgressBar {
+    if !std::io::stderr().is_terminal() {
+        return ProgressBar::with_draw_target(Some(len as u64), ProgressDrawTarget::hidden());
+    }
+    let bar = ProgressBar::new(len as u64);
+    if let Ok(style) =
+        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} msgs ({eta})")
+    {
+        bar.set_style(style);
+    }
+    bar
+}

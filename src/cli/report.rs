@@ -1,0 +1,56 @@
+//! `tessla-telegraf report`: render a run's line protocol (our output with pass-through) as an
+//! HTML page with SVG plots, an MSE table and violation counts.
+
+use crate::cli::{EXIT_IO, EXIT_OK};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Debug, Args, Clone)]
+pub struct ReportArgs {
+    /// Line protocol written by `tessla-telegraf run` (pass-through telemetry and verdicts);
+    /// `-` reads stdin.
+    pub file: PathBuf,
+    /// Folder to write `index.html` and the SVG plots into (created when missing).
+    #[arg(short = 'o', long = "output", value_name = "DIR")]
+    pub output: PathBuf,
+}
+
+/// Run the subcommand; returns the exit code.
+pub fn run(args: ReportArgs) -> i32 {
+    let (text, name) = if args.file.as_os_str() == "-" {
+        let mut text = String::new();
+        if let Err(e) = std::io::Read::read_to_string(&mut std::io::stdin(), &mut text) {
+            eprintln!("E! report: cannot read stdin: {e}");
+            return EXIT_IO;
+        }
+        (text, "stdin".to_string())
+    } else {
+        match std::fs::read_to_string(&args.file) {
+            Ok(text) => (text, args.file.display().to_string()),
+            Err(e) => {
+                eprintln!("E! report: cannot read {}: {e}", args.file.display());
+                return EXIT_IO;
+            }
+        }
+    };
+    match crate::report::write_report(&text, &name, &args.output) {
+        Ok(written) => {
+            let s = &written.summary;
+            println!("{}", written.html.display());
+            for svg in &written.svgs {
+                println!("{}", svg.display());
+            }
+            let mse = s.mse.map_or_else(|| "no data".to_string(), |v| format!("{v:.6e}"));
+            eprintln!(
+                "I! report: {} records; MSE expected/actual speed {mse}; P1 violated {} unknown {}; \
+                 P2 violated {}; P3 spikes {} dropouts {}",
+                s.records, s.p1_violated, s.p1_unknown, s.p2_violations, s.p3_spikes, s.p3_dropouts
+            );
+            EXIT_OK
+        }
+        Err(e) => {
+            eprintln!("E! report: {e}");
+            EXIT_IO
+        }
+    }
+}

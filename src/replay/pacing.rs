@@ -1,0 +1,103 @@
+//! When each message of a replay is due: the recorded pacing scaled by `--speed`.
+//!
+//! Offsets are measured from the first message. A sample without a timestamp comes one
+//! `interval` after the previous one; a timestamp earlier than the previous one does not move
+//! time backwards (the message goes out right after its predecessor). `speed` 0 means as fast as
+//! possible: every offset is zero.
+
+use std::time::Duration;
+
+/// Check a `--speed` value: finite and not negative.
+pub fn check_speed(speed: f64) -> Result<f64, String> {
+    if speed.is_finite() && speed >= 0.0 {
+        Ok(speed)
+    } else {
+        Err(format!(
+            "--speed must be a number >= 0 (0 = as fast as possible), not {speed}"
+        ))
+    }
+}
+
+/// The due offset of every sample, from its timestamp (`None` = untimed).
+pub fn offsets(times_ns: &[Option<i64>], speed: f64, interval: Duration) -> Vec<Duration> {
+    let mut offsets = Vec::with_capacity(times_ns.len());
+    if speed <= 0.0 || !speed.is_finite() {
+        offsets.resize(times_ns.len(), Duration::ZERO);
+        return offsets;
+    }
+    // Recorded time elapsed since the first sample, in ns, never decreasing.
+    let mut elapsed_ns: u128 = 0;
+    let mut previous: Option<i64> = None;
+    let step_ns = interval.as_nanos();
+    for (i, time) in times_ns.iter().enumerate() {
+        if i > 0 {
+            match (previous, time) {
+                (Some(prev), Some(now)) => {
+                    let delta = i128::from(*now) - i128::from(prev);
+                    elapsed_ns += u128::try_from(delta).unwrap_or(0);
+                }
+                _ => elapsed_ns += step_ns,
+            }
+        }
+        if let Some(now) = time {
+            // A step back in time is not replayed, but the next forward step is measured
+            // from the largest time seen so far.
+            previous = Some(previous.map_or(*now, |p| p.max(*now)));
+        } else if let Some(p) = previous {
+            previous = Some(p.saturating_add(i64::try_from(step_ns).unwrap_or(i64::MAX)));
+        }
+        let scaled = elapsed_ns as f64 / speed;
+        offsets.push(Duration::from_nanos(scaled.min(u64::MAX as f64) as u64));
+    }
+    offsets
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const MS: i64 = 1_000_000;
+
+    #[test]
+    fn recorded_pacing_is_scaled() {
+        let t = [Some(1000 * MS), Some(1200 * MS), Some(1600 * MS)];
+        let real = offsets(&t, 1.0, Duration::from_millis(200));
+        assert_eq!(
+            real,
+            vec![Duration::ZERO, Duration::from_millis(200), Duration::from_millis(600)]
+        );
+        let fast = offsets(&t, 4.0, Duration::from_millis(200));
+        assert_eq!(
+            fast,
+            vec![Duration::ZERO, Duration::from_millis(50), Duration::from_millis(150)]
+        );
+    }
+
+    #[test]
+    fn speed_zero_is_as_fast_as_possible() {
+        let t = [Some(0), Some(10 * MS), None];
+        assert_eq!(offsets(&t, 0.0, Duration::from_secs(1)), vec![Duration::ZERO; 3]);
+    }
+
+    #[test]
+    fn untimed_samples_use_the_interval_and_time_never_goes_back() {
+        let t = [None, None, None];
+        assert_eq!(
+            offsets(&t, 1.0, Duration::from_millis(100)),
+            vec![Duration::ZERO, Duration::from_millis(100), Duration::from_millis(200)]
+        );
+        let back = [Some(500 * MS), Some(300 * MS), Some(700 * MS)];
+        assert_eq!(
+            offsets(&back, 1.0, Duration::from_millis(100)),
+            vec![Duration::ZERO, Duration::ZERO, Duration::from_millis(200)]
+        );
+    }
+
+    #[test]
+    fn bad_speeds_are_rejected() {
+        assert!(check_speed(-1.0).is_err());
+        assert!(check_speed(f64::NAN).is_err());
+        assert_eq!(check_speed(0.0), Ok(0.0));
+        assert_eq!(check_speed(2.5), Ok(2.5));
+    }
+}

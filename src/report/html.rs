@@ -1,0 +1,163 @@
+//! The report page: a well-formed (XML-parsable) HTML5 document with the summary table, the MSE
+//! and violation counts, and the SVG plots. Every number in the table also carries its full
+//! precision in a `data-value` attribute, for tools and tests.
+
+use super::data::Run;
+use super::stats::Summary;
+
+/// Escape text for HTML/XML content and attribute values.
+pub fn escape(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&#39;"),
+            c if c.is_control() && c != '\n' && c != '\t' => out.push('\u{FFFD}'),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+fn number_row(id: &str, label: &str, value: Option<f64>, shown: String) -> String {
+    let data = value.map_or_else(String::new, |v| format!(" data-value=\"{v:e}\""));
+    format!(
+        "<tr><th scope=\"row\">{}</th><td id=\"{id}\"{data}>{}</td></tr>\n",
+        escape(label),
+        escape(&shown)
+    )
+}
+
+fn count_row(id: &str, label: &str, count: usize, of: Option<usize>) -> String {
+    let shown = match of {
+        Some(total) => format!("{count} of {total}"),
+        None => count.to_string(),
+    };
+    number_row(id, label, Some(count as f64), shown)
+}
+
+fn fmt_opt(value: Option<f64>) -> String {
+    value.map_or_else(|| "no data".to_string(), |v| format!("{v:.6e}"))
+}
+
+/// The whole page. `plots` are `(file name, title)` of the SVGs next to the page.
+pub fn page(source_name: &str, s: &Summary, plots: &[(&str, &str)], run: &Run) -> String {
+    let mut out = String::new();
+    out.push_str("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\"/>\n");
+    out.push_str(&format!(
+        "<title>tessla-telegraf report: {}</title>\n",
+        escape(source_name)
+    ));
+    out.push_str(
+        "<style>body{font-family:sans-serif;max-width:1000px;margin:auto}\
+         table{border-collapse:collapse}th,td{border:1px solid #999;padding:4px 8px;text-align:left}\
+         img{max-width:100%}</style>\n</head>\n<body>\n",
+    );
+    out.push_str(&format!(
+        "<h1>Run report</h1>\n<p>Source: <code>{}</code>; {} records over {:.1} s{}.</p>\n",
+        escape(source_name),
+        s.records,
+        s.duration_s,
+        if s.skipped > 0 {
+            format!(", {} lines skipped (not line protocol)", s.skipped)
+        } else {
+            String::new()
+        }
+    ));
+    let measurements = {
+        let mut names: Vec<&str> = run.records.iter().map(|r| r.measurement.as_str()).collect();
+        names.sort_unstable();
+        names.dedup();
+        names.join(", ")
+    };
+    out.push_str(&format!(
+        "<p>Measurements: {}</p>\n",
+        escape(&measurements)
+    ));
+
+    out.push_str("<h2>Mean squared error</h2>\n<table id=\"mse\">\n");
+    out.push_str(&number_row(
+        "mse-telemetry",
+        &format!(
+            "MSE expected vs actual speed, from the telemetry ({} pairs) [(m/s)²]",
+            s.mse_pairs
+        ),
+        s.mse,
+        fmt_opt(s.mse),
+    ));
+    out.push_str(&number_row(
+        "mse-spec",
+        "speed_mse reported by the spec at the end [(m/s)²]",
+        s.spec_mse,
+        fmt_opt(s.spec_mse),
+    ));
+    out.push_str("</table>\n");
+
+    out.push_str("<h2>Violations</h2>\n<table id=\"violations\">\n");
+    out.push_str(&count_row(
+        "p1-violated",
+        "P1 braking distance: steps violated",
+        s.p1_violated,
+        Some(s.p1_violated + s.p1_unknown + s.p1_ok),
+    ));
+    out.push_str(&count_row(
+        "p1-unknown",
+        "P1 braking distance: steps unknown (sector blinded)",
+        s.p1_unknown,
+        Some(s.p1_violated + s.p1_unknown + s.p1_ok),
+    ));
+    out.push_str(&count_row(
+        "p2-violated",
+        "P2 tolerance: steps violated",
+        s.p2_violations,
+        Some(s.p2_steps),
+    ));
+    out.push_str(&count_row(
+        "augmented",
+        "Augmented actions",
+        s.augmented_actions,
+        Some(s.actions),
+    ));
+    out.push_str(&count_row(
+        "p3-scans-with-spikes",
+        "P3 lidar: scans with spikes",
+        s.p3_scans_with_spikes,
+        Some(s.p3_scans),
+    ));
+    out.push_str(&number_row(
+        "p3-spikes",
+        "P3 lidar: spikes in all scans",
+        Some(s.p3_spikes),
+        format!("{}", s.p3_spikes),
+    ));
+    out.push_str(&number_row(
+        "p3-dropouts",
+        "P3 lidar: dropouts in all scans",
+        Some(s.p3_dropouts),
+        format!("{}", s.p3_dropouts),
+    ));
+    out.push_str("</table>\n<h2>Plots</h2>\n");
+    for (file, title) in plots {
+        out.push_str(&format!(
+            "<figure><img src=\"{}\" alt=\"{}\"/><figcaption>{}</figcaption></figure>\n",
+            escape(file),
+            escape(title),
+            escape(title)
+        ));
+    }
+    out.push_str("</body>\n</html>\n");
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn escapes_markup() {
+        assert_eq!(escape("a<b & \"c\"'"), "a&lt;b &amp; &quot;c&quot;&#39;");
+    }
+}

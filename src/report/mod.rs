@@ -1,0 +1,47 @@
+//! The run report (`tessla-telegraf report`): the paper's plots and tables from line protocol.
+//!
+//! Data flows one way: the line protocol our binary printed (pass-through telemetry and
+//! verdicts) is read into [`data::Run`], [`series`] picks the quantities out of it wherever the
+//! output binding put them, [`stats`] computes the MSE table and violation counts, [`plots`]
+//! draws SVG charts with plotters, and [`html`] writes the page. The command line lives in
+//! `crate::cli::report`.
+
+pub mod data;
+pub mod html;
+pub mod plots;
+pub mod series;
+pub mod stats;
+
+use std::path::{Path, PathBuf};
+
+/// Files written by [`write_report`].
+#[derive(Debug, Clone)]
+pub struct Written {
+    pub html: PathBuf,
+    pub svgs: Vec<PathBuf>,
+    pub summary: stats::Summary,
+}
+
+/// Read `text` (line protocol) and write `index.html` and the SVG plots into `dir`.
+pub fn write_report(text: &str, source_name: &str, dir: &Path) -> Result<Written, String> {
+    let run = data::Run::parse(text);
+    let picked = series::Picked::from_run(&run);
+    let summary = stats::Summary::compute(&run, &picked);
+    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    let mut svgs = Vec::new();
+    for plot in plots::render_all(&picked)? {
+        let path = dir.join(plot.file_name);
+        std::fs::write(&path, &plot.svg)
+            .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        svgs.push(path);
+    }
+    let page = html::page(source_name, &summary, &plots::FILES, &run);
+    let html_path = dir.join("index.html");
+    std::fs::write(&html_path, page)
+        .map_err(|e| format!("cannot write {}: {e}", html_path.display()))?;
+    Ok(Written {
+        html: html_path,
+        svgs,
+        summary,
+    })
+}

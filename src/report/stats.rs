@@ -1,0 +1,124 @@
+//! The report's numbers: the MSE between expected and actual speed (the paper's Table I) and
+//! the count of violations per property.
+
+use super::data::Run;
+use super::series::Picked;
+
+/// Everything the report's table shows.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Summary {
+    /// Records of the run, and records that were not line protocol.
+    pub records: usize,
+    pub skipped: usize,
+    /// Duration from the first to the last record, in seconds.
+    pub duration_s: f64,
+    /// Mean squared error between expected and actual speed over the records that carry both,
+    /// computed here from the pass-through telemetry.
+    pub mse: Option<f64>,
+    /// Number of (expected, actual) pairs in `mse`.
+    pub mse_pairs: usize,
+    /// The spec's own running MSE (`speed_mse`) at the end of the run.
+    pub spec_mse: Option<f64>,
+    /// P2: steps with `p2_violated` true, and steps it was reported.
+    pub p2_violations: usize,
+    pub p2_steps: usize,
+    /// Actions that differ from the robot's own command.
+    pub augmented_actions: usize,
+    pub actions: usize,
+    /// P1: steps per status.
+    pub p1_violated: usize,
+    pub p1_unknown: usize,
+    pub p1_ok: usize,
+    /// P3: scans with at least one spike, total spikes, total dropouts, scans reported.
+    pub p3_scans_with_spikes: usize,
+    pub p3_spikes: f64,
+    pub p3_dropouts: f64,
+    pub p3_scans: usize,
+}
+
+impl Summary {
+    pub fn compute(run: &Run, picked: &Picked) -> Summary {
+        let (mse, mse_pairs) = mse_of_records(run);
+        let first = run.records.first().map_or(0.0, |r| r.t);
+        let last = run.records.iter().map(|r| r.t).fold(first, f64::max);
+        let status_count = |s: &str| picked.p1_status.points.iter().filter(|(_, v)| v == s).count();
+        Summary {
+            records: run.records.len(),
+            skipped: run.skipped,
+            duration_s: last - first,
+            mse,
+            mse_pairs,
+            spec_mse: picked.speed_mse.points.last().map(|(_, v)| *v),
+            p2_violations: picked.p2_violated.points.iter().filter(|(_, v)| *v).count(),
+            p2_steps: picked.p2_violated.points.len(),
+            augmented_actions: picked.augmented.points.iter().filter(|(_, v)| *v).count(),
+            actions: picked.augmented.points.len(),
+            p1_violated: status_count("violated"),
+            p1_unknown: status_count("unknown"),
+            p1_ok: status_count("ok"),
+            p3_scans_with_spikes: picked.p3_spikes.points.iter().filter(|(_, v)| *v > 0.0).count(),
+            p3_spikes: picked.p3_spikes.points.iter().map(|(_, v)| v).sum(),
+            p3_dropouts: picked.p3_dropouts.points.iter().map(|(_, v)| v).sum(),
+            p3_scans: picked.p3_spikes.points.len().max(picked.p3_dropouts.points.len()),
+        }
+    }
+}
+
+/// MSE over the records that carry both `expectedSpeed` and `actualSpeed` (a string
+/// `actualSpeed` counts when it holds a number).
+pub fn mse_of_records(run: &Run) -> (Option<f64>, usize) {
+    let mut sum = 0.0;
+    let mut n = 0usize;
+    for r in &run.records {
+        let expected = r.field("expectedSpeed").and_then(|v| v.as_f64());
+        let actual = r.field("actualSpeed").and_then(|v| v.as_f64());
+        if let (Some(e), Some(a)) = (expected, actual) {
+            sum += (e - a) * (e - a);
+            n += 1;
+        }
+    }
+    ((n > 0).then(|| sum / n as f64), n)
+}
+
+/// The running MSE after each pair, for the plot when the spec's `speed_mse` is absent.
+pub fn running_mse(run: &Run) -> Vec<(f64, f64)> {
+    let mut sum = 0.0;
+    let mut n = 0.0;
+    let mut out = Vec::new();
+    for r in &run.records {
+        let expected = r.field("expectedSpeed").and_then(|v| v.as_f64());
+        let actual = r.field("actualSpeed").and_then(|v| v.as_f64());
+        if let (Some(e), Some(a)) = (expected, actual) {
+            sum += (e - a) * (e - a);
+            n += 1.0;
+            out.push((r.t, sum / n));
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mse_and_counts() {
+        let run = Run::parse(
+            "mqtt_consumer expectedSpeed=0.1,actualSpeed=\"0.05\" 0\n\
+             mqtt_consumer expectedSpeed=0.1 1\n\
+             mqtt_consumer expectedSpeed=0.2,actualSpeed=0.1 2\n\
+             action p1_status=\"violated\",p2_violated=true,augmented=true,p3_spikes=2,p3_dropouts=1,speed_mse=0.00625 2\n\
+             action p1_status=\"unknown\",p2_violated=false,augmented=false,p3_spikes=0,p3_dropouts=4 3\n",
+        );
+        let s = Summary::compute(&run, &Picked::from_run(&run));
+        assert_eq!(s.mse_pairs, 2);
+        let expected = (0.05f64.powi(2) + 0.1f64.powi(2)) / 2.0;
+        assert!((s.mse.unwrap() - expected).abs() < 1e-15);
+        assert_eq!(s.spec_mse, Some(0.00625));
+        assert_eq!((s.p2_violations, s.p2_steps), (1, 2));
+        assert_eq!((s.augmented_actions, s.actions), (1, 2));
+        assert_eq!((s.p1_violated, s.p1_unknown, s.p1_ok), (1, 1, 0));
+        assert_eq!((s.p3_scans_with_spikes, s.p3_spikes, s.p3_dropouts), (1, 2.0, 5.0));
+        assert_eq!(running_mse(&run).len(), 2);
+    }
+}

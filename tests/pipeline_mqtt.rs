@@ -1,0 +1,114 @@
+//! The MQTT round trip with real Mosquitto: `replay` publishes the recorded run on `tessla`; a
+//! stand-in for Telegraf's mqtt_consumer turns each message into the line Telegraf would make
+//! and pipes it into `tessla-telegraf run`; the `action` metrics go back out as outputs.mqtt
+//! would publish them; the test, subscribed to `action`, gets every corrective action, in
+//! order, with the values our binary computes for the recorded run directly.
+
+#[path = "support/mqtt_client.rs"]
+mod mqtt_client;
+#[path = "support/recorded.rs"]
+mod recorded;
+#[path = "support/servers.rs"]
+mod servers;
+#[path = "support/telegraf_standin.rs"]
+mod telegraf_standin;
+
+use serde_json::Value;
+use std::io::{BufRead, BufReader, Write};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+use telegraf_standin::{ConsumerConfig, line_to_message, message_to_line};
+
+const MS: i64 = 1_000_000;
+
+fn action_messages(output: &str) -> Vec<Value> {
+    output
+        .lines()
+        .filter(|l| l.starts_with("action ") || l.starts_with("action,"))
+        .map(|l| line_to_message(l, MS).unwrap())
+        .collect()
+}
+
+#[test]
+fn replayed_run_comes_back_as_the_same_actions() {
+    let Some(broker) = servers::Mosquitto::start() else { return };
+    let fixture = recorded::recorded_run_path();
+    let input = std::fs::read_to_string(&fixture).unwrap();
+    let records = input.lines().filter(|l| !l.trim().is_empty() && !l.starts_with('#')).count();
+    // What our binary answers when fed the recorded run directly.
+    let expected = action_messages(&recorded::run_binary(&input));
+    assert!(!expected.is_empty(), "the recorded run causes actions");
+
+    // The test's own subscriber to the robot's action topic.
+    let actions = mqtt_client::subscribe(broker.port, "action", "robot");
+
+    // Stand-in Telegraf: mqtt_consumer -> processors.execd (our binary) -> outputs.mqtt.
+    let telemetry = mqtt_client::subscribe(broker.port, "tessla", "telegraf-in");
+    let mut child = Command::new(recorded::BIN)
+        .arg("run")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stdout = child.stdout.take().unwrap();
+    let port = broker.port;
+    let output_side = std::thread::spawn(move || {
+        let publisher = mqtt_client::Publisher::connect(port, "telegraf-out");
+        let mut published = 0usize;
+        for line in BufReader::new(stdout).lines() {
+            let line = line.unwrap();
+            if line.starts_with("action ") || line.starts_with("action,") {
+                let message = line_to_message(&line, MS).expect("our action line parses");
+                publisher.publish("action", serde_json::to_vec(&message).unwrap());
+                published += 1;
+            }
+        }
+        published
+    });
+    let cfg = ConsumerConfig {
+        host: "robot-pc".into(),
+        json_string_fields: vec!["actualSpeed".into()],
+        json_time_key: Some("time".into()),
+    };
+    let mut stdin = child.stdin.take().unwrap();
+    let input_side = std::thread::spawn(move || {
+        let mut fed = 0usize;
+        while fed < records {
+            let Ok((_, payload)) = telemetry.recv_timeout(Duration::from_secs(30)) else { break };
+            if let Some(line) = message_to_line("tessla", &payload, &cfg, 0) {
+                stdin.write_all(line.as_bytes()).unwrap();
+                stdin.write_all(b"\n").unwrap();
+            }
+            fed += 1;
+        }
+        fed // stdin closes here: EOF, as when Telegraf stops
+    });
+
+    let out = Command::new(recorded::BIN)
+        .args(["replay", fixture.to_str().unwrap(), "--broker", &broker.url()])
+        .args(["--topic", "tessla", "--speed", "0", "--time-key", "time"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "replay: {}", String::from_utf8_lossy(&out.stderr));
+
+    let fed = input_side.join().unwrap();
+    assert_eq!(fed, records, "every recorded message reached the stand-in");
+    let status = child.wait().unwrap();
+    assert!(status.success(), "run exited with {status}");
+    let published = output_side.join().unwrap();
+    assert_eq!(published, expected.len());
+
+    let got: Vec<Value> = mqtt_client::collect(&actions, expected.len(), Duration::from_secs(20))
+        .into_iter()
+        .map(|(_, p)| serde_json::from_slice(&p).unwrap())
+        .collect();
+    assert_eq!(got.len(), expected.len(), "every action arrived");
+    for (i, (g, e)) in got.iter().zip(&expected).enumerate() {
+        assert_eq!(g["name"], "action");
+        assert_eq!(g["fields"], e["fields"], "action {i}: fields");
+        assert_eq!(g["timestamp"], e["timestamp"], "action {i}: time");
+    }
+    let augmented = got.iter().filter(|m| m["fields"]["augmented"] == true).count();
+    assert!(augmented > 0, "the recorded run has corrective actions");
+}

@@ -1,0 +1,90 @@
+//! Test-side MQTT clients (rumqttc): a subscriber that collects messages of one topic into a
+//! channel, and a publisher for the stand-in's `outputs.mqtt`.
+//!
+//! Include with `#[path = "support/mqtt_client.rs"] mod mqtt_client;`.
+#![allow(dead_code)]
+
+use rumqttc::{Client, Event, MqttOptions, Packet, QoS};
+use std::sync::mpsc::{Receiver, channel};
+use std::time::{Duration, Instant};
+
+fn options(id: &str, port: u16) -> MqttOptions {
+    let mut o = MqttOptions::new(id, "127.0.0.1", port);
+    o.set_max_packet_size(1 << 20, 1 << 20);
+    o.set_keep_alive(Duration::from_secs(30));
+    o
+}
+
+/// Subscribe to `topic`; returns once the broker confirmed the subscription.
+pub fn subscribe(port: u16, topic: &str, id: &str) -> Receiver<(Instant, Vec<u8>)> {
+    let (client, mut connection) = Client::new(options(id, port), 1024);
+    client.subscribe(topic, QoS::AtLeastOnce).unwrap();
+    let (tx, rx) = channel();
+    let (ready_tx, ready_rx) = channel();
+    std::thread::spawn(move || {
+        let _client = client; // keep the request channel open
+        for event in connection.iter() {
+            match event {
+                Ok(Event::Incoming(Packet::SubAck(_))) => {
+                    let _ = ready_tx.send(());
+                }
+                Ok(Event::Incoming(Packet::Publish(p))) => {
+                    if tx.send((Instant::now(), p.payload.to_vec())).is_err() {
+                        return;
+                    }
+                }
+                Ok(_) => {}
+                Err(_) => return,
+            }
+        }
+    });
+    ready_rx
+        .recv_timeout(Duration::from_secs(10))
+        .expect("no SUBACK from mosquitto");
+    rx
+}
+
+/// Collect `n` messages, waiting at most `timeout` for each.
+pub fn collect(rx: &Receiver<(Instant, Vec<u8>)>, n: usize, timeout: Duration) -> Vec<(Instant, Vec<u8>)> {
+    let mut out = Vec::new();
+    while out.len() < n {
+        match rx.recv_timeout(timeout) {
+            Ok(m) => out.push(m),
+            Err(_) => break,
+        }
+    }
+    out
+}
+
+/// A connected publisher whose connection is driven by a background thread.
+pub struct Publisher {
+    client: Client,
+}
+
+impl Publisher {
+    pub fn connect(port: u16, id: &str) -> Publisher {
+        let (client, mut connection) = Client::new(options(id, port), 1024);
+        let (ready_tx, ready_rx) = channel();
+        std::thread::spawn(move || {
+            for event in connection.iter() {
+                match event {
+                    Ok(Event::Incoming(Packet::ConnAck(_))) => {
+                        let _ = ready_tx.send(());
+                    }
+                    Ok(_) => {}
+                    Err(_) => return,
+                }
+            }
+        });
+        ready_rx
+            .recv_timeout(Duration::from_secs(10))
+            .expect("no CONNACK from mosquitto");
+        Publisher { client }
+    }
+
+    pub fn publish(&self, topic: &str, payload: Vec<u8>) {
+        self.client
+            .publish(topic, QoS::AtLeastOnce, false, payload)
+            .unwrap();
+    }
+}

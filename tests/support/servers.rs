@@ -1,0 +1,217 @@
+//! Real servers for the pipeline tests: Mosquitto and InfluxDB 1.x, each started on a free
+//! 127.0.0.1 port with a temporary data folder and stopped (killed and reaped) on drop.
+//!
+//! When a server binary is missing: with `REQUIRE_SERVERS=1` (set by `.ci/run`) the test fails;
+//! otherwise `start` prints how to install it and returns `None`, and the test skips itself.
+//!
+//! Include with `#[path = "support/servers.rs"] mod servers;`.
+#![allow(dead_code)]
+
+use std::io::Write;
+use std::net::{TcpListener, TcpStream};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// A free TCP port on 127.0.0.1 (bound, read, released).
+pub fn free_port() -> u16 {
+    TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+fn find_binary(name: &str) -> Option<PathBuf> {
+    let path = std::env::var_os("PATH")?;
+    std::env::split_paths(&path)
+        .chain([PathBuf::from("/usr/sbin"), PathBuf::from("/usr/bin")])
+        .map(|dir| dir.join(name))
+        .find(|candidate| candidate.is_file())
+}
+
+/// The binary, or `None` after explaining how to get it (panics when servers are required).
+fn require(name: &str, package: &str) -> Option<PathBuf> {
+    if let Some(path) = find_binary(name) {
+        return Some(path);
+    }
+    let hint = format!(
+        "`{name}` not found: install it with `sudo apt-get install {package}` \
+         (Debian/Ubuntu; .ci/run installs mosquitto and influxdb)"
+    );
+    if std::env::var("REQUIRE_SERVERS").is_ok_and(|v| v == "1") {
+        panic!("REQUIRE_SERVERS=1 but {hint}");
+    }
+    eprintln!("SKIPPED: {hint}");
+    None
+}
+
+fn wait_for_port(port: u16, child: &mut Child, what: &str, log: &Path) {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while Instant::now() < deadline {
+        if TcpStream::connect(("127.0.0.1", port)).is_ok() {
+            return;
+        }
+        if let Ok(Some(status)) = child.try_wait() {
+            panic!(
+                "{what} exited ({status}) before listening on {port}; log:\n{}",
+                std::fs::read_to_string(log).unwrap_or_default()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    panic!(
+        "{what} did not listen on 127.0.0.1:{port} within 30 s; log:\n{}",
+        std::fs::read_to_string(log).unwrap_or_default()
+    );
+}
+
+fn spawn(binary: &Path, args: &[&str], log: &Path) -> Child {
+    let out = std::fs::File::create(log).unwrap();
+    let err = out.try_clone().unwrap();
+    Command::new(binary)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(out)
+        .stderr(err)
+        .spawn()
+        .unwrap_or_else(|e| panic!("cannot start {}: {e}", binary.display()))
+}
+
+/// A running Mosquitto broker.
+pub struct Mosquitto {
+    pub port: u16,
+    child: Child,
+    _dir: tempfile::TempDir,
+}
+
+impl Mosquitto {
+    pub fn start() -> Option<Mosquitto> {
+        let binary = require("mosquitto", "mosquitto")?;
+        let dir = tempfile::tempdir().unwrap();
+        let port = free_port();
+        let conf = dir.path().join("mosquitto.conf");
+        let mut f = std::fs::File::create(&conf).unwrap();
+        writeln!(f, "listener {port} 127.0.0.1").unwrap();
+        writeln!(f, "allow_anonymous true").unwrap();
+        writeln!(f, "persistence false").unwrap();
+        writeln!(f, "log_dest stdout").unwrap();
+        drop(f);
+        let log = dir.path().join("mosquitto.log");
+        let mut child = spawn(&binary, &["-c", conf.to_str().unwrap()], &log);
+        wait_for_port(port, &mut child, "mosquitto", &log);
+        Some(Mosquitto {
+            port,
+            child,
+            _dir: dir,
+        })
+    }
+
+    pub fn url(&self) -> String {
+        format!("mqtt://127.0.0.1:{}", self.port)
+    }
+}
+
+impl Drop for Mosquitto {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// A running InfluxDB 1.x server.
+pub struct Influxd {
+    pub port: u16,
+    child: Child,
+    dir: tempfile::TempDir,
+}
+
+impl Influxd {
+    pub fn start() -> Option<Influxd> {
+        let binary = require("influxd", "influxdb")?;
+        let dir = tempfile::tempdir().unwrap();
+        let port = free_port();
+        let rpc_port = free_port();
+        let d = dir.path().display();
+        let conf = dir.path().join("influxdb.conf");
+        std::fs::write(
+            &conf,
+            format!(
+                "reporting-disabled = true\n\
+                 bind-address = \"127.0.0.1:{rpc_port}\"\n\
+                 [meta]\n  dir = \"{d}/meta\"\n\
+                 [data]\n  dir = \"{d}/data\"\n  wal-dir = \"{d}/wal\"\n  query-log-enabled = false\n\
+                 [http]\n  bind-address = \"127.0.0.1:{port}\"\n  log-enabled = false\n\
+                 [monitor]\n  store-enabled = false\n\
+                 [continuous_queries]\n  enabled = false\n"
+            ),
+        )
+        .unwrap();
+        let log = dir.path().join("influxd.log");
+        let mut child = spawn(&binary, &["run", "-config", conf.to_str().unwrap()], &log);
+        wait_for_port(port, &mut child, "influxd", &log);
+        let server = Influxd { port, child, dir };
+        // The HTTP port opens before the service is ready: wait for /ping to answer 204.
+        let deadline = Instant::now() + Duration::from_secs(30);
+        loop {
+            if let Ok(r) = agent().get(&server.url("/ping")).call() {
+                if r.status() == 204 {
+                    break;
+                }
+            }
+            assert!(Instant::now() < deadline, "influxd /ping never answered 204");
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        Some(server)
+    }
+
+    pub fn url(&self, path: &str) -> String {
+        format!("http://127.0.0.1:{}{path}", self.port)
+    }
+
+    pub fn log(&self) -> String {
+        std::fs::read_to_string(self.dir.path().join("influxd.log")).unwrap_or_default()
+    }
+
+    /// Run an InfluxQL statement (POST /query); returns the status and the JSON answer.
+    pub fn query(&self, db: Option<&str>, q: &str) -> (u16, serde_json::Value) {
+        let mut request = agent().post(&self.url("/query")).query("q", q).query("epoch", "ns");
+        if let Some(db) = db {
+            request = request.query("db", db);
+        }
+        let mut response = request.send_empty().unwrap();
+        let status = response.status().as_u16();
+        let body = response.body_mut().read_to_string().unwrap();
+        let json = serde_json::from_str(&body)
+            .unwrap_or_else(|e| panic!("influxd answered non-JSON ({e}) to {q:?}: {body}"));
+        (status, json)
+    }
+
+    /// Write line protocol (POST /write, ns precision); returns the status and the body.
+    pub fn write(&self, db: &str, lines: &str) -> (u16, String) {
+        let mut response = agent()
+            .post(&self.url("/write"))
+            .query("db", db)
+            .query("precision", "ns")
+            .send(lines.as_bytes())
+            .unwrap();
+        let status = response.status().as_u16();
+        (status, response.body_mut().read_to_string().unwrap_or_default())
+    }
+}
+
+impl Drop for Influxd {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// An HTTP agent that returns 4xx/5xx answers instead of failing on them.
+pub fn agent() -> ureq::Agent {
+    ureq::Agent::config_builder()
+        .http_status_as_error(false)
+        .timeout_global(Some(Duration::from_secs(60)))
+        .build()
+        .into()
+}
