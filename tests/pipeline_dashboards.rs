@@ -50,13 +50,22 @@ fn flux_names_are_extracted() {
 
 #[test]
 fn a_renamed_output_is_caught() {
-    let emitted = Emitted::from_lines("action speed=0.1,p1_margin=0.5 1\nmqtt_consumer,topic=t expectedSpeed=1 1\n");
+    let emitted = Emitted::from_lines(
+        "action speed=0.1,p1_margin=0.5 1\nmqtt_consumer,topic=t expectedSpeed=1 1\n",
+    );
     let ok = influxql_refs("SELECT \"speed\" FROM \"action\" WHERE $timeFilter");
     assert!(emitted.missing(&ok).is_empty());
     let renamed = influxql_refs("SELECT \"p1_margin_m\" FROM \"action\" WHERE $timeFilter");
-    assert_eq!(emitted.missing(&renamed), vec!["field \"p1_margin_m\" of \"action\"".to_string()]);
-    let bad_tag = flux_refs("filter(fn: (r) => r._measurement == \"mqtt_consumer\" and r.robot == \"1\")");
-    assert_eq!(emitted.missing(&bad_tag), vec!["tag or field \"robot\" of \"mqtt_consumer\"".to_string()]);
+    assert_eq!(
+        emitted.missing(&renamed),
+        vec!["field \"p1_margin_m\" of \"action\"".to_string()]
+    );
+    let bad_tag =
+        flux_refs("filter(fn: (r) => r._measurement == \"mqtt_consumer\" and r.robot == \"1\")");
+    assert_eq!(
+        emitted.missing(&bad_tag),
+        vec!["tag or field \"robot\" of \"mqtt_consumer\"".to_string()]
+    );
 }
 
 #[test]
@@ -88,14 +97,23 @@ fn every_dashboard_name_is_emitted_by_the_bundled_spec() {
     let emitted = Emitted::from_lines(&output);
     let mut problems = Vec::new();
     for (kind, queries, refs_of) in [
-        ("InfluxQL", influxql_queries(), influxql_refs as fn(&str) -> Refs),
+        (
+            "InfluxQL",
+            influxql_queries(),
+            influxql_refs as fn(&str) -> Refs,
+        ),
         ("Flux", flux_queries(), flux_refs as fn(&str) -> Refs),
     ] {
         for (panel, query) in queries {
             let refs = refs_of(&query);
-            assert!(!refs.measurements.is_empty(), "{kind} {panel:?}: no measurement in {query}");
+            assert!(
+                !refs.measurements.is_empty(),
+                "{kind} {panel:?}: no measurement in {query}"
+            );
             for missing in emitted.missing(&refs) {
-                problems.push(format!("{kind} panel {panel:?} queries {missing}, not emitted"));
+                problems.push(format!(
+                    "{kind} panel {panel:?} queries {missing}, not emitted"
+                ));
             }
         }
     }

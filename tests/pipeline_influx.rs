@@ -38,7 +38,9 @@ fn answer(json: &Value, aggregate: bool) -> Expected {
 
 /// Write `output` to a fresh InfluxDB, check it all arrived, run every panel query.
 fn check_output_in_influxdb(output: &str) {
-    let Some(influx) = servers::Influxd::start() else { return };
+    let Some(influx) = servers::Influxd::start() else {
+        return;
+    };
     let (status, json) = influx.query(None, &format!("CREATE DATABASE \"{DB}\""));
     assert_eq!(status, 200, "{json}");
 
@@ -70,7 +72,10 @@ fn check_output_in_influxdb(output: &str) {
     for (panel, query) in influxql_queries() {
         let want = expected_answer(&query, &pts);
         let concrete = query
-            .replace("$timeFilter", &format!("time >= {first} AND time <= {last}"))
+            .replace(
+                "$timeFilter",
+                &format!("time >= {first} AND time <= {last}"),
+            )
             .replace("$__interval", "1s");
         let (status, json) = influx.query(Some(DB), &concrete);
         assert_eq!(status, 200, "{panel}: {concrete}: {json}");

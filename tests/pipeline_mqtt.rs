@@ -31,19 +31,41 @@ fn action_messages(output: &str) -> Vec<Value> {
 
 #[test]
 fn replayed_run_comes_back_as_the_same_actions() {
-    let Some(broker) = servers::Mosquitto::start() else { return };
+    let Some(broker) = servers::Mosquitto::start() else {
+        return;
+    };
     let fixture = recorded::recorded_run_path();
     let input = std::fs::read_to_string(&fixture).unwrap();
-    let records = input.lines().filter(|l| !l.trim().is_empty() && !l.starts_with('#')).count();
+    let records = input
+        .lines()
+        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'))
+        .count();
     // What our binary answers when fed the recorded run directly.
     let expected = action_messages(&recorded::run_binary(&input));
     assert!(!expected.is_empty(), "the recorded run causes actions");
+
+    // Publish on the topic the recording came from, and let the stand-in add the same host
+    // tag, so the binding sees the tags it saw in the direct run.
+    let tag_of_first = |key: &str| {
+        influxdb_line_protocol::parse_lines(&input)
+            .flatten()
+            .next()
+            .and_then(|l| {
+                l.series.tag_set.and_then(|tags| {
+                    tags.iter()
+                        .find(|(k, _)| k.as_str() == key)
+                        .map(|(_, v)| v.to_string())
+                })
+            })
+    };
+    let topic = tag_of_first("topic").unwrap_or_else(|| "tessla".to_string());
+    let host = tag_of_first("host").unwrap_or_else(|| "robot-pc".to_string());
 
     // The test's own subscriber to the robot's action topic.
     let actions = mqtt_client::subscribe(broker.port, "action", "robot");
 
     // Stand-in Telegraf: mqtt_consumer -> processors.execd (our binary) -> outputs.mqtt.
-    let telemetry = mqtt_client::subscribe(broker.port, "tessla", "telegraf-in");
+    let telemetry = mqtt_client::subscribe(broker.port, &topic, "telegraf-in");
     let mut child = Command::new(recorded::BIN)
         .arg("run")
         .stdin(Stdio::piped())
@@ -67,16 +89,19 @@ fn replayed_run_comes_back_as_the_same_actions() {
         published
     });
     let cfg = ConsumerConfig {
-        host: "robot-pc".into(),
+        host,
         json_string_fields: vec!["actualSpeed".into()],
         json_time_key: Some("time".into()),
     };
     let mut stdin = child.stdin.take().unwrap();
+    let consumer_topic = topic.clone();
     let input_side = std::thread::spawn(move || {
         let mut fed = 0usize;
         while fed < records {
-            let Ok((_, payload)) = telemetry.recv_timeout(Duration::from_secs(30)) else { break };
-            if let Some(line) = message_to_line("tessla", &payload, &cfg, 0) {
+            let Ok((_, payload)) = telemetry.recv_timeout(Duration::from_secs(30)) else {
+                break;
+            };
+            if let Some(line) = message_to_line(&consumer_topic, &payload, &cfg, 0) {
                 stdin.write_all(line.as_bytes()).unwrap();
                 stdin.write_all(b"\n").unwrap();
             }
@@ -86,11 +111,20 @@ fn replayed_run_comes_back_as_the_same_actions() {
     });
 
     let out = Command::new(recorded::BIN)
-        .args(["replay", fixture.to_str().unwrap(), "--broker", &broker.url()])
-        .args(["--topic", "tessla", "--speed", "0", "--time-key", "time"])
+        .args([
+            "replay",
+            fixture.to_str().unwrap(),
+            "--broker",
+            &broker.url(),
+        ])
+        .args(["--topic", &topic, "--speed", "0", "--time-key", "time"])
         .output()
         .unwrap();
-    assert!(out.status.success(), "replay: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "replay: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 
     let fed = input_side.join().unwrap();
     assert_eq!(fed, records, "every recorded message reached the stand-in");
@@ -109,6 +143,9 @@ fn replayed_run_comes_back_as_the_same_actions() {
         assert_eq!(g["fields"], e["fields"], "action {i}: fields");
         assert_eq!(g["timestamp"], e["timestamp"], "action {i}: time");
     }
-    let augmented = got.iter().filter(|m| m["fields"]["augmented"] == true).count();
+    let augmented = got
+        .iter()
+        .filter(|m| m["fields"]["augmented"] == true)
+        .count();
     assert!(augmented > 0, "the recorded run has corrective actions");
 }

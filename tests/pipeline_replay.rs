@@ -27,7 +27,9 @@ fn as_json(messages: &[(std::time::Instant, Vec<u8>)]) -> Vec<Value> {
 
 #[test]
 fn line_protocol_records_arrive_as_robot_json_in_order() {
-    let Some(broker) = servers::Mosquitto::start() else { return };
+    let Some(broker) = servers::Mosquitto::start() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("run.lp");
     // Shaped as Telegraf's mqtt_consumer makes the robot's messages: a string actualSpeed,
@@ -57,7 +59,10 @@ fn line_protocol_records_arrive_as_robot_json_in_order() {
     ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "replay failed: {stderr}");
-    assert!(stderr.contains("line 3"), "the bad record is reported: {stderr}");
+    assert!(
+        stderr.contains("line 3"),
+        "the bad record is reported: {stderr}"
+    );
     let got = as_json(&mqtt_client::collect(&rx, 3, Duration::from_secs(10)));
     assert_eq!(
         got,
@@ -73,7 +78,9 @@ fn line_protocol_records_arrive_as_robot_json_in_order() {
 
 #[test]
 fn csv_with_string_field_and_time_key() {
-    let Some(broker) = servers::Mosquitto::start() else { return };
+    let Some(broker) = servers::Mosquitto::start() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("run.csv");
     std::fs::write(
@@ -96,8 +103,16 @@ fn csv_with_string_field_and_time_key() {
         "actualSpeed",
         "--time-key",
         "time",
+        // QoS 0: nothing is acknowledged; replay must still deliver everything before it
+        // disconnects.
+        "--qos",
+        "0",
     ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let got = as_json(&mqtt_client::collect(&rx, 2, Duration::from_secs(10)));
     assert_eq!(
         got,
@@ -111,7 +126,9 @@ fn csv_with_string_field_and_time_key() {
 
 #[test]
 fn recorded_pacing_is_kept_and_scaled() {
-    let Some(broker) = servers::Mosquitto::start() else { return };
+    let Some(broker) = servers::Mosquitto::start() else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let file = dir.path().join("paced.lp");
     // Four records 0.4 s apart: 1.2 s recorded.
@@ -130,7 +147,11 @@ fn recorded_pacing_is_kept_and_scaled() {
             "--speed",
             speed,
         ]);
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         let got = mqtt_client::collect(&rx, 4, Duration::from_secs(10));
         assert_eq!(got.len(), 4);
         let span = got[3].0.duration_since(got[0].0).as_secs_f64();
@@ -138,7 +159,10 @@ fn recorded_pacing_is_kept_and_scaled() {
             span >= recorded_s * 0.9 && span < recorded_s + 0.5,
             "--speed {speed}: first to last took {span} s, recorded {recorded_s} s"
         );
-        let values: Vec<Value> = as_json(&got).into_iter().map(|v| v["expectedSpeed"].clone()).collect();
+        let values: Vec<Value> = as_json(&got)
+            .into_iter()
+            .map(|v| v["expectedSpeed"].clone())
+            .collect();
         assert_eq!(values, vec![json!(0.0), json!(1.0), json!(2.0), json!(3.0)]);
     }
 }
@@ -164,4 +188,49 @@ fn missing_file_and_bad_options_fail_clearly() {
     let out = replay(&["x.lp", "--speed=-1"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--speed"));
+}
+
+#[test]
+fn many_full_scans_all_arrive_even_with_qos_0() {
+    let Some(broker) = servers::Mosquitto::start() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("scans.lp");
+    let mut text = String::new();
+    for i in 0..300i64 {
+        let beams: Vec<String> = (0..360)
+            .map(|j| format!("lidar_{j}={}", 0.12 + ((i * 7 + j) % 300) as f64 / 100.0))
+            .collect();
+        text.push_str(&format!(
+            "mqtt_consumer,topic=tessla expectedSpeed={i},{} {}\n",
+            beams.join(","),
+            T0 + i * S / 5
+        ));
+    }
+    std::fs::write(&file, text).unwrap();
+    let rx = mqtt_client::subscribe(broker.port, "tessla", "sub-scans");
+    let out = replay(&[
+        file.to_str().unwrap(),
+        "--broker",
+        &broker.url(),
+        "--speed",
+        "0",
+        "--qos",
+        "0",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let got = as_json(&mqtt_client::collect(&rx, 300, Duration::from_secs(10)));
+    assert_eq!(got.len(), 300, "every scan arrived");
+    for (i, message) in got.iter().enumerate() {
+        assert_eq!(message["expectedSpeed"], json!(i as f64), "in order");
+        let lidar = message["lidar"].as_array().unwrap();
+        assert_eq!(lidar.len(), 360);
+        let expected_last = 0.12 + ((i as i64 * 7 + 359) % 300) as f64 / 100.0;
+        assert_eq!(lidar[359], json!(expected_last));
+    }
 }

@@ -1,6 +1,9 @@
 //! `tessla-telegraf report`: the HTML and every SVG are well-formed XML, the plots are there,
 //! and the MSE and violation counts in the table are the ones computed here independently.
 
+#[path = "support/recorded.rs"]
+mod recorded;
+
 use std::path::Path;
 use std::process::Command;
 
@@ -20,7 +23,11 @@ fn synthetic_run() -> (String, f64, usize, usize, usize, usize, f64, f64) {
         let t = T0 + i * 200 * MS;
         let expected = if i < 25 { 0.015 } else { 0.1 };
         // The robot is stuck between steps 30 and 39.
-        let actual = if (30..40).contains(&i) { 0.0 } else { expected - 0.001 * (i % 3) as f64 };
+        let actual = if (30..40).contains(&i) {
+            0.0
+        } else {
+            expected - 0.001 * (i % 3) as f64
+        };
         // Every 7th message has no actualSpeed: it must not count in the MSE.
         if i % 7 == 3 {
             text.push_str(&format!(
@@ -36,7 +43,11 @@ fn synthetic_run() -> (String, f64, usize, usize, usize, usize, f64, f64) {
         sq_sum += diff * diff;
         pairs += 1;
         let violated = diff.abs() > 0.02;
-        let speed = if violated { (expected + 0.5 * diff).min(0.22) } else { expected };
+        let speed = if violated {
+            (expected + 0.5 * diff).min(0.22)
+        } else {
+            expected
+        };
         let status = match i {
             40..=44 => "violated",
             45..=46 => "unknown",
@@ -57,7 +68,16 @@ fn synthetic_run() -> (String, f64, usize, usize, usize, usize, f64, f64) {
             1.0 - 0.02 * i as f64
         ));
     }
-    (text, sq_sum / pairs as f64, p1_violated, p1_unknown, p2_violated, augmented, spikes, dropouts)
+    (
+        text,
+        sq_sum / pairs as f64,
+        p1_violated,
+        p1_unknown,
+        p2_violated,
+        augmented,
+        spikes,
+        dropouts,
+    )
 }
 
 fn cell(doc: &roxmltree::Document<'_>, id: &str) -> f64 {
@@ -80,7 +100,11 @@ fn check_svg(path: &Path, min_lines: usize) -> String {
         .descendants()
         .filter(|n| n.tag_name().name() == "polyline" || n.tag_name().name() == "path")
         .count();
-    assert!(polylines >= min_lines, "{}: {polylines} lines", path.display());
+    assert!(
+        polylines >= min_lines,
+        "{}: {polylines} lines",
+        path.display()
+    );
     text
 }
 
@@ -92,21 +116,39 @@ fn report_is_well_formed_with_independent_numbers() {
     std::fs::write(&input, &text).unwrap();
     let out_dir = dir.path().join("report");
     let out = Command::new(BIN)
-        .args(["report", input.to_str().unwrap(), "-o", out_dir.to_str().unwrap()])
+        .args([
+            "report",
+            input.to_str().unwrap(),
+            "-o",
+            out_dir.to_str().unwrap(),
+        ])
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(stdout.contains("index.html"), "prints what it wrote: {stdout}");
+    assert!(
+        stdout.contains("index.html"),
+        "prints what it wrote: {stdout}"
+    );
 
     let html = std::fs::read_to_string(out_dir.join("index.html")).unwrap();
     let doc = roxmltree::Document::parse_with_options(
         &html,
-        roxmltree::ParsingOptions { allow_dtd: true, ..Default::default() },
+        roxmltree::ParsingOptions {
+            allow_dtd: true,
+            ..Default::default()
+        },
     )
     .expect("index.html is well-formed");
     let computed = cell(&doc, "mse-telemetry");
-    assert!((computed - mse).abs() <= 1e-12 * mse.max(1e-12), "{computed} vs {mse}");
+    assert!(
+        (computed - mse).abs() <= 1e-12 * mse.max(1e-12),
+        "{computed} vs {mse}"
+    );
     let spec_mse = cell(&doc, "mse-spec");
     assert!((spec_mse - mse).abs() <= 1e-12 * mse.max(1e-12));
     assert_eq!(cell(&doc, "p1-violated"), p1v as f64);
@@ -115,7 +157,10 @@ fn report_is_well_formed_with_independent_numbers() {
     assert_eq!(cell(&doc, "augmented"), aug as f64);
     assert_eq!(cell(&doc, "p3-spikes"), spikes);
     assert_eq!(cell(&doc, "p3-dropouts"), dropouts);
-    assert!(p2v > 0 && p1v > 0 && spikes > 0.0, "the data exercises every count");
+    assert!(
+        p2v > 0 && p1v > 0 && spikes > 0.0,
+        "the data exercises every count"
+    );
 
     let images: Vec<&str> = doc
         .descendants()
@@ -125,12 +170,18 @@ fn report_is_well_formed_with_independent_numbers() {
     assert_eq!(images, vec!["speeds.svg", "p1.svg", "p3.svg", "mse.svg"]);
     let speeds = check_svg(&out_dir.join("speeds.svg"), 3);
     assert!(speeds.contains("expected speed") && speeds.contains("augmented action"));
-    assert!(speeds.contains("time [s]"), "axis labels are written as text");
+    assert!(
+        speeds.contains("time [s]"),
+        "axis labels are written as text"
+    );
     let p1 = check_svg(&out_dir.join("p1.svg"), 1);
     assert!(p1.contains("status violated") && p1.contains("status unknown"));
     // P1 status markers: one circle per step in the legend's colours.
     let p1_doc = roxmltree::Document::parse(&p1).unwrap();
-    let circles = p1_doc.descendants().filter(|n| n.tag_name().name() == "circle").count();
+    let circles = p1_doc
+        .descendants()
+        .filter(|n| n.tag_name().name() == "circle")
+        .count();
     assert!(circles >= p1v + p1u, "{circles} status markers");
     check_svg(&out_dir.join("p3.svg"), 2);
     check_svg(&out_dir.join("mse.svg"), 2);
@@ -143,10 +194,19 @@ fn report_of_empty_input_still_renders() {
     std::fs::write(&input, "# nothing\n").unwrap();
     let out_dir = dir.path().join("r");
     let out = Command::new(BIN)
-        .args(["report", input.to_str().unwrap(), "-o", out_dir.to_str().unwrap()])
+        .args([
+            "report",
+            input.to_str().unwrap(),
+            "-o",
+            out_dir.to_str().unwrap(),
+        ])
         .output()
         .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let html = std::fs::read_to_string(out_dir.join("index.html")).unwrap();
     assert!(html.contains("no data"));
     for svg in ["speeds.svg", "p1.svg", "p3.svg", "mse.svg"] {
@@ -162,4 +222,94 @@ fn report_of_missing_file_fails_with_its_name() {
         .unwrap();
     assert_eq!(out.status.code(), Some(3));
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/out.lp"));
+}
+
+/// MSE of the recorded run's telemetry, computed here from the fixture itself: records that
+/// carry both speeds (a string actualSpeed counts when it holds a number).
+fn fixture_mse(input: &str) -> (f64, usize) {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for line in influxdb_line_protocol::parse_lines(input).flatten() {
+        let number = |name: &str| {
+            line.field_value(name).and_then(|v| match v {
+                influxdb_line_protocol::FieldValue::F64(f) => Some(*f),
+                influxdb_line_protocol::FieldValue::I64(i) => Some(*i as f64),
+                influxdb_line_protocol::FieldValue::String(s) => s.trim().parse().ok(),
+                _ => None,
+            })
+        };
+        if let (Some(e), Some(a)) = (number("expectedSpeed"), number("actualSpeed")) {
+            sum += (e - a) * (e - a);
+            n += 1;
+        }
+    }
+    (sum / n as f64, n)
+}
+
+#[test]
+fn report_of_the_recorded_run() {
+    let (input, output) = recorded::recorded_output();
+    let dir = tempfile::tempdir().unwrap();
+    let out_lp = dir.path().join("out.lp");
+    std::fs::write(&out_lp, &output).unwrap();
+    let out_dir = dir.path().join("report");
+    let out = Command::new(BIN)
+        .args([
+            "report",
+            out_lp.to_str().unwrap(),
+            "-o",
+            out_dir.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let html = std::fs::read_to_string(out_dir.join("index.html")).unwrap();
+    let doc = roxmltree::Document::parse_with_options(
+        &html,
+        roxmltree::ParsingOptions {
+            allow_dtd: true,
+            ..Default::default()
+        },
+    )
+    .expect("index.html is well-formed");
+    let (mse, pairs) = fixture_mse(&input);
+    assert!(pairs > 0, "the fixture carries both speeds");
+    let shown = cell(&doc, "mse-telemetry");
+    assert!(
+        (shown - mse).abs() <= 1e-9 * mse.max(1e-12),
+        "report {shown} vs fixture {mse}"
+    );
+    // Violation counts: count the action metrics of our output here.
+    let actions: Vec<_> = influxdb_line_protocol::parse_lines(&output)
+        .flatten()
+        .filter(|l| l.series.measurement.as_str() == "action")
+        .collect();
+    let count = |f: &dyn Fn(&influxdb_line_protocol::ParsedLine<'_>) -> bool| {
+        actions.iter().filter(|l| f(l)).count() as f64
+    };
+    let is_true = |l: &influxdb_line_protocol::ParsedLine<'_>, name: &str| {
+        matches!(
+            l.field_value(name),
+            Some(influxdb_line_protocol::FieldValue::Boolean(true))
+        )
+    };
+    let status_is = |l: &influxdb_line_protocol::ParsedLine<'_>, s: &str| matches!(l.field_value("p1_status"), Some(influxdb_line_protocol::FieldValue::String(v)) if v.as_str() == s);
+    assert_eq!(cell(&doc, "augmented"), count(&|l| is_true(l, "augmented")));
+    let p1v = cell(&doc, "p1-violated");
+    assert_eq!(p1v, count(&|l| status_is(l, "violated")));
+    assert!(p1v > 0.0, "the obstacle run violates P1");
+    assert!(
+        cell(&doc, "p1-unknown") > 0.0,
+        "the blinded sector makes P1 unknown"
+    );
+    assert!(
+        cell(&doc, "p3-spikes") > 0.0,
+        "the injected dust spikes are counted"
+    );
+    for svg in ["speeds.svg", "p1.svg", "p3.svg", "mse.svg"] {
+        check_svg(&out_dir.join(svg), 2);
+    }
 }

@@ -30,7 +30,11 @@ pub struct ReplayArgs {
     /// The recorded run: line protocol (as in our fixtures) or CSV with a header.
     pub file: PathBuf,
     /// The MQTT broker.
-    #[arg(long, value_name = "mqtt://HOST:PORT", default_value = "mqtt://127.0.0.1:1883")]
+    #[arg(
+        long,
+        value_name = "mqtt://HOST:PORT",
+        default_value = "mqtt://127.0.0.1:1883"
+    )]
     pub broker: String,
     /// The topic the robot publishes on.
     #[arg(long, default_value = "tessla")]
@@ -157,9 +161,9 @@ fn progress_bar(len: usize) -> ProgressBar {
         return ProgressBar::with_draw_target(Some(len as u64), ProgressDrawTarget::hidden());
     }
     let bar = ProgressBar::new(len as u64);
-    if let Ok(style) =
-        ProgressStyle::with_template("{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} msgs ({eta})")
-    {
+    if let Ok(style) = ProgressStyle::with_template(
+        "{spinner} [{elapsed_precise}] {wide_bar} {pos}/{len} msgs ({eta})",
+    ) {
         bar.set_style(style);
     }
     bar

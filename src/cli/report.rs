@@ -40,7 +40,9 @@ pub fn run(args: ReportArgs) -> i32 {
             for svg in &written.svgs {
                 println!("{}", svg.display());
             }
-            let mse = s.mse.map_or_else(|| "no data".to_string(), |v| format!("{v:.6e}"));
+            let mse = s
+                .mse
+                .map_or_else(|| "no data".to_string(), |v| format!("{v:.6e}"));
             eprintln!(
                 "I! report: {} records; MSE expected/actual speed {mse}; P1 violated {} unknown {}; \
                  P2 violated {}; P3 spikes {} dropouts {}",

@@ -88,7 +88,10 @@ mod tests {
         Sample {
             line: 1,
             time_ns: Some(1_700_000_000_000_000_000),
-            fields: fields.into_iter().map(|(n, v)| (n.to_string(), v)).collect(),
+            fields: fields
+                .into_iter()
+                .map(|(n, v)| (n.to_string(), v))
+                .collect(),
         }
     }
 

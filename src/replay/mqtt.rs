@@ -35,7 +35,8 @@ impl FromStr for Broker {
     type Err = String;
 
     fn from_str(text: &str) -> Result<Self, String> {
-        let bad = |why: &str| format!("bad broker address {text:?}: {why} (expected mqtt://HOST:PORT)");
+        let bad =
+            |why: &str| format!("bad broker address {text:?}: {why} (expected mqtt://HOST:PORT)");
         let rest = match text.split_once("://") {
             Some(("mqtt" | "tcp", rest)) => rest,
             Some((scheme, _)) => {
@@ -153,7 +154,10 @@ impl Publisher {
         }
         self.client
             .publish(topic, self.qos, false, payload)
-            .map_err(|e| self.failure().unwrap_or_else(|| format!("MQTT broker {}: {e}", self.broker)))?;
+            .map_err(|e| {
+                self.failure()
+                    .unwrap_or_else(|| format!("MQTT broker {}: {e}", self.broker))
+            })?;
         self.published += 1;
         Ok(())
     }
@@ -220,10 +224,10 @@ fn drive(
             }
             Ok(Ok(_)) | Err(RecvTimeoutError::Timeout) => {}
             Ok(Err(e)) => {
-                if disconnect_sent.is_none() {
-                    if let Ok(mut slot) = error.lock() {
-                        *slot = Some(format!("connection to MQTT broker {broker} lost: {e}"));
-                    }
+                if disconnect_sent.is_none()
+                    && let Ok(mut slot) = error.lock()
+                {
+                    *slot = Some(format!("connection to MQTT broker {broker} lost: {e}"));
                 }
                 return;
             }
@@ -239,16 +243,38 @@ mod tests {
     #[test]
     fn broker_addresses() {
         let b: Broker = "mqtt://127.0.0.1:1884".parse().unwrap();
-        assert_eq!(b, Broker { host: "127.0.0.1".into(), port: 1884 });
+        assert_eq!(
+            b,
+            Broker {
+                host: "127.0.0.1".into(),
+                port: 1884
+            }
+        );
         assert_eq!(b.to_string(), "mqtt://127.0.0.1:1884");
         let b: Broker = "localhost".parse().unwrap();
         assert_eq!(b.port, 1883);
         let b: Broker = "tcp://[::1]:99/".parse().unwrap();
-        assert_eq!(b, Broker { host: "::1".into(), port: 99 });
+        assert_eq!(
+            b,
+            Broker {
+                host: "::1".into(),
+                port: 99
+            }
+        );
         assert_eq!(b.to_string(), "mqtt://[::1]:99");
-        assert!("mqtts://h:1".parse::<Broker>().unwrap_err().contains("not supported"));
+        assert!(
+            "mqtts://h:1"
+                .parse::<Broker>()
+                .unwrap_err()
+                .contains("not supported")
+        );
         assert!("mqtt://h:x".parse::<Broker>().unwrap_err().contains("port"));
-        assert!("mqtt://:1".parse::<Broker>().unwrap_err().contains("no host"));
+        assert!(
+            "mqtt://:1"
+                .parse::<Broker>()
+                .unwrap_err()
+                .contains("no host")
+        );
     }
 
     #[test]
@@ -259,7 +285,10 @@ mod tests {
             .local_addr()
             .unwrap()
             .port();
-        let broker = Broker { host: "127.0.0.1".into(), port };
+        let broker = Broker {
+            host: "127.0.0.1".into(),
+            port,
+        };
         let err = Publisher::connect(&broker, "t", QoS::AtLeastOnce, Duration::from_secs(5))
             .err()
             .unwrap();

@@ -64,19 +64,30 @@ mod tests {
         let real = offsets(&t, 1.0, Duration::from_millis(200));
         assert_eq!(
             real,
-            vec![Duration::ZERO, Duration::from_millis(200), Duration::from_millis(600)]
+            vec![
+                Duration::ZERO,
+                Duration::from_millis(200),
+                Duration::from_millis(600)
+            ]
         );
         let fast = offsets(&t, 4.0, Duration::from_millis(200));
         assert_eq!(
             fast,
-            vec![Duration::ZERO, Duration::from_millis(50), Duration::from_millis(150)]
+            vec![
+                Duration::ZERO,
+                Duration::from_millis(50),
+                Duration::from_millis(150)
+            ]
         );
     }
 
     #[test]
     fn speed_zero_is_as_fast_as_possible() {
         let t = [Some(0), Some(10 * MS), None];
-        assert_eq!(offsets(&t, 0.0, Duration::from_secs(1)), vec![Duration::ZERO; 3]);
+        assert_eq!(
+            offsets(&t, 0.0, Duration::from_secs(1)),
+            vec![Duration::ZERO; 3]
+        );
     }
 
     #[test]
@@ -84,7 +95,11 @@ mod tests {
         let t = [None, None, None];
         assert_eq!(
             offsets(&t, 1.0, Duration::from_millis(100)),
-            vec![Duration::ZERO, Duration::from_millis(100), Duration::from_millis(200)]
+            vec![
+                Duration::ZERO,
+                Duration::from_millis(100),
+                Duration::from_millis(200)
+            ]
         );
         let back = [Some(500 * MS), Some(300 * MS), Some(700 * MS)];
         assert_eq!(

@@ -167,14 +167,19 @@ mod tests {
         assert_eq!(s.fields.len(), 4);
         assert_eq!(s.fields[0], ("lidar_0".into(), FieldValue::Float(0.5)));
         assert_eq!(s.fields[1], ("lidar_1".into(), FieldValue::Float(0.0)));
-        assert!(matches!(s.fields[2], (ref n, FieldValue::Float(v)) if n == "lidar_2" && v.is_nan()));
+        assert!(
+            matches!(s.fields[2], (ref n, FieldValue::Float(v)) if n == "lidar_2" && v.is_nan())
+        );
         assert_eq!(s.fields[3], ("lidar_3".into(), FieldValue::Float(3.0)));
     }
 
     #[test]
     fn dotted_lidar_columns_become_indexed_fields() {
         let rec = read("lidar.0,lidar.1\n1,2\n").unwrap();
-        assert_eq!(rec.samples[0].fields[1], ("lidar_1".into(), FieldValue::Float(2.0)));
+        assert_eq!(
+            rec.samples[0].fields[1],
+            ("lidar_1".into(), FieldValue::Float(2.0))
+        );
         assert_eq!(rec.samples[0].time_ns, None);
     }
 

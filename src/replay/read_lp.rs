@@ -12,12 +12,15 @@ use influxdb_line_protocol::{FieldValue as LpValue, parse_lines, split_lines};
 pub fn read(text: &str, measurement: Option<&str>) -> Recording {
     let mut recording = Recording::default();
     let base = text.as_ptr() as usize;
+    // Line numbers are counted incrementally from the previous record's offset.
+    let (mut counted_to, mut line) = (0usize, 1usize);
     for chunk in split_lines(text) {
         // `split_lines` yields sub-slices of `text`: their offset gives the line number.
         let offset = (chunk.as_ptr() as usize).saturating_sub(base);
-        let line = 1 + text
-            .get(..offset)
-            .map_or(0, |before| before.bytes().filter(|&b| b == b'\n').count());
+        if let Some(between) = text.get(counted_to..offset) {
+            line += between.bytes().filter(|&b| b == b'\n').count();
+            counted_to = offset;
+        }
         let trimmed = chunk.trim_end_matches('\r');
         for parsed in parse_lines(trimmed) {
             match parsed {

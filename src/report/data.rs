@@ -85,9 +85,11 @@ impl Run {
                     run.skipped += 1;
                     continue;
                 };
-                let start = *run.start_ns.get_or_insert(line.timestamp.unwrap_or(0));
                 let t = match line.timestamp {
-                    Some(ns) => (i128::from(ns) - i128::from(start)) as f64 / 1e9,
+                    Some(ns) => {
+                        let start = *run.start_ns.get_or_insert(ns);
+                        (i128::from(ns) - i128::from(start)) as f64 / 1e9
+                    }
                     None => previous_t,
                 };
                 previous_t = t;
@@ -141,8 +143,17 @@ mod tests {
         assert_eq!(run.records[0].t, 0.0);
         assert_eq!(run.records[1].t, 0.5);
         assert_eq!(run.records[0].tags, vec![("topic".into(), "tessla".into())]);
-        assert_eq!(run.records[0].field("actualSpeed").and_then(Value::as_f64), Some(0.05));
-        assert_eq!(run.records[1].field("augmented").and_then(Value::as_bool), Some(true));
-        assert_eq!(run.records[1].field("p1_status").map(Value::as_text), Some("ok".into()));
+        assert_eq!(
+            run.records[0].field("actualSpeed").and_then(Value::as_f64),
+            Some(0.05)
+        );
+        assert_eq!(
+            run.records[1].field("augmented").and_then(Value::as_bool),
+            Some(true)
+        );
+        assert_eq!(
+            run.records[1].field("p1_status").map(Value::as_text),
+            Some("ok".into())
+        );
     }
 }

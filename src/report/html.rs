@@ -73,10 +73,7 @@ pub fn page(source_name: &str, s: &Summary, plots: &[(&str, &str)], run: &Run) -
         names.dedup();
         names.join(", ")
     };
-    out.push_str(&format!(
-        "<p>Measurements: {}</p>\n",
-        escape(&measurements)
-    ));
+    out.push_str(&format!("<p>Measurements: {}</p>\n", escape(&measurements)));
 
     out.push_str("<h2>Mean squared error</h2>\n<table id=\"mse\">\n");
     out.push_str(&number_row(

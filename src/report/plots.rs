@@ -46,7 +46,11 @@ pub fn render_all(picked: &Picked) -> Result<Vec<Plot>, String> {
             "p3.svg" => render(title, |root| p3(root, picked, title)),
             _ => render(title, |root| mse(root, picked, title)),
         }?;
-        plots.push(Plot { file_name, title, svg });
+        plots.push(Plot {
+            file_name,
+            title,
+            svg,
+        });
     }
     Ok(plots)
 }
@@ -58,7 +62,8 @@ fn render(title: &str, draw: impl FnOnce(&Root<'_>) -> DrawResult) -> Result<Str
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| format!("plot {title:?}: {e}"))?;
+        root.fill(&WHITE)
+            .map_err(|e| format!("plot {title:?}: {e}"))?;
         draw(&root).map_err(|e| format!("plot {title:?}: {e}"))?;
         root.present().map_err(|e| format!("plot {title:?}: {e}"))?;
     }
@@ -69,7 +74,9 @@ fn render(title: &str, draw: impl FnOnce(&Root<'_>) -> DrawResult) -> Result<Str
 fn span(values: impl Iterator<Item = f64>, floor_zero: bool) -> Range<f64> {
     let (mut lo, mut hi) = values
         .filter(|v| v.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
     if !lo.is_finite() {
         return 0.0..1.0;
     }
@@ -80,7 +87,11 @@ fn span(values: impl Iterator<Item = f64>, floor_zero: bool) -> Range<f64> {
         hi = lo + 1.0;
     }
     let pad = (hi - lo) * 0.05;
-    (if floor_zero && lo >= 0.0 { lo } else { lo - pad })..(hi + pad)
+    (if floor_zero && lo >= 0.0 {
+        lo
+    } else {
+        lo - pad
+    })..(hi + pad)
 }
 
 fn time_span(picked: &Picked) -> Range<f64> {
@@ -120,15 +131,24 @@ fn speeds(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
         .y_desc("speed [m/s]")
         .draw()?;
     chart
-        .draw_series(LineSeries::new(picked.expected_speed.points.clone(), EXPECTED.stroke_width(2)))?
+        .draw_series(LineSeries::new(
+            picked.expected_speed.points.clone(),
+            EXPECTED.stroke_width(2),
+        ))?
         .label("expected speed")
         .legend(legend(EXPECTED));
     chart
-        .draw_series(LineSeries::new(picked.actual_speed.points.clone(), ACTUAL.stroke_width(2)))?
+        .draw_series(LineSeries::new(
+            picked.actual_speed.points.clone(),
+            ACTUAL.stroke_width(2),
+        ))?
         .label("actual speed")
         .legend(legend(ACTUAL));
     chart
-        .draw_series(LineSeries::new(picked.action_speed.points.clone(), ACTION.stroke_width(1)))?
+        .draw_series(LineSeries::new(
+            picked.action_speed.points.clone(),
+            ACTION.stroke_width(1),
+        ))?
         .label("action speed")
         .legend(legend(ACTION));
     // Mark each augmented action at the speed sent (a step's action and flag share its time).
@@ -147,7 +167,11 @@ fn speeds(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
         })
         .collect();
     chart
-        .draw_series(marks.into_iter().map(|p| TriangleMarker::new(p, 5, AUGMENTED.filled())))?
+        .draw_series(
+            marks
+                .into_iter()
+                .map(|p| TriangleMarker::new(p, 5, AUGMENTED.filled())),
+        )?
         .label("augmented action")
         .legend(|(x, y)| TriangleMarker::new((x + 10, y), 5, AUGMENTED.filled()));
     chart
@@ -180,9 +204,15 @@ fn p1(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
         .y_desc("margin Ldist - Bdist [m]")
         .draw()?;
     let end = time_span(picked).end;
-    chart.draw_series(LineSeries::new(vec![(0.0, 0.0), (end, 0.0)], BLACK.mix(0.5)))?;
+    chart.draw_series(LineSeries::new(
+        vec![(0.0, 0.0), (end, 0.0)],
+        BLACK.mix(0.5),
+    ))?;
     chart
-        .draw_series(LineSeries::new(picked.p1_margin.points.clone(), EXPECTED.stroke_width(2)))?
+        .draw_series(LineSeries::new(
+            picked.p1_margin.points.clone(),
+            EXPECTED.stroke_width(2),
+        ))?
         .label("margin")
         .legend(legend(EXPECTED));
     // Status at each step: on the margin curve where there is one, else on the zero line.
@@ -204,7 +234,11 @@ fn p1(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
             })
             .collect();
         chart
-            .draw_series(points.into_iter().map(|p| Circle::new(p, 3, color.filled())))?
+            .draw_series(
+                points
+                    .into_iter()
+                    .map(|p| Circle::new(p, 3, color.filled())),
+            )?
             .label(format!("status {status}"))
             .legend(move |(x, y)| Circle::new((x + 10, y), 3, color.filled()));
     }
@@ -239,7 +273,10 @@ fn p3(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
         (&picked.p3_dropouts, DROPOUT, "dropouts"),
     ] {
         chart
-            .draw_series(LineSeries::new(series.points.clone(), color.stroke_width(1)))?
+            .draw_series(LineSeries::new(
+                series.points.clone(),
+                color.stroke_width(1),
+            ))?
             .label(label)
             .legend(legend(color));
         chart.draw_series(
@@ -276,11 +313,17 @@ fn mse(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
         .y_desc("speed_mse [(m/s)^2]")
         .draw()?;
     chart
-        .draw_series(LineSeries::new(picked.speed_mse.points.clone(), EXPECTED.stroke_width(2)))?
+        .draw_series(LineSeries::new(
+            picked.speed_mse.points.clone(),
+            EXPECTED.stroke_width(2),
+        ))?
         .label("speed_mse (spec)")
         .legend(legend(EXPECTED));
     chart
-        .draw_series(LineSeries::new(picked.running_mse.points.clone(), ACTUAL.stroke_width(1)))?
+        .draw_series(LineSeries::new(
+            picked.running_mse.points.clone(),
+            ACTUAL.stroke_width(1),
+        ))?
         .label("MSE of the telemetry (report)")
         .legend(legend(ACTUAL));
     chart

@@ -52,14 +52,12 @@ impl Picked {
         Picked {
             expected_speed: pick(run, "expectedSpeed", Value::as_f64),
             actual_speed: pick(run, "actualSpeed", Value::as_f64),
-            action_speed: first_non_empty(
-                pick_in(run, "action", "speed", Value::as_f64),
-                || pick(run, "p2_action", Value::as_f64),
-            ),
-            augmented: first_non_empty(
-                pick_in(run, "action", "augmented", Value::as_bool),
-                || pick(run, "p2_augmented", Value::as_bool),
-            ),
+            action_speed: first_non_empty(pick_in(run, "action", "speed", Value::as_f64), || {
+                pick(run, "p2_action", Value::as_f64)
+            }),
+            augmented: first_non_empty(pick_in(run, "action", "augmented", Value::as_bool), || {
+                pick(run, "p2_augmented", Value::as_bool)
+            }),
             p2_violated: pick(run, "p2_violated", Value::as_bool),
             speed_mse: pick(run, "speed_mse", Value::as_f64),
             running_mse: Series {
@@ -108,7 +106,10 @@ pub fn pick<T>(run: &Run, name: &str, convert: impl Fn(&Value) -> Option<T>) -> 
             })
             .unwrap_or_else(|| "value".to_string());
         return Series {
-            source: Some(Source { measurement: name.to_string(), field }),
+            source: Some(Source {
+                measurement: name.to_string(),
+                field,
+            }),
             points: own,
         };
     }
@@ -120,7 +121,10 @@ pub fn pick<T>(run: &Run, name: &str, convert: impl Fn(&Value) -> Option<T>) -> 
             None => counts.push((&r.measurement, 1)),
         }
     }
-    let best = counts.iter().max_by_key(|(_, n)| *n).map(|(m, _)| m.to_string());
+    let best = counts
+        .iter()
+        .max_by_key(|(_, n)| *n)
+        .map(|(m, _)| m.to_string());
     match best {
         Some(measurement) => pick_in(run, &measurement, name, convert),
         None => Series::default_empty(),
@@ -151,7 +155,10 @@ pub fn pick_in<T>(
 
 impl<T> Series<T> {
     fn default_empty() -> Self {
-        Series { source: None, points: Vec::new() }
+        Series {
+            source: None,
+            points: Vec::new(),
+        }
     }
 }
 
@@ -168,7 +175,10 @@ mod tests {
         );
         let picked = Picked::from_run(&run);
         assert_eq!(picked.p1_margin.points, vec![(0.0, 0.5), (1.0, 0.25)]);
-        assert_eq!(picked.p1_margin.source.as_ref().unwrap().measurement, "p1_margin");
+        assert_eq!(
+            picked.p1_margin.source.as_ref().unwrap().measurement,
+            "p1_margin"
+        );
         assert_eq!(picked.action_speed.points, vec![(0.0, 0.1)]);
         assert_eq!(picked.augmented.points, vec![(0.0, false)]);
     }

@@ -41,7 +41,14 @@ impl Summary {
         let (mse, mse_pairs) = mse_of_records(run);
         let first = run.records.first().map_or(0.0, |r| r.t);
         let last = run.records.iter().map(|r| r.t).fold(first, f64::max);
-        let status_count = |s: &str| picked.p1_status.points.iter().filter(|(_, v)| v == s).count();
+        let status_count = |s: &str| {
+            picked
+                .p1_status
+                .points
+                .iter()
+                .filter(|(_, v)| v == s)
+                .count()
+        };
         Summary {
             records: run.records.len(),
             skipped: run.skipped,
@@ -56,10 +63,19 @@ impl Summary {
             p1_violated: status_count("violated"),
             p1_unknown: status_count("unknown"),
             p1_ok: status_count("ok"),
-            p3_scans_with_spikes: picked.p3_spikes.points.iter().filter(|(_, v)| *v > 0.0).count(),
+            p3_scans_with_spikes: picked
+                .p3_spikes
+                .points
+                .iter()
+                .filter(|(_, v)| *v > 0.0)
+                .count(),
             p3_spikes: picked.p3_spikes.points.iter().map(|(_, v)| v).sum(),
             p3_dropouts: picked.p3_dropouts.points.iter().map(|(_, v)| v).sum(),
-            p3_scans: picked.p3_spikes.points.len().max(picked.p3_dropouts.points.len()),
+            p3_scans: picked
+                .p3_spikes
+                .points
+                .len()
+                .max(picked.p3_dropouts.points.len()),
         }
     }
 }
@@ -118,7 +134,10 @@ mod tests {
         assert_eq!((s.p2_violations, s.p2_steps), (1, 2));
         assert_eq!((s.augmented_actions, s.actions), (1, 2));
         assert_eq!((s.p1_violated, s.p1_unknown, s.p1_ok), (1, 1, 0));
-        assert_eq!((s.p3_scans_with_spikes, s.p3_spikes, s.p3_dropouts), (1, 2.0, 5.0));
+        assert_eq!(
+            (s.p3_scans_with_spikes, s.p3_spikes, s.p3_dropouts),
+            (1, 2.0, 5.0)
+        );
         assert_eq!(running_mse(&run).len(), 2);
     }
 }

@@ -27,7 +27,10 @@ pub fn influxql_queries() -> Vec<(String, String)> {
     for panel in dash["panels"].as_array().expect("panels") {
         let title = panel["title"].as_str().unwrap_or("?").to_string();
         for target in panel["targets"].as_array().expect("targets") {
-            out.push((title.clone(), target["query"].as_str().expect("query").to_string()));
+            out.push((
+                title.clone(),
+                target["query"].as_str().expect("query").to_string(),
+            ));
         }
     }
     out
@@ -44,7 +47,10 @@ pub fn flux_queries() -> Vec<(String, String)> {
         for chart in resource["spec"]["charts"].as_array().expect("charts") {
             let name = chart["name"].as_str().unwrap_or("?").to_string();
             for q in chart["queries"].as_array().expect("queries") {
-                out.push((name.clone(), q["query"].as_str().expect("query").to_string()));
+                out.push((
+                    name.clone(),
+                    q["query"].as_str().expect("query").to_string(),
+                ));
             }
         }
     }
@@ -63,7 +69,11 @@ pub struct Refs {
 
 /// Double-quoted identifiers of an InfluxQL fragment (`"name"`).
 fn quoted_identifiers(text: &str) -> Vec<String> {
-    text.split('"').skip(1).step_by(2).map(str::to_string).collect()
+    text.split('"')
+        .skip(1)
+        .step_by(2)
+        .map(str::to_string)
+        .collect()
 }
 
 /// Names used by an InfluxQL `SELECT ... FROM "m" WHERE ... [GROUP BY ...]`.
@@ -94,7 +104,8 @@ pub fn influxql_refs(query: &str) -> Refs {
         refs.keys.extend(quoted_identifiers(clause));
     }
     if group_at < query.len() {
-        refs.keys.extend(quoted_identifiers(query.get(group_at..).unwrap()));
+        refs.keys
+            .extend(quoted_identifiers(query.get(group_at..).unwrap()));
     }
     refs
 }
@@ -107,12 +118,18 @@ pub fn flux_refs(query: &str) -> Refs {
     let mut rest = normalized.as_str();
     while let Some(at) = rest.find("r.") {
         let before_ok = at == 0
-            || !rest[..at].chars().last().is_some_and(|c| c.is_alphanumeric() || c == '_');
+            || !rest[..at]
+                .chars()
+                .last()
+                .is_some_and(|c| c.is_alphanumeric() || c == '_');
         rest = &rest[at + 2..];
         if !before_ok {
             continue;
         }
-        let name: String = rest.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+        let name: String = rest
+            .chars()
+            .take_while(|c| c.is_alphanumeric() || *c == '_')
+            .collect();
         let after = rest[name.len()..].trim_start();
         let literal = after
             .strip_prefix("==")
@@ -157,8 +174,14 @@ impl Emitted {
     pub fn from_lines(text: &str) -> Emitted {
         let mut e = Emitted::default();
         for p in points(text) {
-            e.fields.entry(p.measurement.clone()).or_default().extend(p.fields.keys().cloned());
-            e.tags.entry(p.measurement.clone()).or_default().extend(p.tags.keys().cloned());
+            e.fields
+                .entry(p.measurement.clone())
+                .or_default()
+                .extend(p.fields.keys().cloned());
+            e.tags
+                .entry(p.measurement.clone())
+                .or_default()
+                .extend(p.tags.keys().cloned());
         }
         e
     }
@@ -204,11 +227,13 @@ pub enum Lit {
     Str(String),
 }
 
+/// Measurement, sorted tags and time: what identifies a point in InfluxDB.
+type SeriesAt = (String, Vec<(String, String)>, i64);
+
 /// The points of `text`, merged as InfluxDB merges them: same measurement, tags and time make
 /// one point, later fields overwriting earlier ones. Sorted by series then time.
 pub fn points(text: &str) -> Vec<Point> {
-    let mut merged: BTreeMap<(String, Vec<(String, String)>, i64), BTreeMap<String, Lit>> =
-        BTreeMap::new();
+    let mut merged: BTreeMap<SeriesAt, BTreeMap<String, Lit>> = BTreeMap::new();
     for chunk in split_lines(text) {
         for line in parse_lines(chunk) {
             let line = line.unwrap_or_else(|e| panic!("not line protocol ({e}): {chunk}"));
@@ -262,7 +287,12 @@ pub enum Expected {
 
 pub fn expected_answer(query: &str, points: &[Point]) -> Expected {
     let refs = influxql_refs(query);
-    let measurement = refs.measurements.iter().next().expect("one measurement").clone();
+    let measurement = refs
+        .measurements
+        .iter()
+        .next()
+        .expect("one measurement")
+        .clone();
     let upper = query.to_uppercase();
     let where_clause = upper
         .find(" WHERE ")

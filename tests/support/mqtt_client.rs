@@ -45,7 +45,11 @@ pub fn subscribe(port: u16, topic: &str, id: &str) -> Receiver<(Instant, Vec<u8>
 }
 
 /// Collect `n` messages, waiting at most `timeout` for each.
-pub fn collect(rx: &Receiver<(Instant, Vec<u8>)>, n: usize, timeout: Duration) -> Vec<(Instant, Vec<u8>)> {
+pub fn collect(
+    rx: &Receiver<(Instant, Vec<u8>)>,
+    n: usize,
+    timeout: Duration,
+) -> Vec<(Instant, Vec<u8>)> {
     let mut out = Vec::new();
     while out.len() < n {
         match rx.recv_timeout(timeout) {

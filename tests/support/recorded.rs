@@ -10,12 +10,21 @@ use std::process::{Command, Stdio};
 
 pub const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
 
-/// The recorded-run fixture: the `.lp` file in tests/fixtures/robot/ (the largest one when
-/// there are several).
+/// The recorded-run fixture: tests/fixtures/robot/recorded_run.lp (the name the Makefile uses),
+/// else the largest `.lp` file in that folder.
 pub fn recorded_run_path() -> PathBuf {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/robot");
+    let preferred = dir.join("recorded_run.lp");
+    if preferred.is_file() {
+        return preferred;
+    }
     let mut candidates: Vec<(u64, PathBuf)> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("{}: {e} (the recorded-run fixture is missing)", dir.display()))
+        .unwrap_or_else(|e| {
+            panic!(
+                "{}: {e} (the recorded-run fixture is missing)",
+                dir.display()
+            )
+        })
         .filter_map(Result::ok)
         .map(|e| e.path())
         .filter(|p| p.extension().is_some_and(|x| x == "lp"))

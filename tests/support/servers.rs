@@ -154,12 +154,15 @@ impl Influxd {
         // The HTTP port opens before the service is ready: wait for /ping to answer 204.
         let deadline = Instant::now() + Duration::from_secs(30);
         loop {
-            if let Ok(r) = agent().get(&server.url("/ping")).call() {
-                if r.status() == 204 {
-                    break;
-                }
+            if let Ok(r) = agent().get(&server.url("/ping")).call()
+                && r.status() == 204
+            {
+                break;
             }
-            assert!(Instant::now() < deadline, "influxd /ping never answered 204");
+            assert!(
+                Instant::now() < deadline,
+                "influxd /ping never answered 204"
+            );
             std::thread::sleep(Duration::from_millis(100));
         }
         Some(server)
@@ -175,7 +178,10 @@ impl Influxd {
 
     /// Run an InfluxQL statement (POST /query); returns the status and the JSON answer.
     pub fn query(&self, db: Option<&str>, q: &str) -> (u16, serde_json::Value) {
-        let mut request = agent().post(&self.url("/query")).query("q", q).query("epoch", "ns");
+        let mut request = agent()
+            .post(&self.url("/query"))
+            .query("q", q)
+            .query("epoch", "ns");
         if let Some(db) = db {
             request = request.query("db", db);
         }
@@ -196,7 +202,10 @@ impl Influxd {
             .send(lines.as_bytes())
             .unwrap();
         let status = response.status().as_u16();
-        (status, response.body_mut().read_to_string().unwrap_or_default())
+        (
+            status,
+            response.body_mut().read_to_string().unwrap_or_default(),
+        )
     }
 }
 

@@ -38,7 +38,11 @@ fn flatten(prefix: &str, value: &Value, out: &mut Vec<(String, Value)>) {
     match value {
         Value::Object(map) => {
             for (k, v) in map {
-                let key = if prefix.is_empty() { k.clone() } else { format!("{prefix}_{k}") };
+                let key = if prefix.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{prefix}_{k}")
+                };
                 flatten(&key, v, out);
             }
         }
@@ -53,12 +57,19 @@ fn flatten(prefix: &str, value: &Value, out: &mut Vec<(String, Value)>) {
 }
 
 fn escape_key(s: &str) -> String {
-    s.replace(',', "\\,").replace('=', "\\=").replace(' ', "\\ ")
+    s.replace(',', "\\,")
+        .replace('=', "\\=")
+        .replace(' ', "\\ ")
 }
 
 /// The line Telegraf's JSON parser and influx serializer make of one MQTT message, or `None`
 /// when the message has no field left (Telegraf drops such a metric).
-pub fn message_to_line(topic: &str, payload: &[u8], cfg: &ConsumerConfig, now_ns: i64) -> Option<String> {
+pub fn message_to_line(
+    topic: &str,
+    payload: &[u8],
+    cfg: &ConsumerConfig,
+    now_ns: i64,
+) -> Option<String> {
     let json: Value = serde_json::from_slice(payload).ok()?;
     let mut leaves = Vec::new();
     flatten("", &json, &mut leaves);
@@ -89,11 +100,17 @@ pub fn message_to_line(topic: &str, payload: &[u8], cfg: &ConsumerConfig, now_ns
         return None;
     }
     fields.sort();
-    let mut tags = vec![("host", cfg.host.clone()), ("topic", topic.to_string())];
+    let mut tags = [("host", cfg.host.clone()), ("topic", topic.to_string())];
     tags.sort();
-    let tag_text: String = tags.iter().map(|(k, v)| format!(",{k}={}", escape_key(v))).collect();
+    let tag_text: String = tags
+        .iter()
+        .map(|(k, v)| format!(",{k}={}", escape_key(v)))
+        .collect();
     let field_text: Vec<String> = fields.iter().map(|(k, v)| format!("{k}={v}")).collect();
-    Some(format!("mqtt_consumer{tag_text} {} {time}", field_text.join(",")))
+    Some(format!(
+        "mqtt_consumer{tag_text} {} {time}",
+        field_text.join(",")
+    ))
 }
 
 /// The JSON message outputs.mqtt publishes for one line-protocol metric.
@@ -148,7 +165,11 @@ mod tests {
 
     #[test]
     fn action_metric_as_outputs_mqtt_publishes_it() {
-        let v = line_to_message("action,robot=1 speed=0.1,augmented=true,p1_status=\"ok\",p3_spikes=2i 1500000000", 1_000_000).unwrap();
+        let v = line_to_message(
+            "action,robot=1 speed=0.1,augmented=true,p1_status=\"ok\",p3_spikes=2i 1500000000",
+            1_000_000,
+        )
+        .unwrap();
         assert_eq!(
             v,
             json!({"fields": {"speed": 0.1, "augmented": true, "p1_status": "ok", "p3_spikes": 2},
