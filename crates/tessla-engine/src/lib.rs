@@ -5,11 +5,11 @@
 
 pub mod ir;
 pub mod load;
-pub mod natives;
 pub mod monitor;
+pub mod natives;
 pub mod value;
 
 pub use ir::{Annotation, InputInfo, OutputInfo, Program, Type};
-pub use monitor::{InputError, Monitor, OutputEvent};
 pub use load::{LoadError, LoadOptions, Loaded, load_file, load_with};
+pub use monitor::{InputError, Monitor, OutputEvent};
 pub use value::{Callable, RuntimeError, Value};

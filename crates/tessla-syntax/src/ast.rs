@@ -51,7 +51,10 @@ pub enum Statement {
         span: Span,
     },
     /// `import A.B`.
-    Import { path: Vec<Ident>, span: Span },
+    Import {
+        path: Vec<Ident>,
+        span: Span,
+    },
     /// `@A(..) in name: Type`.
     In {
         annotations: Vec<Annotation>,
@@ -193,15 +196,24 @@ pub enum ExprKind {
     /// `__root__.name`.
     RootMember(Ident),
     /// Integer literal; `unit` is the time unit suffix of a time literal (`100ms` -> Some("ms")).
-    Int { value: i128, unit: Option<Ident> },
+    Int {
+        value: i128,
+        unit: Option<Ident>,
+    },
     Float(f64),
     /// A string literal; plain strings have a single `Text` part.
-    Str { parts: Vec<StrPart>, format: bool },
+    Str {
+        parts: Vec<StrPart>,
+        format: bool,
+    },
     /// `(a, b)`; `()` is Unit; `(a)` is parenthesised and the parser returns `a` itself, except
     /// with a trailing comma `(a,)`, which is a one-element tuple.
     Tuple(Vec<Expr>),
     /// `{ def a = 1; def b = 2; a + b }`.
-    Block { defs: Vec<Def>, result: Box<Expr> },
+    Block {
+        defs: Vec<Def>,
+        result: Box<Expr>,
+    },
     /// `{a = 1, b: 2}`; a member without value (`{a}`) is `a = a`.
     Record(Vec<(Ident, Expr)>),
     /// `f[T](args)`, or `f[T]` alone (then `args` is `None`).
@@ -211,8 +223,14 @@ pub enum ExprKind {
         args: Option<Vec<Arg>>,
     },
     /// `obj.field` (record field, tuple `._1`, or module member `String.concat`).
-    Member { object: Box<Expr>, field: Ident },
-    Unary { op: UnaryOp, operand: Box<Expr> },
+    Member {
+        object: Box<Expr>,
+        field: Ident,
+    },
+    Unary {
+        op: UnaryOp,
+        operand: Box<Expr>,
+    },
     Binary {
         op: BinOp,
         lhs: Box<Expr>,
@@ -224,14 +242,20 @@ pub enum ExprKind {
         then_branch: Box<Expr>,
         else_branch: Box<Expr>,
     },
-    Lambda { params: Vec<Param>, body: Box<Expr> },
+    Lambda {
+        params: Vec<Param>,
+        body: Box<Expr>,
+    },
 }
 
 #[derive(Debug, Clone, PartialEq)]
 pub enum StrPart {
     Text(String),
     /// `${expr}` or `$id`, with an optional format specifier (`%.2f`) in format strings.
-    Interp { expr: Expr, format: Option<String> },
+    Interp {
+        expr: Expr,
+        format: Option<String>,
+    },
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -143,7 +143,9 @@ impl<'a> Files<'a> for CsFiles<'a> {
                 }
             }
         }
-        let end = text[start..].find('\n').map_or(text.len(), |i| start + i + 1);
+        let end = text[start..]
+            .find('\n')
+            .map_or(text.len(), |i| start + i + 1);
         Ok(start..end)
     }
 }
@@ -181,7 +183,8 @@ fn to_codespan(d: &Diagnostic) -> CsDiagnostic<FileId> {
     };
     let mut labels = Vec::new();
     if let Some(s) = d.span {
-        labels.push(Label::primary(s.file, s.start as usize..s.end as usize).with_message(&d.label));
+        labels
+            .push(Label::primary(s.file, s.start as usize..s.end as usize).with_message(&d.label));
     }
     for (s, note) in &d.notes_at {
         labels.push(Label::secondary(s.file, s.start as usize..s.end as usize).with_message(note));

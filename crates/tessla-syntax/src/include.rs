@@ -4,7 +4,7 @@
 //! include-loop and missing-file diagnostics, and the order in which files are read.
 
 use crate::ast::File;
-use crate::diag::Diagnostic;
+use crate::diag::{Category, Diagnostic};
 use crate::source::{FileId, SourceMap};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -54,6 +54,74 @@ pub fn load_spec(
     resolver: &dyn Resolver,
     map: &mut SourceMap,
 ) -> Result<Vec<(FileId, File)>, Vec<Diagnostic>> {
-    let _ = (root, resolver, map);
-    todo!("syntax: implemented by the parser")
+    let mut state = LoadState {
+        resolver,
+        done: HashMap::new(),
+        stack: Vec::new(),
+        files: Vec::new(),
+        diags: Vec::new(),
+    };
+    match resolver.resolve(None, root) {
+        Ok((name, text)) => state.visit(map, name, text),
+        Err(msg) => state.diags.push(
+            Diagnostic::error(Category::Name, None, format!("cannot load the spec: {msg}"))
+                .with_help("check the path given on the command line"),
+        ),
+    }
+    if state.diags.iter().any(Diagnostic::is_error) {
+        Err(state.diags)
+    } else {
+        Ok(state.files)
+    }
+}
+
+struct LoadState<'r> {
+    resolver: &'r dyn Resolver,
+    /// Canonical name -> file, for files fully loaded.
+    done: HashMap<String, FileId>,
+    /// Canonical names of the files being loaded (the include chain), for loop detection.
+    stack: Vec<String>,
+    files: Vec<(FileId, File)>,
+    diags: Vec<Diagnostic>,
+}
+
+impl LoadState<'_> {
+    fn visit(&mut self, map: &mut SourceMap, name: String, text: String) {
+        let path = Path::new(&name).to_path_buf();
+        let id = map.add(name.clone(), Some(&path), text);
+        let (file, mut diags) = crate::parse(&map.get(id).text, id);
+        self.diags.append(&mut diags);
+        self.stack.push(name.clone());
+        for inc in &file.includes {
+            match self.resolver.resolve(Some(&name), &inc.path) {
+                Ok((inc_name, inc_text)) => {
+                    if self.stack.contains(&inc_name) {
+                        self.diags.push(
+                            Diagnostic::error(
+                                Category::Recursion,
+                                Some(inc.span),
+                                format!("include loop: `{inc_name}` includes itself through this include"),
+                            )
+                            .with_label("this include closes the loop")
+                            .with_help("remove one of the includes in the loop"),
+                        );
+                    } else if !self.done.contains_key(&inc_name) {
+                        self.visit(map, inc_name, inc_text);
+                    }
+                }
+                Err(msg) => self.diags.push(
+                    Diagnostic::error(
+                        Category::Name,
+                        Some(inc.span),
+                        format!("cannot include `{}`: {msg}", inc.path),
+                    )
+                    .with_label("included here")
+                    .with_help("include paths are relative to the including file"),
+                ),
+            }
+        }
+        self.stack.pop();
+        self.done.insert(name, id);
+        self.files.push((id, file));
+    }
 }

@@ -6,4 +6,8 @@
 pub mod ast;
 pub mod diag;
 pub mod include;
+pub mod lexer;
+pub mod parser;
+
+pub use parser::parse;
 pub mod source;

@@ -1,0 +1,390 @@
+//! Tokens of TeSSLa 1.2 source text.
+//!
+//! Owns: turning text into [`Token`]s with spans: identifiers, numbers, operators, significant
+//! newlines, and string literals (with `${expr}`/`$id` interpolation lexed into nested token lists,
+//! and `f"..."` format specifiers). Comments (`#`, `--`, doc lines `---`/`##`) and escaped newlines
+//! are skipped; the newline ending a comment is kept, since newlines end statements.
+//!
+//! Hand-written: string interpolation needs nested lexer modes, and newline significance depends
+//! on the parser's context, which lexer generators such as logos do not express directly.
+
+use crate::diag::{Category, Diagnostic};
+use crate::source::{FileId, Span};
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum Tok {
+    Ident(String),
+    Int(i128),
+    Float(f64),
+    Str {
+        parts: Vec<LexStrPart>,
+        format: bool,
+    },
+    /// An operator or punctuation, e.g. `+.`, `(`, `=>`.
+    Punct(&'static str),
+    Newline,
+    Eof,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum LexStrPart {
+    Text(String),
+    /// The tokens of `${ ... }` (without the braces) or of `$id`, then an optional format.
+    Interp {
+        tokens: Vec<Token>,
+        span: Span,
+        format: Option<String>,
+    },
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Token {
+    pub tok: Tok,
+    pub span: Span,
+}
+
+/// Longest first, so that `>=.` wins over `>=` and `>`.
+const PUNCTS: &[&str] = &[
+    ">=.", "<=.", "&&", "||", "==", "!=", "<=", ">=", "<<", ">>", "<.", ">.", "+.", "-.", "*.",
+    "/.", ":=", "=>", "@@", "+", "-", "*", "/", "%", "<", ">", "=", "!", "~", "&", "|", "^", "(",
+    ")", "[", "]", "{", "}", ",", ";", ":", ".", "@",
+];
+
+pub struct Lexer<'a> {
+    text: &'a str,
+    pos: usize,
+    file: FileId,
+    pub diagnostics: Vec<Diagnostic>,
+}
+
+/// Letters, `_`, and (as TeSSLa allows emoji names) any other non-ASCII symbol.
+fn is_ident_start(c: char) -> bool {
+    c == '_' || c.is_alphabetic() || (!c.is_ascii() && !c.is_whitespace() && !c.is_numeric())
+}
+
+fn is_ident_char(c: char) -> bool {
+    is_ident_start(c) || c.is_alphanumeric()
+}
+
+impl<'a> Lexer<'a> {
+    pub fn new(text: &'a str, file: FileId) -> Lexer<'a> {
+        Lexer {
+            text,
+            pos: 0,
+            file,
+            diagnostics: Vec::new(),
+        }
+    }
+
+    fn span(&self, start: usize) -> Span {
+        Span::new(self.file, start, self.pos)
+    }
+
+    fn peek(&self) -> Option<char> {
+        self.text.get(self.pos..).and_then(|s| s.chars().next())
+    }
+
+    fn peek_at(&self, n: usize) -> Option<char> {
+        self.text.get(self.pos..).and_then(|s| s.chars().nth(n))
+    }
+
+    fn rest(&self) -> &'a str {
+        self.text.get(self.pos..).unwrap_or("")
+    }
+
+    fn bump(&mut self) -> Option<char> {
+        let c = self.peek()?;
+        self.pos += c.len_utf8();
+        Some(c)
+    }
+
+    fn error(&mut self, span: Span, msg: impl Into<String>) {
+        self.diagnostics
+            .push(Diagnostic::error(Category::Syntax, Some(span), msg));
+    }
+
+    /// Lex the whole text; the last token is [`Tok::Eof`].
+    pub fn tokenize(mut self) -> (Vec<Token>, Vec<Diagnostic>) {
+        let toks = self.tokens_until(None);
+        (toks, self.diagnostics)
+    }
+
+    /// Lex tokens until EOF, or (inside `${ ... }`) until the `}` closing the interpolation,
+    /// which is consumed but not returned.
+    fn tokens_until(&mut self, close_brace: Option<usize>) -> Vec<Token> {
+        let mut out = Vec::new();
+        let mut depth = 0usize;
+        loop {
+            self.skip_space_and_comments();
+            let start = self.pos;
+            let Some(c) = self.peek() else {
+                if let Some(open) = close_brace {
+                    let sp = Span::new(self.file, open, open + 2);
+                    self.error(sp, "unterminated `${` in a string: add the closing `}`");
+                }
+                out.push(Token {
+                    tok: Tok::Eof,
+                    span: self.span(start),
+                });
+                return out;
+            };
+            if c == '\n' || (c == '\r' && self.peek_at(1) == Some('\n')) {
+                self.bump();
+                if c == '\r' {
+                    self.bump();
+                }
+                out.push(Token {
+                    tok: Tok::Newline,
+                    span: self.span(start),
+                });
+                continue;
+            }
+            if close_brace.is_some() && c == '}' && depth == 0 {
+                self.bump();
+                out.push(Token {
+                    tok: Tok::Eof,
+                    span: self.span(start),
+                });
+                return out;
+            }
+            let tok = if c == '"' {
+                self.bump();
+                self.string(start, false)
+            } else if c == 'f' && self.peek_at(1) == Some('"') {
+                self.bump();
+                self.bump();
+                self.string(start, true)
+            } else if is_ident_start(c) {
+                while self.peek().is_some_and(is_ident_char) {
+                    self.bump();
+                }
+                Tok::Ident(self.text[start..self.pos].to_string())
+            } else if c.is_ascii_digit() {
+                self.number(start)
+            } else if c == '$' && self.peek_at(1) == Some('{') {
+                // `${` outside strings opens an object literal, like `{`.
+                self.bump();
+                self.bump();
+                depth += 1;
+                Tok::Punct("{")
+            } else if let Some(p) = PUNCTS.iter().find(|p| self.rest().starts_with(**p)) {
+                self.pos += p.len();
+                match *p {
+                    "{" => depth += 1,
+                    "}" => depth = depth.saturating_sub(1),
+                    _ => {}
+                }
+                Tok::Punct(p)
+            } else {
+                self.bump();
+                let sp = self.span(start);
+                self.error(sp, format!("unexpected character `{}`", c.escape_debug()));
+                continue;
+            };
+            out.push(Token {
+                tok,
+                span: self.span(start),
+            });
+        }
+    }
+
+    fn skip_space_and_comments(&mut self) {
+        loop {
+            match self.peek() {
+                Some(' ' | '\t') => {
+                    self.bump();
+                }
+                Some('\r') if self.peek_at(1) != Some('\n') => {
+                    self.bump();
+                }
+                Some('\\') if self.peek_at(1) == Some('\n') => {
+                    self.bump();
+                    self.bump();
+                }
+                Some('#') => self.skip_line(),
+                Some('-') if self.peek_at(1) == Some('-') => self.skip_line(),
+                _ => return,
+            }
+        }
+    }
+
+    fn skip_line(&mut self) {
+        while let Some(c) = self.peek() {
+            if c == '\n' {
+                return;
+            }
+            self.bump();
+        }
+    }
+
+    fn number(&mut self, start: usize) -> Tok {
+        if self.rest().starts_with("0x") && self.peek_at(2).is_some_and(|c| c.is_ascii_hexdigit()) {
+            self.pos += 2;
+            let ds = self.pos;
+            while self.peek().is_some_and(|c| c.is_ascii_hexdigit()) {
+                self.bump();
+            }
+            return match i128::from_str_radix(&self.text[ds..self.pos], 16) {
+                Ok(v) => Tok::Int(v),
+                Err(_) => {
+                    let sp = self.span(start);
+                    self.error(sp, "integer literal too large");
+                    Tok::Int(0)
+                }
+            };
+        }
+        while self.peek().is_some_and(|c| c.is_ascii_digit()) {
+            self.bump();
+        }
+        let mut is_float = false;
+        if self.peek() == Some('.') && self.peek_at(1).is_some_and(|c| c.is_ascii_digit()) {
+            is_float = true;
+            self.bump();
+            while self.peek().is_some_and(|c| c.is_ascii_digit()) {
+                self.bump();
+            }
+        }
+        if self.peek() == Some('e') {
+            let sign = matches!(self.peek_at(1), Some('+' | '-'));
+            let digit_at = if sign { 2 } else { 1 };
+            if self.peek_at(digit_at).is_some_and(|c| c.is_ascii_digit()) {
+                is_float = true;
+                for _ in 0..digit_at {
+                    self.bump();
+                }
+                while self.peek().is_some_and(|c| c.is_ascii_digit()) {
+                    self.bump();
+                }
+            }
+        }
+        let text = &self.text[start..self.pos];
+        if is_float {
+            match text.parse::<f64>() {
+                Ok(v) => Tok::Float(v),
+                Err(_) => {
+                    let sp = self.span(start);
+                    self.error(sp, "malformed float literal");
+                    Tok::Float(0.0)
+                }
+            }
+        } else {
+            match text.parse::<i128>() {
+                Ok(v) => Tok::Int(v),
+                Err(_) => {
+                    let sp = self.span(start);
+                    self.error(sp, "integer literal too large");
+                    Tok::Int(0)
+                }
+            }
+        }
+    }
+
+    /// After the opening quote: text, escapes, interpolations, formats, up to the closing quote.
+    fn string(&mut self, start: usize, format: bool) -> Tok {
+        let mut parts = Vec::new();
+        let mut text = String::new();
+        loop {
+            let Some(c) = self.peek() else {
+                let sp = self.span(start);
+                self.error(sp, "unterminated string literal: add the closing `\"`");
+                break;
+            };
+            match c {
+                '"' => {
+                    self.bump();
+                    break;
+                }
+                '\\' => {
+                    let es = self.pos;
+                    self.bump();
+                    match self.bump() {
+                        Some('n') => text.push('\n'),
+                        Some('t') => text.push('\t'),
+                        Some('r') => text.push('\r'),
+                        Some('"') => text.push('"'),
+                        Some('\\') => text.push('\\'),
+                        Some('$') => text.push('$'),
+                        Some('%') => text.push('%'),
+                        Some(other) => {
+                            // TeSSLa lexes any escape; an unknown one is an error only when the
+                            // string is evaluated, so keep its text for the checker to report.
+                            let _ = es;
+                            text.push('\\');
+                            text.push(other);
+                        }
+                        None => {}
+                    }
+                }
+                '$' if self.peek_at(1) == Some('{') => {
+                    let is = self.pos;
+                    self.bump();
+                    self.bump();
+                    if !text.is_empty() {
+                        parts.push(LexStrPart::Text(std::mem::take(&mut text)));
+                    }
+                    let tokens = self.tokens_until(Some(is));
+                    let span = self.span(is);
+                    let fmt = if format { self.format_spec() } else { None };
+                    parts.push(LexStrPart::Interp {
+                        tokens,
+                        span,
+                        format: fmt,
+                    });
+                }
+                '$' if self.peek_at(1).is_some_and(is_ident_start) => {
+                    let is = self.pos;
+                    self.bump();
+                    let ids = self.pos;
+                    while self.peek().is_some_and(is_ident_char) {
+                        self.bump();
+                    }
+                    if !text.is_empty() {
+                        parts.push(LexStrPart::Text(std::mem::take(&mut text)));
+                    }
+                    let span = self.span(is);
+                    let id = Token {
+                        tok: Tok::Ident(self.text[ids..self.pos].to_string()),
+                        span: Span::new(self.file, ids, self.pos),
+                    };
+                    let eof = Token {
+                        tok: Tok::Eof,
+                        span: Span::new(self.file, self.pos, self.pos),
+                    };
+                    let fmt = if format { self.format_spec() } else { None };
+                    parts.push(LexStrPart::Interp {
+                        tokens: vec![id, eof],
+                        span,
+                        format: fmt,
+                    });
+                }
+                _ => {
+                    self.bump();
+                    text.push(c);
+                }
+            }
+        }
+        if !text.is_empty() || parts.is_empty() {
+            parts.push(LexStrPart::Text(text));
+        }
+        Tok::Str { parts, format }
+    }
+
+    /// A `%...` format specifier directly after an interpolation in an `f"..."` string.
+    fn format_spec(&mut self) -> Option<String> {
+        if self.peek() != Some('%') {
+            return None;
+        }
+        let s = self.pos;
+        self.bump();
+        while self
+            .peek()
+            .is_some_and(|c| "-#+ 0,(".contains(c) || c.is_ascii_digit() || c == '.')
+        {
+            self.bump();
+        }
+        if self.peek().is_some_and(|c| !matches!(c, '\\' | '$' | '"')) {
+            self.bump();
+        }
+        Some(self.text[s..self.pos].to_string())
+    }
+}
