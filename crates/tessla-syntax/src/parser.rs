@@ -202,18 +202,42 @@ impl<'a> Parser<'a> {
         }
     }
 
-    /// Skip to the end of the current statement (a newline or `;` outside brackets).
+    /// Skip to the end of the current statement: a newline or `;` outside brackets, or a line
+    /// that starts a new statement (so an unclosed bracket does not swallow the rest of the file).
     fn recover(&mut self) {
         let mut depth = 0i32;
+        let mut first = true;
         loop {
+            let at_line_start = first
+                && self.pos > 0
+                && matches!(
+                    self.toks.get(self.pos - 1).map(|t| &t.tok),
+                    Some(Tok::Newline)
+                );
+            if at_line_start && self.starts_statement(0) {
+                return;
+            }
+            first = false;
             match self.peek() {
                 Tok::Eof => return,
-                Tok::Newline | Tok::Punct(";") if depth <= 0 => return,
+                Tok::Newline if depth <= 0 || self.starts_statement(1) => return,
+                Tok::Punct(";") if depth <= 0 => return,
                 Tok::Punct("(" | "[" | "{") => depth += 1,
                 Tok::Punct(")" | "]" | "}") => depth -= 1,
                 _ => {}
             }
             self.advance();
+        }
+    }
+
+    fn starts_statement(&self, n: usize) -> bool {
+        match self.peek_n(n) {
+            Tok::Ident(k) => matches!(
+                k.as_str(),
+                "def" | "liftable" | "in" | "out" | "include" | "type" | "module" | "import"
+            ),
+            Tok::Punct("@" | "@@") => true,
+            _ => false,
         }
     }
 
@@ -1036,6 +1060,7 @@ impl<'a> Parser<'a> {
                     kind: ExprKind::RootMember(id),
                 })
             }
+            Tok::Ident(k) if KEYWORDS.contains(&k.as_str()) => self.expected("an expression"),
             Tok::Ident(_) => {
                 let id = self.ident()?;
                 Ok(Expr {
