@@ -1,1 +1,14 @@
-//! lineproto: InfluxDB line protocol as Telegraf writes and reads it.
+//! lineproto: InfluxDB line protocol as Telegraf reads and writes it.
+//!
+//! Owns: cutting a byte stream into records ([`split`], quote-aware: a string field may hold a raw
+//! newline), parsing one record into a [`Metric`] ([`parse`], on the `influxdb-line-protocol`
+//! crate with Telegraf's rules applied on top), and writing metrics back with Telegraf's escaping
+//! ([`write`]). No I/O happens here.
+
+pub mod parse;
+pub mod split;
+pub mod write;
+
+pub use parse::{FieldValue, Metric, ParseError, parse_record};
+pub use split::{Record, RecordSplitter};
+pub use write::{LineWriter, NotFinite};
