@@ -7,6 +7,10 @@
 //! events -> bytes out. [`transport`] moves the bytes (stdin/stdout, UDP); [`cli`] wires the
 //! subcommands.
 
+pub mod bundled;
 pub mod cli;
+pub mod log;
 pub mod replay;
 pub mod report;
+pub mod telegraf;
+pub mod transport;

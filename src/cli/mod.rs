@@ -6,6 +6,8 @@
 //! - 2: a spec error (parse, type, include ...) or a bad command line
 //! - 3: an I/O error that stops the run (input file unreadable, UDP address not bindable)
 
+pub mod run;
+
 use clap::{Args, Parser, Subcommand};
 
 pub mod replay;
@@ -82,6 +84,30 @@ pub struct RunArgs {
     pub spec: Option<PathBuf>,
     #[command(flatten)]
     pub spec_options: SpecOptions,
+    /// Do not echo input records (by default each is written back unchanged before its outputs).
+    #[arg(long)]
+    pub no_passthrough: bool,
+    /// What to do with a record whose timestamp is not after the last evaluated step.
+    #[arg(long, value_enum, default_value_t)]
+    pub late: crate::telegraf::processor::LateMode,
+    /// Measurement of the metric that groups outputs without a Telegraf annotation.
+    #[arg(long, default_value = "tessla")]
+    pub measurement: String,
+    /// Add a static tag to every output metric: `--tag site=lab` (repeatable).
+    #[arg(long = "tag", value_name = "KEY=VALUE")]
+    pub tags: Vec<String>,
+    /// UDP mode (the TeSSLa Telegraf Connector's wiring): receive line protocol on this address.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:1653")]
+    pub udp_listen: Option<String>,
+    /// UDP mode: send outputs to this address.
+    #[arg(long, value_name = "ADDR", default_value = "127.0.0.1:1654")]
+    pub udp_send: String,
+    /// UDP mode: largest datagram to send, in bytes (lines are never split).
+    #[arg(long, value_name = "BYTES", default_value_t = 8192)]
+    pub udp_max_datagram: usize,
+    /// Least severe messages written to stderr.
+    #[arg(long, value_enum, default_value_t)]
+    pub log_level: crate::log::Level,
 }
 
 pub fn main() -> i32 {
@@ -97,9 +123,7 @@ pub fn main() -> i32 {
 }
 
 fn run(args: RunArgs) -> i32 {
-    let _ = args;
-    eprintln!("E! run: not implemented yet");
-    EXIT_SPEC
+    run::run(args)
 }
 
 fn check(args: CheckArgs) -> i32 {
@@ -112,4 +136,21 @@ fn trace(args: TraceArgs) -> i32 {
     let _ = args;
     eprintln!("E! trace: not implemented yet");
     EXIT_SPEC
+}
+
+/// The engine's load options from the command line (`--base-time`, `--set NAME=VALUE`).
+pub fn load_options(o: &SpecOptions) -> Result<tessla_engine::LoadOptions, String> {
+    let overrides = o
+        .set
+        .iter()
+        .map(|s| {
+            s.split_once('=')
+                .map(|(k, v)| (k.trim().to_string(), v.trim().to_string()))
+                .ok_or_else(|| format!("--set {s}: expected NAME=VALUE"))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(tessla_engine::LoadOptions {
+        base_time: Some(o.base_time.clone()),
+        overrides,
+    })
 }

@@ -1,0 +1,96 @@
+//! `tessla-telegraf [run]`: load the spec (or the bundled robot monitors), then process line
+//! protocol from stdin (Telegraf's execd) or UDP (the connector's wiring) until EOF or a signal.
+
+use super::{EXIT_IO, EXIT_OK, EXIT_SPEC, RunArgs};
+use crate::log::{self, Level};
+use crate::telegraf::binding::parse_tags;
+use crate::telegraf::processor::{Options, Processor};
+use crate::transport::{self, Ending};
+
+pub fn run(args: RunArgs) -> i32 {
+    log::set_level(args.log_level);
+    let options = match super::load_options(&args.spec_options) {
+        Ok(o) => o,
+        Err(msg) => {
+            log::log(Level::Error, &msg);
+            return EXIT_SPEC;
+        }
+    };
+    let loaded = match &args.spec {
+        Some(path) => tessla_engine::load_file(path, &options),
+        None => crate::bundled::load(&options),
+    };
+    let loaded = match loaded {
+        Ok(l) => l,
+        Err(e) => {
+            log::log(Level::Error, &e.render());
+            return EXIT_SPEC;
+        }
+    };
+    if !loaded.warnings.is_empty() {
+        log::log(
+            Level::Warn,
+            &tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false),
+        );
+    }
+    let tags = match args
+        .tags
+        .iter()
+        .map(|t| parse_tags(t).map_err(|e| format!("--tag {t}: {e}")))
+        .collect::<Result<Vec<_>, _>>()
+    {
+        Ok(t) => t.into_iter().flatten().collect(),
+        Err(e) => {
+            log::log(Level::Error, &e);
+            return EXIT_SPEC;
+        }
+    };
+    let opts = Options {
+        passthrough: !args.no_passthrough,
+        late: args.late,
+        measurement: args.measurement.clone(),
+        tags,
+    };
+    let mut proc = match Processor::new(loaded.program, opts) {
+        Ok(p) => p,
+        Err(e) => {
+            log::log(Level::Error, &format!("spec: {e}"));
+            return EXIT_SPEC;
+        }
+    };
+    let rt = match tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            log::log(Level::Error, &format!("cannot start the runtime: {e}"));
+            return EXIT_IO;
+        }
+    };
+    let result = rt.block_on(async {
+        match &args.udp_listen {
+            Some(listen) => {
+                transport::udp::run(&mut proc, listen, &args.udp_send, args.udp_max_datagram).await
+            }
+            None => transport::stdio::run(&mut proc).await,
+        }
+    });
+    match result {
+        Ok(ending) => {
+            if ending == Ending::OutputClosed {
+                log::log(Level::Info, "stdout was closed by its reader; stopping");
+            }
+            log::log(Level::Info, &proc.summary());
+            // The blocking stdin reader thread may still wait for input: leave without joining it.
+            rt.shutdown_background();
+            EXIT_OK
+        }
+        Err(e) => {
+            log::log(Level::Error, &format!("I/O error: {e}"));
+            log::log(Level::Info, &proc.summary());
+            rt.shutdown_background();
+            EXIT_IO
+        }
+    }
+}

@@ -1,0 +1,91 @@
+//! Logging to stderr in the form Telegraf's execd plugin understands.
+//!
+//! Owns: the level prefixes (`E! `, `W! `, `I! `, `D! `, which Telegraf >= 1.37 maps to its own
+//! log levels), the `--log-level` filter, the 64 KiB line cap (Telegraf's stderr reader drops
+//! longer lines), and rate limiting of repeated warnings: each kind of warning is printed the
+//! first 10 times, then once per 1000 occurrences with the running count.
+
+use std::collections::HashMap;
+use std::io::Write;
+use std::sync::Mutex;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, clap::ValueEnum, Default)]
+pub enum Level {
+    Error,
+    Warn,
+    #[default]
+    Info,
+    Debug,
+}
+
+static LEVEL: Mutex<Level> = Mutex::new(Level::Info);
+static COUNTS: Mutex<Option<HashMap<&'static str, u64>>> = Mutex::new(None);
+
+const MAX_LINE: usize = 60 * 1024;
+
+pub fn set_level(level: Level) {
+    if let Ok(mut l) = LEVEL.lock() {
+        *l = level;
+    }
+}
+
+fn enabled(level: Level) -> bool {
+    LEVEL.lock().map(|l| level <= *l).unwrap_or(true)
+}
+
+/// Print one message at `level` (every line of a multi-line message gets the prefix).
+pub fn log(level: Level, msg: &str) {
+    if !enabled(level) {
+        return;
+    }
+    let prefix = match level {
+        Level::Error => "E! ",
+        Level::Warn => "W! ",
+        Level::Info => "I! ",
+        Level::Debug => "D! ",
+    };
+    let mut out = String::with_capacity(msg.len() + 8);
+    for line in msg.lines() {
+        let mut end = line.len().min(MAX_LINE);
+        while !line.is_char_boundary(end) {
+            end -= 1;
+        }
+        out.push_str(prefix);
+        out.push_str(&line[..end]);
+        if end < line.len() {
+            out.push_str(" …(truncated)");
+        }
+        out.push('\n');
+    }
+    let _ = std::io::stderr().lock().write_all(out.as_bytes());
+}
+
+/// A warning of kind `kind`, rate-limited per kind. Returns whether it was printed.
+pub fn warn_limited(kind: &'static str, msg: impl FnOnce() -> String) -> bool {
+    let n = match COUNTS.lock() {
+        Ok(mut c) => {
+            let n = c.get_or_insert_with(HashMap::new).entry(kind).or_insert(0);
+            *n += 1;
+            *n
+        }
+        Err(_) => 1,
+    };
+    if n <= 10 {
+        log(Level::Warn, &msg());
+        if n == 10 {
+            log(
+                Level::Warn,
+                &format!("{kind}: further warnings of this kind are rate-limited"),
+            );
+        }
+        true
+    } else if n % 1000 == 0 {
+        log(
+            Level::Warn,
+            &format!("{kind}: {n} so far; latest: {}", msg()),
+        );
+        true
+    } else {
+        false
+    }
+}

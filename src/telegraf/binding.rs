@@ -1,0 +1,270 @@
+//! Binding spec inputs to metric fields, and converting field values to stream values.
+//!
+//! Owns: reading `@TelegrafIn(measurement, tags, field)` from the program's inputs (an input
+//! without it binds to the field of the same name in any metric), field patterns ending in `_*`
+//! that gather `name_0 .. name_N` into one `List[Float]` (a missing index becomes NaN), and the
+//! lossless conversions from line-protocol values to [`Value`]s of the input's type.
+
+use lineproto::{FieldValue, Metric};
+use std::sync::Arc;
+use tessla_engine::{Program, Type, Value};
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum FieldPattern {
+    Exact(String),
+    /// `ranges_*`: the prefix `ranges_`.
+    Indexed(String),
+}
+
+/// Where one input's events come from.
+#[derive(Debug, Clone)]
+pub struct InputBinding {
+    pub input: usize,
+    pub name: String,
+    pub ty: Type,
+    pub measurement: Option<String>,
+    pub tags: Vec<(String, String)>,
+    pub field: FieldPattern,
+}
+
+/// Why a field value could not become an event.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ConvertError {
+    pub input: String,
+    pub reason: String,
+}
+
+fn str_arg<'a>(args: &'a [(String, Value)], name: &str, pos: usize) -> Option<&'a str> {
+    args.iter()
+        .find(|(n, _)| n == name)
+        .or_else(|| args.get(pos))
+        .and_then(|(_, v)| match v {
+            Value::Str(s) => Some(&**s),
+            _ => None,
+        })
+}
+
+/// The bindings of every input of `program`, or a message naming a bad annotation.
+pub fn bindings(program: &Program) -> Result<Vec<InputBinding>, String> {
+    let mut out = Vec::new();
+    for (i, info) in program.inputs.iter().enumerate() {
+        let ann = info.annotations.iter().find(|a| a.name == "TelegrafIn");
+        let (measurement, tags, field) = match ann {
+            None => (None, Vec::new(), FieldPattern::Exact(info.name.clone())),
+            Some(a) => {
+                let m = str_arg(&a.args, "measurement", 0).unwrap_or("");
+                let t = str_arg(&a.args, "tags", 1).unwrap_or("");
+                let f = str_arg(&a.args, "field", 2).unwrap_or(&info.name);
+                let tags = parse_tags(t)
+                    .map_err(|e| format!("input `{}`: @TelegrafIn tags `{t}`: {e}", info.name))?;
+                let field = match f.strip_suffix('*') {
+                    Some(prefix) => FieldPattern::Indexed(prefix.to_string()),
+                    None => FieldPattern::Exact(if f.is_empty() {
+                        info.name.clone()
+                    } else {
+                        f.to_string()
+                    }),
+                };
+                let measurement = (!m.is_empty()).then(|| m.to_string());
+                (measurement, tags, field)
+            }
+        };
+        if matches!(field, FieldPattern::Indexed(_)) && info.ty != Type::List(Box::new(Type::Float))
+        {
+            return Err(format!(
+                "input `{}`: a `_*` field pattern needs type Events[List[Float]], found {:?}",
+                info.name, info.ty
+            ));
+        }
+        out.push(InputBinding {
+            input: i,
+            name: info.name.clone(),
+            ty: info.ty.clone(),
+            measurement,
+            tags,
+            field,
+        });
+    }
+    Ok(out)
+}
+
+/// `"k=v,k2=v2"` (may be empty).
+pub fn parse_tags(s: &str) -> Result<Vec<(String, String)>, String> {
+    s.split(',')
+        .filter(|p| !p.trim().is_empty())
+        .map(|p| {
+            p.split_once('=')
+                .map(|(k, v)| (k.trim().to_string(), v.trim().to_string()))
+                .ok_or_else(|| format!("`{p}` is not key=value"))
+        })
+        .collect()
+}
+
+impl InputBinding {
+    /// Whether the metric's measurement and tags select this input.
+    pub fn matches(&self, m: &Metric) -> bool {
+        self.measurement
+            .as_ref()
+            .is_none_or(|x| *x == m.measurement)
+            && self.tags.iter().all(|(k, v)| m.tag(k) == Some(v.as_str()))
+    }
+
+    /// The event this input gets from the metric: `None` when the metric has no such field.
+    pub fn extract(&self, m: &Metric) -> Option<Result<Value, ConvertError>> {
+        match &self.field {
+            FieldPattern::Exact(f) => m.field(f).map(|v| self.convert(v)),
+            FieldPattern::Indexed(prefix) => {
+                let mut beams: Vec<(usize, f64)> = Vec::new();
+                for (k, v) in &m.fields {
+                    let Some(idx) = k
+                        .strip_prefix(prefix.as_str())
+                        .and_then(|s| s.parse::<usize>().ok())
+                    else {
+                        continue;
+                    };
+                    let x = match v {
+                        FieldValue::Float(f) => *f,
+                        FieldValue::Int(i) => *i as f64,
+                        FieldValue::UInt(u) => *u as f64,
+                        FieldValue::Str(s) => s.trim().parse().unwrap_or(f64::NAN),
+                        FieldValue::Bool(_) => f64::NAN,
+                    };
+                    beams.push((idx, x));
+                }
+                let n = beams.iter().map(|(i, _)| i + 1).max()?;
+                // Bound the list: an absurd index must not allocate gigabytes.
+                if n > 1_000_000 {
+                    return Some(Err(ConvertError {
+                        input: self.name.clone(),
+                        reason: format!("index {} in `{prefix}*` is beyond 1000000", n - 1),
+                    }));
+                }
+                let mut list = vec![Value::Float(f64::NAN); n];
+                for (i, x) in beams {
+                    if let Some(slot) = list.get_mut(i) {
+                        *slot = Value::Float(x);
+                    }
+                }
+                Some(Ok(Value::List(Arc::new(list))))
+            }
+        }
+    }
+
+    /// Convert where no information is lost.
+    pub fn convert(&self, v: &FieldValue) -> Result<Value, ConvertError> {
+        let bad = |reason: String| ConvertError {
+            input: self.name.clone(),
+            reason,
+        };
+        let r = match (&self.ty, v) {
+            (Type::Unit, _) => Some(Value::Unit),
+            (Type::Float, FieldValue::Float(f)) => Some(Value::Float(*f)),
+            (Type::Float, FieldValue::Int(i)) => Some(Value::Float(*i as f64)),
+            (Type::Float, FieldValue::UInt(u)) => Some(Value::Float(*u as f64)),
+            (Type::Float, FieldValue::Str(s)) => s.trim().parse::<f64>().ok().map(Value::Float),
+            (Type::Int, FieldValue::Int(i)) => Some(Value::Int(*i)),
+            (Type::Int, FieldValue::UInt(u)) => i64::try_from(*u).ok().map(Value::Int),
+            (Type::Int, FieldValue::Float(f)) => whole(*f).map(Value::Int),
+            (Type::Int, FieldValue::Str(s)) => {
+                let t = s.trim();
+                t.parse::<i64>()
+                    .ok()
+                    .or_else(|| t.parse::<f64>().ok().and_then(whole))
+                    .map(Value::Int)
+            }
+            (Type::Bool, FieldValue::Bool(b)) => Some(Value::Bool(*b)),
+            (Type::Bool, FieldValue::Str(s)) => match s.as_str() {
+                "true" => Some(Value::Bool(true)),
+                "false" => Some(Value::Bool(false)),
+                _ => None,
+            },
+            (Type::String, FieldValue::Str(s)) => Some(Value::Str(s.as_str().into())),
+            _ => None,
+        };
+        r.ok_or_else(|| {
+            bad(format!(
+                "{v:?} does not convert to {:?} without loss",
+                self.ty
+            ))
+        })
+    }
+}
+
+fn whole(f: f64) -> Option<i64> {
+    (f.fract() == 0.0 && f.abs() < 9.2e18).then_some(f as i64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn b(ty: Type, field: FieldPattern) -> InputBinding {
+        InputBinding {
+            input: 0,
+            name: "x".into(),
+            ty,
+            measurement: Some("m".into()),
+            tags: vec![("topic".into(), "tessla".into())],
+            field,
+        }
+    }
+
+    fn metric(line: &str) -> Metric {
+        lineproto::parse_record(line.as_bytes()).unwrap().unwrap()
+    }
+
+    #[test]
+    fn conversions_are_lossless() {
+        let f = b(Type::Float, FieldPattern::Exact("x".into()));
+        assert_eq!(
+            f.convert(&FieldValue::Str("0.5".into())),
+            Ok(Value::Float(0.5))
+        );
+        assert_eq!(f.convert(&FieldValue::Int(3)), Ok(Value::Float(3.0)));
+        assert!(f.convert(&FieldValue::Bool(true)).is_err());
+        let i = b(Type::Int, FieldPattern::Exact("x".into()));
+        assert_eq!(i.convert(&FieldValue::Float(4.0)), Ok(Value::Int(4)));
+        assert!(i.convert(&FieldValue::Float(4.5)).is_err());
+        assert!(i.convert(&FieldValue::UInt(u64::MAX)).is_err());
+        let bo = b(Type::Bool, FieldPattern::Exact("x".into()));
+        assert_eq!(
+            bo.convert(&FieldValue::Str("true".into())),
+            Ok(Value::Bool(true))
+        );
+        let u = b(Type::Unit, FieldPattern::Exact("x".into()));
+        assert_eq!(u.convert(&FieldValue::Str("any".into())), Ok(Value::Unit));
+    }
+
+    #[test]
+    fn matching_by_measurement_and_tag_subset() {
+        let x = b(Type::Float, FieldPattern::Exact("x".into()));
+        assert!(x.matches(&metric("m,host=h,topic=tessla x=1 1")));
+        assert!(!x.matches(&metric("m,topic=other x=1 1")));
+        assert!(!x.matches(&metric("n,topic=tessla x=1 1")));
+    }
+
+    #[test]
+    fn indexed_fields_gather_into_a_list_with_nan_gaps() {
+        let l = b(
+            Type::List(Box::new(Type::Float)),
+            FieldPattern::Indexed("lidar_".into()),
+        );
+        let v = l
+            .extract(&metric("m,topic=tessla lidar_2=3,lidar_0=1,other=5 1"))
+            .unwrap()
+            .unwrap();
+        let Value::List(items) = v else { panic!() };
+        assert_eq!(items.len(), 3);
+        assert_eq!(items[0], Value::Float(1.0));
+        assert!(matches!(items[1], Value::Float(f) if f.is_nan()));
+        assert_eq!(items[2], Value::Float(3.0));
+        assert!(l.extract(&metric("m,topic=tessla other=5 1")).is_none());
+    }
+
+    #[test]
+    fn tag_lists_parse() {
+        assert_eq!(parse_tags("").unwrap(), vec![]);
+        assert_eq!(parse_tags("a=1,b=2").unwrap().len(), 2);
+        assert!(parse_tags("a").is_err());
+    }
+}

@@ -1,0 +1,61 @@
+//! stdin -> processor -> stdout, as Telegraf's execd processor drives its child.
+//!
+//! Owns: reading without waiting for a full buffer, flushing the pending step whenever a read
+//! returns less than a full buffer (no more input right now: never wait for the next record to
+//! answer this one), flushing stdout after every batch, SIGTERM/SIGINT, and a closed stdout.
+
+use super::Ending;
+use crate::telegraf::processor::Processor;
+use lineproto::RecordSplitter;
+use std::io::Write;
+use tokio::io::AsyncReadExt;
+
+const BUF: usize = 64 * 1024;
+
+/// Run until EOF, a signal, or a closed stdout. Pending steps are always evaluated and written.
+pub async fn run(proc: &mut Processor) -> std::io::Result<Ending> {
+    let mut stdin = tokio::io::stdin();
+    let mut splitter = RecordSplitter::default();
+    let mut buf = vec![0u8; BUF];
+    let mut out = Vec::with_capacity(BUF);
+    let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
+    let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())?;
+    let ending = loop {
+        let n = tokio::select! {
+            r = stdin.read(&mut buf) => r?,
+            _ = sigterm.recv() => break Ending::Signal,
+            _ = sigint.recv() => break Ending::Signal,
+        };
+        if n == 0 {
+            break Ending::Eof;
+        }
+        splitter.push(&buf[..n]);
+        while let Some(rec) = splitter.next_record() {
+            proc.record(&rec, &mut out);
+        }
+        if n < BUF {
+            proc.flush(&mut out);
+        }
+        if write_out(&mut out).is_err() {
+            return Ok(Ending::OutputClosed);
+        }
+    };
+    while let Some(rec) = splitter.finish() {
+        proc.record(&rec, &mut out);
+    }
+    proc.flush(&mut out);
+    if write_out(&mut out).is_err() {
+        return Ok(Ending::OutputClosed);
+    }
+    Ok(ending)
+}
+
+fn write_out(out: &mut Vec<u8>) -> std::io::Result<()> {
+    if out.is_empty() {
+        return Ok(());
+    }
+    let mut stdout = std::io::stdout().lock();
+    let r = stdout.write_all(out).and_then(|()| stdout.flush());
+    out.clear();
+    r
+}
