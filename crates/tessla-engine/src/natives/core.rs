@@ -1,0 +1,264 @@
+//! Value-level functions on scalars, strings, options and lists (the `extern` names the checker
+//! also reaches by their TeSSLa names: `pow`, `List.size`, `getSome` ...).
+//!
+//! Owns: their semantics, with TeSSLa's error rules: integer overflow, division by zero,
+//! `getSome(None)`, an index out of bounds and `floatToInt` of NaN are runtime errors (values).
+
+use crate::value::{RuntimeError, Value};
+use std::sync::Arc;
+
+fn err(e: RuntimeError) -> Value {
+    Value::Error(e)
+}
+
+fn type_err(name: &str, args: &[Value]) -> Value {
+    err(RuntimeError::Other(
+        format!("{name}: unexpected arguments {args:?}").into(),
+    ))
+}
+
+pub fn int_to_float(a: &[Value]) -> Value {
+    match a {
+        [Value::Int(i)] => Value::Float(*i as f64),
+        _ => type_err("intToFloat", a),
+    }
+}
+
+pub fn float_to_int(a: &[Value]) -> Value {
+    match a {
+        [Value::Float(f)] if f.is_finite() && f.abs() < 9.2e18 => Value::Int(f.trunc() as i64),
+        [Value::Float(_)] => err(RuntimeError::Overflow),
+        _ => type_err("floatToInt", a),
+    }
+}
+
+fn float1(name: &str, a: &[Value], f: fn(f64) -> f64) -> Value {
+    match a {
+        [Value::Float(x)] => Value::Float(f(*x)),
+        _ => type_err(name, a),
+    }
+}
+
+pub fn sin(a: &[Value]) -> Value {
+    float1("sin", a, f64::sin)
+}
+pub fn cos(a: &[Value]) -> Value {
+    float1("cos", a, f64::cos)
+}
+pub fn tan(a: &[Value]) -> Value {
+    float1("tan", a, f64::tan)
+}
+pub fn atan(a: &[Value]) -> Value {
+    float1("atan", a, f64::atan)
+}
+pub fn sqrt(a: &[Value]) -> Value {
+    float1("sqrt", a, f64::sqrt)
+}
+
+pub fn pow(a: &[Value]) -> Value {
+    match a {
+        [Value::Float(x), Value::Float(y)] => Value::Float(x.powf(*y)),
+        _ => type_err("pow", a),
+    }
+}
+
+pub fn log(a: &[Value]) -> Value {
+    match a {
+        [Value::Float(x), Value::Float(b)] => Value::Float(x.ln() / b.ln()),
+        [Value::Float(x)] => Value::Float(x.ln()),
+        _ => type_err("log", a),
+    }
+}
+
+pub fn abs(a: &[Value]) -> Value {
+    match a {
+        [Value::Int(i)] => i.checked_abs().map_or(err(RuntimeError::Overflow), Value::Int),
+        [Value::Float(f)] => Value::Float(f.abs()),
+        _ => type_err("abs", a),
+    }
+}
+
+pub fn max(a: &[Value]) -> Value {
+    match a {
+        [Value::Int(x), Value::Int(y)] => Value::Int(*x.max(y)),
+        [Value::Float(x), Value::Float(y)] => Value::Float(x.max(*y)),
+        _ => type_err("max", a),
+    }
+}
+
+pub fn min(a: &[Value]) -> Value {
+    match a {
+        [Value::Int(x), Value::Int(y)] => Value::Int(*x.min(y)),
+        [Value::Float(x), Value::Float(y)] => Value::Float(x.min(*y)),
+        _ => type_err("min", a),
+    }
+}
+
+pub fn to_string(a: &[Value]) -> Value {
+    match a {
+        [v] => Value::Str(v.to_string().into()),
+        _ => type_err("toString", a),
+    }
+}
+
+pub fn concat(a: &[Value]) -> Value {
+    match a {
+        [Value::Str(x), Value::Str(y)] => Value::Str(format!("{x}{y}").into()),
+        _ => type_err("String.concat", a),
+    }
+}
+
+pub fn some(a: &[Value]) -> Value {
+    match a {
+        [v] => Value::Some(Arc::new(v.clone())),
+        _ => type_err("Some", a),
+    }
+}
+
+pub fn is_none(a: &[Value]) -> Value {
+    match a {
+        [Value::None] => Value::Bool(true),
+        [Value::Some(_)] => Value::Bool(false),
+        _ => type_err("isNone", a),
+    }
+}
+
+pub fn is_some(a: &[Value]) -> Value {
+    match a {
+        [Value::None] => Value::Bool(false),
+        [Value::Some(_)] => Value::Bool(true),
+        _ => type_err("isSome", a),
+    }
+}
+
+pub fn get_some(a: &[Value]) -> Value {
+    match a {
+        [Value::Some(v)] => (**v).clone(),
+        [Value::None] => err(RuntimeError::GetSomeOfNone),
+        _ => type_err("getSome", a),
+    }
+}
+
+pub fn get_some_or_else(a: &[Value]) -> Value {
+    match a {
+        [Value::Some(v), _] => (**v).clone(),
+        [Value::None, d] => d.clone(),
+        _ => type_err("getSomeOrElse", a),
+    }
+}
+
+pub fn list_empty(_: &[Value]) -> Value {
+    Value::List(Arc::new(Vec::new()))
+}
+
+pub fn list_size(a: &[Value]) -> Value {
+    match a {
+        [Value::List(l)] => Value::Int(l.len() as i64),
+        _ => type_err("List.size", a),
+    }
+}
+
+pub fn list_append(a: &[Value]) -> Value {
+    match a {
+        [Value::List(l), v] => {
+            let mut l = (**l).clone();
+            l.push(v.clone());
+            Value::List(Arc::new(l))
+        }
+        _ => type_err("List.append", a),
+    }
+}
+
+pub fn list_prepend(a: &[Value]) -> Value {
+    match a {
+        [v, Value::List(l)] => {
+            let mut n = Vec::with_capacity(l.len() + 1);
+            n.push(v.clone());
+            n.extend(l.iter().cloned());
+            Value::List(Arc::new(n))
+        }
+        _ => type_err("List.prepend", a),
+    }
+}
+
+pub fn list_get(a: &[Value]) -> Value {
+    match a {
+        [Value::List(l), Value::Int(i)] => usize::try_from(*i)
+            .ok()
+            .and_then(|i| l.get(i))
+            .cloned()
+            .unwrap_or(err(RuntimeError::IndexOutOfBounds)),
+        _ => type_err("List.get", a),
+    }
+}
+
+pub fn list_set(a: &[Value]) -> Value {
+    match a {
+        [Value::List(l), Value::Int(i), v] => match usize::try_from(*i).ok().filter(|i| *i < l.len()) {
+            Some(i) => {
+                let mut n = (**l).clone();
+                n[i] = v.clone();
+                Value::List(Arc::new(n))
+            }
+            None => err(RuntimeError::IndexOutOfBounds),
+        },
+        _ => type_err("List.set", a),
+    }
+}
+
+pub fn list_head(a: &[Value]) -> Value {
+    match a {
+        [Value::List(l)] => l.first().cloned().unwrap_or(err(RuntimeError::IndexOutOfBounds)),
+        _ => type_err("List.head", a),
+    }
+}
+
+pub fn list_last(a: &[Value]) -> Value {
+    match a {
+        [Value::List(l)] => l.last().cloned().unwrap_or(err(RuntimeError::IndexOutOfBounds)),
+        _ => type_err("List.last", a),
+    }
+}
+
+pub fn list_tail(a: &[Value]) -> Value {
+    match a {
+        [Value::List(l)] => Value::List(Arc::new(l.iter().skip(1).cloned().collect())),
+        _ => type_err("List.tail", a),
+    }
+}
+
+pub fn list_init(a: &[Value]) -> Value {
+    match a {
+        [Value::List(l)] => Value::List(Arc::new(
+            l.iter().take(l.len().saturating_sub(1)).cloned().collect(),
+        )),
+        _ => type_err("List.init", a),
+    }
+}
+
+/// `List.fold(list, init, f)`: `f(acc, x)` over the elements, left to right.
+pub fn list_fold(a: &[Value]) -> Value {
+    match a {
+        [Value::List(l), init, Value::Closure(f)] => {
+            let mut acc = init.clone();
+            for x in l.iter() {
+                acc = f.call(&[acc, x.clone()]);
+                if matches!(acc, Value::Error(_)) {
+                    break;
+                }
+            }
+            acc
+        }
+        _ => type_err("List.fold", a),
+    }
+}
+
+/// `List.map(list, f)`.
+pub fn list_map(a: &[Value]) -> Value {
+    match a {
+        [Value::List(l), Value::Closure(f)] => {
+            Value::List(Arc::new(l.iter().map(|x| f.call(std::slice::from_ref(x))).collect()))
+        }
+        _ => type_err("List.map", a),
+    }
+}
