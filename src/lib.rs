@@ -13,4 +13,5 @@ pub mod log;
 pub mod replay;
 pub mod report;
 pub mod telegraf;
+pub mod trace;
 pub mod transport;

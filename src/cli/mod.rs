@@ -6,7 +6,9 @@
 //! - 2: a spec error (parse, type, include ...) or a bad command line
 //! - 3: an I/O error that stops the run (input file unreadable, UDP address not bindable)
 
+pub mod check;
 pub mod run;
+pub mod trace;
 
 use clap::{Args, Parser, Subcommand};
 
@@ -127,15 +129,11 @@ fn run(args: RunArgs) -> i32 {
 }
 
 fn check(args: CheckArgs) -> i32 {
-    let _ = args;
-    eprintln!("E! check: not implemented yet");
-    EXIT_SPEC
+    check::run(args)
 }
 
 fn trace(args: TraceArgs) -> i32 {
-    let _ = args;
-    eprintln!("E! trace: not implemented yet");
-    EXIT_SPEC
+    trace::run(args)
 }
 
 /// The engine's load options from the command line (`--base-time`, `--set NAME=VALUE`).

@@ -4,6 +4,7 @@
 //! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s.
 
 use crate::value::Value;
+use std::sync::Arc;
 
 /// A value type, as reported by `check` and used by bindings to convert inputs.
 #[derive(Debug, Clone, PartialEq)]
@@ -18,6 +19,8 @@ pub enum Type {
     Tuple(Vec<Type>),
     Record(Vec<(String, Type)>),
     Events(Box<Type>),
+    /// Not inferred (the engine infers types of inputs and literals only, see `check`).
+    Unknown,
 }
 
 /// An annotation on an input or output (`@TelegrafIn("m", "", "f")`), with its arguments named by
@@ -46,12 +49,136 @@ pub struct OutputInfo {
     pub raw: bool,
 }
 
+/// Index of a stream node in [`Program::nodes`].
+pub type NodeId = usize;
+
+/// A compiled value-level function: arguments (or a frame of variables) in, a value out.
+pub type Func = Arc<dyn Fn(&[Value]) -> Value + Send + Sync>;
+
+/// The function of a `lift`: `None` for arguments without an event; `None` out = no event.
+pub type LiftFunc = Arc<dyn Fn(&[Option<Value>]) -> Option<Value> + Send + Sync>;
+
+/// An argument of a signal lift: a stream, or a constant (always defined, never an event).
+#[derive(Clone, Debug)]
+pub enum SArg {
+    Stream(NodeId),
+    Const(Value),
+}
+
+/// One stream node. Edges marked lazy may point forward (recursion); all others point to
+/// nodes evaluated earlier in [`Program::order`].
+#[derive(Clone)]
+pub enum Node {
+    Input(usize),
+    Nil,
+    /// One event at the first step (t = 0).
+    Const(Value),
+    /// The same events as another node (a reference made before that node existed).
+    Alias(NodeId),
+    Time(NodeId),
+    /// `last(value, trigger)`; `value` is lazy.
+    Last {
+        value: NodeId,
+        trigger: NodeId,
+    },
+    /// `delay(delay, reset)`; `delay` is lazy.
+    Delay {
+        delay: NodeId,
+        reset: NodeId,
+    },
+    Default {
+        stream: NodeId,
+        value: Value,
+    },
+    DefaultFrom {
+        stream: NodeId,
+        from: NodeId,
+    },
+    Lift {
+        args: Vec<NodeId>,
+        f: LiftFunc,
+    },
+    /// Signal lift: fires when an argument stream has an event and all have had one.
+    SLift {
+        args: Vec<SArg>,
+        f: Func,
+    },
+    /// Leftmost event wins.
+    Merge(Vec<NodeId>),
+    Filter {
+        stream: NodeId,
+        cond: NodeId,
+    },
+    /// `init` at t = 0, then `f(acc, x)` at each event of `stream`.
+    Fold {
+        stream: NodeId,
+        init: Value,
+        f: Func,
+    },
+    /// The first event, then `f(acc, x)`.
+    Reduce {
+        stream: NodeId,
+        f: Func,
+    },
+}
+
+impl std::fmt::Debug for Node {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Node::Input(i) => write!(f, "Input({i})"),
+            Node::Nil => write!(f, "Nil"),
+            Node::Const(v) => write!(f, "Const({v:?})"),
+            Node::Alias(n) => write!(f, "Alias({n})"),
+            Node::Time(n) => write!(f, "Time({n})"),
+            Node::Last { value, trigger } => write!(f, "Last({value}, {trigger})"),
+            Node::Delay { delay, reset } => write!(f, "Delay({delay}, {reset})"),
+            Node::Default { stream, value } => write!(f, "Default({stream}, {value:?})"),
+            Node::DefaultFrom { stream, from } => write!(f, "DefaultFrom({stream}, {from})"),
+            Node::Lift { args, .. } => write!(f, "Lift({args:?})"),
+            Node::SLift { args, .. } => write!(f, "SLift({args:?})"),
+            Node::Merge(a) => write!(f, "Merge({a:?})"),
+            Node::Filter { stream, cond } => write!(f, "Filter({stream}, {cond})"),
+            Node::Fold { stream, init, .. } => write!(f, "Fold({stream}, {init:?})"),
+            Node::Reduce { stream, .. } => write!(f, "Reduce({stream})"),
+        }
+    }
+}
+
+impl Node {
+    /// Dependencies that must be evaluated before this node in the same step.
+    pub fn strict_deps(&self) -> Vec<NodeId> {
+        match self {
+            Node::Input(_) | Node::Nil | Node::Const(_) => vec![],
+            Node::Alias(n) | Node::Time(n) => vec![*n],
+            Node::Last { trigger, .. } => vec![*trigger],
+            Node::Delay { reset, .. } => vec![*reset],
+            Node::Default { stream, .. } => vec![*stream],
+            Node::DefaultFrom { stream, from } => vec![*stream, *from],
+            Node::Lift { args, .. } | Node::Merge(args) => args.clone(),
+            Node::SLift { args, .. } => args
+                .iter()
+                .filter_map(|a| match a {
+                    SArg::Stream(n) => Some(*n),
+                    SArg::Const(_) => None,
+                })
+                .collect(),
+            Node::Filter { stream, cond } => vec![*stream, *cond],
+            Node::Fold { stream, .. } | Node::Reduce { stream, .. } => vec![*stream],
+        }
+    }
+}
+
 /// A compiled specification, shared (in an `Arc`) by every monitor instance.
 #[derive(Debug)]
 pub struct Program {
     pub inputs: Vec<InputInfo>,
     pub outputs: Vec<OutputInfo>,
     pub global_annotations: Vec<Annotation>,
+    pub nodes: Vec<Node>,
+    /// Evaluation order of the nodes within a step (strict dependencies first).
+    pub order: Vec<NodeId>,
+    /// The node of each output.
+    pub output_nodes: Vec<NodeId>,
 }
 
 impl Program {

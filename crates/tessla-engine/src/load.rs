@@ -4,11 +4,13 @@
 //! monitors), the options that affect compilation (base time, `--set` overrides) and the error
 //! type carrying rendered-ready diagnostics.
 
+use crate::compile;
 use crate::ir::Program;
 use std::path::Path;
 use std::sync::Arc;
+use tessla_syntax::diag::Category;
 use tessla_syntax::diag::Diagnostic;
-use tessla_syntax::include::Resolver;
+use tessla_syntax::include::{FsResolver, Resolver, load_spec};
 use tessla_syntax::source::SourceMap;
 
 /// Options that change how a spec compiles.
@@ -45,8 +47,7 @@ impl LoadError {
 
 /// Load the spec at `path` from the file system (includes relative to the including file).
 pub fn load_file(path: &Path, options: &LoadOptions) -> Result<Loaded, LoadError> {
-    let _ = (path, options);
-    todo!("engine: implemented by the core")
+    load_with(&path.display().to_string(), &FsResolver, options)
 }
 
 /// Load the spec named `root` through `resolver` (the bundled specs use an in-memory resolver).
@@ -55,6 +56,37 @@ pub fn load_with(
     resolver: &dyn Resolver,
     options: &LoadOptions,
 ) -> Result<Loaded, LoadError> {
-    let _ = (root, resolver, options);
-    todo!("engine: implemented by the core")
+    let mut sources = SourceMap::new();
+    let base = match options.base_time.as_deref().map(compile::parse_base_time) {
+        None => 1_000_000,
+        Some(Ok(b)) => b,
+        Some(Err(msg)) => {
+            return Err(LoadError {
+                sources,
+                diagnostics: vec![Diagnostic::error(Category::Time, None, msg)],
+            });
+        }
+    };
+    let files = match load_spec(root, resolver, &mut sources) {
+        Ok(f) => f,
+        Err(diagnostics) => {
+            return Err(LoadError {
+                sources,
+                diagnostics,
+            });
+        }
+    };
+    let asts: Vec<_> = files.into_iter().map(|(_, f)| f).collect();
+    let result = compile::Compiler::new(&sources, base).program(&asts, &options.overrides);
+    match result {
+        Ok((program, warnings)) => Ok(Loaded {
+            program: Arc::new(program),
+            sources,
+            warnings,
+        }),
+        Err(diagnostics) => Err(LoadError {
+            sources,
+            diagnostics,
+        }),
+    }
 }

@@ -21,8 +21,8 @@
 //! - Runtime errors (division by zero, overflow, `getSome(None)`) are values: an output whose value
 //!   is [`Value::Error`] reaches the sink like any other event; the caller reports it.
 
-use crate::ir::Program;
-use crate::value::Value;
+use crate::ir::{Node, Program, SArg};
+use crate::value::{RuntimeError, Value};
 
 use std::sync::Arc;
 
@@ -49,6 +49,16 @@ pub enum InputError {
 #[derive(Debug, Clone)]
 pub struct Monitor {
     program: Arc<Program>,
+    t0: i64,
+    pending: Option<i64>,
+    last_evaluated: Option<i64>,
+    inputs: Vec<Option<Value>>,
+    /// The latest value of each node from earlier steps.
+    last: Vec<Option<Value>>,
+    /// Scratch: this step's event of each node.
+    cur: Vec<Option<Value>>,
+    /// Armed delay target of each `Delay` node.
+    targets: Vec<Option<i64>>,
 }
 
 impl Monitor {
@@ -57,8 +67,17 @@ impl Monitor {
     }
 
     pub fn starting_at(program: Arc<Program>, t0: i64) -> Monitor {
-        let _ = (program, t0);
-        todo!("engine: implemented by the core")
+        let n = program.nodes.len();
+        Monitor {
+            inputs: vec![None; program.inputs.len()],
+            last: vec![None; n],
+            cur: vec![None; n],
+            targets: vec![None; n],
+            program,
+            t0,
+            pending: None,
+            last_evaluated: None,
+        }
     }
 
     pub fn program(&self) -> &Arc<Program> {
@@ -67,12 +86,12 @@ impl Monitor {
 
     /// Timestamp of the step collecting inputs, if one is open.
     pub fn pending(&self) -> Option<i64> {
-        todo!()
+        self.pending
     }
 
     /// Timestamp of the last evaluated step, if any.
     pub fn last_evaluated(&self) -> Option<i64> {
-        todo!()
+        self.last_evaluated
     }
 
     pub fn push<S: FnMut(OutputEvent<'_>)>(
@@ -82,17 +101,215 @@ impl Monitor {
         value: Value,
         sink: &mut S,
     ) -> Result<(), InputError> {
-        let _ = (ts, input, value, sink);
-        todo!()
+        if input >= self.inputs.len() {
+            return Err(InputError::UnknownInput(input));
+        }
+        if let Some(p) = self.pending {
+            if ts < p {
+                return Err(InputError::Decreasing { last: p, got: ts });
+            }
+        } else if let Some(l) = self.last_evaluated
+            && ts <= l
+        {
+            return Err(InputError::Decreasing { last: l, got: ts });
+        } else if self.last_evaluated.is_none() && ts < self.t0 {
+            return Err(InputError::Decreasing {
+                last: self.t0,
+                got: ts,
+            });
+        }
+        if self.pending == Some(ts) {
+            if self.inputs[input].is_some() {
+                return Err(InputError::Multiple { input, ts });
+            }
+        } else {
+            self.advance_to(ts, sink);
+            self.pending = Some(ts);
+        }
+        self.inputs[input] = Some(value);
+        Ok(())
     }
 
+    /// Evaluate the pending step now.
     pub fn flush<S: FnMut(OutputEvent<'_>)>(&mut self, sink: &mut S) {
-        let _ = sink;
-        todo!()
+        if let Some(p) = self.pending.take() {
+            self.step(p, sink);
+        } else if self.last_evaluated.is_none() {
+            self.step(self.t0, sink);
+        }
     }
 
+    /// Evaluate the pending step (if before `ts`), the first step at t0 if none ran yet, and
+    /// every delay firing strictly before `ts`.
     pub fn advance_to<S: FnMut(OutputEvent<'_>)>(&mut self, ts: i64, sink: &mut S) {
-        let _ = (ts, sink);
-        todo!()
+        if let Some(p) = self.pending
+            && p < ts
+        {
+            self.pending = None;
+            self.step(p, sink);
+        }
+        if self.pending.is_none() && self.last_evaluated.is_none() && self.t0 < ts {
+            self.step(self.t0, sink);
+        }
+        if self.pending.is_some() {
+            return;
+        }
+        while let Some(t) = self.next_delay().filter(|t| *t < ts) {
+            self.step(t, sink);
+        }
     }
+
+    fn next_delay(&self) -> Option<i64> {
+        self.targets.iter().flatten().copied().min()
+    }
+
+    fn step<S: FnMut(OutputEvent<'_>)>(&mut self, ts: i64, sink: &mut S) {
+        let program = Arc::clone(&self.program);
+        let first = self.last_evaluated.is_none();
+        for c in self.cur.iter_mut() {
+            *c = None;
+        }
+        let mut fired = Vec::new();
+        for &i in &program.order {
+            let v = match &program.nodes[i] {
+                Node::Input(k) => self.inputs.get_mut(*k).and_then(Option::take),
+                Node::Nil => None,
+                Node::Const(v) => first.then(|| v.clone()),
+                Node::Alias(n) => self.cur[*n].clone(),
+                Node::Time(n) => self.cur[*n].as_ref().map(|_| Value::Int(ts)),
+                Node::Last { value, trigger } => {
+                    if self.cur[*trigger].is_some() {
+                        self.last[*value].clone()
+                    } else {
+                        None
+                    }
+                }
+                Node::Delay { .. } => {
+                    if self.targets[i] == Some(ts) {
+                        self.targets[i] = None;
+                        fired.push(i);
+                        Some(Value::Unit)
+                    } else {
+                        None
+                    }
+                }
+                Node::Default { stream, value } => self.cur[*stream]
+                    .clone()
+                    .or_else(|| first.then(|| value.clone())),
+                Node::DefaultFrom { stream, from } => self.cur[*stream].clone().or_else(|| {
+                    let s_never = self.last[*stream].is_none();
+                    let d_first = self.last[*from].is_none();
+                    if s_never && d_first {
+                        self.cur[*from].clone()
+                    } else {
+                        None
+                    }
+                }),
+                Node::Lift { args, f } => {
+                    if args.iter().any(|a| self.cur[*a].is_some()) {
+                        let vals: Vec<Option<Value>> =
+                            args.iter().map(|a| self.cur[*a].clone()).collect();
+                        f(&vals)
+                    } else {
+                        None
+                    }
+                }
+                Node::SLift { args, f } => self.slift(args, f),
+                Node::Merge(args) => args.iter().find_map(|a| self.cur[*a].clone()),
+                Node::Filter { stream, cond } => match &self.cur[*stream] {
+                    Some(v) => {
+                        let c = self.cur[*cond].as_ref().or(self.last[*cond].as_ref());
+                        match c {
+                            Some(Value::Bool(true)) => Some(v.clone()),
+                            Some(Value::Error(e)) => Some(Value::Error(e.clone())),
+                            _ => None,
+                        }
+                    }
+                    None => None,
+                },
+                Node::Fold { stream, init, f } => {
+                    if first {
+                        Some(init.clone())
+                    } else {
+                        match (&self.cur[*stream], &self.last[i]) {
+                            (Some(x), Some(acc)) => Some(strict2(f, acc, x)),
+                            _ => None,
+                        }
+                    }
+                }
+                Node::Reduce { stream, f } => match (&self.cur[*stream], &self.last[i]) {
+                    (Some(x), Some(acc)) => Some(strict2(f, acc, x)),
+                    (Some(x), None) => Some(x.clone()),
+                    _ => None,
+                },
+            };
+            self.cur[i] = v;
+        }
+        // Arm delays after the whole step: their delay argument is lazy and may come later.
+        for (i, node) in program.nodes.iter().enumerate() {
+            if let Node::Delay { delay, reset } = node {
+                let reset_now = self.cur[*reset].is_some();
+                let fired_now = fired.contains(&i);
+                if reset_now && !fired_now {
+                    self.targets[i] = None;
+                }
+                if reset_now || fired_now {
+                    match &self.cur[*delay] {
+                        Some(Value::Int(d)) if *d > 0 => {
+                            self.targets[i] = Some(ts.saturating_add(*d))
+                        }
+                        Some(Value::Int(_)) => {
+                            self.cur[i] = Some(Value::Error(RuntimeError::NonPositiveDelay));
+                        }
+                        _ => {}
+                    }
+                }
+            }
+        }
+        for (out, &n) in program.output_nodes.iter().enumerate() {
+            if let Some(v) = &self.cur[n] {
+                sink(OutputEvent {
+                    ts,
+                    output: out,
+                    value: v,
+                });
+            }
+        }
+        for (l, c) in self.last.iter_mut().zip(self.cur.iter_mut()) {
+            if let Some(v) = c.take() {
+                *l = Some(v);
+            }
+        }
+        for i in self.inputs.iter_mut() {
+            *i = None;
+        }
+        self.last_evaluated = Some(ts);
+    }
+
+    fn slift(&self, args: &[SArg], f: &crate::ir::Func) -> Option<Value> {
+        let mut any = false;
+        let mut vals = Vec::with_capacity(args.len());
+        for a in args {
+            match a {
+                SArg::Const(v) => vals.push(v.clone()),
+                SArg::Stream(n) => {
+                    if self.cur[*n].is_some() {
+                        any = true;
+                    }
+                    vals.push(self.cur[*n].as_ref().or(self.last[*n].as_ref())?.clone());
+                }
+            }
+        }
+        if !any {
+            return None;
+        }
+        Some(f(&vals))
+    }
+}
+
+fn strict2(f: &crate::ir::Func, a: &Value, b: &Value) -> Value {
+    if let Value::Error(e) = a {
+        return Value::Error(e.clone());
+    }
+    f(&[a.clone(), b.clone()])
 }

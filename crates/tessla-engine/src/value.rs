@@ -48,3 +48,106 @@ impl PartialEq for dyn Callable {
         std::ptr::addr_eq(self as *const Self, other as *const Self)
     }
 }
+
+/// Java's `Double.toString`, which TeSSLa's interpreter output uses: `23.0`, `1.0E63`,
+/// `1.0E-5`, `Infinity`, `NaN`.
+pub fn java_float(f: f64) -> String {
+    if f.is_nan() {
+        return "NaN".into();
+    }
+    if f.is_infinite() {
+        return if f > 0.0 { "Infinity" } else { "-Infinity" }.into();
+    }
+    if f == 0.0 {
+        return if f.is_sign_negative() { "-0.0" } else { "0.0" }.into();
+    }
+    let a = f.abs();
+    if (1e-3..1e7).contains(&a) {
+        let s = format!("{f}");
+        if s.contains('.') { s } else { format!("{s}.0") }
+    } else {
+        // Shortest round-trip digits in scientific form, then Java's layout.
+        let s = format!("{f:e}");
+        let (mant, exp) = s.split_once('e').unwrap_or((&s, "0"));
+        let mant = if mant.contains('.') {
+            mant.to_string()
+        } else {
+            format!("{mant}.0")
+        };
+        format!("{mant}E{exp}")
+    }
+}
+
+impl fmt::Display for Value {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fn list(
+            f: &mut fmt::Formatter<'_>,
+            open: &str,
+            items: &[Value],
+            close: &str,
+        ) -> fmt::Result {
+            f.write_str(open)?;
+            for (i, v) in items.iter().enumerate() {
+                if i > 0 {
+                    f.write_str(", ")?;
+                }
+                write!(f, "{v}")?;
+            }
+            f.write_str(close)
+        }
+        match self {
+            Value::Unit => f.write_str("()"),
+            Value::Bool(b) => write!(f, "{b}"),
+            Value::Int(i) => write!(f, "{i}"),
+            Value::Float(x) => f.write_str(&java_float(*x)),
+            Value::Str(s) => f.write_str(s),
+            Value::None => f.write_str("None"),
+            Value::Some(v) => write!(f, "Some({v})"),
+            Value::List(l) => list(f, "List(", l, ")"),
+            Value::Tuple(t) => list(f, "(", t, ")"),
+            Value::Record(r) => {
+                f.write_str("{")?;
+                for (i, (k, v)) in r.iter().enumerate() {
+                    if i > 0 {
+                        f.write_str(", ")?;
+                    }
+                    write!(f, "{k} = {v}")?;
+                }
+                f.write_str("}")
+            }
+            Value::Closure(_) => f.write_str("<function>"),
+            Value::Error(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl fmt::Display for RuntimeError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            RuntimeError::DivisionByZero => f.write_str("Division by zero"),
+            RuntimeError::Overflow => f.write_str("Integer overflow"),
+            RuntimeError::GetSomeOfNone => f.write_str("Tried to get value of None"),
+            RuntimeError::IndexOutOfBounds => f.write_str("Index out of bounds"),
+            RuntimeError::NonPositiveDelay => f.write_str("Delay must be positive"),
+            RuntimeError::Other(s) => f.write_str(s),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn floats_print_as_java_does() {
+        assert_eq!(java_float(23.0), "23.0");
+        assert_eq!(java_float(1e63), "1.0E63");
+        assert_eq!(java_float(1.5e-5), "1.5E-5");
+        assert_eq!(java_float(0.25), "0.25");
+        assert_eq!(java_float(f64::INFINITY), "Infinity");
+        assert_eq!(
+            Value::List(Arc::new(vec![Value::Int(1), Value::Int(2)])).to_string(),
+            "List(1, 2)"
+        );
+    }
+}

@@ -72,7 +72,9 @@ pub fn log(a: &[Value]) -> Value {
 
 pub fn abs(a: &[Value]) -> Value {
     match a {
-        [Value::Int(i)] => i.checked_abs().map_or(err(RuntimeError::Overflow), Value::Int),
+        [Value::Int(i)] => i
+            .checked_abs()
+            .map_or(err(RuntimeError::Overflow), Value::Int),
         [Value::Float(f)] => Value::Float(f.abs()),
         _ => type_err("abs", a),
     }
@@ -194,28 +196,36 @@ pub fn list_get(a: &[Value]) -> Value {
 
 pub fn list_set(a: &[Value]) -> Value {
     match a {
-        [Value::List(l), Value::Int(i), v] => match usize::try_from(*i).ok().filter(|i| *i < l.len()) {
-            Some(i) => {
-                let mut n = (**l).clone();
-                n[i] = v.clone();
-                Value::List(Arc::new(n))
+        [Value::List(l), Value::Int(i), v] => {
+            match usize::try_from(*i).ok().filter(|i| *i < l.len()) {
+                Some(i) => {
+                    let mut n = (**l).clone();
+                    n[i] = v.clone();
+                    Value::List(Arc::new(n))
+                }
+                None => err(RuntimeError::IndexOutOfBounds),
             }
-            None => err(RuntimeError::IndexOutOfBounds),
-        },
+        }
         _ => type_err("List.set", a),
     }
 }
 
 pub fn list_head(a: &[Value]) -> Value {
     match a {
-        [Value::List(l)] => l.first().cloned().unwrap_or(err(RuntimeError::IndexOutOfBounds)),
+        [Value::List(l)] => l
+            .first()
+            .cloned()
+            .unwrap_or(err(RuntimeError::IndexOutOfBounds)),
         _ => type_err("List.head", a),
     }
 }
 
 pub fn list_last(a: &[Value]) -> Value {
     match a {
-        [Value::List(l)] => l.last().cloned().unwrap_or(err(RuntimeError::IndexOutOfBounds)),
+        [Value::List(l)] => l
+            .last()
+            .cloned()
+            .unwrap_or(err(RuntimeError::IndexOutOfBounds)),
         _ => type_err("List.last", a),
     }
 }
@@ -256,9 +266,9 @@ pub fn list_fold(a: &[Value]) -> Value {
 /// `List.map(list, f)`.
 pub fn list_map(a: &[Value]) -> Value {
     match a {
-        [Value::List(l), Value::Closure(f)] => {
-            Value::List(Arc::new(l.iter().map(|x| f.call(std::slice::from_ref(x))).collect()))
-        }
+        [Value::List(l), Value::Closure(f)] => Value::List(Arc::new(
+            l.iter().map(|x| f.call(std::slice::from_ref(x))).collect(),
+        )),
         _ => type_err("List.map", a),
     }
 }

@@ -7,6 +7,8 @@
 //! implementation only handles well-typed, error-free values. Natives that take functions call
 //! them through [`crate::value::Callable`].
 
+pub mod core;
+
 use crate::value::Value;
 
 /// A native implementation: well-typed, error-free arguments in, a value (maybe an error) out.
@@ -29,4 +31,69 @@ pub fn all() -> &'static [Native] {
     REGISTRY
 }
 
-static REGISTRY: &[Native] = &[];
+static REGISTRY: &[Native] = &[
+    Native {
+        name: "intToFloat",
+        func: core::int_to_float,
+    },
+    Native {
+        name: "floatToInt",
+        func: core::float_to_int,
+    },
+    Native {
+        name: "pow",
+        func: core::pow,
+    },
+    Native {
+        name: "log",
+        func: core::log,
+    },
+    Native {
+        name: "sin",
+        func: core::sin,
+    },
+    Native {
+        name: "cos",
+        func: core::cos,
+    },
+    Native {
+        name: "tan",
+        func: core::tan,
+    },
+    Native {
+        name: "atan",
+        func: core::atan,
+    },
+    Native {
+        name: "sqrt",
+        func: core::sqrt,
+    },
+    Native {
+        name: "abs",
+        func: core::abs,
+    },
+    Native {
+        name: "max",
+        func: core::max,
+    },
+    Native {
+        name: "min",
+        func: core::min,
+    },
+    Native {
+        name: "toString",
+        func: core::to_string,
+    },
+    Native {
+        name: "List_size",
+        func: core::list_size,
+    },
+    Native {
+        name: "List_get",
+        func: core::list_get,
+    },
+    Native {
+        name: "List_fold",
+        func: core::list_fold,
+    },
+];

@@ -1,0 +1,1859 @@
+//! From parsed files to a [`Program`]: name resolution, macro expansion, constant folding,
+//! implicit signal lift, and closure compilation of value-level code.
+//!
+//! Owns: the compile-time evaluation of a spec. Every expression becomes a [`Term`]: a constant,
+//! a stream node, runtime value code (a closure over a frame of variables, used inside function
+//! bodies and lambdas), or a function. Functions applied to stream arguments are expanded in
+//! place (TeSSLa's macros); operators and liftable functions on streams become signal lifts;
+//! value-level functions are compiled once into closures, so evaluation never walks the AST.
+//! Recursion is allowed only through the lazy first argument of `last` and `delay`.
+
+use crate::ir::{
+    Annotation, Func, InputInfo, LiftFunc, Node, NodeId, OutputInfo, Program, SArg, Type,
+};
+use crate::natives;
+use crate::value::{Callable, RuntimeError, Value};
+use std::cell::RefCell;
+use std::collections::HashMap;
+use std::rc::Rc;
+use std::sync::{Arc, OnceLock};
+use tessla_syntax::ast::{self, BinOp, Body, Def, Expr, ExprKind, Statement, StrPart, UnaryOp};
+use tessla_syntax::diag::{Category, Diagnostic, nearest};
+use tessla_syntax::source::{SourceMap, Span};
+
+/// Frame code: runtime value code reading variables from a frame.
+type Dyn = Arc<dyn Fn(&[Value]) -> Value + Send + Sync>;
+
+#[derive(Clone)]
+enum Term {
+    Const(Value),
+    Stream(NodeId),
+    Dyn(Dyn),
+    Func(Rc<FuncTerm>),
+}
+
+enum FuncTerm {
+    /// A stream builtin (`last`, `merge` ...) or a value builtin (native).
+    Builtin(&'static str),
+    Native(natives::NativeFn),
+    User {
+        def: Rc<Def>,
+        env: Env,
+    },
+    Lambda {
+        params: Vec<ast::Param>,
+        body: Rc<Expr>,
+        env: Env,
+    },
+}
+
+#[derive(Clone)]
+struct Entry {
+    def: Rc<Def>,
+    env_cell: Rc<RefCell<Option<Env>>>,
+    state: Rc<RefCell<DefState>>,
+}
+
+enum DefState {
+    Todo,
+    InProgress { alias: Option<NodeId> },
+    Done(Term),
+}
+
+#[derive(Clone)]
+enum Binding {
+    Term(Term),
+    Def(Entry),
+}
+
+/// Names in scope, innermost last. `frame` = number of runtime variables of the current frame.
+#[derive(Clone, Default)]
+struct Env {
+    names: Rc<HashMap<String, Binding>>,
+    parent: Option<Rc<Env>>,
+    frame: usize,
+}
+
+impl Env {
+    fn lookup(&self, name: &str) -> Option<Binding> {
+        self.names
+            .get(name)
+            .cloned()
+            .or_else(|| self.parent.as_ref().and_then(|p| p.lookup(name)))
+    }
+
+    fn child(&self, names: HashMap<String, Binding>, frame: usize) -> Env {
+        Env {
+            names: Rc::new(names),
+            parent: Some(Rc::new(self.clone())),
+            frame,
+        }
+    }
+
+    fn all_names(&self, out: &mut Vec<String>) {
+        out.extend(self.names.keys().cloned());
+        if let Some(p) = &self.parent {
+            p.all_names(out);
+        }
+    }
+}
+
+struct Fail;
+type R<T> = Result<T, Fail>;
+
+const STREAM_BUILTINS: &[&str] = &[
+    "nil",
+    "unit",
+    "time",
+    "last",
+    "delay",
+    "default",
+    "defaultFrom",
+    "lift",
+    "lift1",
+    "lift2",
+    "lift3",
+    "lift4",
+    "lift5",
+    "slift",
+    "slift1",
+    "slift2",
+    "slift3",
+    "slift4",
+    "slift5",
+    "merge",
+    "merge2",
+    "merge3",
+    "merge4",
+    "merge5",
+    "merge6",
+    "merge7",
+    "merge8",
+    "const",
+    "first",
+    "filter",
+    "count",
+    "sum",
+    "fold",
+    "reduce",
+    "prev",
+    "pure",
+    "isFirst",
+    "firstEvent",
+    "defined",
+    "on",
+    "constIf",
+    "unitIf",
+    "rising",
+    "falling",
+    "resetCount",
+    "noEvent",
+    "period",
+    "runtime",
+    "maximum",
+    "minimum",
+    "average",
+];
+
+const VALUE_BUILTINS: &[(&str, natives::NativeFn)] = &[
+    ("intToFloat", natives::core::int_to_float),
+    ("floatToInt", natives::core::float_to_int),
+    ("pow", natives::core::pow),
+    ("log", natives::core::log),
+    ("sin", natives::core::sin),
+    ("cos", natives::core::cos),
+    ("tan", natives::core::tan),
+    ("atan", natives::core::atan),
+    ("sqrt", natives::core::sqrt),
+    ("abs", natives::core::abs),
+    ("max", natives::core::max),
+    ("min", natives::core::min),
+    ("toString", natives::core::to_string),
+    ("String.concat", natives::core::concat),
+    ("Some", natives::core::some),
+    ("isNone", natives::core::is_none),
+    ("isSome", natives::core::is_some),
+    ("getSome", natives::core::get_some),
+    ("getSomeOrElse", natives::core::get_some_or_else),
+    ("List.empty", natives::core::list_empty),
+    ("List.size", natives::core::list_size),
+    ("List.append", natives::core::list_append),
+    ("List.prepend", natives::core::list_prepend),
+    ("List.get", natives::core::list_get),
+    ("List.set", natives::core::list_set),
+    ("List.head", natives::core::list_head),
+    ("List.last", natives::core::list_last),
+    ("List.tail", natives::core::list_tail),
+    ("List.init", natives::core::list_init),
+    ("List.fold", natives::core::list_fold),
+    ("List.map", natives::core::list_map),
+];
+
+pub struct Compiler<'a> {
+    sources: &'a SourceMap,
+    pub diags: Vec<Diagnostic>,
+    nodes: Vec<Node>,
+    /// Node ids whose definition is pending (reserved aliases), for error checks.
+    lazy_depth: usize,
+    inline_depth: usize,
+    base_ns: i128,
+    inputs: Vec<InputInfo>,
+    input_nodes: Vec<NodeId>,
+    annotation_params: HashMap<String, Vec<String>>,
+    compiled_fns: HashMap<*const Def, Arc<OnceLock<Func>>>,
+    unit_node: Option<NodeId>,
+}
+
+fn unit_factor(unit: &str) -> Option<i128> {
+    Some(match unit {
+        "fs" => 1,
+        "ps" => 1_000,
+        "ns" => 1_000_000,
+        "us" | "µs" => 1_000_000_000,
+        "ms" => 1_000_000_000_000,
+        "s" => 1_000_000_000_000_000,
+        "min" => 60_000_000_000_000_000,
+        "h" => 3_600_000_000_000_000_000,
+        "d" => 86_400_000_000_000_000_000,
+        _ => return None,
+    })
+}
+
+/// Parse a base time in TeSSLa's form (`1 ns`, `33333 µs`, `1ms`) into femtoseconds.
+pub fn parse_base_time(s: &str) -> Result<i128, String> {
+    let s = s.trim();
+    let split = s.find(|c: char| !c.is_ascii_digit()).unwrap_or(s.len());
+    let (num, unit) = s.split_at(split);
+    let n: i128 = if num.is_empty() {
+        1
+    } else {
+        num.parse()
+            .map_err(|_| format!("bad number in base time `{s}`"))?
+    };
+    let f = unit_factor(unit.trim()).ok_or_else(|| {
+        format!("unknown unit in base time `{s}`: use fs, ps, ns, us, µs, ms, s, min, h or d")
+    })?;
+    if n <= 0 {
+        return Err(format!("base time `{s}` must be positive"));
+    }
+    Ok(n * f)
+}
+
+fn is_err(v: &Value) -> Option<Value> {
+    match v {
+        Value::Error(_) => Some(v.clone()),
+        _ => None,
+    }
+}
+
+/// Call a native strictly: the first error argument is the result.
+fn call_native(f: natives::NativeFn, args: &[Value]) -> Value {
+    if let Some(e) = args.iter().find_map(is_err) {
+        return e;
+    }
+    f(args)
+}
+
+fn binop(op: BinOp, a: &Value, b: &Value) -> Value {
+    use Value::*;
+    if let Option::Some(e) = is_err(a).or_else(|| is_err(b)) {
+        return e;
+    }
+    let ovf = || Error(RuntimeError::Overflow);
+    match (op, a, b) {
+        (BinOp::Add, Int(x), Int(y)) => x.checked_add(*y).map_or_else(ovf, Int),
+        (BinOp::Sub, Int(x), Int(y)) => x.checked_sub(*y).map_or_else(ovf, Int),
+        (BinOp::Mul, Int(x), Int(y)) => x.checked_mul(*y).map_or_else(ovf, Int),
+        (BinOp::Div, Int(_), Int(0)) | (BinOp::Mod, Int(_), Int(0)) => {
+            Error(RuntimeError::DivisionByZero)
+        }
+        (BinOp::Div, Int(x), Int(y)) => x.checked_div(*y).map_or_else(ovf, Int),
+        (BinOp::Mod, Int(x), Int(y)) => x.checked_rem(*y).map_or_else(ovf, Int),
+        (BinOp::Add, Str(x), Str(y)) => Str(format!("{x}{y}").into()),
+        (BinOp::FAdd, Float(x), Float(y)) => Float(x + y),
+        (BinOp::FSub, Float(x), Float(y)) => Float(x - y),
+        (BinOp::FMul, Float(x), Float(y)) => Float(x * y),
+        (BinOp::FDiv, Float(x), Float(y)) => Float(x / y),
+        (BinOp::Lt, Int(x), Int(y)) => Bool(x < y),
+        (BinOp::Gt, Int(x), Int(y)) => Bool(x > y),
+        (BinOp::Le, Int(x), Int(y)) => Bool(x <= y),
+        (BinOp::Ge, Int(x), Int(y)) => Bool(x >= y),
+        (BinOp::FLt, Float(x), Float(y)) => Bool(x < y),
+        (BinOp::FGt, Float(x), Float(y)) => Bool(x > y),
+        (BinOp::FLe, Float(x), Float(y)) => Bool(x <= y),
+        (BinOp::FGe, Float(x), Float(y)) => Bool(x >= y),
+        (BinOp::Eq, x, y) => Bool(x == y),
+        (BinOp::Ne, x, y) => Bool(x != y),
+        (BinOp::And, Bool(x), Bool(y)) => Bool(*x && *y),
+        (BinOp::Or, Bool(x), Bool(y)) => Bool(*x || *y),
+        (BinOp::BitAnd, Int(x), Int(y)) => Int(x & y),
+        (BinOp::BitOr, Int(x), Int(y)) => Int(x | y),
+        (BinOp::BitXor, Int(x), Int(y)) => Int(x ^ y),
+        (BinOp::Shl, Int(x), Int(y)) => u32::try_from(*y)
+            .ok()
+            .and_then(|s| x.checked_shl(s))
+            .map_or_else(ovf, Int),
+        (BinOp::Shr, Int(x), Int(y)) => u32::try_from(*y)
+            .ok()
+            .and_then(|s| x.checked_shr(s))
+            .map_or_else(ovf, Int),
+        _ => Error(RuntimeError::Other(
+            format!("`{}` is not defined for {a:?} and {b:?}", op.symbol()).into(),
+        )),
+    }
+}
+
+fn unop(op: UnaryOp, a: &Value) -> Value {
+    match (op, a) {
+        (_, Value::Error(_)) => a.clone(),
+        (UnaryOp::Not, Value::Bool(b)) => Value::Bool(!b),
+        (UnaryOp::BitNot, Value::Int(i)) => Value::Int(!i),
+        (UnaryOp::Neg, Value::Int(i)) => i
+            .checked_neg()
+            .map_or(Value::Error(RuntimeError::Overflow), Value::Int),
+        (UnaryOp::FNeg, Value::Float(f)) => Value::Float(-f),
+        _ => Value::Error(RuntimeError::Other(
+            format!("{op:?} is not defined for {a:?}").into(),
+        )),
+    }
+}
+
+/// A runtime function value (closure over a captured frame).
+struct RtClosure {
+    captured: Vec<Value>,
+    body: Dyn,
+}
+
+impl std::fmt::Debug for RtClosure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("<function>")
+    }
+}
+
+impl Callable for RtClosure {
+    fn call(&self, args: &[Value]) -> Value {
+        let mut frame = self.captured.clone();
+        frame.extend_from_slice(args);
+        (self.body)(&frame)
+    }
+}
+
+/// A compiled named function called as a value.
+struct FnValue(Func);
+
+impl std::fmt::Debug for FnValue {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("<function>")
+    }
+}
+
+impl Callable for FnValue {
+    fn call(&self, args: &[Value]) -> Value {
+        (self.0)(args)
+    }
+}
+
+fn value_type(v: &Value) -> Type {
+    match v {
+        Value::Unit => Type::Unit,
+        Value::Bool(_) => Type::Bool,
+        Value::Int(_) => Type::Int,
+        Value::Float(_) => Type::Float,
+        Value::Str(_) => Type::String,
+        _ => Type::Unknown,
+    }
+}
+
+/// The IR type of a declared AST type (`Events[T]` -> `T` for inputs).
+pub fn ir_type(t: &ast::Type) -> Type {
+    match t {
+        ast::Type::Name(n) => match n.name.as_str() {
+            "Int" => Type::Int,
+            "Float" => Type::Float,
+            "Bool" => Type::Bool,
+            "String" => Type::String,
+            "Unit" => Type::Unit,
+            _ => Type::Unknown,
+        },
+        ast::Type::App { name, args, .. } => {
+            let a = args.first().map(ir_type).unwrap_or(Type::Unknown);
+            match name.name.as_str() {
+                "Events" => Type::Events(Box::new(a)),
+                "Option" => Type::Option(Box::new(a)),
+                "List" => Type::List(Box::new(a)),
+                _ => Type::Unknown,
+            }
+        }
+        ast::Type::Tuple { elems, .. } if elems.is_empty() => Type::Unit,
+        ast::Type::Tuple { elems, .. } => Type::Tuple(elems.iter().map(ir_type).collect()),
+        ast::Type::Record { fields, .. } => Type::Record(
+            fields
+                .iter()
+                .map(|(n, t)| (n.name.clone(), ir_type(t)))
+                .collect(),
+        ),
+        ast::Type::Function { .. } => Type::Unknown,
+    }
+}
+
+impl<'a> Compiler<'a> {
+    pub fn new(sources: &'a SourceMap, base_ns_fs: i128) -> Compiler<'a> {
+        Compiler {
+            sources,
+            diags: Vec::new(),
+            nodes: Vec::new(),
+            lazy_depth: 0,
+            inline_depth: 0,
+            base_ns: base_ns_fs,
+            inputs: Vec::new(),
+            input_nodes: Vec::new(),
+            annotation_params: HashMap::new(),
+            compiled_fns: HashMap::new(),
+            unit_node: None,
+        }
+    }
+
+    fn error<T>(&mut self, cat: Category, span: Span, msg: impl Into<String>) -> R<T> {
+        self.diags.push(Diagnostic::error(cat, Some(span), msg));
+        Err(Fail)
+    }
+
+    fn node(&mut self, n: Node) -> NodeId {
+        self.nodes.push(n);
+        self.nodes.len() - 1
+    }
+
+    /// Compile the statements of all files (includes first) into a program.
+    pub fn program(
+        mut self,
+        files: &[ast::File],
+        overrides: &[(String, String)],
+    ) -> Result<(Program, Vec<Diagnostic>), Vec<Diagnostic>> {
+        let mut names: HashMap<String, Binding> = HashMap::new();
+        let mut outs: Vec<&ast::Out> = Vec::new();
+        let mut out_all = false;
+        let mut defs_in_order: Vec<String> = Vec::new();
+        let env_cell: Rc<RefCell<Option<Env>>> = Rc::new(RefCell::new(None));
+        let mut statements: Vec<(String, &Statement)> = Vec::new();
+        for f in files {
+            for s in &f.statements {
+                statements.push((String::new(), s));
+            }
+        }
+        let mut i = 0;
+        while i < statements.len() {
+            let (prefix, s) = statements[i].clone();
+            i += 1;
+            match s {
+                Statement::Def(d) => {
+                    let name = format!("{prefix}{}", d.name.name);
+                    if let Some(Binding::Def(prev)) = names.get(&name)
+                        && prefix.is_empty()
+                    {
+                        let sp = prev.def.name.span;
+                        self.diags.push(
+                            Diagnostic::error(
+                                Category::Other,
+                                Some(d.name.span),
+                                format!("`{name}` is defined twice"),
+                            )
+                            .with_note_at(sp, "first defined here"),
+                        );
+                        continue;
+                    }
+                    defs_in_order.push(name.clone());
+                    names.insert(
+                        name,
+                        Binding::Def(Entry {
+                            def: Rc::new(d.clone()),
+                            env_cell: env_cell.clone(),
+                            state: Rc::new(RefCell::new(DefState::Todo)),
+                        }),
+                    );
+                }
+                Statement::Module {
+                    name,
+                    statements: inner,
+                    ..
+                } => {
+                    for st in inner {
+                        statements.push((format!("{prefix}{}.", name.name), st));
+                    }
+                }
+                Statement::AnnotationDef { name, params, .. } => {
+                    self.annotation_params.insert(
+                        name.name.clone(),
+                        params.iter().map(|p| p.name.name.clone()).collect(),
+                    );
+                }
+                Statement::In { name, ty, .. } => {
+                    let elem = match ir_type(ty) {
+                        Type::Events(t) => *t,
+                        _ => {
+                            self.diags.push(
+                                Diagnostic::error(
+                                    Category::Type,
+                                    Some(ty.span()),
+                                    format!("input `{}` must have a type Events[T]", name.name),
+                                )
+                                .with_help(format!(
+                                    "write `in {}: Events[Float]` (or another element type)",
+                                    name.name
+                                )),
+                            );
+                            Type::Unknown
+                        }
+                    };
+                    let idx = self.inputs.len();
+                    let n = self.node(Node::Input(idx));
+                    self.input_nodes.push(n);
+                    self.inputs.push(InputInfo {
+                        name: name.name.clone(),
+                        ty: elem,
+                        annotations: Vec::new(),
+                    });
+                    names.insert(name.name.clone(), Binding::Term(Term::Stream(n)));
+                }
+                Statement::Out(o) => outs.push(o),
+                Statement::OutAll { .. } => out_all = true,
+                Statement::TypeDef { .. }
+                | Statement::Import { .. }
+                | Statement::GlobalAnnotation(_) => {}
+            }
+        }
+        // --set overrides replace the body of a top-level constant.
+        for (name, value) in overrides {
+            let known: Vec<String> = names
+                .iter()
+                .filter_map(|(n, b)| match b {
+                    Binding::Def(e) if e.def.params.is_none() && !n.contains('.') => {
+                        Some(n.clone())
+                    }
+                    _ => None,
+                })
+                .collect();
+            let Some(Binding::Def(entry)) = names.get(name).cloned() else {
+                let mut k = known.clone();
+                k.sort();
+                self.diags.push(
+                    Diagnostic::error(
+                        Category::Name,
+                        None,
+                        format!("--set {name}: the spec has no top-level constant `{name}`"),
+                    )
+                    .with_help(format!("known constants: {}", k.join(", "))),
+                );
+                continue;
+            };
+            let mut map = SourceMap::new();
+            let fid = map.add("--set", None, format!("def {name} = {value}\n"));
+            let (file, diags) = tessla_syntax::parse(&map.get(fid).text, fid);
+            let new_def = match (diags.is_empty(), file.statements.first()) {
+                (true, Some(Statement::Def(d))) => d.clone(),
+                _ => {
+                    self.diags.push(Diagnostic::error(
+                        Category::Syntax,
+                        None,
+                        format!("--set {name}={value}: not an expression"),
+                    ));
+                    continue;
+                }
+            };
+            // Type check: the new value must be a constant of the old value's type.
+            let old_ty = self.const_type_of(&entry.def);
+            let new_ty = self.const_type_of(&new_def);
+            if old_ty != new_ty || new_ty.is_none() {
+                self.diags.push(Diagnostic::error(
+                    Category::Type,
+                    Some(entry.def.name.span),
+                    format!("--set {name}={value}: expected a constant of type {old_ty:?}, found {new_ty:?}"),
+                ));
+                continue;
+            }
+            let mut d = (*entry.def).clone();
+            d.body = new_def.body;
+            names.insert(
+                name.clone(),
+                Binding::Def(Entry {
+                    def: Rc::new(d),
+                    env_cell: entry.env_cell.clone(),
+                    state: Rc::new(RefCell::new(DefState::Todo)),
+                }),
+            );
+        }
+        let env = Env {
+            names: Rc::new(names),
+            parent: None,
+            frame: 0,
+        };
+        *env_cell.borrow_mut() = Some(env.clone());
+
+        // Annotations of inputs.
+        let mut input_i = 0;
+        for (_, s) in &statements {
+            if let Statement::In { annotations, .. } = s {
+                let anns = self.annotations(annotations, &env);
+                if let Some(info) = self.inputs.get_mut(input_i) {
+                    info.annotations = anns;
+                }
+                input_i += 1;
+            }
+        }
+        let mut outputs = Vec::new();
+        let mut output_nodes = Vec::new();
+        for o in outs {
+            let annotations = self.annotations(&o.annotations, &env);
+            let raw = annotations.iter().any(|a| a.name == "raw");
+            let name = o
+                .alias
+                .as_ref()
+                .map_or_else(|| o.source_text.clone(), |a| a.name.clone());
+            if let Ok(t) = self.expr(&o.expr, &env) {
+                let ty = match &t {
+                    Term::Const(v) => value_type(v),
+                    Term::Stream(n) => self.stream_type(*n),
+                    _ => Type::Unknown,
+                };
+                match self.to_stream(t, o.expr.span) {
+                    Ok(n) => {
+                        outputs.push(OutputInfo {
+                            name,
+                            ty,
+                            annotations,
+                            raw,
+                        });
+                        output_nodes.push(n);
+                    }
+                    Err(Fail) => {}
+                }
+            }
+        }
+        if out_all {
+            for (i, info) in self.inputs.clone().iter().enumerate() {
+                outputs.push(OutputInfo {
+                    name: info.name.clone(),
+                    ty: info.ty.clone(),
+                    annotations: Vec::new(),
+                    raw: false,
+                });
+                output_nodes.push(self.input_nodes[i]);
+            }
+            for name in &defs_in_order {
+                if let Some(Binding::Def(e)) = env.lookup(name)
+                    && e.def.params.is_none()
+                    && let Ok(t) = self.def_term(&e, e.def.name.span)
+                    && let Term::Stream(n) = t
+                {
+                    outputs.push(OutputInfo {
+                        name: name.clone(),
+                        ty: self.stream_type(n),
+                        annotations: Vec::new(),
+                        raw: false,
+                    });
+                    output_nodes.push(n);
+                }
+            }
+        }
+        if self.diags.iter().any(|d| d.is_error()) {
+            return Err(self.diags);
+        }
+        let order = match self.order(&output_nodes) {
+            Ok(o) => o,
+            Err(()) => return Err(self.diags),
+        };
+        let _ = self.sources;
+        Ok((
+            Program {
+                inputs: self.inputs,
+                outputs,
+                global_annotations: Vec::new(),
+                nodes: self.nodes,
+                order,
+                output_nodes,
+            },
+            self.diags,
+        ))
+    }
+
+    /// The type of a parameterless def's constant value, if it is a literal constant.
+    fn const_type_of(&mut self, d: &Def) -> Option<Type> {
+        match &d.body {
+            Body::Expr { expr, .. } => match &expr.kind {
+                ExprKind::Int { .. } => Some(Type::Int),
+                ExprKind::Float(_) => Some(Type::Float),
+                ExprKind::Str { .. } => Some(Type::String),
+                ExprKind::Var(v) if v.name == "true" || v.name == "false" => Some(Type::Bool),
+                ExprKind::Unary { operand, .. } => match &operand.kind {
+                    ExprKind::Int { .. } => Some(Type::Int),
+                    ExprKind::Float(_) => Some(Type::Float),
+                    _ => None,
+                },
+                _ => None,
+            },
+            Body::Extern { .. } => None,
+        }
+    }
+
+    fn stream_type(&self, n: NodeId) -> Type {
+        match self.nodes.get(n) {
+            Some(Node::Input(i)) => self.inputs.get(*i).map_or(Type::Unknown, |i| i.ty.clone()),
+            Some(Node::Const(v)) => value_type(v),
+            Some(Node::Alias(m)) => self.stream_type(*m),
+            Some(Node::Time(_)) => Type::Int,
+            Some(
+                Node::Default { stream, .. }
+                | Node::DefaultFrom { stream, .. }
+                | Node::Filter { stream, .. },
+            ) => self.stream_type(*stream),
+            Some(Node::Last { value, .. }) => self.stream_type(*value),
+            Some(Node::Delay { .. }) => Type::Unit,
+            _ => Type::Unknown,
+        }
+    }
+
+    fn annotations(&mut self, anns: &[ast::Annotation], env: &Env) -> Vec<Annotation> {
+        let mut out = Vec::new();
+        for a in anns {
+            let params = self.annotation_params.get(&a.name.name).cloned();
+            if params.is_none() && a.name.name != "raw" {
+                self.diags.push(
+                    Diagnostic::warning(
+                        Category::Name,
+                        Some(a.name.span),
+                        format!("annotation `@{}` is not declared", a.name.name),
+                    )
+                    .with_help(format!("declare it: `def @{}(...)`", a.name.name)),
+                );
+            }
+            let mut args = Vec::new();
+            for (i, arg) in a.args.iter().enumerate() {
+                let name = arg
+                    .name
+                    .as_ref()
+                    .map(|n| n.name.clone())
+                    .or_else(|| params.as_ref().and_then(|p| p.get(i).cloned()))
+                    .unwrap_or_else(|| format!("_{i}"));
+                match self.expr(&arg.value, env) {
+                    Ok(Term::Const(v)) => args.push((name, v)),
+                    Ok(_) => self.diags.push(Diagnostic::error(
+                        Category::Type,
+                        Some(arg.value.span),
+                        "annotation arguments must be constants",
+                    )),
+                    Err(Fail) => {}
+                }
+            }
+            out.push(Annotation {
+                name: a.name.name.clone(),
+                args,
+            });
+        }
+        out
+    }
+
+    /// Evaluation order: strict dependencies first; a cycle not through `last`/`delay` is an error.
+    fn order(&mut self, roots: &[NodeId]) -> Result<Vec<NodeId>, ()> {
+        let n = self.nodes.len();
+        let mut state = vec![0u8; n];
+        let mut order = Vec::with_capacity(n);
+        // Every node is evaluated (lazy edges may reach nodes not reachable strictly from outputs).
+        let _ = roots;
+        for start in 0..n {
+            if state[start] != 0 {
+                continue;
+            }
+            let mut stack: Vec<(NodeId, usize)> = vec![(start, 0)];
+            state[start] = 1;
+            while let Some(&mut (node, ref mut idx)) = stack.last_mut() {
+                let deps = self.nodes[node].strict_deps();
+                if let Some(&d) = deps.get(*idx) {
+                    *idx += 1;
+                    match state.get(d) {
+                        Some(0) => {
+                            state[d] = 1;
+                            stack.push((d, 0));
+                        }
+                        Some(1) => {
+                            self.diags.push(
+                                Diagnostic::error(Category::Recursion, None, "a stream depends on itself without `last` or `delay` in between")
+                                    .with_help("recursion is allowed only through the first argument of `last` or `delay`"),
+                            );
+                            return Err(());
+                        }
+                        _ => {}
+                    }
+                } else {
+                    state[node] = 2;
+                    order.push(node);
+                    stack.pop();
+                }
+            }
+        }
+        Ok(order)
+    }
+
+    fn unit(&mut self) -> NodeId {
+        if let Some(u) = self.unit_node {
+            return u;
+        }
+        let u = self.node(Node::Const(Value::Unit));
+        self.unit_node = Some(u);
+        u
+    }
+
+    fn to_stream(&mut self, t: Term, span: Span) -> R<NodeId> {
+        match t {
+            Term::Stream(n) => Ok(n),
+            Term::Const(v) => Ok(self.node(Node::Const(v))),
+            Term::Dyn(_) => self.error(
+                Category::Type,
+                span,
+                "a value depending on a function parameter is used where a stream is needed",
+            ),
+            Term::Func(_) => self.error(
+                Category::Type,
+                span,
+                "a function is used where a stream is needed",
+            ),
+        }
+    }
+
+    fn def_term(&mut self, e: &Entry, span: Span) -> R<Term> {
+        if e.def.params.is_some() {
+            let env = e.env_cell.borrow().clone().unwrap_or_default();
+            return Ok(Term::Func(Rc::new(FuncTerm::User {
+                def: e.def.clone(),
+                env,
+            })));
+        }
+        let st = std::mem::replace(&mut *e.state.borrow_mut(), DefState::Todo);
+        match st {
+            DefState::Done(t) => {
+                *e.state.borrow_mut() = DefState::Done(t.clone());
+                Ok(t)
+            }
+            DefState::InProgress { alias } => {
+                if self.lazy_depth == 0 {
+                    *e.state.borrow_mut() = DefState::InProgress { alias };
+                    self.diags.push(
+                        Diagnostic::error(Category::Recursion, Some(span), format!("`{}` is defined in terms of itself", e.def.name.name))
+                            .with_help("recursion is allowed only through the first argument of `last` or `delay`"),
+                    );
+                    return Err(Fail);
+                }
+                let a = match alias {
+                    Some(a) => a,
+                    None => self.node(Node::Alias(usize::MAX)),
+                };
+                *e.state.borrow_mut() = DefState::InProgress { alias: Some(a) };
+                Ok(Term::Stream(a))
+            }
+            DefState::Todo => {
+                *e.state.borrow_mut() = DefState::InProgress { alias: None };
+                let env = e.env_cell.borrow().clone().unwrap_or_default();
+                let saved = self.lazy_depth;
+                self.lazy_depth = 0;
+                let r = self.body(&e.def, &env);
+                self.lazy_depth = saved;
+                let alias = match &*e.state.borrow() {
+                    DefState::InProgress { alias } => *alias,
+                    _ => None,
+                };
+                match r {
+                    Ok(t) => {
+                        if let Some(a) = alias {
+                            match &t {
+                                Term::Stream(n) => self.nodes[a] = Node::Alias(*n),
+                                Term::Const(v) => self.nodes[a] = Node::Const(v.clone()),
+                                _ => {
+                                    *e.state.borrow_mut() = DefState::Todo;
+                                    return self.error(
+                                        Category::Recursion,
+                                        span,
+                                        "only streams may be defined recursively",
+                                    );
+                                }
+                            }
+                        }
+                        *e.state.borrow_mut() = DefState::Done(t.clone());
+                        Ok(t)
+                    }
+                    Err(Fail) => {
+                        if let Some(a) = alias {
+                            self.nodes[a] = Node::Nil;
+                        }
+                        *e.state.borrow_mut() = DefState::Done(Term::Const(Value::Unit));
+                        Err(Fail)
+                    }
+                }
+            }
+        }
+    }
+
+    fn body(&mut self, d: &Def, env: &Env) -> R<Term> {
+        match &d.body {
+            Body::Extern { name, span, .. } => match natives::lookup(name) {
+                Some(n) => Ok(Term::Func(Rc::new(FuncTerm::Native(n.func)))),
+                None => match VALUE_BUILTINS.iter().find(|(n, _)| n == name) {
+                    Some((_, f)) => Ok(Term::Func(Rc::new(FuncTerm::Native(*f)))),
+                    None => self.error(Category::Name, *span, format!("unknown extern `{name}`")),
+                },
+            },
+            Body::Expr { expr, where_defs } => {
+                if where_defs.is_empty() {
+                    self.expr(expr, env)
+                } else {
+                    let env = self.local_defs(where_defs, env);
+                    self.expr(expr, &env)
+                }
+            }
+        }
+    }
+
+    fn local_defs(&mut self, defs: &[Def], env: &Env) -> Env {
+        let cell: Rc<RefCell<Option<Env>>> = Rc::new(RefCell::new(None));
+        let mut names = HashMap::new();
+        for d in defs {
+            names.insert(
+                d.name.name.clone(),
+                Binding::Def(Entry {
+                    def: Rc::new(d.clone()),
+                    env_cell: cell.clone(),
+                    state: Rc::new(RefCell::new(DefState::Todo)),
+                }),
+            );
+        }
+        let child = env.child(names, env.frame);
+        *cell.borrow_mut() = Some(child.clone());
+        child
+    }
+
+    fn lookup(&mut self, name: &str, span: Span, env: &Env) -> R<Term> {
+        match env.lookup(name) {
+            Some(Binding::Term(t)) => Ok(t),
+            Some(Binding::Def(e)) => self.def_term(&e, span),
+            None => {
+                if name == "true" {
+                    return Ok(Term::Const(Value::Bool(true)));
+                }
+                if name == "false" {
+                    return Ok(Term::Const(Value::Bool(false)));
+                }
+                if name == "None" {
+                    return Ok(Term::Const(Value::None));
+                }
+                if name == "unit" {
+                    let u = self.unit();
+                    return Ok(Term::Stream(u));
+                }
+                if name == "nil" {
+                    return Ok(Term::Stream(self.node(Node::Nil)));
+                }
+                if let Some(b) = STREAM_BUILTINS.iter().find(|b| **b == name) {
+                    return Ok(Term::Func(Rc::new(FuncTerm::Builtin(b))));
+                }
+                if let Some((_, f)) = VALUE_BUILTINS.iter().find(|(n, _)| *n == name) {
+                    return Ok(Term::Func(Rc::new(FuncTerm::Native(*f))));
+                }
+                let mut known = Vec::new();
+                env.all_names(&mut known);
+                known.extend(STREAM_BUILTINS.iter().map(|s| s.to_string()));
+                known.extend(VALUE_BUILTINS.iter().map(|(s, _)| s.to_string()));
+                let near = nearest(name, known.iter().map(String::as_str));
+                let mut d =
+                    Diagnostic::error(Category::Name, Some(span), format!("unknown name `{name}`"));
+                if !near.is_empty() {
+                    d = d.with_help(format!(
+                        "did you mean {}?",
+                        near.iter()
+                            .map(|n| format!("`{n}`"))
+                            .collect::<Vec<_>>()
+                            .join(" or ")
+                    ));
+                }
+                self.diags.push(d);
+                Err(Fail)
+            }
+        }
+    }
+
+    fn expr(&mut self, e: &Expr, env: &Env) -> R<Term> {
+        match &e.kind {
+            ExprKind::Var(id) => self.lookup(&id.name, id.span, env),
+            ExprKind::RootMember(id) => self.lookup(&id.name, id.span, env),
+            ExprKind::Int { value, unit } => {
+                let v = match unit {
+                    None => *value,
+                    Some(u) => {
+                        let f = unit_factor(&u.name).unwrap_or(1);
+                        let fs = value.checked_mul(f).unwrap_or(i128::MAX);
+                        if fs % self.base_ns != 0 {
+                            return self.error(
+                                Category::Time,
+                                e.span,
+                                format!(
+                                    "{value} {} is not a whole number of base time units",
+                                    u.name
+                                ),
+                            );
+                        }
+                        fs / self.base_ns
+                    }
+                };
+                match i64::try_from(v) {
+                    Ok(i) => Ok(Term::Const(Value::Int(i))),
+                    Err(_) => self.error(
+                        Category::Type,
+                        e.span,
+                        "integer literal does not fit in 64 bits",
+                    ),
+                }
+            }
+            ExprKind::Float(f) => Ok(Term::Const(Value::Float(*f))),
+            ExprKind::Str { parts, .. } => {
+                let mut terms = Vec::new();
+                for p in parts {
+                    match p {
+                        StrPart::Text(t) => terms.push(Term::Const(Value::Str(t.as_str().into()))),
+                        StrPart::Interp { expr, format } => {
+                            let t = self.expr(expr, env)?;
+                            let fmt = format.clone();
+                            let f: Func = Arc::new(move |a: &[Value]| match (&fmt, a.first()) {
+                                (Some(spec), Some(v)) => Value::Str(format_value(spec, v).into()),
+                                (None, Some(v)) => Value::Str(v.to_string().into()),
+                                _ => Value::Unit,
+                            });
+                            terms.push(self.apply_value_fn(f, vec![t], e.span)?);
+                        }
+                    }
+                }
+                if terms.len() == 1 {
+                    return Ok(terms.remove(0));
+                }
+                let concat: Func = Arc::new(|a: &[Value]| {
+                    if let Some(err) = a.iter().find_map(is_err) {
+                        return err;
+                    }
+                    let mut s = String::new();
+                    for v in a {
+                        s.push_str(&v.to_string());
+                    }
+                    Value::Str(s.into())
+                });
+                self.apply_value_fn(concat, terms, e.span)
+            }
+            ExprKind::Tuple(es) if es.is_empty() => Ok(Term::Const(Value::Unit)),
+            ExprKind::Tuple(es) => {
+                let terms = es
+                    .iter()
+                    .map(|x| self.expr(x, env))
+                    .collect::<R<Vec<_>>>()?;
+                let f: Func = Arc::new(|a: &[Value]| Value::Tuple(a.to_vec().into()));
+                self.apply_value_fn(f, terms, e.span)
+            }
+            ExprKind::Record(members) => {
+                let mut sorted: Vec<_> = members.iter().collect();
+                sorted.sort_by(|a, b| a.0.name.cmp(&b.0.name));
+                let names: Vec<Arc<str>> = sorted
+                    .iter()
+                    .map(|(n, _)| Arc::from(n.name.as_str()))
+                    .collect();
+                let terms = sorted
+                    .iter()
+                    .map(|(_, x)| self.expr(x, env))
+                    .collect::<R<Vec<_>>>()?;
+                let f: Func = Arc::new(move |a: &[Value]| {
+                    Value::Record(
+                        names
+                            .iter()
+                            .cloned()
+                            .zip(a.iter().cloned())
+                            .collect::<Vec<_>>()
+                            .into(),
+                    )
+                });
+                self.apply_value_fn(f, terms, e.span)
+            }
+            ExprKind::Block { defs, result } => {
+                let env = self.local_defs(defs, env);
+                self.expr(result, &env)
+            }
+            ExprKind::Member { object, field } => {
+                if let ExprKind::Var(m) = &object.kind
+                    && env.lookup(&m.name).is_none()
+                {
+                    let q = format!("{}.{}", m.name, field.name);
+                    return self.lookup(&q, e.span, env);
+                }
+                let obj = self.expr(object, env)?;
+                let fname: Arc<str> = field.name.as_str().into();
+                let f: Func = Arc::new(move |a: &[Value]| match a.first() {
+                    Some(Value::Record(r)) => r
+                        .iter()
+                        .find(|(k, _)| *k == fname)
+                        .map(|(_, v)| v.clone())
+                        .unwrap_or_else(|| {
+                            Value::Error(RuntimeError::Other(format!("no field {fname}").into()))
+                        }),
+                    Some(Value::Tuple(t)) => fname
+                        .strip_prefix('_')
+                        .and_then(|i| i.parse::<usize>().ok())
+                        .and_then(|i| t.get(i.wrapping_sub(1)))
+                        .cloned()
+                        .unwrap_or_else(|| {
+                            Value::Error(RuntimeError::Other(format!("no member {fname}").into()))
+                        }),
+                    Some(err @ Value::Error(_)) => err.clone(),
+                    other => Value::Error(RuntimeError::Other(
+                        format!("no member {fname} in {other:?}").into(),
+                    )),
+                });
+                self.apply_value_fn(f, vec![obj], e.span)
+            }
+            ExprKind::Unary { op, operand } => {
+                let t = self.expr(operand, env)?;
+                let op = *op;
+                let f: Func = Arc::new(move |a: &[Value]| unop(op, &a[0]));
+                self.apply_value_fn(f, vec![t], e.span)
+            }
+            ExprKind::Binary { op, lhs, rhs } => {
+                let a = self.expr(lhs, env)?;
+                let b = self.expr(rhs, env)?;
+                let op = *op;
+                if let (Term::Const(x), Term::Const(y)) = (&a, &b) {
+                    let hint = match (op, x, y) {
+                        (
+                            BinOp::Add
+                            | BinOp::Sub
+                            | BinOp::Mul
+                            | BinOp::Div
+                            | BinOp::Lt
+                            | BinOp::Gt
+                            | BinOp::Le
+                            | BinOp::Ge,
+                            Value::Float(_),
+                            _,
+                        )
+                        | (
+                            BinOp::Add
+                            | BinOp::Sub
+                            | BinOp::Mul
+                            | BinOp::Div
+                            | BinOp::Lt
+                            | BinOp::Gt
+                            | BinOp::Le
+                            | BinOp::Ge,
+                            _,
+                            Value::Float(_),
+                        ) => Some(format!("use `{}.` for Float in TeSSLa 1.2", op.symbol())),
+                        _ => None,
+                    };
+                    if let Some(h) = hint {
+                        self.diags.push(
+                            Diagnostic::error(
+                                Category::Type,
+                                Some(e.span),
+                                format!("`{}` is not defined for Float", op.symbol()),
+                            )
+                            .with_help(h),
+                        );
+                        return Err(Fail);
+                    }
+                }
+                if matches!(op, BinOp::And | BinOp::Or) {
+                    // Lazy: the right side is not evaluated when the left decides.
+                    if let Term::Dyn(_) | Term::Const(_) = a
+                        && let Term::Dyn(_) | Term::Const(_) = b
+                        && !matches!((&a, &b), (Term::Const(_), Term::Const(_)))
+                    {
+                        let (fa, fb) = (self.as_dyn(a), self.as_dyn(b));
+                        let is_and = op == BinOp::And;
+                        return Ok(Term::Dyn(Arc::new(move |fr: &[Value]| match fa(fr) {
+                            Value::Bool(x) if x != is_and => Value::Bool(x),
+                            Value::Bool(_) => fb(fr),
+                            other => other,
+                        })));
+                    }
+                }
+                let f: Func = Arc::new(move |v: &[Value]| binop(op, &v[0], &v[1]));
+                self.apply_value_fn(f, vec![a, b], e.span)
+            }
+            ExprKind::If {
+                cond,
+                then_branch,
+                else_branch,
+                ..
+            } => {
+                let c = self.expr(cond, env)?;
+                if let Term::Const(v) = &c {
+                    return match v {
+                        Value::Bool(true) => self.expr(then_branch, env),
+                        Value::Bool(false) => self.expr(else_branch, env),
+                        _ => self.error(
+                            Category::Type,
+                            cond.span,
+                            "the condition of `if` must be a Bool",
+                        ),
+                    };
+                }
+                let t = self.expr(then_branch, env)?;
+                let f = self.expr(else_branch, env)?;
+                if let Term::Dyn(_) = c
+                    && !matches!(t, Term::Stream(_) | Term::Func(_))
+                    && !matches!(f, Term::Stream(_) | Term::Func(_))
+                {
+                    let (fc, ft, ff) = (self.as_dyn(c), self.as_dyn(t), self.as_dyn(f));
+                    return Ok(Term::Dyn(Arc::new(move |fr: &[Value]| match fc(fr) {
+                        Value::Bool(true) => ft(fr),
+                        Value::Bool(false) => ff(fr),
+                        other => other,
+                    })));
+                }
+                let ite: Func = Arc::new(|v: &[Value]| match &v[0] {
+                    Value::Bool(true) => v[1].clone(),
+                    Value::Bool(false) => v[2].clone(),
+                    other => other.clone(),
+                });
+                self.apply_value_fn(ite, vec![c, t, f], e.span)
+            }
+            ExprKind::Lambda { params, body } => Ok(Term::Func(Rc::new(FuncTerm::Lambda {
+                params: params.clone(),
+                body: Rc::new((**body).clone()),
+                env: env.clone(),
+            }))),
+            ExprKind::Call { function, args, .. } => {
+                let f = self.expr(function, env)?;
+                let Some(args) = args else {
+                    return Ok(f);
+                };
+                // `last` and `delay`: the first argument is lazy (may refer back recursively).
+                let lazy_first = matches!(&f, Term::Func(ft) if matches!(&**ft, FuncTerm::Builtin("last" | "delay")));
+                let mut terms = Vec::with_capacity(args.len());
+                for (i, a) in args.iter().enumerate() {
+                    if lazy_first && i == 0 {
+                        self.lazy_depth += 1;
+                        let r = self.expr(&a.value, env);
+                        self.lazy_depth -= 1;
+                        terms.push(r?);
+                    } else {
+                        terms.push(self.expr(&a.value, env)?);
+                    }
+                }
+                self.call(f, terms, e.span, env)
+            }
+        }
+    }
+
+    /// Turn a constant or frame code into frame code.
+    fn as_dyn(&self, t: Term) -> Dyn {
+        match t {
+            Term::Dyn(d) => d,
+            Term::Const(v) => Arc::new(move |_: &[Value]| v.clone()),
+            _ => Arc::new(|_: &[Value]| Value::Error(RuntimeError::Other("not a value".into()))),
+        }
+    }
+
+    /// Apply a strict value function to terms: fold constants, lift over streams, or build frame
+    /// code inside function bodies.
+    fn apply_value_fn(&mut self, f: Func, args: Vec<Term>, span: Span) -> R<Term> {
+        if args.iter().all(|a| matches!(a, Term::Const(_))) {
+            let vals: Vec<Value> = args
+                .into_iter()
+                .map(|a| match a {
+                    Term::Const(v) => v,
+                    _ => Value::Unit,
+                })
+                .collect();
+            return Ok(Term::Const(f(&vals)));
+        }
+        let has_stream = args.iter().any(|a| matches!(a, Term::Stream(_)));
+        let has_dyn = args.iter().any(|a| matches!(a, Term::Dyn(_)));
+        if args.iter().any(|a| matches!(a, Term::Func(_))) {
+            // Functions as arguments of value functions become closures.
+            let mut conv = Vec::new();
+            for a in args {
+                conv.push(match a {
+                    Term::Func(ft) => self.func_value(&ft, span)?,
+                    other => other,
+                });
+            }
+            return self.apply_value_fn(f, conv, span);
+        }
+        if has_stream && !has_dyn {
+            let sargs = args
+                .into_iter()
+                .map(|a| match a {
+                    Term::Stream(n) => SArg::Stream(n),
+                    Term::Const(v) => SArg::Const(v),
+                    _ => SArg::Const(Value::Unit),
+                })
+                .collect();
+            return Ok(Term::Stream(self.node(Node::SLift { args: sargs, f })));
+        }
+        if has_stream {
+            return self.error(
+                Category::Unsupported,
+                span,
+                "mixing streams and function parameters in one expression is not supported",
+            );
+        }
+        let ds: Vec<Dyn> = args.into_iter().map(|a| self.as_dyn(a)).collect();
+        Ok(Term::Dyn(Arc::new(move |fr: &[Value]| {
+            let vals: Vec<Value> = ds.iter().map(|d| d(fr)).collect();
+            f(&vals)
+        })))
+    }
+
+    /// A function term as a runtime value (`Value::Closure`), constant or frame code.
+    fn func_value(&mut self, ft: &Rc<FuncTerm>, span: Span) -> R<Term> {
+        match &**ft {
+            FuncTerm::Native(n) => {
+                let n = *n;
+                let f: Func = Arc::new(move |a: &[Value]| call_native(n, a));
+                Ok(Term::Const(Value::Closure(Arc::new(FnValue(f)))))
+            }
+            FuncTerm::User { def, env } => {
+                let f = self.compile_fn(def, env, span)?;
+                Ok(Term::Const(Value::Closure(Arc::new(FnValue(f)))))
+            }
+            FuncTerm::Lambda { params, body, env } => {
+                let (names, frame) = self.param_frame(params, env.frame);
+                let inner = env.child(names, frame);
+                let code = self.expr(body, &inner)?;
+                let code = self.as_dyn(code);
+                let outer = env.frame;
+                if outer == 0 {
+                    Ok(Term::Const(Value::Closure(Arc::new(RtClosure {
+                        captured: Vec::new(),
+                        body: code,
+                    }))))
+                } else {
+                    Ok(Term::Dyn(Arc::new(move |fr: &[Value]| {
+                        Value::Closure(Arc::new(RtClosure {
+                            captured: fr[..outer.min(fr.len())].to_vec(),
+                            body: code.clone(),
+                        }))
+                    })))
+                }
+            }
+            FuncTerm::Builtin(b) => self.error(
+                Category::Unsupported,
+                span,
+                format!("the stream function `{b}` cannot be used as a value"),
+            ),
+        }
+    }
+
+    fn param_frame(&self, params: &[ast::Param], base: usize) -> (HashMap<String, Binding>, usize) {
+        let mut names = HashMap::new();
+        for (i, p) in params.iter().enumerate() {
+            let slot = base + i;
+            let d: Dyn = Arc::new(move |fr: &[Value]| fr.get(slot).cloned().unwrap_or(Value::Unit));
+            names.insert(p.name.name.clone(), Binding::Term(Term::Dyn(d)));
+        }
+        (names, base + params.len())
+    }
+
+    /// Compile a named value function once into a closure (recursion through a cell).
+    fn compile_fn(&mut self, def: &Rc<Def>, env: &Env, span: Span) -> R<Func> {
+        let key = Rc::as_ptr(def);
+        if let Some(cell) = self.compiled_fns.get(&key) {
+            let cell = cell.clone();
+            return Ok(Arc::new(move |a: &[Value]| match cell.get() {
+                Some(f) => f(a),
+                None => Value::Error(RuntimeError::Other("function not compiled".into())),
+            }));
+        }
+        let cell: Arc<OnceLock<Func>> = Arc::new(OnceLock::new());
+        self.compiled_fns.insert(key, cell.clone());
+        let params = def.params.clone().unwrap_or_default();
+        let (names, frame) = self.param_frame(&params, 0);
+        let inner = Env {
+            names: Rc::new(names),
+            parent: Some(Rc::new(env.clone())),
+            frame,
+        };
+        let body = self.body(def, &inner)?;
+        let f: Func = match body {
+            Term::Dyn(d) => Arc::new(move |a: &[Value]| d(a)),
+            Term::Const(v) => Arc::new(move |_: &[Value]| v.clone()),
+            Term::Func(ft) => match &*ft {
+                FuncTerm::Native(n) => {
+                    let n = *n;
+                    Arc::new(move |a: &[Value]| call_native(n, a))
+                }
+                _ => {
+                    return self.error(
+                        Category::Unsupported,
+                        span,
+                        "functions returning functions are not supported",
+                    );
+                }
+            },
+            Term::Stream(_) => {
+                return self.error(
+                    Category::Type,
+                    span,
+                    format!(
+                        "`{}` makes a stream and cannot be called on values",
+                        def.name.name
+                    ),
+                );
+            }
+        };
+        let _ = cell.set(f.clone());
+        Ok(f)
+    }
+
+    fn call(&mut self, f: Term, args: Vec<Term>, span: Span, env: &Env) -> R<Term> {
+        let Term::Func(ft) = f else {
+            // Calling a closure value at runtime.
+            if let Term::Dyn(_) | Term::Const(Value::Closure(_)) = f {
+                let mut all = vec![f];
+                all.extend(args);
+                let call: Func = Arc::new(|a: &[Value]| match &a[0] {
+                    Value::Closure(c) => c.call(&a[1..]),
+                    other => Value::Error(RuntimeError::Other(
+                        format!("{other:?} is not a function").into(),
+                    )),
+                });
+                return self.apply_value_fn(call, all, span);
+            }
+            return self.error(Category::Type, span, "this is not a function");
+        };
+        match &*ft {
+            FuncTerm::Builtin(name) => self.builtin(name, args, span, env),
+            FuncTerm::Native(n) => {
+                let n = *n;
+                self.apply_value_fn(Arc::new(move |a: &[Value]| call_native(n, a)), args, span)
+            }
+            FuncTerm::User { def, env: denv } => {
+                let params = def.params.clone().unwrap_or_default();
+                if params.len() != args.len() {
+                    return self.error(
+                        Category::Type,
+                        span,
+                        format!(
+                            "`{}` takes {} arguments, {} given",
+                            def.name.name,
+                            params.len(),
+                            args.len()
+                        ),
+                    );
+                }
+                let expand = args.iter().any(|a| matches!(a, Term::Stream(_) | Term::Func(_)))
+                    || def.params.as_ref().is_some_and(|ps| ps.iter().any(|p| matches!(&p.ty, Some(ast::Type::App { name, .. }) if name.name == "Events")));
+                if expand {
+                    self.inline_depth += 1;
+                    if self.inline_depth > 200 {
+                        self.inline_depth -= 1;
+                        return self.error(
+                            Category::Recursion,
+                            span,
+                            format!("`{}` expands without end (recursive macro)", def.name.name),
+                        );
+                    }
+                    let names: HashMap<String, Binding> = params
+                        .iter()
+                        .zip(args)
+                        .map(|(p, a)| (p.name.name.clone(), Binding::Term(a)))
+                        .collect();
+                    let inner = denv.child(names, denv.frame);
+                    let r = self.body(def, &inner);
+                    self.inline_depth -= 1;
+                    r
+                } else {
+                    let f = self.compile_fn(def, denv, span)?;
+                    self.apply_value_fn(f, args, span)
+                }
+            }
+            FuncTerm::Lambda {
+                params,
+                body,
+                env: lenv,
+            } => {
+                if params.len() != args.len() {
+                    return self.error(
+                        Category::Type,
+                        span,
+                        format!(
+                            "the function takes {} arguments, {} given",
+                            params.len(),
+                            args.len()
+                        ),
+                    );
+                }
+                let names: HashMap<String, Binding> = params
+                    .iter()
+                    .zip(args)
+                    .map(|(p, a)| (p.name.name.clone(), Binding::Term(a)))
+                    .collect();
+                let inner = lenv.child(names, lenv.frame);
+                self.expr(body, &inner)
+            }
+        }
+    }
+
+    fn stream_arg(&mut self, args: &[Term], i: usize, span: Span) -> R<NodeId> {
+        match args.get(i) {
+            Some(t) => self.to_stream(t.clone(), span),
+            None => self.error(Category::Type, span, format!("missing argument {}", i + 1)),
+        }
+    }
+
+    fn value_fn_arg(&mut self, args: &[Term], i: usize, span: Span) -> R<Func> {
+        match args.get(i) {
+            Some(Term::Func(ft)) => match self.func_value(ft, span)? {
+                Term::Const(Value::Closure(c)) => Ok(Arc::new(move |a: &[Value]| c.call(a))),
+                _ => self.error(
+                    Category::Unsupported,
+                    span,
+                    "this function cannot be compiled to a value",
+                ),
+            },
+            Some(Term::Const(Value::Closure(c))) => {
+                let c = c.clone();
+                Ok(Arc::new(move |a: &[Value]| c.call(a)))
+            }
+            _ => self.error(
+                Category::Type,
+                span,
+                format!("argument {} must be a function", i + 1),
+            ),
+        }
+    }
+
+    fn const_arg(&mut self, args: &[Term], i: usize, span: Span) -> R<Value> {
+        match args.get(i) {
+            Some(Term::Const(v)) => Ok(v.clone()),
+            _ => self.error(
+                Category::Type,
+                span,
+                format!("argument {} must be a constant", i + 1),
+            ),
+        }
+    }
+
+    fn builtin(&mut self, name: &str, args: Vec<Term>, span: Span, env: &Env) -> R<Term> {
+        let _ = env;
+        let n = args.len();
+        let node = match name {
+            "time" => Node::Time(self.stream_arg(&args, 0, span)?),
+            "last" => Node::Last {
+                value: self.stream_arg(&args, 0, span)?,
+                trigger: self.stream_arg(&args, 1, span)?,
+            },
+            "prev" => {
+                let s = self.stream_arg(&args, 0, span)?;
+                Node::Last {
+                    value: s,
+                    trigger: s,
+                }
+            }
+            "delay" => Node::Delay {
+                delay: self.stream_arg(&args, 0, span)?,
+                reset: self.stream_arg(&args, 1, span)?,
+            },
+            "default" => Node::Default {
+                stream: self.stream_arg(&args, 0, span)?,
+                value: self.const_arg(&args, 1, span)?,
+            },
+            "defaultFrom" => Node::DefaultFrom {
+                stream: self.stream_arg(&args, 0, span)?,
+                from: self.stream_arg(&args, 1, span)?,
+            },
+            "merge" | "merge2" | "merge3" | "merge4" | "merge5" | "merge6" | "merge7"
+            | "merge8" => Node::Merge(
+                (0..n)
+                    .map(|i| self.stream_arg(&args, i, span))
+                    .collect::<R<Vec<_>>>()?,
+            ),
+            "filter" => Node::Filter {
+                stream: self.stream_arg(&args, 0, span)?,
+                cond: self.stream_arg(&args, 1, span)?,
+            },
+            "const" => {
+                let v = self.const_arg(&args, 0, span)?;
+                let s = self.stream_arg(&args, 1, span)?;
+                Node::SLift {
+                    args: vec![SArg::Stream(s)],
+                    f: Arc::new(move |_: &[Value]| v.clone()),
+                }
+            }
+            "first" => {
+                let a = self.stream_arg(&args, 0, span)?;
+                let b = self.stream_arg(&args, 1, span)?;
+                Node::SLift {
+                    args: vec![SArg::Stream(a), SArg::Stream(b)],
+                    f: Arc::new(|v: &[Value]| v[0].clone()),
+                }
+            }
+            "on" => {
+                let t = self.stream_arg(&args, 0, span)?;
+                let s = self.stream_arg(&args, 1, span)?;
+                Node::SLift {
+                    args: vec![SArg::Stream(t), SArg::Stream(s)],
+                    f: Arc::new(|v: &[Value]| v[1].clone()),
+                }
+            }
+            "count" => Node::Fold {
+                stream: self.stream_arg(&args, 0, span)?,
+                init: Value::Int(0),
+                f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &Value::Int(1))),
+            },
+            "sum" => Node::Fold {
+                stream: self.stream_arg(&args, 0, span)?,
+                init: Value::Int(0),
+                f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &a[1])),
+            },
+            "fold" => Node::Fold {
+                stream: self.stream_arg(&args, 0, span)?,
+                init: self.const_arg(&args, 1, span)?,
+                f: self.value_fn_arg(&args, 2, span)?,
+            },
+            "reduce" => Node::Reduce {
+                stream: self.stream_arg(&args, 0, span)?,
+                f: self.value_fn_arg(&args, 1, span)?,
+            },
+            "maximum" => Node::Reduce {
+                stream: self.stream_arg(&args, 0, span)?,
+                f: Arc::new(|a: &[Value]| call_native(natives::core::max, a)),
+            },
+            "minimum" => Node::Reduce {
+                stream: self.stream_arg(&args, 0, span)?,
+                f: Arc::new(|a: &[Value]| call_native(natives::core::min, a)),
+            },
+            "lift" | "lift1" | "lift2" | "lift3" | "lift4" | "lift5" | "slift" | "slift1"
+            | "slift2" | "slift3" | "slift4" | "slift5" => {
+                let Some(ft) = args.last().cloned() else {
+                    return self.error(
+                        Category::Type,
+                        span,
+                        format!("`{name}` needs a function as its last argument"),
+                    );
+                };
+                let f = self.value_fn_arg(&[ft], 0, span)?;
+                let streams = (0..n - 1)
+                    .map(|i| self.stream_arg(&args, i, span))
+                    .collect::<R<Vec<_>>>()?;
+                if name.starts_with('s') {
+                    Node::SLift {
+                        args: streams.into_iter().map(SArg::Stream).collect(),
+                        f,
+                    }
+                } else {
+                    let lf: LiftFunc = Arc::new(move |a: &[Option<Value>]| {
+                        let opts: Vec<Value> = a
+                            .iter()
+                            .map(|o| match o {
+                                Some(v) => Value::Some(Arc::new(v.clone())),
+                                None => Value::None,
+                            })
+                            .collect();
+                        match f(&opts) {
+                            Value::Some(v) => Some((*v).clone()),
+                            Value::None => None,
+                            other => Some(other),
+                        }
+                    });
+                    Node::Lift {
+                        args: streams,
+                        f: lf,
+                    }
+                }
+            }
+            "pure" => {
+                let s = self.stream_arg(&args, 0, span)?;
+                Node::Lift {
+                    args: vec![s, self.node(Node::Nil)],
+                    f: Arc::new(|a: &[Option<Value>]| a[0].clone()),
+                }
+                .pipe_pure(self, s)
+            }
+            "isFirst" => {
+                let s = self.stream_arg(&args, 0, span)?;
+                let cnt = self.node(Node::Fold {
+                    stream: s,
+                    init: Value::Int(0),
+                    f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &Value::Int(1))),
+                });
+                Node::SLift {
+                    args: vec![SArg::Stream(s), SArg::Stream(cnt)],
+                    f: Arc::new(|v: &[Value]| Value::Bool(v[1] == Value::Int(1))),
+                }
+            }
+            "firstEvent" => {
+                let s = self.stream_arg(&args, 0, span)?;
+                Node::Lift {
+                    args: vec![s],
+                    f: Arc::new(|a: &[Option<Value>]| a[0].clone()),
+                }
+                .first_only(self)
+            }
+            "defined" => {
+                let s = self.stream_arg(&args, 0, span)?;
+                let t = self.node(Node::SLift {
+                    args: vec![SArg::Stream(s)],
+                    f: Arc::new(|_: &[Value]| Value::Bool(true)),
+                });
+                Node::Default {
+                    stream: t,
+                    value: Value::Bool(false),
+                }
+            }
+            "constIf" => {
+                let v = self.const_arg(&args, 0, span)?;
+                let c = self.stream_arg(&args, 1, span)?;
+                let k = self.node(Node::SLift {
+                    args: vec![SArg::Stream(c)],
+                    f: Arc::new(move |_: &[Value]| v.clone()),
+                });
+                Node::Filter { stream: k, cond: c }
+            }
+            "unitIf" => {
+                let c = self.stream_arg(&args, 0, span)?;
+                let k = self.node(Node::SLift {
+                    args: vec![SArg::Stream(c)],
+                    f: Arc::new(|_: &[Value]| Value::Unit),
+                });
+                Node::Filter { stream: k, cond: c }
+            }
+            "rising" | "falling" => {
+                let c = self.stream_arg(&args, 0, span)?;
+                let prev = self.node(Node::Last {
+                    value: c,
+                    trigger: c,
+                });
+                let want = name == "rising";
+                let edge = self.node(Node::Lift {
+                    args: vec![c, prev],
+                    f: Arc::new(move |a: &[Option<Value>]| match (&a[0], &a[1]) {
+                        (Some(Value::Bool(now)), Some(Value::Bool(before)))
+                            if *now == want && *before != want =>
+                        {
+                            Some(Value::Bool(true))
+                        }
+                        (Some(_), _) => Some(Value::Bool(false)),
+                        _ => None,
+                    }),
+                });
+                let k = self.node(Node::SLift {
+                    args: vec![SArg::Stream(edge)],
+                    f: Arc::new(|_: &[Value]| Value::Unit),
+                });
+                Node::Filter {
+                    stream: k,
+                    cond: edge,
+                }
+            }
+            "period" => {
+                let d = self.const_arg(&args, 0, span)?;
+                let u = self.unit();
+                let alias = self.node(Node::Alias(usize::MAX));
+                let m = self.node(Node::Merge(vec![u, alias]));
+                let dd = d.clone();
+                let dnode = self.node(Node::SLift {
+                    args: vec![SArg::Stream(m)],
+                    f: Arc::new(move |_: &[Value]| dd.clone()),
+                });
+                let delay = self.node(Node::Delay {
+                    delay: dnode,
+                    reset: u,
+                });
+                self.nodes[alias] = Node::Alias(delay);
+                // The periodic events: the delay's firings, plus the start at t = 0.
+                Node::Merge(vec![u, delay])
+            }
+            "resetCount" | "noEvent" | "runtime" | "average" => {
+                return self.error(
+                    Category::Unsupported,
+                    span,
+                    format!("`{name}` is not supported yet"),
+                );
+            }
+            _ => {
+                return self.error(
+                    Category::Unsupported,
+                    span,
+                    format!("`{name}` is not supported yet"),
+                );
+            }
+        };
+        Ok(Term::Stream(self.node(node)))
+    }
+}
+
+trait NodeExt {
+    fn pipe_pure(self, c: &mut Compiler<'_>, s: NodeId) -> Node;
+    fn first_only(self, c: &mut Compiler<'_>) -> Node;
+}
+
+impl NodeExt for Node {
+    /// `pure(s)`: events of `s` whose value differs from the previous event's.
+    fn pipe_pure(self, c: &mut Compiler<'_>, s: NodeId) -> Node {
+        let prev = c.node(Node::Last {
+            value: s,
+            trigger: s,
+        });
+        Node::Lift {
+            args: vec![s, prev],
+            f: Arc::new(|a: &[Option<Value>]| match (&a[0], &a[1]) {
+                (Some(x), Some(p)) if x == p => None,
+                (x, _) => x.clone(),
+            }),
+        }
+    }
+
+    /// Only the first event of the (single-argument) lift's stream.
+    fn first_only(self, c: &mut Compiler<'_>) -> Node {
+        let Node::Lift { args, .. } = &self else {
+            return self;
+        };
+        let s = args[0];
+        let seen = c.node(Node::Last {
+            value: s,
+            trigger: s,
+        });
+        Node::Lift {
+            args: vec![s, seen],
+            f: Arc::new(|a: &[Option<Value>]| match (&a[0], &a[1]) {
+                (Some(x), None) => Some(x.clone()),
+                _ => None,
+            }),
+        }
+    }
+}
+
+/// A printf-style format of one value (`%d`, `%.2f`, `%s`, `%x`, `%e`); best effort.
+fn format_value(spec: &str, v: &Value) -> String {
+    let conv = spec.chars().last().unwrap_or('s');
+    let body = &spec[1..spec.len().saturating_sub(1)];
+    let (width, prec) = match body.split_once('.') {
+        Some((w, p)) => (w, p.parse::<usize>().ok()),
+        None => (body, None),
+    };
+    let zero = width.starts_with('0');
+    let width: usize = width
+        .trim_start_matches(['-', '+', ' ', '#', '0', ',', '('])
+        .parse()
+        .unwrap_or(0);
+    let s = match (conv, v) {
+        ('d', Value::Int(i)) => i.to_string(),
+        ('x', Value::Int(i)) => format!("{i:x}"),
+        ('X', Value::Int(i)) => format!("{i:X}"),
+        ('o', Value::Int(i)) => format!("{i:o}"),
+        ('f', Value::Float(f)) => format!("{f:.*}", prec.unwrap_or(6)),
+        ('e', Value::Float(f)) => format!("{f:.*e}", prec.unwrap_or(6)),
+        _ => v.to_string(),
+    };
+    if s.len() < width {
+        let pad = width - s.len();
+        if zero {
+            format!("{}{s}", "0".repeat(pad))
+        } else {
+            format!("{}{s}", " ".repeat(pad))
+        }
+    } else {
+        s
+    }
+}
