@@ -75,7 +75,6 @@ pub fn run(program: &Arc<Program>, trace: &str) -> TraceRun {
     if failed.borrow().is_none() {
         monitor.flush(&mut sink);
     }
-    drop(sink);
     run.error = failed.into_inner();
     run
 }

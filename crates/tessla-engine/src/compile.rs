@@ -614,17 +614,14 @@ impl<'a> Compiler<'a> {
                     Term::Stream(n) => self.stream_type(*n),
                     _ => Type::Unknown,
                 };
-                match self.to_stream(t, o.expr.span) {
-                    Ok(n) => {
-                        outputs.push(OutputInfo {
-                            name,
-                            ty,
-                            annotations,
-                            raw,
-                        });
-                        output_nodes.push(n);
-                    }
-                    Err(Fail) => {}
+                if let Ok(n) = self.stream_of(t, o.expr.span) {
+                    outputs.push(OutputInfo {
+                        name,
+                        ty,
+                        annotations,
+                        raw,
+                    });
+                    output_nodes.push(n);
                 }
             }
         }
@@ -801,7 +798,7 @@ impl<'a> Compiler<'a> {
         u
     }
 
-    fn to_stream(&mut self, t: Term, span: Span) -> R<NodeId> {
+    fn stream_of(&mut self, t: Term, span: Span) -> R<NodeId> {
         match t {
             Term::Stream(n) => Ok(n),
             Term::Const(v) => Ok(self.node(Node::Const(v))),
@@ -1496,7 +1493,7 @@ impl<'a> Compiler<'a> {
 
     fn stream_arg(&mut self, args: &[Term], i: usize, span: Span) -> R<NodeId> {
         match args.get(i) {
-            Some(t) => self.to_stream(t.clone(), span),
+            Some(t) => self.stream_of(t.clone(), span),
             None => self.error(Category::Type, span, format!("missing argument {}", i + 1)),
         }
     }
