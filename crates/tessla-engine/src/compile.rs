@@ -56,8 +56,12 @@ struct Entry {
 
 enum DefState {
     Todo,
-    InProgress { alias: Option<NodeId> },
+    InProgress {
+        alias: Option<NodeId>,
+    },
     Done(Term),
+    /// Compiling it failed (already reported): uses fail silently.
+    Failed,
 }
 
 #[derive(Clone)]
@@ -829,6 +833,10 @@ impl<'a> Compiler<'a> {
                 *e.state.borrow_mut() = DefState::Done(t.clone());
                 Ok(t)
             }
+            DefState::Failed => {
+                *e.state.borrow_mut() = DefState::Failed;
+                Err(Fail)
+            }
             DefState::InProgress { alias } => {
                 if self.lazy_depth == 0 {
                     *e.state.borrow_mut() = DefState::InProgress { alias };
@@ -879,7 +887,7 @@ impl<'a> Compiler<'a> {
                         if let Some(a) = alias {
                             self.nodes[a] = Node::Nil;
                         }
-                        *e.state.borrow_mut() = DefState::Done(Term::Const(Value::Unit));
+                        *e.state.borrow_mut() = DefState::Failed;
                         Err(Fail)
                     }
                 }
@@ -1426,6 +1434,12 @@ impl<'a> Compiler<'a> {
             }
             FuncTerm::User { def, env: denv } => {
                 let params = def.params.clone().unwrap_or_default();
+                if let Body::Extern { .. } = def.body {
+                    return match self.body(def, denv)? {
+                        Term::Func(inner) => self.call(Term::Func(inner), args, span, env),
+                        other => Ok(other),
+                    };
+                }
                 if params.len() != args.len() {
                     return self.error(
                         Category::Type,

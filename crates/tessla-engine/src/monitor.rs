@@ -229,7 +229,11 @@ impl Monitor {
                 },
                 Node::Fold { stream, init, f } => {
                     if first {
-                        Some(init.clone())
+                        // The initial value, folded with an event at t = 0 if there is one.
+                        Some(match &self.cur[*stream] {
+                            Some(x) => strict2(f, init, x),
+                            None => init.clone(),
+                        })
                     } else {
                         match (&self.cur[*stream], &self.last[i]) {
                             (Some(x), Some(acc)) => Some(strict2(f, acc, x)),

@@ -8,6 +8,7 @@
 //! them through [`crate::value::Callable`].
 
 pub mod core;
+pub mod lidar;
 
 use crate::value::Value;
 
@@ -95,5 +96,21 @@ static REGISTRY: &[Native] = &[
     Native {
         name: "List_fold",
         func: core::list_fold,
+    },
+    Native {
+        name: "lidar_dropouts",
+        func: lidar::dropouts,
+    },
+    Native {
+        name: "lidar_spikes",
+        func: lidar::spikes,
+    },
+    Native {
+        name: "lidar_sector_min",
+        func: lidar::sector_min,
+    },
+    Native {
+        name: "lidar_sector_valid_fraction",
+        func: lidar::sector_valid_fraction,
     },
 ];
