@@ -92,7 +92,6 @@ fn dashboards_cover_the_issue_panels() {
 }
 
 #[test]
-#[ignore = "needs the `run` command, the bundled robot spec and tests/fixtures/robot/recorded_run.lp (issues 3 and 4); run with --ignored once they land"]
 fn every_dashboard_name_is_emitted_by_the_bundled_spec() {
     let (_, output) = recorded::recorded_output();
     let emitted = Emitted::from_lines(&output);

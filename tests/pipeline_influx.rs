@@ -128,7 +128,6 @@ fn synthetic_output_is_stored_and_every_panel_answers() {
 }
 
 #[test]
-#[ignore = "needs the `run` command, the bundled robot spec and tests/fixtures/robot/recorded_run.lp (issues 3 and 4); run with --ignored once they land"]
 fn recorded_run_output_is_stored_and_every_panel_answers() {
     let (_, output) = recorded::recorded_output();
     check_output_in_influxdb(&output);

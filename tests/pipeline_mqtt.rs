@@ -30,7 +30,6 @@ fn action_messages(output: &str) -> Vec<Value> {
 }
 
 #[test]
-#[ignore = "needs the `run` command, the bundled robot spec and tests/fixtures/robot/recorded_run.lp (issues 3 and 4); run with --ignored once they land"]
 fn replayed_run_comes_back_as_the_same_actions() {
     let Some(broker) = servers::Mosquitto::start() else {
         return;

@@ -246,7 +246,6 @@ fn fixture_mse(input: &str) -> (f64, usize) {
 }
 
 #[test]
-#[ignore = "needs the `run` command, the bundled robot spec and tests/fixtures/robot/recorded_run.lp (issues 3 and 4); run with --ignored once they land"]
 fn report_of_the_recorded_run() {
     let (input, output) = recorded::recorded_output();
     let dir = tempfile::tempdir().unwrap();
