@@ -1125,45 +1125,34 @@ impl<'a> Compiler<'a> {
                 let a = self.expr(lhs, env)?;
                 let b = self.expr(rhs, env)?;
                 let op = *op;
-                if let (Term::Const(x), Term::Const(y)) = (&a, &b) {
-                    let hint = match (op, x, y) {
-                        (
-                            BinOp::Add
-                            | BinOp::Sub
-                            | BinOp::Mul
-                            | BinOp::Div
-                            | BinOp::Lt
-                            | BinOp::Gt
-                            | BinOp::Le
-                            | BinOp::Ge,
-                            Value::Float(_),
-                            _,
+                let int_op = matches!(
+                    op,
+                    BinOp::Add
+                        | BinOp::Sub
+                        | BinOp::Mul
+                        | BinOp::Div
+                        | BinOp::Mod
+                        | BinOp::Lt
+                        | BinOp::Gt
+                        | BinOp::Le
+                        | BinOp::Ge
+                );
+                let is_float = |c: &Compiler<'_>, t: &Term| match t {
+                    Term::Const(Value::Float(_)) => true,
+                    Term::Stream(n) => c.stream_type(*n) == Type::Float,
+                    _ => false,
+                };
+                if int_op && (is_float(self, &a) || is_float(self, &b)) {
+                    self.diags.push(
+                        Diagnostic::error(
+                            Category::Type,
+                            Some(e.span),
+                            format!("`{}` is not defined for Float in TeSSLa 1.2", op.symbol()),
                         )
-                        | (
-                            BinOp::Add
-                            | BinOp::Sub
-                            | BinOp::Mul
-                            | BinOp::Div
-                            | BinOp::Lt
-                            | BinOp::Gt
-                            | BinOp::Le
-                            | BinOp::Ge,
-                            _,
-                            Value::Float(_),
-                        ) => Some(format!("use `{}.` for Float in TeSSLa 1.2", op.symbol())),
-                        _ => None,
-                    };
-                    if let Some(h) = hint {
-                        self.diags.push(
-                            Diagnostic::error(
-                                Category::Type,
-                                Some(e.span),
-                                format!("`{}` is not defined for Float", op.symbol()),
-                            )
-                            .with_help(h),
-                        );
-                        return Err(Fail);
-                    }
+                        .with_label("a Float operand")
+                        .with_help(format!("use `{}.` for Float", op.symbol())),
+                    );
+                    return Err(Fail);
                 }
                 if matches!(op, BinOp::And | BinOp::Or) {
                     // Lazy: the right side is not evaluated when the left decides.

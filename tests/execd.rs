@@ -1,0 +1,217 @@
+//! The binary as Telegraf's `processors.execd` runs it: a child process on stdin/stdout.
+//! Pass-through is byte-identical; outputs parse back; a bad line loses nothing else; a reply
+//! arrives before the next record is written; EOF and SIGTERM flush and exit 0; the shipped
+//! telegraf.conf's command runs as Telegraf would run it; UDP mode round-trips.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+
+fn spawn(args: &[&str]) -> Child {
+    Command::new(BIN)
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+}
+
+fn fixture_lines(n: usize) -> Vec<String> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/robot/recorded_run.lp");
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .take(n)
+        .map(|l| format!("{l}\n"))
+        .collect()
+}
+
+fn run_all(args: &[&str], input: &str) -> (String, String, i32) {
+    let mut child = spawn(args);
+    let mut stdin = child.stdin.take().unwrap();
+    let input = input.to_string();
+    let w = std::thread::spawn(move || {
+        let _ = stdin.write_all(input.as_bytes());
+    });
+    let out = child.wait_with_output().unwrap();
+    w.join().unwrap();
+    (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+        out.status.code().unwrap_or(-1),
+    )
+}
+
+#[test]
+fn passthrough_is_byte_identical_and_outputs_parse_back() {
+    let lines = fixture_lines(20);
+    let input: String = lines.concat();
+    let (out, err, code) = run_all(&[], &input);
+    assert_eq!(code, 0, "{err}");
+    let echoed: Vec<&str> = out
+        .split_inclusive('\n')
+        .filter(|l| l.starts_with("mqtt_consumer"))
+        .collect();
+    assert_eq!(echoed, lines.iter().map(String::as_str).collect::<Vec<_>>());
+    for l in out.split_inclusive('\n') {
+        let m = lineproto::parse_record(l.as_bytes()).unwrap().unwrap();
+        assert!(m.timestamp.is_some());
+    }
+    assert_eq!(out.lines().filter(|l| l.starts_with("action ")).count(), 20);
+    assert!(err.contains("I! summary: 20 records"), "{err}");
+}
+
+#[test]
+fn a_bad_line_costs_only_itself() {
+    let lines = fixture_lines(6);
+    let input = format!(
+        "{}{}this is not line protocol\nm,t= f=1 5\n{}",
+        lines[0],
+        lines[1],
+        lines[2..].concat()
+    );
+    let (out, err, code) = run_all(&["--no-passthrough"], &input);
+    assert_eq!(code, 0);
+    assert_eq!(
+        out.lines().filter(|l| l.starts_with("action ")).count(),
+        6,
+        "{out}"
+    );
+    assert!(err.contains("line 3"), "the warning names the line: {err}");
+    assert!(err.contains("line 4"), "{err}");
+    assert!(err.contains("2 parse errors"), "{err}");
+}
+
+#[test]
+fn each_record_is_answered_before_the_next_is_written() {
+    let mut child = spawn(&["--no-passthrough"]);
+    let mut stdin = child.stdin.take().unwrap();
+    let mut stdout = BufReader::new(child.stdout.take().unwrap());
+    for l in fixture_lines(5) {
+        stdin.write_all(l.as_bytes()).unwrap();
+        stdin.flush().unwrap();
+        let start = Instant::now();
+        let mut got_action = false;
+        while !got_action {
+            let mut line = String::new();
+            assert!(stdout.read_line(&mut line).unwrap() > 0, "stdout closed");
+            got_action = line.starts_with("action ");
+            assert!(start.elapsed() < Duration::from_secs(10), "no answer");
+        }
+    }
+    drop(stdin);
+    assert!(child.wait().unwrap().success());
+}
+
+#[test]
+fn sigterm_flushes_and_exits_zero() {
+    let mut child = spawn(&["--no-passthrough"]);
+    let mut stdin = child.stdin.take().unwrap();
+    stdin.write_all(fixture_lines(1)[0].as_bytes()).unwrap();
+    stdin.flush().unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    let pid = child.id().to_string();
+    assert!(
+        Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .unwrap()
+            .success()
+    );
+    let mut out = String::new();
+    child
+        .stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut out)
+        .unwrap();
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(0), "{err}");
+    assert!(out.contains("action "), "{out}");
+    assert!(err.contains("I! summary: 1 records"), "{err}");
+}
+
+#[test]
+fn a_spec_error_exits_2_before_reading_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = dir.path().join("bad.tessla");
+    std::fs::write(&spec, "in x: Events[Float]\ndef y = x + 1.0\nout y\n").unwrap();
+    let (_, err, code) = run_all(&["--spec", spec.to_str().unwrap()], "");
+    assert_eq!(code, 2);
+    assert!(err.contains("bad.tessla:2:9"), "{err}");
+    assert!(err.contains("+."), "the fix is named: {err}");
+}
+
+#[test]
+fn shipped_conf_command_runs_as_telegraf_would() {
+    let conf = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("telegraf/telegraf.conf"),
+    )
+    .unwrap();
+    let v: toml::Value = toml::from_str(&conf).unwrap();
+    let execd = &v["processors"]["execd"][0];
+    let cmd: Vec<String> = execd["command"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(cmd[0], "tessla-telegraf");
+    assert_eq!(execd["namepass"][0].as_str(), Some("mqtt_consumer"));
+    let args: Vec<&str> = cmd[1..].iter().map(String::as_str).collect();
+    let input = fixture_lines(3).concat();
+    let (out, err, code) = run_all(&args, &input);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(out.lines().filter(|l| l.starts_with("action ")).count(), 3);
+    // The action metric is what outputs.mqtt's namepass selects.
+    let mqtt = &v["outputs"]["mqtt"][0];
+    assert_eq!(mqtt["namepass"][0].as_str(), Some("action"));
+    assert_eq!(mqtt["topic"].as_str(), Some("action"));
+}
+
+#[test]
+fn udp_mode_round_trips() {
+    let recv = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    recv.set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    let send_to = recv.local_addr().unwrap().to_string();
+    // A free port for the monitor to listen on.
+    let listen = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .to_string();
+    let mut child = spawn(&[
+        "--udp-listen",
+        &listen,
+        "--udp-send",
+        &send_to,
+        "--no-passthrough",
+    ]);
+    std::thread::sleep(Duration::from_millis(500));
+    let sock = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let lines = fixture_lines(2);
+    // Two records and a bad line in one datagram: the bad line costs only itself.
+    let datagram = format!("{}garbage\n{}", lines[0], lines[1]);
+    sock.send_to(datagram.as_bytes(), &listen).unwrap();
+    let mut got = String::new();
+    let mut buf = vec![0u8; 65536];
+    while got.lines().filter(|l| l.starts_with("action ")).count() < 2 {
+        let n = recv.recv(&mut buf).expect("no UDP answer");
+        got.push_str(&String::from_utf8_lossy(&buf[..n]));
+    }
+    let pid = child.id().to_string();
+    Command::new("kill").args(["-TERM", &pid]).status().unwrap();
+    assert_eq!(child.wait().unwrap().code(), Some(0));
+}
