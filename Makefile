@@ -1,5 +1,5 @@
 # Every command the README mentions lives here. `make run` and `make test` are the README's first two.
-.PHONY: run test setup build bench check-spec fmt lint ci
+.PHONY: run test setup build bench fmt lint ci fixtures conformance
 
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
@@ -29,3 +29,18 @@ lint:
 
 ci:
 	bash .ci/run
+
+# Regenerate the recorded-run fixture and its ground truth (fixed seed).
+fixtures:
+	python3 tools/gen_robot_run.py
+
+# Rewrite the conformance pass list after an improvement (the list may only grow).
+conformance:
+	UPDATE_CONFORMANCE=1 $(CARGO) test --test conformance -- --nocapture
+	cat target/conformance-summary.txt
+
+# The README's example image, from the recorded-run fixture.
+report-example: build
+	./target/release/tessla-telegraf run < tests/fixtures/robot/recorded_run.lp > target/out.lp
+	./target/release/tessla-telegraf report target/out.lp -o target/report
+	mkdir -p docs && cp target/report/speeds.svg docs/report-example.svg
