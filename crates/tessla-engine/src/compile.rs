@@ -1372,17 +1372,22 @@ impl<'a> Compiler<'a> {
             Term::Dyn(d) => Arc::new(move |a: &[Value]| d(a)),
             Term::Const(v) => Arc::new(move |_: &[Value]| v.clone()),
             Term::Func(ft) => match &*ft {
-                FuncTerm::Native(n) => {
+                FuncTerm::Native(n) if matches!(def.body, Body::Extern { .. }) => {
                     let n = *n;
                     Arc::new(move |a: &[Value]| call_native(n, a))
                 }
-                _ => {
-                    return self.error(
-                        Category::Unsupported,
-                        span,
-                        "functions returning functions are not supported",
-                    );
-                }
+                // A function returning a function: the result is a closure value.
+                _ => match self.func_value(&ft, span)? {
+                    Term::Const(v) => Arc::new(move |_: &[Value]| v.clone()),
+                    Term::Dyn(d) => Arc::new(move |a: &[Value]| d(a)),
+                    _ => {
+                        return self.error(
+                            Category::Unsupported,
+                            span,
+                            "this function value is not supported",
+                        );
+                    }
+                },
             },
             Term::Stream(_) => {
                 return self.error(
