@@ -113,7 +113,12 @@ fn sigterm_flushes_and_exits_zero() {
     let mut stdin = child.stdin.take().unwrap();
     stdin.write_all(fixture_lines(1)[0].as_bytes()).unwrap();
     stdin.flush().unwrap();
-    std::thread::sleep(Duration::from_millis(300));
+    // Wait for the answer (the signal handlers are installed before input is read).
+    let mut stdout = BufReader::new(child.stdout.take().unwrap());
+    let mut out = String::new();
+    while !out.contains("action ") {
+        assert!(stdout.read_line(&mut out).unwrap() > 0, "no answer: {out}");
+    }
     let pid = child.id().to_string();
     assert!(
         Command::new("kill")
@@ -122,13 +127,7 @@ fn sigterm_flushes_and_exits_zero() {
             .unwrap()
             .success()
     );
-    let mut out = String::new();
-    child
-        .stdout
-        .take()
-        .unwrap()
-        .read_to_string(&mut out)
-        .unwrap();
+    stdout.read_to_string(&mut out).unwrap();
     let mut err = String::new();
     child
         .stderr
