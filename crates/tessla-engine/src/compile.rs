@@ -1832,7 +1832,12 @@ impl NodeExt for Node {
 /// A printf-style format of one value (`%d`, `%.2f`, `%s`, `%x`, `%e`); best effort.
 fn format_value(spec: &str, v: &Value) -> String {
     let conv = spec.chars().last().unwrap_or('s');
-    let body = &spec[1..spec.len().saturating_sub(1)];
+    // The flags/width/precision between `%` and the conversion character (char-safe).
+    let inner: String = spec.chars().skip(1).collect();
+    let mut body_chars: Vec<char> = inner.chars().collect();
+    body_chars.pop();
+    let body_owned: String = body_chars.into_iter().collect();
+    let body = body_owned.as_str();
     let (width, prec) = match body.split_once('.') {
         Some((w, p)) => (w, p.parse::<usize>().ok()),
         None => (body, None),
@@ -1860,5 +1865,29 @@ fn format_value(spec: &str, v: &Value) -> String {
         }
     } else {
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn format_specs_never_panic() {
+        for spec in ["%", "%d", "%é", "%5.2f", "%08.3e", "%x", "%-3s"] {
+            let _ = format_value(spec, &Value::Float(1.5));
+            let _ = format_value(spec, &Value::Int(42));
+        }
+        assert_eq!(format_value("%5.2f", &Value::Float(3.14159)), " 3.14");
+        assert_eq!(format_value("%04d", &Value::Int(42)), "0042");
+    }
+
+    #[test]
+    fn base_times_parse_in_tesslas_forms() {
+        assert_eq!(parse_base_time("1 ns"), Ok(1_000_000));
+        assert_eq!(parse_base_time("1ms"), Ok(1_000_000_000_000));
+        assert_eq!(parse_base_time("33333 µs"), Ok(33_333_000_000_000));
+        assert!(parse_base_time("5 parsecs").is_err());
+        assert!(parse_base_time("0 s").is_err());
     }
 }
