@@ -1878,7 +1878,7 @@ mod tests {
             let _ = format_value(spec, &Value::Float(1.5));
             let _ = format_value(spec, &Value::Int(42));
         }
-        assert_eq!(format_value("%5.2f", &Value::Float(2.71828)), " 2.72");
+        assert_eq!(format_value("%5.2f", &Value::Float(1.23456)), " 1.23");
         assert_eq!(format_value("%04d", &Value::Int(42)), "0042");
     }
 
