@@ -222,3 +222,23 @@ fn udp_mode_round_trips() {
     Command::new("kill").args(["-TERM", &pid]).status().unwrap();
     assert_eq!(child.wait().unwrap().code(), Some(0));
 }
+
+#[test]
+fn a_closed_stdout_ends_the_run_cleanly() {
+    let mut child = spawn(&[]);
+    drop(child.stdout.take());
+    let mut stdin = child.stdin.take().unwrap();
+    // Keep writing until the child notices that nobody reads its output and exits.
+    for l in fixture_lines(50) {
+        if stdin.write_all(l.as_bytes()).is_err() {
+            break;
+        }
+        let _ = stdin.flush();
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    drop(stdin);
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
