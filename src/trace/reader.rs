@@ -21,12 +21,33 @@ pub fn events<'a>(
 ) -> impl Iterator<Item = Result<Event, String>> + 'a {
     text.lines().enumerate().filter_map(move |(i, raw)| {
         let line = i + 1;
-        let l = raw.trim();
-        if l.is_empty() || l.starts_with('#') || l.starts_with("--") {
+        let l = strip_comment(raw).trim();
+        if l.is_empty() {
             return None;
         }
         Some(parse_line(l, line, program))
     })
+}
+
+/// The line without a trailing `#` or `--` comment (outside string literals).
+fn strip_comment(line: &str) -> &str {
+    let mut in_str = false;
+    let mut escape = false;
+    let bytes = line.as_bytes();
+    for (i, &b) in bytes.iter().enumerate() {
+        if escape {
+            escape = false;
+            continue;
+        }
+        match b {
+            b'\\' if in_str => escape = true,
+            b'"' => in_str = !in_str,
+            b'#' if !in_str => return &line[..i],
+            b'-' if !in_str && bytes.get(i + 1) == Some(&b'-') => return &line[..i],
+            _ => {}
+        }
+    }
+    line
 }
 
 fn parse_line(l: &str, line: usize, program: &Program) -> Result<Event, String> {
@@ -215,6 +236,17 @@ impl ValueParser<'_> {
             return None;
         }
         let start = self.pos;
+        if self.s[self.pos..].starts_with(b"0x") || self.s[self.pos..].starts_with(b"-0x") {
+            let neg = self.s[self.pos] == b'-';
+            self.pos += if neg { 3 } else { 2 };
+            let hs = self.pos;
+            while self.s.get(self.pos).is_some_and(u8::is_ascii_hexdigit) {
+                self.pos += 1;
+            }
+            let h = std::str::from_utf8(&self.s[hs..self.pos]).ok()?;
+            let v = i64::from_str_radix(h, 16).ok()?;
+            return Some(Value::Int(if neg { -v } else { v }));
+        }
         while self
             .s
             .get(self.pos)
