@@ -1233,9 +1233,93 @@ impl<'a> Compiler<'a> {
                         terms.push(self.expr(&a.value, env)?);
                     }
                 }
+                let terms = self.order_named_args(&f, args, terms, e.span)?;
                 self.call(f, terms, e.span, env)
             }
         }
+    }
+
+    /// Put named arguments (`f(b = 1, a = x)`) in the order of the function's parameters.
+    fn order_named_args(
+        &mut self,
+        f: &Term,
+        args: &[ast::Arg],
+        terms: Vec<Term>,
+        span: Span,
+    ) -> R<Vec<Term>> {
+        if args.iter().all(|a| a.name.is_none()) {
+            return Ok(terms);
+        }
+        let params: Vec<String> = match f {
+            Term::Func(ft) => match &**ft {
+                FuncTerm::User { def, .. } => def
+                    .params
+                    .iter()
+                    .flatten()
+                    .map(|p| p.name.name.clone())
+                    .collect(),
+                FuncTerm::Lambda { params, .. } => {
+                    params.iter().map(|p| p.name.name.clone()).collect()
+                }
+                _ => {
+                    return self.error(
+                        Category::Unsupported,
+                        span,
+                        "named arguments need a function with named parameters",
+                    );
+                }
+            },
+            _ => return self.error(Category::Type, span, "named arguments need a function"),
+        };
+        let mut slots: Vec<Option<Term>> = vec![None; params.len()];
+        let mut next = 0;
+        for (a, t) in args.iter().zip(terms) {
+            let idx = match &a.name {
+                Some(n) => match params.iter().position(|p| *p == n.name) {
+                    Some(i) => i,
+                    None => {
+                        let near = nearest(&n.name, params.iter().map(String::as_str)).join(", ");
+                        self.diags.push(
+                            Diagnostic::error(
+                                Category::Name,
+                                Some(n.span),
+                                format!("no parameter named `{}`", n.name),
+                            )
+                            .with_help(format!(
+                                "parameters: {}",
+                                if near.is_empty() {
+                                    params.join(", ")
+                                } else {
+                                    near
+                                }
+                            )),
+                        );
+                        return Err(Fail);
+                    }
+                },
+                None => {
+                    while next < slots.len() && slots[next].is_some() {
+                        next += 1;
+                    }
+                    next
+                }
+            };
+            match slots.get_mut(idx) {
+                Some(slot @ None) => *slot = Some(t),
+                _ => {
+                    return self.error(
+                        Category::Type,
+                        span,
+                        "an argument is given twice or there are too many arguments",
+                    );
+                }
+            }
+        }
+        slots
+            .into_iter()
+            .map(|s| s.ok_or(Fail))
+            .collect::<R<Vec<_>>>()
+            .or_else(|_| self.error(Category::Type, span, "missing arguments"))
     }
 
     /// Turn a constant or frame code into frame code.
