@@ -18,8 +18,9 @@ setup:
 test: setup
 	$(CARGO) test --workspace
 
-bench: build
-	$(CARGO) bench --workspace
+# Engine benchmarks (criterion); figures in BENCHMARKS.md.
+bench:
+	$(CARGO) bench --bench engine -- --noplot
 
 fmt:
 	$(CARGO) fmt --all

@@ -293,18 +293,30 @@ fn binop(op: BinOp, a: &Value, b: &Value) -> Value {
         (BinOp::BitAnd, Int(x), Int(y)) => Int(x & y),
         (BinOp::BitOr, Int(x), Int(y)) => Int(x | y),
         (BinOp::BitXor, Int(x), Int(y)) => Int(x ^ y),
-        (BinOp::Shl, Int(x), Int(y)) => u32::try_from(*y)
-            .ok()
-            .and_then(|s| x.checked_shl(s))
-            .map_or_else(ovf, Int),
-        (BinOp::Shr, Int(x), Int(y)) => u32::try_from(*y)
-            .ok()
-            .and_then(|s| x.checked_shr(s))
-            .map_or_else(ovf, Int),
+        (BinOp::Shl, Int(x), Int(y)) => shift_left(*x, *y).map_or_else(ovf, Int),
+        (BinOp::Shr, Int(x), Int(y)) => match y.checked_neg() {
+            Option::Some(n) => shift_left(*x, n).map_or_else(ovf, Int),
+            Option::None => Int(if *x < 0 { -1 } else { 0 }),
+        },
         _ => Error(RuntimeError::Other(
             format!("`{}` is not defined for {a:?} and {b:?}", op.symbol()).into(),
         )),
     }
+}
+
+/// `x << s` on unbounded integers (TeSSLa's semantics): a negative `s` shifts right
+/// (arithmetically); a result outside i64 is `None` (an overflow error).
+fn shift_left(x: i64, s: i64) -> Option<i64> {
+    if s < 0 {
+        let r = u32::try_from(s.unsigned_abs()).unwrap_or(u32::MAX).min(63);
+        return Some(x >> r);
+    }
+    if x == 0 {
+        return Some(0);
+    }
+    let r = u32::try_from(s).ok().filter(|r| *r < 64)?;
+    let shifted = x.checked_shl(r)?;
+    (shifted >> r == x).then_some(shifted)
 }
 
 fn unop(op: UnaryOp, a: &Value) -> Value {
@@ -1391,8 +1403,18 @@ impl<'a> Compiler<'a> {
                 Ok(Term::Const(Value::Closure(Arc::new(FnValue(f)))))
             }
             FuncTerm::User { def, env } => {
-                let f = self.compile_fn(def, env, span)?;
-                Ok(Term::Const(Value::Closure(Arc::new(FnValue(f)))))
+                let (f, _) = self.compile_fn(def, env, span)?;
+                let outer = env.frame;
+                if outer == 0 {
+                    return Ok(Term::Const(Value::Closure(Arc::new(FnValue(f)))));
+                }
+                // Defined inside a function body: the closure captures the enclosing frame.
+                Ok(Term::Dyn(Arc::new(move |fr: &[Value]| {
+                    Value::Closure(Arc::new(RtClosure {
+                        captured: fr[..outer.min(fr.len())].to_vec(),
+                        body: f.clone(),
+                    }))
+                })))
             }
             FuncTerm::Lambda { params, body, env } => {
                 let (names, frame) = self.param_frame(params, env.frame);
@@ -1432,20 +1454,29 @@ impl<'a> Compiler<'a> {
         (names, base + params.len())
     }
 
-    /// Compile a named value function once into a closure (recursion through a cell).
-    fn compile_fn(&mut self, def: &Rc<Def>, env: &Env, span: Span) -> R<Func> {
+    /// Compile a named value function once into a closure (recursion through a cell). The
+    /// closure takes the enclosing function's frame (`env.frame` values, none at top level)
+    /// followed by the arguments. The flag is false while the function is still being compiled
+    /// (a recursive call), so such calls must not be folded at compile time.
+    fn compile_fn(&mut self, def: &Rc<Def>, env: &Env, span: Span) -> R<(Func, bool)> {
         let key = Rc::as_ptr(def);
         if let Some(cell) = self.compiled_fns.get(&key) {
+            if let Some(f) = cell.get() {
+                return Ok((f.clone(), true));
+            }
             let cell = cell.clone();
-            return Ok(Arc::new(move |a: &[Value]| match cell.get() {
-                Some(f) => f(a),
-                None => Value::Error(RuntimeError::Other("function not compiled".into())),
-            }));
+            return Ok((
+                Arc::new(move |a: &[Value]| match cell.get() {
+                    Some(f) => f(a),
+                    None => Value::Error(RuntimeError::Other("function not compiled".into())),
+                }),
+                false,
+            ));
         }
         let cell: Arc<OnceLock<Func>> = Arc::new(OnceLock::new());
         self.compiled_fns.insert(key, cell.clone());
         let params = def.params.clone().unwrap_or_default();
-        let (names, frame) = self.param_frame(&params, 0);
+        let (names, frame) = self.param_frame(&params, env.frame);
         let inner = Env {
             names: Rc::new(names),
             parent: Some(Rc::new(env.clone())),
@@ -1485,7 +1516,7 @@ impl<'a> Compiler<'a> {
             }
         };
         let _ = cell.set(f.clone());
-        Ok(f)
+        Ok((f, true))
     }
 
     fn call(&mut self, f: Term, args: Vec<Term>, span: Span, env: &Env) -> R<Term> {
@@ -1552,8 +1583,29 @@ impl<'a> Compiler<'a> {
                     self.inline_depth -= 1;
                     r
                 } else {
-                    let f = self.compile_fn(def, denv, span)?;
-                    self.apply_value_fn(f, args, span)
+                    let (f, ready) = self.compile_fn(def, denv, span)?;
+                    // A function defined inside a function body also gets the enclosing frame.
+                    let mut all: Vec<Term> = (0..denv.frame)
+                        .map(|slot| {
+                            let d: Dyn = Arc::new(move |fr: &[Value]| {
+                                fr.get(slot).cloned().unwrap_or(Value::Unit)
+                            });
+                            Term::Dyn(d)
+                        })
+                        .collect();
+                    all.extend(args);
+                    if !ready && all.iter().all(|a| matches!(a, Term::Const(_))) {
+                        // A recursive call with constant arguments: evaluated at run time.
+                        let vals: Vec<Value> = all
+                            .into_iter()
+                            .filter_map(|a| match a {
+                                Term::Const(v) => Some(v),
+                                _ => None,
+                            })
+                            .collect();
+                        return Ok(Term::Dyn(Arc::new(move |_: &[Value]| f(&vals))));
+                    }
+                    self.apply_value_fn(f, all, span)
                 }
             }
             FuncTerm::Lambda {
@@ -1678,11 +1730,21 @@ impl<'a> Compiler<'a> {
                 }
             }
             "on" => {
+                // At each event of the trigger, the latest value of the stream (this step's or
+                // an earlier one); nothing before the stream's first event.
                 let t = self.stream_arg(&args, 0, span)?;
                 let s = self.stream_arg(&args, 1, span)?;
-                Node::SLift {
-                    args: vec![SArg::Stream(t), SArg::Stream(s)],
-                    f: Arc::new(|v: &[Value]| v[1].clone()),
+                let before = self.node(Node::Last {
+                    value: s,
+                    trigger: t,
+                });
+                Node::Lift {
+                    args: vec![t, s, before],
+                    f: Arc::new(|a: &[Option<Value>]| match a {
+                        [Some(_), Some(now), _] => Some(now.clone()),
+                        [Some(_), None, Some(prev)] => Some(prev.clone()),
+                        _ => None,
+                    }),
                 }
             }
             "count" => Node::Fold {
