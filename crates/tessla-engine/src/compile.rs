@@ -243,6 +243,10 @@ pub fn parse_base_time(s: &str) -> Result<i128, String> {
     Ok(n * f)
 }
 
+fn unknown_extern(_: &[Value]) -> Value {
+    Value::Error(RuntimeError::Other("call of an unknown extern".into()))
+}
+
 fn is_err(v: &Value) -> Option<Value> {
     match v {
         Value::Error(_) => Some(v.clone()),
@@ -823,11 +827,20 @@ impl<'a> Compiler<'a> {
                 span,
                 "a value depending on a function parameter is used where a stream is needed",
             ),
-            Term::Func(_) => self.error(
-                Category::Type,
-                span,
-                "a function is used where a stream is needed",
-            ),
+            Term::Func(ft) => {
+                // A parameterless function (`def foo() = 42`) used as a stream is called.
+                if let FuncTerm::User { def, .. } = &*ft
+                    && def.params.as_ref().is_some_and(|p| p.is_empty())
+                {
+                    let t = self.call(Term::Func(ft.clone()), Vec::new(), span, &Env::default())?;
+                    return self.stream_of(t, span);
+                }
+                self.error(
+                    Category::Type,
+                    span,
+                    "a function is used where a stream is needed",
+                )
+            }
         }
     }
 
@@ -909,11 +922,20 @@ impl<'a> Compiler<'a> {
 
     fn body(&mut self, d: &Def, env: &Env) -> R<Term> {
         match &d.body {
-            Body::Extern { name, span, .. } => match natives::lookup(name) {
+            Body::Extern { name, .. } => match natives::lookup(name) {
                 Some(n) => Ok(Term::Func(Rc::new(FuncTerm::Native(n.func)))),
                 None => match VALUE_BUILTINS.iter().find(|(n, _)| n == name) {
                     Some((_, f)) => Ok(Term::Func(Rc::new(FuncTerm::Native(*f)))),
-                    None => self.error(Category::Name, *span, format!("unknown extern `{name}`")),
+                    // As in TeSSLa, an unknown extern is an error when it is evaluated.
+                    None => {
+                        if d.params.is_some() {
+                            let f: natives::NativeFn = unknown_extern;
+                            Ok(Term::Func(Rc::new(FuncTerm::Native(f))))
+                        } else {
+                            let msg: Arc<str> = format!("unknown extern `{name}`").into();
+                            Ok(Term::Const(Value::Error(RuntimeError::Other(msg))))
+                        }
+                    }
                 },
             },
             Body::Expr { expr, where_defs } => {
@@ -1004,16 +1026,8 @@ impl<'a> Compiler<'a> {
                     Some(u) => {
                         let f = unit_factor(&u.name).unwrap_or(1);
                         let fs = value.checked_mul(f).unwrap_or(i128::MAX);
-                        if fs % self.base_ns != 0 {
-                            return self.error(
-                                Category::Time,
-                                e.span,
-                                format!(
-                                    "{value} {} is not a whole number of base time units",
-                                    u.name
-                                ),
-                            );
-                        }
+                        // Like TeSSLa, a literal that is not a whole number of base time
+                        // units is truncated (100ms at a base time of 33333 µs is 3).
                         fs / self.base_ns
                     }
                 };
@@ -1482,7 +1496,10 @@ impl<'a> Compiler<'a> {
             parent: Some(Rc::new(env.clone())),
             frame,
         };
-        let body = self.body(def, &inner)?;
+        let Ok(body) = self.body(def, &inner) else {
+            self.compiled_fns.remove(&key);
+            return Err(Fail);
+        };
         let f: Func = match body {
             Term::Dyn(d) => Arc::new(move |a: &[Value]| d(a)),
             Term::Const(v) => Arc::new(move |_: &[Value]| v.clone()),
@@ -1561,8 +1578,25 @@ impl<'a> Compiler<'a> {
                         ),
                     );
                 }
-                let expand = args.iter().any(|a| matches!(a, Term::Stream(_) | Term::Func(_)))
-                    || def.params.as_ref().is_some_and(|ps| ps.iter().any(|p| matches!(&p.ty, Some(ast::Type::App { name, .. }) if name.name == "Events")));
+                let has_func = args.iter().any(|a| matches!(a, Term::Func(_)));
+                let has_stream = args.iter().any(|a| matches!(a, Term::Stream(_)));
+                let stream_params = def.params.as_ref().is_some_and(|ps| ps.iter().any(|p| matches!(&p.ty, Some(ast::Type::App { name, .. }) if name.name == "Events")));
+                // `liftable` functions on streams are signal-lifted, not expanded.
+                let lift = def.liftable && has_stream && !has_func && !stream_params;
+                let mut expand = !lift && (has_func || has_stream || stream_params);
+                if !expand {
+                    let saved = self.diags.len();
+                    match self.call_compiled(def, denv, args.clone(), span) {
+                        Ok(t) => return Ok(t),
+                        // A body that makes streams from its parameters (`static if`, `const`
+                        // ...) cannot be a value function: expand it like a macro instead.
+                        Err(Fail) if !lift => {
+                            self.diags.truncate(saved);
+                            expand = true;
+                        }
+                        Err(Fail) => return Err(Fail),
+                    }
+                }
                 if expand {
                     self.inline_depth += 1;
                     if self.inline_depth > 200 {
@@ -1583,29 +1617,7 @@ impl<'a> Compiler<'a> {
                     self.inline_depth -= 1;
                     r
                 } else {
-                    let (f, ready) = self.compile_fn(def, denv, span)?;
-                    // A function defined inside a function body also gets the enclosing frame.
-                    let mut all: Vec<Term> = (0..denv.frame)
-                        .map(|slot| {
-                            let d: Dyn = Arc::new(move |fr: &[Value]| {
-                                fr.get(slot).cloned().unwrap_or(Value::Unit)
-                            });
-                            Term::Dyn(d)
-                        })
-                        .collect();
-                    all.extend(args);
-                    if !ready && all.iter().all(|a| matches!(a, Term::Const(_))) {
-                        // A recursive call with constant arguments: evaluated at run time.
-                        let vals: Vec<Value> = all
-                            .into_iter()
-                            .filter_map(|a| match a {
-                                Term::Const(v) => Some(v),
-                                _ => None,
-                            })
-                            .collect();
-                        return Ok(Term::Dyn(Arc::new(move |_: &[Value]| f(&vals))));
-                    }
-                    self.apply_value_fn(f, all, span)
+                    self.call_compiled(def, denv, args, span)
                 }
             }
             FuncTerm::Lambda {
@@ -1633,6 +1645,32 @@ impl<'a> Compiler<'a> {
                 self.expr(body, &inner)
             }
         }
+    }
+
+    /// Call a user function compiled to a value function (lifted over stream arguments).
+    fn call_compiled(&mut self, def: &Rc<Def>, denv: &Env, args: Vec<Term>, span: Span) -> R<Term> {
+        let (f, ready) = self.compile_fn(def, denv, span)?;
+        // A function defined inside a function body also gets the enclosing frame.
+        let mut all: Vec<Term> = (0..denv.frame)
+            .map(|slot| {
+                let d: Dyn =
+                    Arc::new(move |fr: &[Value]| fr.get(slot).cloned().unwrap_or(Value::Unit));
+                Term::Dyn(d)
+            })
+            .collect();
+        all.extend(args);
+        if !ready && all.iter().all(|a| matches!(a, Term::Const(_))) {
+            // A recursive call with constant arguments: evaluated at run time.
+            let vals: Vec<Value> = all
+                .into_iter()
+                .filter_map(|a| match a {
+                    Term::Const(v) => Some(v),
+                    _ => None,
+                })
+                .collect();
+            return Ok(Term::Dyn(Arc::new(move |_: &[Value]| f(&vals))));
+        }
+        self.apply_value_fn(f, all, span)
     }
 
     fn stream_arg(&mut self, args: &[Term], i: usize, span: Span) -> R<NodeId> {

@@ -59,6 +59,8 @@ pub struct Monitor {
     cur: Vec<Option<Value>>,
     /// Armed delay target of each `Delay` node.
     targets: Vec<Option<i64>>,
+    /// Reused argument buffer of signal lifts.
+    scratch: Vec<Value>,
 }
 
 impl Monitor {
@@ -73,6 +75,7 @@ impl Monitor {
             last: vec![None; n],
             cur: vec![None; n],
             targets: vec![None; n],
+            scratch: Vec::new(),
             program,
             t0,
             pending: None,
@@ -290,24 +293,32 @@ impl Monitor {
         self.last_evaluated = Some(ts);
     }
 
-    fn slift(&self, args: &[SArg], f: &crate::ir::Func) -> Option<Value> {
-        let mut any = false;
-        let mut vals = Vec::with_capacity(args.len());
+    /// Signal lift. Checks for an event first (most nodes have none in a step), then fills a
+    /// reused argument buffer, so a step allocates nothing for scalar values.
+    fn slift(&mut self, args: &[SArg], f: &crate::ir::Func) -> Option<Value> {
+        let has_event = args
+            .iter()
+            .any(|a| matches!(a, SArg::Stream(n) if self.cur[*n].is_some()));
+        if !has_event {
+            return None;
+        }
+        let mut vals = std::mem::take(&mut self.scratch);
+        vals.clear();
         for a in args {
             match a {
                 SArg::Const(v) => vals.push(v.clone()),
-                SArg::Stream(n) => {
-                    if self.cur[*n].is_some() {
-                        any = true;
+                SArg::Stream(n) => match self.cur[*n].as_ref().or(self.last[*n].as_ref()) {
+                    Some(v) => vals.push(v.clone()),
+                    None => {
+                        self.scratch = vals;
+                        return None;
                     }
-                    vals.push(self.cur[*n].as_ref().or(self.last[*n].as_ref())?.clone());
-                }
+                },
             }
         }
-        if !any {
-            return None;
-        }
-        Some(f(&vals))
+        let r = f(&vals);
+        self.scratch = vals;
+        Some(r)
     }
 }
 
