@@ -1,15 +1,27 @@
 //! TeSSLa's own conformance cases (`$TESSLA_SUITE` or `../shared/tessla-suite`), run through the
-//! same code path as `tessla-telegraf trace`. Outputs are compared as sets of lines with floats
-//! compared by value; cases expecting errors pass when we report an error of that kind.
-//! Prints per-folder figures and writes `target/conformance-summary.txt`. Fails when a case in
-//! `tests/conformance-pass.txt` stops passing (`UPDATE_CONFORMANCE=1` rewrites that list).
-//! Without the suite it skips, unless `REQUIRE_TESSLA_SUITE=1`.
+//! same code path as `tessla-telegraf trace` (`tessla_telegraf::trace::run_named`).
+//!
+//! Outputs are compared as sets of lines (`ts: name = value`) with floats compared by value.
+//! Cases expecting errors pass when we report an error of that kind: a compile error (a syntax
+//! error when TeSSLa reports "Invalid syntax") or a runtime error, with the outputs before it.
+//! A case is "unsupported" when we stop on a feature the engine names as not supported.
+//! Prints per-folder `N passed, N failed, N unsupported`, writes `target/conformance-summary.txt`
+//! and the reason for every case that does not pass to `target/conformance-details.txt`.
+//! Fails when a case in `tests/conformance-pass.txt` stops passing (`UPDATE_CONFORMANCE=1`
+//! rewrites that list). Each case runs on its own thread with a time limit. Without the suite
+//! it skips, unless `REQUIRE_TESSLA_SUITE=1`.
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::Duration;
 use tessla_engine::LoadOptions;
+use tessla_syntax::diag::Category;
+use tessla_telegraf::trace::ErrorKind;
+
+/// How long one case may run.
+const CASE_LIMIT: Duration = Duration::from_secs(10);
 
 fn suite() -> Option<PathBuf> {
     let dir = std::env::var_os("TESSLA_SUITE")
@@ -18,10 +30,12 @@ fn suite() -> Option<PathBuf> {
     dir.is_dir().then_some(dir)
 }
 
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 enum Outcome {
     Pass,
-    Fail,
+    Fail(String),
+    /// The feature, as the engine or trace reader names it.
+    Unsupported(String),
 }
 
 /// A line `ts: name = value` with a float value normalised, so `1.0E10` and `10000000000.0` match.
@@ -43,10 +57,30 @@ fn lines(s: &str) -> BTreeSet<String> {
         .collect()
 }
 
+/// Why two output sets differ: the first few missing and unexpected lines.
+fn difference(ours: &BTreeSet<String>, expected: &BTreeSet<String>) -> String {
+    let missing: Vec<&str> = expected
+        .difference(ours)
+        .take(3)
+        .map(|s| s.as_str())
+        .collect();
+    let extra: Vec<&str> = ours
+        .difference(expected)
+        .take(3)
+        .map(|s| s.as_str())
+        .collect();
+    format!(
+        "outputs differ ({} missing, {} unexpected); missing: {missing:?}; unexpected: {extra:?}",
+        expected.difference(ours).count(),
+        ours.difference(expected).count()
+    )
+}
+
 fn run_case(dir: &Path, desc: &serde_json::Value) -> Outcome {
     let get = |k: &str| desc.get(k).and_then(|v| v.as_str()).map(|f| dir.join(f));
+    let read = |k: &str| get(k).and_then(|p| std::fs::read_to_string(p).ok());
     let Some(spec) = get("spec") else {
-        return Outcome::Fail;
+        return Outcome::Fail("descriptor names no spec".into());
     };
     let options = LoadOptions {
         base_time: desc
@@ -55,46 +89,60 @@ fn run_case(dir: &Path, desc: &serde_json::Value) -> Outcome {
             .map(str::to_string),
         overrides: Vec::new(),
     };
-    let loaded = tessla_engine::load_file(&spec, &options);
-    let expects_compile_error = get("expectedErrors").is_some();
-    let loaded = match loaded {
+    let expected_errors = read("expectedErrors");
+    let loaded = match tessla_engine::load_file(&spec, &options) {
         Ok(l) => l,
-        Err(_) => {
-            return if expects_compile_error {
-                Outcome::Pass
-            } else {
-                Outcome::Fail
+        Err(err) => {
+            let errors: Vec<_> = err.diagnostics.iter().filter(|d| d.is_error()).collect();
+            let first = errors
+                .first()
+                .map_or_else(|| "no message".to_string(), |d| d.one_line(&err.sources));
+            let unsupported = errors.iter().find(|d| d.category == Category::Unsupported);
+            return match (&expected_errors, unsupported) {
+                (Some(_), Some(u))
+                    if errors.iter().all(|d| d.category == Category::Unsupported) =>
+                {
+                    Outcome::Unsupported(u.message.clone())
+                }
+                (Some(want), _) => {
+                    if want.contains("Invalid syntax")
+                        && !errors.iter().any(|d| d.category == Category::Syntax)
+                    {
+                        Outcome::Fail(format!("expected a syntax error, got: {first}"))
+                    } else {
+                        Outcome::Pass
+                    }
+                }
+                (None, Some(u)) => Outcome::Unsupported(u.message.clone()),
+                (None, None) => Outcome::Fail(format!("compile error: {first}")),
             };
         }
     };
-    if expects_compile_error {
-        return Outcome::Fail;
+    if let Some(want) = expected_errors {
+        let want = want.lines().next().unwrap_or("").to_string();
+        return Outcome::Fail(format!("expected a compile error: {want}"));
     }
-    let input = get("input")
-        .and_then(|p| std::fs::read_to_string(p).ok())
-        .unwrap_or_default();
-    let run = tessla_telegraf::trace::run(&loaded.program, &input);
-    let expected = get("expectedOutput")
-        .and_then(|p| std::fs::read_to_string(p).ok())
-        .unwrap_or_default();
-    let expects_runtime_error = get("expectedRuntimeErrors").is_some();
-    if expects_runtime_error != run.error.is_some() {
-        return Outcome::Fail;
+    let input_name = get("input").map_or_else(|| "input".to_string(), |p| p.display().to_string());
+    let input = read("input").unwrap_or_default();
+    let run = tessla_telegraf::trace::run_named(&loaded.program, &input_name, &input);
+    let expected = lines(&read("expectedOutput").unwrap_or_default());
+    let ours = lines(&run.output);
+    let expected_runtime = read("expectedRuntimeErrors");
+    match (&run.error, &expected_runtime) {
+        (Some(e), _) if e.kind == ErrorKind::Unsupported => {
+            return Outcome::Unsupported(e.message.clone());
+        }
+        (Some(e), None) => return Outcome::Fail(format!("runtime error: {}", e.message)),
+        (None, Some(want)) => {
+            let want = want.lines().next().unwrap_or("").to_string();
+            return Outcome::Fail(format!("expected a runtime error: {want}"));
+        }
+        _ => {}
     }
-    if expects_runtime_error {
-        // Outputs before the error must match those TeSSLa printed (as a set).
-        return if lines(&run.output).is_subset(&lines(&expected))
-            || lines(&expected).is_subset(&lines(&run.output))
-        {
-            Outcome::Pass
-        } else {
-            Outcome::Fail
-        };
-    }
-    if lines(&run.output) == lines(&expected) {
+    if ours == expected {
         Outcome::Pass
     } else {
-        Outcome::Fail
+        Outcome::Fail(difference(&ours, &expected))
     }
 }
 
@@ -138,6 +186,42 @@ fn cases(root: &Path) -> Vec<(String, PathBuf, serde_json::Value)> {
     out
 }
 
+/// Run one case on its own thread; a panic or a run over [`CASE_LIMIT`] is a failure.
+fn run_limited(dir: PathBuf, desc: serde_json::Value) -> Outcome {
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        let r = std::panic::catch_unwind(|| run_case(&dir, &desc))
+            .unwrap_or_else(|_| Outcome::Fail("panicked".into()));
+        let _ = tx.send(r);
+    });
+    rx.recv_timeout(CASE_LIMIT)
+        .unwrap_or_else(|_| Outcome::Fail(format!("no result within {} s", CASE_LIMIT.as_secs())))
+}
+
+#[derive(Default)]
+struct Counts {
+    passed: usize,
+    failed: usize,
+    unsupported: usize,
+}
+
+impl Counts {
+    fn add(&mut self, o: &Outcome) {
+        match o {
+            Outcome::Pass => self.passed += 1,
+            Outcome::Fail(_) => self.failed += 1,
+            Outcome::Unsupported(_) => self.unsupported += 1,
+        }
+    }
+
+    fn line(&self, name: &str) -> String {
+        format!(
+            "{name:<15} {:>4} passed, {:>4} failed, {:>4} unsupported\n",
+            self.passed, self.failed, self.unsupported
+        )
+    }
+}
+
 #[test]
 fn tessla_suite_conformance() {
     let Some(root) = suite() else {
@@ -150,57 +234,60 @@ fn tessla_suite_conformance() {
     };
     let all = cases(&root);
     assert!(!all.is_empty(), "no cases found under {}", root.display());
-    let mut results: BTreeMap<String, Outcome> = BTreeMap::new();
-    for (name, dir, desc) in all {
-        // Each case runs on its own thread with a time limit, so a hang cannot hang the test.
-        let (tx, rx) = mpsc::channel();
-        std::thread::spawn(move || {
-            let r = std::panic::catch_unwind(|| run_case(&dir, &desc)).unwrap_or(Outcome::Fail);
-            let _ = tx.send(r);
-        });
-        let outcome = rx
-            .recv_timeout(Duration::from_secs(10))
-            .unwrap_or(Outcome::Fail);
-        results.insert(name, outcome);
-    }
-    let mut per_folder: BTreeMap<String, (usize, usize)> = BTreeMap::new();
+    let results: BTreeMap<String, Outcome> = all
+        .into_iter()
+        .map(|(name, dir, desc)| (name, run_limited(dir, desc)))
+        .collect();
+
+    let mut per_folder: BTreeMap<String, Counts> = BTreeMap::new();
+    let mut total = Counts::default();
+    let mut details = String::new();
     for (name, o) in &results {
         let folder = name.split('/').next().unwrap_or("").to_string();
-        let e = per_folder.entry(folder).or_default();
+        per_folder.entry(folder).or_default().add(o);
+        total.add(o);
         match o {
-            Outcome::Pass => e.0 += 1,
-            Outcome::Fail => e.1 += 1,
+            Outcome::Pass => {}
+            Outcome::Fail(why) => {
+                let _ = writeln!(details, "FAIL        {name}: {why}");
+            }
+            Outcome::Unsupported(what) => {
+                let _ = writeln!(details, "UNSUPPORTED {name}: {what}");
+            }
         }
     }
     let mut summary = String::new();
-    let (mut p, mut f) = (0, 0);
-    for (folder, (ok, bad)) in &per_folder {
-        summary.push_str(&format!("{folder:<12} {ok:>4} passed, {bad:>4} failed\n"));
-        p += ok;
-        f += bad;
+    for (folder, counts) in &per_folder {
+        summary.push_str(&counts.line(folder));
     }
-    summary.push_str(&format!("{:<12} {p:>4} passed, {f:>4} failed\n", "total"));
+    summary.push_str(&total.line("total"));
     eprintln!("{summary}");
     let target = Path::new(env!("CARGO_MANIFEST_DIR")).join("target");
     let _ = std::fs::create_dir_all(&target);
     let _ = std::fs::write(target.join("conformance-summary.txt"), &summary);
+    let _ = std::fs::write(target.join("conformance-details.txt"), &details);
 
     let list_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/conformance-pass.txt");
-    let passing: Vec<&String> = results
-        .iter()
-        .filter(|(_, o)| **o == Outcome::Pass)
-        .map(|(n, _)| n)
-        .collect();
     if std::env::var_os("UPDATE_CONFORMANCE").is_some() {
-        let text: String = passing.iter().map(|n| format!("{n}\n")).collect();
+        let text: String = results
+            .iter()
+            .filter(|(_, o)| **o == Outcome::Pass)
+            .map(|(n, _)| format!("{n}\n"))
+            .collect();
         std::fs::write(&list_path, text).unwrap();
         return;
     }
     let expected = std::fs::read_to_string(&list_path).unwrap_or_default();
-    let regressions: Vec<&str> = expected
+    let regressions: Vec<String> = expected
         .lines()
-        .filter(|l| !l.trim().is_empty())
-        .filter(|l| results.get(*l) != Some(&Outcome::Pass))
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+        .filter_map(|l| match results.get(l) {
+            Some(Outcome::Pass) => None,
+            Some(Outcome::Fail(why)) => Some(format!("{l}: {why}")),
+            Some(Outcome::Unsupported(what)) => Some(format!("{l}: unsupported: {what}")),
+            None => Some(format!("{l}: no such case in the suite")),
+        })
         .collect();
     assert!(
         regressions.is_empty(),

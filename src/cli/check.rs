@@ -28,17 +28,23 @@ pub fn run(args: CheckArgs) -> i32 {
     let ann = |a: &[tessla_engine::Annotation]| {
         a.iter()
             .map(|a| {
-                let args: Vec<String> =
-                    a.args.iter().map(|(k, v)| format!("{k} = {v:?}")).collect();
+                let args: Vec<String> = a
+                    .args
+                    .iter()
+                    .map(|(k, v)| match v {
+                        tessla_engine::Value::Str(s) => format!("{k} = {s:?}"),
+                        other => format!("{k} = {other}"),
+                    })
+                    .collect();
                 format!(" @{}({})", a.name, args.join(", "))
             })
             .collect::<String>()
     };
     for i in &p.inputs {
-        println!("in  {}: Events[{:?}]{}", i.name, i.ty, ann(&i.annotations));
+        println!("in  {}: Events[{}]{}", i.name, i.ty, ann(&i.annotations));
     }
     for o in &p.outputs {
-        println!("out {}: Events[{:?}]{}", o.name, o.ty, ann(&o.annotations));
+        println!("out {}: Events[{}]{}", o.name, o.ty, ann(&o.annotations));
     }
     println!(
         "{} inputs, {} outputs, {} stream nodes",

@@ -1,8 +1,11 @@
-//! `tessla-telegraf trace SPEC [TRACE]`: run a spec over a TeSSLa input trace (file or stdin)
-//! and print TeSSLa's output format; exit 1 on a runtime error, 2 on a spec error.
+//! `tessla-telegraf trace SPEC [TRACE]`: run a spec over a TeSSLa input trace (file or stdin,
+//! read line by line) and print TeSSLa's output format as outputs are produced. Exit 1 on a
+//! runtime or trace error (outputs before it are printed, the error goes to stderr), 2 on a
+//! spec error, 3 when the trace cannot be read; 0 also when stdout is closed by the reader.
 
 use super::{EXIT_IO, EXIT_OK, EXIT_RUNTIME, EXIT_SPEC, TraceArgs};
-use std::io::{Read, Write};
+use crate::trace::{ErrorKind, run_stream};
+use std::io::{BufReader, IsTerminal};
 
 pub fn run(args: TraceArgs) -> i32 {
     let options = match super::load_options(&args.spec_options) {
@@ -19,32 +22,45 @@ pub fn run(args: TraceArgs) -> i32 {
             return EXIT_SPEC;
         }
     };
-    let text = match &args.trace {
-        Some(p) => {
-            std::fs::read_to_string(p).map_err(|e| format!("cannot read {}: {e}", p.display()))
-        }
-        None => {
-            let mut s = String::new();
-            std::io::stdin()
-                .read_to_string(&mut s)
-                .map(|_| s)
-                .map_err(|e| format!("cannot read stdin: {e}"))
-        }
+    if !loaded.warnings.is_empty() {
+        let color = std::io::stderr().is_terminal();
+        eprint!(
+            "{}",
+            tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, color)
+        );
+    }
+    let stdout = std::io::stdout();
+    let mut out = stdout.lock();
+    let result = match &args.trace {
+        Some(p) => match std::fs::File::open(p) {
+            Ok(f) => run_stream(
+                &loaded.program,
+                &p.display().to_string(),
+                BufReader::new(f),
+                &mut out,
+            ),
+            Err(e) => {
+                eprintln!("error: cannot read {}: {e}", p.display());
+                return EXIT_IO;
+            }
+        },
+        None => run_stream(
+            &loaded.program,
+            "<stdin>",
+            std::io::stdin().lock(),
+            &mut out,
+        ),
     };
-    let text = match text {
-        Ok(t) => t,
+    match result {
+        Ok(()) => EXIT_OK,
+        Err(e) if e.kind == ErrorKind::OutputClosed => EXIT_OK,
+        Err(e) if e.kind == ErrorKind::Io => {
+            eprintln!("{e}");
+            EXIT_IO
+        }
         Err(e) => {
-            eprintln!("error: {e}");
-            return EXIT_IO;
-        }
-    };
-    let result = crate::trace::run(&loaded.program, &text);
-    let _ = std::io::stdout().write_all(result.output.as_bytes());
-    match result.error {
-        Some(e) => {
             eprintln!("{e}");
             EXIT_RUNTIME
         }
-        None => EXIT_OK,
     }
 }

@@ -1,32 +1,75 @@
-//! TeSSLa's input trace format: `TS: name = value`, `TS: name` (a unit event), comments (`--`,
-//! `#`) and blank lines. Values: integers, floats, strings with escapes, `true`/`false`, `()`,
-//! tuples, `Some(x)`/`None`, `List(...)`, records `{a = 1}`; each checked against the input's
-//! declared element type.
+//! TeSSLa's input trace format, one event per line: `TS: name = value`, `TS: name` (a unit
+//! event), comments (`--`, `#`) and blank lines.
+//!
+//! A value is a constant TeSSLa expression, as in TeSSLa's interpreter: literals (ints, hex
+//! ints, floats, strings with escapes and `${...}` interpolation, `true`/`false`, `()`),
+//! tuples, `Some(x)`/`None`, `List(...)`, records `{a = 1}`/`${a: 1}`, operators and
+//! `if then else`. It is parsed with `tessla_syntax::parse_expr` (the spec grammar is a superset
+//! of the trace grammar) and evaluated here, then checked against the input's declared type (a
+//! record `{_1 = a, _2 = b}` is a tuple, as TeSSLa treats tuples as records). `Set(...)` and
+//! `Map(k -> v, ...)` build set and map values (`->` only occurs in maps, so it is read as a
+//! comma and the arguments are paired). Integers beyond 64 bits are reported as unsupported.
 
 use std::sync::Arc;
 use tessla_engine::{Program, Type, Value};
+use tessla_syntax::ast::{BinOp, Expr, ExprKind, StrPart, UnaryOp};
+use tessla_syntax::source::FileId;
 
+/// One input event of a trace.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Event {
+    /// 1-based line number in the trace.
     pub line: usize,
     pub ts: i64,
+    /// Index into `Program::inputs`.
     pub input: usize,
     pub value: Value,
 }
 
-/// The events of a trace in order; a malformed line is an `Err` naming it.
+/// Why a trace line could not be read.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ReadErrorKind {
+    /// Not an event line, an undeclared input, a value that does not fit the declared type.
+    Malformed,
+    /// A value this engine cannot represent (the message names the feature).
+    Unsupported,
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ReadError {
+    pub kind: ReadErrorKind,
+    /// 1-based line number in the trace.
+    pub line: usize,
+    pub message: String,
+}
+
+impl ReadError {
+    fn malformed(line: usize, message: impl Into<String>) -> ReadError {
+        ReadError {
+            kind: ReadErrorKind::Malformed,
+            line,
+            message: message.into(),
+        }
+    }
+}
+
+/// Read one line of a trace: `None` for blank and comment lines.
+pub fn parse_line(raw: &str, line: usize, program: &Program) -> Option<Result<Event, ReadError>> {
+    let l = strip_comment(raw).trim();
+    if l.is_empty() {
+        return None;
+    }
+    Some(parse_event(l, line, program))
+}
+
+/// The events of a whole trace text, in order.
 pub fn events<'a>(
     text: &'a str,
     program: &'a Program,
-) -> impl Iterator<Item = Result<Event, String>> + 'a {
-    text.lines().enumerate().filter_map(move |(i, raw)| {
-        let line = i + 1;
-        let l = strip_comment(raw).trim();
-        if l.is_empty() {
-            return None;
-        }
-        Some(parse_line(l, line, program))
-    })
+) -> impl Iterator<Item = Result<Event, ReadError>> + 'a {
+    text.lines()
+        .enumerate()
+        .filter_map(move |(i, raw)| parse_line(raw, i + 1, program))
 }
 
 /// The line without a trailing `#` or `--` comment (outside string literals).
@@ -42,54 +85,49 @@ fn strip_comment(line: &str) -> &str {
         match b {
             b'\\' if in_str => escape = true,
             b'"' => in_str = !in_str,
-            b'#' if !in_str => return &line[..i],
-            b'-' if !in_str && bytes.get(i + 1) == Some(&b'-') => return &line[..i],
+            b'#' if !in_str => return line.get(..i).unwrap_or(line),
+            b'-' if !in_str && bytes.get(i + 1) == Some(&b'-') => {
+                return line.get(..i).unwrap_or(line);
+            }
             _ => {}
         }
     }
     line
 }
 
-fn parse_line(l: &str, line: usize, program: &Program) -> Result<Event, String> {
+fn parse_event(l: &str, line: usize, program: &Program) -> Result<Event, ReadError> {
     let (ts, rest) = l
         .split_once(':')
-        .ok_or_else(|| format!("line {line}: expected `TIMESTAMP: name = value`"))?;
-    let ts: i64 = ts
-        .trim()
-        .parse()
-        .map_err(|_| format!("line {line}: `{}` is not an integer timestamp", ts.trim()))?;
+        .ok_or_else(|| ReadError::malformed(line, "expected `TIMESTAMP: name = value`"))?;
+    let ts: i64 = ts.trim().parse().map_err(|_| {
+        ReadError::malformed(
+            line,
+            format!("`{}` is not a non-negative integer timestamp", ts.trim()),
+        )
+    })?;
+    if ts < 0 {
+        return Err(ReadError::malformed(
+            line,
+            format!("timestamp {ts} is negative"),
+        ));
+    }
     let (name, value) = match rest.split_once('=') {
         Some((n, v)) => (n.trim(), Some(v.trim())),
         None => (rest.trim(), None),
     };
     let input = program
         .input_index(name)
-        .ok_or_else(|| format!("line {line}: undeclared input stream `{name}`"))?;
-    let ty = &program.inputs[input].ty;
+        .ok_or_else(|| ReadError::malformed(line, format!("Undeclared input stream {name}")))?;
+    let ty = program
+        .inputs
+        .get(input)
+        .map_or(Type::Unknown, |i| i.ty.clone());
     let value = match value {
         None => Value::Unit,
-        Some(v) => {
-            let mut p = ValueParser {
-                s: v.as_bytes(),
-                pos: 0,
-            };
-            let val = p
-                .value()
-                .ok_or_else(|| format!("line {line}: cannot read the value `{v}`"))?;
-            p.ws();
-            if p.pos != p.s.len() {
-                return Err(format!(
-                    "line {line}: unexpected text after the value `{v}`"
-                ));
-            }
-            val
-        }
+        Some(v) => read_value(v, line)?,
     };
-    if !fits(&value, ty) {
-        return Err(format!(
-            "line {line}: value `{value}` of `{name}` does not have the declared type {ty:?}"
-        ));
-    }
+    let value = coerce(value, &ty)
+        .map_err(|why| ReadError::malformed(line, format!("input {name}: {why}")))?;
     Ok(Event {
         line,
         ts,
@@ -98,166 +136,510 @@ fn parse_line(l: &str, line: usize, program: &Program) -> Result<Event, String> 
     })
 }
 
-fn fits(v: &Value, t: &Type) -> bool {
-    match (v, t) {
-        (_, Type::Unknown) => true,
-        (Value::Unit, Type::Unit)
-        | (Value::Bool(_), Type::Bool)
-        | (Value::Int(_), Type::Int)
-        | (Value::Float(_), Type::Float)
-        | (Value::Str(_), Type::String)
-        | (Value::None, Type::Option(_)) => true,
-        (Value::Some(x), Type::Option(t)) => fits(x, t),
-        (Value::List(l), Type::List(t)) => l.iter().all(|x| fits(x, t)),
-        (Value::Tuple(xs), Type::Tuple(ts)) => {
-            xs.len() == ts.len() && xs.iter().zip(ts).all(|(x, t)| fits(x, t))
+/// Parse and evaluate the value text of one event.
+fn read_value(text: &str, line: usize) -> Result<Value, ReadError> {
+    check_escapes(text).map_err(|m| ReadError::malformed(line, m))?;
+    let unsupported = |feature: &str| ReadError {
+        kind: ReadErrorKind::Unsupported,
+        line,
+        message: format!("{feature} in traces are not supported"),
+    };
+    let (expr, diags) = tessla_syntax::parse_expr(&arrows_as_commas(text), FileId(0));
+    let expr = match (expr, diags.first()) {
+        (Some(e), None) => e,
+        (_, Some(d)) if d.message.contains("integer literal too large") => {
+            return Err(unsupported("Int values beyond 64 bits"));
         }
-        (Value::Record(_), Type::Record(_)) => true,
-        _ => false,
+        (_, Some(d)) => {
+            return Err(ReadError::malformed(
+                line,
+                format!("cannot read the value `{text}`: {}", d.message),
+            ));
+        }
+        (None, None) => {
+            return Err(ReadError::malformed(
+                line,
+                format!("cannot read the value `{text}`"),
+            ));
+        }
+    };
+    eval(&expr).map_err(|e| match e {
+        EvalError::BigInt => unsupported("Int values beyond 64 bits"),
+        EvalError::Bad(m) => ReadError::malformed(line, format!("in the value `{text}`: {m}")),
+    })
+}
+
+/// `->` (outside string literals) replaced by `,`: in TeSSLa's trace grammar it only separates
+/// a map entry's key from its value, and `Map(...)` pairs its arguments again.
+fn arrows_as_commas(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut in_str = false;
+    let mut escape = false;
+    let mut chars = text.chars().peekable();
+    while let Some(c) = chars.next() {
+        if escape {
+            escape = false;
+        } else if c == '\\' && in_str {
+            escape = true;
+        } else if c == '"' {
+            in_str = !in_str;
+        } else if c == '-' && !in_str && chars.peek() == Some(&'>') {
+            chars.next();
+            out.push_str(", ");
+            continue;
+        }
+        out.push(c);
+    }
+    out
+}
+
+/// TeSSLa's valid escapes; the syntax crate also reports others, but keeps `\\d` and `\d` alike
+/// in the AST, so they are checked on the raw text.
+fn check_escapes(text: &str) -> Result<(), String> {
+    let mut in_str = false;
+    let mut chars = text.chars();
+    while let Some(c) = chars.next() {
+        match c {
+            '"' => in_str = !in_str,
+            '\\' if in_str => match chars.next() {
+                Some('n' | 'r' | 't' | 'a' | '\\' | '"' | '$' | '%') => {}
+                Some(o) => return Err(format!("Invalid escape sequence '\\{o}' in string")),
+                None => return Err("unterminated string".into()),
+            },
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
+/// Why a trace value cannot be evaluated.
+enum EvalError {
+    /// An integer that does not fit 64 bits (TeSSLa's Int is unbounded).
+    BigInt,
+    Bad(String),
+}
+
+impl From<String> for EvalError {
+    fn from(m: String) -> Self {
+        EvalError::Bad(m)
     }
 }
 
-struct ValueParser<'a> {
-    s: &'a [u8],
-    pos: usize,
+impl From<&str> for EvalError {
+    fn from(m: &str) -> Self {
+        EvalError::Bad(m.to_string())
+    }
 }
 
-impl ValueParser<'_> {
-    fn ws(&mut self) {
-        while self.s.get(self.pos).is_some_and(u8::is_ascii_whitespace) {
-            self.pos += 1;
+/// Evaluate a constant trace expression.
+fn eval(e: &Expr) -> Result<Value, EvalError> {
+    match &e.kind {
+        ExprKind::Int { value, unit: None } => i64::try_from(*value)
+            .map(Value::Int)
+            .map_err(|_| EvalError::BigInt),
+        ExprKind::Int { unit: Some(u), .. } => {
+            Err(format!("time units (`{}`) are not allowed in traces", u.name).into())
         }
-    }
-
-    fn eat(&mut self, t: &str) -> bool {
-        self.ws();
-        if self.s[self.pos..].starts_with(t.as_bytes()) {
-            self.pos += t.len();
-            true
-        } else {
-            false
-        }
-    }
-
-    fn list(&mut self, close: u8) -> Option<Vec<Value>> {
-        let mut out = Vec::new();
-        self.ws();
-        if self.s.get(self.pos) == Some(&close) {
-            self.pos += 1;
-            return Some(out);
-        }
-        loop {
-            out.push(self.value()?);
-            self.ws();
-            match self.s.get(self.pos) {
-                Some(b',') => self.pos += 1,
-                Some(c) if *c == close => {
-                    self.pos += 1;
-                    return Some(out);
-                }
-                _ => return None,
+        ExprKind::Float(f) => Ok(Value::Float(*f)),
+        ExprKind::Str { parts, format } => {
+            if *format {
+                return Err("format strings are not allowed in traces".into());
             }
-        }
-    }
-
-    fn value(&mut self) -> Option<Value> {
-        self.ws();
-        if self.eat("true") {
-            return Some(Value::Bool(true));
-        }
-        if self.eat("false") {
-            return Some(Value::Bool(false));
-        }
-        if self.eat("None") {
-            return Some(Value::None);
-        }
-        if self.eat("Some(") {
-            let v = self.value()?;
-            return self.eat(")").then(|| Value::Some(Arc::new(v)));
-        }
-        if self.eat("List(") {
-            return self.list(b')').map(|l| Value::List(Arc::new(l)));
-        }
-        if self.eat("(") {
-            let l = self.list(b')')?;
-            return Some(match l.len() {
-                0 => Value::Unit,
-                1 => l.into_iter().next()?,
-                _ => Value::Tuple(l.into()),
-            });
-        }
-        if self.eat("{") {
-            let mut fields: Vec<(Arc<str>, Value)> = Vec::new();
-            loop {
-                self.ws();
-                if self.eat("}") {
-                    break;
+            let mut s = String::new();
+            for p in parts {
+                match p {
+                    StrPart::Text(t) => s.push_str(t),
+                    StrPart::Interp { expr, .. } => s.push_str(&eval(expr)?.to_string()),
                 }
-                let start = self.pos;
-                while self
-                    .s
-                    .get(self.pos)
-                    .is_some_and(|c| c.is_ascii_alphanumeric() || *c == b'_')
-                {
-                    self.pos += 1;
-                }
-                let name = std::str::from_utf8(&self.s[start..self.pos])
-                    .ok()?
-                    .to_string();
-                if !(self.eat("=") || self.eat(":")) {
-                    return None;
-                }
-                fields.push((name.into(), self.value()?));
-                self.eat(",");
             }
-            fields.sort_by(|a, b| a.0.cmp(&b.0));
-            return Some(Value::Record(fields.into()));
+            Ok(Value::Str(s.into()))
         }
-        if self.s.get(self.pos) == Some(&b'"') {
-            self.pos += 1;
-            let mut out = Vec::new();
-            while let Some(&c) = self.s.get(self.pos) {
-                self.pos += 1;
-                match c {
-                    b'"' => return String::from_utf8(out).ok().map(|s| Value::Str(s.into())),
-                    b'\\' => {
-                        let e = *self.s.get(self.pos)?;
-                        self.pos += 1;
-                        out.push(match e {
-                            b'n' => b'\n',
-                            b't' => b'\t',
-                            b'r' => b'\r',
-                            other => other,
-                        });
+        ExprKind::Tuple(items) => {
+            let vals = items.iter().map(eval).collect::<Result<Vec<_>, _>>()?;
+            Ok(if vals.is_empty() {
+                Value::Unit
+            } else {
+                Value::Tuple(vals.into())
+            })
+        }
+        ExprKind::Record(fields) => {
+            let mut out: Vec<(Arc<str>, Value)> = Vec::new();
+            for (name, v) in fields {
+                if out.iter().any(|(n, _)| **n == *name.name) {
+                    return Err(format!("member {} is given twice", name.name).into());
+                }
+                out.push((name.name.as_str().into(), eval(v)?));
+            }
+            out.sort_by(|a, b| a.0.cmp(&b.0));
+            Ok(Value::Record(out.into()))
+        }
+        ExprKind::Var(id) => match id.name.as_str() {
+            "true" => Ok(Value::Bool(true)),
+            "false" => Ok(Value::Bool(false)),
+            "None" => Ok(Value::None),
+            other => Err(format!("`{other}` is not a value").into()),
+        },
+        ExprKind::Call {
+            function,
+            type_args,
+            args: Some(args),
+        } if type_args.is_empty() => {
+            let ExprKind::Var(f) = &function.kind else {
+                return Err("only `Some`, `List`, `Set` and `Map` may be called in traces".into());
+            };
+            if let Some(a) = args.iter().find_map(|a| a.name.as_ref()) {
+                return Err(format!("named argument `{}` in a trace value", a.name).into());
+            }
+            let vals = args
+                .iter()
+                .map(|a| eval(&a.value))
+                .collect::<Result<Vec<_>, _>>()?;
+            match (f.name.as_str(), vals.len()) {
+                ("Some", 1) => Ok(Value::Some(Arc::new(
+                    vals.into_iter().next().unwrap_or(Value::Unit),
+                ))),
+                ("List", _) => Ok(Value::List(Arc::new(vals))),
+                ("Set", _) => {
+                    let mut set: Vec<Value> = Vec::with_capacity(vals.len());
+                    for v in vals {
+                        if !set.contains(&v) {
+                            set.push(v);
+                        }
                     }
-                    _ => out.push(c),
+                    Ok(Value::Set(Arc::new(set)))
+                }
+                ("Map", n) if n % 2 == 0 => {
+                    let mut map: Vec<(Value, Value)> = Vec::with_capacity(n / 2);
+                    let mut it = vals.into_iter();
+                    while let (Some(k), Some(v)) = (it.next(), it.next()) {
+                        // A repeated key keeps the last value, as Scala's `toMap` does.
+                        match map.iter_mut().find(|(mk, _)| *mk == k) {
+                            Some(entry) => entry.1 = v,
+                            None => map.push((k, v)),
+                        }
+                    }
+                    Ok(Value::Map(Arc::new(map)))
+                }
+                (other, n) => {
+                    Err(format!("`{other}` with {n} arguments is not a trace value").into())
                 }
             }
-            return None;
         }
-        let start = self.pos;
-        if self.s[self.pos..].starts_with(b"0x") || self.s[self.pos..].starts_with(b"-0x") {
-            let neg = self.s[self.pos] == b'-';
-            self.pos += if neg { 3 } else { 2 };
-            let hs = self.pos;
-            while self.s.get(self.pos).is_some_and(u8::is_ascii_hexdigit) {
-                self.pos += 1;
+        ExprKind::Unary { op, operand } => Ok(unary(*op, eval(operand)?)?),
+        ExprKind::Binary { op, lhs, rhs } => match op {
+            BinOp::And => match eval(lhs)? {
+                Value::Bool(false) => Ok(Value::Bool(false)),
+                Value::Bool(true) => Ok(bool_of(eval(rhs)?)?),
+                v => Err(format!("`&&` needs Bool operands, found {}", show(&v)).into()),
+            },
+            BinOp::Or => match eval(lhs)? {
+                Value::Bool(true) => Ok(Value::Bool(true)),
+                Value::Bool(false) => Ok(bool_of(eval(rhs)?)?),
+                v => Err(format!("`||` needs Bool operands, found {}", show(&v)).into()),
+            },
+            _ => Ok(binary(*op, eval(lhs)?, eval(rhs)?)?),
+        },
+        ExprKind::If {
+            cond,
+            then_branch,
+            else_branch,
+            ..
+        } => match eval(cond)? {
+            Value::Bool(true) => eval(then_branch),
+            Value::Bool(false) => eval(else_branch),
+            v => Err(format!("an `if` condition must be a Bool, found {}", show(&v)).into()),
+        },
+        _ => Err("only constants, operators and `if` are allowed in trace values".into()),
+    }
+}
+
+fn bool_of(v: Value) -> Result<Value, String> {
+    match v {
+        Value::Bool(_) => Ok(v),
+        v => Err(format!("expected a Bool, found {}", show(&v))),
+    }
+}
+
+fn unary(op: UnaryOp, v: Value) -> Result<Value, String> {
+    match (op, v) {
+        (UnaryOp::Not, Value::Bool(b)) => Ok(Value::Bool(!b)),
+        (UnaryOp::BitNot, Value::Int(i)) => Ok(Value::Int(!i)),
+        (UnaryOp::Neg, Value::Int(i)) => i
+            .checked_neg()
+            .map(Value::Int)
+            .ok_or_else(|| "Int overflow".to_string()),
+        (UnaryOp::FNeg, Value::Float(f)) => Ok(Value::Float(-f)),
+        // A negative float literal: `-1.5` (TeSSLa's trace lexer reads it as one literal).
+        (UnaryOp::Neg, Value::Float(f)) => Ok(Value::Float(-f)),
+        (op, v) => Err(format!("operator {op:?} does not apply to {}", show(&v))),
+    }
+}
+
+fn binary(op: BinOp, a: Value, b: Value) -> Result<Value, String> {
+    use BinOp::*;
+    use Value::{Bool, Float, Int};
+    let overflow = || "Int overflow".to_string();
+    Ok(match (op, &a, &b) {
+        (Add, Int(x), Int(y)) => Int(x.checked_add(*y).ok_or_else(overflow)?),
+        (Sub, Int(x), Int(y)) => Int(x.checked_sub(*y).ok_or_else(overflow)?),
+        (Mul, Int(x), Int(y)) => Int(x.checked_mul(*y).ok_or_else(overflow)?),
+        (Div | Mod, Int(_), Int(0)) => return Err("Division by zero".into()),
+        (Div, Int(x), Int(y)) => Int(x.checked_div(*y).ok_or_else(overflow)?),
+        (Mod, Int(x), Int(y)) => Int(x.checked_rem(*y).ok_or_else(overflow)?),
+        (Shl, Int(x), Int(y)) => Int(x
+            .checked_shl(u32::try_from(*y).map_err(|_| overflow())?)
+            .ok_or_else(overflow)?),
+        (Shr, Int(x), Int(y)) => Int(x
+            .checked_shr(u32::try_from(*y).map_err(|_| overflow())?)
+            .ok_or_else(overflow)?),
+        (BitAnd, Int(x), Int(y)) => Int(x & y),
+        (BitOr, Int(x), Int(y)) => Int(x | y),
+        (BitXor, Int(x), Int(y)) => Int(x ^ y),
+        (Lt, Int(x), Int(y)) => Bool(x < y),
+        (Gt, Int(x), Int(y)) => Bool(x > y),
+        (Le, Int(x), Int(y)) => Bool(x <= y),
+        (Ge, Int(x), Int(y)) => Bool(x >= y),
+        (FAdd, Float(x), Float(y)) => Float(x + y),
+        (FSub, Float(x), Float(y)) => Float(x - y),
+        (FMul, Float(x), Float(y)) => Float(x * y),
+        (FDiv, Float(x), Float(y)) => Float(x / y),
+        (FLt, Float(x), Float(y)) => Bool(x < y),
+        (FGt, Float(x), Float(y)) => Bool(x > y),
+        (FLe, Float(x), Float(y)) => Bool(x <= y),
+        (FGe, Float(x), Float(y)) => Bool(x >= y),
+        (Eq, _, _) => Bool(a == b),
+        (Ne, _, _) => Bool(a != b),
+        _ => {
+            return Err(format!(
+                "operator `{}` does not apply to {} and {}",
+                op.symbol(),
+                show(&a),
+                show(&b)
+            ));
+        }
+    })
+}
+
+/// A value as TeSSLa shows it in input errors (strings quoted).
+fn show(v: &Value) -> String {
+    match v {
+        Value::Str(s) => format!("{s:?}"),
+        other => other.to_string(),
+    }
+}
+
+/// A type as TeSSLa writes it.
+pub fn type_name(t: &Type) -> String {
+    let join = |ts: &[Type]| ts.iter().map(type_name).collect::<Vec<_>>().join(", ");
+    match t {
+        Type::Unit => "Unit".into(),
+        Type::Bool => "Bool".into(),
+        Type::Int => "Int".into(),
+        Type::Float => "Float".into(),
+        Type::String => "String".into(),
+        Type::Option(t) => format!("Option[{}]", type_name(t)),
+        Type::List(t) => format!("List[{}]", type_name(t)),
+        Type::Tuple(ts) => format!("({})", join(ts)),
+        Type::Record(fs) => format!(
+            "{{{}}}",
+            fs.iter()
+                .map(|(n, t)| format!("{n}: {}", type_name(t)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        Type::Events(t) => format!("Events[{}]", type_name(t)),
+        Type::Unknown => "?".into(),
+    }
+}
+
+/// `v` as a value of type `t`, or why it is not one (TeSSLa's wording).
+fn coerce(v: Value, t: &Type) -> Result<Value, String> {
+    let mismatch = |v: &Value| format!("{} is not of type {}.", show(v), type_name(t));
+    match (v, t) {
+        (v, Type::Unknown) => Ok(v),
+        (v @ Value::Unit, Type::Unit)
+        | (v @ Value::Bool(_), Type::Bool)
+        | (v @ Value::Int(_), Type::Int)
+        | (v @ Value::Float(_), Type::Float)
+        | (v @ Value::Str(_), Type::String)
+        | (v @ Value::None, Type::Option(_)) => Ok(v),
+        (Value::Some(x), Type::Option(inner)) => {
+            Ok(Value::Some(Arc::new(coerce((*x).clone(), inner)?)))
+        }
+        (Value::List(xs), Type::List(inner)) => Ok(Value::List(Arc::new(
+            xs.iter()
+                .map(|x| coerce(x.clone(), inner))
+                .collect::<Result<_, _>>()?,
+        ))),
+        (Value::Tuple(xs), Type::Tuple(ts)) if xs.len() == ts.len() => Ok(Value::Tuple(
+            xs.iter()
+                .zip(ts)
+                .map(|(x, t)| coerce(x.clone(), t))
+                .collect::<Result<Vec<_>, _>>()?
+                .into(),
+        )),
+        // TeSSLa's tuples are records with members `_1`, `_2`, ...
+        (Value::Record(fs), Type::Tuple(ts)) if fs.len() == ts.len() => {
+            let mut out = Vec::with_capacity(ts.len());
+            for (i, t) in ts.iter().enumerate() {
+                let key = format!("_{}", i + 1);
+                let x = fs
+                    .iter()
+                    .find(|(n, _)| **n == *key)
+                    .map(|(_, x)| x.clone())
+                    .ok_or_else(|| mismatch(&Value::Record(fs.clone())))?;
+                out.push(coerce(x, t)?);
             }
-            let h = std::str::from_utf8(&self.s[hs..self.pos]).ok()?;
-            let v = i64::from_str_radix(h, 16).ok()?;
-            return Some(Value::Int(if neg { -v } else { v }));
+            Ok(Value::Tuple(out.into()))
         }
-        while self
-            .s
-            .get(self.pos)
-            .is_some_and(|c| c.is_ascii_digit() || matches!(c, b'-' | b'+' | b'.' | b'e' | b'E'))
-        {
-            self.pos += 1;
+        (Value::Record(fs), Type::Record(ts)) => {
+            let mut out: Vec<(Arc<str>, Value)> = Vec::with_capacity(ts.len());
+            for (n, ft) in ts {
+                let x = fs
+                    .iter()
+                    .find(|(k, _)| **k == **n)
+                    .map(|(_, x)| x.clone())
+                    .ok_or_else(|| format!("Expected {} but {n} is missing.", type_name(t)))?;
+                out.push((n.as_str().into(), coerce(x, ft)?));
+            }
+            if let Some((extra, _)) = fs.iter().find(|(k, _)| !ts.iter().any(|(n, _)| **k == **n)) {
+                return Err(format!(
+                    "Expected {} but found the extra member {extra}.",
+                    type_name(t)
+                ));
+            }
+            out.sort_by(|a, b| a.0.cmp(&b.0));
+            Ok(Value::Record(out.into()))
         }
-        let t = std::str::from_utf8(&self.s[start..self.pos]).ok()?;
-        if let Ok(i) = t.parse::<i64>() {
-            return Some(Value::Int(i));
+        (v, Type::Record(_)) => Err(format!("Expected {} but found {}.", type_name(t), show(&v))),
+        (v, _) => Err(mismatch(&v)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tessla_syntax::include::MemResolver;
+
+    fn program(spec: &str) -> Arc<Program> {
+        let mut r = MemResolver::default();
+        r.files.insert("main".into(), spec.into());
+        match tessla_engine::load_with("main", &r, &Default::default()) {
+            Ok(l) => l.program,
+            Err(e) => panic!("{}", e.render()),
         }
-        t.parse::<f64>().ok().map(Value::Float)
+    }
+
+    fn read(spec: &str, line: &str) -> Result<Value, ReadError> {
+        let p = program(spec);
+        parse_line(line, 1, &p).unwrap().map(|e| e.value)
+    }
+
+    #[test]
+    fn values_are_constant_expressions() {
+        let spec = "in x: Events[Int]\nout x";
+        assert_eq!(read(spec, "3: x = 42").unwrap(), Value::Int(42));
+        assert_eq!(read(spec, "3: x = -7 # comment").unwrap(), Value::Int(-7));
+        assert_eq!(read(spec, "3: x = 0xaffe").unwrap(), Value::Int(0xaffe));
+        assert_eq!(read(spec, "3: x = 2 + 40 * 2").unwrap(), Value::Int(82));
+        assert_eq!(
+            read(spec, "3: x = if 1 < 2 then 5 else 6").unwrap(),
+            Value::Int(5)
+        );
+        let s = "in s: Events[String]\nout s";
+        assert_eq!(
+            read(s, r#"1: s = "a ${2 + 40} \"q\" \$ -- no comment""#).unwrap(),
+            Value::Str("a 42 \"q\" $ -- no comment".into())
+        );
+    }
+
+    #[test]
+    fn unit_events_and_comment_lines() {
+        let p = program("in u: Events[Unit]\nout u");
+        assert!(parse_line("  # only a comment", 1, &p).is_none());
+        assert!(parse_line("-- another", 1, &p).is_none());
+        assert!(parse_line("", 1, &p).is_none());
+        let e = parse_line("5: u -- unit", 2, &p).unwrap().unwrap();
+        assert_eq!((e.ts, e.input, e.value, e.line), (5, 0, Value::Unit, 2));
+    }
+
+    #[test]
+    fn structured_values_follow_the_declared_type() {
+        let spec = "in t: Events[(Int, String)]\nin o: Events[Option[List[Int]]]\n\
+                    in r: Events[{x: Int, y: Float}]\nout t\nout o\nout r";
+        assert_eq!(
+            read(spec, r#"1: t = (1, "a")"#).unwrap(),
+            Value::Tuple(vec![Value::Int(1), Value::Str("a".into())].into())
+        );
+        // TeSSLa's tuples are records with members _1, _2.
+        assert_eq!(
+            read(spec, r#"1: t = {_2 = "a", _1 = 1}"#).unwrap(),
+            Value::Tuple(vec![Value::Int(1), Value::Str("a".into())].into())
+        );
+        assert_eq!(
+            read(spec, "1: o = Some(List(1, 2))").unwrap(),
+            Value::Some(Arc::new(Value::List(Arc::new(vec![
+                Value::Int(1),
+                Value::Int(2)
+            ]))))
+        );
+        assert_eq!(read(spec, "1: o = None").unwrap(), Value::None);
+        let r = read(spec, "1: r = ${y = 2.5, x = 1}").unwrap();
+        assert_eq!(
+            r,
+            Value::Record(
+                vec![
+                    (Arc::from("x"), Value::Int(1)),
+                    (Arc::from("y"), Value::Float(2.5))
+                ]
+                .into()
+            )
+        );
+        let missing = read(spec, "1: r = {x: 1}").unwrap_err();
+        assert_eq!(
+            missing.message,
+            "input r: Expected {x: Int, y: Float} but y is missing."
+        );
+    }
+
+    #[test]
+    fn sets_and_maps() {
+        let spec = "in s: Events[Set[Int]]\nin m: Events[Map[Int, String]]\nout s\nout m";
+        assert_eq!(
+            read(spec, "1: s = Set(1, 2, 1)").unwrap(),
+            Value::Set(Arc::new(vec![Value::Int(1), Value::Int(2)]))
+        );
+        assert_eq!(
+            read(spec, r#"1: m = Map(1 -> "a->b", 2 -> "c", 1 -> "d")"#).unwrap(),
+            Value::Map(Arc::new(vec![
+                (Value::Int(1), Value::Str("d".into())),
+                (Value::Int(2), Value::Str("c".into()))
+            ]))
+        );
+        assert_eq!(
+            read(spec, "1: m = Map()").unwrap(),
+            Value::Map(Arc::new(vec![]))
+        );
+    }
+
+    #[test]
+    fn bad_lines_say_what_is_wrong() {
+        let spec = "in x: Events[Int]\nout x";
+        let e = read(spec, r#"1: x = "text""#).unwrap_err();
+        assert_eq!(e.message, "input x: \"text\" is not of type Int.");
+        assert_eq!(e.kind, ReadErrorKind::Malformed);
+        let e = read(spec, "1: y = 1").unwrap_err();
+        assert_eq!(e.message, "Undeclared input stream y");
+        let e = read(spec, "x = 1").unwrap_err();
+        assert!(e.message.contains("TIMESTAMP"), "{}", e.message);
+        let e = read(spec, "1: x = (1").unwrap_err();
+        assert!(e.message.contains("cannot read the value"), "{}", e.message);
+        let e = read(spec, "1: x = 1 / 0").unwrap_err();
+        assert!(e.message.contains("Division by zero"), "{}", e.message);
+        let e = read(spec, "1: x = 99999999999999999999999").unwrap_err();
+        assert_eq!(e.kind, ReadErrorKind::Unsupported);
+        let s = "in s: Events[String]\nout s";
+        let e = read(s, r#"1: s = "\d""#).unwrap_err();
+        assert_eq!(e.message, "Invalid escape sequence '\\d' in string");
     }
 }

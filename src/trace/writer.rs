@@ -5,7 +5,12 @@ use std::io::{self, Write};
 use tessla_engine::{OutputInfo, Value};
 
 /// Write one output event in TeSSLa's format.
-pub fn write_event(out: &mut impl Write, ts: i64, output: &OutputInfo, value: &Value) -> io::Result<()> {
+pub fn write_event(
+    out: &mut impl Write,
+    ts: i64,
+    output: &OutputInfo,
+    value: &Value,
+) -> io::Result<()> {
     if output.raw {
         writeln!(out, "{value}")
     } else {

@@ -8,6 +8,7 @@
 //! value-level functions are compiled once into closures, so evaluation never walks the AST.
 //! Recursion is allowed only through the lazy first argument of `last` and `delay`.
 
+use crate::collections;
 use crate::ir::{
     Annotation, Func, InputInfo, LiftFunc, Node, NodeId, OutputInfo, Program, SArg, Type,
 };
@@ -157,6 +158,8 @@ const STREAM_BUILTINS: &[&str] = &[
     "maximum",
     "minimum",
     "average",
+    "Set.collect",
+    "Set.collectWithRemove",
 ];
 
 const VALUE_BUILTINS: &[(&str, natives::NativeFn)] = &[
@@ -191,7 +194,17 @@ const VALUE_BUILTINS: &[(&str, natives::NativeFn)] = &[
     ("List.init", natives::core::list_init),
     ("List.fold", natives::core::list_fold),
     ("List.map", natives::core::list_map),
+    ("ite", ite_native),
 ];
+
+/// A value function by name: the core builtins, then the collection functions.
+fn value_builtin(name: &str) -> Option<natives::NativeFn> {
+    VALUE_BUILTINS
+        .iter()
+        .chain(collections::FUNCTIONS)
+        .find(|(n, _)| *n == name)
+        .map(|(_, f)| *f)
+}
 
 pub struct Compiler<'a> {
     sources: &'a SourceMap,
@@ -206,6 +219,10 @@ pub struct Compiler<'a> {
     annotation_params: HashMap<String, Vec<String>>,
     compiled_fns: HashMap<*const Def, Arc<OnceLock<Func>>>,
     unit_node: Option<NodeId>,
+    /// Element types of stream nodes known from operators and declarations.
+    node_types: HashMap<NodeId, Type>,
+    /// The unit of the base time in femtoseconds (`µs` in `33333 µs`); `None`: `base_ns`.
+    base_unit: Option<i128>,
 }
 
 fn unit_factor(unit: &str) -> Option<i128> {
@@ -225,6 +242,11 @@ fn unit_factor(unit: &str) -> Option<i128> {
 
 /// Parse a base time in TeSSLa's form (`1 ns`, `33333 µs`, `1ms`) into femtoseconds.
 pub fn parse_base_time(s: &str) -> Result<i128, String> {
+    parse_base_parts(s).map(|(n, unit)| n * unit)
+}
+
+/// A base time as (count, unit in femtoseconds): `33333 µs` -> (33333, 10^9).
+pub fn parse_base_parts(s: &str) -> Result<(i128, i128), String> {
     let s = s.trim();
     let split = s.find(|c: char| !c.is_ascii_digit()).unwrap_or(s.len());
     let (num, unit) = s.split_at(split);
@@ -240,7 +262,77 @@ pub fn parse_base_time(s: &str) -> Result<i128, String> {
     if n <= 0 {
         return Err(format!("base time `{s}` must be positive"));
     }
-    Ok(n * f)
+    Ok((n, f))
+}
+
+/// Two operands of an operator function (missing ones are Unit, which no operator accepts).
+fn operands(a: &[Value]) -> (Value, Value) {
+    (
+        a.first().cloned().unwrap_or(Value::Unit),
+        a.get(1).cloned().unwrap_or(Value::Unit),
+    )
+}
+
+/// TeSSLa's `Operators.<name>` functions (`slift(x, y, Operators.add)`) as natives.
+fn operator_fn(name: &str) -> Option<natives::NativeFn> {
+    macro_rules! bin {
+        ($op:expr) => {{
+            let f: natives::NativeFn = |a: &[Value]| {
+                let (x, y) = operands(a);
+                binop($op, &x, &y)
+            };
+            f
+        }};
+    }
+    macro_rules! un {
+        ($op:expr) => {{
+            let f: natives::NativeFn = |a: &[Value]| unop($op, &operands(a).0);
+            f
+        }};
+    }
+    Some(match name {
+        "add" => bin!(BinOp::Add),
+        "sub" => bin!(BinOp::Sub),
+        "mul" => bin!(BinOp::Mul),
+        "div" => bin!(BinOp::Div),
+        "mod" => bin!(BinOp::Mod),
+        "lt" => bin!(BinOp::Lt),
+        "gt" => bin!(BinOp::Gt),
+        "leq" => bin!(BinOp::Le),
+        "geq" => bin!(BinOp::Ge),
+        "eq" => bin!(BinOp::Eq),
+        "neq" => bin!(BinOp::Ne),
+        "fadd" => bin!(BinOp::FAdd),
+        "fsub" => bin!(BinOp::FSub),
+        "fmul" => bin!(BinOp::FMul),
+        "fdiv" => bin!(BinOp::FDiv),
+        "flt" => bin!(BinOp::FLt),
+        "fgt" => bin!(BinOp::FGt),
+        "fleq" => bin!(BinOp::FLe),
+        "fgeq" => bin!(BinOp::FGe),
+        "and" => bin!(BinOp::And),
+        "or" => bin!(BinOp::Or),
+        "bitand" => bin!(BinOp::BitAnd),
+        "bitor" => bin!(BinOp::BitOr),
+        "bitxor" => bin!(BinOp::BitXor),
+        "leftshift" => bin!(BinOp::Shl),
+        "rightshift" => bin!(BinOp::Shr),
+        "not" => un!(UnaryOp::Not),
+        "negate" => un!(UnaryOp::Neg),
+        "fnegate" => un!(UnaryOp::FNeg),
+        "bitflip" => un!(UnaryOp::BitNot),
+        _ => return None,
+    })
+}
+
+/// `ite(c, a, b)`: `a` if `c` else `b` (any values, also functions).
+fn ite_native(a: &[Value]) -> Value {
+    match a {
+        [Value::Bool(true), x, _] => x.clone(),
+        [Value::Bool(false), _, y] => y.clone(),
+        [e @ Value::Error(_), ..] => e.clone(),
+        _ => Value::Error(RuntimeError::Other("ite: expected (Bool, A, A)".into())),
+    }
 }
 
 fn unknown_extern(_: &[Value]) -> Value {
@@ -430,7 +522,15 @@ impl<'a> Compiler<'a> {
             annotation_params: HashMap::new(),
             compiled_fns: HashMap::new(),
             unit_node: None,
+            base_unit: None,
+            node_types: HashMap::new(),
         }
+    }
+
+    /// Set the unit of the base time (see [`parse_base_parts`]) for time literal conversion.
+    pub fn with_base_unit(mut self, unit_fs: i128) -> Self {
+        self.base_unit = Some(unit_fs);
+        self
     }
 
     fn error<T>(&mut self, cat: Category, span: Span, msg: impl Into<String>) -> R<T> {
@@ -460,6 +560,11 @@ impl<'a> Compiler<'a> {
                 statements.push((String::new(), s));
             }
         }
+        // Module prefix (`Foo.Bar.`) -> (its scope cell, its members by short name).
+        type ModuleScope = (Rc<RefCell<Option<Env>>>, HashMap<String, Binding>);
+        let mut modules: HashMap<String, ModuleScope> = HashMap::new();
+        // (importing module prefix, imported module prefix).
+        let mut imports: Vec<(String, String)> = Vec::new();
         let mut i = 0;
         while i < statements.len() {
             let (prefix, s) = statements[i].clone();
@@ -482,14 +587,29 @@ impl<'a> Compiler<'a> {
                         continue;
                     }
                     defs_in_order.push(name.clone());
-                    names.insert(
-                        name,
-                        Binding::Def(Entry {
-                            def: Rc::new(d.clone()),
-                            env_cell: env_cell.clone(),
-                            state: Rc::new(RefCell::new(DefState::Todo)),
-                        }),
-                    );
+                    // A def in a module sees the module's other members by their short names.
+                    let cell = if prefix.is_empty() {
+                        env_cell.clone()
+                    } else {
+                        modules
+                            .entry(prefix.clone())
+                            .or_insert_with(|| (Rc::new(RefCell::new(None)), HashMap::new()))
+                            .0
+                            .clone()
+                    };
+                    let entry = Entry {
+                        def: Rc::new(d.clone()),
+                        env_cell: cell,
+                        state: Rc::new(RefCell::new(DefState::Todo)),
+                    };
+                    if let Some(m) = modules.get_mut(&prefix) {
+                        m.1.insert(d.name.name.clone(), Binding::Def(entry.clone()));
+                    }
+                    names.insert(name, Binding::Def(entry));
+                }
+                Statement::Import { path, .. } => {
+                    let target: String = path.iter().map(|p| format!("{}.", p.name)).collect();
+                    imports.push((prefix.clone(), target));
                 }
                 Statement::Module {
                     name,
@@ -536,9 +656,7 @@ impl<'a> Compiler<'a> {
                 }
                 Statement::Out(o) => outs.push(o),
                 Statement::OutAll { .. } => out_all = true,
-                Statement::TypeDef { .. }
-                | Statement::Import { .. }
-                | Statement::GlobalAnnotation(_) => {}
+                Statement::TypeDef { .. } | Statement::GlobalAnnotation(_) => {}
             }
         }
         // --set overrides replace the body of a top-level constant.
@@ -601,12 +719,50 @@ impl<'a> Compiler<'a> {
                 }),
             );
         }
+        // `import M`: M's members become visible by short name (own members win). `M` is
+        // looked up relative to the importing module first, then from the top.
+        for (at, target) in &imports {
+            let full = [format!("{at}{target}"), target.clone()]
+                .into_iter()
+                .find(|t| modules.contains_key(t));
+            let Some(members) = full.and_then(|t| modules.get(&t)).map(|m| m.1.clone()) else {
+                continue;
+            };
+            let scope = if at.is_empty() {
+                &mut names
+            } else {
+                match modules.get_mut(at) {
+                    Some(m) => &mut m.1,
+                    None => continue,
+                }
+            };
+            for (k, b) in members {
+                scope.entry(k).or_insert(b);
+            }
+        }
         let env = Env {
             names: Rc::new(names),
             parent: None,
             frame: 0,
         };
         *env_cell.borrow_mut() = Some(env.clone());
+        // Module scopes nest: `Foo.Bar.` sees `Foo.`'s members, which see the top level.
+        let mut prefixes: Vec<&String> = modules.keys().collect();
+        prefixes.sort_by_key(|p| p.len());
+        let mut module_envs: HashMap<String, Env> = HashMap::new();
+        for p in prefixes {
+            let trimmed = p.trim_end_matches('.');
+            let parent = trimmed
+                .rfind('.')
+                .map(|k| format!("{}.", &trimmed[..k]))
+                .and_then(|pp| module_envs.get(&pp).cloned())
+                .unwrap_or_else(|| env.clone());
+            if let Some((cell, members)) = modules.get(p) {
+                let menv = parent.child(members.clone(), 0);
+                *cell.borrow_mut() = Some(menv.clone());
+                module_envs.insert(p.clone(), menv);
+            }
+        }
 
         // Annotations of inputs.
         let mut input_i = 0;
@@ -711,19 +867,49 @@ impl<'a> Compiler<'a> {
         }
     }
 
+    /// Record the element type of a stream term (when known and not recorded yet).
+    fn typed(&mut self, t: Term, ty: Type) -> Term {
+        if let Term::Stream(n) = t
+            && ty != Type::Unknown
+        {
+            self.node_types.entry(n).or_insert(ty);
+        }
+        t
+    }
+
     fn stream_type(&self, n: NodeId) -> Type {
+        self.stream_type_within(n, &mut 64)
+    }
+
+    /// The element type of a node, visiting at most `budget` nodes (streams may be recursive
+    /// through `last`, and merges branch).
+    fn stream_type_within(&self, n: NodeId, budget: &mut u32) -> Type {
+        if *budget == 0 {
+            return Type::Unknown;
+        }
+        *budget -= 1;
+        if let Some(t) = self.node_types.get(&n) {
+            return t.clone();
+        }
         match self.nodes.get(n) {
             Some(Node::Input(i)) => self.inputs.get(*i).map_or(Type::Unknown, |i| i.ty.clone()),
             Some(Node::Const(v)) => value_type(v),
-            Some(Node::Alias(m)) => self.stream_type(*m),
+            Some(Node::Alias(m)) => self.stream_type_within(*m, budget),
             Some(Node::Time(_)) => Type::Int,
             Some(
                 Node::Default { stream, .. }
                 | Node::DefaultFrom { stream, .. }
                 | Node::Filter { stream, .. },
-            ) => self.stream_type(*stream),
-            Some(Node::Last { value, .. }) => self.stream_type(*value),
+            ) => self.stream_type_within(*stream, budget),
+            Some(Node::Last { value, .. }) => self.stream_type_within(*value, budget),
             Some(Node::Delay { .. }) => Type::Unit,
+            Some(Node::Fold { init, .. }) => value_type(init),
+            Some(Node::Reduce { stream, .. }) => self.stream_type_within(*stream, budget),
+            Some(Node::Merge(args)) => args
+                .iter()
+                .map(|a| self.stream_type_within(*a, budget))
+                .find(|t| *t != Type::Unknown)
+                .unwrap_or(Type::Unknown),
             _ => Type::Unknown,
         }
     }
@@ -884,6 +1070,16 @@ impl<'a> Compiler<'a> {
                 let saved = self.lazy_depth;
                 self.lazy_depth = 0;
                 let r = self.body(&e.def, &env);
+                let r = match (r, &e.def.result_type) {
+                    (Ok(t), Some(declared)) => {
+                        let ty = match ir_type(declared) {
+                            Type::Events(t) => *t,
+                            t => t,
+                        };
+                        Ok(self.typed(t, ty))
+                    }
+                    (r, _) => r,
+                };
                 self.lazy_depth = saved;
                 let alias = match &*e.state.borrow() {
                     DefState::InProgress { alias } => *alias,
@@ -922,10 +1118,18 @@ impl<'a> Compiler<'a> {
 
     fn body(&mut self, d: &Def, env: &Env) -> R<Term> {
         match &d.body {
+            Body::Extern { span, .. } if d.result_type.is_none() => self.error(
+                Category::Type,
+                *span,
+                format!(
+                    "extern definition `{}` needs a type annotation",
+                    d.name.name
+                ),
+            ),
             Body::Extern { name, .. } => match natives::lookup(name) {
                 Some(n) => Ok(Term::Func(Rc::new(FuncTerm::Native(n.func)))),
-                None => match VALUE_BUILTINS.iter().find(|(n, _)| n == name) {
-                    Some((_, f)) => Ok(Term::Func(Rc::new(FuncTerm::Native(*f)))),
+                None => match value_builtin(name) {
+                    Some(f) => Ok(Term::Func(Rc::new(FuncTerm::Native(f)))),
                     // As in TeSSLa, an unknown extern is an error when it is evaluated.
                     None => {
                         if d.params.is_some() {
@@ -985,19 +1189,26 @@ impl<'a> Compiler<'a> {
                     let u = self.unit();
                     return Ok(Term::Stream(u));
                 }
+                if let Some(f) = name.strip_prefix("Operators.").and_then(operator_fn) {
+                    return Ok(Term::Func(Rc::new(FuncTerm::Native(f))));
+                }
                 if name == "nil" {
                     return Ok(Term::Stream(self.node(Node::Nil)));
                 }
                 if let Some(b) = STREAM_BUILTINS.iter().find(|b| **b == name) {
                     return Ok(Term::Func(Rc::new(FuncTerm::Builtin(b))));
                 }
-                if let Some((_, f)) = VALUE_BUILTINS.iter().find(|(n, _)| *n == name) {
-                    return Ok(Term::Func(Rc::new(FuncTerm::Native(*f))));
+                if let Some(v) = collections::empty(name) {
+                    return Ok(Term::Const(v));
+                }
+                if let Some(f) = value_builtin(name) {
+                    return Ok(Term::Func(Rc::new(FuncTerm::Native(f))));
                 }
                 let mut known = Vec::new();
                 env.all_names(&mut known);
                 known.extend(STREAM_BUILTINS.iter().map(|s| s.to_string()));
                 known.extend(VALUE_BUILTINS.iter().map(|(s, _)| s.to_string()));
+                known.extend(collections::FUNCTIONS.iter().map(|(s, _)| s.to_string()));
                 let near = nearest(name, known.iter().map(String::as_str));
                 let mut d =
                     Diagnostic::error(Category::Name, Some(span), format!("unknown name `{name}`"));
@@ -1026,9 +1237,32 @@ impl<'a> Compiler<'a> {
                     Some(u) => {
                         let f = unit_factor(&u.name).unwrap_or(1);
                         let fs = value.checked_mul(f).unwrap_or(i128::MAX);
-                        // Like TeSSLa, a literal that is not a whole number of base time
-                        // units is truncated (100ms at a base time of 33333 µs is 3).
-                        fs / self.base_ns
+                        // As TeSSLa does: the literal must be a whole number of the base
+                        // time's unit; then it is divided by the base's count, truncating
+                        // (100ms at 33333 µs is 3), but it must not become 0.
+                        let unit_fs = self.base_unit.unwrap_or(self.base_ns);
+                        if fs % unit_fs != 0 {
+                            return self.error(
+                                Category::Time,
+                                e.span,
+                                format!(
+                                    "cannot convert {value} {} to the base time's unit",
+                                    u.name
+                                ),
+                            );
+                        }
+                        let r = fs / unit_fs / (self.base_ns / unit_fs).max(1);
+                        if r == 0 && *value != 0 {
+                            return self.error(
+                                Category::Time,
+                                e.span,
+                                format!(
+                                    "cannot represent {value} {} in terms of the base time",
+                                    u.name
+                                ),
+                            );
+                        }
+                        r
                     }
                 };
                 match i64::try_from(v) {
@@ -1110,10 +1344,13 @@ impl<'a> Compiler<'a> {
                 self.expr(result, &env)
             }
             ExprKind::Member { object, field } => {
-                if let ExprKind::Var(m) = &object.kind
-                    && env.lookup(&m.name).is_none()
+                // `Foo.Bar.x` where `Foo` is not a value in scope: a module member.
+                if let Some(path) = dotted_path(object)
+                    && env
+                        .lookup(path.split('.').next().unwrap_or_default())
+                        .is_none()
                 {
-                    let q = format!("{}.{}", m.name, field.name);
+                    let q = format!("{path}.{}", field.name);
                     return self.lookup(&q, e.span, env);
                 }
                 let obj = self.expr(object, env)?;
@@ -1144,8 +1381,14 @@ impl<'a> Compiler<'a> {
             ExprKind::Unary { op, operand } => {
                 let t = self.expr(operand, env)?;
                 let op = *op;
+                let ty = match op {
+                    UnaryOp::Not => Type::Bool,
+                    UnaryOp::FNeg => Type::Float,
+                    UnaryOp::Neg | UnaryOp::BitNot => Type::Int,
+                };
                 let f: Func = Arc::new(move |a: &[Value]| unop(op, &a[0]));
-                self.apply_value_fn(f, vec![t], e.span)
+                let r = self.apply_value_fn(f, vec![t], e.span)?;
+                Ok(self.typed(r, ty))
             }
             ExprKind::Binary { op, lhs, rhs } => {
                 let a = self.expr(lhs, env)?;
@@ -1195,8 +1438,26 @@ impl<'a> Compiler<'a> {
                         })));
                     }
                 }
+                let ty = match op {
+                    BinOp::FAdd | BinOp::FSub | BinOp::FMul | BinOp::FDiv => Type::Float,
+                    BinOp::Add => match (&a, &b) {
+                        (Term::Stream(n), _) | (_, Term::Stream(n)) => self.stream_type(*n),
+                        _ => Type::Unknown,
+                    },
+                    BinOp::Sub
+                    | BinOp::Mul
+                    | BinOp::Div
+                    | BinOp::Mod
+                    | BinOp::Shl
+                    | BinOp::Shr
+                    | BinOp::BitAnd
+                    | BinOp::BitOr
+                    | BinOp::BitXor => Type::Int,
+                    _ => Type::Bool,
+                };
                 let f: Func = Arc::new(move |v: &[Value]| binop(op, &v[0], &v[1]));
-                self.apply_value_fn(f, vec![a, b], e.span)
+                let r = self.apply_value_fn(f, vec![a, b], e.span)?;
+                Ok(self.typed(r, ty))
             }
             ExprKind::If {
                 cond,
@@ -1234,7 +1495,13 @@ impl<'a> Compiler<'a> {
                     Value::Bool(false) => v[2].clone(),
                     other => other.clone(),
                 });
-                self.apply_value_fn(ite, vec![c, t, f], e.span)
+                let ty = match (&t, &f) {
+                    (Term::Stream(n), _) | (_, Term::Stream(n)) => self.stream_type(*n),
+                    (Term::Const(v), _) => value_type(v),
+                    _ => Type::Unknown,
+                };
+                let r = self.apply_value_fn(ite, vec![c, t, f], e.span)?;
+                Ok(self.typed(r, ty))
             }
             ExprKind::Lambda { params, body } => Ok(Term::Func(Rc::new(FuncTerm::Lambda {
                 params: params.clone(),
@@ -1561,10 +1828,11 @@ impl<'a> Compiler<'a> {
             FuncTerm::User { def, env: denv } => {
                 let params = def.params.clone().unwrap_or_default();
                 if let Body::Extern { .. } = def.body {
-                    return match self.body(def, denv)? {
-                        Term::Func(inner) => self.call(Term::Func(inner), args, span, env),
-                        other => Ok(other),
+                    let r = match self.body(def, denv)? {
+                        Term::Func(inner) => self.call(Term::Func(inner), args, span, env)?,
+                        other => other,
                     };
+                    return Ok(self.typed_as_declared(r, def));
                 }
                 if params.len() != args.len() {
                     return self.error(
@@ -1670,7 +1938,17 @@ impl<'a> Compiler<'a> {
                 .collect();
             return Ok(Term::Dyn(Arc::new(move |_: &[Value]| f(&vals))));
         }
-        self.apply_value_fn(f, all, span)
+        let r = self.apply_value_fn(f, all, span)?;
+        Ok(self.typed_as_declared(r, def))
+    }
+
+    /// Record a function's declared result type on the stream its call made.
+    fn typed_as_declared(&mut self, t: Term, def: &Def) -> Term {
+        match def.result_type.as_ref().map(ir_type) {
+            Some(Type::Events(ty)) => self.typed(t, *ty),
+            Some(ty) => self.typed(t, ty),
+            None => t,
+        }
     }
 
     fn stream_arg(&mut self, args: &[Term], i: usize, span: Span) -> R<NodeId> {
@@ -1821,6 +2099,18 @@ impl<'a> Compiler<'a> {
                         format!("`{name}` needs a function as its last argument"),
                     );
                 };
+                if let Some(arity) = fn_arity(&ft)
+                    && arity != n - 1
+                {
+                    return self.error(
+                        Category::Type,
+                        span,
+                        format!(
+                            "`{name}` is given {} streams but its function takes {arity} arguments",
+                            n - 1
+                        ),
+                    );
+                }
                 let f = self.value_fn_arg(&[ft], 0, span)?;
                 let streams = (0..n - 1)
                     .map(|i| self.stream_arg(&args, i, span))
@@ -1953,7 +2243,67 @@ impl<'a> Compiler<'a> {
                 // The periodic events: the delay's firings, plus the start at t = 0.
                 Node::Merge(vec![u, delay])
             }
-            "resetCount" | "noEvent" | "runtime" | "average" => {
+            "resetCount" => {
+                // Events of `x` since the last `reset` (a reset with an event counts it).
+                let x = self.stream_arg(&args, 0, span)?;
+                let reset = self.stream_arg(&args, 1, span)?;
+                let tag = self.node(Node::Lift {
+                    args: vec![x, reset],
+                    f: Arc::new(|a: &[Option<Value>]| match a {
+                        [Some(_), Some(_)] => Some(Value::Int(1)),
+                        [None, Some(_)] => Some(Value::Int(0)),
+                        [Some(_), None] => Some(Value::Int(-1)),
+                        _ => None,
+                    }),
+                });
+                Node::Fold {
+                    stream: tag,
+                    init: Value::Int(0),
+                    f: Arc::new(|a: &[Value]| match a {
+                        [acc, Value::Int(-1)] => binop(BinOp::Add, acc, &Value::Int(1)),
+                        [_, tag] => tag.clone(),
+                        _ => Value::Unit,
+                    }),
+                }
+            }
+            "Set.collect" => Node::Fold {
+                stream: self.stream_arg(&args, 0, span)?,
+                init: Value::Set(Arc::new(Vec::new())),
+                f: Arc::new(collections::set_add),
+            },
+            "Set.collectWithRemove" => {
+                // Add this step's `add` value, then remove this step's `remove` value.
+                let add = self.stream_arg(&args, 0, span)?;
+                let remove = self.stream_arg(&args, 1, span)?;
+                let step = self.node(Node::Lift {
+                    args: vec![add, remove],
+                    f: Arc::new(|a: &[Option<Value>]| {
+                        let opt = |o: &Option<Value>| match o {
+                            Some(v) => Value::Some(Arc::new(v.clone())),
+                            None => Value::None,
+                        };
+                        Some(Value::Tuple(a.iter().map(opt).collect::<Vec<_>>().into()))
+                    }),
+                });
+                Node::Fold {
+                    stream: step,
+                    init: Value::Set(Arc::new(Vec::new())),
+                    f: Arc::new(|a: &[Value]| match a {
+                        [set, Value::Tuple(t)] => {
+                            let mut s = set.clone();
+                            if let Some(Value::Some(x)) = t.first() {
+                                s = collections::set_add(&[s, (**x).clone()]);
+                            }
+                            if let Some(Value::Some(x)) = t.get(1) {
+                                s = collections::set_remove(&[s, (**x).clone()]);
+                            }
+                            s
+                        }
+                        _ => Value::Unit,
+                    }),
+                }
+            }
+            "noEvent" | "runtime" | "average" => {
                 return self.error(
                     Category::Unsupported,
                     span,
@@ -1969,6 +2319,31 @@ impl<'a> Compiler<'a> {
             }
         };
         Ok(Term::Stream(self.node(node)))
+    }
+}
+
+/// `a.b.c` as the string "a.b.c" when the expression is only names and member accesses.
+fn dotted_path(e: &Expr) -> Option<String> {
+    match &e.kind {
+        ExprKind::Var(id) => Some(id.name.clone()),
+        ExprKind::Member { object, field } => {
+            dotted_path(object).map(|p| format!("{p}.{}", field.name))
+        }
+        _ => None,
+    }
+}
+
+/// The number of parameters of a lambda or user function term, when known at compile time.
+fn fn_arity(t: &Term) -> Option<usize> {
+    match t {
+        Term::Func(ft) => match &**ft {
+            FuncTerm::Lambda { params, .. } => Some(params.len()),
+            FuncTerm::User { def, .. } if !matches!(def.body, Body::Extern { .. }) => {
+                def.params.as_ref().map(Vec::len)
+            }
+            _ => None,
+        },
+        _ => None,
     }
 }
 

@@ -23,6 +23,32 @@ pub enum Type {
     Unknown,
 }
 
+impl std::fmt::Display for Type {
+    /// TeSSLa's notation: `Float`, `Option[Int]`, `List[Float]`, `(Int, Bool)`, `{a: Int}`;
+    /// an element type the engine does not infer prints as `?`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Type::Unit => f.write_str("Unit"),
+            Type::Bool => f.write_str("Bool"),
+            Type::Int => f.write_str("Int"),
+            Type::Float => f.write_str("Float"),
+            Type::String => f.write_str("String"),
+            Type::Option(t) => write!(f, "Option[{t}]"),
+            Type::List(t) => write!(f, "List[{t}]"),
+            Type::Events(t) => write!(f, "Events[{t}]"),
+            Type::Tuple(ts) => {
+                let parts: Vec<String> = ts.iter().map(ToString::to_string).collect();
+                write!(f, "({})", parts.join(", "))
+            }
+            Type::Record(fs) => {
+                let parts: Vec<String> = fs.iter().map(|(n, t)| format!("{n}: {t}")).collect();
+                write!(f, "{{{}}}", parts.join(", "))
+            }
+            Type::Unknown => f.write_str("?"),
+        }
+    }
+}
+
 /// An annotation on an input or output (`@TelegrafIn("m", "", "f")`), with its arguments named by
 /// the annotation declaration's parameters, in declaration order.
 #[derive(Debug, Clone, PartialEq)]

@@ -3,6 +3,7 @@
 //! Owns: name resolution, macro expansion and type checking (front-end semantics), the IR
 //! (`ir`), values (`value`) and monitor instances (`monitor`).
 
+pub mod collections;
 pub mod compile;
 pub mod ir;
 pub mod load;

@@ -57,9 +57,9 @@ pub fn load_with(
     options: &LoadOptions,
 ) -> Result<Loaded, LoadError> {
     let mut sources = SourceMap::new();
-    let base = match options.base_time.as_deref().map(compile::parse_base_time) {
-        None => 1_000_000,
-        Some(Ok(b)) => b,
+    let (base, base_unit) = match options.base_time.as_deref().map(compile::parse_base_parts) {
+        None => (1_000_000, 1_000_000),
+        Some(Ok((count, unit))) => (count * unit, unit),
         Some(Err(msg)) => {
             return Err(LoadError {
                 sources,
@@ -77,7 +77,9 @@ pub fn load_with(
         }
     };
     let asts: Vec<_> = files.into_iter().map(|(_, f)| f).collect();
-    let result = compile::Compiler::new(&sources, base).program(&asts, &options.overrides);
+    let result = compile::Compiler::new(&sources, base)
+        .with_base_unit(base_unit)
+        .program(&asts, &options.overrides);
     match result {
         Ok((program, warnings)) => Ok(Loaded {
             program: Arc::new(program),

@@ -7,7 +7,7 @@
 use std::fmt;
 use std::sync::Arc;
 
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub enum Value {
     Unit,
     Bool(bool),
@@ -20,9 +20,35 @@ pub enum Value {
     Tuple(Arc<[Value]>),
     /// Fields sorted by name.
     Record(Arc<[(Arc<str>, Value)]>),
+    /// A set: distinct elements in insertion order (equality ignores the order).
+    Set(Arc<Vec<Value>>),
+    /// A map: distinct keys in insertion order (equality ignores the order).
+    Map(Arc<Vec<(Value, Value)>>),
     /// A function value (a lambda or a named function passed to `lift`, `fold`, ...).
     Closure(Arc<dyn Callable>),
     Error(RuntimeError),
+}
+
+impl PartialEq for Value {
+    fn eq(&self, other: &Self) -> bool {
+        use Value::*;
+        match (self, other) {
+            (Unit, Unit) | (None, None) => true,
+            (Bool(a), Bool(b)) => a == b,
+            (Int(a), Int(b)) => a == b,
+            (Float(a), Float(b)) => a == b,
+            (Str(a), Str(b)) => a == b,
+            (Some(a), Some(b)) => a == b,
+            (List(a), List(b)) => a == b,
+            (Tuple(a), Tuple(b)) => a == b,
+            (Record(a), Record(b)) => a == b,
+            (Set(a), Set(b)) => a.len() == b.len() && a.iter().all(|x| b.contains(x)),
+            (Map(a), Map(b)) => a.len() == b.len() && a.iter().all(|kv| b.contains(kv)),
+            (Closure(a), Closure(b)) => Arc::ptr_eq(a, b),
+            (Error(a), Error(b)) => a == b,
+            _ => false,
+        }
+    }
 }
 
 /// A runtime error carried as a value (TeSSLa propagates errors through the streams).
@@ -114,6 +140,23 @@ impl fmt::Display for Value {
                     write!(f, "{k} = {v}")?;
                 }
                 f.write_str("}")
+            }
+            // Scala's names: small collections keep insertion order, larger ones are hashed.
+            Value::Set(items) if items.len() <= 4 => list(f, "Set(", items, ")"),
+            Value::Set(items) => list(f, "HashSet(", items, ")"),
+            Value::Map(entries) => {
+                f.write_str(if entries.len() <= 4 {
+                    "Map("
+                } else {
+                    "HashMap("
+                })?;
+                for (i, (k, v)) in entries.iter().enumerate() {
+                    if i > 0 {
+                        f.write_str(", ")?;
+                    }
+                    write!(f, "{k} -> {v}")?;
+                }
+                f.write_str(")")
             }
             Value::Closure(_) => f.write_str("<function>"),
             Value::Error(e) => write!(f, "{e}"),

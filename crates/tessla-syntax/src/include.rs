@@ -22,14 +22,40 @@ pub struct FsResolver;
 
 impl Resolver for FsResolver {
     fn resolve(&self, from: Option<&str>, name: &str) -> Result<(String, String), String> {
-        let path = match from.and_then(|f| Path::new(f).parent()) {
+        let path = normalize(&match from.and_then(|f| Path::new(f).parent()) {
             Some(dir) => dir.join(name),
             None => PathBuf::from(name),
-        };
+        });
         let text = std::fs::read_to_string(&path)
             .map_err(|e| format!("cannot read `{}`: {e}", path.display()))?;
         Ok((path.display().to_string(), text))
     }
+}
+
+/// `path` with `.` components removed and `dir/..` pairs folded (without touching the file
+/// system), so one file reached by two spellings has one name and include loops are found.
+fn normalize(path: &Path) -> PathBuf {
+    use std::path::Component;
+    let mut out = PathBuf::new();
+    for c in path.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                let last_is_normal =
+                    matches!(out.components().next_back(), Some(Component::Normal(_)));
+                if last_is_normal {
+                    out.pop();
+                } else {
+                    out.push("..");
+                }
+            }
+            other => out.push(other.as_os_str()),
+        }
+    }
+    if out.as_os_str().is_empty() {
+        out.push(".");
+    }
+    out
 }
 
 /// Resolves names from a fixed in-memory table (name -> text); used for the bundled specs.
@@ -85,7 +111,22 @@ struct LoadState<'r> {
     diags: Vec<Diagnostic>,
 }
 
+/// A safety net against include loops the names cannot show (e.g. through symbolic links).
+const MAX_INCLUDE_DEPTH: usize = 64;
+
 impl LoadState<'_> {
+    /// Resolve an include as TeSSLa does: the name as written, else with `.tessla` appended.
+    fn resolve(&self, from: &str, name: &str) -> Result<(String, String), String> {
+        self.resolver.resolve(Some(from), name).or_else(|err| {
+            if name.ends_with(".tessla") {
+                return Err(err);
+            }
+            self.resolver
+                .resolve(Some(from), &format!("{name}.tessla"))
+                .map_err(|_| err)
+        })
+    }
+
     fn visit(&mut self, map: &mut SourceMap, name: String, text: String) {
         let path = Path::new(&name).to_path_buf();
         let id = map.add(name.clone(), Some(&path), text);
@@ -93,7 +134,18 @@ impl LoadState<'_> {
         self.diags.append(&mut diags);
         self.stack.push(name.clone());
         for inc in &file.includes {
-            match self.resolver.resolve(Some(&name), &inc.path) {
+            if self.stack.len() >= MAX_INCLUDE_DEPTH {
+                self.diags.push(
+                    Diagnostic::error(
+                        Category::Recursion,
+                        Some(inc.span),
+                        format!("includes nested more than {MAX_INCLUDE_DEPTH} deep"),
+                    )
+                    .with_help("an include loop through links? check the include chain"),
+                );
+                break;
+            }
+            match self.resolve(&name, &inc.path) {
                 Ok((inc_name, inc_text)) => {
                     if self.stack.contains(&inc_name) {
                         self.diags.push(

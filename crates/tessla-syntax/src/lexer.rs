@@ -305,10 +305,22 @@ impl<'a> Lexer<'a> {
                         Some('\\') => text.push('\\'),
                         Some('$') => text.push('$'),
                         Some('%') => text.push('%'),
+                        Some('a') => text.push('\u{7}'),
                         Some(other) => {
-                            // TeSSLa lexes any escape; an unknown one is an error only when the
-                            // string is evaluated, so keep its text for the checker to report.
-                            let _ = es;
+                            // Reported here (TeSSLa reports it when translating the literal);
+                            // the text is kept so the rest of the file still parses.
+                            let sp = self.span(es);
+                            self.diagnostics.push(
+                                Diagnostic::error(
+                                    Category::Syntax,
+                                    Some(sp),
+                                    format!("Invalid escape sequence '\\{other}' in string"),
+                                )
+                                .with_help(
+                                    "valid escapes are \\n \\r \\t \\a \\\\ \\\" \\$ \\%; \
+                                     write \\\\ for a backslash",
+                                ),
+                            );
                             text.push('\\');
                             text.push(other);
                         }

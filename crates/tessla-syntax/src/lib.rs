@@ -9,5 +9,5 @@ pub mod include;
 pub mod lexer;
 pub mod parser;
 
-pub use parser::parse;
+pub use parser::{parse, parse_expr};
 pub mod source;

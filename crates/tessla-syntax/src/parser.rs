@@ -27,6 +27,32 @@ pub fn parse(text: &str, file: FileId) -> (File, Vec<Diagnostic>) {
     (f, diags)
 }
 
+/// Parse one expression spanning the whole text (newlines allowed around it), as TeSSLa's input
+/// traces use for event values (`Some((1, "a"))`, `${x = 2}`, `2 + 40`). `None` with diagnostics
+/// when the text is not exactly one expression.
+pub fn parse_expr(text: &str, file: FileId) -> (Option<Expr>, Vec<Diagnostic>) {
+    let (tokens, mut diags) = Lexer::new(text, file).tokenize();
+    let mut p = Parser {
+        toks: tokens,
+        pos: 0,
+        text,
+        diags: Vec::new(),
+    };
+    p.skip_nl();
+    let e = p.expr().ok();
+    p.skip_nl();
+    let e = match e {
+        Some(e) if *p.peek() == Tok::Eof => Some(e),
+        Some(_) => {
+            let _ = p.expected::<()>("the end of the value");
+            None
+        }
+        None => None,
+    };
+    diags.append(&mut p.diags);
+    (e, diags)
+}
+
 const KEYWORDS: &[&str] = &[
     "def", "liftable", "in", "out", "as", "if", "then", "else", "static", "include", "type",
     "module", "import", "extern", "where", "return", "strict", "lazy", "__root__",
@@ -152,7 +178,11 @@ impl<'a> Parser<'a> {
 
     fn expected<T>(&mut self, what: &str) -> PResult<T> {
         let found = describe(self.peek());
-        let span = self.span();
+        let mut span = self.span();
+        if matches!(self.peek(), Tok::Newline | Tok::Eof) {
+            // Point at the end of the line, not across the line break.
+            span.end = span.start;
+        }
         self.diags.push(
             Diagnostic::error(
                 Category::Syntax,
@@ -166,10 +196,43 @@ impl<'a> Parser<'a> {
 
     fn expect_punct(&mut self, p: &str) -> PResult<Span> {
         if self.is_punct(p) {
-            Ok(self.advance().span)
-        } else {
-            self.expected(&format!("`{p}`"))
+            return Ok(self.advance().span);
         }
+        let r = self.expected(&format!("`{p}`"));
+        let open = match p {
+            ")" => Some("("),
+            "]" => Some("["),
+            "}" => Some("{"),
+            _ => None,
+        };
+        if let Some(open) = open
+            && let Some(at) = self.unclosed(open, p)
+            && let Some(d) = self.diags.last_mut()
+        {
+            d.notes_at
+                .push((at, format!("unclosed `{open}` opened here")));
+            d.help = Some(format!("add the closing `{p}`"));
+        }
+        r
+    }
+
+    /// The span of the nearest `open` before the current token that has no matching `close`.
+    fn unclosed(&self, open: &str, close: &str) -> Option<Span> {
+        let mut depth = 0usize;
+        let end = self.pos.min(self.toks.len());
+        for t in self.toks.get(..end)?.iter().rev() {
+            match &t.tok {
+                Tok::Punct(q) if *q == close => depth += 1,
+                Tok::Punct(q) if *q == open || (open == "{" && *q == "${") => {
+                    if depth == 0 {
+                        return Some(t.span);
+                    }
+                    depth -= 1;
+                }
+                _ => {}
+            }
+        }
+        None
     }
 
     fn expect_kw(&mut self, k: &str) -> PResult<Span> {
@@ -254,6 +317,13 @@ impl<'a> Parser<'a> {
                 Ok(())
             }
             Tok::Eof | Tok::Punct("}") => Ok(()),
+            Tok::Punct("=") => {
+                let r = self.expected("the end of the statement (a new line or `;`)");
+                if let Some(d) = self.diags.last_mut() {
+                    d.help = Some("use `==` to compare values".into());
+                }
+                r
+            }
             _ => self.expected("the end of the statement (a new line or `;`)"),
         }
     }
@@ -473,7 +543,17 @@ impl<'a> Parser<'a> {
         if self.eat_kw("in") {
             self.skip_nl();
             let name = self.ident()?;
-            self.expect_punct(":")?;
+            if !self.is_punct(":") {
+                let _ = self.expected::<()>("`:`");
+                if let Some(d) = self.diags.last_mut() {
+                    d.help = Some(format!(
+                        "an input needs its type: `in {}: Events[Int]`",
+                        name.name
+                    ));
+                }
+                return Err(Fail);
+            }
+            self.advance();
             self.skip_nl();
             let ty = self.ty()?;
             return Ok(Statement::In {

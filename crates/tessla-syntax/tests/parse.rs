@@ -220,3 +220,37 @@ fn keywords_and_bad_characters_are_reported() {
         "{msgs:?}"
     );
 }
+
+#[test]
+fn string_escapes_follow_tessla() {
+    let f = ok(r#"def s = "a\n\t\r\a\\\"\$\%b""#);
+    match &def_body(&f, 0).kind {
+        ExprKind::Str { parts, .. } => {
+            assert_eq!(parts, &[StrPart::Text("a\n\t\r\u{7}\\\"$%b".into())]);
+        }
+        k => panic!("not a string: {k:?}"),
+    }
+    let (_, d, map) = parse("def s = \"x\\dy\"\nout s");
+    assert_eq!(d.len(), 1);
+    assert_eq!(d[0].message, "Invalid escape sequence '\\d' in string");
+    assert!(d[0].help.is_some());
+    assert!(
+        d[0].one_line(&map).starts_with("t.tessla:1:11"),
+        "{}",
+        d[0].one_line(&map)
+    );
+}
+
+#[test]
+fn single_expressions_parse_on_their_own() {
+    let mut map = SourceMap::new();
+    let id = map.add("v", None, "Some((1, ${x = 2}))".to_string());
+    let (e, d) = tessla_syntax::parse_expr(&map.get(id).text, id);
+    assert!(d.is_empty(), "{d:?}");
+    assert_eq!(show(&e.unwrap()), "Some((1, {x=2}))");
+    for bad in ["1 2", "", "(1", "def x = 1"] {
+        let (e, d) = tessla_syntax::parse_expr(bad, id);
+        assert!(e.is_none() && !d.is_empty(), "{bad:?} parsed");
+        assert!(d.iter().all(|d| d.category == Category::Syntax));
+    }
+}

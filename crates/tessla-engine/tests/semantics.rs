@@ -1,0 +1,197 @@
+//! Engine semantics on small specs: closures over enclosing parameters, recursion, liftable
+//! functions, modules, collections, time literal conversion and stream functions. Each test
+//! loads a spec from memory, feeds events through a `Monitor` and checks the output lines.
+
+use std::sync::Arc;
+use tessla_engine::{LoadOptions, Loaded, Monitor, OutputEvent, Value};
+use tessla_syntax::include::MemResolver;
+
+fn load(spec: &str, base_time: Option<&str>) -> Result<Loaded, String> {
+    let resolver = MemResolver {
+        files: [("spec.tessla".to_string(), spec.to_string())].into(),
+    };
+    let options = LoadOptions {
+        base_time: base_time.map(str::to_string),
+        overrides: Vec::new(),
+    };
+    tessla_engine::load_with("spec.tessla", &resolver, &options).map_err(|e| e.render())
+}
+
+/// Run `spec` over `(ts, input, value)` events; output lines `ts: name = value`, sorted per step.
+fn run(spec: &str, events: &[(i64, &str, Value)]) -> Vec<String> {
+    let loaded = load(spec, None).unwrap();
+    let program = Arc::clone(&loaded.program);
+    let mut m = Monitor::new(Arc::clone(&program));
+    let mut out: Vec<(i64, String)> = Vec::new();
+    let mut sink = |e: OutputEvent<'_>| {
+        out.push((
+            e.ts,
+            format!("{}: {} = {}", e.ts, program.outputs[e.output].name, e.value),
+        ));
+    };
+    for (ts, name, v) in events {
+        let i = program.input_index(name).unwrap();
+        m.push(*ts, i, v.clone(), &mut sink).unwrap();
+    }
+    m.flush(&mut sink);
+    out.sort();
+    out.into_iter().map(|(_, l)| l).collect()
+}
+
+fn int(i: i64) -> Value {
+    Value::Int(i)
+}
+
+#[test]
+fn nested_functions_see_the_enclosing_parameters() {
+    let spec = "in x: Events[Int]\n\
+        def f(a: Int) = {\n  def g(b: Int) = a * 10 + b\n  g(3)\n}\n\
+        def y := slift1(x, f)\nout y\n";
+    assert_eq!(
+        run(spec, &[(1, "x", int(4)), (2, "x", int(7))]),
+        ["1: y = 43", "2: y = 73"]
+    );
+}
+
+#[test]
+fn returned_closures_keep_their_captured_values() {
+    let spec = "in x: Events[Int]\n\
+        def pow(b: Int): (Int) => Int = {\n\
+          def prod(n: Int): Int = if n <= 1 then b else prod(n - 1) * b\n  prod\n}\n\
+        out slift2(x, x, (a: Int, n: Int) => pow(a)(n)) as y\n";
+    assert_eq!(
+        run(spec, &[(1, "x", int(2)), (2, "x", int(3))]),
+        ["1: y = 4", "2: y = 27"]
+    );
+}
+
+#[test]
+fn recursive_calls_with_constant_arguments_run_at_evaluation_time() {
+    let spec = "in x: Events[Int]\n\
+        def f(n: Int): Int = if n < 5 then 0 else f(3) + 1\nout slift1(x, f) as y\n";
+    assert_eq!(
+        run(spec, &[(1, "x", int(9)), (2, "x", int(1))]),
+        ["1: y = 1", "2: y = 0"]
+    );
+}
+
+#[test]
+fn liftable_functions_are_signal_lifted_on_streams() {
+    let spec = "in x: Events[Int]\nin y: Events[Int]\n\
+        liftable def second(a: Int, b: Int): Int := b\nout second(x, y) as s\n";
+    // No event before both streams have a value.
+    assert_eq!(
+        run(
+            spec,
+            &[(1, "y", int(42)), (2, "x", int(23)), (3, "y", int(13))]
+        ),
+        ["2: s = 42", "3: s = 13"]
+    );
+}
+
+#[test]
+fn static_if_on_a_parameter_expands_the_function() {
+    let spec = "in x: Events[Int]\n\
+        def foo(c: Bool) = static if c then x + 42 else x + 5\n\
+        out foo(true) as a\nout foo(false) as b\n";
+    assert_eq!(run(spec, &[(1, "x", int(0))]), ["1: a = 42", "1: b = 5"]);
+}
+
+#[test]
+fn shifts_follow_unbounded_integer_semantics() {
+    let spec = "in x: Events[Int]\nin y: Events[Int]\n\
+        def l := x << y\ndef r := x >> y\nout l\nout r\n";
+    assert_eq!(
+        run(
+            spec,
+            &[(1, "x", int(-2)), (1, "y", int(-4)), (2, "y", int(2))]
+        ),
+        ["1: l = -1", "1: r = -32", "2: l = -8", "2: r = -1"]
+    );
+    // A result beyond 64 bits is an overflow error, not a wrapped value.
+    let lines = run(spec, &[(1, "x", int(3)), (1, "y", int(63))]);
+    assert_eq!(lines[0], "1: l = Integer overflow");
+}
+
+#[test]
+fn reset_count_and_on() {
+    let spec = "in x: Events[Unit]\nin y: Events[Int]\n\
+        def z := resetCount(x, y)\nout z\nout on(x, y) as o\n";
+    let u = Value::Unit;
+    assert_eq!(
+        run(
+            spec,
+            &[
+                (1, "x", u.clone()),
+                (2, "y", int(7)),
+                (3, "x", u.clone()),
+                (4, "x", u.clone()),
+                (4, "y", int(8)),
+            ]
+        ),
+        [
+            "0: z = 0", "1: z = 1", "2: z = 0", "3: o = 7", "3: z = 1", "4: o = 8", "4: z = 1"
+        ]
+    );
+}
+
+#[test]
+fn sets_and_maps() {
+    let spec = "in x: Events[Int]\n\
+        def s := Set.collect(x)\n\
+        def m := Map.add(Map.empty[Int, String], 1, \"one\")\n\
+        out Set.size(s) as n\nout Set.fold(s, 0, Operators.add) as total\n\
+        out Map.get(m, 1) as g\n";
+    assert_eq!(
+        run(
+            spec,
+            &[(1, "x", int(5)), (2, "x", int(5)), (3, "x", int(2))]
+        ),
+        [
+            "0: g = one",
+            "0: n = 0",
+            "0: total = 0",
+            "1: n = 1",
+            "1: total = 5",
+            "2: n = 1",
+            "2: total = 5",
+            "3: n = 2",
+            "3: total = 7"
+        ]
+    );
+}
+
+#[test]
+fn module_members_see_each_other_and_can_be_imported() {
+    let spec = "in x: Events[Int]\n\
+        module Foo {\n  def double(a: Int) = 2 * a\n  def bar = double(x)\n}\n\
+        module Baz {\n  def k = 7\n}\nimport Baz\n\
+        out Foo.bar as b\nout k\n";
+    assert_eq!(run(spec, &[(1, "x", int(21))]), ["0: k = 7", "1: b = 42"]);
+}
+
+#[test]
+fn time_literals_convert_to_the_base_time_as_tessla_does() {
+    let spec = "out 100ms as a\nout 1min as b\n";
+    let loaded = load(spec, Some("33333 µs")).unwrap();
+    let mut m = Monitor::new(Arc::clone(&loaded.program));
+    let mut got = Vec::new();
+    m.flush(&mut |e: OutputEvent<'_>| got.push(e.value.clone()));
+    got.sort_by_key(|v| v.to_string());
+    assert_eq!(got, [int(1800), int(3)]);
+    // Below one base time unit, or not a whole number of the base's unit: compile errors.
+    assert!(load("out 1ms as a\n", Some("33333 µs")).is_err());
+    assert!(load("out 100s as a\n", Some("1 min")).is_err());
+}
+
+#[test]
+fn spec_errors_are_reported_not_panicked() {
+    let e = load(
+        "in x: Events[Int]\nout lift1(x, (a: Option[Int], b: Option[Int]) => b)\n",
+        None,
+    )
+    .unwrap_err();
+    assert!(e.contains("takes 2 arguments"), "{e}");
+    let e = load("def foo := extern(\"foo\")\nout foo\n", None).unwrap_err();
+    assert!(e.contains("type annotation"), "{e}");
+}
