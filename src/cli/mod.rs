@@ -110,6 +110,17 @@ pub struct RunArgs {
     /// Least severe messages written to stderr.
     #[arg(long, value_enum, default_value_t)]
     pub log_level: crate::log::Level,
+    /// One monitor instance per distinct value of these tags (`--instance-by topic` or
+    /// `--instance-by robot,site`); every output line carries them. Default: one instance.
+    #[arg(long, value_name = "TAG[,TAG]", value_delimiter = ',')]
+    pub instance_by: Vec<String>,
+    /// Most monitor instances kept; past it the least recently used is evicted (counted, warned).
+    #[arg(long, value_name = "N", default_value_t = crate::telegraf::processor::DEFAULT_MAX_INSTANCES,
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
+    pub max_instances: usize,
+    /// Evict a monitor instance that received no record for this long (wall clock): `30s`, `5m`, `1h`.
+    #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration)]
+    pub instance_idle: Option<std::time::Duration>,
 }
 
 pub fn main() -> i32 {

@@ -50,6 +50,14 @@ pub fn run(args: RunArgs) -> i32 {
         late: args.late,
         measurement: args.measurement.clone(),
         tags,
+        instance_by: args
+            .instance_by
+            .iter()
+            .map(|t| t.trim().to_string())
+            .filter(|t| !t.is_empty())
+            .collect(),
+        max_instances: args.max_instances,
+        instance_idle: args.instance_idle,
     };
     let mut proc = match Processor::new(loaded.program, opts) {
         Ok(p) => p,

@@ -5,7 +5,39 @@
 
 use super::{EXIT_IO, EXIT_OK, EXIT_RUNTIME, EXIT_SPEC, TraceArgs};
 use crate::trace::{ErrorKind, run_stream};
-use std::io::{BufReader, IsTerminal};
+use std::cell::RefCell;
+use std::io::{BufReader, BufWriter, IsTerminal, Read, StdoutLock, Write};
+use std::rc::Rc;
+
+type Out = Rc<RefCell<BufWriter<StdoutLock<'static>>>>;
+
+/// The output writer, shared with [`FlushBeforeRead`].
+struct SharedOut(Out);
+
+impl Write for SharedOut {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0.borrow_mut().write(buf)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.0.borrow_mut().flush()
+    }
+}
+
+/// Stdin that flushes the outputs before each read (the `BufReader` around it reads only when
+/// its buffer is empty, i.e. when the trace may have to wait for its producer).
+struct FlushBeforeRead {
+    inner: std::io::Stdin,
+    out: Out,
+}
+
+impl Read for FlushBeforeRead {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        // A failed flush (closed stdout) shows up again at the next output write.
+        let _ = self.out.borrow_mut().flush();
+        self.inner.read(buf)
+    }
+}
 
 pub fn run(args: TraceArgs) -> i32 {
     let options = match super::load_options(&args.spec_options) {
@@ -30,26 +62,30 @@ pub fn run(args: TraceArgs) -> i32 {
         );
     }
     let stdout = std::io::stdout();
-    let mut out = stdout.lock();
     let result = match &args.trace {
+        // A trace file is read as fast as possible: outputs are block-buffered.
         Some(p) => match std::fs::File::open(p) {
             Ok(f) => run_stream(
                 &loaded.program,
                 &p.display().to_string(),
                 BufReader::new(f),
-                &mut out,
+                &mut BufWriter::new(stdout.lock()),
             ),
             Err(e) => {
                 eprintln!("error: cannot read {}: {e}", p.display());
                 return EXIT_IO;
             }
         },
-        None => run_stream(
-            &loaded.program,
-            "<stdin>",
-            std::io::stdin().lock(),
-            &mut out,
-        ),
+        // A trace on stdin may arrive slowly (a live feed): outputs are block-buffered but
+        // flushed whenever reading would wait for more input.
+        None => {
+            let out = Rc::new(RefCell::new(BufWriter::new(stdout.lock())));
+            let input = BufReader::new(FlushBeforeRead {
+                inner: std::io::stdin(),
+                out: out.clone(),
+            });
+            run_stream(&loaded.program, "<stdin>", input, &mut SharedOut(out))
+        }
     };
     match result {
         Ok(()) => EXIT_OK,

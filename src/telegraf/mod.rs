@@ -7,4 +7,5 @@
 
 pub mod binding;
 pub mod encode;
+pub mod instances;
 pub mod processor;

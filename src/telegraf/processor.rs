@@ -1,6 +1,8 @@
 //! The step loop: records in, pass-through and verdict lines out.
 //!
-//! Owns: one monitor instance fed from metrics; when a step is evaluated (a record with a later
+//! Owns: routing each metric to its monitor instance (one, or one per value of the
+//! `--instance-by` tags, each with its own state, timestamps and late-record rule; evicted past
+//! `--max-instances` or after `--instance-idle`); when a step is evaluated (a record with a later
 //! timestamp arrives, or the transport says no more input is available right now: [`flush`]);
 //! late records (`--late shift|drop`); records without a timestamp (wall clock, as Telegraf);
 //! pass-through of each record's exact bytes before the outputs it causes; and the counters of
@@ -10,9 +12,11 @@
 
 use super::binding::{self, InputBinding};
 use super::encode::{self, Encoding};
+use super::instances::{Key, Table};
 use crate::log;
-use lineproto::{Record, parse_record};
+use lineproto::{Metric, Record, parse_record};
 use std::sync::Arc;
+use std::time::{Duration, Instant};
 use tessla_engine::{InputError, Monitor, OutputEvent, Program, Value};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Default)]
@@ -30,7 +34,15 @@ pub struct Options {
     pub late: LateMode,
     pub measurement: String,
     pub tags: Vec<(String, String)>,
+    /// Tags whose values select the monitor instance (empty: one instance for everything).
+    pub instance_by: Vec<String>,
+    /// Most instances kept; past it the least recently used is evicted (at least 1).
+    pub max_instances: usize,
+    /// Evict an instance not used for this long (wall clock).
+    pub instance_idle: Option<Duration>,
 }
+
+pub const DEFAULT_MAX_INSTANCES: usize = 100_000;
 
 impl Default for Options {
     fn default() -> Self {
@@ -39,6 +51,9 @@ impl Default for Options {
             late: LateMode::Shift,
             measurement: "tessla".into(),
             tags: Vec::new(),
+            instance_by: Vec::new(),
+            max_instances: DEFAULT_MAX_INSTANCES,
+            instance_idle: None,
         }
     }
 }
@@ -51,22 +66,49 @@ pub struct Counters {
     pub parse_errors: u64,
     pub late: u64,
     pub dropped_values: u64,
+    /// Monitor instances created.
+    pub instances: u64,
+    /// Monitor instances evicted (LRU or idle).
+    pub evicted: u64,
+}
+
+/// One monitor and the tags its output lines carry (static tags and instance tags).
+struct Instance {
+    monitor: Monitor,
+    tags: Vec<(String, String)>,
+}
+
+/// What writing a step's outputs needs, apart from the instance.
+struct Emitter {
+    encodings: Vec<Encoding>,
+    measurement: String,
+    events: Vec<(i64, usize, Value)>,
 }
 
 pub struct Processor {
     program: Arc<Program>,
-    monitor: Option<Monitor>,
     bindings: Vec<InputBinding>,
-    encodings: Vec<Encoding>,
+    emitter: Emitter,
     opts: Options,
     pub counters: Counters,
-    events: Vec<(i64, usize, Value)>,
+    instances: Table<Instance>,
+    /// Stands in for "now" when no idle limit needs the clock.
+    epoch: Instant,
 }
 
 fn now_ns() -> i64 {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
+}
+
+fn describe(instance_by: &[String], key: &Key) -> String {
+    instance_by
+        .iter()
+        .zip(key)
+        .map(|(k, v)| format!("{k}={}", v.as_deref().unwrap_or("(absent)")))
+        .collect::<Vec<_>>()
+        .join(",")
 }
 
 impl Processor {
@@ -76,13 +118,89 @@ impl Processor {
         let encodings = encode::encodings(&program);
         Ok(Processor {
             program,
-            monitor: None,
             bindings,
-            encodings,
+            emitter: Emitter {
+                encodings,
+                measurement: opts.measurement.clone(),
+                events: Vec::new(),
+            },
             opts,
             counters: Counters::default(),
-            events: Vec::new(),
+            instances: Table::default(),
+            epoch: Instant::now(),
         })
+    }
+
+    /// Monitor instances alive now.
+    pub fn instance_count(&self) -> usize {
+        self.instances.len()
+    }
+
+    fn now(&self) -> Instant {
+        if self.opts.instance_idle.is_some() {
+            Instant::now()
+        } else {
+            self.epoch
+        }
+    }
+
+    fn key(&self, m: &Metric) -> Key {
+        self.opts
+            .instance_by
+            .iter()
+            .map(|t| m.tag(t).map(str::to_string))
+            .collect()
+    }
+
+    /// The instance for `m`, created (starting at `ts`) when new.
+    fn instance_for(&mut self, m: &Metric, ts: i64, now: Instant) -> usize {
+        let key = self.key(m);
+        if let Some(i) = self.instances.find(&key, now) {
+            return i;
+        }
+        let mut tags: Vec<(String, String)> = self
+            .opts
+            .tags
+            .iter()
+            .filter(|(k, _)| !self.opts.instance_by.contains(k))
+            .cloned()
+            .collect();
+        for (k, v) in self.opts.instance_by.iter().zip(&key) {
+            if let Some(v) = v {
+                tags.push((k.clone(), v.clone()));
+            }
+        }
+        if !self.opts.instance_by.is_empty() {
+            tags.sort();
+        }
+        self.counters.instances += 1;
+        let monitor = Monitor::starting_at(self.program.clone(), ts);
+        self.instances.insert(key, Instance { monitor, tags }, now)
+    }
+
+    /// Evict instances past `--max-instances` or idle too long, writing their pending outputs.
+    fn evict(&mut self, now: Instant, out: &mut Vec<u8>) {
+        let max = self.opts.max_instances.max(1);
+        while let Some(i) = self.instances.evictable(max, self.opts.instance_idle, now) {
+            let full = self.instances.len() > max;
+            let Some((key, mut inst)) = self.instances.remove(i) else {
+                break;
+            };
+            self.emitter.flush(&mut inst, &mut self.counters, out);
+            self.counters.evicted += 1;
+            let by = &self.opts.instance_by;
+            log::warn_limited("instance evicted", || {
+                let why = if full {
+                    format!("least recently used, --max-instances {max}")
+                } else {
+                    "idle longer than --instance-idle".to_string()
+                };
+                format!(
+                    "monitor instance {} evicted ({why}); its state starts afresh with its next record",
+                    describe(by, &key)
+                )
+            });
+        }
     }
 
     /// Handle one record, appending pass-through and completed steps' outputs to `out`.
@@ -113,9 +231,12 @@ impl Processor {
             }
         };
         let mut ts = metric.timestamp.unwrap_or_else(now_ns);
-        let monitor = self
-            .monitor
-            .get_or_insert_with(|| Monitor::starting_at(self.program.clone(), ts));
+        let now = self.now();
+        let slot = self.instance_for(&metric, ts, now);
+        let Some(inst) = self.instances.get_mut(slot) else {
+            return;
+        };
+        let monitor = &mut inst.monitor;
         let mut late = false;
         // The earliest timestamp still accepted: the open step, or just after the last evaluated one.
         let min = match (monitor.pending(), monitor.last_evaluated()) {
@@ -143,11 +264,11 @@ impl Processor {
             ts = min;
         }
         if monitor.pending().is_some_and(|p| ts > p) {
-            let events = &mut self.events;
+            let events = &mut self.emitter.events;
             monitor.advance_to(ts, &mut |e: OutputEvent<'_>| {
                 events.push((e.ts, e.output, e.value.clone()))
             });
-            self.emit(out);
+            self.emitter.emit(&inst.tags, &mut self.counters, out);
         }
         if self.opts.passthrough {
             out.extend_from_slice(&rec.bytes);
@@ -155,32 +276,40 @@ impl Processor {
                 out.push(b'\n');
             }
         }
-        if late && self.opts.late == LateMode::Drop {
-            return;
+        if !(late && self.opts.late == LateMode::Drop) {
+            self.push_fields(&metric, rec.line, ts, slot, out);
         }
-        let Some(monitor) = self.monitor.as_mut() else {
+        self.instances.mark_open(slot);
+        self.evict(now, out);
+    }
+
+    /// Feed the metric's bound fields to instance `slot` as events at `ts`.
+    fn push_fields(&mut self, metric: &Metric, line: u64, ts: i64, slot: usize, out: &mut Vec<u8>) {
+        let Some(inst) = self.instances.get_mut(slot) else {
             return;
         };
         for b in &self.bindings {
-            if !b.matches(&metric) {
+            if !b.matches(metric) {
                 continue;
             }
-            match b.extract(&metric) {
+            match b.extract(metric) {
                 None => {}
                 Some(Err(e)) => {
                     self.counters.dropped_values += 1;
                     log::warn_limited("conversion", || {
                         format!(
-                            "line {}: input `{}`: {}; value skipped",
-                            rec.line, e.input, e.reason
+                            "line {line}: input `{}`: {}; value skipped",
+                            e.input, e.reason
                         )
                     });
                 }
                 Some(Ok(v)) => {
-                    let events = &mut self.events;
-                    let r = monitor.push(ts, b.input, v, &mut |e: OutputEvent<'_>| {
-                        events.push((e.ts, e.output, e.value.clone()))
-                    });
+                    let events = &mut self.emitter.events;
+                    let r = inst
+                        .monitor
+                        .push(ts, b.input, v, &mut |e: OutputEvent<'_>| {
+                            events.push((e.ts, e.output, e.value.clone()))
+                        });
                     match r {
                         Ok(()) => self.counters.events += 1,
                         Err(err) => {
@@ -192,62 +321,209 @@ impl Processor {
                                 other => format!("{other:?}"),
                             };
                             log::warn_limited("input event", || {
-                                format!(
-                                    "line {}: input `{}`: {why}; value skipped",
-                                    rec.line, b.name
-                                )
+                                format!("line {line}: input `{}`: {why}; value skipped", b.name)
                             });
                         }
                     }
                 }
             }
         }
-        self.emit(out);
+        self.emitter.emit(&inst.tags, &mut self.counters, out);
     }
 
-    /// No more input right now: evaluate the pending step and append its outputs.
+    /// No more input right now: evaluate every instance's pending step and append its outputs.
     pub fn flush(&mut self, out: &mut Vec<u8>) {
-        if let Some(m) = self.monitor.as_mut() {
-            let events = &mut self.events;
-            m.flush(&mut |e: OutputEvent<'_>| events.push((e.ts, e.output, e.value.clone())));
-        }
-        self.emit(out);
-    }
-
-    fn emit(&mut self, out: &mut Vec<u8>) {
-        let events = std::mem::take(&mut self.events);
-        let mut i = 0;
-        while i < events.len() {
-            let ts = events[i].0;
-            let mut step = Vec::new();
-            while i < events.len() && events[i].0 == ts {
-                step.push((events[i].1, events[i].2.clone()));
-                i += 1;
-            }
-            self.counters.outputs += step.len() as u64;
-            let dropped = encode::encode_step(
-                ts,
-                &step,
-                &self.encodings,
-                &self.opts.measurement,
-                &self.opts.tags,
-                out,
-            );
-            for d in dropped {
-                self.counters.dropped_values += 1;
-                log::warn_limited("output value", || {
-                    format!("output `{}` at {ts}: {}; field dropped", d.output, d.reason)
-                });
+        for i in self.instances.take_open() {
+            if let Some(inst) = self.instances.get_mut(i) {
+                self.emitter.flush(inst, &mut self.counters, out);
             }
         }
+        let now = self.now();
+        self.evict(now, out);
     }
 
     /// The one-line summary printed at the end of a run.
     pub fn summary(&self) -> String {
         let c = &self.counters;
-        format!(
+        let mut s = format!(
             "summary: {} records, {} events, {} outputs, {} parse errors, {} late records, {} dropped values",
             c.records, c.events, c.outputs, c.parse_errors, c.late, c.dropped_values
-        )
+        );
+        if !self.opts.instance_by.is_empty() {
+            s.push_str(&format!(
+                ", {} instances, {} evicted",
+                c.instances, c.evicted
+            ));
+        }
+        s
+    }
+}
+
+impl Emitter {
+    /// Evaluate the instance's pending step (or its first step) and write the outputs.
+    fn flush(&mut self, inst: &mut Instance, counters: &mut Counters, out: &mut Vec<u8>) {
+        let events = &mut self.events;
+        inst.monitor
+            .flush(&mut |e: OutputEvent<'_>| events.push((e.ts, e.output, e.value.clone())));
+        self.emit(&inst.tags, counters, out);
+    }
+
+    /// Write the collected events as metrics, one group per timestamp.
+    fn emit(&mut self, tags: &[(String, String)], counters: &mut Counters, out: &mut Vec<u8>) {
+        if self.events.is_empty() {
+            return;
+        }
+        let events = std::mem::take(&mut self.events);
+        let mut rest = events.as_slice();
+        while let Some(&(ts, _, _)) = rest.first() {
+            let n = rest.iter().take_while(|e| e.0 == ts).count();
+            let (now, later) = rest.split_at(n);
+            rest = later;
+            let step: Vec<(usize, Value)> = now.iter().map(|(_, o, v)| (*o, v.clone())).collect();
+            counters.outputs += step.len() as u64;
+            let dropped =
+                encode::encode_step(ts, &step, &self.encodings, &self.measurement, tags, out);
+            for d in dropped {
+                counters.dropped_values += 1;
+                log::warn_limited("output value", || {
+                    format!("output `{}` at {ts}: {}; field dropped", d.output, d.reason)
+                });
+            }
+        }
+        // Keep the buffer's capacity for the next step.
+        let mut events = events;
+        events.clear();
+        self.events = events;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use lineproto::RecordSplitter;
+    use tessla_syntax::include::MemResolver;
+
+    /// `c` counts `x`; `k` is a constant event at TeSSLa time 0.
+    const SPEC: &str = "in x: Events[Int]\n\
+                        def c = count(x)\n\
+                        def k: Events[Int] = const(7, ())\n\
+                        out c\nout k\nout x\n";
+
+    fn processor(opts: Options) -> Processor {
+        let resolver = MemResolver {
+            files: [("t.tessla".to_string(), SPEC.to_string())].into(),
+        };
+        let loaded = tessla_engine::load_with("t.tessla", &resolver, &Default::default()).unwrap();
+        Processor::new(loaded.program, opts).unwrap()
+    }
+
+    /// Feed `input` as one read (flushing at its end, as a transport does) and return the output.
+    fn feed(p: &mut Processor, input: &str) -> String {
+        let mut s = RecordSplitter::default();
+        s.push(input.as_bytes());
+        let mut out = Vec::new();
+        while let Some(r) = s.next_record() {
+            p.record(&r, &mut out);
+        }
+        while let Some(r) = s.finish() {
+            p.record(&r, &mut out);
+        }
+        p.flush(&mut out);
+        String::from_utf8(out).unwrap()
+    }
+
+    #[test]
+    fn time_zero_events_carry_the_first_records_timestamp() {
+        let mut p = processor(Options {
+            passthrough: false,
+            ..Options::default()
+        });
+        let out = feed(&mut p, "m x=5 1700000000000000000\n");
+        assert_eq!(out, "tessla c=1i,k=7i,x=5i 1700000000000000000\n");
+    }
+
+    #[test]
+    fn records_with_one_timestamp_join_one_step_after_their_pass_through() {
+        let mut p = processor(Options::default());
+        let out = feed(&mut p, "m x=5 100\nm y=1 100\nm x=6 200\n");
+        // The step at 100 is evaluated when the record at 200 arrives, before it is echoed.
+        assert_eq!(
+            out,
+            "m x=5 100\nm y=1 100\ntessla c=1i,k=7i,x=5i 100\nm x=6 200\ntessla c=2i,x=6i 200\n"
+        );
+        assert_eq!(p.counters.records, 3);
+        assert_eq!(p.counters.events, 2);
+    }
+
+    #[test]
+    fn late_records_shift_or_drop() {
+        let mut p = processor(Options {
+            passthrough: false,
+            ..Options::default()
+        });
+        feed(&mut p, "m x=1 100\n");
+        assert_eq!(feed(&mut p, "m x=2 50\n"), "tessla c=2i,x=2i 101\n");
+        assert_eq!(p.counters.late, 1);
+        let mut p = processor(Options {
+            passthrough: false,
+            late: LateMode::Drop,
+            ..Options::default()
+        });
+        feed(&mut p, "m x=1 100\n");
+        assert_eq!(feed(&mut p, "m x=2 100\n"), "");
+        assert_eq!(feed(&mut p, "m x=3 300\n"), "tessla c=2i,x=3i 300\n");
+        assert_eq!(p.counters.late, 1);
+    }
+
+    #[test]
+    fn a_record_without_timestamp_gets_the_wall_clock() {
+        let mut p = processor(Options {
+            passthrough: false,
+            ..Options::default()
+        });
+        let before = now_ns();
+        let out = feed(&mut p, "m x=1\n");
+        let after = now_ns();
+        let m = parse_record(out.as_bytes()).unwrap().unwrap();
+        let ts = m.timestamp.unwrap();
+        assert!(before <= ts && ts <= after, "{before} <= {ts} <= {after}");
+    }
+
+    #[test]
+    fn a_second_event_in_one_step_is_counted_and_skipped() {
+        let mut p = processor(Options {
+            passthrough: false,
+            ..Options::default()
+        });
+        assert_eq!(feed(&mut p, "m x=1 100\nm x=2 100\n"), "tessla c=1i,k=7i,x=1i 100\n");
+        assert_eq!(p.counters.dropped_values, 1);
+    }
+
+    #[test]
+    fn instances_keep_separate_state_and_tag_their_outputs() {
+        let mut p = processor(Options {
+            passthrough: false,
+            instance_by: vec!["robot".into()],
+            tags: vec![("site".into(), "lab".into())],
+            ..Options::default()
+        });
+        let out = feed(
+            &mut p,
+            "m,robot=a x=1 100\nm,robot=b x=1 100\nm,robot=a x=1 200\nm x=9 300\n",
+        );
+        let mut lines: Vec<&str> = out.lines().collect();
+        lines.sort();
+        assert_eq!(
+            lines,
+            [
+                "tessla,robot=a,site=lab c=1i,k=7i,x=1i 100",
+                "tessla,robot=a,site=lab c=2i,x=1i 200",
+                "tessla,robot=b,site=lab c=1i,k=7i,x=1i 100",
+                // A metric without the tag is an instance of its own, without the tag.
+                "tessla,site=lab c=1i,k=7i,x=9i 300",
+            ]
+        );
+        assert_eq!(p.instance_count(), 3);
+        assert!(p.summary().ends_with("3 instances, 0 evicted"));
     }
 }

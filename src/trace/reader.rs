@@ -642,4 +642,36 @@ mod tests {
         let e = read(s, r#"1: s = "\d""#).unwrap_err();
         assert_eq!(e.message, "Invalid escape sequence '\\d' in string");
     }
+
+    #[test]
+    fn no_line_makes_the_reader_panic() {
+        let spec = "in a: Events[(Int, String)]\nin b: Events[{x: Int}]\nin c: Events[Float]\n\
+                    in d: Events[Map[Int, Set[String]]]\nout a\nout b\nout c\nout d";
+        let p = program(spec);
+        let lines = [
+            r#"1: a = (1, "x${2}\"")"#,
+            "2: b = ${x = -0x7fffffffffffffff - 1}",
+            "3: c = -.1.5e300 *. 1e10",
+            r#"4: d = Map(1 -> Set("a", "b"), 2 -> Set())"#,
+            "5: a = {_1 = 9223372036854775807 + 1, _2 = \"\"}",
+        ];
+        let pieces = [
+            "\"", "$", "${", "(", ")", "->", "\\", "µ", "--", "#", ":", "=", ",", "0x",
+        ];
+        let mut n = 0u64;
+        for l in lines {
+            for cut in 0..=l.len() {
+                if !l.is_char_boundary(cut) {
+                    continue;
+                }
+                for piece in pieces {
+                    n += 1;
+                    let mutated = format!("{}{piece}{}", &l[..cut], &l[cut..]);
+                    let _ = parse_line(&mutated, 1, &p);
+                    let _ = parse_line(&l[..cut], 1, &p);
+                }
+            }
+        }
+        assert!(n > 500);
+    }
 }

@@ -219,6 +219,8 @@ pub struct Compiler<'a> {
     annotation_params: HashMap<String, Vec<String>>,
     compiled_fns: HashMap<*const Def, Arc<OnceLock<Func>>>,
     unit_node: Option<NodeId>,
+    /// Function calls per event of fused signal-lift nodes (absent: 1).
+    slift_calls: HashMap<NodeId, usize>,
     /// Element types of stream nodes known from operators and declarations.
     node_types: HashMap<NodeId, Type>,
     /// The unit of the base time in femtoseconds (`µs` in `33333 µs`); `None`: `base_ns`.
@@ -400,6 +402,47 @@ fn binop(op: BinOp, a: &Value, b: &Value) -> Value {
     }
 }
 
+/// The closure of a binary operator, with a fast path for its usual operand types (the
+/// evaluator's hot path: no dispatch on the operator per event).
+fn binop_fn(op: BinOp) -> Func {
+    use Value::{Bool, Float, Int};
+    macro_rules! fast {
+        ($($pat:pat => $e:expr),+) => {
+            Arc::new(move |v: &[Value]| match v {
+                $($pat => $e,)+
+                [a, b] => binop(op, a, b),
+                _ => Value::Error(RuntimeError::Other("an operator needs two operands".into())),
+            })
+        };
+    }
+    match op {
+        BinOp::FAdd => fast!([Float(x), Float(y)] => Float(x + y)),
+        BinOp::FSub => fast!([Float(x), Float(y)] => Float(x - y)),
+        BinOp::FMul => fast!([Float(x), Float(y)] => Float(x * y)),
+        BinOp::FDiv => fast!([Float(x), Float(y)] => Float(x / y)),
+        BinOp::FLt => fast!([Float(x), Float(y)] => Bool(x < y)),
+        BinOp::FGt => fast!([Float(x), Float(y)] => Bool(x > y)),
+        BinOp::FLe => fast!([Float(x), Float(y)] => Bool(x <= y)),
+        BinOp::FGe => fast!([Float(x), Float(y)] => Bool(x >= y)),
+        BinOp::Lt => fast!([Int(x), Int(y)] => Bool(x < y)),
+        BinOp::Gt => fast!([Int(x), Int(y)] => Bool(x > y)),
+        BinOp::Le => fast!([Int(x), Int(y)] => Bool(x <= y)),
+        BinOp::Ge => fast!([Int(x), Int(y)] => Bool(x >= y)),
+        BinOp::And => fast!([Bool(x), Bool(y)] => Bool(*x && *y)),
+        BinOp::Or => fast!([Bool(x), Bool(y)] => Bool(*x || *y)),
+        BinOp::Add => {
+            fast!([Int(x), Int(y)] => x.checked_add(*y).map_or(Value::Error(RuntimeError::Overflow), Int))
+        }
+        BinOp::Sub => {
+            fast!([Int(x), Int(y)] => x.checked_sub(*y).map_or(Value::Error(RuntimeError::Overflow), Int))
+        }
+        _ => Arc::new(move |v: &[Value]| match v {
+            [a, b] => binop(op, a, b),
+            _ => Value::Error(RuntimeError::Other("an operator needs two operands".into())),
+        }),
+    }
+}
+
 /// `x << s` on unbounded integers (TeSSLa's semantics): a negative `s` shifts right
 /// (arithmetically); a result outside i64 is `None` (an overflow error).
 fn shift_left(x: i64, s: i64) -> Option<i64> {
@@ -524,6 +567,7 @@ impl<'a> Compiler<'a> {
             unit_node: None,
             base_unit: None,
             node_types: HashMap::new(),
+            slift_calls: HashMap::new(),
         }
     }
 
@@ -840,6 +884,11 @@ impl<'a> Compiler<'a> {
                 inputs: self.inputs,
                 outputs,
                 global_annotations: Vec::new(),
+                delays: order
+                    .iter()
+                    .copied()
+                    .filter(|i| matches!(self.nodes.get(*i), Some(Node::Delay { .. })))
+                    .collect(),
                 nodes: self.nodes,
                 order,
                 output_nodes,
@@ -864,6 +913,33 @@ impl<'a> Compiler<'a> {
                 _ => None,
             },
             Body::Extern { .. } => None,
+        }
+    }
+
+    /// A signal-lift node, with argument lifts fused into it where possible (see `fuse`).
+    fn slift_node(&mut self, args: Vec<SArg>, f: Func) -> NodeId {
+        if std::env::var_os("TMP_NO_FUSE").is_some() {
+            return self.node(Node::SLift { args, f });
+        }
+        let fused = {
+            let nodes = &self.nodes;
+            let calls = &self.slift_calls;
+            crate::fuse::fuse(&args, &f, |n| match nodes.get(n) {
+                Some(Node::SLift { args, f }) => Some(crate::fuse::Inner {
+                    args,
+                    f,
+                    calls: calls.get(&n).copied().unwrap_or(1),
+                }),
+                _ => None,
+            })
+        };
+        match fused {
+            Some((args, f, calls)) => {
+                let n = self.node(Node::SLift { args, f });
+                self.slift_calls.insert(n, calls);
+                n
+            }
+            None => self.node(Node::SLift { args, f }),
         }
     }
 
@@ -959,10 +1035,18 @@ impl<'a> Compiler<'a> {
         let n = self.nodes.len();
         let mut state = vec![0u8; n];
         let mut order = Vec::with_capacity(n);
-        // Every node is evaluated (lazy edges may reach nodes not reachable strictly from outputs).
-        let _ = roots;
+        // Only nodes an output reads (directly, or lazily through `last`/`delay`) are evaluated;
+        // others (such as signal lifts fused into their users) are left out.
+        let mut reachable = vec![false; n];
+        let mut todo: Vec<NodeId> = roots.iter().copied().filter(|r| *r < n).collect();
+        while let Some(x) = todo.pop() {
+            if std::mem::replace(&mut reachable[x], true) {
+                continue;
+            }
+            todo.extend(self.nodes[x].all_deps().into_iter().filter(|d| *d < n));
+        }
         for start in 0..n {
-            if state[start] != 0 {
+            if state[start] != 0 || !reachable[start] {
                 continue;
             }
             let mut stack: Vec<(NodeId, usize)> = vec![(start, 0)];
@@ -1455,8 +1539,7 @@ impl<'a> Compiler<'a> {
                     | BinOp::BitXor => Type::Int,
                     _ => Type::Bool,
                 };
-                let f: Func = Arc::new(move |v: &[Value]| binop(op, &v[0], &v[1]));
-                let r = self.apply_value_fn(f, vec![a, b], e.span)?;
+                let r = self.apply_value_fn(binop_fn(op), vec![a, b], e.span)?;
                 Ok(self.typed(r, ty))
             }
             ExprKind::If {
@@ -1659,7 +1742,7 @@ impl<'a> Compiler<'a> {
                     _ => SArg::Const(Value::Unit),
                 })
                 .collect();
-            return Ok(Term::Stream(self.node(Node::SLift { args: sargs, f })));
+            return Ok(Term::Stream(self.slift_node(sargs, f)));
         }
         if has_stream {
             return self.error(

@@ -171,6 +171,18 @@ impl std::fmt::Debug for Node {
 }
 
 impl Node {
+    /// Every node this one reads: the strict dependencies and the lazy ones (`last`'s and
+    /// `delay`'s first argument, read from earlier steps).
+    pub fn all_deps(&self) -> Vec<NodeId> {
+        let mut d = self.strict_deps();
+        match self {
+            Node::Last { value, .. } => d.push(*value),
+            Node::Delay { delay, .. } => d.push(*delay),
+            _ => {}
+        }
+        d
+    }
+
     /// Dependencies that must be evaluated before this node in the same step.
     pub fn strict_deps(&self) -> Vec<NodeId> {
         match self {
@@ -205,6 +217,8 @@ pub struct Program {
     pub order: Vec<NodeId>,
     /// The node of each output.
     pub output_nodes: Vec<NodeId>,
+    /// The `Delay` nodes (the monitor arms and fires only these).
+    pub delays: Vec<NodeId>,
 }
 
 impl Program {

@@ -163,7 +163,11 @@ impl Monitor {
     }
 
     fn next_delay(&self) -> Option<i64> {
-        self.targets.iter().flatten().copied().min()
+        self.program
+            .delays
+            .iter()
+            .filter_map(|d| self.targets.get(*d).copied().flatten())
+            .min()
     }
 
     fn step<S: FnMut(OutputEvent<'_>)>(&mut self, ts: i64, sink: &mut S) {
@@ -253,8 +257,8 @@ impl Monitor {
             self.cur[i] = v;
         }
         // Arm delays after the whole step: their delay argument is lazy and may come later.
-        for (i, node) in program.nodes.iter().enumerate() {
-            if let Node::Delay { delay, reset } = node {
+        for &i in &program.delays {
+            if let Some(Node::Delay { delay, reset }) = program.nodes.get(i) {
                 let reset_now = self.cur[*reset].is_some();
                 let fired_now = fired.contains(&i);
                 if reset_now && !fired_now {

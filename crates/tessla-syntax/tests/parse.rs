@@ -254,3 +254,30 @@ fn single_expressions_parse_on_their_own() {
         assert!(d.iter().all(|d| d.category == Category::Syntax));
     }
 }
+
+#[test]
+fn errors_carry_fixes_where_one_is_known() {
+    let (_, d, map) = parse("in x: Events[Int]\nout (x + 1\n");
+    let first = &d[0];
+    assert_eq!(first.help.as_deref(), Some("add the closing `)`"));
+    let (at, note) = &first.notes_at[0];
+    assert_eq!(note, "unclosed `(` opened here");
+    assert!(
+        map.location(*at).starts_with("t.tessla:2:5"),
+        "{}",
+        map.location(*at)
+    );
+
+    let (_, d, _) = parse("in x: Events[Int]\ndef y = x = 1\nout y");
+    assert_eq!(d[0].help.as_deref(), Some("use `==` to compare values"));
+
+    let (_, d, map) = parse("in x\nout x");
+    assert_eq!(
+        d[0].help.as_deref(),
+        Some("an input needs its type: `in x: Events[Int]`")
+    );
+    // The caret sits at the end of the line, not across the line break.
+    let span = d[0].span.unwrap();
+    assert_eq!(span.start, span.end);
+    assert!(d[0].one_line(&map).starts_with("t.tessla:1:5"));
+}

@@ -1,0 +1,213 @@
+//! The table of monitor instances, one per distinct value of the `--instance-by` tags.
+//!
+//! Owns: keys (the values of the instance tags in a metric; a missing tag is part of the key as
+//! "absent"), slots that stay valid while an instance lives, least-recently-used order for
+//! `--max-instances`, wall-clock idleness for `--instance-idle`, and the list of instances with
+//! a step still open (so "no more input right now" evaluates only those, not the whole fleet).
+//! What an instance holds is up to the caller (the step loop stores a monitor and its tags).
+
+use std::collections::{BTreeMap, HashMap};
+use std::time::{Duration, Instant};
+
+/// The values of the instance tags in one metric, in `--instance-by` order.
+pub type Key = Vec<Option<String>>;
+
+struct Slot<T> {
+    key: Key,
+    value: T,
+    /// Position in `lru`.
+    seq: u64,
+    last_used: Instant,
+    /// Whether the slot's index is in `open`.
+    open: bool,
+}
+
+/// Instances by key, with LRU order. Slot indices are reused after eviction.
+pub struct Table<T> {
+    slots: Vec<Option<Slot<T>>>,
+    free: Vec<usize>,
+    index: HashMap<Key, usize>,
+    lru: BTreeMap<u64, usize>,
+    next_seq: u64,
+    open: Vec<usize>,
+}
+
+impl<T> Default for Table<T> {
+    fn default() -> Self {
+        Table {
+            slots: Vec::new(),
+            free: Vec::new(),
+            index: HashMap::new(),
+            lru: BTreeMap::new(),
+            next_seq: 0,
+            open: Vec::new(),
+        }
+    }
+}
+
+impl<T> Table<T> {
+    pub fn len(&self) -> usize {
+        self.index.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.index.is_empty()
+    }
+
+    /// The slot of `key`, marked as used now.
+    pub fn find(&mut self, key: &Key, now: Instant) -> Option<usize> {
+        let i = *self.index.get(key)?;
+        self.touch(i, now);
+        Some(i)
+    }
+
+    fn touch(&mut self, i: usize, now: Instant) {
+        let seq = self.next_seq;
+        if let Some(Some(s)) = self.slots.get_mut(i) {
+            self.lru.remove(&s.seq);
+            s.seq = seq;
+            s.last_used = now;
+            self.lru.insert(seq, i);
+            self.next_seq += 1;
+        }
+    }
+
+    /// Insert a new instance (the caller has checked that `key` is absent); returns its slot.
+    pub fn insert(&mut self, key: Key, value: T, now: Instant) -> usize {
+        let seq = self.next_seq;
+        self.next_seq += 1;
+        let slot = Slot {
+            key: key.clone(),
+            value,
+            seq,
+            last_used: now,
+            open: false,
+        };
+        let i = match self.free.pop() {
+            Some(i) => {
+                if let Some(s) = self.slots.get_mut(i) {
+                    *s = Some(slot);
+                }
+                i
+            }
+            None => {
+                self.slots.push(Some(slot));
+                self.slots.len() - 1
+            }
+        };
+        self.index.insert(key, i);
+        self.lru.insert(seq, i);
+        i
+    }
+
+    pub fn get_mut(&mut self, i: usize) -> Option<&mut T> {
+        self.slots
+            .get_mut(i)
+            .and_then(|s| s.as_mut())
+            .map(|s| &mut s.value)
+    }
+
+    /// Note that slot `i` has a step open (evaluated by the next [`Table::take_open`]).
+    pub fn mark_open(&mut self, i: usize) {
+        if let Some(Some(s)) = self.slots.get_mut(i)
+            && !s.open
+        {
+            s.open = true;
+            self.open.push(i);
+        }
+    }
+
+    /// The slots with a step open, clearing the list.
+    pub fn take_open(&mut self) -> Vec<usize> {
+        let open = std::mem::take(&mut self.open);
+        for &i in &open {
+            if let Some(Some(s)) = self.slots.get_mut(i) {
+                s.open = false;
+            }
+        }
+        open
+    }
+
+    /// The least recently used instance, if the table holds more than `max`, or if it was
+    /// last used more than `idle` before `now`.
+    pub fn evictable(&self, max: usize, idle: Option<Duration>, now: Instant) -> Option<usize> {
+        let (_, &i) = self.lru.first_key_value()?;
+        let s = self.slots.get(i)?.as_ref()?;
+        let too_many = self.index.len() > max;
+        let too_idle = idle.is_some_and(|d| now.saturating_duration_since(s.last_used) > d);
+        (too_many || too_idle).then_some(i)
+    }
+
+    /// Remove slot `i`, returning its key and value.
+    pub fn remove(&mut self, i: usize) -> Option<(Key, T)> {
+        let s = self.slots.get_mut(i)?.take()?;
+        self.lru.remove(&s.seq);
+        self.index.remove(&s.key);
+        if s.open {
+            self.open.retain(|&j| j != i);
+        }
+        self.free.push(i);
+        Some((s.key, s.value))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn k(s: &str) -> Key {
+        vec![Some(s.to_string())]
+    }
+
+    #[test]
+    fn least_recently_used_is_evicted_first() {
+        let now = Instant::now();
+        let mut t = Table::default();
+        let a = t.insert(k("a"), 1, now);
+        let b = t.insert(k("b"), 2, now);
+        assert_eq!(t.evictable(2, None, now), None);
+        t.insert(k("c"), 3, now);
+        assert_eq!(t.evictable(2, None, now), Some(a));
+        // Using `a` makes `b` the oldest.
+        assert_eq!(t.find(&k("a"), now), Some(a));
+        assert_eq!(t.evictable(2, None, now), Some(b));
+        assert_eq!(t.remove(b), Some((k("b"), 2)));
+        assert_eq!(t.evictable(2, None, now), None);
+        assert_eq!(t.find(&k("b"), now), None);
+        // The freed slot is reused.
+        assert_eq!(t.insert(k("d"), 4, now), b);
+        assert_eq!(t.get_mut(b), Some(&mut 4));
+        assert_eq!(t.len(), 3);
+    }
+
+    #[test]
+    fn idle_instances_are_evictable() {
+        let then = Instant::now();
+        let later = then + Duration::from_secs(5);
+        let mut t = Table::default();
+        let a = t.insert(k("a"), (), then);
+        let b = t.insert(k("b"), (), later);
+        let idle = Some(Duration::from_secs(2));
+        assert_eq!(t.evictable(10, idle, later), Some(a));
+        t.remove(a);
+        assert_eq!(t.evictable(10, idle, later), None);
+        assert_eq!(
+            t.evictable(10, idle, later + Duration::from_secs(3)),
+            Some(b)
+        );
+    }
+
+    #[test]
+    fn open_slots_are_listed_once_and_forgotten_on_removal() {
+        let now = Instant::now();
+        let mut t = Table::default();
+        let a = t.insert(k("a"), (), now);
+        let b = t.insert(k("b"), (), now);
+        t.mark_open(a);
+        t.mark_open(a);
+        t.mark_open(b);
+        t.remove(b);
+        assert_eq!(t.take_open(), vec![a]);
+        assert_eq!(t.take_open(), Vec::<usize>::new());
+    }
+}

@@ -1,0 +1,242 @@
+//! Per-robot monitor instances (`--instance-by`, `--max-instances`) with the real binary as a
+//! child process: each robot's outputs are exactly those it gets when monitored alone, output
+//! lines carry the instance tags, a fleet split across two processes gives the union of what one
+//! process gives (partition invariance), and eviction is counted.
+
+use std::io::Write;
+use std::process::{Command, Stdio};
+
+const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+const ROBOTS: usize = 3;
+const PER_ROBOT: usize = 40;
+
+fn run(args: &[&str], input: &str) -> (String, String, i32) {
+    let mut child = Command::new(BIN)
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let input = input.to_string();
+    let w = std::thread::spawn(move || {
+        let _ = stdin.write_all(input.as_bytes());
+    });
+    let out = child.wait_with_output().unwrap();
+    w.join().unwrap();
+    (
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+        out.status.code().unwrap_or(-1),
+    )
+}
+
+/// The recorded run's records as robot `k` sends them: its own MQTT topic, and its clock
+/// offset by `k` µs so that robots interleave without sharing timestamps... except robot 0 and
+/// robot 2, which share every timestamp (one process must still keep them apart).
+fn robot_lines(k: usize) -> Vec<String> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/robot/recorded_run.lp");
+    let offset: i64 = if k == 2 { 0 } else { k as i64 * 1000 };
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        // Each robot starts at a different point of the run, so their states differ.
+        .skip(k * 7)
+        .take(PER_ROBOT)
+        .map(|l| {
+            let (head, ts) = l.rsplit_once(' ').unwrap();
+            let ts: i64 = ts.parse().unwrap();
+            let head = head.replacen("topic=tessla", &format!("topic=tessla/robot{k}"), 1);
+            assert!(head.contains(&format!("topic=tessla/robot{k}")));
+            format!("{head} {}\n", ts + offset)
+        })
+        .collect()
+}
+
+/// Robots' records interleaved round-robin, as one Telegraf would receive a fleet.
+fn fleet(robots: &[usize]) -> String {
+    let per: Vec<Vec<String>> = robots.iter().map(|&k| robot_lines(k)).collect();
+    let mut s = String::new();
+    for i in 0..PER_ROBOT {
+        for lines in &per {
+            s.push_str(&lines[i]);
+        }
+    }
+    s
+}
+
+fn sorted_lines(s: &str) -> Vec<String> {
+    let mut v: Vec<String> = s.lines().map(str::to_string).collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn each_instance_computes_what_its_robot_gets_alone() {
+    let (out, err, code) = run(
+        &["--no-passthrough", "--instance-by", "topic"],
+        &fleet(&[0, 1, 2]),
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("3 instances, 0 evicted"), "{err}");
+    for k in 0..ROBOTS {
+        let topic = format!("tessla/robot{k}");
+        // Alone, without instances; the static tag stands in for the instance tag.
+        let alone_input: String = robot_lines(k).concat();
+        let (alone, err, code) = run(
+            &["--no-passthrough", "--tag", &format!("topic={topic}")],
+            &alone_input,
+        );
+        assert_eq!(code, 0, "{err}");
+        assert!(err.contains("0 late records"), "{err}");
+        let mine: Vec<String> = out
+            .lines()
+            .filter(|l| {
+                let m = lineproto::parse_record(l.as_bytes()).unwrap().unwrap();
+                m.tag("topic") == Some(topic.as_str())
+            })
+            .map(str::to_string)
+            .collect();
+        // Same lines in the same order: the instance's state is its own.
+        assert_eq!(mine, alone.lines().collect::<Vec<_>>(), "robot {k}");
+        assert_eq!(
+            mine.iter().filter(|l| l.starts_with("action,")).count(),
+            PER_ROBOT
+        );
+    }
+    // Every output line carries its instance's tag.
+    assert_eq!(
+        out.lines().count(),
+        out.lines()
+            .filter(|l| l.contains(",topic=tessla/robot"))
+            .count()
+    );
+}
+
+#[test]
+fn one_instance_mixes_robots_that_share_timestamps() {
+    // Without --instance-by, robots 0 and 2 share timestamps: their records join one step and
+    // the second event of an input in a step is refused. This is what instances prevent.
+    let (_, err, code) = run(&["--no-passthrough"], &fleet(&[0, 2]));
+    assert_eq!(code, 0, "{err}");
+    assert!(!err.contains("0 dropped values"), "{err}");
+    let (_, err, _) = run(
+        &["--no-passthrough", "--instance-by", "topic"],
+        &fleet(&[0, 2]),
+    );
+    assert!(err.contains("0 dropped values"), "{err}");
+}
+
+#[test]
+fn a_fleet_split_across_two_processes_gives_the_same_outputs() {
+    let args = ["--no-passthrough", "--instance-by", "topic"];
+    let (all, err, code) = run(&args, &fleet(&[0, 1, 2]));
+    assert_eq!(code, 0, "{err}");
+    let (part_a, err, code) = run(&args, &fleet(&[0, 2]));
+    assert_eq!(code, 0, "{err}");
+    let (part_b, err, code) = run(&args, &fleet(&[1]));
+    assert_eq!(code, 0, "{err}");
+    assert!(!part_a.is_empty() && !part_b.is_empty());
+    let union = format!("{part_a}{part_b}");
+    assert_eq!(sorted_lines(&all), sorted_lines(&union));
+}
+
+#[test]
+fn pass_through_is_unchanged_with_instances() {
+    let input = fleet(&[0, 1]);
+    let (out, err, code) = run(&["--instance-by", "topic"], &input);
+    assert_eq!(code, 0, "{err}");
+    let echoed: String = out
+        .split_inclusive('\n')
+        .filter(|l| l.starts_with("mqtt_consumer"))
+        .collect();
+    assert_eq!(echoed, input);
+}
+
+#[test]
+fn past_max_instances_the_least_recently_used_is_evicted() {
+    // Two robots alternating with room for one instance: every record evicts the other robot.
+    let input = fleet(&[0, 1]);
+    let (out, err, code) = run(
+        &[
+            "--no-passthrough",
+            "--instance-by",
+            "topic",
+            "--max-instances",
+            "1",
+        ],
+        &input,
+    );
+    assert_eq!(code, 0, "{err}");
+    let records = 2 * PER_ROBOT;
+    assert!(
+        err.contains(&format!("{records} instances, {} evicted", records - 1)),
+        "{err}"
+    );
+    assert!(
+        err.contains("W! monitor instance topic=tessla/robot0 evicted"),
+        "{err}"
+    );
+    // Evicted instances still answer their record before they go.
+    assert_eq!(
+        out.lines().filter(|l| l.starts_with("action,")).count(),
+        records
+    );
+    // And their state starts afresh: a fresh instance's MSE is that of its only sample, so the
+    // outputs differ from the run with room for both.
+    let (kept, _, _) = run(&["--no-passthrough", "--instance-by", "topic"], &input);
+    assert_ne!(sorted_lines(&out), sorted_lines(&kept));
+}
+
+#[test]
+fn max_instances_zero_is_refused() {
+    let (_, err, code) = run(&["--instance-by", "topic", "--max-instances", "0"], "");
+    assert_eq!(code, 2, "{err}");
+}
+
+#[test]
+fn an_idle_instance_is_evicted() {
+    use std::io::{BufRead, BufReader};
+    let mut child = Command::new(BIN)
+        .args([
+            "--no-passthrough",
+            "--instance-by",
+            "topic",
+            "--instance-idle",
+            "200ms",
+        ])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let mut stdout = BufReader::new(child.stdout.take().unwrap());
+    let mut send_and_wait = |line: &str| {
+        stdin.write_all(line.as_bytes()).unwrap();
+        stdin.flush().unwrap();
+        let mut got = String::new();
+        while !got.starts_with("action,") {
+            got.clear();
+            assert!(stdout.read_line(&mut got).unwrap() > 0, "no answer");
+        }
+    };
+    let r0 = robot_lines(0);
+    let r1 = robot_lines(1);
+    send_and_wait(&r0[0]);
+    send_and_wait(&r1[0]);
+    // Robot 0 falls silent; robot 1 goes on past the idle limit.
+    std::thread::sleep(std::time::Duration::from_millis(400));
+    send_and_wait(&r1[1]);
+    drop(stdin);
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert!(err.contains("2 instances, 1 evicted"), "{err}");
+    assert!(
+        err.contains("topic=tessla/robot0 evicted (idle longer than --instance-idle)"),
+        "{err}"
+    );
+}

@@ -1,0 +1,112 @@
+//! `tessla-telegraf trace SPEC [TRACE]` as a user runs it: TeSSLa's output format on stdout,
+//! errors on stderr, exit codes 0 (ok), 1 (runtime or trace error), 2 (spec error), 3 (I/O).
+
+use std::io::Write;
+use std::process::{Command, Output, Stdio};
+
+const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+
+fn temp(name: &str, text: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("tessla-trace-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn trace(spec: &str, args: &[&str], stdin: &str) -> Output {
+    let mut child = Command::new(BIN)
+        .arg("trace")
+        .arg(spec)
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    child
+        .stdin
+        .take()
+        .unwrap()
+        .write_all(stdin.as_bytes())
+        .unwrap();
+    child.wait_with_output().unwrap()
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+#[test]
+fn reads_stdin_and_prints_tessla_outputs() {
+    let spec = temp("sum.tessla", "in x: Events[Int]\ndef s := x + 1\nout s\n");
+    let out = trace(
+        spec.to_str().unwrap(),
+        &[],
+        "1: x = 1\n-- comment\n4: x = 0x10\n",
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert_eq!(text(&out.stdout), "1: s = 2\n4: s = 17\n");
+}
+
+#[test]
+fn reads_a_trace_file() {
+    let spec = temp("id.tessla", "in x: Events[String]\nout x\n");
+    let input = temp("id.input", "2: x = \"a ${1 + 1}\"\n");
+    let out = trace(spec.to_str().unwrap(), &[input.to_str().unwrap()], "");
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert_eq!(text(&out.stdout), "2: x = a 2\n");
+}
+
+#[test]
+fn a_runtime_error_keeps_earlier_outputs_and_exits_1() {
+    let spec = temp("div.tessla", "in x: Events[Int]\nout 10 / x as q\n");
+    let out = trace(
+        spec.to_str().unwrap(),
+        &[],
+        "1: x = 2\n2: x = 0\n3: x = 5\n",
+    );
+    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(text(&out.stdout), "1: q = 5\n");
+    assert!(
+        text(&out.stderr).contains("Division by zero (t = 2)"),
+        "{}",
+        text(&out.stderr)
+    );
+}
+
+#[test]
+fn a_bad_trace_line_names_its_place_and_exits_1() {
+    let spec = temp("bad.tessla", "in x: Events[Int]\nout x\n");
+    // As in TeSSLa, the step still pending at the bad line (t = 2) is not evaluated.
+    let out = trace(
+        spec.to_str().unwrap(),
+        &[],
+        "1: x = 1\n2: x = 2\n3: x = \"no\"\n",
+    );
+    assert_eq!(out.status.code(), Some(1));
+    assert_eq!(text(&out.stdout), "1: x = 1\n");
+    assert!(
+        text(&out.stderr).contains("<stdin>:3: input x: \"no\" is not of type Int."),
+        "{}",
+        text(&out.stderr)
+    );
+}
+
+#[test]
+fn a_spec_error_exits_2_with_place_and_fix() {
+    let spec = temp("broken.tessla", "in x\nout x\n");
+    let out = trace(spec.to_str().unwrap(), &[], "");
+    assert_eq!(out.status.code(), Some(2));
+    let err = text(&out.stderr);
+    assert!(err.contains("broken.tessla:1:5"), "{err}");
+    assert!(err.contains("help: an input needs its type"), "{err}");
+}
+
+#[test]
+fn a_missing_trace_file_exits_3() {
+    let spec = temp("ok.tessla", "in x: Events[Int]\nout x\n");
+    let out = trace(spec.to_str().unwrap(), &["/nonexistent/trace.input"], "");
+    assert_eq!(out.status.code(), Some(3));
+    assert!(text(&out.stderr).contains("/nonexistent/trace.input"));
+}
