@@ -242,3 +242,100 @@ fn a_closed_stdout_ends_the_run_cleanly() {
     assert_eq!(out.status.code(), Some(0), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+fn execd_fixture(name: &str) -> String {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/execd")
+        .join(name);
+    std::fs::read_to_string(path).unwrap()
+}
+
+/// `tests/fixtures/execd/speed.out.lp` was checked by hand against `speed.tessla` over
+/// `speed.lp`: 0.25 - 0.2 is 0.04999999999999999 in binary floating point; the second scan
+/// has 3 beams (index 1 missing, NaN); the third record's tag `topic=other` binds only the
+/// unannotated `mode`; the string's quotes are escaped.
+#[test]
+fn fixture_outputs_are_exact_and_parse_back_with_the_same_values() {
+    let spec =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/execd/speed.tessla");
+    let input = execd_fixture("speed.lp");
+    let expected = execd_fixture("speed.out.lp");
+    let spec = spec.to_str().unwrap();
+    let (out, err, code) = run_all(&["--spec", spec, "--tag", "site=lab"], &input);
+    assert_eq!(code, 0, "{err}");
+    // Each record, byte for byte, then the outputs it causes (those of its own timestamp).
+    let records: Vec<&str> = input.split_inclusive('\n').collect();
+    let mut want = String::new();
+    for r in &records {
+        want.push_str(r);
+        let ts = r.trim_end().rsplit_once(' ').unwrap().1;
+        for l in expected.lines().filter(|l| l.ends_with(&format!(" {ts}"))) {
+            want.push_str(l);
+            want.push('\n');
+        }
+    }
+    assert_eq!(out, want);
+    // Values read back equal the ones the spec computes.
+    let parsed: Vec<lineproto::Metric> = expected
+        .lines()
+        .map(|l| lineproto::parse_record(l.as_bytes()).unwrap().unwrap())
+        .collect();
+    let speed_diff = &parsed[0];
+    assert_eq!(speed_diff.measurement, "speed_diff");
+    assert_eq!(
+        speed_diff.field("value"),
+        Some(&lineproto::FieldValue::Float(0.25 - 0.2))
+    );
+    assert_eq!(parsed[1].tag("site"), Some("lab"));
+    assert_eq!(
+        parsed[4].field("late"),
+        Some(&lineproto::FieldValue::Bool(true))
+    );
+    assert_eq!(
+        parsed[6].field("mode"),
+        Some(&lineproto::FieldValue::Str("say \"hi\", then go".into()))
+    );
+    assert!(err.contains("3 records, 8 events, 12 outputs"), "{err}");
+}
+
+#[test]
+fn shipped_udp_conf_matches_the_udp_defaults() {
+    let conf = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("telegraf/telegraf-udp.conf"),
+    )
+    .unwrap();
+    let v: toml::Value = toml::from_str(&conf).unwrap();
+    let writer = &v["outputs"]["socket_writer"][0];
+    let listener = &v["inputs"]["socket_listener"][0];
+    // Telegraf sends only robot metrics to us, so our outputs never loop back.
+    assert_eq!(writer["namepass"][0].as_str(), Some("mqtt_consumer"));
+    let to_us = writer["address"].as_str().unwrap();
+    let from_us = listener["service_address"].as_str().unwrap();
+    // Be Telegraf: receive where the conf's socket_listener listens, send where its socket_writer
+    // sends; the monitor runs with its defaults (`--udp-listen` without an address).
+    let recv = std::net::UdpSocket::bind(from_us.strip_prefix("udp://").unwrap()).unwrap();
+    recv.set_read_timeout(Some(Duration::from_millis(300)))
+        .unwrap();
+    let mut child = spawn(&["run", "--udp-listen", "--no-passthrough"]);
+    let sock = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let line = fixture_lines(1).concat();
+    let mut got = String::new();
+    let mut buf = vec![0u8; 65536];
+    let start = Instant::now();
+    while !got.contains("action ") {
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "no answer: {got}"
+        );
+        if got.is_empty() {
+            sock.send_to(line.as_bytes(), to_us.strip_prefix("udp://").unwrap())
+                .unwrap();
+        }
+        if let Ok(n) = recv.recv(&mut buf) {
+            got.push_str(&String::from_utf8_lossy(&buf[..n]));
+        }
+    }
+    let pid = child.id().to_string();
+    Command::new("kill").args(["-TERM", &pid]).status().unwrap();
+    assert_eq!(child.wait().unwrap().code(), Some(0));
+}

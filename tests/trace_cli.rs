@@ -110,3 +110,36 @@ fn a_missing_trace_file_exits_3() {
     assert_eq!(out.status.code(), Some(3));
     assert!(text(&out.stderr).contains("/nonexistent/trace.input"));
 }
+
+#[test]
+fn outputs_of_a_live_feed_appear_before_the_feed_ends() {
+    use std::io::{BufRead, BufReader};
+    let spec = temp("live.tessla", "in x: Events[Int]\nout x\n");
+    let mut child = Command::new(BIN)
+        .arg("trace")
+        .arg(&spec)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    // Step 1 is complete once an event at t = 2 arrives; the feed then pauses.
+    stdin.write_all(b"1: x = 7\n2: x = 8\n").unwrap();
+    stdin.flush().unwrap();
+    let stdout = child.stdout.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let reader = std::thread::spawn(move || {
+        let mut lines = BufReader::new(stdout).lines();
+        let first = lines.next().and_then(Result::ok);
+        let _ = tx.send(first);
+        lines.map_while(Result::ok).collect::<Vec<_>>()
+    });
+    let first = rx.recv_timeout(std::time::Duration::from_secs(10));
+    drop(stdin);
+    let rest = reader.join().unwrap();
+    let status = child.wait().unwrap();
+    assert_eq!(first, Ok(Some("1: x = 7".to_string())));
+    assert_eq!(rest, ["2: x = 8"]);
+    assert_eq!(status.code(), Some(0));
+}

@@ -495,7 +495,10 @@ mod tests {
             passthrough: false,
             ..Options::default()
         });
-        assert_eq!(feed(&mut p, "m x=1 100\nm x=2 100\n"), "tessla c=1i,k=7i,x=1i 100\n");
+        assert_eq!(
+            feed(&mut p, "m x=1 100\nm x=2 100\n"),
+            "tessla c=1i,k=7i,x=1i 100\n"
+        );
         assert_eq!(p.counters.dropped_values, 1);
     }
 

@@ -874,6 +874,7 @@ impl<'a> Compiler<'a> {
         if self.diags.iter().any(|d| d.is_error()) {
             return Err(self.diags);
         }
+        self.fuse_single_use(&output_nodes);
         let order = match self.order(&output_nodes) {
             Ok(o) => o,
             Err(()) => return Err(self.diags),
@@ -916,30 +917,51 @@ impl<'a> Compiler<'a> {
         }
     }
 
-    /// A signal-lift node, with argument lifts fused into it where possible (see `fuse`).
     fn slift_node(&mut self, args: Vec<SArg>, f: Func) -> NodeId {
+        self.node(Node::SLift { args, f })
+    }
+
+    /// Fuse signal lifts read only by one other signal lift into it (see `fuse`), so the
+    /// evaluator stores and dispatches fewer nodes; nothing is computed twice.
+    fn fuse_single_use(&mut self, outputs: &[NodeId]) {
         if std::env::var_os("TMP_NO_FUSE").is_some() {
-            return self.node(Node::SLift { args, f });
+            return;
         }
-        let fused = {
+        let n = self.nodes.len();
+        let mut uses = vec![0usize; n];
+        for node in &self.nodes {
+            for d in node.all_deps() {
+                if let Some(u) = uses.get_mut(d) {
+                    *u += 1;
+                }
+            }
+        }
+        for o in outputs {
+            if let Some(u) = uses.get_mut(*o) {
+                *u += 2;
+            }
+        }
+        for i in 0..n {
+            let Node::SLift { args, f } = &self.nodes[i] else {
+                continue;
+            };
             let nodes = &self.nodes;
             let calls = &self.slift_calls;
-            crate::fuse::fuse(&args, &f, |n| match nodes.get(n) {
-                Some(Node::SLift { args, f }) => Some(crate::fuse::Inner {
-                    args,
-                    f,
-                    calls: calls.get(&n).copied().unwrap_or(1),
-                }),
+            let fused = crate::fuse::fuse(args, f, |m| match nodes.get(m) {
+                Some(Node::SLift { args, f }) if m < i && uses.get(m) == Some(&1) => {
+                    Some(crate::fuse::Inner {
+                        args,
+                        f,
+                        calls: calls.get(&m).copied().unwrap_or(1),
+                    })
+                }
                 _ => None,
-            })
-        };
-        match fused {
-            Some((args, f, calls)) => {
-                let n = self.node(Node::SLift { args, f });
-                self.slift_calls.insert(n, calls);
-                n
+            });
+            if let Some((args, f, c)) = fused {
+                // The inlined nodes lose this use; their own arguments gain it.
+                self.nodes[i] = Node::SLift { args, f };
+                self.slift_calls.insert(i, c);
             }
-            None => self.node(Node::SLift { args, f }),
         }
     }
 
