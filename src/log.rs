@@ -38,6 +38,14 @@ pub fn log(level: Level, msg: &str) {
     if !enabled(level) {
         return;
     }
+    let _ = std::io::stderr()
+        .lock()
+        .write_all(format(level, msg).as_bytes());
+}
+
+/// The stderr text of one message: each line prefixed, cut (on a char boundary) to stay under
+/// Telegraf's 64 KiB line limit.
+fn format(level: Level, msg: &str) -> String {
     let prefix = match level {
         Level::Error => "E! ",
         Level::Warn => "W! ",
@@ -57,7 +65,7 @@ pub fn log(level: Level, msg: &str) {
         }
         out.push('\n');
     }
-    let _ = std::io::stderr().lock().write_all(out.as_bytes());
+    out
 }
 
 /// A warning of kind `kind`, rate-limited per kind. Returns whether it was printed.
@@ -87,5 +95,33 @@ pub fn warn_limited(kind: &'static str, msg: impl FnOnce() -> String) -> bool {
         true
     } else {
         false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_line_is_prefixed() {
+        assert_eq!(format(Level::Warn, "a\nb"), "W! a\nW! b\n");
+        assert_eq!(format(Level::Error, "x"), "E! x\n");
+        assert_eq!(format(Level::Debug, "x"), "D! x\n");
+    }
+
+    #[test]
+    fn long_lines_are_cut_under_64_kib_on_a_char_boundary() {
+        let msg = "é".repeat(40 * 1024);
+        let out = format(Level::Info, &msg);
+        assert!(out.len() < 64 * 1024, "{}", out.len());
+        assert!(out.starts_with("I! é"));
+        assert!(out.ends_with(" …(truncated)\n"));
+    }
+
+    #[test]
+    fn levels_order_from_error_to_debug() {
+        assert!(
+            Level::Error < Level::Warn && Level::Warn < Level::Info && Level::Info < Level::Debug
+        );
     }
 }

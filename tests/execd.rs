@@ -339,3 +339,70 @@ fn shipped_udp_conf_matches_the_udp_defaults() {
     Command::new("kill").args(["-TERM", &pid]).status().unwrap();
     assert_eq!(child.wait().unwrap().code(), Some(0));
 }
+
+/// A small deterministic generator (xorshift), so the garbage is the same on every run.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+}
+
+#[test]
+fn garbage_never_makes_it_panic() {
+    let good = fixture_lines(10);
+    let alphabet: &[u8] =
+        b" ,=\"\\\n\t\r0123456789.eE+-_iutfTF#\x00\xff\xc3mqtt_consumer lidar_ topic";
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let mut input: Vec<u8> = Vec::new();
+    for (n, g) in good.iter().enumerate() {
+        // A mutated copy of a real record: bytes replaced, cut or duplicated.
+        let mut bad = g.as_bytes().to_vec();
+        for _ in 0..(1 + rng.next() % 8) {
+            let i = (rng.next() as usize) % bad.len();
+            bad[i] = alphabet[(rng.next() as usize) % alphabet.len()];
+        }
+        bad.truncate(1 + (rng.next() as usize) % bad.len());
+        input.extend_from_slice(&bad);
+        input.push(b'\n');
+        // Pure noise.
+        for _ in 0..(rng.next() % 200) {
+            input.push(alphabet[(rng.next() as usize) % alphabet.len()]);
+        }
+        input.push(b'\n');
+        // Absurd values: huge indices and numbers.
+        input.extend_from_slice(
+            format!(
+                "mqtt_consumer lidar_99999999999=1,expectedSpeed=1e400,actualSpeed=\"NaN\" {n}\n"
+            )
+            .as_bytes(),
+        );
+        // A good record.
+        input.extend_from_slice(g.as_bytes());
+    }
+    let mut child = spawn(&["--late", "drop"]);
+    let mut stdin = child.stdin.take().unwrap();
+    let w = std::thread::spawn(move || {
+        let _ = stdin.write_all(&input);
+    });
+    let out = child.wait_with_output().unwrap();
+    w.join().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    // Everything written parses back.
+    for l in String::from_utf8_lossy(&out.stdout).lines() {
+        assert!(lineproto::parse_record(l.as_bytes()).is_ok(), "{l}");
+    }
+    assert!(err.contains("parse error"), "{err}");
+    // Every good record got through, whatever garbage came before it (an unbalanced quote
+    // costs only its own line).
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let echoed: Vec<&str> = stdout.split_inclusive('\n').collect();
+    for g in &good {
+        assert!(echoed.contains(&g.as_str()), "lost: {g}");
+    }
+}

@@ -240,3 +240,37 @@ fn an_idle_instance_is_evicted() {
         "{err}"
     );
 }
+
+#[test]
+fn shipped_fleet_conf_command_keeps_robots_apart() {
+    let conf = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("telegraf/telegraf-fleet.conf"),
+    )
+    .unwrap();
+    let v: toml::Value = toml::from_str(&conf).unwrap();
+    let execd = &v["processors"]["execd"][0];
+    let cmd: Vec<&str> = execd["command"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_str().unwrap())
+        .collect();
+    assert_eq!(cmd[0], "tessla-telegraf");
+    // The MQTT topic template reads the tag the instances are keyed by.
+    let by = cmd[cmd.iter().position(|a| *a == "--instance-by").unwrap() + 1];
+    let topic = v["outputs"]["mqtt"][0]["topic"].as_str().unwrap();
+    assert!(
+        topic.contains(&format!("{{{{ .Tag \"{by}\" }}}}")),
+        "{topic}"
+    );
+    let (out, err, code) = run(&cmd[1..], &fleet(&[0, 1, 2]));
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("3 instances"), "{err}");
+    for k in 0..ROBOTS {
+        let actions = out
+            .lines()
+            .filter(|l| l.starts_with(&format!("action,{by}=tessla/robot{k} ")))
+            .count();
+        assert_eq!(actions, PER_ROBOT, "robot {k}");
+    }
+}

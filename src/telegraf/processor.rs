@@ -83,6 +83,8 @@ struct Emitter {
     encodings: Vec<Encoding>,
     measurement: String,
     events: Vec<(i64, usize, Value)>,
+    /// Scratch: one timestamp's events.
+    step: Vec<(usize, Value)>,
 }
 
 pub struct Processor {
@@ -94,6 +96,8 @@ pub struct Processor {
     instances: Table<Instance>,
     /// Stands in for "now" when no idle limit needs the clock.
     epoch: Instant,
+    /// The slot of the only instance, when there is one that is never evicted.
+    single: Option<usize>,
 }
 
 fn now_ns() -> i64 {
@@ -123,11 +127,13 @@ impl Processor {
                 encodings,
                 measurement: opts.measurement.clone(),
                 events: Vec::new(),
+                step: Vec::new(),
             },
             opts,
             counters: Counters::default(),
             instances: Table::default(),
             epoch: Instant::now(),
+            single: None,
         })
     }
 
@@ -154,6 +160,13 @@ impl Processor {
 
     /// The instance for `m`, created (starting at `ts`) when new.
     fn instance_for(&mut self, m: &Metric, ts: i64, now: Instant) -> usize {
+        // One instance that is never evicted: skip the lookup.
+        if self.opts.instance_by.is_empty()
+            && self.opts.instance_idle.is_none()
+            && let Some(i) = self.single
+        {
+            return i;
+        }
         let key = self.key(m);
         if let Some(i) = self.instances.find(&key, now) {
             return i;
@@ -175,7 +188,11 @@ impl Processor {
         }
         self.counters.instances += 1;
         let monitor = Monitor::starting_at(self.program.clone(), ts);
-        self.instances.insert(key, Instance { monitor, tags }, now)
+        let i = self.instances.insert(key, Instance { monitor, tags }, now);
+        if self.opts.instance_by.is_empty() && self.opts.instance_idle.is_none() {
+            self.single = Some(i);
+        }
+        i
     }
 
     /// Evict instances past `--max-instances` or idle too long, writing their pending outputs.
@@ -217,6 +234,21 @@ impl Processor {
             Ok(Some(m)) => m,
             Ok(None) => {
                 self.counters.records -= 1;
+                return;
+            }
+            Err(_) if Self::spans_lines(&rec.bytes) => {
+                // A record spanning several physical lines that does not parse is most likely an
+                // unbalanced quote that swallowed the lines after it: take each line alone, so
+                // one bad line costs only itself.
+                self.counters.records -= 1;
+                for (line, part) in (rec.line..).zip(rec.bytes.split_inclusive(|&b| b == b'\n')) {
+                    let sub = Record {
+                        bytes: part.to_vec(),
+                        line,
+                        oversized: false,
+                    };
+                    self.record(&sub, out);
+                }
                 return;
             }
             Err(e) => {
@@ -281,6 +313,13 @@ impl Processor {
         }
         self.instances.mark_open(slot);
         self.evict(now, out);
+    }
+
+    /// Whether `bytes` holds a newline before its last byte.
+    fn spans_lines(bytes: &[u8]) -> bool {
+        bytes
+            .split_last()
+            .is_some_and(|(_, head)| head.contains(&b'\n'))
     }
 
     /// Feed the metric's bound fields to instance `slot` as events at `ts`.
@@ -373,13 +412,15 @@ impl Emitter {
         if self.events.is_empty() {
             return;
         }
-        let events = std::mem::take(&mut self.events);
-        let mut rest = events.as_slice();
-        while let Some(&(ts, _, _)) = rest.first() {
-            let n = rest.iter().take_while(|e| e.0 == ts).count();
-            let (now, later) = rest.split_at(n);
-            rest = later;
-            let step: Vec<(usize, Value)> = now.iter().map(|(_, o, v)| (*o, v.clone())).collect();
+        let mut events = std::mem::take(&mut self.events);
+        let mut step = std::mem::take(&mut self.step);
+        let mut it = events.drain(..).peekable();
+        while let Some((ts, o, v)) = it.next() {
+            step.clear();
+            step.push((o, v));
+            while let Some((o, v)) = it.next_if(|e| e.0 == ts).map(|(_, o, v)| (o, v)) {
+                step.push((o, v));
+            }
             counters.outputs += step.len() as u64;
             let dropped =
                 encode::encode_step(ts, &step, &self.encodings, &self.measurement, tags, out);
@@ -390,10 +431,11 @@ impl Emitter {
                 });
             }
         }
-        // Keep the buffer's capacity for the next step.
-        let mut events = events;
-        events.clear();
+        drop(it);
+        step.clear();
+        // Keep the buffers' capacity for the next step.
         self.events = events;
+        self.step = step;
     }
 }
 
@@ -430,6 +472,20 @@ mod tests {
         }
         p.flush(&mut out);
         String::from_utf8(out).unwrap()
+    }
+
+    #[test]
+    fn an_unbalanced_quote_costs_only_its_own_line() {
+        let mut p = processor(Options::default());
+        let out = feed(&mut p, "m x=1 100\nm s=\"open 150\nm x=2 200\nm x=3 300\n");
+        assert!(out.contains("m x=2 200\ntessla c=2i,x=2i 200\n"), "{out}");
+        assert!(out.contains("m x=3 300\ntessla c=3i,x=3i 300\n"), "{out}");
+        assert!(!out.contains("open"), "{out}");
+        assert_eq!(p.counters.records, 4);
+        assert_eq!(p.counters.parse_errors, 1);
+        // A string field that really spans lines stays one record.
+        let out = feed(&mut p, "m x=4,s=\"two\nlines\" 400\n");
+        assert_eq!(out, "m x=4,s=\"two\nlines\" 400\ntessla c=4i,x=4i 400\n");
     }
 
     #[test]

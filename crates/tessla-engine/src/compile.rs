@@ -219,8 +219,6 @@ pub struct Compiler<'a> {
     annotation_params: HashMap<String, Vec<String>>,
     compiled_fns: HashMap<*const Def, Arc<OnceLock<Func>>>,
     unit_node: Option<NodeId>,
-    /// Function calls per event of fused signal-lift nodes (absent: 1).
-    slift_calls: HashMap<NodeId, usize>,
     /// Element types of stream nodes known from operators and declarations.
     node_types: HashMap<NodeId, Type>,
     /// The unit of the base time in femtoseconds (`µs` in `33333 µs`); `None`: `base_ns`.
@@ -567,7 +565,6 @@ impl<'a> Compiler<'a> {
             unit_node: None,
             base_unit: None,
             node_types: HashMap::new(),
-            slift_calls: HashMap::new(),
         }
     }
 
@@ -874,7 +871,6 @@ impl<'a> Compiler<'a> {
         if self.diags.iter().any(|d| d.is_error()) {
             return Err(self.diags);
         }
-        self.fuse_single_use(&output_nodes);
         let order = match self.order(&output_nodes) {
             Ok(o) => o,
             Err(()) => return Err(self.diags),
@@ -919,50 +915,6 @@ impl<'a> Compiler<'a> {
 
     fn slift_node(&mut self, args: Vec<SArg>, f: Func) -> NodeId {
         self.node(Node::SLift { args, f })
-    }
-
-    /// Fuse signal lifts read only by one other signal lift into it (see `fuse`), so the
-    /// evaluator stores and dispatches fewer nodes; nothing is computed twice.
-    fn fuse_single_use(&mut self, outputs: &[NodeId]) {
-        if std::env::var_os("TMP_NO_FUSE").is_some() {
-            return;
-        }
-        let n = self.nodes.len();
-        let mut uses = vec![0usize; n];
-        for node in &self.nodes {
-            for d in node.all_deps() {
-                if let Some(u) = uses.get_mut(d) {
-                    *u += 1;
-                }
-            }
-        }
-        for o in outputs {
-            if let Some(u) = uses.get_mut(*o) {
-                *u += 2;
-            }
-        }
-        for i in 0..n {
-            let Node::SLift { args, f } = &self.nodes[i] else {
-                continue;
-            };
-            let nodes = &self.nodes;
-            let calls = &self.slift_calls;
-            let fused = crate::fuse::fuse(args, f, |m| match nodes.get(m) {
-                Some(Node::SLift { args, f }) if m < i && uses.get(m) == Some(&1) => {
-                    Some(crate::fuse::Inner {
-                        args,
-                        f,
-                        calls: calls.get(&m).copied().unwrap_or(1),
-                    })
-                }
-                _ => None,
-            });
-            if let Some((args, f, c)) = fused {
-                // The inlined nodes lose this use; their own arguments gain it.
-                self.nodes[i] = Node::SLift { args, f };
-                self.slift_calls.insert(i, c);
-            }
-        }
     }
 
     /// Record the element type of a stream term (when known and not recorded yet).
@@ -1058,7 +1010,7 @@ impl<'a> Compiler<'a> {
         let mut state = vec![0u8; n];
         let mut order = Vec::with_capacity(n);
         // Only nodes an output reads (directly, or lazily through `last`/`delay`) are evaluated;
-        // others (such as signal lifts fused into their users) are left out.
+        // others (leftovers of macro expansion) are left out.
         let mut reachable = vec![false; n];
         let mut todo: Vec<NodeId> = roots.iter().copied().filter(|r| *r < n).collect();
         while let Some(x) = todo.pop() {

@@ -5,7 +5,6 @@
 
 pub mod collections;
 pub mod compile;
-pub mod fuse;
 pub mod ir;
 pub mod load;
 pub mod monitor;

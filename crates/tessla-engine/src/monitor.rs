@@ -306,6 +306,17 @@ impl Monitor {
         if !has_event {
             return None;
         }
+        // Up to three arguments (nearly every operator) are passed in a stack array.
+        let get = |a: &SArg| match a {
+            SArg::Const(v) => Some(v.clone()),
+            SArg::Stream(n) => self.cur[*n].as_ref().or(self.last[*n].as_ref()).cloned(),
+        };
+        match args {
+            [a] => return Some(f(&[get(a)?])),
+            [a, b] => return Some(f(&[get(a)?, get(b)?])),
+            [a, b, c] => return Some(f(&[get(a)?, get(b)?, get(c)?])),
+            _ => {}
+        }
         let mut vals = std::mem::take(&mut self.scratch);
         vals.clear();
         for a in args {

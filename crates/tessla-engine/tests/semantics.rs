@@ -195,3 +195,18 @@ fn spec_errors_are_reported_not_panicked() {
     let e = load("def foo := extern(\"foo\")\nout foo\n", None).unwrap_err();
     assert!(e.contains("type annotation"), "{e}");
 }
+
+#[test]
+fn output_types_are_inferred_from_operators_and_declarations() {
+    let spec = "in a: Events[Float]\nin b: Events[Int]\n\
+        def d = a -. 1.0\ndef v = d >. 0.0 || b > 3\ndef w = if v then d else a\n\
+        def n: Events[Int] = count(a)\nout d\nout v\nout w\nout n\nout b + 1 as c\n";
+    let loaded = load(spec, None).unwrap();
+    let types: Vec<String> = loaded
+        .program
+        .outputs
+        .iter()
+        .map(|o| format!("{} {}", o.name, o.ty))
+        .collect();
+    assert_eq!(types, ["d Float", "v Bool", "w Float", "n Int", "c Int"]);
+}
