@@ -272,3 +272,118 @@ pub fn list_map(a: &[Value]) -> Value {
         _ => type_err("List.map", a),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn int(i: i64) -> Value {
+        Value::Int(i)
+    }
+    fn list(items: &[i64]) -> Value {
+        Value::List(Arc::new(items.iter().map(|i| Value::Int(*i)).collect()))
+    }
+
+    #[derive(Debug)]
+    struct Add;
+    impl crate::value::Callable for Add {
+        fn call(&self, args: &[Value]) -> Value {
+            match args {
+                [Value::Int(a), Value::Int(b)] => a
+                    .checked_add(*b)
+                    .map_or(err(RuntimeError::Overflow), Value::Int),
+                [Value::Int(a)] => Value::Int(a * 10),
+                _ => err(RuntimeError::Other("bad".into())),
+            }
+        }
+    }
+
+    #[test]
+    fn float_conversions_truncate_and_reject_nan() {
+        assert_eq!(float_to_int(&[Value::Float(-2.7)]), int(-2));
+        assert_eq!(
+            float_to_int(&[Value::Float(f64::NAN)]),
+            err(RuntimeError::Overflow)
+        );
+        assert_eq!(
+            float_to_int(&[Value::Float(1e300)]),
+            err(RuntimeError::Overflow)
+        );
+        assert_eq!(int_to_float(&[int(3)]), Value::Float(3.0));
+    }
+
+    #[test]
+    fn math_functions_follow_f64_and_overflow_is_an_error() {
+        assert_eq!(
+            pow(&[Value::Float(2.0), Value::Float(10.0)]),
+            Value::Float(1024.0)
+        );
+        assert_eq!(
+            log(&[Value::Float(8.0), Value::Float(2.0)]),
+            Value::Float(3.0)
+        );
+        assert_eq!(abs(&[int(i64::MIN)]), err(RuntimeError::Overflow));
+        assert_eq!(abs(&[int(-4)]), int(4));
+        assert_eq!(max(&[int(3), int(7)]), int(7));
+        assert_eq!(
+            min(&[Value::Float(3.5), Value::Float(-1.0)]),
+            Value::Float(-1.0)
+        );
+        assert!(matches!(
+            pow(&[int(1)]),
+            Value::Error(RuntimeError::Other(_))
+        ));
+    }
+
+    #[test]
+    fn options_and_strings() {
+        let s = some(&[int(5)]);
+        assert_eq!(s.to_string(), "Some(5)");
+        assert_eq!(get_some(std::slice::from_ref(&s)), int(5));
+        assert_eq!(get_some(&[Value::None]), err(RuntimeError::GetSomeOfNone));
+        assert_eq!(get_some_or_else(&[Value::None, int(9)]), int(9));
+        assert_eq!(is_some(&[s]), Value::Bool(true));
+        assert_eq!(is_none(&[Value::None]), Value::Bool(true));
+        let ab = concat(&[Value::Str("a".into()), Value::Str("b".into())]);
+        assert_eq!(ab, Value::Str("ab".into()));
+        assert_eq!(to_string(&[Value::Float(1.0)]), Value::Str("1.0".into()));
+    }
+
+    #[test]
+    fn lists_build_index_and_fold() {
+        let l = list_append(&[list(&[1, 2]), int(3)]);
+        assert_eq!(l, list(&[1, 2, 3]));
+        assert_eq!(list_prepend(&[int(0), l.clone()]), list(&[0, 1, 2, 3]));
+        assert_eq!(list_size(std::slice::from_ref(&l)), int(3));
+        assert_eq!(list_get(&[l.clone(), int(1)]), int(2));
+        assert_eq!(
+            list_get(&[l.clone(), int(3)]),
+            err(RuntimeError::IndexOutOfBounds)
+        );
+        assert_eq!(
+            list_get(&[l.clone(), int(-1)]),
+            err(RuntimeError::IndexOutOfBounds)
+        );
+        assert_eq!(list_set(&[l.clone(), int(0), int(9)]), list(&[9, 2, 3]));
+        assert_eq!(
+            list_set(&[l.clone(), int(5), int(9)]),
+            err(RuntimeError::IndexOutOfBounds)
+        );
+        assert_eq!(list_head(std::slice::from_ref(&l)), int(1));
+        assert_eq!(list_last(std::slice::from_ref(&l)), int(3));
+        assert_eq!(list_tail(std::slice::from_ref(&l)), list(&[2, 3]));
+        assert_eq!(list_init(std::slice::from_ref(&l)), list(&[1, 2]));
+        assert_eq!(
+            list_head(&[list_empty(&[])]),
+            err(RuntimeError::IndexOutOfBounds)
+        );
+        assert_eq!(list_init(&[list_empty(&[])]), list(&[]));
+        let add = Value::Closure(Arc::new(Add));
+        assert_eq!(list_fold(&[l.clone(), int(100), add.clone()]), int(106));
+        assert_eq!(
+            list_fold(&[list(&[i64::MAX, 1]), int(0), add.clone()]),
+            err(RuntimeError::Overflow)
+        );
+        assert_eq!(list_map(&[l, add]), list(&[10, 20, 30]));
+    }
+}
