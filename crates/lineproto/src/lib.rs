@@ -7,8 +7,12 @@
 
 pub mod parse;
 pub mod split;
+mod telegraf_rules;
 pub mod write;
 
 pub use parse::{FieldValue, Metric, ParseError, parse_record};
-pub use split::{Record, RecordSplitter};
-pub use write::{LineWriter, NotFinite};
+pub use split::{DEFAULT_MAX_RECORD, OVERSIZED_HEAD, Record, RecordSplitter};
+pub use write::{
+    LineWriter, NotFinite, measurement_is_writable, write_field_key, write_field_value,
+    write_measurement, write_tag_key, write_tag_value, write_value,
+};

@@ -1,11 +1,17 @@
 //! Parsing one line-protocol record into a [`Metric`].
 //!
 //! Owns: the conversion from the `influxdb-line-protocol` crate's parse result to owned metrics,
-//! and the places where Telegraf's parser differs from the crate (research note §5): a trailing
-//! `\r` is accepted, `#` comment lines and blank lines are "no metric", out-of-range floats
-//! (`1e400`, which the crate reads as infinity) are rejected as Telegraf does, and a repeated
-//! tag or field key keeps the last value.
+//! and the places where Telegraf's parser differs from the crate (research note §2.2, §5): a
+//! trailing `\r` is accepted, `#` comment lines and blank lines are "no metric", the grammar
+//! differences handled in [`crate::telegraf_rules`] (tabs, `.5`, leading zeros, `\\`, ...),
+//! out-of-range floats (`1e400`, which the crate reads as infinity) are rejected as Telegraf does,
+//! and a repeated tag or field key keeps the last value (Telegraf overwrites).
+//!
+//! Deviation kept on purpose: invalid UTF-8 anywhere is an error (Telegraf, in Go, does not
+//! check), because the crate parses `&str`; Telegraf's own serializer only writes valid UTF-8
+//! for JSON-derived metrics.
 
+use crate::telegraf_rules;
 use influxdb_line_protocol::FieldValue as CrateValue;
 
 #[derive(Debug, Clone, PartialEq)]
@@ -60,12 +66,21 @@ impl std::fmt::Display for ParseError {
     }
 }
 
+/// At most 60 characters of `text` (control characters escaped), `…` marking a cut.
 fn excerpt(text: &str) -> String {
-    let mut s: String = text.chars().take(60).flat_map(char::escape_debug).collect();
-    if text.chars().count() > 60 {
-        s.push('…');
+    const MAX: usize = 60;
+    let mut out = String::new();
+    let mut len = 0;
+    for c in text.chars() {
+        let esc = c.escape_debug();
+        if len + esc.len() > MAX {
+            out.push('…');
+            break;
+        }
+        len += esc.len();
+        out.extend(esc);
     }
-    s
+    out
 }
 
 /// Parse one record (as cut by [`crate::RecordSplitter`]). `Ok(None)`: a blank or comment line.
@@ -75,7 +90,7 @@ pub fn parse_record(bytes: &[u8]) -> Result<Option<Metric>, ParseError> {
         Err(e) => {
             let lossy = String::from_utf8_lossy(bytes);
             return Err(ParseError {
-                column: String::from_utf8_lossy(&bytes[..e.valid_up_to()])
+                column: String::from_utf8_lossy(bytes.get(..e.valid_up_to()).unwrap_or_default())
                     .chars()
                     .count()
                     + 1,
@@ -84,29 +99,30 @@ pub fn parse_record(bytes: &[u8]) -> Result<Option<Metric>, ParseError> {
             });
         }
     };
-    let trimmed = text
-        .strip_suffix('\n')
-        .unwrap_or(text)
-        .strip_suffix('\r')
-        .unwrap_or_else(|| text.strip_suffix('\n').unwrap_or(text));
-    let body = trimmed.trim_start();
+    let line = text.strip_suffix('\n').unwrap_or(text);
+    let line = line.strip_suffix('\r').unwrap_or(line);
+    let body = line.trim_start_matches([' ', '\t', '\r', '\x0b', '\x0c']);
+    // Columns are reported over the whole record, leading blanks included.
+    let lead = line.len() - body.len();
+    let column = |byte: usize| {
+        line.get(..lead + byte)
+            .map_or(1, |head| head.chars().count() + 1)
+    };
     if body.trim().is_empty() || body.starts_with('#') {
         return Ok(None);
     }
-    if let Some(pos) = body.find('\0') {
-        return Err(ParseError {
-            column: body[..pos].chars().count() + 1,
-            reason: "NUL byte in the record".into(),
-            excerpt: excerpt(body),
-        });
-    }
-    let mut lines = influxdb_line_protocol::parse_lines(body);
+    let fixed = telegraf_rules::normalize(body).map_err(|f| ParseError {
+        column: column(f.at),
+        reason: f.reason,
+        excerpt: excerpt(body),
+    })?;
+    let mut lines = influxdb_line_protocol::parse_lines(&fixed);
     let parsed = match lines.next() {
         Some(Ok(p)) => p,
         Some(Err(e)) => {
             let reason = e.to_string();
             return Err(ParseError {
-                column: column_of(body, &reason),
+                column: column(offset_of(body, &reason)),
                 reason,
                 excerpt: excerpt(body),
             });
@@ -133,9 +149,7 @@ pub fn parse_record(bytes: &[u8]) -> Result<Option<Metric>, ParseError> {
         let value = match v {
             CrateValue::F64(f) if !f.is_finite() => {
                 return Err(ParseError {
-                    column: body
-                        .find(k.as_str())
-                        .map_or(1, |i| body[..i].chars().count() + 1),
+                    column: column(body.find(k.as_str()).unwrap_or(0)),
                     reason: format!("field `{}`: float value out of range", k.as_str()),
                     excerpt: excerpt(body),
                 });
@@ -146,12 +160,9 @@ pub fn parse_record(bytes: &[u8]) -> Result<Option<Metric>, ParseError> {
             CrateValue::Boolean(b) => FieldValue::Bool(*b),
             CrateValue::String(s) => FieldValue::Str(s.as_str().to_string()),
         };
-        let k = k.as_str().to_string();
-        match fields.iter_mut().find(|(fk, _)| *fk == k) {
-            Some(slot) => slot.1 = value,
-            None => fields.push((k, value)),
-        }
+        fields.push((k.as_str().to_string(), value));
     }
+    keep_last_of_each_key(&mut fields);
     Ok(Some(Metric {
         measurement: parsed.series.measurement.as_str().to_string(),
         tags,
@@ -160,12 +171,33 @@ pub fn parse_record(bytes: &[u8]) -> Result<Option<Metric>, ParseError> {
     }))
 }
 
+/// Telegraf overwrites a repeated field: keep the first position, the last value. Records
+/// rarely repeat keys, so first check cheaply (a sort of borrowed keys: O(n log n) for the
+/// 360-field lidar line) before rebuilding.
+fn keep_last_of_each_key(fields: &mut Vec<(String, FieldValue)>) {
+    let mut keys: Vec<&str> = fields.iter().map(|(k, _)| k.as_str()).collect();
+    keys.sort_unstable();
+    if keys.windows(2).all(|w| w.first() != w.last()) {
+        return;
+    }
+    let mut out: Vec<(String, FieldValue)> = Vec::with_capacity(fields.len());
+    for (k, v) in fields.drain(..) {
+        match out.iter_mut().find(|(ok, _)| *ok == k) {
+            Some(slot) => slot.1 = v,
+            None => out.push((k, v)),
+        }
+    }
+    *fields = out;
+}
+
 /// The crate reports no position; point at the offending text when its message quotes it.
-fn column_of(body: &str, reason: &str) -> usize {
-    let quoted = reason.split('\'').nth(1).filter(|q| !q.is_empty());
-    quoted
+fn offset_of(body: &str, reason: &str) -> usize {
+    reason
+        .split('\'')
+        .nth(1)
+        .filter(|q| !q.is_empty())
         .and_then(|q| body.find(q))
-        .map_or(1, |i| body[..i].chars().count() + 1)
+        .unwrap_or(0)
 }
 
 #[cfg(test)]
@@ -211,6 +243,12 @@ mod tests {
             "m 1",
             "m a=99999999999999999999i 1",
             "m a=1 99999999999999999999",
+            "m a=1 9999999999999999999",
+            "m a=18446744073709551616u 1",
+            "m a=-1u 1",
+            "m a=1.5i 1",
+            "m a=yes 1",
+            "m,t= a=1 1",
             "m a=\"unterminated 1",
         ] {
             let e = parse_record(bad.as_bytes()).unwrap_err();
@@ -220,5 +258,43 @@ mod tests {
         assert_eq!(e.reason, "invalid UTF-8");
         assert_eq!(e.column, 5);
         assert!(parse_record(b"m a=1\0 1").is_err());
+    }
+
+    #[test]
+    fn reads_telegraf_forms_the_crate_alone_gets_wrong() {
+        let m = ok("m,t=a\\\\b\tc=.5,d=5.,e=-.25e1\t7\n");
+        assert_eq!(
+            m.tag("t"),
+            Some("a\\\\b"),
+            "Telegraf keeps `\\\\` as two backslashes"
+        );
+        assert_eq!(m.field("c"), Some(&FieldValue::Float(0.5)));
+        assert_eq!(m.field("d"), Some(&FieldValue::Float(5.0)));
+        assert_eq!(m.field("e"), Some(&FieldValue::Float(-2.5)));
+        assert_eq!(m.timestamp, Some(7));
+        assert_eq!(
+            ok("m s=\"a\0b\" 1").field("s"),
+            Some(&FieldValue::Str("a\0b".into()))
+        );
+        assert_eq!(parse_record(b"  \t# indented comment \"\n").unwrap(), None);
+    }
+
+    #[test]
+    fn columns_count_characters_of_the_whole_record() {
+        let e = parse_record("  m,t=\u{e9} a=007i 1".as_bytes()).unwrap_err();
+        assert_eq!(e.column, 11, "{e:?}");
+        assert!(e.reason.contains("leading zero"), "{e:?}");
+        let e = parse_record(b"m a=1,b=1e400 1").unwrap_err();
+        assert_eq!(e.column, 7, "{e:?}");
+        let e = parse_record(b"m,a,b=c f=1 1").unwrap_err();
+        assert_eq!(e.column, 3, "{e:?}");
+    }
+
+    #[test]
+    fn excerpts_are_short_and_escaped() {
+        let long = format!("m\t{} 1", "x".repeat(500));
+        let e = parse_record(long.as_bytes()).unwrap_err();
+        assert!(e.excerpt.chars().count() <= 61, "{}", e.excerpt);
+        assert!(e.excerpt.starts_with("m\\t"), "{}", e.excerpt);
     }
 }

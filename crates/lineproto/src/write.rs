@@ -1,11 +1,18 @@
 //! Writing line protocol that Telegraf's parser reads back unchanged.
 //!
-//! Owns: escaping of measurements, tag keys/values and field keys (Telegraf's serializer rules:
-//! tab/LF/FF/CR as `\t` `\n` `\f` `\r`, comma and space (and `=` outside measurements)
-//! backslash-escaped, trailing backslashes dropped), string field values (`"` and `\` escaped),
-//! and value formatting (Float shortest round-trip with no exponent, Int `5i`, UInt `5u`).
-//! Hand-written instead of the crate's builder, which writes NaN/inf, empty tag values and raw
-//! newlines in tags that Telegraf rejects (research note §5.3).
+//! Owns: escaping of measurements, tag keys/values and field keys (Telegraf's serializer rules,
+//! research note §2.1/§2.4: tab/LF/FF/CR as `\t` `\n` `\f` `\r`, comma and space (and `=`
+//! outside measurements) backslash-escaped, backslashes themselves not escaped, trailing
+//! backslashes dropped), string field values (`"` and `\` escaped), value formatting (Float in
+//! shortest round-trip form with no exponent, Int `5i`, UInt `5u`), and [`LineWriter`] for whole
+//! lines. Hand-written instead of the crate's builder, which writes NaN/inf, empty tag values and
+//! raw newlines in tags that Telegraf rejects, and doubles backslashes Telegraf keeps doubled
+//! (research note §5.3).
+//!
+//! Where a name cannot be represented exactly the writer stays valid rather than exact: other
+//! control characters become `\xNN` text, and a backslash run of odd length right before a
+//! character that gets escaped (or before `"`) gains one backslash, so that it cannot pair with
+//! the escape (Telegraf's own serializer writes a broken line there).
 
 use crate::parse::FieldValue;
 use std::fmt::Write as _;
@@ -14,22 +21,77 @@ use std::fmt::Write as _;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NotFinite;
 
+/// The escape written for `c` in a name, if it needs one.
+fn name_escape(c: char, escape_eq: bool) -> Option<&'static str> {
+    Some(match c {
+        '\t' => "\\t",
+        '\n' => "\\n",
+        '\u{c}' => "\\f",
+        '\r' => "\\r",
+        ',' => "\\,",
+        ' ' => "\\ ",
+        '=' if escape_eq => "\\=",
+        _ => return None,
+    })
+}
+
 fn escape_name(out: &mut String, s: &str, escape_eq: bool) {
-    let s = s.trim_end_matches('\\');
+    let mut run = 0usize; // pending backslashes
     for c in s.chars() {
-        match c {
-            '\t' => out.push_str("\\t"),
-            '\n' => out.push_str("\\n"),
-            '\u{c}' => out.push_str("\\f"),
-            '\r' => out.push_str("\\r"),
-            ',' | ' ' => {
-                out.push('\\');
-                out.push(c);
+        if c == '\\' {
+            run += 1;
+            continue;
+        }
+        let esc = name_escape(c, escape_eq);
+        let other_control = esc.is_none() && c.is_control() && c.is_ascii();
+        let pad = run % 2 == 1 && (esc.is_some() || other_control || c == '"');
+        out.extend(std::iter::repeat_n('\\', run + usize::from(pad)));
+        run = 0;
+        match esc {
+            Some(e) => out.push_str(e),
+            None if other_control => {
+                let _ = write!(out, "\\x{:02x}", u32::from(c));
             }
-            '=' if escape_eq => out.push_str("\\="),
-            c => out.push(c),
+            None => out.push(c),
         }
     }
+    // Trailing backslashes cannot be written (Telegraf's serializer drops them too).
+}
+
+/// Whether `name` can be written as a measurement Telegraf reads back: not empty, and not
+/// starting with `#` (such a line is a comment) once trailing backslashes are dropped.
+pub fn measurement_is_writable(name: &str) -> bool {
+    let name = name.trim_end_matches('\\');
+    !name.is_empty() && !name.starts_with('#')
+}
+
+/// Append an escaped measurement name (see [`measurement_is_writable`] for names that cannot be).
+pub fn write_measurement(out: &mut String, name: &str) {
+    escape_name(out, name, false);
+}
+
+/// Append an escaped tag key.
+pub fn write_tag_key(out: &mut String, key: &str) {
+    escape_name(out, key, true);
+}
+
+/// Append an escaped tag value.
+pub fn write_tag_value(out: &mut String, value: &str) {
+    escape_name(out, value, true);
+}
+
+/// Append an escaped field key.
+pub fn write_field_key(out: &mut String, key: &str) {
+    escape_name(out, key, true);
+}
+
+/// Append a field value in line-protocol form; NaN and infinite floats are refused.
+pub fn write_field_value(out: &mut String, value: &FieldValue) -> Result<(), NotFinite> {
+    write_value(out, value)
+}
+
+fn writable_name(s: &str) -> bool {
+    !s.trim_end_matches('\\').is_empty()
 }
 
 /// Builds one line: `measurement[,tags] fields [timestamp]\n`. Fields with non-finite floats are
@@ -37,6 +99,7 @@ fn escape_name(out: &mut String, s: &str, escape_eq: bool) {
 #[derive(Debug)]
 pub struct LineWriter {
     line: String,
+    measurement_ok: bool,
     fields: usize,
     in_fields: bool,
     skipped: usize,
@@ -48,6 +111,7 @@ impl LineWriter {
         escape_name(&mut line, measurement, false);
         LineWriter {
             line,
+            measurement_ok: measurement_is_writable(measurement),
             fields: 0,
             in_fields: false,
             skipped: 0,
@@ -56,10 +120,7 @@ impl LineWriter {
 
     /// Add a tag (before any field). Tags with an empty key or value are skipped, as Telegraf does.
     pub fn tag(&mut self, key: &str, value: &str) -> &mut Self {
-        if self.in_fields
-            || key.trim_end_matches('\\').is_empty()
-            || value.trim_end_matches('\\').is_empty()
-        {
+        if self.in_fields || !writable_name(key) || !writable_name(value) {
             return self;
         }
         self.line.push(',');
@@ -69,11 +130,10 @@ impl LineWriter {
         self
     }
 
-    /// Add a field; a NaN or infinite Float is skipped and counted.
+    /// Add a field; a NaN or infinite Float, or an empty key, is skipped and counted.
     pub fn field(&mut self, key: &str, value: &FieldValue) -> &mut Self {
-        if let FieldValue::Float(f) = value
-            && !f.is_finite()
-        {
+        let not_finite = matches!(value, FieldValue::Float(f) if !f.is_finite());
+        if not_finite || !writable_name(key) {
             self.skipped += 1;
             return self;
         }
@@ -87,10 +147,11 @@ impl LineWriter {
         self
     }
 
-    /// The finished line (with `\n`), or `None` when every field was skipped; and the number of
-    /// fields skipped for being NaN or infinite.
+    /// The finished line (with `\n`), or `None` when every field was skipped or the measurement
+    /// cannot be written ([`measurement_is_writable`]); and the number of fields skipped for
+    /// being NaN or infinite or having an empty key.
     pub fn finish(mut self, timestamp: Option<i64>) -> (Option<String>, usize) {
-        if self.fields == 0 {
+        if self.fields == 0 || !self.measurement_ok {
             return (None, self.skipped);
         }
         if let Some(ts) = timestamp {
