@@ -15,18 +15,38 @@ fn options(id: &str, port: u16) -> MqttOptions {
     o
 }
 
-/// Subscribe to `topic`; returns once the broker confirmed the subscription.
+/// Subscribe to `topic`; returns once the broker confirmed the subscription. A connection that
+/// fails before the SUBACK (a broker still starting, a reset under load) is retried with a new
+/// client, up to five times, before the test fails with the last error.
 pub fn subscribe(port: u16, topic: &str, id: &str) -> Receiver<(Instant, Vec<u8>)> {
+    let mut last_error = String::from("no attempt made");
+    for attempt in 0..5 {
+        match try_subscribe(port, topic, id) {
+            Ok(rx) => return rx,
+            Err(e) => {
+                last_error = e;
+                std::thread::sleep(Duration::from_millis(100 * (attempt + 1)));
+            }
+        }
+    }
+    panic!("no SUBACK from mosquitto on port {port}: {last_error}");
+}
+
+fn try_subscribe(port: u16, topic: &str, id: &str) -> Result<Receiver<(Instant, Vec<u8>)>, String> {
     let (client, mut connection) = Client::new(options(id, port), 1024);
-    client.subscribe(topic, QoS::AtLeastOnce).unwrap();
+    client
+        .subscribe(topic, QoS::AtLeastOnce)
+        .map_err(|e| e.to_string())?;
     let (tx, rx) = channel();
-    let (ready_tx, ready_rx) = channel();
+    let (ready_tx, ready_rx) = channel::<Result<(), String>>();
     std::thread::spawn(move || {
         let _client = client; // keep the request channel open
+        let mut ready = false;
         for event in connection.iter() {
             match event {
                 Ok(Event::Incoming(Packet::SubAck(_))) => {
-                    let _ = ready_tx.send(());
+                    ready = true;
+                    let _ = ready_tx.send(Ok(()));
                 }
                 Ok(Event::Incoming(Packet::Publish(p))) => {
                     if tx.send((Instant::now(), p.payload.to_vec())).is_err() {
@@ -34,14 +54,20 @@ pub fn subscribe(port: u16, topic: &str, id: &str) -> Receiver<(Instant, Vec<u8>
                     }
                 }
                 Ok(_) => {}
-                Err(_) => return,
+                Err(e) => {
+                    if !ready {
+                        let _ = ready_tx.send(Err(format!("{e:?}")));
+                    }
+                    return;
+                }
             }
         }
     });
-    ready_rx
-        .recv_timeout(Duration::from_secs(10))
-        .expect("no SUBACK from mosquitto");
-    rx
+    match ready_rx.recv_timeout(Duration::from_secs(10)) {
+        Ok(Ok(())) => Ok(rx),
+        Ok(Err(e)) => Err(e),
+        Err(e) => Err(format!("{e}")),
+    }
 }
 
 /// Collect `n` messages, waiting at most `timeout` for each.
