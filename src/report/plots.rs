@@ -9,6 +9,7 @@
 
 use super::series::Picked;
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::ops::Range;
 
@@ -111,6 +112,59 @@ fn legend(color: RGBColor) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
     move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
 }
 
+type Chart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// A titled chart over the run's time span with the y range `ys`, axes labelled.
+fn chart<'a, 'b>(
+    root: &'a Root<'b>,
+    picked: &Picked,
+    title: &str,
+    ys: Range<f64>,
+    y_desc: &str,
+    y_label_width: u32,
+) -> Result<Chart<'a, 'b>, Box<dyn std::error::Error + 'static>> {
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, ("sans-serif", 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(y_label_width)
+        .build_cartesian_2d(time_span(picked), ys)?;
+    chart
+        .configure_mesh()
+        .x_desc("time [s]")
+        .y_desc(y_desc)
+        .draw()?;
+    Ok(chart)
+}
+
+/// A labelled line through `points`.
+fn line(
+    chart: &mut Chart<'_, '_>,
+    points: &[(f64, f64)],
+    color: RGBColor,
+    width: u32,
+    label: &str,
+) -> DrawResult {
+    chart
+        .draw_series(LineSeries::new(
+            points.iter().copied(),
+            color.stroke_width(width),
+        ))?
+        .label(label)
+        .legend(legend(color));
+    Ok(())
+}
+
+/// The legend box, drawn last.
+fn legend_box<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>) -> DrawResult {
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    Ok(())
+}
+
 fn speeds(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
     let ys = picked
         .expected_speed
@@ -119,38 +173,28 @@ fn speeds(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
         .chain(&picked.actual_speed.points)
         .chain(&picked.action_speed.points)
         .map(|(_, v)| *v);
-    let mut chart = ChartBuilder::on(root)
-        .caption(title, ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(64)
-        .build_cartesian_2d(time_span(picked), span(ys, true))?;
-    chart
-        .configure_mesh()
-        .x_desc("time [s]")
-        .y_desc("speed [m/s]")
-        .draw()?;
-    chart
-        .draw_series(LineSeries::new(
-            picked.expected_speed.points.clone(),
-            EXPECTED.stroke_width(2),
-        ))?
-        .label("expected speed")
-        .legend(legend(EXPECTED));
-    chart
-        .draw_series(LineSeries::new(
-            picked.actual_speed.points.clone(),
-            ACTUAL.stroke_width(2),
-        ))?
-        .label("actual speed")
-        .legend(legend(ACTUAL));
-    chart
-        .draw_series(LineSeries::new(
-            picked.action_speed.points.clone(),
-            ACTION.stroke_width(1),
-        ))?
-        .label("action speed")
-        .legend(legend(ACTION));
+    let mut chart = chart(root, picked, title, span(ys, true), "speed [m/s]", 64)?;
+    line(
+        &mut chart,
+        &picked.expected_speed.points,
+        EXPECTED,
+        2,
+        "expected speed",
+    )?;
+    line(
+        &mut chart,
+        &picked.actual_speed.points,
+        ACTUAL,
+        2,
+        "actual speed",
+    )?;
+    line(
+        &mut chart,
+        &picked.action_speed.points,
+        ACTION,
+        1,
+        "action speed",
+    )?;
     // Mark each augmented action at the speed sent (a step's action and flag share its time).
     let marks: Vec<(f64, f64)> = picked
         .augmented
@@ -174,12 +218,7 @@ fn speeds(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
         )?
         .label("augmented action")
         .legend(|(x, y)| TriangleMarker::new((x + 10, y), 5, AUGMENTED.filled()));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
-    Ok(())
+    legend_box(&mut chart)
 }
 
 fn status_color(status: &str) -> RGBColor {
@@ -192,29 +231,14 @@ fn status_color(status: &str) -> RGBColor {
 
 fn p1(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
     let ys = picked.p1_margin.points.iter().map(|(_, v)| *v);
-    let mut chart = ChartBuilder::on(root)
-        .caption(title, ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(64)
-        .build_cartesian_2d(time_span(picked), span(ys.chain([0.0]), false))?;
-    chart
-        .configure_mesh()
-        .x_desc("time [s]")
-        .y_desc("margin Ldist - Bdist [m]")
-        .draw()?;
+    let ys = span(ys.chain([0.0]), false);
+    let mut chart = chart(root, picked, title, ys, "margin Ldist - Bdist [m]", 64)?;
     let end = time_span(picked).end;
     chart.draw_series(LineSeries::new(
         vec![(0.0, 0.0), (end, 0.0)],
         BLACK.mix(0.5),
     ))?;
-    chart
-        .draw_series(LineSeries::new(
-            picked.p1_margin.points.clone(),
-            EXPECTED.stroke_width(2),
-        ))?
-        .label("margin")
-        .legend(legend(EXPECTED));
+    line(&mut chart, &picked.p1_margin.points, EXPECTED, 2, "margin")?;
     // Status at each step: on the margin curve where there is one, else on the zero line.
     for status in ["ok", "violated", "unknown"] {
         let color = status_color(status);
@@ -242,12 +266,7 @@ fn p1(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
             .label(format!("status {status}"))
             .legend(move |(x, y)| Circle::new((x + 10, y), 3, color.filled()));
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
-    Ok(())
+    legend_box(&mut chart)
 }
 
 fn p3(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
@@ -257,28 +276,12 @@ fn p3(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
         .iter()
         .chain(&picked.p3_dropouts.points)
         .map(|(_, v)| *v);
-    let mut chart = ChartBuilder::on(root)
-        .caption(title, ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(64)
-        .build_cartesian_2d(time_span(picked), span(ys, true))?;
-    chart
-        .configure_mesh()
-        .x_desc("time [s]")
-        .y_desc("beams per scan")
-        .draw()?;
+    let mut chart = chart(root, picked, title, span(ys, true), "beams per scan", 64)?;
     for (series, color, label) in [
         (&picked.p3_spikes, ACTUAL, "spikes"),
         (&picked.p3_dropouts, DROPOUT, "dropouts"),
     ] {
-        chart
-            .draw_series(LineSeries::new(
-                series.points.clone(),
-                color.stroke_width(1),
-            ))?
-            .label(label)
-            .legend(legend(color));
+        line(&mut chart, &series.points, color, 1, label)?;
         chart.draw_series(
             series
                 .points
@@ -286,12 +289,7 @@ fn p3(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
                 .map(|p| Circle::new(*p, 2, color.filled())),
         )?;
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
-    Ok(())
+    legend_box(&mut chart)
 }
 
 fn mse(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
@@ -301,35 +299,22 @@ fn mse(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
         .iter()
         .chain(&picked.running_mse.points)
         .map(|(_, v)| *v);
-    let mut chart = ChartBuilder::on(root)
-        .caption(title, ("sans-serif", 20))
-        .margin(12)
-        .x_label_area_size(40)
-        .y_label_area_size(80)
-        .build_cartesian_2d(time_span(picked), span(ys, true))?;
-    chart
-        .configure_mesh()
-        .x_desc("time [s]")
-        .y_desc("speed_mse [(m/s)^2]")
-        .draw()?;
-    chart
-        .draw_series(LineSeries::new(
-            picked.speed_mse.points.clone(),
-            EXPECTED.stroke_width(2),
-        ))?
-        .label("speed_mse (spec)")
-        .legend(legend(EXPECTED));
-    chart
-        .draw_series(LineSeries::new(
-            picked.running_mse.points.clone(),
-            ACTUAL.stroke_width(1),
-        ))?
-        .label("MSE of the telemetry (report)")
-        .legend(legend(ACTUAL));
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
-    Ok(())
+    let mut chart = chart(
+        root,
+        picked,
+        title,
+        span(ys, true),
+        "speed_mse [(m/s)^2]",
+        80,
+    )?;
+    line(
+        &mut chart,
+        &picked.speed_mse.points,
+        EXPECTED,
+        2,
+        "speed_mse (spec)",
+    )?;
+    let label = "MSE of the telemetry (report)";
+    line(&mut chart, &picked.running_mse.points, ACTUAL, 1, label)?;
+    legend_box(&mut chart)
 }
