@@ -223,6 +223,8 @@ pub struct Compiler<'a> {
     node_types: HashMap<NodeId, Type>,
     /// The unit of the base time in femtoseconds (`µs` in `33333 µs`); `None`: `base_ns`.
     base_unit: Option<i128>,
+    /// Time literals are allowed (a base time is set, or 1 ns is assumed).
+    time_units: bool,
 }
 
 fn unit_factor(unit: &str) -> Option<i128> {
@@ -564,8 +566,15 @@ impl<'a> Compiler<'a> {
             compiled_fns: HashMap::new(),
             unit_node: None,
             base_unit: None,
+            time_units: true,
             node_types: HashMap::new(),
         }
+    }
+
+    /// Allow or forbid time literals (forbidden when the spec runs without a base time).
+    pub fn with_time_units(mut self, allowed: bool) -> Self {
+        self.time_units = allowed;
+        self
     }
 
     /// Set the unit of the base time (see [`parse_base_parts`]) for time literal conversion.
@@ -876,8 +885,11 @@ impl<'a> Compiler<'a> {
             Err(()) => return Err(self.diags),
         };
         let _ = self.sources;
+        let (last_slot, n_last_slots) = crate::ir::last_slots(&self.nodes, &order);
         Ok((
             Program {
+                last_slot,
+                n_last_slots,
                 inputs: self.inputs,
                 outputs,
                 global_annotations: Vec::new(),
@@ -1292,6 +1304,17 @@ impl<'a> Compiler<'a> {
             ExprKind::Int { value, unit } => {
                 let v = match unit {
                     None => *value,
+                    Some(u) if !self.time_units => {
+                        self.diags.push(
+                            Diagnostic::error(
+                                Category::Time,
+                                Some(u.span),
+                                format!("time unit `{}` used, but no base time is set", u.name),
+                            )
+                            .with_help("set the base time of the trace (`--base-time 1ms`)"),
+                        );
+                        return Err(Fail);
+                    }
                     Some(u) => {
                         let f = unit_factor(&u.name).unwrap_or(1);
                         let fs = value.checked_mul(f).unwrap_or(i128::MAX);

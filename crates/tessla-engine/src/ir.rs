@@ -219,6 +219,59 @@ pub struct Program {
     pub output_nodes: Vec<NodeId>,
     /// The `Delay` nodes (the monitor arms and fires only these).
     pub delays: Vec<NodeId>,
+    /// Per node: its slot among the values a monitor keeps from earlier steps, or [`NO_SLOT`]
+    /// when no node reads it across steps (see [`last_slots`]).
+    pub last_slot: Vec<u32>,
+    /// Number of slots in use in `last_slot`.
+    pub n_last_slots: usize,
+}
+
+/// `last_slot` of a node whose earlier values nobody reads.
+pub const NO_SLOT: u32 = u32::MAX;
+
+/// Which nodes' latest values must persist between steps: the lazy argument of `last`, the
+/// arguments of signal lifts (they use the latest value of silent arguments), the condition of
+/// `filter`, both arguments of `defaultFrom`, and `fold`/`reduce` accumulators. Returns the slot
+/// of each node (or [`NO_SLOT`]) and the number of slots; a monitor instance stores only these.
+pub fn last_slots(nodes: &[Node], order: &[NodeId]) -> (Vec<u32>, usize) {
+    let mut need = vec![false; nodes.len()];
+    let mut mark = |n: NodeId| {
+        if let Some(x) = need.get_mut(n) {
+            *x = true;
+        }
+    };
+    for &i in order {
+        match nodes.get(i) {
+            Some(Node::Last { value, .. }) => mark(*value),
+            Some(Node::DefaultFrom { stream, from }) => {
+                mark(*stream);
+                mark(*from);
+            }
+            Some(Node::SLift { args, .. }) => {
+                for a in args {
+                    if let SArg::Stream(n) = a {
+                        mark(*n);
+                    }
+                }
+            }
+            Some(Node::Filter { cond, .. }) => mark(*cond),
+            Some(Node::Fold { .. } | Node::Reduce { .. }) => mark(i),
+            _ => {}
+        }
+    }
+    let mut next = 0u32;
+    let slots = need
+        .iter()
+        .map(|&n| {
+            if n {
+                next += 1;
+                next - 1
+            } else {
+                NO_SLOT
+            }
+        })
+        .collect();
+    (slots, next as usize)
 }
 
 impl Program {
