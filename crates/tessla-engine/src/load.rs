@@ -81,6 +81,13 @@ pub fn load_with(
         }
     };
     let asts: Vec<_> = files.into_iter().map(|(_, f)| f).collect();
+    let type_errors = crate::typeck::check(&asts);
+    if !type_errors.is_empty() {
+        return Err(LoadError {
+            sources,
+            diagnostics: type_errors,
+        });
+    }
     let result = compile::Compiler::new(&sources, base)
         .with_base_unit(base_unit)
         .with_time_units(!(options.time_units_need_base && options.base_time.is_none()))
