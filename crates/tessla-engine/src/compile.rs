@@ -227,6 +227,25 @@ pub struct Compiler<'a> {
     time_units: bool,
 }
 
+/// The type of a parameterless def's constant value, if it is a literal constant.
+fn const_type_of(d: &Def) -> Option<Type> {
+    match &d.body {
+        Body::Expr { expr, .. } => match &expr.kind {
+            ExprKind::Int { .. } => Some(Type::Int),
+            ExprKind::Float(_) => Some(Type::Float),
+            ExprKind::Str { .. } => Some(Type::String),
+            ExprKind::Var(v) if v.name == "true" || v.name == "false" => Some(Type::Bool),
+            ExprKind::Unary { operand, .. } => match &operand.kind {
+                ExprKind::Int { .. } => Some(Type::Int),
+                ExprKind::Float(_) => Some(Type::Float),
+                _ => None,
+            },
+            _ => None,
+        },
+        Body::Extern { .. } => None,
+    }
+}
+
 fn unit_factor(unit: &str) -> Option<i128> {
     Some(match unit {
         "fs" => 1,
@@ -711,10 +730,15 @@ impl<'a> Compiler<'a> {
         }
         // --set overrides replace the body of a top-level constant.
         for (name, value) in overrides {
+            // Parameters: top-level defs whose value is a constant literal.
             let known: Vec<String> = names
                 .iter()
                 .filter_map(|(n, b)| match b {
-                    Binding::Def(e) if e.def.params.is_none() && !n.contains('.') => {
+                    Binding::Def(e)
+                        if e.def.params.is_none()
+                            && !n.contains('.')
+                            && const_type_of(&e.def).is_some() =>
+                    {
                         Some(n.clone())
                     }
                     _ => None,
@@ -748,8 +772,8 @@ impl<'a> Compiler<'a> {
                 }
             };
             // Type check: the new value must be a constant of the old value's type.
-            let old_ty = self.const_type_of(&entry.def);
-            let new_ty = self.const_type_of(&new_def);
+            let old_ty = const_type_of(&entry.def);
+            let new_ty = const_type_of(&new_def);
             if old_ty != new_ty || new_ty.is_none() {
                 self.diags.push(Diagnostic::error(
                     Category::Type,
@@ -904,25 +928,6 @@ impl<'a> Compiler<'a> {
             },
             self.diags,
         ))
-    }
-
-    /// The type of a parameterless def's constant value, if it is a literal constant.
-    fn const_type_of(&mut self, d: &Def) -> Option<Type> {
-        match &d.body {
-            Body::Expr { expr, .. } => match &expr.kind {
-                ExprKind::Int { .. } => Some(Type::Int),
-                ExprKind::Float(_) => Some(Type::Float),
-                ExprKind::Str { .. } => Some(Type::String),
-                ExprKind::Var(v) if v.name == "true" || v.name == "false" => Some(Type::Bool),
-                ExprKind::Unary { operand, .. } => match &operand.kind {
-                    ExprKind::Int { .. } => Some(Type::Int),
-                    ExprKind::Float(_) => Some(Type::Float),
-                    _ => None,
-                },
-                _ => None,
-            },
-            Body::Extern { .. } => None,
-        }
     }
 
     fn slift_node(&mut self, args: Vec<SArg>, f: Func) -> NodeId {

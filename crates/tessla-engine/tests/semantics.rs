@@ -242,3 +242,26 @@ fn robot_monitor_instance_state_is_small() {
     );
     assert!(bytes < 4096, "{bytes} bytes per instance");
 }
+
+/// `--set` of an unknown name lists only the parameters (defs whose value is a literal).
+#[test]
+fn set_lists_only_parameters_as_known_constants() {
+    let resolver = MemResolver {
+        files: [(
+            "spec.tessla".to_string(),
+            "in x: Events[Float]\ndef delta = 0.5\ndef n = -3\ndef d = x -. delta\nout d\n"
+                .to_string(),
+        )]
+        .into(),
+    };
+    let options = LoadOptions {
+        base_time: None,
+        overrides: vec![("nope".into(), "1".into())],
+        time_units_need_base: false,
+    };
+    let e = tessla_engine::load_with("spec.tessla", &resolver, &options)
+        .unwrap_err()
+        .render();
+    assert!(e.contains("known constants: delta, n"), "{e}");
+    assert!(!e.contains(", d"), "{e}");
+}
