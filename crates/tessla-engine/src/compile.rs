@@ -10,7 +10,7 @@
 
 use crate::collections;
 use crate::ir::{
-    Annotation, Func, InputInfo, LiftFunc, Node, NodeId, OutputInfo, Program, SArg, Type,
+    Annotation, Func, InputInfo, LiftFunc, Node, NodeId, OutputInfo, Program, SArg, ScalarOp, Type,
 };
 use crate::natives;
 use crate::value::{Callable, RuntimeError, Value};
@@ -460,6 +460,29 @@ fn binop_fn(op: BinOp) -> Func {
             _ => Value::Error(RuntimeError::Other("an operator needs two operands".into())),
         }),
     }
+}
+
+/// The operators the evaluator runs inline on scalars ([`Node::Bin`]).
+fn scalar_op(op: BinOp) -> Option<ScalarOp> {
+    Some(match op {
+        BinOp::FAdd => ScalarOp::FAdd,
+        BinOp::FSub => ScalarOp::FSub,
+        BinOp::FMul => ScalarOp::FMul,
+        BinOp::FDiv => ScalarOp::FDiv,
+        BinOp::FLt => ScalarOp::FLt,
+        BinOp::FGt => ScalarOp::FGt,
+        BinOp::FLe => ScalarOp::FLe,
+        BinOp::FGe => ScalarOp::FGe,
+        BinOp::Add => ScalarOp::IAdd,
+        BinOp::Sub => ScalarOp::ISub,
+        BinOp::Lt => ScalarOp::ILt,
+        BinOp::Gt => ScalarOp::IGt,
+        BinOp::Le => ScalarOp::ILe,
+        BinOp::Ge => ScalarOp::IGe,
+        BinOp::And => ScalarOp::And,
+        BinOp::Or => ScalarOp::Or,
+        _ => return None,
+    })
 }
 
 /// `x << s` on unbounded integers (TeSSLa's semantics): a negative `s` shifts right
@@ -928,6 +951,18 @@ impl<'a> Compiler<'a> {
             },
             self.diags,
         ))
+    }
+
+    /// Replace the signal lift just made for `t` by a node the evaluator runs inline (a typed
+    /// fast path: no closure call, no argument copies).
+    fn inline_op(&mut self, t: &Term, make: impl FnOnce(&[SArg], &Func) -> Option<Node>) {
+        if let Term::Stream(n) = t
+            && let Some(Node::SLift { args, f }) = self.nodes.get(*n)
+            && let Some(node) = make(args, f)
+            && let Some(slot) = self.nodes.get_mut(*n)
+        {
+            *slot = node;
+        }
     }
 
     fn slift_node(&mut self, args: Vec<SArg>, f: Func) -> NodeId {
@@ -1542,6 +1577,17 @@ impl<'a> Compiler<'a> {
                     _ => Type::Bool,
                 };
                 let r = self.apply_value_fn(binop_fn(op), vec![a, b], e.span)?;
+                if let Some(sop) = scalar_op(op) {
+                    self.inline_op(&r, |args, f| match args {
+                        [a, b] => Some(Node::Bin {
+                            op: sop,
+                            a: a.clone(),
+                            b: b.clone(),
+                            f: f.clone(),
+                        }),
+                        _ => None,
+                    });
+                }
                 Ok(self.typed(r, ty))
             }
             ExprKind::If {
@@ -1586,6 +1632,14 @@ impl<'a> Compiler<'a> {
                     _ => Type::Unknown,
                 };
                 let r = self.apply_value_fn(ite, vec![c, t, f], e.span)?;
+                self.inline_op(&r, |args, _| match args {
+                    [c, t, f] => Some(Node::Ite {
+                        cond: c.clone(),
+                        then: t.clone(),
+                        other: f.clone(),
+                    }),
+                    _ => None,
+                });
                 Ok(self.typed(r, ty))
             }
             ExprKind::Lambda { params, body } => Ok(Term::Func(Rc::new(FuncTerm::Lambda {

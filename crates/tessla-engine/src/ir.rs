@@ -91,6 +91,56 @@ pub enum SArg {
     Const(Value),
 }
 
+/// Operators with an inline fast path in the evaluator (see [`Node::Bin`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ScalarOp {
+    FAdd,
+    FSub,
+    FMul,
+    FDiv,
+    FLt,
+    FGt,
+    FLe,
+    FGe,
+    IAdd,
+    ISub,
+    ILt,
+    IGt,
+    ILe,
+    IGe,
+    And,
+    Or,
+}
+
+impl ScalarOp {
+    /// The result on scalar operands, or `None` for other operands (the general closure then
+    /// decides: errors propagate, overflow is an error value).
+    #[inline]
+    pub fn apply(self, a: &Value, b: &Value) -> Option<Value> {
+        use ScalarOp::*;
+        use Value::{Bool, Float, Int};
+        Some(match (self, a, b) {
+            (FAdd, Float(x), Float(y)) => Float(x + y),
+            (FSub, Float(x), Float(y)) => Float(x - y),
+            (FMul, Float(x), Float(y)) => Float(x * y),
+            (FDiv, Float(x), Float(y)) => Float(x / y),
+            (FLt, Float(x), Float(y)) => Bool(x < y),
+            (FGt, Float(x), Float(y)) => Bool(x > y),
+            (FLe, Float(x), Float(y)) => Bool(x <= y),
+            (FGe, Float(x), Float(y)) => Bool(x >= y),
+            (IAdd, Int(x), Int(y)) => Int(x.checked_add(*y)?),
+            (ISub, Int(x), Int(y)) => Int(x.checked_sub(*y)?),
+            (ILt, Int(x), Int(y)) => Bool(x < y),
+            (IGt, Int(x), Int(y)) => Bool(x > y),
+            (ILe, Int(x), Int(y)) => Bool(x <= y),
+            (IGe, Int(x), Int(y)) => Bool(x >= y),
+            (And, Bool(x), Bool(y)) => Bool(*x && *y),
+            (Or, Bool(x), Bool(y)) => Bool(*x || *y),
+            _ => return None,
+        })
+    }
+}
+
 /// One stream node. Edges marked lazy may point forward (recursion); all others point to
 /// nodes evaluated earlier in [`Program::order`].
 #[derive(Clone)]
@@ -129,6 +179,20 @@ pub enum Node {
         args: Vec<SArg>,
         f: Func,
     },
+    /// A signal lift of a scalar operator, run inline on `Float`/`Int`/`Bool` operands; other
+    /// operands (errors, strings) go through `f`, the operator's general closure.
+    Bin {
+        op: ScalarOp,
+        a: SArg,
+        b: SArg,
+        f: Func,
+    },
+    /// A signal lift of `if cond then then else other`.
+    Ite {
+        cond: SArg,
+        then: SArg,
+        other: SArg,
+    },
     /// Leftmost event wins.
     Merge(Vec<NodeId>),
     Filter {
@@ -162,6 +226,8 @@ impl std::fmt::Debug for Node {
             Node::DefaultFrom { stream, from } => write!(f, "DefaultFrom({stream}, {from})"),
             Node::Lift { args, .. } => write!(f, "Lift({args:?})"),
             Node::SLift { args, .. } => write!(f, "SLift({args:?})"),
+            Node::Bin { op, a, b, .. } => write!(f, "Bin({op:?}, {a:?}, {b:?})"),
+            Node::Ite { cond, then, other } => write!(f, "Ite({cond:?}, {then:?}, {other:?})"),
             Node::Merge(a) => write!(f, "Merge({a:?})"),
             Node::Filter { stream, cond } => write!(f, "Filter({stream}, {cond})"),
             Node::Fold { stream, init, .. } => write!(f, "Fold({stream}, {init:?})"),
@@ -201,9 +267,20 @@ impl Node {
                 })
                 .collect(),
             Node::Filter { stream, cond } => vec![*stream, *cond],
+            Node::Bin { a, b, .. } => stream_args(&[a, b]),
+            Node::Ite { cond, then, other } => stream_args(&[cond, then, other]),
             Node::Fold { stream, .. } | Node::Reduce { stream, .. } => vec![*stream],
         }
     }
+}
+
+fn stream_args(args: &[&SArg]) -> Vec<NodeId> {
+    args.iter()
+        .filter_map(|a| match a {
+            SArg::Stream(n) => Some(*n),
+            SArg::Const(_) => None,
+        })
+        .collect()
 }
 
 /// A compiled specification, shared (in an `Arc`) by every monitor instance.
@@ -255,6 +332,16 @@ pub fn last_slots(nodes: &[Node], order: &[NodeId]) -> (Vec<u32>, usize) {
                 }
             }
             Some(Node::Filter { cond, .. }) => mark(*cond),
+            Some(Node::Bin { a, b, .. }) => {
+                for n in stream_args(&[a, b]) {
+                    mark(n);
+                }
+            }
+            Some(Node::Ite { cond, then, other }) => {
+                for n in stream_args(&[cond, then, other]) {
+                    mark(n);
+                }
+            }
             Some(Node::Fold { .. } | Node::Reduce { .. }) => mark(i),
             _ => {}
         }

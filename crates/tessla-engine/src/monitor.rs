@@ -262,6 +262,35 @@ impl Monitor {
                     }
                 }
                 Node::SLift { args, f } => slift(cur, last, slots, &mut sc.args, args, f),
+                Node::Bin { op, a, b, f } => {
+                    if has_event(cur, a) || has_event(cur, b) {
+                        match (arg(cur, last, slots, a), arg(cur, last, slots, b)) {
+                            (Some(x), Some(y)) => {
+                                Some(op.apply(x, y).unwrap_or_else(|| f(&[x.clone(), y.clone()])))
+                            }
+                            _ => None,
+                        }
+                    } else {
+                        None
+                    }
+                }
+                Node::Ite { cond, then, other } => {
+                    if has_event(cur, cond) || has_event(cur, then) || has_event(cur, other) {
+                        match (
+                            arg(cur, last, slots, cond),
+                            arg(cur, last, slots, then),
+                            arg(cur, last, slots, other),
+                        ) {
+                            (Some(Value::Bool(c)), Some(t), Some(e)) => {
+                                Some(if *c { t.clone() } else { e.clone() })
+                            }
+                            (Some(c), Some(_), Some(_)) => Some(c.clone()),
+                            _ => None,
+                        }
+                    } else {
+                        None
+                    }
+                }
                 Node::Merge(args) => args.iter().find_map(|a| cur[*a].clone()),
                 Node::Filter { stream, cond } => match &cur[*stream] {
                     Some(v) => {
@@ -341,6 +370,29 @@ impl Monitor {
             *i = None;
         }
         self.last_evaluated = Some(ts);
+    }
+}
+
+/// Whether a signal-lift argument has an event in this step.
+#[inline]
+fn has_event(cur: &[Option<Value>], a: &SArg) -> bool {
+    matches!(a, SArg::Stream(n) if cur.get(*n).is_some_and(Option::is_some))
+}
+
+/// The current or latest value of a signal-lift argument, by reference.
+#[inline]
+fn arg<'a>(
+    cur: &'a [Option<Value>],
+    last: &'a [Option<Value>],
+    slots: &[u32],
+    a: &'a SArg,
+) -> Option<&'a Value> {
+    match a {
+        SArg::Const(v) => Some(v),
+        SArg::Stream(n) => cur
+            .get(*n)
+            .and_then(Option::as_ref)
+            .or_else(|| last_of(last, slots, *n)),
     }
 }
 
