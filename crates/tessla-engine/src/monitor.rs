@@ -210,8 +210,11 @@ impl Monitor {
         let slots = &program.last_slot[..];
         let first = self.last_evaluated.is_none();
         let cur = &mut sc.cur;
-        cur.clear();
-        cur.resize(program.nodes.len(), None);
+        // Every entry is `None` between steps (the commit below empties it).
+        if cur.len() != program.nodes.len() {
+            cur.clear();
+            cur.resize(program.nodes.len(), None);
+        }
         let last = &mut self.last[..];
         for &i in &program.order {
             let Some(node) = program.nodes.get(i) else {
@@ -323,7 +326,11 @@ impl Monitor {
                     _ => None,
                 },
             };
-            cur[i] = v;
+            if v.is_some()
+                && let Some(c) = cur.get_mut(i)
+            {
+                *c = v;
+            }
         }
         // Arm delays after the whole step: their delay argument is lazy and may come later.
         for (k, &i) in program.delays.iter().enumerate() {
@@ -357,15 +364,15 @@ impl Monitor {
                 });
             }
         }
+        // Commit: keep the values read across steps, empty the scratch for the next step.
         for (&s, c) in slots.iter().zip(cur.iter_mut()) {
-            if s != NO_SLOT
-                && let Some(v) = c.take()
+            if let Some(v) = c.take()
+                && s != NO_SLOT
                 && let Some(l) = last.get_mut(s as usize)
             {
                 *l = Some(v);
             }
         }
-        cur.clear();
         for i in self.inputs.iter_mut() {
             *i = None;
         }
