@@ -784,7 +784,18 @@ impl<'a> Compiler<'a> {
             let fid = map.add("--set", None, format!("def {name} = {value}\n"));
             let (file, diags) = tessla_syntax::parse(&map.get(fid).text, fid);
             let new_def = match (diags.is_empty(), file.statements.first()) {
-                (true, Some(Statement::Def(d))) => d.clone(),
+                (true, Some(Statement::Def(d))) => {
+                    let mut d = d.clone();
+                    // `--set delta=-0.5` means the Float -0.5 (in a spec it is written `-.0.5`).
+                    if let Body::Expr { expr, .. } = &mut d.body
+                        && let ExprKind::Unary { op, operand } = &mut expr.kind
+                        && *op == UnaryOp::Neg
+                        && matches!(operand.kind, ExprKind::Float(_))
+                    {
+                        *op = UnaryOp::FNeg;
+                    }
+                    d
+                }
                 _ => {
                     self.diags.push(Diagnostic::error(
                         Category::Syntax,

@@ -265,3 +265,26 @@ fn set_lists_only_parameters_as_known_constants() {
     assert!(e.contains("known constants: delta, n"), "{e}");
     assert!(!e.contains(", d"), "{e}");
 }
+
+/// `--set delta=-0.5` sets the Float -0.5 (in the spec language it would be `-.0.5`).
+#[test]
+fn set_accepts_a_negative_float() {
+    let resolver = MemResolver {
+        files: [(
+            "spec.tessla".to_string(),
+            "in x: Events[Float]\ndef delta = 0.5\nout x +. delta as y\n".to_string(),
+        )]
+        .into(),
+    };
+    let options = LoadOptions {
+        base_time: None,
+        overrides: vec![("delta".into(), "-0.5".into())],
+        time_units_need_base: false,
+    };
+    let loaded = tessla_engine::load_with("spec.tessla", &resolver, &options).unwrap();
+    let mut m = Monitor::new(loaded.program.clone());
+    let mut got = Vec::new();
+    m.push(1, 0, Value::Float(2.0), &mut |_| {}).unwrap();
+    m.flush(&mut |e: OutputEvent<'_>| got.push(e.value.clone()));
+    assert_eq!(got, vec![Value::Float(1.5)]);
+}
