@@ -88,6 +88,7 @@ fn run_case(dir: &Path, desc: &serde_json::Value) -> Outcome {
             .and_then(|v| v.as_str())
             .map(str::to_string),
         overrides: Vec::new(),
+        time_units_need_base: true,
     };
     let expected_errors = read("expectedErrors");
     let loaded = match tessla_engine::load_file(&spec, &options) {

@@ -161,5 +161,6 @@ pub fn load_options(o: &SpecOptions) -> Result<tessla_engine::LoadOptions, Strin
     Ok(tessla_engine::LoadOptions {
         base_time: Some(o.base_time.clone()),
         overrides,
+        time_units_need_base: false,
     })
 }

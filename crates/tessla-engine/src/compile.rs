@@ -10,7 +10,7 @@
 
 use crate::collections;
 use crate::ir::{
-    Annotation, Func, InputInfo, LiftFunc, Node, NodeId, OutputInfo, Program, SArg, Type,
+    Annotation, Func, InputInfo, LiftFunc, Node, NodeId, OutputInfo, Program, SArg, ScalarOp, Type,
 };
 use crate::natives;
 use crate::value::{Callable, RuntimeError, Value};
@@ -223,6 +223,27 @@ pub struct Compiler<'a> {
     node_types: HashMap<NodeId, Type>,
     /// The unit of the base time in femtoseconds (`µs` in `33333 µs`); `None`: `base_ns`.
     base_unit: Option<i128>,
+    /// Time literals are allowed (a base time is set, or 1 ns is assumed).
+    time_units: bool,
+}
+
+/// The type of a parameterless def's constant value, if it is a literal constant.
+fn const_type_of(d: &Def) -> Option<Type> {
+    match &d.body {
+        Body::Expr { expr, .. } => match &expr.kind {
+            ExprKind::Int { .. } => Some(Type::Int),
+            ExprKind::Float(_) => Some(Type::Float),
+            ExprKind::Str { .. } => Some(Type::String),
+            ExprKind::Var(v) if v.name == "true" || v.name == "false" => Some(Type::Bool),
+            ExprKind::Unary { operand, .. } => match &operand.kind {
+                ExprKind::Int { .. } => Some(Type::Int),
+                ExprKind::Float(_) => Some(Type::Float),
+                _ => None,
+            },
+            _ => None,
+        },
+        Body::Extern { .. } => None,
+    }
 }
 
 fn unit_factor(unit: &str) -> Option<i128> {
@@ -441,6 +462,29 @@ fn binop_fn(op: BinOp) -> Func {
     }
 }
 
+/// The operators the evaluator runs inline on scalars ([`Node::Bin`]).
+fn scalar_op(op: BinOp) -> Option<ScalarOp> {
+    Some(match op {
+        BinOp::FAdd => ScalarOp::FAdd,
+        BinOp::FSub => ScalarOp::FSub,
+        BinOp::FMul => ScalarOp::FMul,
+        BinOp::FDiv => ScalarOp::FDiv,
+        BinOp::FLt => ScalarOp::FLt,
+        BinOp::FGt => ScalarOp::FGt,
+        BinOp::FLe => ScalarOp::FLe,
+        BinOp::FGe => ScalarOp::FGe,
+        BinOp::Add => ScalarOp::IAdd,
+        BinOp::Sub => ScalarOp::ISub,
+        BinOp::Lt => ScalarOp::ILt,
+        BinOp::Gt => ScalarOp::IGt,
+        BinOp::Le => ScalarOp::ILe,
+        BinOp::Ge => ScalarOp::IGe,
+        BinOp::And => ScalarOp::And,
+        BinOp::Or => ScalarOp::Or,
+        _ => return None,
+    })
+}
+
 /// `x << s` on unbounded integers (TeSSLa's semantics): a negative `s` shifts right
 /// (arithmetically); a result outside i64 is `None` (an overflow error).
 fn shift_left(x: i64, s: i64) -> Option<i64> {
@@ -564,8 +608,15 @@ impl<'a> Compiler<'a> {
             compiled_fns: HashMap::new(),
             unit_node: None,
             base_unit: None,
+            time_units: true,
             node_types: HashMap::new(),
         }
+    }
+
+    /// Allow or forbid time literals (forbidden when the spec runs without a base time).
+    pub fn with_time_units(mut self, allowed: bool) -> Self {
+        self.time_units = allowed;
+        self
     }
 
     /// Set the unit of the base time (see [`parse_base_parts`]) for time literal conversion.
@@ -702,10 +753,15 @@ impl<'a> Compiler<'a> {
         }
         // --set overrides replace the body of a top-level constant.
         for (name, value) in overrides {
+            // Parameters: top-level defs whose value is a constant literal.
             let known: Vec<String> = names
                 .iter()
                 .filter_map(|(n, b)| match b {
-                    Binding::Def(e) if e.def.params.is_none() && !n.contains('.') => {
+                    Binding::Def(e)
+                        if e.def.params.is_none()
+                            && !n.contains('.')
+                            && const_type_of(&e.def).is_some() =>
+                    {
                         Some(n.clone())
                     }
                     _ => None,
@@ -728,7 +784,18 @@ impl<'a> Compiler<'a> {
             let fid = map.add("--set", None, format!("def {name} = {value}\n"));
             let (file, diags) = tessla_syntax::parse(&map.get(fid).text, fid);
             let new_def = match (diags.is_empty(), file.statements.first()) {
-                (true, Some(Statement::Def(d))) => d.clone(),
+                (true, Some(Statement::Def(d))) => {
+                    let mut d = d.clone();
+                    // `--set delta=-0.5` means the Float -0.5 (in a spec it is written `-.0.5`).
+                    if let Body::Expr { expr, .. } = &mut d.body
+                        && let ExprKind::Unary { op, operand } = &mut expr.kind
+                        && *op == UnaryOp::Neg
+                        && matches!(operand.kind, ExprKind::Float(_))
+                    {
+                        *op = UnaryOp::FNeg;
+                    }
+                    d
+                }
                 _ => {
                     self.diags.push(Diagnostic::error(
                         Category::Syntax,
@@ -739,8 +806,8 @@ impl<'a> Compiler<'a> {
                 }
             };
             // Type check: the new value must be a constant of the old value's type.
-            let old_ty = self.const_type_of(&entry.def);
-            let new_ty = self.const_type_of(&new_def);
+            let old_ty = const_type_of(&entry.def);
+            let new_ty = const_type_of(&new_def);
             if old_ty != new_ty || new_ty.is_none() {
                 self.diags.push(Diagnostic::error(
                     Category::Type,
@@ -876,8 +943,11 @@ impl<'a> Compiler<'a> {
             Err(()) => return Err(self.diags),
         };
         let _ = self.sources;
+        let (last_slot, n_last_slots) = crate::ir::last_slots(&self.nodes, &order);
         Ok((
             Program {
+                last_slot,
+                n_last_slots,
                 inputs: self.inputs,
                 outputs,
                 global_annotations: Vec::new(),
@@ -894,22 +964,15 @@ impl<'a> Compiler<'a> {
         ))
     }
 
-    /// The type of a parameterless def's constant value, if it is a literal constant.
-    fn const_type_of(&mut self, d: &Def) -> Option<Type> {
-        match &d.body {
-            Body::Expr { expr, .. } => match &expr.kind {
-                ExprKind::Int { .. } => Some(Type::Int),
-                ExprKind::Float(_) => Some(Type::Float),
-                ExprKind::Str { .. } => Some(Type::String),
-                ExprKind::Var(v) if v.name == "true" || v.name == "false" => Some(Type::Bool),
-                ExprKind::Unary { operand, .. } => match &operand.kind {
-                    ExprKind::Int { .. } => Some(Type::Int),
-                    ExprKind::Float(_) => Some(Type::Float),
-                    _ => None,
-                },
-                _ => None,
-            },
-            Body::Extern { .. } => None,
+    /// Replace the signal lift just made for `t` by a node the evaluator runs inline (a typed
+    /// fast path: no closure call, no argument copies).
+    fn inline_op(&mut self, t: &Term, make: impl FnOnce(&[SArg], &Func) -> Option<Node>) {
+        if let Term::Stream(n) = t
+            && let Some(Node::SLift { args, f }) = self.nodes.get(*n)
+            && let Some(node) = make(args, f)
+            && let Some(slot) = self.nodes.get_mut(*n)
+        {
+            *slot = node;
         }
     }
 
@@ -1292,6 +1355,17 @@ impl<'a> Compiler<'a> {
             ExprKind::Int { value, unit } => {
                 let v = match unit {
                     None => *value,
+                    Some(u) if !self.time_units => {
+                        self.diags.push(
+                            Diagnostic::error(
+                                Category::Time,
+                                Some(u.span),
+                                format!("time unit `{}` used, but no base time is set", u.name),
+                            )
+                            .with_help("set the base time of the trace (`--base-time 1ms`)"),
+                        );
+                        return Err(Fail);
+                    }
                     Some(u) => {
                         let f = unit_factor(&u.name).unwrap_or(1);
                         let fs = value.checked_mul(f).unwrap_or(i128::MAX);
@@ -1514,6 +1588,17 @@ impl<'a> Compiler<'a> {
                     _ => Type::Bool,
                 };
                 let r = self.apply_value_fn(binop_fn(op), vec![a, b], e.span)?;
+                if let Some(sop) = scalar_op(op) {
+                    self.inline_op(&r, |args, f| match args {
+                        [a, b] => Some(Node::Bin {
+                            op: sop,
+                            a: a.clone(),
+                            b: b.clone(),
+                            f: f.clone(),
+                        }),
+                        _ => None,
+                    });
+                }
                 Ok(self.typed(r, ty))
             }
             ExprKind::If {
@@ -1558,6 +1643,14 @@ impl<'a> Compiler<'a> {
                     _ => Type::Unknown,
                 };
                 let r = self.apply_value_fn(ite, vec![c, t, f], e.span)?;
+                self.inline_op(&r, |args, _| match args {
+                    [c, t, f] => Some(Node::Ite {
+                        cond: c.clone(),
+                        then: t.clone(),
+                        other: f.clone(),
+                    }),
+                    _ => None,
+                });
                 Ok(self.typed(r, ty))
             }
             ExprKind::Lambda { params, body } => Ok(Term::Func(Rc::new(FuncTerm::Lambda {

@@ -91,6 +91,56 @@ pub enum SArg {
     Const(Value),
 }
 
+/// Operators with an inline fast path in the evaluator (see [`Node::Bin`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ScalarOp {
+    FAdd,
+    FSub,
+    FMul,
+    FDiv,
+    FLt,
+    FGt,
+    FLe,
+    FGe,
+    IAdd,
+    ISub,
+    ILt,
+    IGt,
+    ILe,
+    IGe,
+    And,
+    Or,
+}
+
+impl ScalarOp {
+    /// The result on scalar operands, or `None` for other operands (the general closure then
+    /// decides: errors propagate, overflow is an error value).
+    #[inline]
+    pub fn apply(self, a: &Value, b: &Value) -> Option<Value> {
+        use ScalarOp::*;
+        use Value::{Bool, Float, Int};
+        Some(match (self, a, b) {
+            (FAdd, Float(x), Float(y)) => Float(x + y),
+            (FSub, Float(x), Float(y)) => Float(x - y),
+            (FMul, Float(x), Float(y)) => Float(x * y),
+            (FDiv, Float(x), Float(y)) => Float(x / y),
+            (FLt, Float(x), Float(y)) => Bool(x < y),
+            (FGt, Float(x), Float(y)) => Bool(x > y),
+            (FLe, Float(x), Float(y)) => Bool(x <= y),
+            (FGe, Float(x), Float(y)) => Bool(x >= y),
+            (IAdd, Int(x), Int(y)) => Int(x.checked_add(*y)?),
+            (ISub, Int(x), Int(y)) => Int(x.checked_sub(*y)?),
+            (ILt, Int(x), Int(y)) => Bool(x < y),
+            (IGt, Int(x), Int(y)) => Bool(x > y),
+            (ILe, Int(x), Int(y)) => Bool(x <= y),
+            (IGe, Int(x), Int(y)) => Bool(x >= y),
+            (And, Bool(x), Bool(y)) => Bool(*x && *y),
+            (Or, Bool(x), Bool(y)) => Bool(*x || *y),
+            _ => return None,
+        })
+    }
+}
+
 /// One stream node. Edges marked lazy may point forward (recursion); all others point to
 /// nodes evaluated earlier in [`Program::order`].
 #[derive(Clone)]
@@ -129,6 +179,20 @@ pub enum Node {
         args: Vec<SArg>,
         f: Func,
     },
+    /// A signal lift of a scalar operator, run inline on `Float`/`Int`/`Bool` operands; other
+    /// operands (errors, strings) go through `f`, the operator's general closure.
+    Bin {
+        op: ScalarOp,
+        a: SArg,
+        b: SArg,
+        f: Func,
+    },
+    /// A signal lift of `if cond then then else other`.
+    Ite {
+        cond: SArg,
+        then: SArg,
+        other: SArg,
+    },
     /// Leftmost event wins.
     Merge(Vec<NodeId>),
     Filter {
@@ -162,6 +226,8 @@ impl std::fmt::Debug for Node {
             Node::DefaultFrom { stream, from } => write!(f, "DefaultFrom({stream}, {from})"),
             Node::Lift { args, .. } => write!(f, "Lift({args:?})"),
             Node::SLift { args, .. } => write!(f, "SLift({args:?})"),
+            Node::Bin { op, a, b, .. } => write!(f, "Bin({op:?}, {a:?}, {b:?})"),
+            Node::Ite { cond, then, other } => write!(f, "Ite({cond:?}, {then:?}, {other:?})"),
             Node::Merge(a) => write!(f, "Merge({a:?})"),
             Node::Filter { stream, cond } => write!(f, "Filter({stream}, {cond})"),
             Node::Fold { stream, init, .. } => write!(f, "Fold({stream}, {init:?})"),
@@ -201,9 +267,20 @@ impl Node {
                 })
                 .collect(),
             Node::Filter { stream, cond } => vec![*stream, *cond],
+            Node::Bin { a, b, .. } => stream_args(&[a, b]),
+            Node::Ite { cond, then, other } => stream_args(&[cond, then, other]),
             Node::Fold { stream, .. } | Node::Reduce { stream, .. } => vec![*stream],
         }
     }
+}
+
+fn stream_args(args: &[&SArg]) -> Vec<NodeId> {
+    args.iter()
+        .filter_map(|a| match a {
+            SArg::Stream(n) => Some(*n),
+            SArg::Const(_) => None,
+        })
+        .collect()
 }
 
 /// A compiled specification, shared (in an `Arc`) by every monitor instance.
@@ -219,6 +296,69 @@ pub struct Program {
     pub output_nodes: Vec<NodeId>,
     /// The `Delay` nodes (the monitor arms and fires only these).
     pub delays: Vec<NodeId>,
+    /// Per node: its slot among the values a monitor keeps from earlier steps, or [`NO_SLOT`]
+    /// when no node reads it across steps (see [`last_slots`]).
+    pub last_slot: Vec<u32>,
+    /// Number of slots in use in `last_slot`.
+    pub n_last_slots: usize,
+}
+
+/// `last_slot` of a node whose earlier values nobody reads.
+pub const NO_SLOT: u32 = u32::MAX;
+
+/// Which nodes' latest values must persist between steps: the lazy argument of `last`, the
+/// arguments of signal lifts (they use the latest value of silent arguments), the condition of
+/// `filter`, both arguments of `defaultFrom`, and `fold`/`reduce` accumulators. Returns the slot
+/// of each node (or [`NO_SLOT`]) and the number of slots; a monitor instance stores only these.
+pub fn last_slots(nodes: &[Node], order: &[NodeId]) -> (Vec<u32>, usize) {
+    let mut need = vec![false; nodes.len()];
+    let mut mark = |n: NodeId| {
+        if let Some(x) = need.get_mut(n) {
+            *x = true;
+        }
+    };
+    for &i in order {
+        match nodes.get(i) {
+            Some(Node::Last { value, .. }) => mark(*value),
+            Some(Node::DefaultFrom { stream, from }) => {
+                mark(*stream);
+                mark(*from);
+            }
+            Some(Node::SLift { args, .. }) => {
+                for a in args {
+                    if let SArg::Stream(n) = a {
+                        mark(*n);
+                    }
+                }
+            }
+            Some(Node::Filter { cond, .. }) => mark(*cond),
+            Some(Node::Bin { a, b, .. }) => {
+                for n in stream_args(&[a, b]) {
+                    mark(n);
+                }
+            }
+            Some(Node::Ite { cond, then, other }) => {
+                for n in stream_args(&[cond, then, other]) {
+                    mark(n);
+                }
+            }
+            Some(Node::Fold { .. } | Node::Reduce { .. }) => mark(i),
+            _ => {}
+        }
+    }
+    let mut next = 0u32;
+    let slots = need
+        .iter()
+        .map(|&n| {
+            if n {
+                next += 1;
+                next - 1
+            } else {
+                NO_SLOT
+            }
+        })
+        .collect();
+    (slots, next as usize)
 }
 
 impl Program {

@@ -9,6 +9,7 @@ pub mod ir;
 pub mod load;
 pub mod monitor;
 pub mod natives;
+pub mod typeck;
 pub mod value;
 
 pub use ir::{Annotation, InputInfo, OutputInfo, Program, Type};

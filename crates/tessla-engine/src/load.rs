@@ -20,6 +20,10 @@ pub struct LoadOptions {
     pub base_time: Option<String>,
     /// `--set NAME=VALUE` overrides of top-level constants, in command-line order.
     pub overrides: Vec<(String, String)>,
+    /// TeSSLa's rule when no base time is set: a time literal (`100ms`) is a compile error.
+    /// When true and `base_time` is `None`, time literals are rejected (the conformance runner
+    /// sets it for cases without a base time); when false, `None` means 1 ns.
+    pub time_units_need_base: bool,
 }
 
 /// A checked, compiled spec.
@@ -77,8 +81,16 @@ pub fn load_with(
         }
     };
     let asts: Vec<_> = files.into_iter().map(|(_, f)| f).collect();
+    let type_errors = crate::typeck::check(&asts);
+    if !type_errors.is_empty() {
+        return Err(LoadError {
+            sources,
+            diagnostics: type_errors,
+        });
+    }
     let result = compile::Compiler::new(&sources, base)
         .with_base_unit(base_unit)
+        .with_time_units(!(options.time_units_need_base && options.base_time.is_none()))
         .program(&asts, &options.overrides);
     match result {
         Ok((program, warnings)) => Ok(Loaded {

@@ -21,9 +21,10 @@
 //! - Runtime errors (division by zero, overflow, `getSome(None)`) are values: an output whose value
 //!   is [`Value::Error`] reaches the sink like any other event; the caller reports it.
 
-use crate::ir::{Node, Program, SArg};
+use crate::ir::{NO_SLOT, Node, NodeId, Program, SArg};
 use crate::value::{RuntimeError, Value};
 
+use std::cell::Cell;
 use std::sync::Arc;
 
 /// One output event: output `output` (index into [`Program::outputs`]) has `value` at `ts`.
@@ -45,22 +46,47 @@ pub enum InputError {
     UnknownInput(usize),
 }
 
-/// The state of every stream of one program instance. Cheap to clone (the program is shared).
+/// The state of one program instance: only what must persist between steps. Cheap to clone
+/// (the program is shared). Per-step scratch (this step's event of each node, argument buffers)
+/// lives in a per-thread buffer shared by all instances, see [`Scratch`].
+///
+/// Layout: `inputs` (one slot per input, filled between steps), `last` (one slot per node read
+/// across steps, indexed by [`Program::last_slot`]), `targets` (one armed target per `delay`
+/// node, in the order of [`Program::delays`]).
 #[derive(Debug, Clone)]
 pub struct Monitor {
     program: Arc<Program>,
     t0: i64,
     pending: Option<i64>,
     last_evaluated: Option<i64>,
-    inputs: Vec<Option<Value>>,
-    /// The latest value of each node from earlier steps.
-    last: Vec<Option<Value>>,
-    /// Scratch: this step's event of each node.
+    inputs: Box<[Option<Value>]>,
+    /// The latest value from earlier steps of each node that is read across steps.
+    last: Box<[Option<Value>]>,
+    /// Armed target of each `Delay` node (parallel to [`Program::delays`]).
+    targets: Box<[Option<i64>]>,
+}
+
+/// Per-step working memory, reused by every monitor on a thread (thousands of instances share
+/// one), so an instance holds only its persistent state.
+#[derive(Default)]
+struct Scratch {
+    /// This step's event of each node.
     cur: Vec<Option<Value>>,
-    /// Armed delay target of each `Delay` node.
-    targets: Vec<Option<i64>>,
-    /// Reused argument buffer of signal lifts.
-    scratch: Vec<Value>,
+    /// Argument buffer of signal lifts with more than three arguments.
+    args: Vec<Value>,
+}
+
+thread_local! {
+    static SCRATCH: Cell<Scratch> = Cell::new(Scratch::default());
+}
+
+/// The latest value of node `n` from earlier steps, if it is kept and has had one.
+#[inline]
+fn last_of<'a>(last: &'a [Option<Value>], slots: &[u32], n: NodeId) -> Option<&'a Value> {
+    match slots.get(n) {
+        Some(&s) if s != NO_SLOT => last.get(s as usize).and_then(Option::as_ref),
+        _ => None,
+    }
 }
 
 impl Monitor {
@@ -69,18 +95,24 @@ impl Monitor {
     }
 
     pub fn starting_at(program: Arc<Program>, t0: i64) -> Monitor {
-        let n = program.nodes.len();
         Monitor {
-            inputs: vec![None; program.inputs.len()],
-            last: vec![None; n],
-            cur: vec![None; n],
-            targets: vec![None; n],
-            scratch: Vec::new(),
+            inputs: vec![None; program.inputs.len()].into_boxed_slice(),
+            last: vec![None; program.n_last_slots].into_boxed_slice(),
+            targets: vec![None; program.delays.len()].into_boxed_slice(),
             program,
             t0,
             pending: None,
             last_evaluated: None,
         }
+    }
+
+    /// Bytes one instance holds: the struct and its per-slot arrays (compound values such as
+    /// lists share their payload and are not counted).
+    pub fn state_bytes(&self) -> usize {
+        std::mem::size_of::<Monitor>()
+            + std::mem::size_of_val(&*self.inputs)
+            + std::mem::size_of_val(&*self.last)
+            + std::mem::size_of_val(&*self.targets)
     }
 
     pub fn program(&self) -> &Arc<Program> {
@@ -163,69 +195,109 @@ impl Monitor {
     }
 
     fn next_delay(&self) -> Option<i64> {
-        self.program
-            .delays
-            .iter()
-            .filter_map(|d| self.targets.get(*d).copied().flatten())
-            .min()
+        self.targets.iter().filter_map(|t| *t).min()
     }
 
     fn step<S: FnMut(OutputEvent<'_>)>(&mut self, ts: i64, sink: &mut S) {
-        let program = Arc::clone(&self.program);
+        // Take the thread's scratch (a nested step from a sink would get a fresh one).
+        let mut scratch = SCRATCH.with(Cell::take);
+        self.eval(ts, &mut scratch, sink);
+        SCRATCH.with(|c| c.set(scratch));
+    }
+
+    fn eval<S: FnMut(OutputEvent<'_>)>(&mut self, ts: i64, sc: &mut Scratch, sink: &mut S) {
+        let program = &*self.program;
+        let slots = &program.last_slot[..];
         let first = self.last_evaluated.is_none();
-        for c in self.cur.iter_mut() {
-            *c = None;
+        let cur = &mut sc.cur;
+        // Every entry is `None` between steps (the commit below empties it).
+        if cur.len() != program.nodes.len() {
+            cur.clear();
+            cur.resize(program.nodes.len(), None);
         }
-        let mut fired = Vec::new();
+        let last = &mut self.last[..];
         for &i in &program.order {
-            let v = match &program.nodes[i] {
+            let Some(node) = program.nodes.get(i) else {
+                continue;
+            };
+            let v = match node {
                 Node::Input(k) => self.inputs.get_mut(*k).and_then(Option::take),
                 Node::Nil => None,
                 Node::Const(v) => first.then(|| v.clone()),
-                Node::Alias(n) => self.cur[*n].clone(),
-                Node::Time(n) => self.cur[*n].as_ref().map(|_| Value::Int(ts)),
+                Node::Alias(n) => cur[*n].clone(),
+                Node::Time(n) => cur[*n].as_ref().map(|_| Value::Int(ts)),
                 Node::Last { value, trigger } => {
-                    if self.cur[*trigger].is_some() {
-                        self.last[*value].clone()
+                    if cur[*trigger].is_some() {
+                        last_of(last, slots, *value).cloned()
                     } else {
                         None
                     }
                 }
                 Node::Delay { .. } => {
-                    if self.targets[i] == Some(ts) {
-                        self.targets[i] = None;
-                        fired.push(i);
-                        Some(Value::Unit)
-                    } else {
-                        None
+                    let k = program.delays.iter().position(|d| *d == i);
+                    match k.and_then(|k| self.targets.get_mut(k)) {
+                        Some(t) if *t == Some(ts) => {
+                            *t = None;
+                            Some(Value::Unit)
+                        }
+                        _ => None,
                     }
                 }
-                Node::Default { stream, value } => self.cur[*stream]
+                Node::Default { stream, value } => cur[*stream]
                     .clone()
                     .or_else(|| first.then(|| value.clone())),
-                Node::DefaultFrom { stream, from } => self.cur[*stream].clone().or_else(|| {
-                    let s_never = self.last[*stream].is_none();
-                    let d_first = self.last[*from].is_none();
+                Node::DefaultFrom { stream, from } => cur[*stream].clone().or_else(|| {
+                    let s_never = last_of(last, slots, *stream).is_none();
+                    let d_first = last_of(last, slots, *from).is_none();
                     if s_never && d_first {
-                        self.cur[*from].clone()
+                        cur[*from].clone()
                     } else {
                         None
                     }
                 }),
                 Node::Lift { args, f } => {
-                    if args.iter().any(|a| self.cur[*a].is_some()) {
+                    if args.iter().any(|a| cur[*a].is_some()) {
                         let vals: Vec<Option<Value>> =
-                            args.iter().map(|a| self.cur[*a].clone()).collect();
+                            args.iter().map(|a| cur[*a].clone()).collect();
                         f(&vals)
                     } else {
                         None
                     }
                 }
-                Node::SLift { args, f } => self.slift(args, f),
-                Node::Merge(args) => args.iter().find_map(|a| self.cur[*a].clone()),
-                Node::Filter { stream, cond } => match &self.cur[*stream] {
+                Node::SLift { args, f } => slift(cur, last, slots, &mut sc.args, args, f),
+                Node::Bin { op, a, b, f } => {
+                    if has_event(cur, a) || has_event(cur, b) {
+                        match (arg(cur, last, slots, a), arg(cur, last, slots, b)) {
+                            (Some(x), Some(y)) => {
+                                Some(op.apply(x, y).unwrap_or_else(|| f(&[x.clone(), y.clone()])))
+                            }
+                            _ => None,
+                        }
+                    } else {
+                        None
+                    }
+                }
+                Node::Ite { cond, then, other } => {
+                    if has_event(cur, cond) || has_event(cur, then) || has_event(cur, other) {
+                        match (
+                            arg(cur, last, slots, cond),
+                            arg(cur, last, slots, then),
+                            arg(cur, last, slots, other),
+                        ) {
+                            (Some(Value::Bool(c)), Some(t), Some(e)) => {
+                                Some(if *c { t.clone() } else { e.clone() })
+                            }
+                            (Some(c), Some(_), Some(_)) => Some(c.clone()),
+                            _ => None,
+                        }
+                    } else {
+                        None
+                    }
+                }
+                Node::Merge(args) => args.iter().find_map(|a| cur[*a].clone()),
+                Node::Filter { stream, cond } => match &cur[*stream] {
                     Some(v) => {
-                        let c = self.cur[*cond].as_ref().or(self.last[*cond].as_ref());
+                        let c = cur[*cond].as_ref().or(last_of(last, slots, *cond));
                         match c {
                             Some(Value::Bool(true)) => Some(v.clone()),
                             Some(Value::Error(e)) => Some(Value::Error(e.clone())),
@@ -237,40 +309,46 @@ impl Monitor {
                 Node::Fold { stream, init, f } => {
                     if first {
                         // The initial value, folded with an event at t = 0 if there is one.
-                        Some(match &self.cur[*stream] {
+                        Some(match &cur[*stream] {
                             Some(x) => strict2(f, init, x),
                             None => init.clone(),
                         })
                     } else {
-                        match (&self.cur[*stream], &self.last[i]) {
+                        match (&cur[*stream], last_of(last, slots, i)) {
                             (Some(x), Some(acc)) => Some(strict2(f, acc, x)),
                             _ => None,
                         }
                     }
                 }
-                Node::Reduce { stream, f } => match (&self.cur[*stream], &self.last[i]) {
+                Node::Reduce { stream, f } => match (&cur[*stream], last_of(last, slots, i)) {
                     (Some(x), Some(acc)) => Some(strict2(f, acc, x)),
                     (Some(x), None) => Some(x.clone()),
                     _ => None,
                 },
             };
-            self.cur[i] = v;
+            if v.is_some()
+                && let Some(c) = cur.get_mut(i)
+            {
+                *c = v;
+            }
         }
         // Arm delays after the whole step: their delay argument is lazy and may come later.
-        for &i in &program.delays {
+        for (k, &i) in program.delays.iter().enumerate() {
             if let Some(Node::Delay { delay, reset }) = program.nodes.get(i) {
-                let reset_now = self.cur[*reset].is_some();
-                let fired_now = fired.contains(&i);
+                let reset_now = cur[*reset].is_some();
+                // A delay that fired this step has its unit event now.
+                let fired_now = matches!(cur[i], Some(Value::Unit));
+                let Some(target) = self.targets.get_mut(k) else {
+                    continue;
+                };
                 if reset_now && !fired_now {
-                    self.targets[i] = None;
+                    *target = None;
                 }
                 if reset_now || fired_now {
-                    match &self.cur[*delay] {
-                        Some(Value::Int(d)) if *d > 0 => {
-                            self.targets[i] = Some(ts.saturating_add(*d))
-                        }
+                    match &cur[*delay] {
+                        Some(Value::Int(d)) if *d > 0 => *target = Some(ts.saturating_add(*d)),
                         Some(Value::Int(_)) => {
-                            self.cur[i] = Some(Value::Error(RuntimeError::NonPositiveDelay));
+                            cur[i] = Some(Value::Error(RuntimeError::NonPositiveDelay));
                         }
                         _ => {}
                     }
@@ -278,7 +356,7 @@ impl Monitor {
             }
         }
         for (out, &n) in program.output_nodes.iter().enumerate() {
-            if let Some(v) = &self.cur[n] {
+            if let Some(v) = &cur[n] {
                 sink(OutputEvent {
                     ts,
                     output: out,
@@ -286,8 +364,12 @@ impl Monitor {
                 });
             }
         }
-        for (l, c) in self.last.iter_mut().zip(self.cur.iter_mut()) {
-            if let Some(v) = c.take() {
+        // Commit: keep the values read across steps, empty the scratch for the next step.
+        for (&s, c) in slots.iter().zip(cur.iter_mut()) {
+            if let Some(v) = c.take()
+                && s != NO_SLOT
+                && let Some(l) = last.get_mut(s as usize)
+            {
                 *l = Some(v);
             }
         }
@@ -296,45 +378,65 @@ impl Monitor {
         }
         self.last_evaluated = Some(ts);
     }
+}
 
-    /// Signal lift. Checks for an event first (most nodes have none in a step), then fills a
-    /// reused argument buffer, so a step allocates nothing for scalar values.
-    fn slift(&mut self, args: &[SArg], f: &crate::ir::Func) -> Option<Value> {
-        let has_event = args
-            .iter()
-            .any(|a| matches!(a, SArg::Stream(n) if self.cur[*n].is_some()));
-        if !has_event {
-            return None;
-        }
-        // Up to three arguments (nearly every operator) are passed in a stack array.
-        let get = |a: &SArg| match a {
-            SArg::Const(v) => Some(v.clone()),
-            SArg::Stream(n) => self.cur[*n].as_ref().or(self.last[*n].as_ref()).cloned(),
-        };
-        match args {
-            [a] => return Some(f(&[get(a)?])),
-            [a, b] => return Some(f(&[get(a)?, get(b)?])),
-            [a, b, c] => return Some(f(&[get(a)?, get(b)?, get(c)?])),
-            _ => {}
-        }
-        let mut vals = std::mem::take(&mut self.scratch);
-        vals.clear();
-        for a in args {
-            match a {
-                SArg::Const(v) => vals.push(v.clone()),
-                SArg::Stream(n) => match self.cur[*n].as_ref().or(self.last[*n].as_ref()) {
-                    Some(v) => vals.push(v.clone()),
-                    None => {
-                        self.scratch = vals;
-                        return None;
-                    }
-                },
-            }
-        }
-        let r = f(&vals);
-        self.scratch = vals;
-        Some(r)
+/// Whether a signal-lift argument has an event in this step.
+#[inline]
+fn has_event(cur: &[Option<Value>], a: &SArg) -> bool {
+    matches!(a, SArg::Stream(n) if cur.get(*n).is_some_and(Option::is_some))
+}
+
+/// The current or latest value of a signal-lift argument, by reference.
+#[inline]
+fn arg<'a>(
+    cur: &'a [Option<Value>],
+    last: &'a [Option<Value>],
+    slots: &[u32],
+    a: &'a SArg,
+) -> Option<&'a Value> {
+    match a {
+        SArg::Const(v) => Some(v),
+        SArg::Stream(n) => cur
+            .get(*n)
+            .and_then(Option::as_ref)
+            .or_else(|| last_of(last, slots, *n)),
     }
+}
+
+/// Signal lift. Checks for an event first (most nodes have none in a step), then passes up to
+/// three arguments in a stack array and more in a reused buffer, so a step allocates nothing for
+/// scalar values.
+fn slift(
+    cur: &[Option<Value>],
+    last: &[Option<Value>],
+    slots: &[u32],
+    buf: &mut Vec<Value>,
+    args: &[SArg],
+    f: &crate::ir::Func,
+) -> Option<Value> {
+    let has_event = args
+        .iter()
+        .any(|a| matches!(a, SArg::Stream(n) if cur[*n].is_some()));
+    if !has_event {
+        return None;
+    }
+    let get = |a: &SArg| match a {
+        SArg::Const(v) => Some(v.clone()),
+        SArg::Stream(n) => cur[*n].as_ref().or(last_of(last, slots, *n)).cloned(),
+    };
+    match args {
+        [a] => return Some(f(&[get(a)?])),
+        [a, b] => return Some(f(&[get(a)?, get(b)?])),
+        [a, b, c] => return Some(f(&[get(a)?, get(b)?, get(c)?])),
+        _ => {}
+    }
+    buf.clear();
+    for a in args {
+        buf.push(get(a)?);
+    }
+    let r = f(buf);
+    buf.clear();
+    Some(r)
 }
 
 fn strict2(f: &crate::ir::Func, a: &Value, b: &Value) -> Value {

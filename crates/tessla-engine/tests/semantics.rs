@@ -13,6 +13,7 @@ fn load(spec: &str, base_time: Option<&str>) -> Result<Loaded, String> {
     let options = LoadOptions {
         base_time: base_time.map(str::to_string),
         overrides: Vec::new(),
+        time_units_need_base: false,
     };
     tessla_engine::load_with("spec.tessla", &resolver, &options).map_err(|e| e.render())
 }
@@ -209,4 +210,81 @@ fn output_types_are_inferred_from_operators_and_declarations() {
         .map(|o| format!("{} {}", o.name, o.ty))
         .collect();
     assert_eq!(types, ["d Float", "v Bool", "w Float", "n Int", "c Int"]);
+}
+
+/// One instance of the bundled robot monitors keeps only the values read across steps: far
+/// fewer slots than nodes, and a few kilobytes at most (the fleet keeps 10,000 instances).
+#[test]
+fn robot_monitor_instance_state_is_small() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../specs/robot.tessla");
+    let options = LoadOptions {
+        base_time: Some("1 ns".into()),
+        overrides: Vec::new(),
+        time_units_need_base: false,
+    };
+    let loaded = tessla_engine::load_file(&root, &options).expect("robot spec loads");
+    let p = &loaded.program;
+    let m = Monitor::new(p.clone());
+    let bytes = m.state_bytes();
+    println!(
+        "robot spec: {} nodes, {} kept across steps, {} delays; state {} bytes per instance",
+        p.nodes.len(),
+        p.n_last_slots,
+        p.delays.len(),
+        bytes
+    );
+    assert!(p.n_last_slots < p.nodes.len());
+    assert_eq!(
+        bytes,
+        std::mem::size_of::<Monitor>()
+            + (p.inputs.len() + p.n_last_slots) * std::mem::size_of::<Option<Value>>()
+            + p.delays.len() * std::mem::size_of::<Option<i64>>()
+    );
+    assert!(bytes < 4096, "{bytes} bytes per instance");
+}
+
+/// `--set` of an unknown name lists only the parameters (defs whose value is a literal).
+#[test]
+fn set_lists_only_parameters_as_known_constants() {
+    let resolver = MemResolver {
+        files: [(
+            "spec.tessla".to_string(),
+            "in x: Events[Float]\ndef delta = 0.5\ndef n = -3\ndef d = x -. delta\nout d\n"
+                .to_string(),
+        )]
+        .into(),
+    };
+    let options = LoadOptions {
+        base_time: None,
+        overrides: vec![("nope".into(), "1".into())],
+        time_units_need_base: false,
+    };
+    let e = tessla_engine::load_with("spec.tessla", &resolver, &options)
+        .unwrap_err()
+        .render();
+    assert!(e.contains("known constants: delta, n"), "{e}");
+    assert!(!e.contains(", d"), "{e}");
+}
+
+/// `--set delta=-0.5` sets the Float -0.5 (in the spec language it would be `-.0.5`).
+#[test]
+fn set_accepts_a_negative_float() {
+    let resolver = MemResolver {
+        files: [(
+            "spec.tessla".to_string(),
+            "in x: Events[Float]\ndef delta = 0.5\nout x +. delta as y\n".to_string(),
+        )]
+        .into(),
+    };
+    let options = LoadOptions {
+        base_time: None,
+        overrides: vec![("delta".into(), "-0.5".into())],
+        time_units_need_base: false,
+    };
+    let loaded = tessla_engine::load_with("spec.tessla", &resolver, &options).unwrap();
+    let mut m = Monitor::new(loaded.program.clone());
+    let mut got = Vec::new();
+    m.push(1, 0, Value::Float(2.0), &mut |_| {}).unwrap();
+    m.flush(&mut |e: OutputEvent<'_>| got.push(e.value.clone()));
+    assert_eq!(got, vec![Value::Float(1.5)]);
 }

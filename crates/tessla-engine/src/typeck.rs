@@ -1,0 +1,1157 @@
+//! The type checker: Hindley–Milner style inference over the parsed spec, run before compilation,
+//! so ill-typed specs are compile errors (file, line, column, caret, fix) and not runtime values.
+//!
+//! Owns: the type rules of TeSSLa 1.2 as far as the engine needs them. Types are unified *modulo
+//! `Events`*: a stream `Events[T]` fits wherever a `T` is expected and the other way round. That
+//! is TeSSLa's implicit signal lift of operators and liftable functions over streams, its
+//! conversion of constants into events at t = 0, and macro expansion of functions with stream
+//! parameters, all in one rule. Everything else must match exactly: `if` conditions are Bool,
+//! both branches have one type, Int operators take Ints (Float has the dotted operators), builtins
+//! get arguments of their signature, user functions get arguments of their declared parameter
+//! types, a def's declared type matches its body, and an output is not a function.
+//!
+//! Soundness rule: the checker never rejects a spec TeSSLa accepts. Whatever it does not model
+//! (type aliases and extern types, named arguments of builtins, record fields of a value of still
+//! unknown type, unknown names, which the compiler reports) gets a fresh type variable, which
+//! fits everything. Definitions are generalised (let-polymorphism) when they are done, so generic
+//! functions and constants may be used at several types.
+
+use std::cell::RefCell;
+use std::collections::HashMap;
+use std::rc::Rc;
+use tessla_syntax::ast::{self, BinOp, Body, Def, Expr, ExprKind, Statement, StrPart, UnaryOp};
+use tessla_syntax::diag::{Category, Diagnostic};
+use tessla_syntax::source::Span;
+
+/// A type during inference.
+#[derive(Clone, Debug, PartialEq)]
+enum Ty {
+    Var(u32),
+    /// `Int`, `Float`, `Bool`, `String`, `Unit`, `Option[T]`, `List[T]`, `Set[T]`, `Map[K, V]`,
+    /// `Events[T]`.
+    Con(&'static str, Vec<Ty>),
+    Fn(Vec<Ty>, Box<Ty>),
+    /// Fields sorted by name.
+    Record(Vec<(String, Ty)>),
+}
+
+fn con(n: &'static str) -> Ty {
+    Ty::Con(n, Vec::new())
+}
+fn int() -> Ty {
+    con("Int")
+}
+fn float() -> Ty {
+    con("Float")
+}
+fn boolean() -> Ty {
+    con("Bool")
+}
+fn string() -> Ty {
+    con("String")
+}
+fn unit() -> Ty {
+    con("Unit")
+}
+fn ev(t: Ty) -> Ty {
+    Ty::Con("Events", vec![t])
+}
+fn opt(t: Ty) -> Ty {
+    Ty::Con("Option", vec![t])
+}
+fn list(t: Ty) -> Ty {
+    Ty::Con("List", vec![t])
+}
+fn set(t: Ty) -> Ty {
+    Ty::Con("Set", vec![t])
+}
+fn map(k: Ty, v: Ty) -> Ty {
+    Ty::Con("Map", vec![k, v])
+}
+/// A tuple is the record with fields `_1` to `_n` (TeSSLa: `(a, b)` is `{_1 = a, _2 = b}`).
+fn tuple(ts: Vec<Ty>) -> Ty {
+    let mut fs: Vec<(String, Ty)> = ts
+        .into_iter()
+        .enumerate()
+        .map(|(i, t)| (format!("_{}", i + 1), t))
+        .collect();
+    fs.sort_by(|a, b| a.0.cmp(&b.0));
+    Ty::Record(fs)
+}
+
+fn func(ps: Vec<Ty>, r: Ty) -> Ty {
+    Ty::Fn(ps, Box::new(r))
+}
+
+/// A generalised type: `vars` are instantiated afresh at each use.
+#[derive(Clone, Debug)]
+struct Scheme {
+    vars: Vec<u32>,
+    ty: Ty,
+}
+
+enum State {
+    Todo,
+    /// Being inferred: uses (recursion through `last`/`delay`) see this monomorphic type.
+    InProgress(Ty),
+    Done(Scheme),
+}
+
+struct DefInfo<'a> {
+    def: &'a Def,
+    /// The scope the def's body sees.
+    scope: Rc<Scope<'a>>,
+    state: RefCell<State>,
+}
+
+enum Local<'a> {
+    Mono(Ty),
+    Def(Rc<DefInfo<'a>>),
+}
+
+/// Names in scope: local (parameters, block and `where` defs) over the module prefix's globals.
+struct Scope<'a> {
+    names: RefCell<HashMap<String, Local<'a>>>,
+    parent: Option<Rc<Scope<'a>>>,
+    /// Module prefix (`Foo.` inside `module Foo`), for global lookups.
+    prefix: String,
+}
+
+impl<'a> Scope<'a> {
+    fn root(prefix: String) -> Rc<Scope<'a>> {
+        Rc::new(Scope {
+            names: RefCell::new(HashMap::new()),
+            parent: None,
+            prefix,
+        })
+    }
+    fn child(self: &Rc<Self>) -> Rc<Scope<'a>> {
+        Rc::new(Scope {
+            names: RefCell::new(HashMap::new()),
+            parent: Some(self.clone()),
+            prefix: self.prefix.clone(),
+        })
+    }
+}
+
+enum Found<'a> {
+    Mono(Ty),
+    Def(Rc<DefInfo<'a>>),
+}
+
+/// Check the statements of all files (includes first); returns the type errors found.
+pub fn check(files: &[ast::File]) -> Vec<Diagnostic> {
+    let mut c = Checker::default();
+    let mut statements: Vec<(String, &Statement)> = Vec::new();
+    for f in files {
+        for s in &f.statements {
+            statements.push((String::new(), s));
+        }
+    }
+    let mut in_order: Vec<Rc<DefInfo<'_>>> = Vec::new();
+    let mut i = 0;
+    while let Some((prefix, s)) = statements.get(i).cloned() {
+        i += 1;
+        match s {
+            Statement::Def(d) => {
+                let scope = c.module_scope(&prefix);
+                let name = format!("{prefix}{}", d.name.name);
+                if !c.globals.contains_key(&name) {
+                    let info = Rc::new(DefInfo {
+                        def: d,
+                        scope,
+                        state: RefCell::new(State::Todo),
+                    });
+                    in_order.push(info.clone());
+                    c.globals.insert(name, info);
+                }
+            }
+            Statement::Module {
+                name,
+                statements: inner,
+                ..
+            } => {
+                for st in inner {
+                    statements.push((format!("{prefix}{}.", name.name), st));
+                }
+            }
+            Statement::Import { path, .. } => {
+                let target: String = path.iter().map(|p| format!("{}.", p.name)).collect();
+                c.imports.push((prefix.clone(), target));
+            }
+            Statement::In { name, ty, .. } => {
+                let t = c.ast_type(ty, &HashMap::new());
+                c.inputs.insert(name.name.clone(), t);
+            }
+            _ => {}
+        }
+    }
+    for g in in_order {
+        c.def_scheme(&g);
+    }
+    for (_, s) in &statements {
+        if let Statement::Out(o) = s {
+            let scope = c.module_scope("");
+            let t = c.infer(&o.expr, &scope);
+            // A parameterless function (`def foo() = 42`) is called.
+            if let Ty::Fn(ps, _) = c.resolve(&t)
+                && !ps.is_empty()
+            {
+                c.report(
+                    Diagnostic::error(
+                        Category::Type,
+                        Some(o.expr.span),
+                        "a function cannot be an output",
+                    )
+                    .with_label("this is a function")
+                    .with_help("output a stream or a value, e.g. the function applied to a stream"),
+                );
+            }
+        }
+    }
+    c.diags
+}
+
+#[derive(Default)]
+struct Checker<'a> {
+    subst: Vec<Option<Ty>>,
+    diags: Vec<Diagnostic>,
+    globals: HashMap<String, Rc<DefInfo<'a>>>,
+    inputs: HashMap<String, Ty>,
+    /// (importing module prefix, imported module prefix).
+    imports: Vec<(String, String)>,
+    module_scopes: HashMap<String, Rc<Scope<'a>>>,
+}
+
+impl<'a> Checker<'a> {
+    fn module_scope(&mut self, prefix: &str) -> Rc<Scope<'a>> {
+        self.module_scopes
+            .entry(prefix.to_string())
+            .or_insert_with(|| Scope::root(prefix.to_string()))
+            .clone()
+    }
+
+    fn fresh(&mut self) -> Ty {
+        self.subst.push(None);
+        Ty::Var((self.subst.len() - 1) as u32)
+    }
+
+    fn report(&mut self, d: Diagnostic) {
+        // One error per place, and not a flood.
+        if self.diags.len() < 20 && !self.diags.iter().any(|x| x.span == d.span) {
+            self.diags.push(d);
+        }
+    }
+
+    /// Follow variable bindings at the top of `t`.
+    fn shallow(&self, t: &Ty) -> Ty {
+        let mut t = t.clone();
+        while let Ty::Var(v) = t {
+            match self.subst.get(v as usize).and_then(Clone::clone) {
+                Some(b) => t = b,
+                None => break,
+            }
+        }
+        t
+    }
+
+    /// `t` with every bound variable replaced (bounded depth: types are small).
+    fn resolve(&self, t: &Ty) -> Ty {
+        self.resolve_depth(t, 0)
+    }
+
+    fn resolve_depth(&self, t: &Ty, depth: u32) -> Ty {
+        let t = self.shallow(t);
+        if depth > 64 {
+            return t;
+        }
+        let r = |x: &Ty| self.resolve_depth(x, depth + 1);
+        match t {
+            Ty::Var(_) => t,
+            Ty::Con(n, args) => Ty::Con(n, args.iter().map(r).collect()),
+            Ty::Fn(ps, ret) => Ty::Fn(ps.iter().map(r).collect(), Box::new(r(&ret))),
+            Ty::Record(fs) => Ty::Record(fs.iter().map(|(n, t)| (n.clone(), r(t))).collect()),
+        }
+    }
+
+    fn occurs(&self, v: u32, t: &Ty) -> bool {
+        match self.resolve(t) {
+            Ty::Var(w) => v == w,
+            Ty::Con(_, args) => args.iter().any(|a| self.occurs(v, a)),
+            Ty::Fn(ps, r) => ps.iter().any(|a| self.occurs(v, a)) || self.occurs(v, &r),
+            Ty::Record(fs) => fs.iter().any(|(_, a)| self.occurs(v, a)),
+        }
+    }
+
+    /// Unify modulo `Events`: `Events[T]` and `T` fit each other (signal lift, constants as
+    /// streams, macro expansion).
+    fn unify(&mut self, a: &Ty, b: &Ty) -> Result<(), ()> {
+        let (a, b) = (self.shallow(a), self.shallow(b));
+        match (&a, &b) {
+            (Ty::Var(x), Ty::Var(y)) if x == y => Ok(()),
+            (Ty::Var(x), t) | (t, Ty::Var(x)) => {
+                // A cyclic type only comes from recursion through `last`; let it pass.
+                if !self.occurs(*x, t)
+                    && let Some(slot) = self.subst.get_mut(*x as usize)
+                {
+                    *slot = Some(t.clone());
+                }
+                Ok(())
+            }
+            (Ty::Con("Events", x), Ty::Con("Events", y)) => match (x.first(), y.first()) {
+                (Some(x), Some(y)) => self.unify(x, y),
+                _ => Ok(()),
+            },
+            (Ty::Con("Events", x), t) | (t, Ty::Con("Events", x)) => match x.first() {
+                Some(x) => {
+                    let x = x.clone();
+                    self.unify(&x, t)
+                }
+                None => Ok(()),
+            },
+            (Ty::Con(n, xs), Ty::Con(m, ys)) => {
+                if n != m || xs.len() != ys.len() {
+                    return Err(());
+                }
+                for (x, y) in xs.iter().zip(ys) {
+                    self.unify(x, y)?;
+                }
+                Ok(())
+            }
+            (Ty::Record(xs), Ty::Record(ys)) if xs.len() == ys.len() => {
+                for ((n, x), (m, y)) in xs.iter().zip(ys) {
+                    if n != m {
+                        return Err(());
+                    }
+                    self.unify(x, y)?;
+                }
+                Ok(())
+            }
+            (Ty::Fn(ps, r), Ty::Fn(qs, s)) if ps.len() == qs.len() => {
+                for (x, y) in ps.iter().zip(qs) {
+                    self.unify(x, y)?;
+                }
+                self.unify(r, s)
+            }
+            _ => Err(()),
+        }
+    }
+
+    /// Unify `found` (of the expression at `span`) with `expected`; report a mismatch with a fix
+    /// where one is known.
+    fn expect(&mut self, expected: &Ty, found: &Ty, span: Span, what: &str) -> bool {
+        if self.unify(expected, found).is_ok() {
+            return true;
+        }
+        let (e, f) = (self.resolve(expected), self.resolve(found));
+        let (es, fs) = (show(&e), show(&f));
+        let mut d = Diagnostic::error(
+            Category::Type,
+            Some(span),
+            format!("{what}: expected {es}, found {fs}"),
+        )
+        .with_label(format!("this is {fs}"));
+        let base = |t: &Ty| match t {
+            Ty::Con("Events", a) => a.first().cloned().unwrap_or(Ty::Var(0)),
+            t => t.clone(),
+        };
+        match (base(&e), base(&f)) {
+            (Ty::Con("Float", _), Ty::Con("Int", _)) => {
+                d = d.with_help("write a Float literal (`1.0`) or convert with `intToFloat(...)`");
+            }
+            (Ty::Con("Int", _), Ty::Con("Float", _)) => {
+                d = d
+                    .with_help("convert with `floatToInt(...)`, or use the dotted Float operators");
+            }
+            (Ty::Fn(ps, _), Ty::Fn(qs, _)) if ps.len() != qs.len() => {
+                d = d.with_help(format!(
+                    "a function of {} arguments is expected; this one takes {} arguments",
+                    ps.len(),
+                    qs.len()
+                ));
+            }
+            (Ty::Con("String", _), _) => {
+                d = d.with_help("convert with `toString(...)`");
+            }
+            _ => {}
+        }
+        self.report(d);
+        false
+    }
+
+    fn generalize(&self, t: &Ty) -> Scheme {
+        let ty = self.resolve(t);
+        let mut vars = Vec::new();
+        collect_vars(&ty, &mut vars);
+        Scheme { vars, ty }
+    }
+
+    fn instantiate(&mut self, s: &Scheme) -> Ty {
+        if s.vars.is_empty() {
+            return s.ty.clone();
+        }
+        let map: HashMap<u32, Ty> = s.vars.iter().map(|v| (*v, self.fresh())).collect();
+        substitute(&s.ty, &map)
+    }
+
+    /// The (instantiated) type of a def, inferring it on first use.
+    fn def_type(&mut self, d: &Rc<DefInfo<'a>>) -> Ty {
+        let s = self.def_scheme(d);
+        self.instantiate(&s)
+    }
+
+    fn def_scheme(&mut self, d: &Rc<DefInfo<'a>>) -> Scheme {
+        let state = std::mem::replace(&mut *d.state.borrow_mut(), State::Todo);
+        match state {
+            State::Done(s) => {
+                *d.state.borrow_mut() = State::Done(s.clone());
+                s
+            }
+            State::InProgress(t) => {
+                *d.state.borrow_mut() = State::InProgress(t.clone());
+                Scheme {
+                    vars: Vec::new(),
+                    ty: t,
+                }
+            }
+            State::Todo => {
+                let me = self.fresh();
+                *d.state.borrow_mut() = State::InProgress(me.clone());
+                let t = self.infer_def(d.def, &d.scope);
+                self.unify(&me, &t).ok();
+                let s = self.generalize(&t);
+                *d.state.borrow_mut() = State::Done(s.clone());
+                s
+            }
+        }
+    }
+
+    /// The type of a def: a function type when it has parameters.
+    fn infer_def(&mut self, d: &'a Def, scope: &Rc<Scope<'a>>) -> Ty {
+        let mut tparams: HashMap<String, Ty> = HashMap::new();
+        for tp in &d.type_params {
+            let v = self.fresh();
+            tparams.insert(tp.name.clone(), v);
+        }
+        let inner = scope.child();
+        let mut ptys = Vec::new();
+        if let Some(ps) = &d.params {
+            for p in ps {
+                let t = match &p.ty {
+                    Some(t) => self.ast_type(t, &tparams),
+                    None => self.fresh(),
+                };
+                inner
+                    .names
+                    .borrow_mut()
+                    .insert(p.name.name.clone(), Local::Mono(t.clone()));
+                ptys.push(t);
+            }
+        }
+        let declared = d.result_type.as_ref().map(|t| self.ast_type(t, &tparams));
+        let body = match &d.body {
+            Body::Extern { .. } => declared.clone().unwrap_or_else(|| self.fresh()),
+            Body::Expr { expr, where_defs } => {
+                let scope = if where_defs.is_empty() {
+                    inner
+                } else {
+                    self.local_defs(where_defs, &inner)
+                };
+                let t = self.infer(expr, &scope);
+                if let Some(dt) = &declared {
+                    self.expect(
+                        dt,
+                        &t,
+                        expr.span,
+                        &format!(
+                            "the body of `{}` does not have its declared type",
+                            d.name.name
+                        ),
+                    );
+                }
+                t
+            }
+        };
+        let ret = declared.unwrap_or(body);
+        if d.params.is_some() {
+            func(ptys, ret)
+        } else {
+            ret
+        }
+    }
+
+    fn local_defs(&mut self, defs: &'a [Def], scope: &Rc<Scope<'a>>) -> Rc<Scope<'a>> {
+        let s = scope.child();
+        for d in defs {
+            s.names.borrow_mut().insert(
+                d.name.name.clone(),
+                Local::Def(Rc::new(DefInfo {
+                    def: d,
+                    scope: s.clone(),
+                    state: RefCell::new(State::Todo),
+                })),
+            );
+        }
+        s
+    }
+
+    fn find(&self, name: &str, scope: &Rc<Scope<'a>>) -> Option<Found<'a>> {
+        let mut s = Some(scope.clone());
+        while let Some(sc) = s {
+            match sc.names.borrow().get(name) {
+                Some(Local::Mono(t)) => return Some(Found::Mono(t.clone())),
+                Some(Local::Def(d)) => return Some(Found::Def(d.clone())),
+                None => {}
+            }
+            s = sc.parent.clone();
+        }
+        self.find_global(name, &scope.prefix)
+    }
+
+    /// A global by name as seen from module `prefix`: own module and enclosing modules first,
+    /// then the top level and inputs, then imported modules.
+    fn find_global(&self, name: &str, prefix: &str) -> Option<Found<'a>> {
+        let mut p = prefix.to_string();
+        loop {
+            if let Some(d) = self.globals.get(&format!("{p}{name}")) {
+                return Some(Found::Def(d.clone()));
+            }
+            if p.is_empty() {
+                break;
+            }
+            let trimmed = p.trim_end_matches('.');
+            p = trimmed
+                .rfind('.')
+                .map_or_else(String::new, |k| format!("{}.", &trimmed[..k]));
+        }
+        if let Some(t) = self.inputs.get(name) {
+            return Some(Found::Mono(t.clone()));
+        }
+        for (at, target) in &self.imports {
+            if prefix.starts_with(at.as_str()) {
+                for full in [format!("{at}{target}{name}"), format!("{target}{name}")] {
+                    if let Some(d) = self.globals.get(&full) {
+                        return Some(Found::Def(d.clone()));
+                    }
+                }
+            }
+        }
+        None
+    }
+
+    fn lookup(&mut self, name: &str, scope: &Rc<Scope<'a>>) -> Ty {
+        match self.find(name, scope) {
+            Some(Found::Mono(t)) => t,
+            Some(Found::Def(d)) => self.def_type(&d),
+            None => self.builtin(name).unwrap_or_else(|| self.fresh()),
+        }
+    }
+
+    fn ast_type(&mut self, t: &ast::Type, tparams: &HashMap<String, Ty>) -> Ty {
+        match t {
+            ast::Type::Name(id) => match id.name.as_str() {
+                "Int" => int(),
+                "Float" => float(),
+                "Bool" => boolean(),
+                "String" => string(),
+                "Unit" => unit(),
+                n => tparams.get(n).cloned().unwrap_or_else(|| self.fresh()),
+            },
+            ast::Type::App { name, args, .. } => {
+                let mut a: Vec<Ty> = args.iter().map(|x| self.ast_type(x, tparams)).collect();
+                match (name.name.as_str(), a.len()) {
+                    ("Events", 1) => ev(a.remove(0)),
+                    ("Option", 1) => opt(a.remove(0)),
+                    ("List", 1) => list(a.remove(0)),
+                    ("Set", 1) => set(a.remove(0)),
+                    ("Map", 2) => {
+                        let k = a.remove(0);
+                        map(k, a.remove(0))
+                    }
+                    _ => self.fresh(),
+                }
+            }
+            ast::Type::Function { params, result, .. } => {
+                let ps = params
+                    .iter()
+                    .map(|(_, p)| self.ast_type(p, tparams))
+                    .collect();
+                let r = self.ast_type(result, tparams);
+                func(ps, r)
+            }
+            ast::Type::Record { fields, .. } if fields.is_empty() => unit(),
+            ast::Type::Record { fields, .. } => {
+                let mut fs: Vec<(String, Ty)> = fields
+                    .iter()
+                    .map(|(n, t)| (n.name.clone(), self.ast_type(t, tparams)))
+                    .collect();
+                fs.sort_by(|a, b| a.0.cmp(&b.0));
+                Ty::Record(fs)
+            }
+            ast::Type::Tuple { elems, .. } if elems.is_empty() => unit(),
+            ast::Type::Tuple { elems, .. } => {
+                tuple(elems.iter().map(|x| self.ast_type(x, tparams)).collect())
+            }
+        }
+    }
+
+    /// Is `t` (resolved) a stream?
+    fn is_stream(&self, t: &Ty) -> bool {
+        matches!(self.shallow(t), Ty::Con("Events", _))
+    }
+
+    /// The result of an operator or lifted function: a stream if any argument is one.
+    fn lifted(&self, args: &[Ty], r: Ty) -> Ty {
+        if args.iter().any(|a| self.is_stream(a)) && !self.is_stream(&r) {
+            ev(r)
+        } else {
+            r
+        }
+    }
+
+    fn infer(&mut self, e: &'a Expr, scope: &Rc<Scope<'a>>) -> Ty {
+        match &e.kind {
+            ExprKind::Var(id) => match id.name.as_str() {
+                n @ ("true" | "false" | "None" | "unit" | "nil")
+                    if self.find(n, scope).is_none() =>
+                {
+                    match n {
+                        "None" => {
+                            let a = self.fresh();
+                            opt(a)
+                        }
+                        "unit" => ev(unit()),
+                        "nil" => {
+                            let a = self.fresh();
+                            ev(a)
+                        }
+                        _ => boolean(),
+                    }
+                }
+                n => self.lookup(n, scope),
+            },
+            ExprKind::RootMember(id) => match self.find_global(&id.name, "") {
+                Some(Found::Mono(t)) => t,
+                Some(Found::Def(d)) => self.def_type(&d),
+                None => self.fresh(),
+            },
+            ExprKind::Int { .. } => int(),
+            ExprKind::Float(_) => float(),
+            ExprKind::Str { parts, .. } => {
+                let mut ts = Vec::new();
+                for p in parts {
+                    if let StrPart::Interp { expr, .. } = p {
+                        ts.push(self.infer(expr, scope));
+                    }
+                }
+                self.lifted(&ts, string())
+            }
+            ExprKind::Tuple(es) if es.is_empty() => unit(),
+            ExprKind::Tuple(es) => {
+                let ts: Vec<Ty> = es.iter().map(|x| self.infer(x, scope)).collect();
+                let r = tuple(ts.iter().map(|t| self.strip(t)).collect());
+                self.lifted(&ts, r)
+            }
+            ExprKind::Record(members) if members.is_empty() => unit(),
+            ExprKind::Record(members) => {
+                let mut fs: Vec<(String, Ty)> = Vec::new();
+                let mut ts = Vec::new();
+                for (n, x) in members {
+                    let t = self.infer(x, scope);
+                    fs.push((n.name.clone(), self.strip(&t)));
+                    ts.push(t);
+                }
+                fs.sort_by(|a, b| a.0.cmp(&b.0));
+                fs.dedup_by(|a, b| a.0 == b.0);
+                self.lifted(&ts, Ty::Record(fs))
+            }
+            ExprKind::Block { defs, result } => {
+                let s = self.local_defs(defs, scope);
+                self.infer(result, &s)
+            }
+            ExprKind::Member { object, field } => {
+                if let Some(path) = dotted(object) {
+                    let head = path.split('.').next().unwrap_or_default();
+                    if self.find(head, scope).is_none() {
+                        let q = format!("{path}.{}", field.name);
+                        return match self.find(&q, scope) {
+                            Some(Found::Mono(t)) => t,
+                            Some(Found::Def(d)) => self.def_type(&d),
+                            None => self.builtin(&q).unwrap_or_else(|| self.fresh()),
+                        };
+                    }
+                }
+                let o = self.infer(object, scope);
+                let base = self.resolve(&self.strip(&o));
+                let r = match &base {
+                    Ty::Record(fs) => match fs.iter().find(|(n, _)| *n == field.name) {
+                        Some((_, t)) => t.clone(),
+                        None => {
+                            let known: Vec<String> =
+                                fs.iter().map(|(n, _)| format!("`{n}`")).collect();
+                            self.report(
+                                Diagnostic::error(
+                                    Category::Type,
+                                    Some(field.span),
+                                    format!("{} has no field `{}`", show(&base), field.name),
+                                )
+                                .with_help(format!("its fields are {}", known.join(", "))),
+                            );
+                            self.fresh()
+                        }
+                    },
+                    _ => self.fresh(),
+                };
+                self.lifted(&[o], r)
+            }
+            ExprKind::Unary { op, operand } => {
+                let t = self.infer(operand, scope);
+                let (want, what) = match op {
+                    UnaryOp::Not => (boolean(), "`!` needs a Bool"),
+                    UnaryOp::FNeg => (float(), "`-.` needs a Float"),
+                    UnaryOp::Neg | UnaryOp::BitNot => (int(), "this operator needs an Int"),
+                };
+                if matches!(op, UnaryOp::Neg) && self.base_is(&t, "Float") {
+                    self.report(
+                        Diagnostic::error(
+                            Category::Type,
+                            Some(e.span),
+                            "`-` is not defined for Float in TeSSLa 1.2",
+                        )
+                        .with_label("a Float operand")
+                        .with_help("use `-.` for Float"),
+                    );
+                    return self.lifted(&[t], float());
+                }
+                self.expect(&want, &t, operand.span, what);
+                self.lifted(&[t], want)
+            }
+            ExprKind::Binary { op, lhs, rhs } => self.binary(*op, lhs, rhs, e.span, scope),
+            ExprKind::If {
+                is_static,
+                cond,
+                then_branch,
+                else_branch,
+            } => {
+                let c = self.infer(cond, scope);
+                self.expect(
+                    &boolean(),
+                    &c,
+                    cond.span,
+                    "the condition of `if` must be a Bool",
+                );
+                let t = self.infer(then_branch, scope);
+                let f = self.infer(else_branch, scope);
+                if *is_static {
+                    // Only one branch is compiled; the other may have another type.
+                    return self.fresh();
+                }
+                if self.unify(&t, &f).is_err() {
+                    let (ts, fs) = (show(&self.resolve(&t)), show(&self.resolve(&f)));
+                    self.report(
+                        Diagnostic::error(
+                            Category::Type,
+                            Some(else_branch.span),
+                            format!("the branches of `if` have different types: {ts} and {fs}"),
+                        )
+                        .with_label(format!("this is {fs}"))
+                        .with_note_at(then_branch.span, format!("this is {ts}"))
+                        .with_help("both branches must have the same type"),
+                    );
+                    return self.fresh();
+                }
+                let r = if self.is_stream(&f) { f } else { t };
+                self.lifted(&[c], r)
+            }
+            ExprKind::Lambda { params, body } => {
+                let inner = scope.child();
+                let mut ps = Vec::new();
+                for p in params {
+                    let t = match &p.ty {
+                        Some(t) => self.ast_type(t, &HashMap::new()),
+                        None => self.fresh(),
+                    };
+                    inner
+                        .names
+                        .borrow_mut()
+                        .insert(p.name.name.clone(), Local::Mono(t.clone()));
+                    ps.push(t);
+                }
+                let r = self.infer(body, &inner);
+                func(ps, r)
+            }
+            ExprKind::Call { function, args, .. } => {
+                let f = self.infer(function, scope);
+                let Some(args) = args else {
+                    return f;
+                };
+                self.call(f, function, args, e.span, scope)
+            }
+        }
+    }
+
+    /// The element type of a stream type, else the type itself.
+    fn strip(&self, t: &Ty) -> Ty {
+        match self.shallow(t) {
+            Ty::Con("Events", a) => a.first().cloned().unwrap_or_else(|| t.clone()),
+            other => other,
+        }
+    }
+
+    fn base_is(&self, t: &Ty, name: &str) -> bool {
+        matches!(self.shallow(&self.strip(t)), Ty::Con(n, _) if n == name)
+    }
+
+    fn binary(
+        &mut self,
+        op: BinOp,
+        lhs: &'a Expr,
+        rhs: &'a Expr,
+        span: Span,
+        scope: &Rc<Scope<'a>>,
+    ) -> Ty {
+        use BinOp::*;
+        let a = self.infer(lhs, scope);
+        let b = self.infer(rhs, scope);
+        let sym = op.symbol();
+        let (operand, result) = match op {
+            Add | Sub | Mul | Div | Mod | Shl | Shr | BitAnd | BitOr | BitXor => (int(), int()),
+            Lt | Gt | Le | Ge => (int(), boolean()),
+            FAdd | FSub | FMul | FDiv => (float(), float()),
+            FLt | FGt | FLe | FGe => (float(), boolean()),
+            And | Or => (boolean(), boolean()),
+            Eq | Ne => {
+                if self.unify(&a, &b).is_err() {
+                    let (x, y) = (show(&self.resolve(&a)), show(&self.resolve(&b)));
+                    self.report(
+                        Diagnostic::error(
+                            Category::Type,
+                            Some(span),
+                            format!("`{sym}` compares values of one type, found {x} and {y}"),
+                        )
+                        .with_label("different types"),
+                    );
+                }
+                return self.lifted(&[a, b], boolean());
+            }
+        };
+        let int_op = matches!(op, Add | Sub | Mul | Div | Mod | Lt | Gt | Le | Ge);
+        if int_op && (self.base_is(&a, "Float") || self.base_is(&b, "Float")) {
+            self.report(
+                Diagnostic::error(
+                    Category::Type,
+                    Some(span),
+                    format!("`{sym}` is not defined for Float in TeSSLa 1.2"),
+                )
+                .with_label("a Float operand")
+                .with_help(format!("use `{sym}.` for Float")),
+            );
+            return self.lifted(&[a, b], result);
+        }
+        let what = format!("operand of `{sym}`");
+        if self.expect(&operand, &a, lhs.span, &what) {
+            self.expect(&operand, &b, rhs.span, &what);
+        }
+        self.lifted(&[a, b], result)
+    }
+
+    fn call(
+        &mut self,
+        f: Ty,
+        function: &'a Expr,
+        args: &'a [ast::Arg],
+        span: Span,
+        scope: &Rc<Scope<'a>>,
+    ) -> Ty {
+        let mut ts: Vec<Ty> = args.iter().map(|a| self.infer(&a.value, scope)).collect();
+        // Variadic builtins get their signature from the number of arguments.
+        if let ExprKind::Var(id) = &function.kind
+            && self.find(&id.name, scope).is_none()
+            && let Some(sig) = self.variadic(&id.name, ts.len())
+        {
+            return self.apply(sig, &ts, args, span, &id.name);
+        }
+        if args.iter().any(|a| a.name.is_some()) {
+            // Named arguments: put them in parameter order when the callee is a user def.
+            let params = match &function.kind {
+                ExprKind::Var(id) => match self.find(&id.name, scope) {
+                    Some(Found::Def(d)) => d.def.params.clone(),
+                    _ => None,
+                },
+                _ => None,
+            };
+            let Some(params) = params else {
+                return self.fresh();
+            };
+            let mut ordered: Vec<Option<Ty>> = vec![None; params.len()];
+            for (k, (a, t)) in args.iter().zip(ts.iter()).enumerate() {
+                let pos = match &a.name {
+                    Some(n) => params.iter().position(|p| p.name.name == n.name),
+                    None => Some(k),
+                };
+                match pos.and_then(|p| ordered.get_mut(p)) {
+                    Some(slot) => *slot = Some(t.clone()),
+                    None => return self.fresh(),
+                }
+            }
+            ts = ordered
+                .into_iter()
+                .map(|t| t.unwrap_or(Ty::Var(0)))
+                .collect();
+            if ts.iter().any(|t| *t == Ty::Var(0)) {
+                return self.fresh();
+            }
+        }
+        let name = match &function.kind {
+            ExprKind::Var(id) => id.name.clone(),
+            _ => "the function".into(),
+        };
+        self.apply(f, &ts, args, span, &name)
+    }
+
+    /// Apply a function type to arguments.
+    fn apply(&mut self, f: Ty, ts: &[Ty], args: &[ast::Arg], span: Span, name: &str) -> Ty {
+        match self.shallow(&f) {
+            Ty::Fn(ps, r) => {
+                if ps.len() != ts.len() {
+                    self.report(Diagnostic::error(
+                        Category::Type,
+                        Some(span),
+                        format!("`{name}` takes {} arguments, {} given", ps.len(), ts.len()),
+                    ));
+                    return self.fresh();
+                }
+                for (i, (p, t)) in ps.iter().zip(ts).enumerate() {
+                    let sp = args.get(i).map_or(span, |a| a.value.span);
+                    if !self.expect(p, t, sp, &format!("argument {} of `{name}`", i + 1)) {
+                        return self.fresh();
+                    }
+                }
+                self.lifted(ts, *r)
+            }
+            Ty::Var(_) => {
+                let r = self.fresh();
+                let _ = self.unify(&f, &func(ts.to_vec(), r.clone()));
+                r
+            }
+            other => {
+                self.report(Diagnostic::error(
+                    Category::Type,
+                    Some(span),
+                    format!(
+                        "`{name}` is {}, not a function",
+                        show(&self.resolve(&other))
+                    ),
+                ));
+                self.fresh()
+            }
+        }
+    }
+
+    /// Signatures of builtins whose arity varies (`lift`, `slift`, `merge`, `log`).
+    fn variadic(&mut self, name: &str, n: usize) -> Option<Ty> {
+        let arity = |base: &str| -> Option<usize> {
+            let rest = name.strip_prefix(base)?;
+            if rest.is_empty() {
+                Some(n)
+            } else {
+                rest.parse().ok()
+            }
+        };
+        if let Some(k) = arity("slift").or_else(|| arity("lift")) {
+            let k = k.min(n.saturating_sub(1));
+            let xs: Vec<Ty> = (0..k).map(|_| self.fresh()).collect();
+            let r = self.fresh();
+            let is_lift = name.starts_with("lift");
+            let fty = if is_lift {
+                func(xs.iter().cloned().map(opt).collect(), opt(r.clone()))
+            } else {
+                func(xs.clone(), r.clone())
+            };
+            let mut ps: Vec<Ty> = xs.into_iter().map(ev).collect();
+            ps.push(fty);
+            return Some(func(ps, ev(r)));
+        }
+        if let Some(k) = arity("merge") {
+            let a = self.fresh();
+            return Some(func(vec![ev(a.clone()); k], ev(a)));
+        }
+        if name == "log" {
+            return Some(func(vec![float(); n.clamp(1, 2)], float()));
+        }
+        None
+    }
+
+    /// The type of a builtin name (stream functions, value functions, collection functions).
+    fn builtin(&mut self, name: &str) -> Option<Ty> {
+        let a = self.fresh();
+        let b = self.fresh();
+        let (k, v) = (a.clone(), b.clone());
+        let f = |ps: Vec<Ty>, r: Ty| func(ps, r);
+        Some(match name {
+            "time" => f(vec![ev(a)], ev(int())),
+            "last" => f(vec![ev(a.clone()), ev(b)], ev(a)),
+            "prev" | "pure" | "firstEvent" => f(vec![ev(a.clone())], ev(a)),
+            "delay" => f(vec![ev(int()), ev(a)], ev(unit())),
+            "default" => f(vec![ev(a.clone()), a.clone()], ev(a)),
+            "defaultFrom" => f(vec![ev(a.clone()), ev(a.clone())], ev(a)),
+            "const" => f(vec![a.clone(), ev(b)], ev(a)),
+            "first" => f(vec![ev(a.clone()), ev(b)], ev(a)),
+            "filter" => f(vec![ev(a.clone()), ev(boolean())], ev(a)),
+            "count" => f(vec![ev(a)], ev(int())),
+            "fold" => f(
+                vec![
+                    ev(a.clone()),
+                    b.clone(),
+                    func(vec![b.clone(), a], b.clone()),
+                ],
+                ev(b),
+            ),
+            "reduce" => f(
+                vec![ev(a.clone()), func(vec![a.clone(), a.clone()], a.clone())],
+                ev(a),
+            ),
+            "isFirst" | "defined" => f(vec![ev(a)], ev(boolean())),
+            "on" => f(vec![ev(a), ev(b.clone())], ev(b)),
+            "constIf" => f(vec![a.clone(), ev(boolean())], ev(a)),
+            "unitIf" => f(vec![ev(boolean())], ev(unit())),
+            "rising" | "falling" => f(vec![ev(boolean())], ev(b)),
+            "resetCount" => f(vec![ev(a), ev(b)], ev(int())),
+            "noEvent" => f(vec![ev(a), ev(b)], ev(boolean())),
+            "period" => f(vec![int()], ev(unit())),
+            "Set.collect" => f(vec![ev(a.clone())], ev(set(a))),
+            "Set.collectWithRemove" => f(vec![ev(a.clone()), ev(a.clone())], ev(set(a))),
+            "intToFloat" => f(vec![int()], float()),
+            "floatToInt" => f(vec![float()], int()),
+            "pow" => f(vec![float(), float()], float()),
+            "sin" | "cos" | "tan" | "atan" | "sqrt" => f(vec![float()], float()),
+            "abs" => f(vec![a.clone()], a),
+            "max" | "min" => f(vec![a.clone(), a.clone()], a),
+            "toString" => f(vec![a], string()),
+            "String.concat" => f(vec![string(), string()], string()),
+            "Some" => f(vec![a.clone()], opt(a)),
+            "isNone" | "isSome" => f(vec![opt(a)], boolean()),
+            "getSome" => f(vec![opt(a.clone())], a),
+            "getSomeOrElse" => f(vec![opt(a.clone()), a.clone()], a),
+            "ite" => f(vec![boolean(), a.clone(), a.clone()], a),
+            "List.empty" => list(a),
+            "Set.empty" => set(a),
+            "Map.empty" => map(a, b),
+            "List.size" => f(vec![list(a)], int()),
+            "List.isEmpty" => f(vec![list(a)], boolean()),
+            "List.append" => f(vec![list(a.clone()), a.clone()], list(a)),
+            "List.prepend" => f(vec![a.clone(), list(a.clone())], list(a)),
+            "List.get" => f(vec![list(a.clone()), int()], a),
+            "List.set" => f(vec![list(a.clone()), int(), a.clone()], list(a)),
+            "List.head" | "List.last" => f(vec![list(a.clone())], a),
+            "List.tail" | "List.init" => f(vec![list(a.clone())], list(a)),
+            "List.fold" => f(
+                vec![
+                    list(a.clone()),
+                    b.clone(),
+                    func(vec![b.clone(), a], b.clone()),
+                ],
+                b,
+            ),
+            "List.map" => f(vec![list(a.clone()), func(vec![a], b.clone())], list(b)),
+            "Set.add" | "Set.remove" => f(vec![set(a.clone()), a.clone()], set(a)),
+            "Set.contains" => f(vec![set(a.clone()), a], boolean()),
+            "Set.size" => f(vec![set(a)], int()),
+            "Set.union" | "Set.intersection" | "Set.minus" => {
+                f(vec![set(a.clone()), set(a.clone())], set(a))
+            }
+            "Set.fold" => f(
+                vec![
+                    set(a.clone()),
+                    b.clone(),
+                    func(vec![b.clone(), a], b.clone()),
+                ],
+                b,
+            ),
+            "Set.map" => f(vec![set(a.clone()), func(vec![a], b.clone())], set(b)),
+            "Map.add" => f(
+                vec![map(k.clone(), v.clone()), k.clone(), v.clone()],
+                map(k, v),
+            ),
+            "Map.contains" => f(vec![map(k.clone(), v), k], boolean()),
+            "Map.get" => f(vec![map(k.clone(), v.clone()), k], v),
+            "Map.getOrElse" => f(vec![map(k.clone(), v.clone()), k, v.clone()], v),
+            "Map.remove" => f(vec![map(k.clone(), v.clone()), k.clone()], map(k, v)),
+            "Map.size" => f(vec![map(k, v)], int()),
+            _ => return None,
+        })
+    }
+}
+
+fn collect_vars(t: &Ty, out: &mut Vec<u32>) {
+    match t {
+        Ty::Var(v) => {
+            if !out.contains(v) {
+                out.push(*v);
+            }
+        }
+        Ty::Con(_, args) => args.iter().for_each(|a| collect_vars(a, out)),
+        Ty::Fn(ps, r) => {
+            ps.iter().for_each(|a| collect_vars(a, out));
+            collect_vars(r, out);
+        }
+        Ty::Record(fs) => fs.iter().for_each(|(_, a)| collect_vars(a, out)),
+    }
+}
+
+fn substitute(t: &Ty, map: &HashMap<u32, Ty>) -> Ty {
+    let s = |x: &Ty| substitute(x, map);
+    match t {
+        Ty::Var(v) => map.get(v).cloned().unwrap_or_else(|| t.clone()),
+        Ty::Con(n, args) => Ty::Con(n, args.iter().map(s).collect()),
+        Ty::Fn(ps, r) => Ty::Fn(ps.iter().map(s).collect(), Box::new(s(r))),
+        Ty::Record(fs) => Ty::Record(fs.iter().map(|(n, t)| (n.clone(), s(t))).collect()),
+    }
+}
+
+/// TeSSLa's notation of a type; unknown parts print as `?`.
+fn show(t: &Ty) -> String {
+    match t {
+        Ty::Var(_) => "?".into(),
+        Ty::Con(n, args) if args.is_empty() => (*n).into(),
+        Ty::Con(n, args) => format!(
+            "{n}[{}]",
+            args.iter().map(show).collect::<Vec<_>>().join(", ")
+        ),
+        Ty::Fn(ps, r) => format!(
+            "({}) => {}",
+            ps.iter().map(show).collect::<Vec<_>>().join(", "),
+            show(r)
+        ),
+        Ty::Record(fs)
+            if fs
+                .iter()
+                .enumerate()
+                .all(|(i, (n, _))| n.strip_prefix('_') == Some(&(i + 1).to_string())) =>
+        {
+            format!(
+                "({})",
+                fs.iter()
+                    .map(|(_, t)| show(t))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        }
+        Ty::Record(fs) => format!(
+            "{{{}}}",
+            fs.iter()
+                .map(|(n, t)| format!("{n}: {}", show(t)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    }
+}
+
+/// `A.B.c` as a string, for module paths.
+fn dotted(e: &Expr) -> Option<String> {
+    match &e.kind {
+        ExprKind::Var(id) => Some(id.name.clone()),
+        ExprKind::Member { object, field } => Some(format!("{}.{}", dotted(object)?, field.name)),
+        _ => None,
+    }
+}
