@@ -337,6 +337,37 @@ impl Monitor {
     }
 }
 
+/// State access for [`crate::snapshot`], the only code that depends on the layout of the fields.
+impl Monitor {
+    pub(crate) fn raw_state(&self) -> crate::snapshot::RawState {
+        crate::snapshot::RawState {
+            t0: self.t0,
+            pending: self.pending,
+            last_evaluated: self.last_evaluated,
+            inputs: self.inputs.clone(),
+            last: self.last.clone(),
+            targets: self.targets.clone(),
+        }
+    }
+
+    /// A monitor of `program` in state `raw` (vectors of another length are cut or padded).
+    pub(crate) fn from_raw_state(program: Arc<Program>, raw: crate::snapshot::RawState) -> Monitor {
+        let mut m = Monitor::starting_at(program, raw.t0);
+        m.pending = raw.pending;
+        m.last_evaluated = raw.last_evaluated;
+        for (slot, v) in m.inputs.iter_mut().zip(raw.inputs) {
+            *slot = v;
+        }
+        for (slot, v) in m.last.iter_mut().zip(raw.last) {
+            *slot = v;
+        }
+        for (slot, v) in m.targets.iter_mut().zip(raw.targets) {
+            *slot = v;
+        }
+        m
+    }
+}
+
 fn strict2(f: &crate::ir::Func, a: &Value, b: &Value) -> Value {
     if let Value::Error(e) = a {
         return Value::Error(e.clone());
