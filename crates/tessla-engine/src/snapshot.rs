@@ -50,13 +50,13 @@ pub fn mix(a: u64, b: u64) -> u64 {
     h.finish()
 }
 
-/// A value as plain data. Floats are kept as their bits (JSON has no NaN or infinities).
+/// A value as plain data.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum SValue {
     Unit,
     Bool(bool),
     Int(i64),
-    Float(u64),
+    Float(#[serde(with = "float")] f64),
     Str(String),
     None,
     Some(Box<SValue>),
@@ -90,7 +90,7 @@ impl SValue {
             Value::Unit => SValue::Unit,
             Value::Bool(b) => SValue::Bool(*b),
             Value::Int(i) => SValue::Int(*i),
-            Value::Float(f) => SValue::Float(f.to_bits()),
+            Value::Float(f) => SValue::Float(*f),
             Value::Str(s) => SValue::Str(s.to_string()),
             Value::None => SValue::None,
             Value::Some(x) => SValue::Some(Box::new(SValue::from_value(x)?)),
@@ -125,7 +125,7 @@ impl SValue {
             SValue::Unit => Value::Unit,
             SValue::Bool(b) => Value::Bool(*b),
             SValue::Int(i) => Value::Int(*i),
-            SValue::Float(bits) => Value::Float(f64::from_bits(*bits)),
+            SValue::Float(f) => Value::Float(*f),
             SValue::Str(s) => Value::Str(Arc::from(s.as_str())),
             SValue::None => Value::None,
             SValue::Some(x) => Value::Some(Arc::new(x.to_value())),
@@ -150,6 +150,45 @@ impl SValue {
                 SError::NonPositiveDelay => RuntimeError::NonPositiveDelay,
                 SError::Other(s) => RuntimeError::Other(Arc::from(s.as_str())),
             }),
+        }
+    }
+}
+
+/// Floats as numbers when finite (exact with serde_json's `float_roundtrip`), else as the
+/// strings `NaN`, `inf`, `-inf` (JSON has no numbers for them).
+mod float {
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    #[derive(Serialize, Deserialize)]
+    #[serde(untagged)]
+    enum Repr {
+        Num(f64),
+        Word(String),
+    }
+
+    pub fn serialize<S: Serializer>(f: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if f.is_finite() {
+            s.serialize_f64(*f)
+        } else if f.is_nan() {
+            s.serialize_str("NaN")
+        } else if *f > 0.0 {
+            s.serialize_str("inf")
+        } else {
+            s.serialize_str("-inf")
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        match Repr::deserialize(d)? {
+            Repr::Num(f) => Ok(f),
+            Repr::Word(w) => match w.as_str() {
+                "NaN" => Ok(f64::NAN),
+                "inf" => Ok(f64::INFINITY),
+                "-inf" => Ok(f64::NEG_INFINITY),
+                other => Err(serde::de::Error::custom(format!(
+                    "`{other}` is not a float"
+                ))),
+            },
         }
     }
 }
