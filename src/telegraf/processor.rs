@@ -300,7 +300,9 @@ impl Processor {
             });
             ts = min;
         }
-        if monitor.pending().is_some_and(|p| ts > p) {
+        // Evaluate the open step and the delay firings before `ts` now, so their outputs
+        // precede this record's pass-through whenever the previous read ended.
+        if monitor.pending().is_none_or(|p| ts > p) {
             let events = &mut self.emitter.events;
             monitor.advance_to(ts, &mut |e: OutputEvent<'_>| {
                 events.push((e.ts, e.output, e.value.clone()))

@@ -215,11 +215,22 @@ fn load_quiet(path: &Path, proc: &mut Processor, ctx: &Context) -> Outcome {
             Outcome::Restored(n)
         }
         Err(why) => {
-            let aside = PathBuf::from(format!("{}.rejected-{}", path.display(), unix_now()));
-            let moved = fs::rename(path, &aside).ok().map(|()| aside);
+            let moved =
+                aside_name(path).and_then(|aside| fs::rename(path, &aside).ok().map(|()| aside));
             Outcome::Rejected(why, moved)
         }
     }
+}
+
+/// `FILE.rejected-<unix seconds>`, with `-2`, `-3` ... appended when that exists already.
+fn aside_name(path: &Path) -> Option<PathBuf> {
+    let base = format!("{}.rejected-{}", path.display(), unix_now());
+    (1..1000)
+        .map(|n| match n {
+            1 => PathBuf::from(&base),
+            n => PathBuf::from(format!("{base}-{n}")),
+        })
+        .find(|p| !p.exists())
 }
 
 /// Parse and validate the file's bytes.
