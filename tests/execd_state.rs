@@ -250,3 +250,57 @@ fn a_state_file_of_another_spec_is_set_aside_with_a_warning() {
     assert!(err.contains("another spec"), "{err}");
     assert_eq!(rejected_files(dir.path()).len(), 2);
 }
+
+/// UDP mode (the connector's wiring): send one datagram, return the answer.
+fn udp_round(args: &[&str], listen: &str, recv: &std::net::UdpSocket, datagram: &str) -> String {
+    let mut c = LiveChild::spawn(args);
+    c.wait_err("udp: listening", 0, |l| l.contains("udp: listening on"));
+    let sock = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    sock.send_to(datagram.as_bytes(), listen).unwrap();
+    let mut buf = vec![0u8; 65536];
+    let n = recv.recv(&mut buf).unwrap();
+    c.signal("TERM");
+    let (_, err, code) = c.finish();
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("I! state: saved 1 monitor instances"), "{err}");
+    String::from_utf8_lossy(&buf[..n]).into_owned()
+}
+
+#[test]
+fn udp_mode_saves_and_restores_state() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = write_spec(
+        dir.path(),
+        "spec.tessla",
+        "in x: Events[Int]\ndef c = count(x)\nout c\n",
+    );
+    let state = dir.path().join("state.json");
+    let recv = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    recv.set_read_timeout(Some(std::time::Duration::from_secs(30)))
+        .unwrap();
+    let send_to = recv.local_addr().unwrap().to_string();
+    let listen = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .to_string();
+    let args = [
+        "--spec",
+        s(&spec),
+        "--udp-listen",
+        &listen,
+        "--udp-send",
+        &send_to,
+        "--no-passthrough",
+        "--state",
+        s(&state),
+    ];
+    assert_eq!(
+        udp_round(&args, &listen, &recv, "m x=1i 10\nm x=1i 20\n"),
+        "tessla c=1i 10\ntessla c=2i 20\n"
+    );
+    assert_eq!(
+        udp_round(&args, &listen, &recv, "m x=1i 30\n"),
+        "tessla c=3i 30\n"
+    );
+}
