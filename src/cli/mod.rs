@@ -121,6 +121,10 @@ pub struct RunArgs {
     /// Evict a monitor instance that received no record for this long (wall clock): `30s`, `5m`, `1h`.
     #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration)]
     pub instance_idle: Option<std::time::Duration>,
+    /// Save every monitor instance's state to FILE on shutdown (EOF, SIGTERM, SIGINT) and
+    /// continue from it at start, so a Telegraf restart or reload keeps the monitors' state.
+    #[arg(long, value_name = "FILE")]
+    pub state: Option<PathBuf>,
 }
 
 pub fn main() -> i32 {

@@ -1,10 +1,13 @@
 //! `tessla-telegraf [run]`: load the spec (or the bundled robot monitors), then process line
 //! protocol from stdin (Telegraf's execd) or UDP (the connector's wiring) until EOF or a signal.
+//! With `--state`, instances are restored at start and saved at every ending; SIGHUP reloads.
 
 use super::{EXIT_IO, EXIT_OK, EXIT_SPEC, RunArgs};
 use crate::log::{self, Level};
 use crate::telegraf::binding::parse_tags;
 use crate::telegraf::processor::{Options, Processor};
+use crate::telegraf::reload::{self, SpecSource};
+use crate::telegraf::state;
 use crate::transport::{self, Ending};
 
 pub fn run(args: RunArgs) -> i32 {
@@ -16,11 +19,11 @@ pub fn run(args: RunArgs) -> i32 {
             return EXIT_SPEC;
         }
     };
-    let loaded = match &args.spec {
-        Some(path) => tessla_engine::load_file(path, &options),
-        None => crate::bundled::load(&options),
+    let source = SpecSource {
+        path: args.spec.clone(),
+        options,
     };
-    let loaded = match loaded {
+    let loaded = match source.load() {
         Ok(l) => l,
         Err(e) => {
             log::log(Level::Error, &e.render());
@@ -45,6 +48,11 @@ pub fn run(args: RunArgs) -> i32 {
             return EXIT_SPEC;
         }
     };
+    let state_ctx = state::Context {
+        set: args.spec_options.set.clone(),
+        base_time: args.spec_options.base_time.clone(),
+        instance_by: Vec::new(),
+    };
     let opts = Options {
         passthrough: !args.no_passthrough,
         late: args.late,
@@ -59,12 +67,22 @@ pub fn run(args: RunArgs) -> i32 {
         max_instances: args.max_instances,
         instance_idle: args.instance_idle,
     };
+    let state_ctx = state::Context {
+        instance_by: opts.instance_by.clone(),
+        ..state_ctx
+    };
     let mut proc = match Processor::new(loaded.program, opts) {
         Ok(p) => p,
         Err(e) => {
             log::log(Level::Error, &format!("spec: {e}"));
             return EXIT_SPEC;
         }
+    };
+    if let Some(path) = &args.state {
+        state::load(path, &mut proc, &state_ctx);
+    }
+    let mut on_hup = |p: &mut Processor, out: &mut Vec<u8>| {
+        reload::reload(&source, p, out);
     };
     let rt = match tokio::runtime::Builder::new_current_thread()
         .enable_all()
@@ -79,11 +97,31 @@ pub fn run(args: RunArgs) -> i32 {
     let result = rt.block_on(async {
         match &args.udp_listen {
             Some(listen) => {
-                transport::udp::run(&mut proc, listen, &args.udp_send, args.udp_max_datagram).await
+                transport::udp::run(
+                    &mut proc,
+                    listen,
+                    &args.udp_send,
+                    args.udp_max_datagram,
+                    &mut on_hup,
+                )
+                .await
             }
-            None => transport::stdio::run(&mut proc).await,
+            None => transport::stdio::run(&mut proc, &mut on_hup).await,
         }
     });
+    // Every ending (EOF, signal, closed stdout, I/O error) has evaluated what it could: save.
+    if let Some(path) = &args.state {
+        match state::save(path, &proc, &state_ctx) {
+            Ok(n) => log::log(
+                Level::Info,
+                &format!("state: saved {n} monitor instances to {}", path.display()),
+            ),
+            Err(e) => log::log(
+                Level::Error,
+                &format!("state: cannot save to {}: {e}", path.display()),
+            ),
+        }
+    }
     match result {
         Ok(ending) => {
             if ending == Ending::OutputClosed {

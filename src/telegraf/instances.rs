@@ -138,6 +138,19 @@ impl<T> Table<T> {
         (too_many || too_idle).then_some(i)
     }
 
+    /// Every instance, least recently used first.
+    pub fn iter_lru(&self) -> impl Iterator<Item = (&Key, &T)> {
+        self.lru.values().filter_map(|&i| {
+            let s = self.slots.get(i)?.as_ref()?;
+            Some((&s.key, &s.value))
+        })
+    }
+
+    /// Every instance's value, in no particular order.
+    pub fn values_mut(&mut self) -> impl Iterator<Item = &mut T> {
+        self.slots.iter_mut().flatten().map(|s| &mut s.value)
+    }
+
     /// Remove slot `i`, returning its key and value.
     pub fn remove(&mut self, i: usize) -> Option<(Key, T)> {
         let s = self.slots.get_mut(i)?.take()?;
@@ -178,6 +191,22 @@ mod tests {
         assert_eq!(t.insert(k("d"), 4, now), b);
         assert_eq!(t.get_mut(b), Some(&mut 4));
         assert_eq!(t.len(), 3);
+    }
+
+    #[test]
+    fn iteration_follows_lru_order() {
+        let now = Instant::now();
+        let mut t = Table::default();
+        t.insert(k("a"), 1, now);
+        t.insert(k("b"), 2, now);
+        t.find(&k("a"), now);
+        let order: Vec<i32> = t.iter_lru().map(|(_, v)| *v).collect();
+        assert_eq!(order, [2, 1]);
+        for v in t.values_mut() {
+            *v *= 10;
+        }
+        let order: Vec<i32> = t.iter_lru().map(|(_, v)| *v).collect();
+        assert_eq!(order, [20, 10]);
     }
 
     #[test]

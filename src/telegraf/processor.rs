@@ -171,6 +171,13 @@ impl Processor {
         if let Some(i) = self.instances.find(&key, now) {
             return i;
         }
+        self.counters.instances += 1;
+        let monitor = Monitor::starting_at(self.program.clone(), ts);
+        self.insert_instance(key, monitor, now)
+    }
+
+    /// Add instance `key` (absent from the table) running `monitor`; returns its slot.
+    fn insert_instance(&mut self, key: Key, monitor: Monitor, now: Instant) -> usize {
         let mut tags: Vec<(String, String)> = self
             .opts
             .tags
@@ -186,8 +193,6 @@ impl Processor {
         if !self.opts.instance_by.is_empty() {
             tags.sort();
         }
-        self.counters.instances += 1;
-        let monitor = Monitor::starting_at(self.program.clone(), ts);
         let i = self.instances.insert(key, Instance { monitor, tags }, now);
         if self.opts.instance_by.is_empty() && self.opts.instance_idle.is_none() {
             self.single = Some(i);
@@ -295,7 +300,9 @@ impl Processor {
             });
             ts = min;
         }
-        if monitor.pending().is_some_and(|p| ts > p) {
+        // Evaluate the open step and the delay firings before `ts` now, so their outputs
+        // precede this record's pass-through whenever the previous read ended.
+        if monitor.pending().is_none_or(|p| ts > p) {
             let events = &mut self.emitter.events;
             monitor.advance_to(ts, &mut |e: OutputEvent<'_>| {
                 events.push((e.ts, e.output, e.value.clone()))
@@ -379,6 +386,44 @@ impl Processor {
         }
         let now = self.now();
         self.evict(now, out);
+    }
+
+    /// The program every instance runs.
+    pub fn program(&self) -> &Arc<Program> {
+        &self.program
+    }
+
+    /// Every instance's key and monitor, least recently used first (`--state`).
+    pub fn monitors(&self) -> impl Iterator<Item = (&Key, &Monitor)> {
+        self.instances.iter_lru().map(|(k, i)| (k, &i.monitor))
+    }
+
+    /// Add an instance restored from saved state; ignored when `key` already has one.
+    pub fn restore_instance(&mut self, key: Key, monitor: Monitor) {
+        let now = self.now();
+        if self.instances.find(&key, now).is_none() {
+            self.insert_instance(key, monitor, now);
+        }
+    }
+
+    /// Run `program` from now on (a spec reload). Every open step is evaluated first with the
+    /// old program; then `carry` turns each instance's monitor into one of the new program.
+    /// Fails (nothing changed) when the new program's input annotations are malformed.
+    pub fn replace_program(
+        &mut self,
+        program: Arc<Program>,
+        out: &mut Vec<u8>,
+        mut carry: impl FnMut(&Monitor) -> Monitor,
+    ) -> Result<(), String> {
+        let bindings = binding::bindings(&program)?;
+        self.flush(out);
+        for inst in self.instances.values_mut() {
+            inst.monitor = carry(&inst.monitor);
+        }
+        self.emitter.encodings = encode::encodings(&program);
+        self.bindings = bindings;
+        self.program = program;
+        Ok(())
     }
 
     /// The one-line summary printed at the end of a run.

@@ -2,9 +2,10 @@
 //!
 //! Owns: reading without waiting for a full buffer, flushing the pending step whenever a read
 //! returns less than a full buffer (no more input right now: never wait for the next record to
-//! answer this one), flushing stdout after every batch, SIGTERM/SIGINT, and a closed stdout.
+//! answer this one), flushing stdout after every batch, SIGTERM/SIGINT, SIGHUP (handed to the
+//! caller's reload between reads), and a closed stdout.
 
-use super::Ending;
+use super::{Ending, OnHangup};
 use crate::telegraf::processor::Processor;
 use lineproto::RecordSplitter;
 use std::io::Write;
@@ -13,16 +14,24 @@ use tokio::io::AsyncReadExt;
 const BUF: usize = 64 * 1024;
 
 /// Run until EOF, a signal, or a closed stdout. Pending steps are always evaluated and written.
-pub async fn run(proc: &mut Processor) -> std::io::Result<Ending> {
+pub async fn run(proc: &mut Processor, on_hup: OnHangup<'_>) -> std::io::Result<Ending> {
     let mut stdin = tokio::io::stdin();
     let mut splitter = RecordSplitter::default();
     let mut buf = vec![0u8; BUF];
     let mut out = Vec::with_capacity(BUF);
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())?;
+    let mut sighup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
     let ending = loop {
         let n = tokio::select! {
             r = stdin.read(&mut buf) => r?,
+            _ = sighup.recv() => {
+                on_hup(proc, &mut out);
+                if write_out(&mut out).is_err() {
+                    return Ok(Ending::OutputClosed);
+                }
+                continue;
+            }
             _ = sigterm.recv() => break Ending::Signal,
             _ = sigint.recv() => break Ending::Signal,
         };

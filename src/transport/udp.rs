@@ -4,7 +4,7 @@
 //! only itself), evaluating the step at the end of each datagram, and sending outputs packed
 //! into datagrams of at most `max_datagram` bytes without splitting a line.
 
-use super::Ending;
+use super::{Ending, OnHangup};
 use crate::telegraf::processor::Processor;
 use lineproto::RecordSplitter;
 use tokio::net::UdpSocket;
@@ -15,6 +15,7 @@ pub async fn run(
     listen: &str,
     send: &str,
     max_datagram: usize,
+    on_hup: OnHangup<'_>,
 ) -> std::io::Result<Ending> {
     let sock = UdpSocket::bind(listen).await?;
     let out_sock = UdpSocket::bind(if send.starts_with('[') {
@@ -35,9 +36,16 @@ pub async fn run(
     let mut out = Vec::new();
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())?;
+    let mut sighup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
     loop {
         let n = tokio::select! {
             r = sock.recv(&mut buf) => r?,
+            _ = sighup.recv() => {
+                on_hup(proc, &mut out);
+                send_packed(&out_sock, &out, max_datagram).await;
+                out.clear();
+                continue;
+            }
             _ = sigterm.recv() => break,
             _ = sigint.recv() => break,
         };

@@ -225,6 +225,11 @@ pub struct Compiler<'a> {
     base_unit: Option<i128>,
     /// Time literals are allowed (a base time is set, or 1 ns is assumed).
     time_units: bool,
+    /// Stable origin of the nodes created now (see [`crate::snapshot`]): a hash of the text of
+    /// the def being compiled and of every def it looked up so far.
+    origin: u64,
+    /// The origin of each node (`Program::node_origins`).
+    origins: Vec<u64>,
 }
 
 /// The type of a parameterless def's constant value, if it is a literal constant.
@@ -610,6 +615,8 @@ impl<'a> Compiler<'a> {
             base_unit: None,
             time_units: true,
             node_types: HashMap::new(),
+            origin: 0,
+            origins: Vec::new(),
         }
     }
 
@@ -632,6 +639,7 @@ impl<'a> Compiler<'a> {
 
     fn node(&mut self, n: Node) -> NodeId {
         self.nodes.push(n);
+        self.origins.push(self.origin);
         self.nodes.len() - 1
     }
 
@@ -892,6 +900,7 @@ impl<'a> Compiler<'a> {
                 .alias
                 .as_ref()
                 .map_or_else(|| o.source_text.clone(), |a| a.name.clone());
+            self.origin = crate::snapshot::text_hash(&o.source_text);
             if let Ok(t) = self.expr(&o.expr, &env) {
                 let ty = match &t {
                     Term::Const(v) => value_type(v),
@@ -957,6 +966,7 @@ impl<'a> Compiler<'a> {
                     .filter(|i| matches!(self.nodes.get(*i), Some(Node::Delay { .. })))
                     .collect(),
                 nodes: self.nodes,
+                node_origins: self.origins,
                 order,
                 output_nodes,
             },
@@ -1190,7 +1200,10 @@ impl<'a> Compiler<'a> {
                 let env = e.env_cell.borrow().clone().unwrap_or_default();
                 let saved = self.lazy_depth;
                 self.lazy_depth = 0;
+                let saved_origin = self.origin;
+                self.origin = crate::snapshot::text_hash(self.sources.text(e.def.span));
                 let r = self.body(&e.def, &env);
+                self.origin = saved_origin;
                 let r = match (r, &e.def.result_type) {
                     (Ok(t), Some(declared)) => {
                         let ty = match ir_type(declared) {
@@ -1295,7 +1308,11 @@ impl<'a> Compiler<'a> {
     fn lookup(&mut self, name: &str, span: Span, env: &Env) -> R<Term> {
         match env.lookup(name) {
             Some(Binding::Term(t)) => Ok(t),
-            Some(Binding::Def(e)) => self.def_term(&e, span),
+            Some(Binding::Def(e)) => {
+                let text = crate::snapshot::text_hash(self.sources.text(e.def.span));
+                self.origin = crate::snapshot::mix(self.origin, text);
+                self.def_term(&e, span)
+            }
             None => {
                 if name == "true" {
                     return Ok(Term::Const(Value::Bool(true)));

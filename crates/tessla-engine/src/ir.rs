@@ -290,6 +290,8 @@ pub struct Program {
     pub outputs: Vec<OutputInfo>,
     pub global_annotations: Vec<Annotation>,
     pub nodes: Vec<Node>,
+    /// Per node: a hash of the source text that defined it (see [`crate::snapshot`]).
+    pub node_origins: Vec<u64>,
     /// Evaluation order of the nodes within a step (strict dependencies first).
     pub order: Vec<NodeId>,
     /// The node of each output.

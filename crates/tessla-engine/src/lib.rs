@@ -1,7 +1,7 @@
 //! tessla-engine: checks a parsed TeSSLa spec, lowers it to a flat core IR and evaluates it.
 //!
 //! Owns: name resolution, macro expansion and type checking (front-end semantics), the IR
-//! (`ir`), values (`value`) and monitor instances (`monitor`).
+//! (`ir`), values (`value`), monitor instances (`monitor`) and their snapshots (`snapshot`).
 
 pub mod collections;
 pub mod compile;
@@ -9,6 +9,7 @@ pub mod ir;
 pub mod load;
 pub mod monitor;
 pub mod natives;
+pub mod snapshot;
 pub mod typeck;
 pub mod value;
 

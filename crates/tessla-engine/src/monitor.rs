@@ -439,6 +439,65 @@ fn slift(
     Some(r)
 }
 
+/// State access for [`crate::snapshot`], the only code besides this file that depends on the
+/// layout of the fields. [`crate::snapshot::RawState`] is per node (`last`, `targets` indexed by
+/// node id) whatever the monitor stores: this converts from and to the slot layout
+/// ([`Program::last_slot`], [`Program::delays`]).
+impl Monitor {
+    pub(crate) fn raw_state(&self) -> crate::snapshot::RawState {
+        let program = &self.program;
+        let n = program.nodes.len();
+        let mut last = vec![None; n];
+        for (node, &slot) in program.last_slot.iter().enumerate() {
+            if slot != NO_SLOT
+                && let (Some(dst), Some(v)) = (last.get_mut(node), self.last.get(slot as usize))
+            {
+                *dst = v.clone();
+            }
+        }
+        let mut targets = vec![None; n];
+        for (k, &node) in program.delays.iter().enumerate() {
+            if let (Some(dst), Some(t)) = (targets.get_mut(node), self.targets.get(k)) {
+                *dst = *t;
+            }
+        }
+        crate::snapshot::RawState {
+            t0: self.t0,
+            pending: self.pending,
+            last_evaluated: self.last_evaluated,
+            inputs: self.inputs.to_vec(),
+            last,
+            targets,
+        }
+    }
+
+    /// A monitor of `program` in state `raw` (per-node vectors of another length are cut or
+    /// padded; values of nodes without a slot are not kept).
+    pub(crate) fn from_raw_state(program: Arc<Program>, raw: crate::snapshot::RawState) -> Monitor {
+        let mut m = Monitor::starting_at(program, raw.t0);
+        m.pending = raw.pending;
+        m.last_evaluated = raw.last_evaluated;
+        for (slot, v) in m.inputs.iter_mut().zip(raw.inputs) {
+            *slot = v;
+        }
+        let program = Arc::clone(&m.program);
+        for (node, v) in raw.last.into_iter().enumerate() {
+            if let Some(&slot) = program.last_slot.get(node)
+                && slot != NO_SLOT
+                && let Some(dst) = m.last.get_mut(slot as usize)
+            {
+                *dst = v;
+            }
+        }
+        for (k, &node) in program.delays.iter().enumerate() {
+            if let (Some(dst), Some(t)) = (m.targets.get_mut(k), raw.targets.get(node)) {
+                *dst = *t;
+            }
+        }
+        m
+    }
+}
+
 fn strict2(f: &crate::ir::Func, a: &Value, b: &Value) -> Value {
     if let Value::Error(e) = a {
         return Value::Error(e.clone());

@@ -1,0 +1,260 @@
+//! `--state FILE`: every monitor instance's state saved at shutdown and read back at start.
+//!
+//! Owns: the state file format (JSON: a header with magic, format version and the fingerprint
+//! of what the state is valid for, then one engine snapshot per instance key), the atomic write
+//! (temporary file in the same folder, fsync, rename, fsync of the folder) and reading it back:
+//! a missing file starts fresh; a corrupt file, another format version or a file written for
+//! another spec / `--set` / `--base-time` / `--instance-by` is renamed aside
+//! (`FILE.rejected-<unix seconds>`) with a warning, and the run starts fresh. Never fatal.
+//!
+//! JSON rather than a binary format: it is readable when something goes wrong, floats are stored
+//! as their bits (exact, NaN included), and the size is measured in `docs/state-and-reload.md`.
+
+use crate::log::{self, Level};
+use crate::telegraf::instances::Key;
+use crate::telegraf::processor::Processor;
+use serde::{Deserialize, Serialize};
+use std::fs::{self, File, OpenOptions};
+use std::io::{self, BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use tessla_engine::Program;
+use tessla_engine::snapshot::{self, Snapshot};
+
+pub const MAGIC: &str = "tessla-telegraf-state";
+/// Format version; bumped on any incompatible change of the layout below or of node keys.
+pub const VERSION: u32 = 1;
+
+/// What, besides the program, decides whether saved state fits this run.
+#[derive(Debug, Clone, Default)]
+pub struct Context {
+    /// `--set NAME=VALUE`, as given.
+    pub set: Vec<String>,
+    pub base_time: String,
+    pub instance_by: Vec<String>,
+}
+
+/// The fingerprint of `program` run with `ctx`, as written in the file (hex).
+pub fn fingerprint(program: &Program, ctx: &Context) -> String {
+    let mut h = snapshot::fingerprint(program);
+    for s in &ctx.set {
+        h = snapshot::mix(h, snapshot::text_hash(&format!("--set {s}")));
+    }
+    h = snapshot::mix(
+        h,
+        snapshot::text_hash(&format!("--base-time {}", ctx.base_time)),
+    );
+    for t in &ctx.instance_by {
+        h = snapshot::mix(h, snapshot::text_hash(&format!("--instance-by {t}")));
+    }
+    format!("{h:016x}")
+}
+
+#[derive(Deserialize)]
+struct Header {
+    magic: String,
+    version: u32,
+    fingerprint: String,
+}
+
+#[derive(Serialize, Deserialize)]
+struct SavedInstance {
+    /// The values of the `--instance-by` tags (`null`: tag absent).
+    key: Key,
+    monitor: Snapshot,
+}
+
+#[derive(Serialize, Deserialize)]
+struct StateFile {
+    magic: String,
+    version: u32,
+    fingerprint: String,
+    /// Unix seconds when written (informational).
+    written: u64,
+    instances: Vec<SavedInstance>,
+}
+
+fn unix_now() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs())
+}
+
+/// Save every instance of `proc` to `path` atomically. Returns the number of instances saved.
+pub fn save(path: &Path, proc: &Processor, ctx: &Context) -> io::Result<usize> {
+    let program = proc.program();
+    let keys = snapshot::node_keys(program);
+    let mut unsaved = 0;
+    let instances: Vec<SavedInstance> = proc
+        .monitors()
+        .map(|(key, m)| {
+            let monitor = snapshot::snapshot_with_keys(m, &keys);
+            unsaved += monitor.unsaved;
+            SavedInstance {
+                key: key.clone(),
+                monitor,
+            }
+        })
+        .collect();
+    if unsaved > 0 {
+        log::log(
+            Level::Warn,
+            &format!(
+                "state: {unsaved} stream values are functions and cannot be saved; those streams restart empty"
+            ),
+        );
+    }
+    let file = StateFile {
+        magic: MAGIC.into(),
+        version: VERSION,
+        fingerprint: fingerprint(program, ctx),
+        written: unix_now(),
+        instances,
+    };
+    write_atomic(path, |w| {
+        serde_json::to_writer(&mut *w, &file).map_err(io::Error::other)?;
+        w.write_all(b"\n")
+    })?;
+    Ok(file.instances.len())
+}
+
+/// Write `path` through a temporary file in the same folder: fsync, rename over `path`, fsync
+/// the folder, so a crash leaves either the old or the new file, never a torn one.
+/// Hand-written (a few lines): `tempfile`'s `persist` does not sync the folder.
+fn write_atomic(
+    path: &Path,
+    body: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
+) -> io::Result<()> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "state".into());
+    let tmp = dir.join(format!(".{name}.tmp-{}", std::process::id()));
+    let result = (|| {
+        let f = OpenOptions::new()
+            .write(true)
+            .create(true)
+            .truncate(true)
+            .open(&tmp)?;
+        let mut w = BufWriter::new(f);
+        body(&mut w)?;
+        let f = w.into_inner().map_err(|e| e.into_error())?;
+        f.sync_all()?;
+        fs::rename(&tmp, path)?;
+        File::open(&dir)?.sync_all()
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}
+
+/// How reading the state file went.
+#[derive(Debug, PartialEq)]
+pub enum Outcome {
+    /// No file: start fresh.
+    Missing,
+    /// This many instances restored.
+    Restored(usize),
+    /// Not usable (why); renamed to the path given, if that worked.
+    Rejected(String, Option<PathBuf>),
+    /// The file could not be read at all (permissions ...); left in place.
+    Unreadable(String),
+}
+
+/// Read `path` and restore its instances into `proc` (which has none yet). Logs what happened.
+pub fn load(path: &Path, proc: &mut Processor, ctx: &Context) -> Outcome {
+    let outcome = load_quiet(path, proc, ctx);
+    let shown = path.display();
+    match &outcome {
+        Outcome::Missing => log::log(
+            Level::Info,
+            &format!("state: {shown} does not exist yet; starting fresh"),
+        ),
+        Outcome::Restored(n) => log::log(
+            Level::Info,
+            &format!("state: restored {n} monitor instances from {shown}"),
+        ),
+        Outcome::Rejected(why, aside) => log::log(
+            Level::Warn,
+            &format!(
+                "state: {shown} not used: {why}; {}; starting fresh",
+                match aside {
+                    Some(p) => format!("renamed to {}", p.display()),
+                    None => "could not rename it aside".into(),
+                }
+            ),
+        ),
+        Outcome::Unreadable(e) => log::log(
+            Level::Warn,
+            &format!("state: cannot read {shown}: {e}; starting fresh"),
+        ),
+    }
+    outcome
+}
+
+fn load_quiet(path: &Path, proc: &mut Processor, ctx: &Context) -> Outcome {
+    let text = match fs::read(path) {
+        Ok(t) => t,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Outcome::Missing,
+        Err(e) => return Outcome::Unreadable(e.to_string()),
+    };
+    match check(&text, proc.program(), ctx) {
+        Ok(file) => {
+            let program = Arc::clone(proc.program());
+            let keys = snapshot::node_keys(&program);
+            let n = file.instances.len();
+            for s in file.instances {
+                let m = snapshot::restore_with_keys(Arc::clone(&program), &s.monitor, &keys);
+                proc.restore_instance(s.key, m);
+            }
+            Outcome::Restored(n)
+        }
+        Err(why) => {
+            let moved =
+                aside_name(path).and_then(|aside| fs::rename(path, &aside).ok().map(|()| aside));
+            Outcome::Rejected(why, moved)
+        }
+    }
+}
+
+/// `FILE.rejected-<unix seconds>`, with `-2`, `-3` ... appended when that exists already.
+fn aside_name(path: &Path) -> Option<PathBuf> {
+    let base = format!("{}.rejected-{}", path.display(), unix_now());
+    (1..1000)
+        .map(|n| match n {
+            1 => PathBuf::from(&base),
+            n => PathBuf::from(format!("{base}-{n}")),
+        })
+        .find(|p| !p.exists())
+}
+
+/// Parse and validate the file's bytes.
+fn check(text: &[u8], program: &Program, ctx: &Context) -> Result<StateFile, String> {
+    let header: Header = serde_json::from_slice(text)
+        .map_err(|e| format!("not a state file (corrupt or truncated: {e})"))?;
+    if header.magic != MAGIC {
+        return Err(format!(
+            "not a state file (magic `{}`, expected `{MAGIC}`)",
+            header.magic
+        ));
+    }
+    if header.version != VERSION {
+        return Err(format!(
+            "written in state format version {}, this build reads version {VERSION}",
+            header.version
+        ));
+    }
+    let expected = fingerprint(program, ctx);
+    if header.fingerprint != expected {
+        return Err(format!(
+            "written for another spec or other options (fingerprint {}, this run {expected}; the spec, --set, --base-time and --instance-by must match)",
+            header.fingerprint
+        ));
+    }
+    serde_json::from_slice(text).map_err(|e| format!("corrupt state file: {e}"))
+}
