@@ -12,6 +12,7 @@ pub mod cli;
 pub mod log;
 pub mod replay;
 pub mod report;
+pub mod simulate;
 pub mod telegraf;
 pub mod trace;
 pub mod transport;

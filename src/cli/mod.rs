@@ -14,6 +14,7 @@ use clap::{Args, Parser, Subcommand};
 
 pub mod replay;
 pub mod report;
+pub mod simulate;
 use std::path::PathBuf;
 
 pub const EXIT_OK: i32 = 0;
@@ -48,6 +49,8 @@ pub enum Command {
     Replay(replay::ReplayArgs),
     /// Render a run's line protocol (pass-through and verdicts) as an HTML report with SVG plots.
     Report(report::ReportArgs),
+    /// Run a simulated TurtleBot3 in closed loop with the monitors (the digital twin's behaviour).
+    Simulate(simulate::SimulateArgs),
 }
 
 /// Options shared by every subcommand that loads a spec.
@@ -136,6 +139,7 @@ pub fn main() -> i32 {
         Some(Command::Trace(a)) => trace(a),
         Some(Command::Replay(a)) => replay::run(a),
         Some(Command::Report(a)) => report::run(a),
+        Some(Command::Simulate(a)) => simulate::run(a),
     }
 }
 

@@ -1,0 +1,313 @@
+//! `tessla-telegraf simulate`: a simulated TurtleBot3 in closed loop with the monitors.
+//!
+//! In-process (default) the run is made twice with the same seed, monitor off (the default
+//! robot) and on (the augmented robot), and the summary compares them; the output file holds
+//! the run `--monitor` chooses. With `--broker` the one chosen run drives the real pipeline.
+
+use super::{EXIT_IO, EXIT_OK, EXIT_SPEC, SpecOptions};
+use crate::log::{self, Level};
+use crate::replay::mqtt::Broker;
+use crate::simulate::closed_loop::{self, Outcome, Scenario};
+use crate::simulate::in_process::InProcess;
+use crate::simulate::mqtt_twin::MqttTwin;
+use crate::simulate::program::Program;
+use crate::simulate::scenario::{self, TerrainChoice};
+use crate::simulate::summary::Summary;
+use crate::simulate::terrain::Terrain;
+use crate::telegraf::processor::{Options, Processor};
+use clap::Args;
+use std::io::Write;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Default)]
+pub enum Switch {
+    #[default]
+    On,
+    Off,
+}
+
+#[derive(Debug, Args, Clone)]
+pub struct SimulateArgs {
+    /// Seed of every random choice (sensor noise, faults, `--terrain random`).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// `yoga-mat` (bundled), `random` (a random mat for the seed) or a terrain file.
+    #[arg(long, value_name = "yoga-mat|random|FILE", default_value = "yoga-mat")]
+    pub terrain: String,
+    /// `paper` (bundled: steps between 0.015 and 0.1 m/s) or a program file.
+    #[arg(long, value_name = "paper|FILE", default_value = "paper")]
+    pub program: String,
+    /// Whether the robot executes the twin's actions (on) or its own command (off).
+    #[arg(long, value_enum, default_value_t)]
+    pub monitor: Switch,
+    /// Seconds between robot messages (the paper's actuation period).
+    #[arg(long, value_name = "S", default_value_t = 0.5)]
+    pub period: f64,
+    /// Seconds from a message to its action taking effect (the twin's round trip).
+    #[arg(long, value_name = "S", default_value_t = 0.2)]
+    pub delay: f64,
+    /// Stop after this many seconds (default: the program's length).
+    #[arg(long, value_name = "S")]
+    pub duration: Option<f64>,
+    /// The `.tessla` file; without it the bundled robot monitors.
+    #[arg(long)]
+    pub spec: Option<PathBuf>,
+    #[command(flatten)]
+    pub spec_options: SpecOptions,
+    /// Write the run (robot messages, passed through, and the monitors' outputs) here.
+    #[arg(short, long, value_name = "FILE")]
+    pub output: Option<PathBuf>,
+    /// Drive the real pipeline: publish to this broker, execute what arrives on `action`.
+    #[arg(long, value_name = "mqtt://HOST:PORT")]
+    pub broker: Option<String>,
+    /// Broker mode: topic of the robot messages.
+    #[arg(long, default_value = "tessla")]
+    pub topic: String,
+    /// Broker mode: topic of the actions.
+    #[arg(long, default_value = "action")]
+    pub action_topic: String,
+    /// Broker mode: seconds to wait for an action before the robot keeps its own command.
+    #[arg(long, value_name = "S", default_value_t = 5.0)]
+    pub action_timeout: f64,
+    /// Broker mode: add the message time (integer ns) under this JSON key.
+    #[arg(long, value_name = "KEY")]
+    pub time_key: Option<String>,
+    /// Lidar: probability per beam and scan of a dust spike.
+    #[arg(long, value_name = "P", default_value_t = 0.001)]
+    pub spike_rate: f64,
+    /// Lidar: probability per beam and scan of a dropout (no return, `0.0`).
+    #[arg(long, value_name = "P", default_value_t = 0.01)]
+    pub dropout_rate: f64,
+    /// Print the summary as one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    /// Least severe messages written to stderr.
+    #[arg(long, value_enum, default_value_t)]
+    pub log_level: crate::log::Level,
+}
+
+fn bad(msg: &str) -> i32 {
+    log::log(Level::Error, &format!("simulate: {msg}"));
+    EXIT_SPEC
+}
+
+fn positive(name: &str, v: f64) -> Result<f64, String> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("--{name} {v}: must be a positive number"))
+    }
+}
+
+fn probability(name: &str, v: f64) -> Result<f64, String> {
+    if (0.0..=1.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err(format!("--{name} {v}: must be between 0 and 1"))
+    }
+}
+
+/// The scenario from the command line; `Err((exit code, message))`.
+fn scenario_of(args: &SimulateArgs) -> Result<Scenario, (i32, String)> {
+    let read = |what: &str, path: &str| {
+        std::fs::read_to_string(path).map_err(|e| (EXIT_IO, format!("--{what} {path}: {e}")))
+    };
+    let terrain = match args.terrain.as_str() {
+        "yoga-mat" => TerrainChoice::YogaMat,
+        "random" => TerrainChoice::Random,
+        path => TerrainChoice::Custom(
+            Terrain::parse(&read("terrain", path)?)
+                .map_err(|e| (EXIT_SPEC, format!("--terrain {path}: {e}")))?,
+        ),
+    };
+    let program = match args.program.as_str() {
+        "paper" => Program::paper_steps(),
+        path => Program::parse(&read("program", path)?)
+            .map_err(|e| (EXIT_SPEC, format!("--program {path}: {e}")))?,
+    };
+    let spec = |e: String| (EXIT_SPEC, e);
+    let mut s = scenario::build(terrain, program, args.seed);
+    s.period = positive("period", args.period).map_err(spec)?;
+    if !(args.delay.is_finite() && args.delay >= 0.0) {
+        return Err(spec(format!(
+            "--delay {}: must be zero or positive",
+            args.delay
+        )));
+    }
+    s.delay = args.delay;
+    if let Some(d) = args.duration {
+        s.duration = positive("duration", d).map_err(spec)?;
+    }
+    s.lidar.spike_rate = probability("spike-rate", args.spike_rate).map_err(spec)?;
+    s.lidar.dropout_rate = probability("dropout-rate", args.dropout_rate).map_err(spec)?;
+    Ok(s)
+}
+
+/// The monitors' program from `--spec` (or the bundled one) and `--set`/`--base-time`.
+fn load(args: &SimulateArgs) -> Result<Arc<tessla_engine::Program>, String> {
+    let options = super::load_options(&args.spec_options)?;
+    let loaded = match &args.spec {
+        Some(path) => tessla_engine::load_file(path, &options),
+        None => crate::bundled::load(&options),
+    }
+    .map_err(|e| e.render())?;
+    if !loaded.warnings.is_empty() {
+        log::log(
+            Level::Warn,
+            &tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false),
+        );
+    }
+    Ok(loaded.program)
+}
+
+pub fn run(args: SimulateArgs) -> i32 {
+    log::set_level(args.log_level);
+    let scenario = match scenario_of(&args) {
+        Ok(s) => s,
+        Err((code, msg)) => {
+            log::log(Level::Error, &format!("simulate: {msg}"));
+            return code;
+        }
+    };
+    let broker = match args.broker.as_deref().map(str::parse::<Broker>) {
+        None => None,
+        Some(Ok(b)) => Some(b),
+        Some(Err(e)) => return bad(&e),
+    };
+    let timeout = match positive("action-timeout", args.action_timeout) {
+        Ok(t) => Duration::from_secs_f64(t),
+        Err(e) => return bad(&e),
+    };
+    let program = match broker {
+        Some(_) => None,
+        None => match load(&args) {
+            Ok(p) => Some(p),
+            Err(e) => {
+                log::log(Level::Error, &e);
+                return EXIT_SPEC;
+            }
+        },
+    };
+    let mut file: Box<dyn Write> = match &args.output {
+        Some(path) => match std::fs::File::create(path) {
+            Ok(f) => Box::new(std::io::BufWriter::new(f)),
+            Err(e) => {
+                log::log(
+                    Level::Error,
+                    &format!("simulate: cannot create {}: {e}", path.display()),
+                );
+                return EXIT_IO;
+            }
+        },
+        None => Box::new(std::io::sink()),
+    };
+    let chosen_on = args.monitor == Switch::On;
+    let mut summary = Summary {
+        terrain: args.terrain.clone(),
+        program: args.program.clone(),
+        seed: args.seed,
+        period_s: scenario.period,
+        delay_s: scenario.delay,
+        default: None,
+        augmented: None,
+    };
+    let result = match (&broker, program) {
+        (Some(broker), _) => {
+            let twin = MqttTwin::connect(
+                broker,
+                &args.topic,
+                &args.action_topic,
+                timeout,
+                args.time_key.clone(),
+            );
+            let mut twin = match twin {
+                Ok(t) => t,
+                Err(e) => {
+                    log::log(Level::Error, &format!("simulate: {e}"));
+                    return EXIT_IO;
+                }
+            };
+            let outcome = closed_loop::run(&scenario, chosen_on, &mut twin, &mut file);
+            if twin.unanswered > 0 {
+                log::log(
+                    Level::Warn,
+                    &format!(
+                        "simulate: {} messages got no action from {broker}",
+                        twin.unanswered
+                    ),
+                );
+            }
+            let finished = twin.finish();
+            outcome.and_then(|o| finished.map(|_| vec![(chosen_on, o)]))
+        }
+        (None, Some(program)) => in_process(&scenario, &program, chosen_on, &mut file),
+        (None, None) => Err("no monitors loaded".to_string()),
+    };
+    let outcomes = match result {
+        Ok(o) => o,
+        Err(e) => {
+            log::log(Level::Error, &format!("simulate: {e}"));
+            return EXIT_IO;
+        }
+    };
+    if let Err(e) = file.flush() {
+        log::log(
+            Level::Error,
+            &format!("simulate: cannot write the output: {e}"),
+        );
+        return EXIT_IO;
+    }
+    for (on, o) in outcomes {
+        if on {
+            summary.augmented = Some(o);
+        } else {
+            summary.default = Some(o);
+        }
+    }
+    let text = if args.json {
+        format!("{}\n", summary.to_json())
+    } else {
+        summary.to_table()
+    };
+    let mut stdout = std::io::stdout();
+    if stdout
+        .write_all(text.as_bytes())
+        .and_then(|_| stdout.flush())
+        .is_err()
+    {
+        return EXIT_IO;
+    }
+    EXIT_OK
+}
+
+/// Both runs in-process: the chosen one writes to `file`, the other only counts.
+fn in_process(
+    scenario: &Scenario,
+    program: &Arc<tessla_engine::Program>,
+    chosen_on: bool,
+    file: &mut dyn Write,
+) -> Result<Vec<(bool, Outcome)>, String> {
+    let mut outcomes = Vec::new();
+    for on in [false, true] {
+        let processor = Processor::new(Arc::clone(program), Options::default())
+            .map_err(|e| format!("spec: {e}"))?;
+        let mut twin = InProcess::new(processor);
+        let outcome = if on == chosen_on {
+            closed_loop::run(scenario, on, &mut twin, file)?
+        } else {
+            closed_loop::run(scenario, on, &mut twin, &mut std::io::sink())?
+        };
+        log::log(
+            Level::Debug,
+            &format!(
+                "monitor {}: {}",
+                if on { "on" } else { "off" },
+                twin.summary()
+            ),
+        );
+        outcomes.push((on, outcome));
+    }
+    Ok(outcomes)
+}

@@ -1,0 +1,240 @@
+//! The closed loop: robot → message → twin (the monitors) → action → robot.
+//!
+//! Owns: the simulation clock and its order of events per control period (measure, emit the
+//! robot message, hand it to the [`Twin`], queue the returned action until the twin's round-trip
+//! delay has passed, integrate the physics to the next period), the robot's speed estimate
+//! (as hector SLAM: pose differences over one period, each pose with Gaussian noise), the
+//! message as Telegraf's JSON parser delivers it ([`Message::to_line`]), and the run's
+//! measures ([`Outcome`]). Which speed the robot executes: with the monitor on, the latest
+//! action that has arrived, as long as the program's own speed has not changed since the
+//! action's message was sent; otherwise (and always with the monitor off) the program's speed.
+
+use super::lidar::{LidarParams, Map};
+use super::program::Program;
+use super::robot::{Params, Robot};
+use super::terrain::Terrain;
+use lineproto::{FieldValue, LineWriter};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use std::collections::VecDeque;
+use std::io::Write;
+
+/// Everything that defines a run, apart from the twin.
+#[derive(Debug, Clone)]
+pub struct Scenario {
+    pub terrain: Terrain,
+    pub program: Program,
+    pub map: Map,
+    pub robot: Params,
+    pub lidar: LidarParams,
+    /// s between robot messages (the paper's actuation period: 0.5 s).
+    pub period: f64,
+    /// s from a message to its action taking effect on the robot.
+    pub delay: f64,
+    /// m: standard deviation of the SLAM pose estimate.
+    pub slam_noise: f64,
+    /// rad/s: standard deviation of the reported angular speed (the robot drives straight).
+    pub angular_noise: f64,
+    pub seed: u64,
+    /// `host` tag of the robot messages.
+    pub host: String,
+    /// ns: timestamp of the first message.
+    pub start_ns: i64,
+    /// s: physics integration step.
+    pub dt: f64,
+    /// s: length of the run (at most the program's duration).
+    pub duration: f64,
+}
+
+/// 2023-11-14T22:13:20Z: a fixed start, so a run's output depends on the seed only.
+pub const START_NS: i64 = 1_700_000_000_000_000_000;
+
+/// One robot message.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Message {
+    pub time_ns: i64,
+    pub expected_speed: f64,
+    pub actual_speed: f64,
+    pub expected_angular: f64,
+    pub actual_angular: f64,
+    pub lidar: Vec<f64>,
+}
+
+impl Message {
+    /// `actualSpeed` as the robot sends it: a string with a number (rounded to 0.1 mm/s).
+    pub fn actual_speed_text(&self) -> String {
+        format!("{}", (self.actual_speed * 1e4).round() / 1e4)
+    }
+
+    /// The line Telegraf's `mqtt_consumer` JSON parser makes of this message (fields sorted as
+    /// the JSON object's keys, numbers as floats, `actualSpeed` kept as a string).
+    pub fn to_line(&self, host: &str) -> String {
+        let mut w = LineWriter::new("mqtt_consumer");
+        w.tag("host", host).tag("topic", "tessla");
+        w.field(
+            "actualAngular",
+            &FieldValue::Float((self.actual_angular * 1e4).round() / 1e4),
+        )
+        .field("actualSpeed", &FieldValue::Str(self.actual_speed_text()))
+        .field("expectedAngular", &FieldValue::Float(self.expected_angular))
+        .field("expectedSpeed", &FieldValue::Float(self.expected_speed));
+        for (i, r) in self.lidar.iter().enumerate() {
+            w.field(&format!("lidar_{i}"), &FieldValue::Float(*r));
+        }
+        w.finish(Some(self.time_ns)).0.unwrap_or_default()
+    }
+}
+
+/// What the twin answered to one message.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Action {
+    /// m/s: the speed to execute.
+    pub speed: f64,
+    /// The monitor changed the robot's own command.
+    pub augmented: bool,
+    /// The spec's running MSE, when the action carried it.
+    pub speed_mse: Option<f64>,
+}
+
+#[derive(Debug, Default)]
+pub struct Reply {
+    /// Line protocol to record: the message as the pipeline saw it, then the monitors' outputs.
+    pub lines: Vec<u8>,
+    pub action: Option<Action>,
+}
+
+/// The monitors, in-process or behind a broker.
+pub trait Twin {
+    /// Hand over one message (`line` is its line-protocol form) and return the answer.
+    fn exchange(&mut self, line: &str, message: &Message) -> Result<Reply, String>;
+}
+
+/// A run's measures.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Outcome {
+    /// Robot messages sent.
+    pub messages: usize,
+    /// Mean squared error between expected and reported actual speed over all messages.
+    pub mse: f64,
+    /// s the robot stood still while its command asked it to move.
+    pub stuck_seconds: f64,
+    /// Actions that changed the robot's command (executed with the monitor on; only proposed
+    /// with it off).
+    pub interventions: usize,
+    /// Messages answered with an action.
+    pub actions: usize,
+    /// The spec's own `speed_mse` in the last action.
+    pub spec_mse: Option<f64>,
+    /// m driven.
+    pub distance: f64,
+}
+
+/// Run `scenario` against `twin`; `monitor_on` decides whether actions are executed. Every
+/// line the twin returns is written to `out`.
+pub fn run(
+    scenario: &Scenario,
+    monitor_on: bool,
+    twin: &mut dyn Twin,
+    out: &mut dyn Write,
+) -> Result<Outcome, String> {
+    let s = scenario;
+    if !(s.period.is_finite() && s.period > 0.0) {
+        return Err(format!("period {} s: must be positive", s.period));
+    }
+    if !(s.delay.is_finite() && s.delay >= 0.0) {
+        return Err(format!("delay {} s: must be zero or positive", s.delay));
+    }
+    let substeps = (s.period / s.dt.max(1e-6)).ceil().max(1.0) as usize;
+    let dt = s.period / substeps as f64;
+    let periods = (s.duration.min(s.program.duration()).max(0.0) / s.period).floor() as usize;
+
+    // Independent streams: the robots of two runs with the same seed see the same noise.
+    let stream = |n: u64| {
+        let mut r = ChaCha8Rng::seed_from_u64(s.seed);
+        r.set_stream(n);
+        r
+    };
+    let (mut slam_rng, mut lidar_rng, mut angular_rng) = (stream(1), stream(2), stream(3));
+    let slam = Normal::new(0.0, s.slam_noise.max(0.0)).map_err(|e| e.to_string())?;
+    let angular = Normal::new(0.0, s.angular_noise.max(0.0)).map_err(|e| e.to_string())?;
+
+    let mut robot = Robot::new(s.robot.clone());
+    let mut pose_prev = robot.x + slam.sample(&mut slam_rng);
+    // (arrival s, the program's speed when the message was sent, action speed)
+    let mut pending: VecDeque<(f64, f64, f64)> = VecDeque::new();
+    let mut executing: Option<(f64, f64)> = None;
+    let mut outcome = Outcome {
+        messages: 0,
+        mse: 0.0,
+        stuck_seconds: 0.0,
+        interventions: 0,
+        actions: 0,
+        spec_mse: None,
+        distance: 0.0,
+    };
+    let mut sum_sq = 0.0;
+    for k in 0..=periods {
+        let t = k as f64 * s.period;
+        let pose = robot.x + slam.sample(&mut slam_rng);
+        let actual = if k == 0 {
+            0.0
+        } else {
+            (pose - pose_prev) / s.period
+        };
+        pose_prev = pose;
+        let expected = s.program.speed_at(t);
+        let message = Message {
+            time_ns: s.start_ns.saturating_add((t * 1e9).round() as i64),
+            expected_speed: expected,
+            actual_speed: actual,
+            expected_angular: 0.0,
+            actual_angular: angular.sample(&mut angular_rng),
+            lidar: s.map.scan(robot.x, &s.lidar, &mut lidar_rng),
+        };
+        // The error as the monitor sees it: the reported (rounded) speed.
+        let reported: f64 = message.actual_speed_text().parse().unwrap_or(actual);
+        sum_sq += (expected - reported).powi(2);
+        outcome.messages += 1;
+        let reply = twin.exchange(&message.to_line(&s.host), &message)?;
+        out.write_all(&reply.lines)
+            .map_err(|e| format!("cannot write the output: {e}"))?;
+        if let Some(a) = reply.action {
+            outcome.actions += 1;
+            if a.augmented {
+                outcome.interventions += 1;
+            }
+            if a.speed_mse.is_some() {
+                outcome.spec_mse = a.speed_mse;
+            }
+            if monitor_on && a.speed.is_finite() {
+                pending.push_back((t + s.delay, expected, a.speed));
+            }
+        }
+        if k == periods {
+            break;
+        }
+        for j in 0..substeps {
+            let now = t + j as f64 * dt;
+            while let Some(&(arrival, setpoint, speed)) = pending.front() {
+                if arrival > now + dt / 2.0 {
+                    break;
+                }
+                executing = Some((setpoint, speed));
+                pending.pop_front();
+            }
+            let own = s.program.speed_at(now);
+            let command = match executing {
+                Some((setpoint, speed)) if setpoint == own => speed,
+                _ => own,
+            };
+            robot.step(command, s.terrain.ground(robot.x), dt);
+            if robot.at_rest() && command.abs() > 0.0 {
+                outcome.stuck_seconds += dt;
+            }
+        }
+    }
+    outcome.mse = sum_sq / outcome.messages.max(1) as f64;
+    outcome.distance = robot.x;
+    Ok(outcome)
+}

@@ -1,0 +1,19 @@
+//! `tessla-telegraf simulate`: a simulated TurtleBot3 Burger in closed loop with the monitors.
+//!
+//! Owns the digital-twin simulation, one module per concern: [`robot`] (drive physics),
+//! [`terrain`] (the ground along the path), [`program`] (the robot's expected-speed schedule),
+//! [`lidar`] (the 2-D map and the sensor's faults), [`closed_loop`] (the clock, the message,
+//! the measures), [`in_process`] and [`mqtt_twin`] (the two ways to reach the monitors),
+//! [`summary`] (the table and JSON printed at the end), and [`scenario`] (building a run from
+//! the named bundled parts). The command line lives in `crate::cli::simulate`; the model and
+//! where its parameters come from are documented in docs/simulation.md.
+
+pub mod closed_loop;
+pub mod in_process;
+pub mod lidar;
+pub mod mqtt_twin;
+pub mod program;
+pub mod robot;
+pub mod scenario;
+pub mod summary;
+pub mod terrain;

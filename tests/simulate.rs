@@ -1,0 +1,192 @@
+//! `tessla-telegraf simulate` as a child process: the closed loop with the monitor on beats the
+//! default robot on the bundled scenario, a seed fixes the run, `--set` reaches the spec, the
+//! output is the pipeline's line protocol, and bad options give clear errors and exit codes.
+
+#[path = "support/recorded.rs"]
+mod recorded;
+
+use recorded::BIN;
+use serde_json::Value;
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn simulate(args: &[&str]) -> Output {
+    Command::new(BIN)
+        .arg("simulate")
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// Run with `--json`; the summary object.
+fn summary(args: &[&str]) -> Value {
+    let mut all = vec!["--json"];
+    all.extend_from_slice(args);
+    let out = simulate(&all);
+    assert!(
+        out.status.success(),
+        "simulate {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+#[test]
+fn monitor_on_lowers_the_mse_on_the_bundled_scenario() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("run.lp");
+    let s = summary(&["--output", out.to_str().unwrap()]);
+    let (d, a) = (&s["default"], &s["augmented"]);
+    assert!(
+        f(&a["mse"]) < f(&d["mse"]),
+        "augmented {} vs default {}",
+        a["mse"],
+        d["mse"]
+    );
+    assert!(f(&s["relative_change"]) < 0.0);
+    // The bundled program is 400 s at 0.5 s: 801 messages, each answered with an action.
+    for o in [d, a] {
+        assert_eq!(o["messages"], 801);
+        assert_eq!(o["actions"], 801);
+        // The spec's running MSE (through the real processor) agrees with the simulator's.
+        assert!((f(&o["spec_mse"]) - f(&o["mse"])).abs() < 1e-12, "{o}");
+    }
+    // The default robot gets stuck for longer and the monitor intervened.
+    assert!(f(&a["stuck_seconds"]) < f(&d["stuck_seconds"]));
+    assert!(
+        f(&d["stuck_seconds"]) > 10.0,
+        "the mat's hills stop the robot"
+    );
+    assert!(a["interventions"].as_u64().unwrap() > 0);
+    assert!(f(&a["distance"]) > f(&d["distance"]));
+
+    // The output is the monitor-on run as `run` writes it: each robot message passed through,
+    // followed by the verdicts and the action.
+    let text = std::fs::read_to_string(&out).unwrap();
+    let messages = text
+        .lines()
+        .filter(|l| l.starts_with("mqtt_consumer,"))
+        .count();
+    let actions: Vec<&str> = text.lines().filter(|l| l.starts_with("action ")).collect();
+    assert_eq!((messages, actions.len()), (801, 801));
+    let augmented = actions
+        .iter()
+        .filter(|l| l.contains("augmented=true"))
+        .count();
+    assert_eq!(augmented as u64, a["interventions"].as_u64().unwrap());
+    let first = text.lines().next().unwrap();
+    assert!(
+        first.starts_with("mqtt_consumer,host=sim,topic=tessla actualAngular=")
+            && first.contains(",actualSpeed=\"0\",expectedAngular=0,expectedSpeed=0.1,lidar_0=")
+            && first.ends_with(" 1700000000000000000"),
+        "{first}"
+    );
+
+    // `report` reads it and computes the same MSE.
+    let rep = Command::new(BIN)
+        .args(["report", out.to_str().unwrap(), "-o"])
+        .arg(dir.path().join("report"))
+        .output()
+        .unwrap();
+    assert!(rep.status.success());
+    let line = String::from_utf8_lossy(&rep.stderr).to_string();
+    let mse: f64 = line
+        .split("MSE expected/actual speed ")
+        .nth(1)
+        .and_then(|r| r.split(';').next())
+        .and_then(|m| m.trim().parse().ok())
+        .unwrap_or_else(|| panic!("report summary: {line}"));
+    assert!((mse - f(&a["mse"])).abs() < 1e-9, "{mse} vs {}", a["mse"]);
+}
+
+fn run_to(path: &Path, args: &[&str]) -> Vec<u8> {
+    let mut all = vec!["--duration", "60", "--output", path.to_str().unwrap()];
+    all.extend_from_slice(args);
+    let out = simulate(&all);
+    assert!(out.status.success());
+    std::fs::read(path).unwrap()
+}
+
+#[test]
+fn a_seed_fixes_the_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("a.lp");
+    let a = run_to(&p, &["--seed", "7", "--terrain", "random"]);
+    let b = run_to(&p, &["--seed", "7", "--terrain", "random"]);
+    let c = run_to(&p, &["--seed", "8", "--terrain", "random"]);
+    assert!(!a.is_empty());
+    assert!(a == b, "same seed, same run");
+    assert!(a != c, "another seed, another run");
+}
+
+#[test]
+fn set_reaches_the_spec_and_gain_zero_changes_nothing() {
+    let s = summary(&["--duration", "120", "--set", "gain=0.0"]);
+    let (d, a) = (&s["default"], &s["augmented"]);
+    assert_eq!(
+        d["mse"], a["mse"],
+        "with gain 0 the action is the robot's own command"
+    );
+    assert_eq!(a["interventions"], 0);
+    // A tolerance wider than any error: the monitor never intervenes.
+    let s = summary(&["--duration", "120", "--set", "delta=1.0"]);
+    assert_eq!(s["default"]["interventions"], 0);
+    assert_eq!(s["augmented"]["interventions"], 0);
+    assert_eq!(s["default"]["mse"], s["augmented"]["mse"]);
+}
+
+#[test]
+fn terrain_and_program_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let terrain = dir.path().join("flat.terrain");
+    std::fs::write(&terrain, "# a flat floor\n0 0 0.01\n50 0 0.01\n").unwrap();
+    let program = dir.path().join("steps.program");
+    std::fs::write(&program, "10 0.05\n10 0.1\n").unwrap();
+    let s = summary(&[
+        "--terrain",
+        terrain.to_str().unwrap(),
+        "--program",
+        program.to_str().unwrap(),
+        "--monitor",
+        "off",
+    ]);
+    let d = &s["default"];
+    assert_eq!(d["messages"], 41);
+    assert_eq!(
+        f(&d["stuck_seconds"]),
+        0.0,
+        "nothing stops the robot on a flat floor"
+    );
+    assert!(
+        f(&d["distance"]) > 1.3 && f(&d["distance"]) < 1.5,
+        "{}",
+        d["distance"]
+    );
+
+    std::fs::write(&terrain, "0 0\n1 oops\n").unwrap();
+    let out = simulate(&["--terrain", terrain.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("line 2") && err.contains("oops"), "{err}");
+}
+
+#[test]
+fn bad_options_are_named() {
+    for (args, code, needle) in [
+        (vec!["--period", "0"], 2, "--period"),
+        (vec!["--delay=-1"], 2, "--delay"),
+        (vec!["--spike-rate", "2"], 2, "--spike-rate"),
+        (vec!["--terrain", "/nonexistent/mat"], 3, "/nonexistent/mat"),
+        (vec!["--set", "nosuch=1"], 2, "nosuch"),
+        (vec!["--broker", "mqtts://h:1"], 2, "not supported"),
+    ] {
+        let out = simulate(&args);
+        assert_eq!(out.status.code(), Some(code), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+}

@@ -1,0 +1,171 @@
+//! `simulate --broker` through a real Mosquitto: the simulated robot publishes its messages on
+//! `tessla`; the Telegraf stand-in (mqtt_consumer JSON -> `tessla-telegraf run` -> outputs.mqtt
+//! JSON) answers on `action`; the robot executes those actions. With the message time carried
+//! in the JSON (`--time-key`), the run through the broker must equal the in-process run.
+
+#[path = "support/mqtt_client.rs"]
+mod mqtt_client;
+#[path = "support/recorded.rs"]
+mod recorded;
+#[path = "support/servers.rs"]
+mod servers;
+#[path = "support/telegraf_standin.rs"]
+mod telegraf_standin;
+
+use recorded::BIN;
+use serde_json::Value;
+use std::io::{BufRead, BufReader, Write};
+use std::process::{Command, Stdio};
+use std::time::Duration;
+use telegraf_standin::{ConsumerConfig, line_to_message, message_to_line};
+
+const MS: i64 = 1_000_000;
+
+/// (speed, augmented) of every `action` line in a run's output.
+fn actions(path: &std::path::Path) -> Vec<(f64, bool)> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .filter(|l| l.starts_with("action ") || l.starts_with("action,"))
+        .map(|l| {
+            let m = line_to_message(l, 1).unwrap();
+            (
+                m["fields"]["speed"].as_f64().unwrap(),
+                m["fields"]["augmented"] == true,
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn simulated_robot_drives_the_pipeline_through_mosquitto() {
+    let Some(broker) = servers::Mosquitto::start() else {
+        return;
+    };
+    // 60 s of the bundled program: 121 messages.
+    let messages = 121usize;
+    let common = ["--duration", "60", "--json", "--seed", "3"];
+
+    // Stand-in Telegraf: mqtt_consumer -> processors.execd (our binary) -> outputs.mqtt.
+    let telemetry = mqtt_client::subscribe(broker.port, "tessla", "telegraf-in");
+    let mut child = Command::new(BIN)
+        .arg("run")
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stdout = child.stdout.take().unwrap();
+    let port = broker.port;
+    let output_side = std::thread::spawn(move || {
+        let publisher = mqtt_client::Publisher::connect(port, "telegraf-out");
+        let mut published = 0usize;
+        for line in BufReader::new(stdout).lines() {
+            let line = line.unwrap();
+            if line.starts_with("action ") || line.starts_with("action,") {
+                let message = line_to_message(&line, MS).expect("our action line parses");
+                publisher.publish("action", serde_json::to_vec(&message).unwrap());
+                published += 1;
+            }
+        }
+        published
+    });
+    let cfg = ConsumerConfig {
+        host: "sim".into(),
+        json_string_fields: vec!["actualSpeed".into()],
+        json_time_key: Some("time".into()),
+    };
+    let mut stdin = child.stdin.take().unwrap();
+    let input_side = std::thread::spawn(move || {
+        let mut fed = 0usize;
+        while fed < messages {
+            let Ok((_, payload)) = telemetry.recv_timeout(Duration::from_secs(60)) else {
+                break;
+            };
+            if let Some(line) = message_to_line("tessla", &payload, &cfg, 0) {
+                stdin.write_all(line.as_bytes()).unwrap();
+                stdin.write_all(b"\n").unwrap();
+                stdin.flush().unwrap();
+            }
+            fed += 1;
+        }
+        fed
+    });
+
+    let dir = tempfile::tempdir().unwrap();
+    let via_broker = dir.path().join("broker.lp");
+    let out = Command::new(BIN)
+        .arg("simulate")
+        .args(common)
+        .args(["--broker", &broker.url(), "--time-key", "time", "--output"])
+        .arg(&via_broker)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "simulate --broker: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let fed = input_side.join().unwrap();
+    assert_eq!(
+        fed, messages,
+        "every simulated message reached the stand-in"
+    );
+    assert!(child.wait().unwrap().success());
+    assert_eq!(output_side.join().unwrap(), messages);
+
+    let broker_summary: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let b = &broker_summary["augmented"];
+    assert_eq!(b["messages"], messages);
+    assert_eq!(b["actions"], messages, "every message was answered");
+    assert!(
+        broker_summary["default"].is_null(),
+        "one run through the broker"
+    );
+
+    // The same run in-process.
+    let in_process = dir.path().join("in-process.lp");
+    let out = Command::new(BIN)
+        .arg("simulate")
+        .args(common)
+        .arg("--output")
+        .arg(&in_process)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let local: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let l = &local["augmented"];
+    for key in [
+        "mse",
+        "interventions",
+        "stuck_seconds",
+        "distance",
+        "spec_mse",
+    ] {
+        assert_eq!(
+            b[key], l[key],
+            "{key}: broker {} in-process {}",
+            b[key], l[key]
+        );
+    }
+    let (ab, al) = (actions(&via_broker), actions(&in_process));
+    assert_eq!(ab.len(), messages);
+    assert_eq!(ab, al, "the same actions, in order");
+    assert!(
+        ab.iter().any(|a| a.1),
+        "the monitor intervened in the first 60 s"
+    );
+}
+
+#[test]
+fn unreachable_broker_exits_3() {
+    let port = servers::free_port();
+    let out = Command::new(BIN)
+        .args(["simulate", "--duration", "1", "--action-timeout", "2"])
+        .args(["--broker", &format!("mqtt://127.0.0.1:{port}")])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(3));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains(&format!("127.0.0.1:{port}")), "{err}");
+}
