@@ -267,6 +267,14 @@ impl Processor {
                 return;
             }
         };
+        if metric.overwritten > 0 {
+            log::warn_limited("repeated field", || {
+                format!(
+                    "line {}: {} field value(s) overwritten by a later value of the same key; the last value is used, as Telegraf does",
+                    rec.line, metric.overwritten
+                )
+            });
+        }
         let mut ts = metric.timestamp.unwrap_or_else(now_ns);
         let now = self.now();
         let slot = self.instance_for(&metric, ts, now);

@@ -511,6 +511,18 @@ impl<'a> Parser<'a> {
                 if *self.peek() == Tok::Eof {
                     return self.expected("`}` closing the module");
                 }
+                if self.is_kw("include") {
+                    let sp = self.span();
+                    let _ = self.err::<()>(
+                        sp,
+                        "`include` is allowed only at the top level of a file, not inside a module",
+                    );
+                    self.advance();
+                    self.recover();
+                    self.skip_nl_semis();
+                    continue;
+                }
+                let at = self.pos;
                 match self.statement() {
                     Ok(s) => {
                         statements.push(s);
@@ -519,6 +531,11 @@ impl<'a> Parser<'a> {
                         }
                     }
                     Err(Fail) => self.recover(),
+                }
+                if self.pos == at {
+                    // Nothing consumed (e.g. an `include` inside a module, which `recover` keeps
+                    // as a statement start): skip the token, or this loop never ends.
+                    self.advance();
                 }
                 self.skip_nl_semis();
             }

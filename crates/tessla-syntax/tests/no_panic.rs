@@ -131,3 +131,32 @@ fn mutated_specs_never_panic() {
         }
     }
 }
+
+/// Inputs the cargo-fuzz `spec` target found (fuzz/, RELIABILITY.md): each parses, with an
+/// error diagnostic, within a deadline (the first hung the parser: an `include` inside a module).
+const FUZZ_FOUND: &[&str] = &[
+    "module Foo {\n  ## c\ninclude \"empty\"\n}\n",
+    "module Foo {\ninclude \"x\"\n",
+];
+
+#[test]
+fn inputs_found_by_fuzzing_terminate_with_a_diagnostic() {
+    for text in FUZZ_FOUND {
+        let (tx, rx) = std::sync::mpsc::channel();
+        let owned = text.to_string();
+        std::thread::spawn(move || {
+            let mut map = SourceMap::new();
+            let id = map.add("fuzz.tessla", None, owned);
+            let (_, diags) = tessla_syntax::parse(&map.get(id).text, id);
+            let _ = tx.send((
+                diags.iter().any(|d| d.is_error()),
+                render(&diags, &map, false),
+            ));
+        });
+        let (error, rendered) = rx
+            .recv_timeout(std::time::Duration::from_secs(20))
+            .unwrap_or_else(|_| panic!("parsing {text:?} did not finish"));
+        assert!(error, "{text:?}");
+        assert!(rendered.contains("fuzz.tessla:"), "{rendered}");
+    }
+}

@@ -1,0 +1,118 @@
+//! The binary as a child process under a deadline: input written from a writer thread, stdout and
+//! stderr collected by reader threads, the child killed (and the test failed, with its stderr) if
+//! it has not exited by the deadline, and its peak resident memory (VmHWM) read from /proc while
+//! it runs.
+//!
+//! Include with `#[path = "support/child.rs"] mod child;`.
+#![allow(dead_code)]
+
+use std::io::{Read, Write};
+use std::process::{ChildStdin, Command, Stdio};
+use std::time::{Duration, Instant};
+
+pub const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+
+/// How a child run ended.
+#[derive(Debug)]
+pub struct Finished {
+    pub stdout: Vec<u8>,
+    pub stderr: String,
+    /// Exit code; `None` when killed by a signal.
+    pub code: Option<i32>,
+    /// The largest VmHWM (peak RSS, KiB) read from /proc/<pid>/status before the child exited.
+    pub peak_rss_kib: Option<u64>,
+}
+
+impl Finished {
+    pub fn stdout_text(&self) -> String {
+        String::from_utf8_lossy(&self.stdout).into_owned()
+    }
+}
+
+/// Run the binary with `args`, `feed` writing its stdin (stdin is closed when `feed` returns);
+/// panics if the child has not exited after `deadline`.
+pub fn run_with<F>(args: &[&str], deadline: Duration, feed: F) -> Finished
+where
+    F: FnOnce(&mut ChildStdin) + Send + 'static,
+{
+    let mut child = Command::new(BIN)
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn the binary");
+    let pid = child.id();
+    let mut stdin = child.stdin.take().expect("stdin");
+    let writer = std::thread::spawn(move || {
+        feed(&mut stdin);
+        drop(stdin);
+    });
+    let mut out = child.stdout.take().expect("stdout");
+    let mut err = child.stderr.take().expect("stderr");
+    let out_reader = std::thread::spawn(move || {
+        let mut v = Vec::new();
+        let _ = out.read_to_end(&mut v);
+        v
+    });
+    let err_reader = std::thread::spawn(move || {
+        let mut v = Vec::new();
+        let _ = err.read_to_end(&mut v);
+        v
+    });
+    let start = Instant::now();
+    let mut peak = None;
+    let status = loop {
+        if let Some(hwm) = vm_hwm_kib(pid) {
+            peak = Some(peak.map_or(hwm, |p: u64| p.max(hwm)));
+        }
+        if let Some(status) = child.try_wait().expect("wait") {
+            break status;
+        }
+        if start.elapsed() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            let err = err_reader.join().unwrap_or_default();
+            let tail = String::from_utf8_lossy(&err);
+            let tail: String = tail
+                .chars()
+                .rev()
+                .take(4000)
+                .collect::<Vec<_>>()
+                .into_iter()
+                .rev()
+                .collect();
+            panic!("the child did not exit within {deadline:?} (killed); stderr tail:\n{tail}");
+        }
+        // Polling the deadline (and sampling memory), not synchronising on it.
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    let _ = writer.join();
+    Finished {
+        stdout: out_reader.join().unwrap_or_default(),
+        stderr: String::from_utf8_lossy(&err_reader.join().unwrap_or_default()).into_owned(),
+        code: status.code(),
+        peak_rss_kib: peak,
+    }
+}
+
+/// Run the binary with `args` and the bytes `input` on stdin.
+pub fn run_bytes(args: &[&str], input: Vec<u8>, deadline: Duration) -> Finished {
+    run_with(args, deadline, move |stdin| {
+        // The child may stop reading (closed stdout, early exit): the test checks the result.
+        let _ = stdin.write_all(&input);
+    })
+}
+
+/// VmHWM of process `pid` in KiB (None once it has exited or on non-Linux systems).
+pub fn vm_hwm_kib(pid: u32) -> Option<u64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))?
+        .trim()
+        .trim_end_matches("kB")
+        .trim()
+        .parse()
+        .ok()
+}
