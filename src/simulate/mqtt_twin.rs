@@ -176,6 +176,7 @@ fn metric_of(json: &Value) -> Option<Metric> {
         tags,
         fields,
         timestamp: None,
+        overwritten: 0,
     })
 }
 
