@@ -144,3 +144,45 @@ fn the_bundled_spec_reloads_without_changing_anything() {
     );
     assert_eq!(out, whole);
 }
+
+#[test]
+fn udp_mode_reloads_on_sighup() {
+    let dir = tempfile::tempdir().unwrap();
+    let main = dir.path().join("main.tessla");
+    std::fs::write(dir.path().join("lib.tessla"), LIB_V1).unwrap();
+    std::fs::write(&main, MAIN_V1).unwrap();
+    let recv = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    recv.set_read_timeout(Some(std::time::Duration::from_secs(30)))
+        .unwrap();
+    let send_to = recv.local_addr().unwrap().to_string();
+    let listen = std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .to_string();
+    let mut c = LiveChild::spawn(&[
+        "--spec",
+        s(&main),
+        "--udp-listen",
+        &listen,
+        "--udp-send",
+        &send_to,
+        "--no-passthrough",
+    ]);
+    c.wait_err("udp: listening", 0, |l| l.contains("udp: listening on"));
+    let sock = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let mut buf = vec![0u8; 65536];
+    let mut ask = |datagram: &str| {
+        sock.send_to(datagram.as_bytes(), &listen).unwrap();
+        let n = recv.recv(&mut buf).unwrap();
+        String::from_utf8_lossy(&buf[..n]).into_owned()
+    };
+    assert_eq!(ask("m x=1i 10\n"), "tessla c=1i,m=2i 10\n");
+    std::fs::write(&main, MAIN_V2).unwrap();
+    let msg = hangup(&mut c, "I! reload:");
+    assert!(msg.contains("reset: outputs n"), "{msg}");
+    assert_eq!(ask("m x=1i 20\n"), "tessla c=2i,m=2i,n=1i 20\n");
+    c.signal("TERM");
+    let (_, err, code) = c.finish();
+    assert_eq!(code, 0, "{err}");
+}

@@ -304,3 +304,47 @@ fn udp_mode_saves_and_restores_state() {
         "tessla c=3i 30\n"
     );
 }
+
+#[test]
+fn state_interval_saves_while_running_so_a_kill_loses_nothing_saved() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = write_spec(
+        dir.path(),
+        "spec.tessla",
+        "in x: Events[Int]\ndef c = count(x)\nout c\n",
+    );
+    let state = dir.path().join("state.json");
+    let args = [
+        "--spec",
+        s(&spec),
+        "--no-passthrough",
+        "--state",
+        s(&state),
+        "--state-interval",
+        "50ms",
+        "--log-level",
+        "debug",
+    ];
+    let mut c = LiveChild::spawn(&args);
+    c.write("m x=1i 10\nm x=1i 20\nm x=1i 30\n");
+    c.wait_out("for the step at 30", |l| l == "tessla c=3i 30\n");
+    let from = c.err.len();
+    c.wait_err("a periodic save", from, |l| {
+        l.starts_with("D! state: saved 1")
+    });
+    // No goodbye: SIGKILL, as a crash.
+    c.signal("KILL");
+    let (_, err, _) = c.finish();
+    assert!(!err.contains("I! state: saved"), "{err}");
+    let (out, err, code) = run_all(&args[..5], "m x=1i 40\n");
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("I! state: restored 1"), "{err}");
+    assert_eq!(out, "tessla c=4i 40\n");
+}
+
+#[test]
+fn state_interval_needs_state() {
+    let (_, err, code) = run_all(&["--state-interval", "1s"], "");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("--state"), "{err}");
+}

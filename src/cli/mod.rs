@@ -128,6 +128,10 @@ pub struct RunArgs {
     /// continue from it at start, so a Telegraf restart or reload keeps the monitors' state.
     #[arg(long, value_name = "FILE")]
     pub state: Option<PathBuf>,
+    /// Also save the state this often while running (`30s`, `5m`), so a crash or SIGKILL
+    /// loses at most this much. Needs --state.
+    #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration, requires = "state")]
+    pub state_interval: Option<std::time::Duration>,
 }
 
 pub fn main() -> i32 {

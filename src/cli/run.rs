@@ -81,8 +81,19 @@ pub fn run(args: RunArgs) -> i32 {
     if let Some(path) = &args.state {
         state::load(path, &mut proc, &state_ctx);
     }
-    let mut on_hup = |p: &mut Processor, out: &mut Vec<u8>| {
+    let mut on_hangup = |p: &mut Processor, out: &mut Vec<u8>| {
         reload::reload(&source, p, out);
+    };
+    let mut save_now = |p: &Processor| {
+        if let Some(path) = &args.state {
+            save_state(path, p, &state_ctx, Level::Debug);
+        }
+    };
+    let hooks = transport::Hooks {
+        on_hangup: &mut on_hangup,
+        periodic: args
+            .state_interval
+            .map(|d| (d, &mut save_now as &mut dyn FnMut(&Processor))),
     };
     let rt = match tokio::runtime::Builder::new_current_thread()
         .enable_all()
@@ -102,25 +113,16 @@ pub fn run(args: RunArgs) -> i32 {
                     listen,
                     &args.udp_send,
                     args.udp_max_datagram,
-                    &mut on_hup,
+                    hooks,
                 )
                 .await
             }
-            None => transport::stdio::run(&mut proc, &mut on_hup).await,
+            None => transport::stdio::run(&mut proc, hooks).await,
         }
     });
     // Every ending (EOF, signal, closed stdout, I/O error) has evaluated what it could: save.
     if let Some(path) = &args.state {
-        match state::save(path, &proc, &state_ctx) {
-            Ok(n) => log::log(
-                Level::Info,
-                &format!("state: saved {n} monitor instances to {}", path.display()),
-            ),
-            Err(e) => log::log(
-                Level::Error,
-                &format!("state: cannot save to {}: {e}", path.display()),
-            ),
-        }
+        save_state(path, &proc, &state_ctx, Level::Info);
     }
     match result {
         Ok(ending) => {
@@ -138,5 +140,24 @@ pub fn run(args: RunArgs) -> i32 {
             rt.shutdown_background();
             EXIT_IO
         }
+    }
+}
+
+/// Save the state, logging success at `level` and failure as an error (never fatal).
+fn save_state(path: &std::path::Path, proc: &Processor, ctx: &state::Context, level: Level) {
+    let start = std::time::Instant::now();
+    match state::save(path, proc, ctx) {
+        Ok(n) => log::log(
+            level,
+            &format!(
+                "state: saved {n} monitor instances to {} in {} ms",
+                path.display(),
+                start.elapsed().as_millis()
+            ),
+        ),
+        Err(e) => log::log(
+            Level::Error,
+            &format!("state: cannot save to {}: {e}", path.display()),
+        ),
     }
 }

@@ -5,7 +5,7 @@
 //! answer this one), flushing stdout after every batch, SIGTERM/SIGINT, SIGHUP (handed to the
 //! caller's reload between reads), and a closed stdout.
 
-use super::{Ending, OnHangup};
+use super::{Ending, Hooks};
 use crate::telegraf::processor::Processor;
 use lineproto::RecordSplitter;
 use std::io::Write;
@@ -14,7 +14,7 @@ use tokio::io::AsyncReadExt;
 const BUF: usize = 64 * 1024;
 
 /// Run until EOF, a signal, or a closed stdout. Pending steps are always evaluated and written.
-pub async fn run(proc: &mut Processor, on_hup: OnHangup<'_>) -> std::io::Result<Ending> {
+pub async fn run(proc: &mut Processor, hooks: Hooks<'_>) -> std::io::Result<Ending> {
     let mut stdin = tokio::io::stdin();
     let mut splitter = RecordSplitter::default();
     let mut buf = vec![0u8; BUF];
@@ -22,11 +22,22 @@ pub async fn run(proc: &mut Processor, on_hup: OnHangup<'_>) -> std::io::Result<
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())?;
     let mut sighup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
+    let mut timer = super::timer(&hooks.periodic);
+    let Hooks {
+        on_hangup,
+        mut periodic,
+    } = hooks;
     let ending = loop {
         let n = tokio::select! {
             r = stdin.read(&mut buf) => r?,
+            _ = super::tick(&mut timer) => {
+                if let Some((_, f)) = periodic.as_mut() {
+                    f(proc);
+                }
+                continue;
+            }
             _ = sighup.recv() => {
-                on_hup(proc, &mut out);
+                on_hangup(proc, &mut out);
                 if write_out(&mut out).is_err() {
                     return Ok(Ending::OutputClosed);
                 }

@@ -4,7 +4,7 @@
 //! only itself), evaluating the step at the end of each datagram, and sending outputs packed
 //! into datagrams of at most `max_datagram` bytes without splitting a line.
 
-use super::{Ending, OnHangup};
+use super::{Ending, Hooks};
 use crate::telegraf::processor::Processor;
 use lineproto::RecordSplitter;
 use tokio::net::UdpSocket;
@@ -15,7 +15,7 @@ pub async fn run(
     listen: &str,
     send: &str,
     max_datagram: usize,
-    on_hup: OnHangup<'_>,
+    hooks: Hooks<'_>,
 ) -> std::io::Result<Ending> {
     let sock = UdpSocket::bind(listen).await?;
     let out_sock = UdpSocket::bind(if send.starts_with('[') {
@@ -37,11 +37,22 @@ pub async fn run(
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())?;
     let mut sighup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
+    let mut timer = super::timer(&hooks.periodic);
+    let Hooks {
+        on_hangup,
+        mut periodic,
+    } = hooks;
     loop {
         let n = tokio::select! {
             r = sock.recv(&mut buf) => r?,
+            _ = super::tick(&mut timer) => {
+                if let Some((_, f)) = periodic.as_mut() {
+                    f(proc);
+                }
+                continue;
+            }
             _ = sighup.recv() => {
-                on_hup(proc, &mut out);
+                on_hangup(proc, &mut out);
                 send_packed(&out_sock, &out, max_datagram).await;
                 out.clear();
                 continue;

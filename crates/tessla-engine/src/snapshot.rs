@@ -57,6 +57,8 @@ pub enum SValue {
     Bool(bool),
     Int(i64),
     Float(#[serde(with = "float")] f64),
+    /// A list of floats only (a lidar scan): stored as bare numbers, a third of the size.
+    Floats(Vec<Float>),
     Str(String),
     None,
     Some(Box<SValue>),
@@ -94,6 +96,18 @@ impl SValue {
             Value::Str(s) => SValue::Str(s.to_string()),
             Value::None => SValue::None,
             Value::Some(x) => SValue::Some(Box::new(SValue::from_value(x)?)),
+            Value::List(xs)
+                if !xs.is_empty() && xs.iter().all(|x| matches!(x, Value::Float(_))) =>
+            {
+                SValue::Floats(
+                    xs.iter()
+                        .map(|x| match x {
+                            Value::Float(f) => Float(*f),
+                            _ => Float(f64::NAN),
+                        })
+                        .collect(),
+                )
+            }
             Value::List(xs) => SValue::List(list(xs)?),
             Value::Tuple(xs) => SValue::Tuple(list(xs)?),
             Value::Set(xs) => SValue::Set(list(xs)?),
@@ -130,6 +144,9 @@ impl SValue {
             SValue::None => Value::None,
             SValue::Some(x) => Value::Some(Arc::new(x.to_value())),
             SValue::List(xs) => Value::List(Arc::new(list(xs))),
+            SValue::Floats(xs) => {
+                Value::List(Arc::new(xs.iter().map(|f| Value::Float(f.0)).collect()))
+            }
             SValue::Tuple(xs) => Value::Tuple(Arc::from(list(xs))),
             SValue::Set(xs) => Value::Set(Arc::new(list(xs))),
             SValue::Record(fs) => Value::Record(
@@ -153,6 +170,11 @@ impl SValue {
         }
     }
 }
+
+/// A float in a [`SValue::Floats`] list (same encoding as [`SValue::Float`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct Float(#[serde(with = "float")] pub f64);
 
 /// Floats as numbers when finite (exact with serde_json's `float_roundtrip`), else as the
 /// strings `NaN`, `inf`, `-inf` (JSON has no numbers for them).

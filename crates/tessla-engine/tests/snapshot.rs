@@ -124,6 +124,12 @@ fn floats_errors_and_collections_survive_json() {
         Value::Float(-0.0),
         Value::Float(0.1 + 0.2),
         Value::Float(f64::MIN_POSITIVE / 3.0),
+        Value::List(Arc::new(vec![
+            Value::Float(2.003),
+            Value::Float(f64::NAN),
+            Value::Float(f64::INFINITY),
+        ])),
+        Value::List(Arc::new(vec![Value::Float(1.0), Value::Int(1)])),
         Value::Error(tessla_engine::RuntimeError::Other("boom".into())),
         Value::Some(Arc::new(Value::List(Arc::new(vec![Value::Str(
             "é\n".into(),
