@@ -92,6 +92,7 @@ fn check_case(dir: &Path, desc: &serde_json::Value) -> Result_ {
             .and_then(|v| v.as_str())
             .map(str::to_string),
         overrides: Vec::new(),
+        time_units_need_base: true,
     };
     let Some(spec) = get("spec") else {
         return Result_::Skipped;
