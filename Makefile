@@ -1,5 +1,5 @@
 # Every command the README mentions lives here. `make run` and `make test` are the README's first two.
-.PHONY: run test setup build bench fmt lint ci fixtures conformance
+.PHONY: run test setup build bench fmt lint ci fixtures conformance fuzz
 
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
@@ -30,6 +30,11 @@ lint:
 
 ci:
 	bash .ci/run
+
+# Build every cargo-fuzz target and run each for FUZZ_SECONDS (default 60); fails on a crash.
+# Long runs and their findings: RELIABILITY.md.
+fuzz:
+	bash tools/fuzz-ci.sh
 
 # Regenerate the recorded-run fixture and its ground truth (fixed seed).
 fixtures:

@@ -362,9 +362,14 @@ fn a_field_of_the_wrong_type_is_reported_and_skipped() {
 
 #[test]
 fn a_million_robots_stay_within_max_instances() {
-    // One million distinct robot tags streamed from a writer thread, one instance per robot,
-    // at most 1000 kept: memory stays bounded and every eviction is counted.
-    const ROBOTS: u64 = 1_000_000;
+    // Distinct robot tags streamed from a writer thread, one instance per robot, at most 1000
+    // kept: memory stays bounded and every eviction is counted. 200k by default (a debug build
+    // takes minutes for a million on a busy machine); HOSTILE_ROBOTS=1000000 for the full run
+    // (RELIABILITY.md).
+    let robots: u64 = std::env::var("HOSTILE_ROBOTS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(200_000);
     let f = run_with(
         &[
             "run",
@@ -375,9 +380,9 @@ fn a_million_robots_stay_within_max_instances() {
             "1000",
         ],
         Duration::from_secs(600),
-        |stdin| {
+        move |stdin| {
             let mut w = std::io::BufWriter::with_capacity(1 << 16, stdin);
-            for i in 0..ROBOTS {
+            for i in 0..robots {
                 let line = format!(
                     "mqtt_consumer,topic=tessla,robot=r{i} expectedSpeed=0.015,actualSpeed=\"0.02\" {}\n",
                     1000 + i
@@ -390,10 +395,10 @@ fn a_million_robots_stay_within_max_instances() {
         },
     );
     assert_eq!(f.code, Some(0), "{}", f.stderr);
-    let evicted = ROBOTS - 1000;
+    let evicted = robots - 1000;
     assert!(
         f.stderr
-            .contains(&format!("{ROBOTS} instances, {evicted} evicted")),
+            .contains(&format!("{robots} instances, {evicted} evicted")),
         "{}",
         f.stderr
     );
@@ -402,14 +407,15 @@ fn a_million_robots_stay_within_max_instances() {
             .contains("evicted (least recently used, --max-instances 1000)")
     );
     let peak = f.peak_rss_kib.expect("VmHWM");
+    eprintln!("{robots} robots, --max-instances 1000: peak RSS {peak} KiB");
     assert!(peak < 200 * 1024, "peak RSS {peak} KiB");
     // Every robot was answered (tagged with its robot), the last one too.
     let out = f.stdout_text();
     assert_eq!(
         out.lines().filter(|l| l.starts_with("action,")).count() as u64,
-        ROBOTS
+        robots
     );
-    assert!(out.contains(&format!("robot=r{} ", ROBOTS - 1)));
+    assert!(out.contains(&format!("robot=r{} ", robots - 1)));
 }
 
 mod udp {
@@ -483,7 +489,7 @@ mod udp {
             got
         }
 
-        /// SIGTERM; the exit code and stderr.
+        /// SIGTERM; the exit code and stderr (a failed test kills the child on drop).
         fn stop(mut self) -> (Option<i32>, String) {
             let pid = self.child.id().to_string();
             std::process::Command::new("kill")
@@ -491,15 +497,25 @@ mod udp {
                 .status()
                 .unwrap();
             let start = Instant::now();
-            while self.child.try_wait().unwrap().is_none() {
+            let status = loop {
+                if let Some(status) = self.child.try_wait().unwrap() {
+                    break status;
+                }
                 assert!(start.elapsed() < Duration::from_secs(30), "no exit");
                 std::thread::sleep(Duration::from_millis(10));
+            };
+            let mut err = String::new();
+            if let Some(mut e) = self.child.stderr.take() {
+                let _ = std::io::Read::read_to_string(&mut e, &mut err);
             }
-            let out = self.child.wait_with_output().unwrap();
-            (
-                out.status.code(),
-                String::from_utf8_lossy(&out.stderr).into_owned(),
-            )
+            (status.code(), err)
+        }
+    }
+
+    impl Drop for Monitor {
+        fn drop(&mut self) {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
         }
     }
 

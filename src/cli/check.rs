@@ -24,6 +24,11 @@ pub fn run(args: CheckArgs) -> i32 {
             tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false)
         );
     }
+    // The Telegraf binding reads the annotations: check them as `run` does.
+    if let Err(e) = crate::telegraf::binding::bindings(&loaded.program) {
+        eprintln!("error: {e}");
+        return EXIT_SPEC;
+    }
     let p = &loaded.program;
     let ann = |a: &[tessla_engine::Annotation]| {
         a.iter()

@@ -230,6 +230,11 @@ pub struct Compiler<'a> {
     origin: u64,
     /// The origin of each node (`Program::node_origins`).
     origins: Vec<u64>,
+    /// Every scope cell and def state created: scopes and defs refer to each other through
+    /// `Rc`s, so they are cleared when compiling ends ([`Compiler::break_cycles`]) or each
+    /// compile leaked the whole name table (found by cargo fuzz's leak checker).
+    scopes: Vec<Rc<RefCell<Option<Env>>>>,
+    states: Vec<Rc<RefCell<DefState>>>,
 }
 
 /// The type of a parameterless def's constant value, if it is a literal constant.
@@ -617,6 +622,36 @@ impl<'a> Compiler<'a> {
             node_types: HashMap::new(),
             origin: 0,
             origins: Vec::new(),
+            scopes: Vec::new(),
+            states: Vec::new(),
+        }
+    }
+
+    /// A new def state, registered for [`Compiler::break_cycles`].
+    fn new_state(&mut self) -> Rc<RefCell<DefState>> {
+        let s = Rc::new(RefCell::new(DefState::Todo));
+        self.states.push(s.clone());
+        s
+    }
+
+    /// A new scope cell, registered for [`Compiler::break_cycles`].
+    fn new_scope(&mut self) -> Rc<RefCell<Option<Env>>> {
+        let c = Rc::new(RefCell::new(None));
+        self.scopes.push(c.clone());
+        c
+    }
+
+    /// Empty every scope cell and def state, breaking the reference cycles between them.
+    fn break_cycles(&mut self) {
+        for c in self.scopes.drain(..) {
+            if let Ok(mut c) = c.try_borrow_mut() {
+                *c = None;
+            }
+        }
+        for st in self.states.drain(..) {
+            if let Ok(mut st) = st.try_borrow_mut() {
+                *st = DefState::Failed;
+            }
         }
     }
 
@@ -653,7 +688,7 @@ impl<'a> Compiler<'a> {
         let mut outs: Vec<&ast::Out> = Vec::new();
         let mut out_all = false;
         let mut defs_in_order: Vec<String> = Vec::new();
-        let env_cell: Rc<RefCell<Option<Env>>> = Rc::new(RefCell::new(None));
+        let env_cell: Rc<RefCell<Option<Env>>> = self.new_scope();
         let mut statements: Vec<(String, &Statement)> = Vec::new();
         for f in files {
             for s in &f.statements {
@@ -690,17 +725,17 @@ impl<'a> Compiler<'a> {
                     // A def in a module sees the module's other members by their short names.
                     let cell = if prefix.is_empty() {
                         env_cell.clone()
+                    } else if let Some(m) = modules.get(&prefix) {
+                        m.0.clone()
                     } else {
-                        modules
-                            .entry(prefix.clone())
-                            .or_insert_with(|| (Rc::new(RefCell::new(None)), HashMap::new()))
-                            .0
-                            .clone()
+                        let c = self.new_scope();
+                        modules.insert(prefix.clone(), (c.clone(), HashMap::new()));
+                        c
                     };
                     let entry = Entry {
                         def: Rc::new(d.clone()),
                         env_cell: cell,
-                        state: Rc::new(RefCell::new(DefState::Todo)),
+                        state: self.new_state(),
                     };
                     if let Some(m) = modules.get_mut(&prefix) {
                         m.1.insert(d.name.name.clone(), Binding::Def(entry.clone()));
@@ -831,7 +866,7 @@ impl<'a> Compiler<'a> {
                 Binding::Def(Entry {
                     def: Rc::new(d),
                     env_cell: entry.env_cell.clone(),
-                    state: Rc::new(RefCell::new(DefState::Todo)),
+                    state: self.new_state(),
                 }),
             );
         }
@@ -944,6 +979,9 @@ impl<'a> Compiler<'a> {
                 }
             }
         }
+        drop(env);
+        drop(module_envs);
+        self.break_cycles();
         if self.diags.iter().any(|d| d.is_error()) {
             return Err(self.diags);
         }
@@ -1288,7 +1326,7 @@ impl<'a> Compiler<'a> {
     }
 
     fn local_defs(&mut self, defs: &[Def], env: &Env) -> Env {
-        let cell: Rc<RefCell<Option<Env>>> = Rc::new(RefCell::new(None));
+        let cell: Rc<RefCell<Option<Env>>> = self.new_scope();
         let mut names = HashMap::new();
         for d in defs {
             names.insert(
@@ -1296,7 +1334,7 @@ impl<'a> Compiler<'a> {
                 Binding::Def(Entry {
                     def: Rc::new(d.clone()),
                     env_cell: cell.clone(),
-                    state: Rc::new(RefCell::new(DefState::Todo)),
+                    state: self.new_state(),
                 }),
             );
         }

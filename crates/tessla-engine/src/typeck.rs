@@ -209,7 +209,8 @@ pub fn check(files: &[ast::File]) -> Vec<Diagnostic> {
             }
         }
     }
-    c.diags
+    c.break_cycles();
+    std::mem::take(&mut c.diags)
 }
 
 #[derive(Default)]
@@ -221,9 +222,30 @@ struct Checker<'a> {
     /// (importing module prefix, imported module prefix).
     imports: Vec<(String, String)>,
     module_scopes: HashMap<String, Rc<Scope<'a>>>,
+    /// Every local scope made: a scope names defs whose `scope` is that scope (or a child), so
+    /// [`Checker::break_cycles`] empties them when checking ends, or each check leaks them.
+    local_scopes: Vec<Rc<Scope<'a>>>,
 }
 
 impl<'a> Checker<'a> {
+    /// A new local scope under `parent`, registered for [`Checker::break_cycles`].
+    fn child_of(&mut self, parent: &Rc<Scope<'a>>) -> Rc<Scope<'a>> {
+        let s = parent.child();
+        self.local_scopes.push(s.clone());
+        s
+    }
+
+    /// Empty every scope, breaking the `Rc` cycles between scopes and the defs they name.
+    fn break_cycles(&mut self) {
+        let module_scopes = self.module_scopes.drain().map(|(_, s)| s);
+        for s in self.local_scopes.drain(..).chain(module_scopes) {
+            if let Ok(mut names) = s.names.try_borrow_mut() {
+                names.clear();
+            }
+        }
+        self.globals.clear();
+    }
+
     fn module_scope(&mut self, prefix: &str) -> Rc<Scope<'a>> {
         self.module_scopes
             .entry(prefix.to_string())
@@ -433,7 +455,7 @@ impl<'a> Checker<'a> {
             let v = self.fresh();
             tparams.insert(tp.name.clone(), v);
         }
-        let inner = scope.child();
+        let inner = self.child_of(scope);
         let mut ptys = Vec::new();
         if let Some(ps) = &d.params {
             for p in ps {
@@ -481,7 +503,7 @@ impl<'a> Checker<'a> {
     }
 
     fn local_defs(&mut self, defs: &'a [Def], scope: &Rc<Scope<'a>>) -> Rc<Scope<'a>> {
-        let s = scope.child();
+        let s = self.child_of(scope);
         for d in defs {
             s.names.borrow_mut().insert(
                 d.name.name.clone(),
@@ -764,7 +786,7 @@ impl<'a> Checker<'a> {
                 self.lifted(&[c], r)
             }
             ExprKind::Lambda { params, body } => {
-                let inner = scope.child();
+                let inner = self.child_of(scope);
                 let mut ps = Vec::new();
                 for p in params {
                     let t = match &p.ty {

@@ -26,10 +26,26 @@ impl Resolver for FsResolver {
             Some(dir) => dir.join(name),
             None => PathBuf::from(name),
         });
-        let text = std::fs::read_to_string(&path)
-            .map_err(|e| format!("cannot read `{}`: {e}", path.display()))?;
+        let bytes =
+            std::fs::read(&path).map_err(|e| format!("cannot read `{}`: {e}", path.display()))?;
+        let text = String::from_utf8(bytes).map_err(|e| {
+            let (line, column) = utf8_error_place(e.as_bytes(), e.utf8_error().valid_up_to());
+            format!(
+                "{}:{line}:{column}: invalid UTF-8; save the file as UTF-8",
+                path.display()
+            )
+        })?;
         Ok((path.display().to_string(), text))
     }
+}
+
+/// 1-based line and column (in characters) of byte `at`, all bytes before it being valid UTF-8.
+fn utf8_error_place(bytes: &[u8], at: usize) -> (usize, usize) {
+    let before = String::from_utf8_lossy(bytes.get(..at).unwrap_or_default());
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    let line = before.matches('\n').count() + 1;
+    let column = before.get(line_start..).map_or(0, |l| l.chars().count()) + 1;
+    (line, column)
 }
 
 /// `path` with `.` components removed and `dir/..` pairs folded (without touching the file

@@ -55,7 +55,15 @@ pub struct Lexer<'a> {
     pos: usize,
     file: FileId,
     pub diagnostics: Vec<Diagnostic>,
+    /// `${` interpolations open around the current position (see [`MAX_INTERPOLATION`]).
+    nesting: usize,
+    /// Whether too deep an interpolation was reported (once per file).
+    too_deep: bool,
 }
+
+/// Deepest nesting of `${ ... }` inside strings: lexing recurses along it (5000 levels
+/// overflowed the stack; found by cargo fuzz).
+pub const MAX_INTERPOLATION: usize = 32;
 
 /// Letters, `_`, and (as TeSSLa allows emoji names) any other non-ASCII symbol.
 fn is_ident_start(c: char) -> bool {
@@ -73,6 +81,8 @@ impl<'a> Lexer<'a> {
             pos: 0,
             file,
             diagnostics: Vec::new(),
+            nesting: 0,
+            too_deep: false,
         }
     }
 
@@ -327,6 +337,21 @@ impl<'a> Lexer<'a> {
                         None => {}
                     }
                 }
+                '$' if self.peek_at(1) == Some('{') && self.nesting >= MAX_INTERPOLATION => {
+                    let sp = Span::new(self.file, self.pos, self.pos + 2);
+                    if !self.too_deep {
+                        self.too_deep = true;
+                        self.error(
+                            sp,
+                            format!(
+                                "string interpolations nested more than {MAX_INTERPOLATION} deep"
+                            ),
+                        );
+                    }
+                    // Kept as text, so lexing goes on.
+                    self.bump();
+                    text.push('$');
+                }
                 '$' if self.peek_at(1) == Some('{') => {
                     let is = self.pos;
                     self.bump();
@@ -334,7 +359,9 @@ impl<'a> Lexer<'a> {
                     if !text.is_empty() {
                         parts.push(LexStrPart::Text(std::mem::take(&mut text)));
                     }
+                    self.nesting += 1;
                     let tokens = self.tokens_until(Some(is));
+                    self.nesting -= 1;
                     let span = self.span(is);
                     let fmt = if format { self.format_spec() } else { None };
                     parts.push(LexStrPart::Interp {

@@ -21,6 +21,8 @@ pub fn parse(text: &str, file: FileId) -> (File, Vec<Diagnostic>) {
         pos: 0,
         text,
         diags: Vec::new(),
+        depth: 0,
+        abandoned: false,
     };
     let f = p.file();
     diags.append(&mut p.diags);
@@ -37,6 +39,8 @@ pub fn parse_expr(text: &str, file: FileId) -> (Option<Expr>, Vec<Diagnostic>) {
         pos: 0,
         text,
         diags: Vec::new(),
+        depth: 0,
+        abandoned: false,
     };
     p.skip_nl();
     let e = p.expr().ok();
@@ -68,7 +72,18 @@ struct Parser<'a> {
     pos: usize,
     text: &'a str,
     diags: Vec<Diagnostic>,
+    /// Nesting of statements, expressions and types being parsed (see [`MAX_DEPTH`]).
+    depth: usize,
+    /// Set when the nesting limit was hit: the rest of the file is skipped and no further
+    /// errors are reported (each enclosing level would add one, each quoting a huge line).
+    abandoned: bool,
 }
+
+/// Deepest nesting of statements, expressions (an operator chain counts one level per operator)
+/// and types accepted. The parser, the checker and dropping the tree all recurse along it: a
+/// spec nested 100k levels deep overflowed the stack (found by cargo fuzz). Hand-written specs
+/// stay far below this.
+pub const MAX_DEPTH: usize = 200;
 
 fn describe(t: &Tok) -> String {
     match t {
@@ -89,6 +104,8 @@ impl<'a> Parser<'a> {
             pos: 0,
             text: self.text,
             diags: Vec::new(),
+            depth: self.depth,
+            abandoned: false,
         }
     }
 
@@ -171,12 +188,18 @@ impl<'a> Parser<'a> {
     }
 
     fn err<T>(&mut self, span: Span, msg: impl Into<String>) -> PResult<T> {
+        if self.abandoned {
+            return Err(Fail);
+        }
         self.diags
             .push(Diagnostic::error(Category::Syntax, Some(span), msg));
         Err(Fail)
     }
 
     fn expected<T>(&mut self, what: &str) -> PResult<T> {
+        if self.abandoned {
+            return Err(Fail);
+        }
         let found = describe(self.peek());
         let mut span = self.span();
         if matches!(self.peek(), Tok::Newline | Tok::Eof) {
@@ -445,6 +468,34 @@ impl<'a> Parser<'a> {
     }
 
     fn statement(&mut self) -> PResult<Statement> {
+        self.nested(0, Self::statement_inner)
+    }
+
+    /// Run `f` one level deeper (plus `extra` levels), or report the spec as nested too deeply.
+    fn nested<T>(&mut self, extra: usize, f: impl FnOnce(&mut Self) -> PResult<T>) -> PResult<T> {
+        if self.depth + extra >= MAX_DEPTH {
+            let sp = self.span();
+            if !self.abandoned {
+                self.abandoned = true;
+                self.diags.push(
+                    Diagnostic::error(
+                        Category::Syntax,
+                        Some(sp),
+                        format!("nested more than {MAX_DEPTH} levels deep"),
+                    )
+                    .with_help("split the expression into several `def`s"),
+                );
+            }
+            self.pos = self.toks.len().saturating_sub(1);
+            return Err(Fail);
+        }
+        self.depth += 1;
+        let r = f(self);
+        self.depth -= 1;
+        r
+    }
+
+    fn statement_inner(&mut self) -> PResult<Statement> {
         let start = self.span();
         if self.is_punct("@@") {
             self.advance();
@@ -809,6 +860,10 @@ impl<'a> Parser<'a> {
     }
 
     fn ty(&mut self) -> PResult<Type> {
+        self.nested(0, Self::ty_inner)
+    }
+
+    fn ty_inner(&mut self) -> PResult<Type> {
         let start = self.span();
         if self.is_punct("(") {
             let after = self.after_matching(0);
@@ -891,6 +946,10 @@ impl<'a> Parser<'a> {
     // ---- expressions ----
 
     pub fn expr(&mut self) -> PResult<Expr> {
+        self.nested(0, Self::expr_inner)
+    }
+
+    fn expr_inner(&mut self) -> PResult<Expr> {
         let start = self.span();
         if self.is_kw("if")
             || (self.is_kw("static") && matches!(self.peek_n(1), Tok::Ident(s) if s == "if"))
@@ -974,12 +1033,16 @@ impl<'a> Parser<'a> {
             return self.unary();
         };
         let mut lhs = self.binary(level + 1)?;
+        // Each operator applied deepens the tree by one level.
+        let mut chain = 0;
         loop {
             let op = match self.peek() {
                 Tok::Punct(p) => ops.iter().find(|(s, _)| s == p).map(|(_, o)| *o),
                 _ => None,
             };
             let Some(op) = op else { break };
+            chain += 1;
+            self.nested(chain, |_| Ok(()))?;
             self.advance();
             self.skip_nl();
             // `if` and lambdas may appear as the right operand (`a + if c then 1 else 2`).
@@ -1012,7 +1075,7 @@ impl<'a> Parser<'a> {
         if let Some(op) = op {
             self.advance();
             self.skip_nl();
-            let operand = self.unary()?;
+            let operand = self.nested(0, Self::unary)?;
             return Ok(Expr {
                 span: start.to(operand.span),
                 kind: ExprKind::Unary {

@@ -139,24 +139,47 @@ const FUZZ_FOUND: &[&str] = &[
     "module Foo {\ninclude \"x\"\n",
 ];
 
+/// Nesting far past `tessla_syntax::parser::MAX_DEPTH`: each overflowed the stack.
+fn too_deep() -> Vec<String> {
+    let n = 20_000;
+    vec![
+        format!("def a = {}1{}\nout a\n", "(".repeat(n), ")".repeat(n)),
+        format!("def a = 1{}\nout a\n", " + 1".repeat(n)),
+        format!("def a = {}1\nout a\n", "!".repeat(n)),
+        format!("def a = {}1{}\n", "${def b = ".repeat(n), "; b}".repeat(n)),
+        format!("in x: {}Int{}\n", "Events[".repeat(n), "]".repeat(n)),
+        "module a {\n".repeat(n),
+        format!("def s = \"{}\"\n", "${\"".repeat(2000)),
+    ]
+}
+
 #[test]
 fn inputs_found_by_fuzzing_terminate_with_a_diagnostic() {
-    for text in FUZZ_FOUND {
+    let texts: Vec<String> = FUZZ_FOUND
+        .iter()
+        .map(|s| s.to_string())
+        .chain(too_deep())
+        .collect();
+    for text in texts {
+        let head: String = text.chars().take(60).collect();
         let (tx, rx) = std::sync::mpsc::channel();
-        let owned = text.to_string();
-        std::thread::spawn(move || {
-            let mut map = SourceMap::new();
-            let id = map.add("fuzz.tessla", None, owned);
-            let (_, diags) = tessla_syntax::parse(&map.get(id).text, id);
-            let _ = tx.send((
-                diags.iter().any(|d| d.is_error()),
-                render(&diags, &map, false),
-            ));
-        });
+        // The main thread's stack size (8 MiB): the binary parses on its main thread.
+        let spawned = std::thread::Builder::new()
+            .stack_size(8 << 20)
+            .spawn(move || {
+                let mut map = SourceMap::new();
+                let id = map.add("fuzz.tessla", None, text);
+                let (_, diags) = tessla_syntax::parse(&map.get(id).text, id);
+                let _ = tx.send((
+                    diags.iter().any(|d| d.is_error()),
+                    render(&diags, &map, false),
+                ));
+            });
+        assert!(spawned.is_ok());
         let (error, rendered) = rx
-            .recv_timeout(std::time::Duration::from_secs(20))
-            .unwrap_or_else(|_| panic!("parsing {text:?} did not finish"));
-        assert!(error, "{text:?}");
-        assert!(rendered.contains("fuzz.tessla:"), "{rendered}");
+            .recv_timeout(std::time::Duration::from_secs(120))
+            .unwrap_or_else(|_| panic!("parsing {head:?}... did not finish"));
+        assert!(error, "{head:?}");
+        assert!(rendered.contains("fuzz.tessla:"), "{head:?}");
     }
 }
