@@ -5,6 +5,7 @@
 //! crate with Telegraf's rules applied on top), and writing metrics back with Telegraf's escaping
 //! ([`write`]). No I/O happens here.
 
+mod fast;
 pub mod parse;
 pub mod split;
 mod telegraf_rules;

@@ -84,7 +84,20 @@ fn excerpt(text: &str) -> String {
 }
 
 /// Parse one record (as cut by [`crate::RecordSplitter`]). `Ok(None)`: a blank or comment line.
+///
+/// Plain records (the usual output of Telegraf's serializers) take a hand-written fast path
+/// ([`crate::fast`]); every other record takes the full path below with the same result.
 pub fn parse_record(bytes: &[u8]) -> Result<Option<Metric>, ParseError> {
+    if let Ok(text) = std::str::from_utf8(bytes)
+        && let Some(m) = crate::fast::parse_plain(text)
+    {
+        return Ok(Some(m));
+    }
+    parse_record_full(bytes)
+}
+
+/// The full path: Telegraf's rules ([`crate::telegraf_rules`]) on top of the crate's parser.
+pub(crate) fn parse_record_full(bytes: &[u8]) -> Result<Option<Metric>, ParseError> {
     let text = match std::str::from_utf8(bytes) {
         Ok(t) => t,
         Err(e) => {
