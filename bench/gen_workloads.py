@@ -11,7 +11,7 @@ regenerated only when missing, so a second `make bench` reuses them):
   fleet   R robots interleaved round by round (tag robot=tb3-NNNNN), K rounds; every robot sends
           speeds and angular speeds each round and a 360-beam scan every 5th round.
   stream  (`--stream`) the fleet shape written to stdout without end or for --records records,
-          for the soak test (nothing is stored).
+          a scan every --scan-every rounds, for the soak test (nothing is stored).
 
 Usage:
   python3 bench/gen_workloads.py [--out DIR] [--seed S] [--p2 N] [--lidar N]
@@ -124,15 +124,16 @@ def write_lidar(out, n, seed):
     return [path]
 
 
-def fleet_lines(seed, robots, rounds=None):
-    """Fleet records: round by round, every robot once per round (its own clock offset)."""
+def fleet_lines(seed, robots, rounds=None, scan_every=5):
+    """Fleet records: round by round, every robot once per round (its own clock offset), a
+    360-beam scan in every `scan_every`-th round."""
     rnd = random.Random(seed + 2)
     pool = scan_pool(rnd)
     heads = [f"mqtt_consumer,host=dt,robot=tb3-{r:05d},topic=tessla " for r in range(robots)]
     step = max(1, 200_000_000 // robots)
     k = 0
     while rounds is None or k < rounds:
-        with_scan = k % 5 == 0
+        with_scan = k % scan_every == 0
         for r in range(robots):
             ts = T0 + k * 200_000_000 + r * step
             scan = pool[(r + k) % SCAN_POOL] if with_scan else ""
@@ -157,12 +158,12 @@ def write_fleet(out, robots, rounds, seed):
     return [path]
 
 
-def stream(robots, records, seed):
+def stream(robots, records, seed, scan_every):
     out = sys.stdout
     buf = []
     n = 0
     try:
-        for line in fleet_lines(seed, robots):
+        for line in fleet_lines(seed, robots, None, scan_every):
             if records is not None and n >= records:
                 break
             buf.append(line)
@@ -187,9 +188,10 @@ def main():
     ap.add_argument("--stream", action="store_true")
     ap.add_argument("--robots", type=int, default=1000)
     ap.add_argument("--records", type=int)
+    ap.add_argument("--scan-every", type=int, default=5, help="stream: a scan every N-th round")
     a = ap.parse_args()
     if a.stream:
-        stream(a.robots, a.records, a.seed)
+        stream(a.robots, a.records, a.seed, a.scan_every)
         return
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
