@@ -1,10 +1,11 @@
 //! The parser's ceiling for `make bench`: stdin cut into records and parsed exactly as
 //! `tessla-telegraf run` does (crates/lineproto: `RecordSplitter` on 64 KiB reads, then
-//! `parse_record`), with nothing evaluated or written but the counts at the end.
+//! `parse_record_into` with one reused metric), with nothing evaluated or written but the counts
+//! at the end.
 //!
 //! Run: `cargo run --release --example parse_only < FILE` prints `records metrics fields errors`.
 
-use lineproto::{RecordSplitter, parse_record};
+use lineproto::{Metric, RecordSplitter, parse_record_into};
 use std::io::Read;
 
 fn main() {
@@ -12,14 +13,15 @@ fn main() {
     let mut splitter = RecordSplitter::default();
     let mut buf = vec![0u8; 64 * 1024];
     let (mut records, mut metrics, mut fields, mut errors) = (0u64, 0u64, 0u64, 0u64);
+    let mut m = Metric::default();
     let mut count = |rec: &lineproto::Record| {
         records += 1;
-        match parse_record(&rec.bytes) {
-            Ok(Some(m)) => {
+        match parse_record_into(&rec.bytes, &mut m) {
+            Ok(true) => {
                 metrics += 1;
                 fields += m.fields.len() as u64;
             }
-            Ok(None) => {}
+            Ok(false) => {}
             Err(_) => errors += 1,
         }
     };

@@ -41,7 +41,9 @@ impl<'a> Cursor<'a> {
             self.i += 1;
         }
         // Plain bytes stop only at ASCII delimiters, so both ends are character boundaries.
-        (self.i > start).then(|| self.s.get(start..self.i)).flatten()
+        (self.i > start)
+            .then(|| self.s.get(start..self.i))
+            .flatten()
     }
 
     #[inline]
@@ -56,42 +58,78 @@ impl<'a> Cursor<'a> {
 }
 
 /// Parse `text` (one record, its line ending included or not) when it is plain; `None` otherwise.
+#[cfg(test)]
 pub(crate) fn parse_plain(text: &str) -> Option<Metric> {
+    let mut m = Metric::default();
+    parse_plain_into(text, &mut m).then_some(m)
+}
+
+/// Overwrite `m` with `text`'s metric when `text` is plain (true); `m`'s strings and vectors are
+/// reused, so a steady stream of records allocates nothing here. On false `m` holds garbage.
+pub(crate) fn parse_plain_into(text: &str, m: &mut Metric) -> bool {
+    parse_into(text, m).is_some()
+}
+
+fn set(dst: &mut String, src: &str) {
+    dst.clear();
+    dst.push_str(src);
+}
+
+fn parse_into(text: &str, m: &mut Metric) -> Option<()> {
     let text = text.strip_suffix('\n').unwrap_or(text);
     let text = text.strip_suffix('\r').unwrap_or(text);
     let mut c = Cursor { s: text, i: 0 };
     if c.peek() == Some(b'#') {
         return None;
     }
-    let measurement = c.name()?.to_string();
-    let mut tags: Vec<(String, String)> = Vec::new();
+    set(&mut m.measurement, c.name()?);
+    let mut nt = 0;
     while c.eat(b',') {
         let k = c.name()?;
         if !c.eat(b'=') {
             return None;
         }
         let v = c.name()?;
-        if tags.iter().any(|(tk, _)| tk == k) {
+        if m.tags.iter().take(nt).any(|(tk, _)| tk == k) {
             return None;
         }
-        tags.push((k.to_string(), v.to_string()));
+        match m.tags.get_mut(nt) {
+            Some((tk, tv)) => {
+                set(tk, k);
+                set(tv, v);
+            }
+            None => m.tags.push((k.to_string(), v.to_string())),
+        }
+        nt += 1;
     }
+    m.tags.truncate(nt);
     if !c.eat(b' ') {
         return None;
     }
-    let mut fields: Vec<(String, FieldValue)> = Vec::new();
+    let mut nf = 0;
     loop {
         let k = c.name()?;
         if !c.eat(b'=') {
             return None;
         }
-        let v = value(&mut c)?;
-        fields.push((k.to_string(), v));
+        match m.fields.get_mut(nf) {
+            Some((fk, fv)) => {
+                set(fk, k);
+                value(&mut c, fv)?;
+            }
+            None => {
+                let mut fv = FieldValue::Bool(false);
+                value(&mut c, &mut fv)?;
+                m.fields.push((k.to_string(), fv));
+            }
+        }
+        nf += 1;
         if !c.eat(b',') {
             break;
         }
     }
-    let timestamp = match c.peek() {
+    m.fields.truncate(nf);
+    m.timestamp = match c.peek() {
         None => None,
         Some(b' ') => {
             c.i += 1;
@@ -107,20 +145,15 @@ pub(crate) fn parse_plain(text: &str) -> Option<Metric> {
         }
         Some(_) => return None,
     };
-    if has_duplicate_keys(&fields) {
+    if has_duplicate_keys(&m.fields) {
         return None;
     }
-    Some(Metric {
-        measurement,
-        tags,
-        fields,
-        timestamp,
-    })
+    Some(())
 }
 
-/// One field value at the cursor, consumed.
+/// One field value at the cursor, consumed, written into `out` (a string slot keeps its buffer).
 #[inline]
-fn value(c: &mut Cursor<'_>) -> Option<FieldValue> {
+fn value(c: &mut Cursor<'_>, out: &mut FieldValue) -> Option<()> {
     let b = c.s.as_bytes();
     let start = c.i;
     if c.eat(b'"') {
@@ -136,36 +169,82 @@ fn value(c: &mut Cursor<'_>) -> Option<FieldValue> {
         if !c.eat(b'"') {
             return None;
         }
-        return Some(FieldValue::Str(s.to_string()));
+        match out {
+            FieldValue::Str(dst) => set(dst, s),
+            other => *other = FieldValue::Str(s.to_string()),
+        }
+        return Some(());
     }
     while b.get(c.i).is_some_and(|&x| x != b',' && x != b' ') {
         c.i += 1;
     }
     let tok = c.s.get(start..c.i)?;
-    match tok {
-        "true" => return Some(FieldValue::Bool(true)),
-        "false" => return Some(FieldValue::Bool(false)),
-        _ => {}
-    }
+    *out = match tok {
+        "true" => FieldValue::Bool(true),
+        "false" => FieldValue::Bool(false),
+        _ => number(tok)?,
+    };
+    Some(())
+}
+
+/// Powers of ten exactly representable as f64.
+const POW10: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+];
+
+/// A decimal number token: `-?int(.frac)?` float, `-?int` followed by `i`, `int` followed by `u`.
+/// Short floats (at most 15 digits) are computed as `digits / 10^frac` (exact operands, one
+/// correctly rounded division: Clinger's fast path, the same value `str::parse` gives); longer
+/// ones and integers near the limits go through `str::parse`.
+#[inline]
+fn number(tok: &str) -> Option<FieldValue> {
     let (num, kind) = match tok.as_bytes().last()? {
         b'i' => (tok.get(..tok.len() - 1)?, b'i'),
         b'u' => (tok.get(..tok.len() - 1)?, b'u'),
         _ => (tok, b'f'),
     };
     let unsigned = num.strip_prefix('-').unwrap_or(num);
-    let (int, frac) = match unsigned.split_once('.') {
-        Some((i, f)) => (i, Some(f)),
-        None => (unsigned, None),
-    };
-    let digits = |s: &str| !s.is_empty() && s.bytes().all(|d| d.is_ascii_digit());
-    if !digits(int) || (int.len() > 1 && int.starts_with('0')) {
+    let neg = unsigned.len() != num.len();
+    let b = unsigned.as_bytes();
+    let mut mantissa: u64 = 0;
+    let mut int_len = 0;
+    while let Some(d) = b.get(int_len).filter(|d| d.is_ascii_digit()) {
+        mantissa = mantissa.wrapping_mul(10).wrapping_add(u64::from(d - b'0'));
+        int_len += 1;
+    }
+    if int_len == 0 || (int_len > 1 && b.first() == Some(&b'0')) {
         return None;
     }
-    match (kind, frac) {
-        (b'f', None) => finite(num.parse::<f64>().ok()?),
-        (b'f', Some(f)) if digits(f) => finite(num.parse::<f64>().ok()?),
+    let mut frac_len = None;
+    if b.get(int_len) == Some(&b'.') {
+        let mut n = 0;
+        while let Some(d) = b.get(int_len + 1 + n).filter(|d| d.is_ascii_digit()) {
+            mantissa = mantissa.wrapping_mul(10).wrapping_add(u64::from(d - b'0'));
+            n += 1;
+        }
+        if n == 0 {
+            return None;
+        }
+        frac_len = Some(n);
+    }
+    let len = int_len + frac_len.map_or(0, |n| n + 1);
+    if len != b.len() {
+        return None;
+    }
+    match (kind, frac_len) {
+        (b'f', f) => {
+            let digits = int_len + f.unwrap_or(0);
+            match POW10.get(f.unwrap_or(0)) {
+                Some(p) if digits <= 15 => {
+                    let x = mantissa as f64 / p;
+                    Some(FieldValue::Float(if neg { -x } else { x }))
+                }
+                _ => finite(num.parse::<f64>().ok()?),
+            }
+        }
         (b'i', None) => num.parse::<i64>().ok().map(FieldValue::Int),
-        (b'u', None) if unsigned.len() == num.len() => num.parse::<u64>().ok().map(FieldValue::UInt),
+        (b'u', None) if !neg => num.parse::<u64>().ok().map(FieldValue::UInt),
         _ => None,
     }
 }
@@ -175,8 +254,9 @@ fn finite(f: f64) -> Option<FieldValue> {
     f.is_finite().then_some(FieldValue::Float(f))
 }
 
-/// Whether two fields share a key: quadratic for the usual handful of fields, a sort of
-/// borrowed keys for long records (the 360-beam lidar line).
+/// Whether two fields share a key: quadratic for the usual handful of fields; for long records
+/// (the 360-beam lidar line) a 16384-bit filter of key hashes, with an exact look-back only on a
+/// filter hit (sorting the keys instead cost a quarter of a lidar record's parse time).
 fn has_duplicate_keys(fields: &[(String, FieldValue)]) -> bool {
     if fields.len() <= 16 {
         return fields
@@ -184,9 +264,23 @@ fn has_duplicate_keys(fields: &[(String, FieldValue)]) -> bool {
             .enumerate()
             .any(|(i, (k, _))| fields.iter().skip(i + 1).any(|(o, _)| o == k));
     }
-    let mut keys: Vec<&str> = fields.iter().map(|(k, _)| k.as_str()).collect();
-    keys.sort_unstable();
-    keys.windows(2).any(|w| w.first() == w.last())
+    let mut seen = [0u64; 256];
+    for (i, (k, _)) in fields.iter().enumerate() {
+        // FNV-1a
+        let h = k.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+        });
+        let h = (h ^ (h >> 32)) as usize & 16383;
+        let bit = 1u64 << (h & 63);
+        let Some(word) = seen.get_mut(h >> 6) else {
+            return true;
+        };
+        if *word & bit != 0 && fields.iter().take(i).any(|(o, _)| o == k) {
+            return true;
+        }
+        *word |= bit;
+    }
+    false
 }
 
 #[cfg(test)]
@@ -219,6 +313,7 @@ mod tests {
             "m a=179769313486231570000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000.0 1",
             "m a=9223372036854775807i,b=18446744073709551615u 9223372036854775807",
             "m a=0.1,b=0.30000000000000004,c=123456789.987654321 1",
+            "m a=-0,b=-0.0,c=0.000000000000001,d=999999999999999,e=9999999999999999,f=0.0000000000000000000001 1",
         ] {
             assert!(same(line), "{line:?} should be plain");
         }
@@ -262,6 +357,44 @@ mod tests {
             "",
         ] {
             assert!(!same(line), "{line:?} should not be plain");
+        }
+    }
+
+    /// Short decimals take the division fast path; it must agree with `str::parse` exactly.
+    #[test]
+    fn short_decimals_equal_str_parse() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        for _ in 0..200_000 {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            let int = seed % 100_000;
+            let frac_len = ((seed >> 20) % 12) as usize;
+            let frac = (seed >> 32) % 10u64.pow(frac_len as u32);
+            let tok = if frac_len == 0 {
+                format!("{int}")
+            } else {
+                format!("{int}.{frac:0frac_len$}")
+            };
+            let want: f64 = tok.parse().unwrap();
+            assert_eq!(number(&tok), Some(FieldValue::Float(want)), "{tok}");
+            let neg = format!("-{tok}");
+            assert_eq!(number(&neg), Some(FieldValue::Float(-want)), "{neg}");
+        }
+    }
+
+    #[test]
+    fn a_reused_metric_holds_exactly_the_new_record() {
+        let mut m = Metric::default();
+        for line in [
+            "m,a=1,b=2 s=\"x\",f=1,g=2i,h=true 5",
+            "n x=\"long string\" 6",
+            "o,t=v y=2u",
+            "m,a=1,b=2 s=\"x\",f=1,g=2i,h=true 5",
+        ] {
+            assert!(parse_plain_into(line, &mut m));
+            assert_eq!(Some(&m), parse_plain(line).as_ref(), "{line}");
+            assert_eq!(Ok(Some(m.clone())), parse_record_full(line.as_bytes()));
         }
     }
 

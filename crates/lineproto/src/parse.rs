@@ -24,7 +24,7 @@ pub enum FieldValue {
 }
 
 /// One parsed metric. Tags keep input order; fields keep input order (last value of a key wins).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Metric {
     pub measurement: String,
     pub tags: Vec<(String, String)>,
@@ -88,12 +88,26 @@ fn excerpt(text: &str) -> String {
 /// Plain records (the usual output of Telegraf's serializers) take a hand-written fast path
 /// ([`crate::fast`]); every other record takes the full path below with the same result.
 pub fn parse_record(bytes: &[u8]) -> Result<Option<Metric>, ParseError> {
+    let mut m = Metric::default();
+    Ok(parse_record_into(bytes, &mut m)?.then_some(m))
+}
+
+/// [`parse_record`] into `m`, reusing its strings and vectors (the step loop parses every record
+/// into one scratch metric, so plain records allocate nothing). `Ok(false)`: a blank or comment
+/// line (`m` then holds garbage, as after an error).
+pub fn parse_record_into(bytes: &[u8], m: &mut Metric) -> Result<bool, ParseError> {
     if let Ok(text) = std::str::from_utf8(bytes)
-        && let Some(m) = crate::fast::parse_plain(text)
+        && crate::fast::parse_plain_into(text, m)
     {
-        return Ok(Some(m));
+        return Ok(true);
     }
-    parse_record_full(bytes)
+    match parse_record_full(bytes)? {
+        Some(full) => {
+            *m = full;
+            Ok(true)
+        }
+        None => Ok(false),
+    }
 }
 
 /// The full path: Telegraf's rules ([`crate::telegraf_rules`]) on top of the crate's parser.
