@@ -1,5 +1,5 @@
 # Every command the README mentions lives here. `make run` and `make test` are the README's first two.
-.PHONY: run test setup build bench fmt lint ci fixtures conformance fuzz
+.PHONY: run test setup build bench bench-criterion bench-process soak fmt lint ci fixtures conformance fuzz
 
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
@@ -18,9 +18,26 @@ setup:
 test: setup
 	$(CARGO) test --workspace
 
-# Engine benchmarks (criterion); figures in BENCHMARKS.md.
-bench:
-	$(CARGO) bench --bench engine -- --noplot
+# Benchmarks; figures in BENCHMARKS.md. Criterion guards of the hot paths (codec, binding, engine
+# step, output formatting, whole record path), then the whole-process runs against the baselines
+# (cat, parse-only, Python, rtlola-cli; workloads generated once into target/bench-data) with
+# latency, peak RSS and spec load, written to target/bench-results.md.
+CRITERION_ARGS ?= --noplot --warm-up-time 1 --measurement-time 3
+BENCH_REPS ?= 5
+
+bench: bench-criterion bench-process
+
+bench-criterion:
+	$(CARGO) bench -p lineproto --bench codec -- $(CRITERION_ARGS)
+	$(CARGO) bench --bench engine --bench binding --bench encode --bench record_path -- $(CRITERION_ARGS)
+
+bench-process:
+	python3 bench/run.py --reps $(BENCH_REPS)
+
+# Soak test (not in CI): 10 million fleet records (1,000 robots) through the release binary with
+# --instance-by robot, RSS sampled every second; fails unless memory stays flat after warm-up.
+soak: build
+	python3 bench/soak.py
 
 fmt:
 	$(CARGO) fmt --all

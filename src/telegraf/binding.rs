@@ -114,6 +114,9 @@ impl InputBinding {
         match &self.field {
             FieldPattern::Exact(f) => m.field(f).map(|v| self.convert(v)),
             FieldPattern::Indexed(prefix) => {
+                if let Some(list) = in_order(prefix, &m.fields) {
+                    return Some(Ok(Value::List(Arc::new(list))));
+                }
                 let mut beams: Vec<(usize, f64)> = Vec::new();
                 for (k, v) in &m.fields {
                     let Some(idx) = k
@@ -122,14 +125,7 @@ impl InputBinding {
                     else {
                         continue;
                     };
-                    let x = match v {
-                        FieldValue::Float(f) => *f,
-                        FieldValue::Int(i) => *i as f64,
-                        FieldValue::UInt(u) => *u as f64,
-                        FieldValue::Str(s) => s.trim().parse().unwrap_or(f64::NAN),
-                        FieldValue::Bool(_) => f64::NAN,
-                    };
-                    beams.push((idx, x));
+                    beams.push((idx, beam(v)));
                 }
                 let n = beams.iter().map(|(i, _)| i + 1).max()?;
                 // Bound the list: an absurd index must not allocate gigabytes.
@@ -188,6 +184,40 @@ impl InputBinding {
             ))
         })
     }
+}
+
+/// The value of an indexed field as a list element.
+fn beam(v: &FieldValue) -> f64 {
+    match v {
+        FieldValue::Float(f) => *f,
+        FieldValue::Int(i) => *i as f64,
+        FieldValue::UInt(u) => *u as f64,
+        FieldValue::Str(s) => s.trim().parse().unwrap_or(f64::NAN),
+        FieldValue::Bool(_) => f64::NAN,
+    }
+}
+
+/// The usual case of an indexed pattern, built in one pass: the matching fields are
+/// `prefix0, prefix1, ...` in this order (as Telegraf's JSON parser writes an array). `None`
+/// when they are not (gaps, other order, no match): the general path handles that.
+fn in_order(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Vec<Value>> {
+    let mut list: Vec<Value> = Vec::new();
+    for (k, v) in fields {
+        let Some(idx) = k.strip_prefix(prefix) else {
+            continue;
+        };
+        if idx.is_empty() || !idx.bytes().all(|b| b.is_ascii_digit()) {
+            if idx.parse::<usize>().is_ok() {
+                return None;
+            }
+            continue;
+        }
+        if idx.parse::<usize>().ok()? != list.len() {
+            return None;
+        }
+        list.push(Value::Float(beam(v)));
+    }
+    (!list.is_empty()).then_some(list)
 }
 
 fn whole(f: f64) -> Option<i64> {
@@ -259,6 +289,27 @@ mod tests {
         assert!(matches!(items[1], Value::Float(f) if f.is_nan()));
         assert_eq!(items[2], Value::Float(3.0));
         assert!(l.extract(&metric("m,topic=tessla other=5 1")).is_none());
+        // In order (the one-pass path) and out of order give the same lists.
+        let a = l.extract(&metric("m lidar_0=1,x=2,lidar_1=2i,lidar_2=\"3\" 1"));
+        let b = l.extract(&metric("m lidar_2=\"3\",lidar_1=2i,x=2,lidar_0=1 1"));
+        assert_eq!(a, b);
+        assert_eq!(
+            a,
+            Some(Ok(Value::List(Arc::new(vec![
+                Value::Float(1.0),
+                Value::Float(2.0),
+                Value::Float(3.0)
+            ]))))
+        );
+        // `lidar_+1` and `lidar_01` parse as indices on the general path: same result.
+        let c = l.extract(&metric("m lidar_0=1,lidar_+1=2 1"));
+        assert_eq!(
+            c,
+            Some(Ok(Value::List(Arc::new(vec![
+                Value::Float(1.0),
+                Value::Float(2.0)
+            ]))))
+        );
     }
 
     #[test]

@@ -14,7 +14,7 @@ use super::binding::{self, InputBinding};
 use super::encode::{self, Encoding};
 use super::instances::{Key, Table};
 use crate::log;
-use lineproto::{Metric, Record, parse_record};
+use lineproto::{Metric, Record, parse_record_into};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tessla_engine::{InputError, Monitor, OutputEvent, Program, Value};
@@ -98,6 +98,8 @@ pub struct Processor {
     epoch: Instant,
     /// The slot of the only instance, when there is one that is never evicted.
     single: Option<usize>,
+    /// Reused for every record's parse (keeps its strings' and vectors' capacity).
+    scratch: Metric,
 }
 
 fn now_ns() -> i64 {
@@ -134,6 +136,7 @@ impl Processor {
             instances: Table::default(),
             epoch: Instant::now(),
             single: None,
+            scratch: Metric::default(),
         })
     }
 
@@ -235,12 +238,14 @@ impl Processor {
             });
             return;
         }
-        let metric = match parse_record(&rec.bytes) {
-            Ok(Some(m)) => m,
-            Ok(None) => {
-                self.counters.records -= 1;
-                return;
+        // Parse into the scratch metric: plain records then allocate nothing.
+        let mut metric = std::mem::take(&mut self.scratch);
+        match parse_record_into(&rec.bytes, &mut metric) {
+            Ok(true) => {
+                self.record_metric(rec, &metric, out);
+                self.scratch = metric;
             }
+            Ok(false) => self.counters.records -= 1,
             Err(_) if Self::spans_lines(&rec.bytes) => {
                 // A record spanning several physical lines that does not parse is most likely an
                 // unbalanced quote that swallowed the lines after it: take each line alone, so
@@ -254,7 +259,6 @@ impl Processor {
                     };
                     self.record(&sub, out);
                 }
-                return;
             }
             Err(e) => {
                 self.counters.parse_errors += 1;
@@ -264,9 +268,12 @@ impl Processor {
                         rec.line, e.column, e.reason, e.excerpt
                     )
                 });
-                return;
             }
-        };
+        }
+    }
+
+    /// Route one parsed record to its instance: pass-through, completed steps, its events.
+    fn record_metric(&mut self, rec: &Record, metric: &Metric, out: &mut Vec<u8>) {
         if metric.overwritten > 0 {
             log::warn_limited("repeated field", || {
                 format!(
@@ -277,7 +284,7 @@ impl Processor {
         }
         let mut ts = metric.timestamp.unwrap_or_else(now_ns);
         let now = self.now();
-        let slot = self.instance_for(&metric, ts, now);
+        let slot = self.instance_for(metric, ts, now);
         let Some(inst) = self.instances.get_mut(slot) else {
             return;
         };
@@ -324,7 +331,7 @@ impl Processor {
             }
         }
         if !(late && self.opts.late == LateMode::Drop) {
-            self.push_fields(&metric, rec.line, ts, slot, out);
+            self.push_fields(metric, rec.line, ts, slot, out);
         }
         self.instances.mark_open(slot);
         self.evict(now, out);
@@ -495,7 +502,7 @@ impl Emitter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use lineproto::RecordSplitter;
+    use lineproto::{RecordSplitter, parse_record};
     use tessla_syntax::include::MemResolver;
 
     /// `c` counts `x`; `k` is a constant event at TeSSLa time 0.

@@ -5,12 +5,13 @@
 //! crate with Telegraf's rules applied on top), and writing metrics back with Telegraf's escaping
 //! ([`write`]). No I/O happens here.
 
+mod fast;
 pub mod parse;
 pub mod split;
 mod telegraf_rules;
 pub mod write;
 
-pub use parse::{FieldValue, Metric, ParseError, parse_record};
+pub use parse::{FieldValue, Metric, ParseError, parse_record, parse_record_into};
 pub use split::{DEFAULT_MAX_RECORD, OVERSIZED_HEAD, Record, RecordSplitter};
 pub use write::{
     LineWriter, NotFinite, measurement_is_writable, write_field_key, write_field_value,

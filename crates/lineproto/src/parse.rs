@@ -24,7 +24,7 @@ pub enum FieldValue {
 }
 
 /// One parsed metric. Tags keep input order; fields keep input order (last value of a key wins).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Metric {
     pub measurement: String,
     pub tags: Vec<(String, String)>,
@@ -86,7 +86,34 @@ fn excerpt(text: &str) -> String {
 }
 
 /// Parse one record (as cut by [`crate::RecordSplitter`]). `Ok(None)`: a blank or comment line.
+///
+/// Plain records (the usual output of Telegraf's serializers) take a hand-written fast path
+/// ([`crate::fast`]); every other record takes the full path below with the same result.
 pub fn parse_record(bytes: &[u8]) -> Result<Option<Metric>, ParseError> {
+    let mut m = Metric::default();
+    Ok(parse_record_into(bytes, &mut m)?.then_some(m))
+}
+
+/// [`parse_record`] into `m`, reusing its strings and vectors (the step loop parses every record
+/// into one scratch metric, so plain records allocate nothing). `Ok(false)`: a blank or comment
+/// line (`m` then holds garbage, as after an error).
+pub fn parse_record_into(bytes: &[u8], m: &mut Metric) -> Result<bool, ParseError> {
+    if let Ok(text) = std::str::from_utf8(bytes)
+        && crate::fast::parse_plain_into(text, m)
+    {
+        return Ok(true);
+    }
+    match parse_record_full(bytes)? {
+        Some(full) => {
+            *m = full;
+            Ok(true)
+        }
+        None => Ok(false),
+    }
+}
+
+/// The full path: Telegraf's rules ([`crate::telegraf_rules`]) on top of the crate's parser.
+pub(crate) fn parse_record_full(bytes: &[u8]) -> Result<Option<Metric>, ParseError> {
     let text = match std::str::from_utf8(bytes) {
         Ok(t) => t,
         Err(e) => {
@@ -250,6 +277,17 @@ mod tests {
             m.fields.first(),
             Some(&("dup".to_string(), FieldValue::Int(2)))
         );
+    }
+
+    /// The scratch metric is reused: a record with a repeated key must not leave its count on
+    /// the plain records parsed into the same metric after it.
+    #[test]
+    fn reused_metric_forgets_overwritten_count() {
+        let mut m = Metric::default();
+        assert_eq!(parse_record_into(b"m a=1,a=2 1\n", &mut m), Ok(true));
+        assert_eq!(m.overwritten, 1);
+        assert_eq!(parse_record_into(b"m a=1,b=2 2\n", &mut m), Ok(true));
+        assert_eq!(m.overwritten, 0);
     }
 
     #[test]

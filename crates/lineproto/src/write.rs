@@ -36,6 +36,13 @@ fn name_escape(c: char, escape_eq: bool) -> Option<&'static str> {
 }
 
 fn escape_name(out: &mut String, s: &str, escape_eq: bool) {
+    // Fast path: most names need no escape at all.
+    if !s.bytes().any(|b| {
+        b < b' ' || b == 0x7f || b == b'\\' || b == b',' || b == b' ' || (escape_eq && b == b'=')
+    }) {
+        out.push_str(s);
+        return;
+    }
     let mut run = 0usize; // pending backslashes
     for c in s.chars() {
         if c == '\\' {

@@ -1,0 +1,250 @@
+#!/usr/bin/env python3
+"""Whole-process benchmarks of tessla-telegraf against its baselines, side by side in one run
+(`make bench` calls this after the criterion benches; figures go to BENCHMARKS.md).
+
+For each workload of bench/gen_workloads.py (fixed seed), every command reads the workload from a
+pipe (`cat FILE | CMD > /dev/null`, as Telegraf's execd feeds its child) and is timed by GNU time
+(`/usr/bin/time -f '%e %U %S %M'`: wall, user, system seconds, peak RSS in KiB), REPS times; the
+tables show medians. Rows:
+  cat            the pipe floor (`cat` copying the same bytes)
+  parse-only     crates/lineproto splitting + parsing, nothing evaluated or written (bench/parse_only.rs)
+  tessla-telegraf  `tessla-telegraf run` (pass-through on), stdin to stdout
+  python P2      bench/p2_processor.py (the paper's DT language, standard library only), P2 only
+  rtlola-cli     `rtlola-cli monitor` on bench/p2.lola over the same events as CSV, P2 only
+Also: spec load (start-up of `run` on empty input), answer latency at 1k and 10k lines/s
+(bench/latency.rs), and a check that the Python baseline writes exactly what tessla-telegraf writes.
+
+Usage: python3 bench/run.py [--reps N] [--no-build] [--no-rtlola] [--out target/bench-results.md]
+"""
+import argparse
+import os
+import platform
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+BIN = ROOT / "target/release/tessla-telegraf"
+EXAMPLES = ROOT / "target/release/examples"
+P2_SPEC = ROOT / "bench/p2.tessla"
+P2_LOLA = ROOT / "bench/p2.lola"
+TIME = "/usr/bin/time"
+
+
+def log(msg):
+    print(msg, file=sys.stderr, flush=True)
+
+
+def build():
+    log("== building the release binary and bench tools")
+    subprocess.run(["cargo", "build", "--release", "--bin", "tessla-telegraf", "--example", "parse_only",
+                    "--example", "latency"], cwd=ROOT, check=True)
+
+
+def find_rtlola(install):
+    """rtlola-cli on PATH or in ~/.cargo/bin; installed with `cargo install rtlola-cli` when missing."""
+    cands = [shutil.which("rtlola-cli"), str(Path.home() / ".cargo/bin/rtlola-cli")]
+    for c in cands:
+        if c and Path(c).exists():
+            return c
+    if not install:
+        return None
+    log("== rtlola-cli missing: cargo install rtlola-cli (a baseline only, never a dependency)")
+    r = subprocess.run(["cargo", "install", "rtlola-cli"], cwd=tempfile.gettempdir())
+    if r.returncode != 0:
+        log("rtlola-cli could not be installed; its rows are left out")
+        return None
+    return find_rtlola(False)
+
+
+def rtlola_cmd(exe, verbosity):
+    """rtlola-cli 0.1.x: offline monitoring of the CSV trace on stdin (column `time`, seconds
+    relative to the start, as in research/anchors.md §1.2). `outputs` writes every output's new
+    value (the work comparable to our verdict lines); `silent` only evaluates."""
+    return [exe, "monitor", "--offline", "relative", "--stdin", "--verbosity", verbosity, str(P2_LOLA)]
+
+
+def timed(cmd, input_path):
+    """One run of `cat input | cmd > /dev/null`: (wall s, user s, sys s, peak RSS KiB)."""
+    with tempfile.NamedTemporaryFile("r", suffix=".time") as tf:
+        cat = subprocess.Popen(["cat", str(input_path)], stdout=subprocess.PIPE)
+        t0 = time.perf_counter()
+        p = subprocess.run([TIME, "-f", "%e %U %S %M", "-o", tf.name, *cmd], stdin=cat.stdout,
+                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        wall = time.perf_counter() - t0
+        cat.stdout.close()
+        cat.wait()
+        if p.returncode != 0:
+            raise RuntimeError(f"{cmd} exited {p.returncode}: {p.stderr.decode()[-500:]}")
+        fields = tf.read().split()[-4:]
+        _, user, sys_, rss = (float(x) for x in fields)
+        return wall, user, sys_, rss
+
+
+def measure(name, cmd, input_path, records, reps):
+    runs = [timed(cmd, input_path) for _ in range(reps)]
+    med = [statistics.median(x) for x in zip(*runs)]
+    wall, user, sys_, rss = med
+    cpu = user + sys_
+    row = {"name": name, "wall": wall, "cpu": cpu, "rss_mb": rss / 1024, "records": records,
+           "rate": records / wall if wall > 0 else float("inf"),
+           "cpu_rate": records / cpu if cpu > 0 else float("inf"), "walls": [r[0] for r in runs]}
+    log(f"   {name:<34} wall {wall:7.3f} s  cpu {cpu:7.3f} s  {row['rate']:>12,.0f}/s  "
+        f"{row['cpu_rate']:>12,.0f}/cpu-s  rss {row['rss_mb']:6.1f} MB")
+    return row
+
+
+def count_lines(path):
+    n = 0
+    with open(path, "rb") as f:
+        while chunk := f.read(1 << 24):
+            n += chunk.count(b"\n")
+    return n
+
+
+def fmt_rate(x):
+    if x == float("inf"):
+        return "-"
+    return f"{x / 1e6:.2f} M" if x >= 1e6 else f"{x / 1e3:.0f} k"
+
+
+def table(title, unit, rows, ours):
+    """Markdown table; ratios are tessla-telegraf's rate over the row's (>1: we are faster)."""
+    out = [f"### {title}", "",
+           f"| command | wall s (median) | {unit}/s wall | {unit}/s per CPU-second | peak RSS MB | ours vs this (wall) | ours vs this (CPU) |",
+           "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        rw = ours["rate"] / r["rate"] if r["rate"] else float("nan")
+        rc = ours["cpu_rate"] / r["cpu_rate"] if r["cpu_rate"] not in (0, float("inf")) else float("nan")
+        out.append(f"| {r['name']} | {r['wall']:.3f} | {fmt_rate(r['rate'])} | {fmt_rate(r['cpu_rate'])} | "
+                   f"{r['rss_mb']:.1f} | {rw:.2f}x | {'-' if rc != rc else f'{rc:.2f}x'} |")
+    return "\n".join(out) + "\n"
+
+
+def startup(cmd, reps=21):
+    times = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        subprocess.run(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                       check=True)
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times) * 1000
+
+
+def same_output(p2_lp, n=20_000):
+    """Python baseline and tessla-telegraf give byte-identical output on the first n P2 records."""
+    with open(p2_lp, "rb") as f:
+        head = b"".join(line for _, line in zip(range(n), f))
+    ours = subprocess.run([str(BIN), "run", "--spec", str(P2_SPEC)], input=head, capture_output=True).stdout
+    py = subprocess.run([sys.executable, str(ROOT / "bench/p2_processor.py")], input=head,
+                        capture_output=True).stdout
+    return ours == py and len(ours) > len(head)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--reps", type=int, default=5)
+    ap.add_argument("--no-build", action="store_true")
+    ap.add_argument("--no-rtlola", action="store_true")
+    ap.add_argument("--out", default=str(ROOT / "target/bench-results.md"))
+    a = ap.parse_args()
+    if not a.no_build:
+        build()
+    rtlola = None if a.no_rtlola else find_rtlola(True)
+    log("== generating workloads (cached in target/bench-data)")
+    paths = subprocess.run([sys.executable, str(ROOT / "bench/gen_workloads.py"), "--out",
+                            str(ROOT / "target/bench-data")], check=True, capture_output=True,
+                           text=True).stdout.split()
+    p2_lp, p2_csv, lidar_lp, fleet_lp = (Path(p) for p in paths)
+    parse_only = [str(EXAMPLES / "parse_only")]
+    ours = [str(BIN), "run"]
+    report = [f"Measured {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())} on {platform.node()} "
+              f"({os.cpu_count()} CPUs, {platform.machine()}, load average at start "
+              f"{os.getloadavg()[0]:.1f}); {a.reps} runs each, medians. Input through a pipe from `cat`, "
+              f"output to /dev/null; pass-through on.", ""]
+
+    log(f"== P2: {p2_lp.name}")
+    n = count_lines(p2_lp)
+    rows = [measure("cat (pipe floor)", ["cat"], p2_lp, n, a.reps),
+            measure("parse-only (lineproto)", parse_only, p2_lp, n, a.reps)]
+    ours_p2 = measure("tessla-telegraf run --spec bench/p2.tessla", [*ours, "--spec", str(P2_SPEC)], p2_lp, n,
+                      a.reps)
+    rows.append(ours_p2)
+    rows.append(measure("tessla-telegraf run (robot spec)", ours, p2_lp, n, a.reps))
+    rows.append(measure("python3 bench/p2_processor.py", [sys.executable, str(ROOT / "bench/p2_processor.py")],
+                        p2_lp, n, a.reps))
+    if rtlola:
+        for verbosity in ["outputs", "silent"]:
+            try:
+                rows.append(measure(f"rtlola-cli monitor bench/p2.lola, CSV, --verbosity {verbosity}",
+                                    rtlola_cmd(rtlola, verbosity), p2_csv, n, a.reps))
+            except RuntimeError as e:
+                log(f"rtlola-cli failed: {e}")
+    report.append(table(f"P2: {n:,} records (expectedSpeed, actualSpeed)", "records", rows, ours_p2))
+    report.append(f"Python baseline output byte-identical to tessla-telegraf's on the first 20,000 records: "
+                  f"{'yes' if same_output(p2_lp) else 'NO'}\n")
+
+    log(f"== lidar: {lidar_lp.name}")
+    n = count_lines(lidar_lp)
+    rows = [measure("cat (pipe floor)", ["cat"], lidar_lp, n, a.reps),
+            measure("parse-only (lineproto)", parse_only, lidar_lp, n, a.reps)]
+    ours_l = measure("tessla-telegraf run (robot spec: P1, P2, P3)", ours, lidar_lp, n, a.reps)
+    rows.append(ours_l)
+    report.append(table(f"Lidar: {n:,} robot messages with 360 beams", "scans", rows, ours_l))
+
+    log(f"== fleet: {fleet_lp.name}")
+    n = count_lines(fleet_lp)
+    rows = [measure("cat (pipe floor)", ["cat"], fleet_lp, n, a.reps),
+            measure("parse-only (lineproto)", parse_only, fleet_lp, n, a.reps)]
+    ours_f = measure("tessla-telegraf run --instance-by robot", [*ours, "--instance-by", "robot"], fleet_lp, n,
+                     a.reps)
+    rows.append(ours_f)
+    report.append(table(f"Fleet: {n:,} records from 10,000 robots interleaved (robot spec)", "records", rows,
+                        ours_f))
+
+    log("== spec load (start-up on empty input)")
+    lines = ["### Spec load: start-up of the whole process on empty input (median of 21)", "",
+             "| command | ms |", "|---|---|"]
+    for name, cmd in [("tessla-telegraf run --spec bench/p2.tessla", [*ours, "--spec", str(P2_SPEC)]),
+                      ("tessla-telegraf run (bundled robot spec)", ours), ("true (process floor)", ["true"])]:
+        ms = startup(cmd)
+        log(f"   {name:<44} {ms:.2f} ms")
+        lines.append(f"| {name} | {ms:.2f} |")
+    if rtlola:
+        empty = Path(tempfile.gettempdir()) / "p2_empty.csv"
+        empty.write_text("time,expectedSpeed,actualSpeed\n")
+        cmd = [rtlola, "monitor", "--offline", "relative", "--csv-in", str(empty), "--verbosity", "silent",
+               str(P2_LOLA)]
+        try:
+            ms = startup(cmd, 5)
+            lines.append(f"| rtlola-cli monitor bench/p2.lola | {ms:.2f} |")
+        except subprocess.CalledProcessError as e:
+            log(f"rtlola start-up failed: {e}")
+    report.append("\n".join(lines) + "\n")
+
+    log("== latency (bench/latency.rs, P2 spec, pass-through on)")
+    lines = ["### Answer latency: write a record into stdin -> read its verdict line (P2 spec)", "",
+             "| rate | records measured | p50 µs | p90 µs | p99 µs | p99.9 µs | max µs |", "|---|---|---|---|---|---|---|"]
+    for rate, secs in [(1000, 10), (10000, 5)]:
+        r = subprocess.run([str(EXAMPLES / "latency"), "--bin", str(BIN), "--rate", str(rate), "--seconds",
+                            str(secs), "--", "run", "--spec", str(P2_SPEC)], capture_output=True, text=True,
+                           check=True).stdout.strip()
+        log(f"   {r}")
+        kv = dict(x.split("=", 1) for x in r.split())
+        lines.append(f"| {rate:,}/s | {kv['measured']} | {kv['p50_us']} | {kv['p90_us']} | {kv['p99_us']} | "
+                     f"{kv['p999_us']} | {kv['max_us']} |")
+    report.append("\n".join(lines) + "\n")
+
+    text = "\n".join(report)
+    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(a.out).write_text(text)
+    print(text)
+    log(f"== written to {a.out}")
+
+
+if __name__ == "__main__":
+    main()

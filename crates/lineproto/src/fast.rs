@@ -1,0 +1,413 @@
+//! A hand-written fast path for the plain records Telegraf's serializers write most of the time.
+//!
+//! Owns: parsing, in one pass and without the `influxdb-line-protocol` crate, the records whose
+//! every part is plain: names and tag values without escapes, spaces-only separators, quoted
+//! strings without backslashes or line breaks, decimal numbers without exponent or leading zeros,
+//! `true`/`false`, distinct tag keys. Anything else returns `None` and [`crate::parse_record`]
+//! takes its full path (Telegraf's rules on top of the crate), so results never differ: the
+//! tests compare both paths on every accepted form.
+//!
+//! Hand-written on purpose (house rule: say why): parsing through the crate plus the Telegraf
+//! rule scan cost about 2 µs per two-field robot record, the largest part of the whole record
+//! path; this path is several times faster (`cargo bench -p lineproto --bench codec`, groups
+//! `parse_p2` and `parse_lidar360`, figures in BENCHMARKS.md).
+
+use crate::parse::{FieldValue, Metric};
+
+/// A byte allowed in a plain name or tag value: printable, not a line-protocol delimiter.
+/// Bytes >= 0x80 belong to UTF-8 characters (the record was validated as UTF-8 before).
+#[inline]
+fn plain(b: u8) -> bool {
+    b > b' ' && b != b',' && b != b'=' && b != b'\\' && b != b'"' && b != 0x7f
+}
+
+struct Cursor<'a> {
+    s: &'a str,
+    i: usize,
+}
+
+impl<'a> Cursor<'a> {
+    #[inline]
+    fn peek(&self) -> Option<u8> {
+        self.s.as_bytes().get(self.i).copied()
+    }
+
+    /// A run of plain bytes (at least one).
+    #[inline]
+    fn name(&mut self) -> Option<&'a str> {
+        let b = self.s.as_bytes();
+        let start = self.i;
+        while b.get(self.i).is_some_and(|&c| plain(c)) {
+            self.i += 1;
+        }
+        // Plain bytes stop only at ASCII delimiters, so both ends are character boundaries.
+        (self.i > start)
+            .then(|| self.s.get(start..self.i))
+            .flatten()
+    }
+
+    #[inline]
+    fn eat(&mut self, c: u8) -> bool {
+        if self.peek() == Some(c) {
+            self.i += 1;
+            true
+        } else {
+            false
+        }
+    }
+}
+
+/// Parse `text` (one record, its line ending included or not) when it is plain; `None` otherwise.
+#[cfg(test)]
+pub(crate) fn parse_plain(text: &str) -> Option<Metric> {
+    let mut m = Metric::default();
+    parse_plain_into(text, &mut m).then_some(m)
+}
+
+/// Overwrite `m` with `text`'s metric when `text` is plain (true); `m`'s strings and vectors are
+/// reused, so a steady stream of records allocates nothing here. On false `m` holds garbage.
+pub(crate) fn parse_plain_into(text: &str, m: &mut Metric) -> bool {
+    parse_into(text, m).is_some()
+}
+
+fn set(dst: &mut String, src: &str) {
+    dst.clear();
+    dst.push_str(src);
+}
+
+fn parse_into(text: &str, m: &mut Metric) -> Option<()> {
+    let text = text.strip_suffix('\n').unwrap_or(text);
+    let text = text.strip_suffix('\r').unwrap_or(text);
+    let mut c = Cursor { s: text, i: 0 };
+    if c.peek() == Some(b'#') {
+        return None;
+    }
+    set(&mut m.measurement, c.name()?);
+    let mut nt = 0;
+    while c.eat(b',') {
+        let k = c.name()?;
+        if !c.eat(b'=') {
+            return None;
+        }
+        let v = c.name()?;
+        if m.tags.iter().take(nt).any(|(tk, _)| tk == k) {
+            return None;
+        }
+        match m.tags.get_mut(nt) {
+            Some((tk, tv)) => {
+                set(tk, k);
+                set(tv, v);
+            }
+            None => m.tags.push((k.to_string(), v.to_string())),
+        }
+        nt += 1;
+    }
+    m.tags.truncate(nt);
+    if !c.eat(b' ') {
+        return None;
+    }
+    let mut nf = 0;
+    loop {
+        let k = c.name()?;
+        if !c.eat(b'=') {
+            return None;
+        }
+        match m.fields.get_mut(nf) {
+            Some((fk, fv)) => {
+                set(fk, k);
+                value(&mut c, fv)?;
+            }
+            None => {
+                let mut fv = FieldValue::Bool(false);
+                value(&mut c, &mut fv)?;
+                m.fields.push((k.to_string(), fv));
+            }
+        }
+        nf += 1;
+        if !c.eat(b',') {
+            break;
+        }
+    }
+    m.fields.truncate(nf);
+    m.timestamp = match c.peek() {
+        None => None,
+        Some(b' ') => {
+            c.i += 1;
+            let t = c.s.get(c.i..)?;
+            let digits = t.strip_prefix('-').unwrap_or(t);
+            if digits.is_empty()
+                || !digits.bytes().all(|d| d.is_ascii_digit())
+                || (digits.len() > 1 && digits.starts_with('0'))
+            {
+                return None;
+            }
+            Some(t.parse::<i64>().ok()?)
+        }
+        Some(_) => return None,
+    };
+    if has_duplicate_keys(&m.fields) {
+        return None;
+    }
+    m.overwritten = 0;
+    Some(())
+}
+
+/// One field value at the cursor, consumed, written into `out` (a string slot keeps its buffer).
+#[inline]
+fn value(c: &mut Cursor<'_>, out: &mut FieldValue) -> Option<()> {
+    let b = c.s.as_bytes();
+    let start = c.i;
+    if c.eat(b'"') {
+        let body = c.i;
+        while let Some(&x) = b.get(c.i) {
+            match x {
+                b'"' => break,
+                b'\\' | b'\n' | b'\r' => return None,
+                _ => c.i += 1,
+            }
+        }
+        let s = c.s.get(body..c.i)?;
+        if !c.eat(b'"') {
+            return None;
+        }
+        match out {
+            FieldValue::Str(dst) => set(dst, s),
+            other => *other = FieldValue::Str(s.to_string()),
+        }
+        return Some(());
+    }
+    while b.get(c.i).is_some_and(|&x| x != b',' && x != b' ') {
+        c.i += 1;
+    }
+    let tok = c.s.get(start..c.i)?;
+    *out = match tok {
+        "true" => FieldValue::Bool(true),
+        "false" => FieldValue::Bool(false),
+        _ => number(tok)?,
+    };
+    Some(())
+}
+
+/// Powers of ten exactly representable as f64.
+const POW10: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+];
+
+/// A decimal number token: `-?int(.frac)?` float, `-?int` followed by `i`, `int` followed by `u`.
+/// Short floats (at most 15 digits) are computed as `digits / 10^frac` (exact operands, one
+/// correctly rounded division: Clinger's fast path, the same value `str::parse` gives); longer
+/// ones and integers near the limits go through `str::parse`.
+#[inline]
+fn number(tok: &str) -> Option<FieldValue> {
+    let (num, kind) = match tok.as_bytes().last()? {
+        b'i' => (tok.get(..tok.len() - 1)?, b'i'),
+        b'u' => (tok.get(..tok.len() - 1)?, b'u'),
+        _ => (tok, b'f'),
+    };
+    let unsigned = num.strip_prefix('-').unwrap_or(num);
+    let neg = unsigned.len() != num.len();
+    let b = unsigned.as_bytes();
+    let mut mantissa: u64 = 0;
+    let mut int_len = 0;
+    while let Some(d) = b.get(int_len).filter(|d| d.is_ascii_digit()) {
+        mantissa = mantissa.wrapping_mul(10).wrapping_add(u64::from(d - b'0'));
+        int_len += 1;
+    }
+    if int_len == 0 || (int_len > 1 && b.first() == Some(&b'0')) {
+        return None;
+    }
+    let mut frac_len = None;
+    if b.get(int_len) == Some(&b'.') {
+        let mut n = 0;
+        while let Some(d) = b.get(int_len + 1 + n).filter(|d| d.is_ascii_digit()) {
+            mantissa = mantissa.wrapping_mul(10).wrapping_add(u64::from(d - b'0'));
+            n += 1;
+        }
+        if n == 0 {
+            return None;
+        }
+        frac_len = Some(n);
+    }
+    let len = int_len + frac_len.map_or(0, |n| n + 1);
+    if len != b.len() {
+        return None;
+    }
+    match (kind, frac_len) {
+        (b'f', f) => {
+            let digits = int_len + f.unwrap_or(0);
+            match POW10.get(f.unwrap_or(0)) {
+                Some(p) if digits <= 15 => {
+                    let x = mantissa as f64 / p;
+                    Some(FieldValue::Float(if neg { -x } else { x }))
+                }
+                _ => finite(num.parse::<f64>().ok()?),
+            }
+        }
+        (b'i', None) => num.parse::<i64>().ok().map(FieldValue::Int),
+        (b'u', None) if !neg => num.parse::<u64>().ok().map(FieldValue::UInt),
+        _ => None,
+    }
+}
+
+#[inline]
+fn finite(f: f64) -> Option<FieldValue> {
+    f.is_finite().then_some(FieldValue::Float(f))
+}
+
+/// Whether two fields share a key: quadratic for the usual handful of fields; for long records
+/// (the 360-beam lidar line) a 16384-bit filter of key hashes, with an exact look-back only on a
+/// filter hit (sorting the keys instead cost a quarter of a lidar record's parse time).
+fn has_duplicate_keys(fields: &[(String, FieldValue)]) -> bool {
+    if fields.len() <= 16 {
+        return fields
+            .iter()
+            .enumerate()
+            .any(|(i, (k, _))| fields.iter().skip(i + 1).any(|(o, _)| o == k));
+    }
+    let mut seen = [0u64; 256];
+    for (i, (k, _)) in fields.iter().enumerate() {
+        // FNV-1a
+        let h = k.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+        });
+        let h = (h ^ (h >> 32)) as usize & 16383;
+        let bit = 1u64 << (h & 63);
+        let Some(word) = seen.get_mut(h >> 6) else {
+            return true;
+        };
+        if *word & bit != 0 && fields.iter().take(i).any(|(o, _)| o == k) {
+            return true;
+        }
+        *word |= bit;
+    }
+    false
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::parse::parse_record_full;
+
+    /// Every record the fast path accepts parses to the same metric on the full path.
+    fn same(line: &str) -> bool {
+        let fast = parse_plain(line);
+        if let Some(m) = &fast {
+            assert_eq!(
+                parse_record_full(line.as_bytes()),
+                Ok(Some(m.clone())),
+                "{line:?}"
+            );
+        }
+        fast.is_some()
+    }
+
+    #[test]
+    fn plain_records_take_the_fast_path_with_the_full_paths_result() {
+        for line in [
+            "mqtt_consumer,host=turtlebot3,topic=tessla actualSpeed=\"0.0188\",expectedSpeed=0.015 1719231000123456789\n",
+            "m a=1 1\r\n",
+            "m a=-1.5,b=0,c=-0,d=10i,e=-7i,f=3u,g=true,h=false,s=\"x y,z=w\" -5",
+            "m a=1",
+            "m,t=ü f=\"ünï\" 0",
+            "m s=\"\" 1",
+            "m a=179769313486231570000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000000.0 1",
+            "m a=9223372036854775807i,b=18446744073709551615u 9223372036854775807",
+            "m a=0.1,b=0.30000000000000004,c=123456789.987654321 1",
+            "m a=-0,b=-0.0,c=0.000000000000001,d=999999999999999,e=9999999999999999,f=0.0000000000000000000001 1",
+        ] {
+            assert!(same(line), "{line:?} should be plain");
+        }
+    }
+
+    #[test]
+    fn anything_unusual_goes_to_the_full_path() {
+        for line in [
+            "# comment",
+            " m a=1 1",
+            "m\ta=1 1",
+            "m  a=1 1",
+            "m a=1  1",
+            "m a=1 1 ",
+            "m,t=a\\ b a=1 1",
+            "m s=\"a\\\"b\" 1",
+            "m s=\"a\nb\" 1",
+            "m a=.5 1",
+            "m a=5. 1",
+            "m a=1e3 1",
+            "m a=007i 1",
+            "m a=01.5 1",
+            "m a=-1u 1",
+            "m a=1.5i 1",
+            "m a=T 1",
+            "m a=1,a=2 1",
+            "m,t=1,t=2 a=1 1",
+            "m a=1 007",
+            "m a=1 99999999999999999999",
+            "m a=99999999999999999999i 1",
+            "m a=1,",
+            "m a= 1",
+            "m a 1",
+            "m 1",
+            "m,t= a=1 1",
+            "m a=1x 1",
+            "m a=NaN 1",
+            "m a=\"open 1",
+            "m a=1 1x",
+            "m a=1 -",
+            "",
+        ] {
+            assert!(!same(line), "{line:?} should not be plain");
+        }
+    }
+
+    /// Short decimals take the division fast path; it must agree with `str::parse` exactly.
+    #[test]
+    fn short_decimals_equal_str_parse() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        for _ in 0..200_000 {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            let int = seed % 100_000;
+            let frac_len = ((seed >> 20) % 12) as usize;
+            let frac = (seed >> 32) % 10u64.pow(frac_len as u32);
+            let tok = if frac_len == 0 {
+                format!("{int}")
+            } else {
+                format!("{int}.{frac:0frac_len$}")
+            };
+            let want: f64 = tok.parse().unwrap();
+            assert_eq!(number(&tok), Some(FieldValue::Float(want)), "{tok}");
+            let neg = format!("-{tok}");
+            assert_eq!(number(&neg), Some(FieldValue::Float(-want)), "{neg}");
+        }
+    }
+
+    #[test]
+    fn a_reused_metric_holds_exactly_the_new_record() {
+        let mut m = Metric::default();
+        for line in [
+            "m,a=1,b=2 s=\"x\",f=1,g=2i,h=true 5",
+            "n x=\"long string\" 6",
+            "o,t=v y=2u",
+            "m,a=1,b=2 s=\"x\",f=1,g=2i,h=true 5",
+        ] {
+            assert!(parse_plain_into(line, &mut m));
+            assert_eq!(Some(&m), parse_plain(line).as_ref(), "{line}");
+            assert_eq!(Ok(Some(m.clone())), parse_record_full(line.as_bytes()));
+        }
+    }
+
+    #[test]
+    fn long_records_with_many_fields() {
+        let mut line = String::from("m,host=h x=1");
+        for i in 0..360 {
+            line.push_str(&format!(",lidar_{i}={}.{}", i % 4, i));
+        }
+        line.push_str(" 17\n");
+        assert!(same(&line));
+        let dup = line.replace("lidar_7=", "lidar_8=");
+        assert!(!same(&dup));
+    }
+}
