@@ -115,7 +115,12 @@ pub fn encode_step(
                 .find(|(m, c, _)| !connector && !*c && *m == measurement)
             {
                 Some(g) => g.2.push((field, fv)),
-                None => groups.push((measurement, connector, vec![(field, fv)])),
+                None => {
+                    // Sized for every event of the step: one allocation per metric.
+                    let mut fields = Vec::with_capacity(if connector { 1 } else { events.len() });
+                    fields.push((field, fv));
+                    groups.push((measurement, connector, fields));
+                }
             },
             Err(reason) => dropped.push(Dropped {
                 output: if connector { measurement } else { field }.to_string(),

@@ -114,7 +114,9 @@ pub struct LineWriter {
 
 impl LineWriter {
     pub fn new(measurement: &str) -> LineWriter {
-        let mut line = String::with_capacity(64);
+        // Room for a typical verdict metric (measurement, a few tags, several fields, timestamp)
+        // without growing.
+        let mut line = String::with_capacity(256);
         escape_name(&mut line, measurement, false);
         LineWriter {
             line,
