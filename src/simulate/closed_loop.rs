@@ -235,6 +235,8 @@ pub fn run(
         }
     }
     outcome.mse = sum_sq / outcome.messages.max(1) as f64;
+    // Summed in 5 ms steps: keep the millisecond, drop the rounding noise.
+    outcome.stuck_seconds = (outcome.stuck_seconds * 1000.0).round() / 1000.0;
     outcome.distance = robot.x;
     Ok(outcome)
 }
