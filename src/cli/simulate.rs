@@ -184,7 +184,16 @@ pub fn run(args: SimulateArgs) -> i32 {
         Err(e) => return bad(&e),
     };
     let program = match broker {
-        Some(_) => None,
+        Some(_) => {
+            if args.spec.is_some() || !args.spec_options.set.is_empty() {
+                log::log(
+                    Level::Warn,
+                    "simulate: --spec and --set configure the in-process monitors; with --broker \
+                     the pipeline's own processor answers",
+                );
+            }
+            None
+        }
         None => match load(&args) {
             Ok(p) => Some(p),
             Err(e) => {
