@@ -1,5 +1,5 @@
 # Every command the README mentions lives here. `make run` and `make test` are the README's first two.
-.PHONY: run test setup build bench bench-criterion bench-process soak fmt lint ci fixtures conformance fuzz
+.PHONY: run test setup build bench bench-criterion bench-process soak fmt lint ci fixtures conformance fuzz reproduce
 
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
@@ -67,3 +67,8 @@ report-example: build
 	./target/release/tessla-telegraf run < tests/fixtures/robot/recorded_run.lp > target/out.lp
 	./target/release/tessla-telegraf report target/out.lp -o target/report
 	mkdir -p docs && cp target/report/speeds.svg docs/report-example.svg
+
+# The paper's Table I in simulation: the bundled yoga-mat scenario with the monitor off and on,
+# sweeps over 20 seeds and a few gain/delta values; writes docs/reproduction.md and its plots.
+reproduce: build
+	nice -n 10 python3 tools/reproduce.py target/release/tessla-telegraf

@@ -130,6 +130,9 @@ fn scenario_of(args: &SimulateArgs) -> Result<Scenario, (i32, String)> {
     let spec = |e: String| (EXIT_SPEC, e);
     let mut s = scenario::build(terrain, program, args.seed);
     s.period = positive("period", args.period).map_err(spec)?;
+    if s.period > 60.0 {
+        return Err(spec(format!("--period {}: at most 60 s", args.period)));
+    }
     if !(args.delay.is_finite() && args.delay >= 0.0) {
         return Err(spec(format!(
             "--delay {}: must be zero or positive",
@@ -181,7 +184,16 @@ pub fn run(args: SimulateArgs) -> i32 {
         Err(e) => return bad(&e),
     };
     let program = match broker {
-        Some(_) => None,
+        Some(_) => {
+            if args.spec.is_some() || !args.spec_options.set.is_empty() {
+                log::log(
+                    Level::Warn,
+                    "simulate: --spec and --set configure the in-process monitors; with --broker \
+                     the pipeline's own processor answers",
+                );
+            }
+            None
+        }
         None => match load(&args) {
             Ok(p) => Some(p),
             Err(e) => {

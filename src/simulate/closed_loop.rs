@@ -235,6 +235,95 @@ pub fn run(
         }
     }
     outcome.mse = sum_sq / outcome.messages.max(1) as f64;
+    // Summed in 5 ms steps: keep the millisecond, drop the rounding noise.
+    outcome.stuck_seconds = (outcome.stuck_seconds * 1000.0).round() / 1000.0;
     outcome.distance = robot.x;
     Ok(outcome)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::simulate::scenario::{self, TerrainChoice};
+
+    /// A twin that answers every message with the same speed and counts what it saw.
+    struct Fixed {
+        speed: f64,
+        seen: Vec<f64>,
+    }
+
+    impl Twin for Fixed {
+        fn exchange(&mut self, line: &str, message: &Message) -> Result<Reply, String> {
+            assert!(line.starts_with("mqtt_consumer,host=sim,topic=tessla "));
+            self.seen.push(message.expected_speed);
+            Ok(Reply {
+                lines: line.as_bytes().to_vec(),
+                action: Some(Action {
+                    speed: self.speed,
+                    augmented: self.speed != message.expected_speed,
+                    speed_mse: None,
+                }),
+            })
+        }
+    }
+
+    fn flat(delay: f64) -> Scenario {
+        let terrain = Terrain::parse("0 0\n100 0\n").unwrap();
+        let program = Program::parse("10 0.1\n").unwrap();
+        let mut s = scenario::build(TerrainChoice::Custom(terrain), program, 1);
+        s.delay = delay;
+        s
+    }
+
+    fn drive(s: &Scenario, on: bool, speed: f64) -> (Outcome, Vec<u8>) {
+        let mut twin = Fixed {
+            speed,
+            seen: Vec::new(),
+        };
+        let mut out = Vec::new();
+        let o = run(s, on, &mut twin, &mut out).unwrap();
+        assert_eq!(twin.seen.len(), o.messages);
+        (o, out)
+    }
+
+    #[test]
+    fn the_robot_executes_actions_only_with_the_monitor_on_and_after_the_delay() {
+        let s = flat(0.2);
+        // A twin that always says "stop".
+        let (off, out) = drive(&s, false, 0.0);
+        assert_eq!(off.messages, 21);
+        // 10 s at 0.1 m/s, less what the controller's lag (tau = 0.5 s) and the integral's
+        // build-up against rolling resistance cost at the start.
+        assert!(
+            off.distance > 0.85 && off.distance < 1.0,
+            "{}",
+            off.distance
+        );
+        assert_eq!(off.interventions, 21, "proposed, not executed");
+        assert_eq!(
+            out.iter().filter(|b| **b == b'\n').count(),
+            21,
+            "every line the twin returned is written"
+        );
+        let (on, _) = drive(&s, true, 0.0);
+        // It moves only during the first 0.2 s, until the first "stop" arrives.
+        assert!(on.distance < 0.02, "{}", on.distance);
+        assert_eq!(
+            on.stuck_seconds, 0.0,
+            "standing still on command is not being stuck"
+        );
+        // A delay longer than the run: no action ever takes effect.
+        let (late, _) = drive(&flat(20.0), true, 0.0);
+        assert_eq!(late.distance, off.distance);
+        assert_eq!(late.mse, off.mse);
+    }
+
+    #[test]
+    fn the_mse_is_over_the_reported_speed() {
+        let (o, _) = drive(&flat(0.2), false, 0.1);
+        // The first message reports 0 against 0.1 and the next ones the start-up lag; then the
+        // robot tracks the command within the estimate's noise.
+        assert!(o.mse > 0.01 / 21.0 && o.mse < 0.002, "{}", o.mse);
+        assert_eq!(o.stuck_seconds, 0.0);
+    }
 }

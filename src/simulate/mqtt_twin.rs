@@ -23,7 +23,7 @@ use std::time::Duration;
 pub struct MqttTwin {
     publisher: Option<Publisher>,
     actions: Receiver<Vec<u8>>,
-    _subscriber: Client,
+    subscriber: Client,
     topic: String,
     timeout: Duration,
     time_key: Option<String>,
@@ -92,7 +92,7 @@ impl MqttTwin {
         Ok(MqttTwin {
             publisher: Some(publisher),
             actions: rx,
-            _subscriber: client,
+            subscriber: client,
             topic: topic.to_string(),
             timeout,
             time_key,
@@ -102,7 +102,7 @@ impl MqttTwin {
 
     /// Wait until the broker acknowledged every message, then disconnect.
     pub fn finish(mut self) -> Result<usize, String> {
-        let _ = self._subscriber.disconnect();
+        let _ = self.subscriber.disconnect();
         match self.publisher.take() {
             Some(p) => p.finish(self.timeout),
             None => Ok(0),
