@@ -265,6 +265,12 @@ fn has_duplicate_keys(fields: &[(String, FieldValue)]) -> bool {
             .enumerate()
             .any(|(i, (k, _))| fields.iter().skip(i + 1).any(|(o, _)| o == k));
     }
+    if fields.len() > 1024 {
+        // The filter below saturates on records this wide (hostile input: 100k fields), and
+        // each hit would scan every earlier key: an exact set keeps it linear.
+        let mut keys = std::collections::HashSet::with_capacity(fields.len());
+        return !fields.iter().all(|(k, _)| keys.insert(k.as_str()));
+    }
     let mut seen = [0u64; 256];
     for (i, (k, _)) in fields.iter().enumerate() {
         // FNV-1a
