@@ -74,8 +74,6 @@ struct Scratch {
     cur: Vec<Option<Value>>,
     /// Argument buffer of signal lifts with more than three arguments.
     args: Vec<Value>,
-    /// The nodes with an event in this step (the commit visits only these).
-    fired: Vec<usize>,
 }
 
 thread_local! {
@@ -332,7 +330,6 @@ impl Monitor {
                 && let Some(c) = cur.get_mut(i)
             {
                 *c = v;
-                sc.fired.push(i);
             }
         }
         // Arm delays after the whole step: their delay argument is lazy and may come later.
@@ -351,9 +348,6 @@ impl Monitor {
                     match &cur[*delay] {
                         Some(Value::Int(d)) if *d > 0 => *target = Some(ts.saturating_add(*d)),
                         Some(Value::Int(_)) => {
-                            if cur[i].is_none() {
-                                sc.fired.push(i);
-                            }
                             cur[i] = Some(Value::Error(RuntimeError::NonPositiveDelay));
                         }
                         _ => {}
@@ -371,16 +365,14 @@ impl Monitor {
             }
         }
         // Commit: keep the values read across steps, empty the scratch for the next step.
-        for &i in &sc.fired {
-            if let Some(v) = cur.get_mut(i).and_then(Option::take)
-                && let Some(&s) = slots.get(i)
+        for (&s, c) in slots.iter().zip(cur.iter_mut()) {
+            if let Some(v) = c.take()
                 && s != NO_SLOT
                 && let Some(l) = last.get_mut(s as usize)
             {
                 *l = Some(v);
             }
         }
-        sc.fired.clear();
         for i in self.inputs.iter_mut() {
             *i = None;
         }
