@@ -329,7 +329,10 @@ impl Monitor {
             if v.is_some()
                 && let Some(c) = cur.get_mut(i)
             {
-                *c = v;
+                // A swap, not an assignment: moves the 24-byte value without a round trip
+                // through the stack (which stalls store forwarding on x86).
+                let mut v = v;
+                std::mem::swap(c, &mut v);
             }
         }
         // Arm delays after the whole step: their delay argument is lazy and may come later.
@@ -366,11 +369,14 @@ impl Monitor {
         }
         // Commit: keep the values read across steps, empty the scratch for the next step.
         for (&s, c) in slots.iter().zip(cur.iter_mut()) {
-            if let Some(v) = c.take()
-                && s != NO_SLOT
-                && let Some(l) = last.get_mut(s as usize)
-            {
-                *l = Some(v);
+            if c.is_some() {
+                if s != NO_SLOT
+                    && let Some(l) = last.get_mut(s as usize)
+                {
+                    // Swap in place (see above), then drop the previous value.
+                    std::mem::swap(c, l);
+                }
+                *c = None;
             }
         }
         for i in self.inputs.iter_mut() {
