@@ -112,30 +112,60 @@ pub enum ScalarOp {
     Or,
 }
 
-impl ScalarOp {
-    /// The result on scalar operands, or `None` for other operands (the general closure then
-    /// decides: errors propagate, overflow is an error value).
+/// A scalar operand or result of a [`ScalarOp`], copied out of a [`Value`] so the evaluator
+/// can compute in registers and write the result straight into its slot.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Scalar {
+    F(f64),
+    I(i64),
+    B(bool),
+}
+
+impl Scalar {
     #[inline]
-    pub fn apply(self, a: &Value, b: &Value) -> Option<Value> {
+    pub fn of(v: &Value) -> Option<Scalar> {
+        match v {
+            Value::Float(x) => Some(Scalar::F(*x)),
+            Value::Int(x) => Some(Scalar::I(*x)),
+            Value::Bool(x) => Some(Scalar::B(*x)),
+            _ => None,
+        }
+    }
+
+    #[inline]
+    pub fn value(self) -> Value {
+        match self {
+            Scalar::F(x) => Value::Float(x),
+            Scalar::I(x) => Value::Int(x),
+            Scalar::B(x) => Value::Bool(x),
+        }
+    }
+}
+
+impl ScalarOp {
+    /// The result on scalar operands of the operator's types, or `None` otherwise (the general
+    /// closure then decides: overflow is an error value, other types are errors).
+    #[inline]
+    pub fn eval(self, a: Scalar, b: Scalar) -> Option<Scalar> {
+        use Scalar::{B, F, I};
         use ScalarOp::*;
-        use Value::{Bool, Float, Int};
         Some(match (self, a, b) {
-            (FAdd, Float(x), Float(y)) => Float(x + y),
-            (FSub, Float(x), Float(y)) => Float(x - y),
-            (FMul, Float(x), Float(y)) => Float(x * y),
-            (FDiv, Float(x), Float(y)) => Float(x / y),
-            (FLt, Float(x), Float(y)) => Bool(x < y),
-            (FGt, Float(x), Float(y)) => Bool(x > y),
-            (FLe, Float(x), Float(y)) => Bool(x <= y),
-            (FGe, Float(x), Float(y)) => Bool(x >= y),
-            (IAdd, Int(x), Int(y)) => Int(x.checked_add(*y)?),
-            (ISub, Int(x), Int(y)) => Int(x.checked_sub(*y)?),
-            (ILt, Int(x), Int(y)) => Bool(x < y),
-            (IGt, Int(x), Int(y)) => Bool(x > y),
-            (ILe, Int(x), Int(y)) => Bool(x <= y),
-            (IGe, Int(x), Int(y)) => Bool(x >= y),
-            (And, Bool(x), Bool(y)) => Bool(*x && *y),
-            (Or, Bool(x), Bool(y)) => Bool(*x || *y),
+            (FAdd, F(x), F(y)) => F(x + y),
+            (FSub, F(x), F(y)) => F(x - y),
+            (FMul, F(x), F(y)) => F(x * y),
+            (FDiv, F(x), F(y)) => F(x / y),
+            (FLt, F(x), F(y)) => B(x < y),
+            (FGt, F(x), F(y)) => B(x > y),
+            (FLe, F(x), F(y)) => B(x <= y),
+            (FGe, F(x), F(y)) => B(x >= y),
+            (IAdd, I(x), I(y)) => I(x.checked_add(y)?),
+            (ISub, I(x), I(y)) => I(x.checked_sub(y)?),
+            (ILt, I(x), I(y)) => B(x < y),
+            (IGt, I(x), I(y)) => B(x > y),
+            (ILe, I(x), I(y)) => B(x <= y),
+            (IGe, I(x), I(y)) => B(x >= y),
+            (And, B(x), B(y)) => B(x && y),
+            (Or, B(x), B(y)) => B(x || y),
             _ => return None,
         })
     }
