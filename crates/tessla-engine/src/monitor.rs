@@ -24,7 +24,7 @@
 use crate::ir::{NO_SLOT, Node, NodeId, Program, SArg, Scalar};
 use crate::value::{RuntimeError, Value};
 
-use std::cell::Cell;
+use std::cell::RefCell;
 use std::sync::Arc;
 
 /// One output event: output `output` (index into [`Program::outputs`]) has `value` at `ts`.
@@ -77,7 +77,7 @@ struct Scratch {
 }
 
 thread_local! {
-    static SCRATCH: Cell<Scratch> = Cell::new(Scratch::default());
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
 }
 
 /// The latest value of node `n` from earlier steps, if it is kept and has had one.
@@ -199,10 +199,11 @@ impl Monitor {
     }
 
     fn step<S: FnMut(OutputEvent<'_>)>(&mut self, ts: i64, sink: &mut S) {
-        // Take the thread's scratch (a nested step from a sink would get a fresh one).
-        let mut scratch = SCRATCH.with(Cell::take);
-        self.eval(ts, &mut scratch, sink);
-        SCRATCH.with(|c| c.set(scratch));
+        // The thread's scratch; a nested step (from a sink) gets a fresh one.
+        SCRATCH.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut sc) => self.eval(ts, &mut sc, sink),
+            Err(_) => self.eval(ts, &mut Scratch::default(), sink),
+        });
     }
 
     fn eval<S: FnMut(OutputEvent<'_>)>(&mut self, ts: i64, sc: &mut Scratch, sink: &mut S) {
