@@ -304,6 +304,16 @@ impl Node {
     }
 }
 
+/// Mark the stream arguments of a signal lift when there are at least two.
+fn mark_all(mark: &mut impl FnMut(NodeId), args: &[&SArg]) {
+    let streams = stream_args(args);
+    if streams.len() >= 2 {
+        for n in streams {
+            mark(n);
+        }
+    }
+}
+
 fn stream_args(args: &[&SArg]) -> Vec<NodeId> {
     args.iter()
         .filter_map(|a| match a {
@@ -354,24 +364,15 @@ pub fn last_slots(nodes: &[Node], order: &[NodeId]) -> (Vec<u32>, usize) {
                 mark(*stream);
                 mark(*from);
             }
+            // A lift reads the latest value of a silent argument only when it has two or more
+            // stream arguments: with one, it fires only with that argument's event.
             Some(Node::SLift { args, .. }) => {
-                for a in args {
-                    if let SArg::Stream(n) = a {
-                        mark(*n);
-                    }
-                }
+                let streams: Vec<&SArg> = args.iter().collect();
+                mark_all(&mut mark, &streams);
             }
             Some(Node::Filter { cond, .. }) => mark(*cond),
-            Some(Node::Bin { a, b, .. }) => {
-                for n in stream_args(&[a, b]) {
-                    mark(n);
-                }
-            }
-            Some(Node::Ite { cond, then, other }) => {
-                for n in stream_args(&[cond, then, other]) {
-                    mark(n);
-                }
-            }
+            Some(Node::Bin { a, b, .. }) => mark_all(&mut mark, &[a, b]),
+            Some(Node::Ite { cond, then, other }) => mark_all(&mut mark, &[cond, then, other]),
             Some(Node::Fold { .. } | Node::Reduce { .. }) => mark(i),
             _ => {}
         }
