@@ -195,6 +195,10 @@ const VALUE_BUILTINS: &[(&str, natives::NativeFn)] = &[
     ("List.fold", natives::core::list_fold),
     ("List.map", natives::core::list_map),
     ("ite", ite_native),
+    ("Option.map", natives::core::option_map),
+    ("OptionUtils.map", natives::core::option_map),
+    ("Option.flatMap", natives::core::option_flat_map),
+    ("OptionUtils.flatMap", natives::core::option_flat_map),
 ];
 
 /// A value function by name: the core builtins, then the collection functions.

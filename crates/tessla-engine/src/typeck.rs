@@ -1032,6 +1032,12 @@ impl<'a> Checker<'a> {
             "getSome" => f(vec![opt(a.clone())], a),
             "getSomeOrElse" => f(vec![opt(a.clone()), a.clone()], a),
             "ite" => f(vec![boolean(), a.clone(), a.clone()], a),
+            "Option.map" | "OptionUtils.map" => {
+                f(vec![opt(a.clone()), func(vec![a], b.clone())], opt(b))
+            }
+            "Option.flatMap" | "OptionUtils.flatMap" => {
+                f(vec![opt(a.clone()), func(vec![a], opt(b.clone()))], opt(b))
+            }
             "List.empty" => list(a),
             "Set.empty" => set(a),
             "Map.empty" => map(a, b),

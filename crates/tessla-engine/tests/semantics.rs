@@ -288,3 +288,22 @@ fn set_accepts_a_negative_float() {
     m.flush(&mut |e: OutputEvent<'_>| got.push(e.value.clone()));
     assert_eq!(got, vec![Value::Float(1.5)]);
 }
+
+/// `Option.map` / `OptionUtils.map` and `Option.flatMap` apply a function inside an Option.
+#[test]
+fn option_map_and_flat_map() {
+    let spec = "in x: Events[Int]\n\
+        out Option.map(Some(x), (v: Int) => v * 2) as m\n\
+        out OptionUtils.map(None[Int], (v: Int) => v) as n\n\
+        out Option.flatMap(Some(x), (v: Int) => if v > 1 then Some(v) else None[Int]) as f\n";
+    assert_eq!(
+        run(spec, &[(1, "x", int(1)), (2, "x", int(5))]),
+        vec![
+            "0: n = None",
+            "1: f = None",
+            "1: m = Some(2)",
+            "2: f = Some(5)",
+            "2: m = Some(10)"
+        ]
+    );
+}
