@@ -2034,7 +2034,9 @@ impl<'a> Compiler<'a> {
                         .zip(args)
                         .map(|(p, a)| (p.name.name.clone(), Binding::Term(a)))
                         .collect();
-                    let inner = denv.child(names, denv.frame);
+                    // The expansion runs in the caller's runtime frame (its arguments read it):
+                    // lambdas made inside capture that frame and put parameters after it.
+                    let inner = denv.child(names, env.frame.max(denv.frame));
                     let r = self.body(def, &inner);
                     self.inline_depth -= 1;
                     r
@@ -2063,7 +2065,8 @@ impl<'a> Compiler<'a> {
                     .zip(args)
                     .map(|(p, a)| (p.name.name.clone(), Binding::Term(a)))
                     .collect();
-                let inner = lenv.child(names, lenv.frame);
+                // Inlined in the caller's runtime frame (see the expansion of user functions).
+                let inner = lenv.child(names, env.frame.max(lenv.frame));
                 self.expr(body, &inner)
             }
         }
