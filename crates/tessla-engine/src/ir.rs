@@ -112,30 +112,60 @@ pub enum ScalarOp {
     Or,
 }
 
-impl ScalarOp {
-    /// The result on scalar operands, or `None` for other operands (the general closure then
-    /// decides: errors propagate, overflow is an error value).
+/// A scalar operand or result of a [`ScalarOp`], copied out of a [`Value`] so the evaluator
+/// can compute in registers and write the result straight into its slot.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Scalar {
+    F(f64),
+    I(i64),
+    B(bool),
+}
+
+impl Scalar {
     #[inline]
-    pub fn apply(self, a: &Value, b: &Value) -> Option<Value> {
+    pub fn of(v: &Value) -> Option<Scalar> {
+        match v {
+            Value::Float(x) => Some(Scalar::F(*x)),
+            Value::Int(x) => Some(Scalar::I(*x)),
+            Value::Bool(x) => Some(Scalar::B(*x)),
+            _ => None,
+        }
+    }
+
+    #[inline]
+    pub fn value(self) -> Value {
+        match self {
+            Scalar::F(x) => Value::Float(x),
+            Scalar::I(x) => Value::Int(x),
+            Scalar::B(x) => Value::Bool(x),
+        }
+    }
+}
+
+impl ScalarOp {
+    /// The result on scalar operands of the operator's types, or `None` otherwise (the general
+    /// closure then decides: overflow is an error value, other types are errors).
+    #[inline]
+    pub fn eval(self, a: Scalar, b: Scalar) -> Option<Scalar> {
+        use Scalar::{B, F, I};
         use ScalarOp::*;
-        use Value::{Bool, Float, Int};
         Some(match (self, a, b) {
-            (FAdd, Float(x), Float(y)) => Float(x + y),
-            (FSub, Float(x), Float(y)) => Float(x - y),
-            (FMul, Float(x), Float(y)) => Float(x * y),
-            (FDiv, Float(x), Float(y)) => Float(x / y),
-            (FLt, Float(x), Float(y)) => Bool(x < y),
-            (FGt, Float(x), Float(y)) => Bool(x > y),
-            (FLe, Float(x), Float(y)) => Bool(x <= y),
-            (FGe, Float(x), Float(y)) => Bool(x >= y),
-            (IAdd, Int(x), Int(y)) => Int(x.checked_add(*y)?),
-            (ISub, Int(x), Int(y)) => Int(x.checked_sub(*y)?),
-            (ILt, Int(x), Int(y)) => Bool(x < y),
-            (IGt, Int(x), Int(y)) => Bool(x > y),
-            (ILe, Int(x), Int(y)) => Bool(x <= y),
-            (IGe, Int(x), Int(y)) => Bool(x >= y),
-            (And, Bool(x), Bool(y)) => Bool(*x && *y),
-            (Or, Bool(x), Bool(y)) => Bool(*x || *y),
+            (FAdd, F(x), F(y)) => F(x + y),
+            (FSub, F(x), F(y)) => F(x - y),
+            (FMul, F(x), F(y)) => F(x * y),
+            (FDiv, F(x), F(y)) => F(x / y),
+            (FLt, F(x), F(y)) => B(x < y),
+            (FGt, F(x), F(y)) => B(x > y),
+            (FLe, F(x), F(y)) => B(x <= y),
+            (FGe, F(x), F(y)) => B(x >= y),
+            (IAdd, I(x), I(y)) => I(x.checked_add(y)?),
+            (ISub, I(x), I(y)) => I(x.checked_sub(y)?),
+            (ILt, I(x), I(y)) => B(x < y),
+            (IGt, I(x), I(y)) => B(x > y),
+            (ILe, I(x), I(y)) => B(x <= y),
+            (IGe, I(x), I(y)) => B(x >= y),
+            (And, B(x), B(y)) => B(x && y),
+            (Or, B(x), B(y)) => B(x || y),
             _ => return None,
         })
     }
@@ -274,6 +304,16 @@ impl Node {
     }
 }
 
+/// Mark the stream arguments of a signal lift when there are at least two.
+fn mark_all(mark: &mut impl FnMut(NodeId), args: &[&SArg]) {
+    let streams = stream_args(args);
+    if streams.len() >= 2 {
+        for n in streams {
+            mark(n);
+        }
+    }
+}
+
 fn stream_args(args: &[&SArg]) -> Vec<NodeId> {
     args.iter()
         .filter_map(|a| match a {
@@ -326,24 +366,15 @@ pub fn last_slots(nodes: &[Node], order: &[NodeId]) -> (Vec<u32>, usize) {
                 mark(*stream);
                 mark(*from);
             }
+            // A lift reads the latest value of a silent argument only when it has two or more
+            // stream arguments: with one, it fires only with that argument's event.
             Some(Node::SLift { args, .. }) => {
-                for a in args {
-                    if let SArg::Stream(n) = a {
-                        mark(*n);
-                    }
-                }
+                let streams: Vec<&SArg> = args.iter().collect();
+                mark_all(&mut mark, &streams);
             }
             Some(Node::Filter { cond, .. }) => mark(*cond),
-            Some(Node::Bin { a, b, .. }) => {
-                for n in stream_args(&[a, b]) {
-                    mark(n);
-                }
-            }
-            Some(Node::Ite { cond, then, other }) => {
-                for n in stream_args(&[cond, then, other]) {
-                    mark(n);
-                }
-            }
+            Some(Node::Bin { a, b, .. }) => mark_all(&mut mark, &[a, b]),
+            Some(Node::Ite { cond, then, other }) => mark_all(&mut mark, &[cond, then, other]),
             Some(Node::Fold { .. } | Node::Reduce { .. }) => mark(i),
             _ => {}
         }

@@ -1,7 +1,8 @@
 //! tessla-engine: checks a parsed TeSSLa spec, lowers it to a flat core IR and evaluates it.
 //!
-//! Owns: name resolution, macro expansion and type checking (front-end semantics), the IR
-//! (`ir`), values (`value`), monitor instances (`monitor`) and their snapshots (`snapshot`).
+//! Owns: type checking (`typeck`, run before compilation), name resolution and macro expansion
+//! (`compile`), the IR (`ir`), values (`value`), monitor instances (`monitor`) and their
+//! snapshots (`snapshot`).
 
 pub mod collections;
 pub mod compile;

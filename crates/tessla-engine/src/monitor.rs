@@ -21,10 +21,10 @@
 //! - Runtime errors (division by zero, overflow, `getSome(None)`) are values: an output whose value
 //!   is [`Value::Error`] reaches the sink like any other event; the caller reports it.
 
-use crate::ir::{NO_SLOT, Node, NodeId, Program, SArg};
+use crate::ir::{NO_SLOT, Node, NodeId, Program, SArg, Scalar};
 use crate::value::{RuntimeError, Value};
 
-use std::cell::Cell;
+use std::cell::RefCell;
 use std::sync::Arc;
 
 /// One output event: output `output` (index into [`Program::outputs`]) has `value` at `ts`.
@@ -77,7 +77,7 @@ struct Scratch {
 }
 
 thread_local! {
-    static SCRATCH: Cell<Scratch> = Cell::new(Scratch::default());
+    static SCRATCH: RefCell<Scratch> = RefCell::new(Scratch::default());
 }
 
 /// The latest value of node `n` from earlier steps, if it is kept and has had one.
@@ -199,10 +199,11 @@ impl Monitor {
     }
 
     fn step<S: FnMut(OutputEvent<'_>)>(&mut self, ts: i64, sink: &mut S) {
-        // Take the thread's scratch (a nested step from a sink would get a fresh one).
-        let mut scratch = SCRATCH.with(Cell::take);
-        self.eval(ts, &mut scratch, sink);
-        SCRATCH.with(|c| c.set(scratch));
+        // The thread's scratch; a nested step (from a sink) gets a fresh one.
+        SCRATCH.with(|cell| match cell.try_borrow_mut() {
+            Ok(mut sc) => self.eval(ts, &mut sc, sink),
+            Err(_) => self.eval(ts, &mut Scratch::default(), sink),
+        });
     }
 
     fn eval<S: FnMut(OutputEvent<'_>)>(&mut self, ts: i64, sc: &mut Scratch, sink: &mut S) {
@@ -221,7 +222,13 @@ impl Monitor {
                 continue;
             };
             let v = match node {
-                Node::Input(k) => self.inputs.get_mut(*k).and_then(Option::take),
+                Node::Input(k) => {
+                    // Move the event in place (the slot is empty between steps).
+                    if let (Some(inp), Some(c)) = (self.inputs.get_mut(*k), cur.get_mut(i)) {
+                        std::mem::swap(inp, c);
+                    }
+                    continue;
+                }
                 Node::Nil => None,
                 Node::Const(v) => first.then(|| v.clone()),
                 Node::Alias(n) => cur[*n].clone(),
@@ -266,33 +273,48 @@ impl Monitor {
                 }
                 Node::SLift { args, f } => slift(cur, last, slots, &mut sc.args, args, f),
                 Node::Bin { op, a, b, f } => {
-                    if has_event(cur, a) || has_event(cur, b) {
-                        match (arg(cur, last, slots, a), arg(cur, last, slots, b)) {
-                            (Some(x), Some(y)) => {
-                                Some(op.apply(x, y).unwrap_or_else(|| f(&[x.clone(), y.clone()])))
-                            }
-                            _ => None,
-                        }
-                    } else {
-                        None
+                    if !has_event(cur, a) && !has_event(cur, b) {
+                        continue;
                     }
+                    let (Some(x), Some(y)) = (arg(cur, last, slots, a), arg(cur, last, slots, b))
+                    else {
+                        continue;
+                    };
+                    // Fast path: compute on copied scalars, write the result in place.
+                    if let (Some(sx), Some(sy)) = (Scalar::of(x), Scalar::of(y))
+                        && let Some(r) = op.eval(sx, sy)
+                    {
+                        if let Some(c) = cur.get_mut(i) {
+                            *c = Some(r.value());
+                        }
+                        continue;
+                    }
+                    Some(f(&[x.clone(), y.clone()]))
                 }
                 Node::Ite { cond, then, other } => {
-                    if has_event(cur, cond) || has_event(cur, then) || has_event(cur, other) {
-                        match (
-                            arg(cur, last, slots, cond),
-                            arg(cur, last, slots, then),
-                            arg(cur, last, slots, other),
-                        ) {
-                            (Some(Value::Bool(c)), Some(t), Some(e)) => {
-                                Some(if *c { t.clone() } else { e.clone() })
-                            }
-                            (Some(c), Some(_), Some(_)) => Some(c.clone()),
-                            _ => None,
-                        }
-                    } else {
-                        None
+                    if !has_event(cur, cond) && !has_event(cur, then) && !has_event(cur, other) {
+                        continue;
                     }
+                    let (Some(c), Some(t), Some(e)) = (
+                        arg(cur, last, slots, cond),
+                        arg(cur, last, slots, then),
+                        arg(cur, last, slots, other),
+                    ) else {
+                        continue;
+                    };
+                    let chosen = match c {
+                        Value::Bool(true) => t,
+                        Value::Bool(false) => e,
+                        // An error condition propagates.
+                        _ => c,
+                    };
+                    if let Some(s) = Scalar::of(chosen) {
+                        if let Some(slot) = cur.get_mut(i) {
+                            *slot = Some(s.value());
+                        }
+                        continue;
+                    }
+                    Some(chosen.clone())
                 }
                 Node::Merge(args) => args.iter().find_map(|a| cur[*a].clone()),
                 Node::Filter { stream, cond } => match &cur[*stream] {
@@ -329,7 +351,10 @@ impl Monitor {
             if v.is_some()
                 && let Some(c) = cur.get_mut(i)
             {
-                *c = v;
+                // A swap, not an assignment: moves the 24-byte value without a round trip
+                // through the stack (which stalls store forwarding on x86).
+                let mut v = v;
+                std::mem::swap(c, &mut v);
             }
         }
         // Arm delays after the whole step: their delay argument is lazy and may come later.
@@ -366,11 +391,14 @@ impl Monitor {
         }
         // Commit: keep the values read across steps, empty the scratch for the next step.
         for (&s, c) in slots.iter().zip(cur.iter_mut()) {
-            if let Some(v) = c.take()
-                && s != NO_SLOT
-                && let Some(l) = last.get_mut(s as usize)
-            {
-                *l = Some(v);
+            if c.is_some() {
+                if s != NO_SLOT
+                    && let Some(l) = last.get_mut(s as usize)
+                {
+                    // Swap in place (see above), then drop the previous value.
+                    std::mem::swap(c, l);
+                }
+                *c = None;
             }
         }
         for i in self.inputs.iter_mut() {

@@ -156,14 +156,14 @@ pub fn check(files: &[ast::File]) -> Vec<Diagnostic> {
             Statement::Def(d) => {
                 let scope = c.module_scope(&prefix);
                 let name = format!("{prefix}{}", d.name.name);
-                if !c.globals.contains_key(&name) {
+                if let std::collections::hash_map::Entry::Vacant(slot) = c.globals.entry(name) {
                     let info = Rc::new(DefInfo {
                         def: d,
                         scope,
                         state: RefCell::new(State::Todo),
                     });
                     in_order.push(info.clone());
-                    c.globals.insert(name, info);
+                    slot.insert(info);
                 }
             }
             Statement::Module {
@@ -916,12 +916,10 @@ impl<'a> Checker<'a> {
                     None => return self.fresh(),
                 }
             }
-            ts = ordered
-                .into_iter()
-                .map(|t| t.unwrap_or(Ty::Var(0)))
-                .collect();
-            if ts.iter().any(|t| *t == Ty::Var(0)) {
-                return self.fresh();
+            match ordered.into_iter().collect::<Option<Vec<Ty>>>() {
+                Some(o) => ts = o,
+                // A parameter without an argument (a default value): not modelled.
+                None => return self.fresh(),
             }
         }
         let name = match &function.kind {
@@ -1056,6 +1054,12 @@ impl<'a> Checker<'a> {
             "getSome" => f(vec![opt(a.clone())], a),
             "getSomeOrElse" => f(vec![opt(a.clone()), a.clone()], a),
             "ite" => f(vec![boolean(), a.clone(), a.clone()], a),
+            "Option.map" | "OptionUtils.map" => {
+                f(vec![opt(a.clone()), func(vec![a], b.clone())], opt(b))
+            }
+            "Option.flatMap" | "OptionUtils.flatMap" => {
+                f(vec![opt(a.clone()), func(vec![a], opt(b.clone()))], opt(b))
+            }
             "List.empty" => list(a),
             "Set.empty" => set(a),
             "Map.empty" => map(a, b),

@@ -288,3 +288,38 @@ fn set_accepts_a_negative_float() {
     m.flush(&mut |e: OutputEvent<'_>| got.push(e.value.clone()));
     assert_eq!(got, vec![Value::Float(1.5)]);
 }
+
+/// `Option.map` / `OptionUtils.map` and `Option.flatMap` apply a function inside an Option.
+#[test]
+fn option_map_and_flat_map() {
+    let spec = "in x: Events[Int]\n\
+        out Option.map(Some(x), (v: Int) => v * 2) as m\n\
+        out OptionUtils.map(None[Int], (v: Int) => v) as n\n\
+        out Option.flatMap(Some(x), (v: Int) => if v > 1 then Some(v) else None[Int]) as f\n";
+    assert_eq!(
+        run(spec, &[(1, "x", int(1)), (2, "x", int(5))]),
+        vec![
+            "0: n = None",
+            "1: f = None",
+            "1: m = Some(2)",
+            "2: f = Some(5)",
+            "2: m = Some(10)"
+        ]
+    );
+}
+
+/// A generic function taking a function, expanded inside a lambda, builds lambdas that capture
+/// the lambda's parameters (the expansion runs in the caller's frame).
+#[test]
+fn lambdas_in_expanded_functions_capture_the_callers_frame() {
+    let spec = "def flat[T, U](opt: Option[T], f: (T) => Option[U]): Option[U] =\n\
+          if isNone(opt) then None[U] else f(getSome(opt))\n\
+        def map2[T, U, V](o1: Option[T], o2: Option[U], f: (T, U) => V) =\n\
+          flat(o1, (v1: T) => OptionUtils.map(o2, (v2: U) => f(v1, v2)))\n\
+        in x: Events[Int]\n\
+        out lift1(x, (v: Option[Int]) => map2(v, Some(1), (a: Int, b: Int) => a + b)) as a\n";
+    assert_eq!(
+        run(spec, &[(1, "x", int(3)), (2, "x", int(10))]),
+        vec!["1: a = 4", "2: a = 11"]
+    );
+}

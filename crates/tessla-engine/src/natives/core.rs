@@ -264,6 +264,27 @@ pub fn list_fold(a: &[Value]) -> Value {
 }
 
 /// `List.map(list, f)`.
+/// `Option.map(o, f)`: `Some(f(x))` for `Some(x)`, `None` for `None`.
+pub fn option_map(a: &[Value]) -> Value {
+    match a {
+        [Value::None, Value::Closure(_)] => Value::None,
+        [Value::Some(x), Value::Closure(f)] => match f.call(std::slice::from_ref(&**x)) {
+            e @ Value::Error(_) => e,
+            v => Value::Some(Arc::new(v)),
+        },
+        _ => type_err("Option.map", a),
+    }
+}
+
+/// `Option.flatMap(o, f)`: `f(x)` for `Some(x)`, `None` for `None`.
+pub fn option_flat_map(a: &[Value]) -> Value {
+    match a {
+        [Value::None, Value::Closure(_)] => Value::None,
+        [Value::Some(x), Value::Closure(f)] => f.call(std::slice::from_ref(&**x)),
+        _ => type_err("Option.flatMap", a),
+    }
+}
+
 pub fn list_map(a: &[Value]) -> Value {
     match a {
         [Value::List(l), Value::Closure(f)] => Value::List(Arc::new(
