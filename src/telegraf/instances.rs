@@ -6,7 +6,7 @@
 //! a step still open (so "no more input right now" evaluates only those, not the whole fleet).
 //! What an instance holds is up to the caller (the step loop stores a monitor and its tags).
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::time::{Duration, Instant};
 
 /// The values of the instance tags in one metric, in `--instance-by` order.
@@ -29,7 +29,7 @@ pub struct Table<T> {
     index: HashMap<Key, usize>,
     lru: BTreeMap<u64, usize>,
     next_seq: u64,
-    open: Vec<usize>,
+    open: VecDeque<usize>,
 }
 
 impl<T> Default for Table<T> {
@@ -40,7 +40,7 @@ impl<T> Default for Table<T> {
             index: HashMap::new(),
             lru: BTreeMap::new(),
             next_seq: 0,
-            open: Vec::new(),
+            open: VecDeque::new(),
         }
     }
 }
@@ -113,7 +113,7 @@ impl<T> Table<T> {
             && !s.open
         {
             s.open = true;
-            self.open.push(i);
+            self.open.push_back(i);
         }
     }
 
@@ -125,7 +125,21 @@ impl<T> Table<T> {
                 s.open = false;
             }
         }
-        open
+        open.into()
+    }
+
+    /// How many slots have a step open.
+    pub fn open_count(&self) -> usize {
+        self.open.len()
+    }
+
+    /// The slot whose step has been open longest, taken off the list.
+    pub fn take_oldest_open(&mut self) -> Option<usize> {
+        let i = self.open.pop_front()?;
+        if let Some(Some(s)) = self.slots.get_mut(i) {
+            s.open = false;
+        }
+        Some(i)
     }
 
     /// The least recently used instance, if the table holds more than `max`, or if it was

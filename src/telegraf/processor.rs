@@ -42,6 +42,10 @@ pub struct Options {
     pub instance_idle: Option<Duration>,
 }
 
+/// Most monitor instances with a step open at once (see [`Processor::record`]); past it the
+/// steps open longest are evaluated.
+pub const MAX_OPEN_STEPS: usize = 1024;
+
 pub const DEFAULT_MAX_INSTANCES: usize = 100_000;
 
 impl Default for Options {
@@ -334,7 +338,23 @@ impl Processor {
             self.push_fields(metric, rec.line, ts, slot, out);
         }
         self.instances.mark_open(slot);
+        self.close_oldest_steps(out);
         self.evict(now, out);
+    }
+
+    /// Bound the steps held open: past [`MAX_OPEN_STEPS`] (a fleet piped in faster than it is
+    /// read never pauses, so every robot would hold its last record's events, 360 beams each),
+    /// evaluate the steps open longest. A later record of such an instance with the same
+    /// timestamp is then late, as after a pause in the input.
+    fn close_oldest_steps(&mut self, out: &mut Vec<u8>) {
+        while self.instances.open_count() > MAX_OPEN_STEPS {
+            let Some(i) = self.instances.take_oldest_open() else {
+                break;
+            };
+            if let Some(inst) = self.instances.get_mut(i) {
+                self.emitter.flush(inst, &mut self.counters, out);
+            }
+        }
     }
 
     /// Whether `bytes` holds a newline before its last byte.
@@ -546,6 +566,40 @@ mod tests {
         // A string field that really spans lines stays one record.
         let out = feed(&mut p, "m x=4,s=\"two\nlines\" 400\n");
         assert_eq!(out, "m x=4,s=\"two\nlines\" 400\ntessla c=4i,x=4i 400\n");
+    }
+
+    /// A fleet that never pauses holds at most MAX_OPEN_STEPS steps open: the oldest are
+    /// evaluated while records keep coming, with the outputs they would get at a pause.
+    #[test]
+    fn open_steps_are_bounded_without_changing_outputs() {
+        let robots = MAX_OPEN_STEPS + 100;
+        let mut p = processor(Options {
+            passthrough: false,
+            instance_by: vec!["robot".into()],
+            ..Options::default()
+        });
+        let mut out = Vec::new();
+        for r in 0..robots {
+            let rec = Record {
+                bytes: format!("m,robot=r{r} x={r}i 100\n").into_bytes(),
+                line: r as u64 + 1,
+                oversized: false,
+            };
+            p.record(&rec, &mut out);
+        }
+        let before_flush = String::from_utf8(out.clone()).unwrap();
+        // The first 100 robots' steps were closed without a pause in the input.
+        assert_eq!(before_flush.lines().count(), 100, "{before_flush}");
+        assert!(before_flush.starts_with("tessla,robot=r0 c=1i,k=7i,x=0i 100\n"));
+        assert_eq!(p.instances.open_count(), MAX_OPEN_STEPS);
+        p.flush(&mut out);
+        let all = String::from_utf8(out).unwrap();
+        assert_eq!(all.lines().count(), robots);
+        for r in 0..robots {
+            let line = format!("tessla,robot=r{r} c=1i,k=7i,x={r}i 100\n");
+            assert!(all.contains(&line), "missing {line}");
+        }
+        assert_eq!(p.counters.late, 0);
     }
 
     #[test]
