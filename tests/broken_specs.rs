@@ -151,3 +151,28 @@ fn known_gaps_do_not_panic_and_are_still_gaps() {
         }
     }
 }
+
+#[test]
+fn closed_output_streams_give_an_exit_code_not_a_panic() {
+    // Diagnostics (and check's listing) written to pipes nobody reads: `check | head` must not
+    // panic (exit 101) when the reader has gone.
+    for (name, want) in [("syntax_too_deep", 2), ("../../../specs/robot", 3)] {
+        let mut c = std::process::Command::new(child::BIN)
+            .args(["check", &spec(name)])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(c.stdout.take());
+        drop(c.stderr.take());
+        let start = std::time::Instant::now();
+        let status = loop {
+            if let Some(s) = c.try_wait().unwrap() {
+                break s;
+            }
+            assert!(start.elapsed() < Duration::from_secs(60), "{name}: no exit");
+            std::thread::sleep(Duration::from_millis(10));
+        };
+        assert_eq!(status.code(), Some(want), "{name}");
+    }
+}

@@ -34,8 +34,16 @@ fuzz_target!(|data: &[u8]| {
     let passthrough = flags & 1 != 0;
     let opts = Options {
         passthrough,
-        late: if flags & 2 != 0 { LateMode::Drop } else { LateMode::Shift },
-        instance_by: if flags & 4 != 0 { vec!["robot".into()] } else { Vec::new() },
+        late: if flags & 2 != 0 {
+            LateMode::Drop
+        } else {
+            LateMode::Shift
+        },
+        instance_by: if flags & 4 != 0 {
+            vec!["robot".into()]
+        } else {
+            Vec::new()
+        },
         max_instances: 3,
         ..Options::default()
     };

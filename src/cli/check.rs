@@ -1,32 +1,39 @@
 //! `tessla-telegraf check SPEC`: parse and check a spec, print its inputs and outputs with types
 //! and annotations; exit 0, or 2 with diagnostics.
 
-use super::{CheckArgs, EXIT_OK, EXIT_SPEC};
+use super::{CheckArgs, EXIT_IO, EXIT_OK, EXIT_SPEC};
+use std::io::Write;
+
+/// Write to stderr; a closed stderr is not worth a panic (the exit code still tells).
+fn report(text: &str) {
+    let _ = std::io::stderr().lock().write_all(text.as_bytes());
+}
 
 pub fn run(args: CheckArgs) -> i32 {
     let options = match super::load_options(&args.spec_options) {
         Ok(o) => o,
         Err(e) => {
-            eprintln!("error: {e}");
+            report(&format!("error: {e}\n"));
             return EXIT_SPEC;
         }
     };
     let loaded = match tessla_engine::load_file(&args.spec, &options) {
         Ok(l) => l,
         Err(e) => {
-            eprint!("{}", e.render());
+            report(&e.render());
             return EXIT_SPEC;
         }
     };
     if !loaded.warnings.is_empty() {
-        eprint!(
-            "{}",
-            tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false)
-        );
+        report(&tessla_syntax::diag::render(
+            &loaded.warnings,
+            &loaded.sources,
+            false,
+        ));
     }
     // The Telegraf binding reads the annotations: check them as `run` does.
     if let Err(e) = crate::telegraf::binding::bindings(&loaded.program) {
-        eprintln!("error: {e}");
+        report(&format!("error: {e}\n"));
         return EXIT_SPEC;
     }
     let p = &loaded.program;
@@ -45,17 +52,38 @@ pub fn run(args: CheckArgs) -> i32 {
             })
             .collect::<String>()
     };
+    let mut out = String::new();
     for i in &p.inputs {
-        println!("in  {}: Events[{}]{}", i.name, i.ty, ann(&i.annotations));
+        out.push_str(&format!(
+            "in  {}: Events[{}]{}\n",
+            i.name,
+            i.ty,
+            ann(&i.annotations)
+        ));
     }
     for o in &p.outputs {
-        println!("out {}: Events[{}]{}", o.name, o.ty, ann(&o.annotations));
+        out.push_str(&format!(
+            "out {}: Events[{}]{}\n",
+            o.name,
+            o.ty,
+            ann(&o.annotations)
+        ));
     }
-    println!(
-        "{} inputs, {} outputs, {} stream nodes",
+    out.push_str(&format!(
+        "{} inputs, {} outputs, {} stream nodes\n",
         p.inputs.len(),
         p.outputs.len(),
         p.nodes.len()
-    );
-    EXIT_OK
+    ));
+    let mut stdout = std::io::stdout().lock();
+    match stdout
+        .write_all(out.as_bytes())
+        .and_then(|()| stdout.flush())
+    {
+        Ok(()) => EXIT_OK,
+        Err(e) => {
+            report(&format!("error: writing the result: {e}\n"));
+            EXIT_IO
+        }
+    }
 }

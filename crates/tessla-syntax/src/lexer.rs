@@ -62,7 +62,7 @@ pub struct Lexer<'a> {
 }
 
 /// Deepest nesting of `${ ... }` inside strings: lexing recurses along it (5000 levels
-/// overflowed the stack; found by cargo fuzz).
+/// overflowed the stack; found while writing tests/fixtures/broken-specs).
 pub const MAX_INTERPOLATION: usize = 32;
 
 /// Letters, `_`, and (as TeSSLa allows emoji names) any other non-ASCII symbol.

@@ -81,8 +81,8 @@ struct Parser<'a> {
 
 /// Deepest nesting of statements, expressions (an operator chain counts one level per operator)
 /// and types accepted. The parser, the checker and dropping the tree all recurse along it: a
-/// spec nested 100k levels deep overflowed the stack (found by cargo fuzz). Hand-written specs
-/// stay far below this.
+/// spec nested 100k levels deep overflowed the stack (found writing the broken-spec corpus).
+/// Hand-written specs stay far below this.
 pub const MAX_DEPTH: usize = 200;
 
 fn describe(t: &Tok) -> String {

@@ -13,7 +13,10 @@ fuzz_target!(|data: &[u8]| {
     let tag_value = parts.next().unwrap_or("v");
     let field_key = parts.next().unwrap_or("f");
     let string = parts.next().unwrap_or("");
-    let float = f64::from_bits(data.iter().fold(0u64, |h, &b| h.rotate_left(5) ^ u64::from(b)));
+    let float = f64::from_bits(
+        data.iter()
+            .fold(0u64, |h, &b| h.rotate_left(5) ^ u64::from(b)),
+    );
     let mut w = LineWriter::new(measurement);
     w.tag(tag_key, tag_value)
         .field(field_key, &FieldValue::Str(string.to_string()))
@@ -30,6 +33,10 @@ fuzz_target!(|data: &[u8]| {
     }
     // Unless the field key was unwritable or read back as `x` (then the float overwrote it).
     if m.fields.len() == 2 {
-        assert!(m.fields.iter().any(|(_, v)| *v == FieldValue::Str(string.to_string())));
+        assert!(
+            m.fields
+                .iter()
+                .any(|(_, v)| *v == FieldValue::Str(string.to_string()))
+        );
     }
 });
