@@ -17,3 +17,16 @@ pub mod robot;
 pub mod scenario;
 pub mod summary;
 pub mod terrain;
+
+/// The data rows of the simulator's text formats (terrain, program): for each line that is not
+/// blank or a `#` comment, its 1-based number and its columns (split at commas and white space).
+fn data_rows(text: &str) -> impl Iterator<Item = (usize, Vec<&str>)> {
+    text.lines().enumerate().filter_map(|(n, raw)| {
+        let line = raw.split('#').next().unwrap_or("").trim();
+        let cols: Vec<&str> = line
+            .split(|c: char| c == ',' || c.is_whitespace())
+            .filter(|c| !c.is_empty())
+            .collect();
+        (!cols.is_empty()).then_some((n + 1, cols))
+    })
+}

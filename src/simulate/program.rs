@@ -51,25 +51,17 @@ impl Program {
     /// Read the file format described at the top of this module.
     pub fn parse(text: &str) -> Result<Program, String> {
         let mut steps = Vec::new();
-        for (n, raw) in text.lines().enumerate() {
-            let line = raw.split('#').next().unwrap_or("").trim();
-            if line.is_empty() {
-                continue;
-            }
-            let cols: Vec<&str> = line
-                .split(|c: char| c == ',' || c.is_whitespace())
-                .filter(|c| !c.is_empty())
-                .collect();
+        for (n, cols) in super::data_rows(text) {
             let [d, s] = cols.as_slice() else {
                 return Err(format!(
                     "line {}: expected `duration_s speed_mps`, found {} columns",
-                    n + 1,
+                    n,
                     cols.len()
                 ));
             };
             let num = |c: &str| {
                 c.parse::<f64>()
-                    .map_err(|_| format!("line {}: {c:?} is not a number", n + 1))
+                    .map_err(|_| format!("line {}: {c:?} is not a number", n))
             };
             steps.push((num(d)?, num(s)?));
         }

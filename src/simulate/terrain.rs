@@ -67,19 +67,11 @@ impl Terrain {
     /// Read the file format described at the top of this module. Errors carry the line number.
     pub fn parse(text: &str) -> Result<Terrain, String> {
         let mut points = Vec::new();
-        for (n, raw) in text.lines().enumerate() {
-            let line = raw.split('#').next().unwrap_or("").trim();
-            if line.is_empty() {
-                continue;
-            }
-            let cols: Vec<&str> = line
-                .split(|c: char| c == ',' || c.is_whitespace())
-                .filter(|c| !c.is_empty())
-                .collect();
+        for (n, cols) in super::data_rows(text) {
             if !(2..=3).contains(&cols.len()) {
                 return Err(format!(
                     "line {}: expected `x height [rolling]`, found {} columns",
-                    n + 1,
+                    n,
                     cols.len()
                 ));
             }
@@ -87,7 +79,7 @@ impl Terrain {
             for (slot, col) in nums.iter_mut().zip(&cols) {
                 *slot = col
                     .parse::<f64>()
-                    .map_err(|_| format!("line {}: {col:?} is not a number", n + 1))?;
+                    .map_err(|_| format!("line {}: {col:?} is not a number", n))?;
             }
             points.push((nums[0], nums[1], nums[2]));
         }
