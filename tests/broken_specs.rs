@@ -68,7 +68,7 @@ const BINDING: &[(&str, &str)] = &[
 /// Specs the checker accepts today although TeSSLa rejects them (type errors the engine only
 /// meets at run time, if at all). Known gaps, listed in RELIABILITY.md: the test checks they do
 /// not panic, and fails once one is rejected, so that it moves to `PLACED`.
-const KNOWN_GAPS: &[&str] = &["annotation_wrong_arguments", "unknown_type"];
+const KNOWN_GAPS: &[&str] = &["annotation_wrong_arguments"];
 
 fn dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/broken-specs")

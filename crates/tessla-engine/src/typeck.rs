@@ -17,7 +17,7 @@
 //! functions and constants may be used at several types.
 
 use std::cell::RefCell;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
 use tessla_syntax::ast::{self, BinOp, Body, Def, Expr, ExprKind, Statement, StrPart, UnaryOp};
 use tessla_syntax::diag::{Category, Diagnostic};
@@ -142,6 +142,9 @@ enum Found<'a> {
 /// Check the statements of all files (includes first); returns the type errors found.
 pub fn check(files: &[ast::File]) -> Vec<Diagnostic> {
     let mut c = Checker::default();
+    for f in files {
+        collect_type_names(&f.statements, &mut c.declared_types);
+    }
     let mut statements: Vec<(String, &Statement)> = Vec::new();
     for f in files {
         for s in &f.statements {
@@ -213,6 +216,24 @@ pub fn check(files: &[ast::File]) -> Vec<Diagnostic> {
     std::mem::take(&mut c.diags)
 }
 
+/// The names of every `type` declaration in `statements` and the modules inside them.
+fn collect_type_names(statements: &[Statement], out: &mut HashSet<String>) {
+    for s in statements {
+        match s {
+            Statement::TypeDef { name, .. } => {
+                out.insert(name.name.clone());
+            }
+            Statement::Module { statements, .. } => collect_type_names(statements, out),
+            _ => {}
+        }
+    }
+}
+
+/// Type names every spec may use.
+const BUILTIN_TYPES: [&str; 10] = [
+    "Int", "Float", "Bool", "String", "Unit", "Events", "Option", "List", "Set", "Map",
+];
+
 #[derive(Default)]
 struct Checker<'a> {
     subst: Vec<Option<Ty>>,
@@ -225,6 +246,13 @@ struct Checker<'a> {
     /// Every local scope made: a scope names defs whose `scope` is that scope (or a child), so
     /// [`Checker::break_cycles`] empties them when checking ends, or each check leaks them.
     local_scopes: Vec<Rc<Scope<'a>>>,
+    /// Names declared with `type` anywhere (modules included): the type names besides the
+    /// builtins that a spec may use.
+    declared_types: HashSet<String>,
+    /// Type parameters of the defs being inferred, innermost last: a lambda or nested def may
+    /// name its enclosing def's type parameters. Used only to decide whether a type name is
+    /// known (the types themselves stay as before).
+    enclosing_tparams: Vec<String>,
 }
 
 impl<'a> Checker<'a> {
@@ -450,6 +478,15 @@ impl<'a> Checker<'a> {
 
     /// The type of a def: a function type when it has parameters.
     fn infer_def(&mut self, d: &'a Def, scope: &Rc<Scope<'a>>) -> Ty {
+        let outer = self.enclosing_tparams.len();
+        self.enclosing_tparams
+            .extend(d.type_params.iter().map(|tp| tp.name.clone()));
+        let t = self.infer_def_body(d, scope);
+        self.enclosing_tparams.truncate(outer);
+        t
+    }
+
+    fn infer_def_body(&mut self, d: &'a Def, scope: &Rc<Scope<'a>>) -> Ty {
         let mut tparams: HashMap<String, Ty> = HashMap::new();
         for tp in &d.type_params {
             let v = self.fresh();
@@ -569,6 +606,52 @@ impl<'a> Checker<'a> {
         }
     }
 
+    /// Report a type name that is neither built in, a type parameter in scope, nor declared
+    /// with `type` (a typo such as `Events[Integer]`). Dotted names (`M.T`) are not checked.
+    fn check_type_name(&mut self, id: &ast::Ident, tparams: &HashMap<String, Ty>) {
+        let n = id.name.as_str();
+        if n.contains('.')
+            || BUILTIN_TYPES.contains(&n)
+            || tparams.contains_key(n)
+            || self.enclosing_tparams.iter().any(|tp| tp == n)
+            || self.declared_types.contains(n)
+        {
+            return;
+        }
+        let known: Vec<&str> = BUILTIN_TYPES
+            .iter()
+            .copied()
+            .chain(self.declared_types.iter().map(String::as_str))
+            .chain(tparams.keys().map(String::as_str))
+            .collect();
+        let mut near = tessla_syntax::diag::nearest(n, known.iter().copied());
+        if near.is_empty() {
+            // `Integer` for `Int`, `Boolean` for `Bool`: a known name that starts the unknown one.
+            let lower = n.to_lowercase();
+            near = known
+                .iter()
+                .copied()
+                .filter(|k| k.len() >= 3 && lower.starts_with(&k.to_lowercase()))
+                .take(3)
+                .collect();
+        }
+        let help = if near.is_empty() {
+            "declare it with `type` or use a built-in type (Int, Float, Bool, String, Unit, Option, List, Set, Map)".to_string()
+        } else {
+            format!(
+                "did you mean {}?",
+                near.iter()
+                    .map(|k| format!("`{k}`"))
+                    .collect::<Vec<_>>()
+                    .join(" or ")
+            )
+        };
+        let d = Diagnostic::error(Category::Type, Some(id.span), format!("unknown type `{n}`"))
+            .with_label("not a known type")
+            .with_help(help);
+        self.report(d);
+    }
+
     fn ast_type(&mut self, t: &ast::Type, tparams: &HashMap<String, Ty>) -> Ty {
         match t {
             ast::Type::Name(id) => match id.name.as_str() {
@@ -577,7 +660,13 @@ impl<'a> Checker<'a> {
                 "Bool" => boolean(),
                 "String" => string(),
                 "Unit" => unit(),
-                n => tparams.get(n).cloned().unwrap_or_else(|| self.fresh()),
+                n => match tparams.get(n) {
+                    Some(t) => t.clone(),
+                    None => {
+                        self.check_type_name(id, tparams);
+                        self.fresh()
+                    }
+                },
             },
             ast::Type::App { name, args, .. } => {
                 let mut a: Vec<Ty> = args.iter().map(|x| self.ast_type(x, tparams)).collect();
@@ -590,7 +679,10 @@ impl<'a> Checker<'a> {
                         let k = a.remove(0);
                         map(k, a.remove(0))
                     }
-                    _ => self.fresh(),
+                    _ => {
+                        self.check_type_name(name, tparams);
+                        self.fresh()
+                    }
                 }
             }
             ast::Type::Function { params, result, .. } => {

@@ -139,6 +139,29 @@ fn records_and_tuples_are_checked() {
 }
 
 #[test]
+fn unknown_type_names_are_reported_with_the_nearest_known() {
+    rejects(
+        "in x: Events[Integer]\nout x\n",
+        &[
+            "unknown type `Integer`",
+            "spec.tessla:1:14",
+            "did you mean `Int`?",
+        ],
+    );
+    rejects(
+        "type Pose = {x: Float, y: Float}\nin p: Events[Pos]\nout p\n",
+        &["unknown type `Pos`", "did you mean `Pose`?"],
+    );
+    // Declared types (in modules too), type parameters and those of an enclosing def are known.
+    let ok = "module Geo {\n  type Pose = {x: Float, y: Float}\n}\n\
+              in p: Events[Pose]\n\
+              def wrap[A](a: A): Option[A] = {\n  def inner(b: A): Option[A] = Some(b)\n  inner(a)\n}\n\
+              def lam[T](t: T) = ((u: Option[T]) => u)(Some(t))\n\
+              out p\nout wrap(1) as w\nout lam(2) as l\n";
+    assert_eq!(load(ok).map_err(|e| e.1), Ok(()));
+}
+
+#[test]
 fn well_typed_specs_load() {
     let ok = [
         // Signal lift of operators, constants as streams, if on streams.
