@@ -20,6 +20,7 @@ const PLACED: &[(&str, &str)] = &[
         "type_int_float_operator",
         "type_int_float_operator.tessla:3:9",
     ),
+    ("unknown_type", "unknown_type.tessla:2:14"),
     ("duplicate_definition", "duplicate_definition.tessla:3:5"),
     ("include_loop_a", "include_loop_b.tessla:2:1"),
     ("include_loop_b", "include_loop_a.tessla:2:1"),
