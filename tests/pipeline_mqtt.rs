@@ -14,12 +14,9 @@ mod servers;
 mod telegraf_standin;
 
 use serde_json::Value;
-use std::io::{BufRead, BufReader, Write};
-use std::process::{Command, Stdio};
+use std::process::Command;
 use std::time::Duration;
-use telegraf_standin::{ConsumerConfig, line_to_message, message_to_line};
-
-const MS: i64 = 1_000_000;
+use telegraf_standin::{ConsumerConfig, MS, StandIn, line_to_message};
 
 fn action_messages(output: &str) -> Vec<Value> {
     output
@@ -65,50 +62,12 @@ fn replayed_run_comes_back_as_the_same_actions() {
     let actions = mqtt_client::subscribe(broker.port, "action", "robot");
 
     // Stand-in Telegraf: mqtt_consumer -> processors.execd (our binary) -> outputs.mqtt.
-    let telemetry = mqtt_client::subscribe(broker.port, &topic, "telegraf-in");
-    let mut child = Command::new(recorded::BIN)
-        .arg("run")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let stdout = child.stdout.take().unwrap();
-    let port = broker.port;
-    let output_side = std::thread::spawn(move || {
-        let publisher = mqtt_client::Publisher::connect(port, "telegraf-out");
-        let mut published = 0usize;
-        for line in BufReader::new(stdout).lines() {
-            let line = line.unwrap();
-            if line.starts_with("action ") || line.starts_with("action,") {
-                let message = line_to_message(&line, MS).expect("our action line parses");
-                publisher.publish("action", serde_json::to_vec(&message).unwrap());
-                published += 1;
-            }
-        }
-        published
-    });
     let cfg = ConsumerConfig {
         host,
         json_string_fields: vec!["actualSpeed".into()],
         json_time_key: Some("time".into()),
     };
-    let mut stdin = child.stdin.take().unwrap();
-    let consumer_topic = topic.clone();
-    let input_side = std::thread::spawn(move || {
-        let mut fed = 0usize;
-        while fed < records {
-            let Ok((_, payload)) = telemetry.recv_timeout(Duration::from_secs(30)) else {
-                break;
-            };
-            if let Some(line) = message_to_line(&consumer_topic, &payload, &cfg, 0) {
-                stdin.write_all(line.as_bytes()).unwrap();
-                stdin.write_all(b"\n").unwrap();
-            }
-            fed += 1;
-        }
-        fed // stdin closes here: EOF, as when Telegraf stops
-    });
+    let standin = StandIn::start(recorded::BIN, broker.port, &topic, cfg, records);
 
     let out = Command::new(recorded::BIN)
         .args([
@@ -126,11 +85,9 @@ fn replayed_run_comes_back_as_the_same_actions() {
         String::from_utf8_lossy(&out.stderr)
     );
 
-    let fed = input_side.join().unwrap();
+    let (fed, status, published) = standin.finish();
     assert_eq!(fed, records, "every recorded message reached the stand-in");
-    let status = child.wait().unwrap();
     assert!(status.success(), "run exited with {status}");
-    let published = output_side.join().unwrap();
     assert_eq!(published, expected.len());
 
     let got: Vec<Value> = mqtt_client::collect(&actions, expected.len(), Duration::from_secs(20))

@@ -14,12 +14,8 @@ mod telegraf_standin;
 
 use recorded::BIN;
 use serde_json::Value;
-use std::io::{BufRead, BufReader, Write};
-use std::process::{Command, Stdio};
-use std::time::Duration;
-use telegraf_standin::{ConsumerConfig, line_to_message, message_to_line};
-
-const MS: i64 = 1_000_000;
+use std::process::Command;
+use telegraf_standin::{ConsumerConfig, StandIn, line_to_message};
 
 /// (speed, augmented) of every `action` line in a run's output.
 fn actions(path: &std::path::Path) -> Vec<(f64, bool)> {
@@ -47,50 +43,12 @@ fn simulated_robot_drives_the_pipeline_through_mosquitto() {
     let common = ["--duration", "60", "--json", "--seed", "3"];
 
     // Stand-in Telegraf: mqtt_consumer -> processors.execd (our binary) -> outputs.mqtt.
-    let telemetry = mqtt_client::subscribe(broker.port, "tessla", "telegraf-in");
-    let mut child = Command::new(BIN)
-        .arg("run")
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let stdout = child.stdout.take().unwrap();
-    let port = broker.port;
-    let output_side = std::thread::spawn(move || {
-        let publisher = mqtt_client::Publisher::connect(port, "telegraf-out");
-        let mut published = 0usize;
-        for line in BufReader::new(stdout).lines() {
-            let line = line.unwrap();
-            if line.starts_with("action ") || line.starts_with("action,") {
-                let message = line_to_message(&line, MS).expect("our action line parses");
-                publisher.publish("action", serde_json::to_vec(&message).unwrap());
-                published += 1;
-            }
-        }
-        published
-    });
     let cfg = ConsumerConfig {
         host: "sim".into(),
         json_string_fields: vec!["actualSpeed".into()],
         json_time_key: Some("time".into()),
     };
-    let mut stdin = child.stdin.take().unwrap();
-    let input_side = std::thread::spawn(move || {
-        let mut fed = 0usize;
-        while fed < messages {
-            let Ok((_, payload)) = telemetry.recv_timeout(Duration::from_secs(60)) else {
-                break;
-            };
-            if let Some(line) = message_to_line("tessla", &payload, &cfg, 0) {
-                stdin.write_all(line.as_bytes()).unwrap();
-                stdin.write_all(b"\n").unwrap();
-                stdin.flush().unwrap();
-            }
-            fed += 1;
-        }
-        fed
-    });
+    let standin = StandIn::start(BIN, broker.port, "tessla", cfg, messages);
 
     let dir = tempfile::tempdir().unwrap();
     let via_broker = dir.path().join("broker.lp");
@@ -106,13 +64,13 @@ fn simulated_robot_drives_the_pipeline_through_mosquitto() {
         "simulate --broker: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let fed = input_side.join().unwrap();
+    let (fed, status, published) = standin.finish();
     assert_eq!(
         fed, messages,
         "every simulated message reached the stand-in"
     );
-    assert!(child.wait().unwrap().success());
-    assert_eq!(output_side.join().unwrap(), messages);
+    assert!(status.success(), "run exited with {status}");
+    assert_eq!(published, messages);
 
     let broker_summary: Value = serde_json::from_slice(&out.stdout).unwrap();
     let b = &broker_summary["augmented"];

@@ -11,11 +11,94 @@
 //!   `{"fields":{..},"name":..,"tags":{..},"timestamp":..}` (keys sorted), timestamp in
 //!   `json_timestamp_units`.
 //!
-//! Include with `#[path = "support/telegraf_standin.rs"] mod telegraf_standin;`.
+//! [`StandIn`] wires both around the real binary over a real broker, as Telegraf would.
+//!
+//! Include with `#[path = "support/telegraf_standin.rs"] mod telegraf_standin;`, after
+//! `#[path = "support/mqtt_client.rs"] mod mqtt_client;` (the stand-in's MQTT side).
 #![allow(dead_code)]
 
 use influxdb_line_protocol::{FieldValue, parse_lines};
 use serde_json::{Map, Value, json};
+use std::io::{BufRead, BufReader, Write};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+/// `json_timestamp_units = "1ms"` of the stand-in's `outputs.mqtt`.
+pub const MS: i64 = 1_000_000;
+
+/// A stand-in Telegraf: `inputs.mqtt_consumer` on `topic` feeding `processors.execd` (the real
+/// binary, `tessla-telegraf run`), whose `action` metrics `outputs.mqtt` publishes on topic
+/// `action` as JSON.
+pub struct StandIn {
+    child: Child,
+    input: JoinHandle<usize>,
+    output: JoinHandle<usize>,
+}
+
+impl StandIn {
+    /// Subscribe to `topic` on the broker at `port` (returns once subscribed) and feed the first
+    /// `messages` messages to a new `bin run`; then its stdin closes (EOF, as when Telegraf stops).
+    pub fn start(
+        bin: &str,
+        port: u16,
+        topic: &str,
+        cfg: ConsumerConfig,
+        messages: usize,
+    ) -> StandIn {
+        let telemetry = crate::mqtt_client::subscribe(port, topic, "telegraf-in");
+        let mut child = Command::new(bin)
+            .arg("run")
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let stdout = child.stdout.take().unwrap();
+        let output = std::thread::spawn(move || {
+            let publisher = crate::mqtt_client::Publisher::connect(port, "telegraf-out");
+            let mut published = 0usize;
+            for line in BufReader::new(stdout).lines() {
+                let line = line.unwrap();
+                if line.starts_with("action ") || line.starts_with("action,") {
+                    let message = line_to_message(&line, MS).expect("our action line parses");
+                    publisher.publish("action", serde_json::to_vec(&message).unwrap());
+                    published += 1;
+                }
+            }
+            published
+        });
+        let mut stdin = child.stdin.take().unwrap();
+        let topic = topic.to_string();
+        let input = std::thread::spawn(move || {
+            let mut fed = 0usize;
+            while fed < messages {
+                let Ok((_, payload)) = telemetry.recv_timeout(Duration::from_secs(60)) else {
+                    break;
+                };
+                if let Some(line) = message_to_line(&topic, &payload, &cfg, 0) {
+                    stdin.write_all(line.as_bytes()).unwrap();
+                    stdin.write_all(b"\n").unwrap();
+                }
+                fed += 1;
+            }
+            fed
+        });
+        StandIn {
+            child,
+            input,
+            output,
+        }
+    }
+
+    /// Wait for the end: (messages fed to the processor, its exit status, actions published).
+    pub fn finish(mut self) -> (usize, ExitStatus, usize) {
+        let fed = self.input.join().unwrap();
+        let status = self.child.wait().unwrap();
+        let published = self.output.join().unwrap();
+        (fed, status, published)
+    }
+}
 
 /// The mqtt_consumer settings the stand-in honours.
 #[derive(Debug, Clone)]
