@@ -151,15 +151,7 @@ fn udp_mode_reloads_on_sighup() {
     let main = dir.path().join("main.tessla");
     std::fs::write(dir.path().join("lib.tessla"), LIB_V1).unwrap();
     std::fs::write(&main, MAIN_V1).unwrap();
-    let recv = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
-    recv.set_read_timeout(Some(std::time::Duration::from_secs(30)))
-        .unwrap();
-    let send_to = recv.local_addr().unwrap().to_string();
-    let listen = std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .to_string();
+    let (recv, send_to, listen) = live_child::udp_ends();
     let mut c = LiveChild::spawn(&[
         "--spec",
         s(&main),

@@ -275,15 +275,7 @@ fn udp_mode_saves_and_restores_state() {
         "in x: Events[Int]\ndef c = count(x)\nout c\n",
     );
     let state = dir.path().join("state.json");
-    let recv = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
-    recv.set_read_timeout(Some(std::time::Duration::from_secs(30)))
-        .unwrap();
-    let send_to = recv.local_addr().unwrap().to_string();
-    let listen = std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .to_string();
+    let (recv, send_to, listen) = live_child::udp_ends();
     let args = [
         "--spec",
         s(&spec),
