@@ -11,24 +11,19 @@
 //! rewrites that list). Each case runs on its own thread with a time limit. Without the suite
 //! it skips, unless `REQUIRE_TESSLA_SUITE=1`.
 
+#[path = "support/tessla_suite.rs"]
+mod tessla_suite;
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::Duration;
-use tessla_engine::LoadOptions;
 use tessla_syntax::diag::Category;
 use tessla_telegraf::trace::ErrorKind;
 
 /// How long one case may run.
 const CASE_LIMIT: Duration = Duration::from_secs(10);
-
-fn suite() -> Option<PathBuf> {
-    let dir = std::env::var_os("TESSLA_SUITE")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/tessla-suite"));
-    dir.is_dir().then_some(dir)
-}
 
 #[derive(Debug, Clone, PartialEq)]
 enum Outcome {
@@ -77,19 +72,12 @@ fn difference(ours: &BTreeSet<String>, expected: &BTreeSet<String>) -> String {
 }
 
 fn run_case(dir: &Path, desc: &serde_json::Value) -> Outcome {
-    let get = |k: &str| desc.get(k).and_then(|v| v.as_str()).map(|f| dir.join(f));
+    let get = |k: &str| tessla_suite::file(dir, desc, k);
     let read = |k: &str| get(k).and_then(|p| std::fs::read_to_string(p).ok());
     let Some(spec) = get("spec") else {
         return Outcome::Fail("descriptor names no spec".into());
     };
-    let options = LoadOptions {
-        base_time: desc
-            .get("baseTime")
-            .and_then(|v| v.as_str())
-            .map(str::to_string),
-        overrides: Vec::new(),
-        time_units_need_base: true,
-    };
+    let options = tessla_suite::load_options(desc);
     let expected_errors = read("expectedErrors");
     let loaded = match tessla_engine::load_file(&spec, &options) {
         Ok(l) => l,
@@ -147,46 +135,6 @@ fn run_case(dir: &Path, desc: &serde_json::Value) -> Outcome {
     }
 }
 
-fn cases(root: &Path) -> Vec<(String, PathBuf, serde_json::Value)> {
-    let mut out = Vec::new();
-    let mut stack = vec![root.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        let Ok(rd) = std::fs::read_dir(&d) else {
-            continue;
-        };
-        for e in rd.flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                stack.push(p);
-            } else if p.extension().is_some_and(|x| x == "json")
-                && let Ok(t) = std::fs::read_to_string(&p)
-                && let Ok(mut v) = serde_json::from_str::<serde_json::Value>(&t)
-                && v.get("spec").is_some()
-            {
-                let stem = p
-                    .file_stem()
-                    .and_then(|s| s.to_str())
-                    .unwrap_or("")
-                    .to_string();
-                // `_.tessla` in a descriptor means "the file named like the descriptor".
-                if let Some(obj) = v.as_object_mut() {
-                    for val in obj.values_mut() {
-                        if let Some(s) = val.as_str()
-                            && let Some(ext) = s.strip_prefix("_.")
-                        {
-                            *val = serde_json::Value::String(format!("{stem}.{ext}"));
-                        }
-                    }
-                }
-                let rel = p.strip_prefix(root).unwrap_or(&p).with_extension("");
-                out.push((rel.display().to_string(), d.clone(), v));
-            }
-        }
-    }
-    out.sort_by(|a, b| a.0.cmp(&b.0));
-    out
-}
-
 /// Run one case on its own thread; a panic or a run over [`CASE_LIMIT`] is a failure.
 fn run_limited(dir: PathBuf, desc: serde_json::Value) -> Outcome {
     let (tx, rx) = mpsc::channel();
@@ -225,19 +173,14 @@ impl Counts {
 
 #[test]
 fn tessla_suite_conformance() {
-    let Some(root) = suite() else {
-        assert!(
-            std::env::var_os("REQUIRE_TESSLA_SUITE").is_none(),
-            "REQUIRE_TESSLA_SUITE is set but the TeSSLa suite was not found (set TESSLA_SUITE or put it at ../shared/tessla-suite)"
-        );
-        eprintln!("conformance: TeSSLa suite not found; skipped (set TESSLA_SUITE)");
+    let Some(root) = tessla_suite::suite_or_skip("conformance") else {
         return;
     };
-    let all = cases(&root);
+    let all = tessla_suite::cases(&root);
     assert!(!all.is_empty(), "no cases found under {}", root.display());
     let results: BTreeMap<String, Outcome> = all
         .into_iter()
-        .map(|(name, dir, desc)| (name, run_limited(dir, desc)))
+        .map(|c| (c.name, run_limited(c.dir, c.desc)))
         .collect();
 
     let mut per_folder: BTreeMap<String, Counts> = BTreeMap::new();

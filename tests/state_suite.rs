@@ -4,51 +4,15 @@
 //! those of the uninterrupted run. Also: a spec loaded twice has the same fingerprint (node
 //! keys are deterministic). Skips without the suite, unless `REQUIRE_TESSLA_SUITE=1`.
 
-use std::path::{Path, PathBuf};
+#[path = "support/tessla_suite.rs"]
+mod tessla_suite;
+
+use std::path::Path;
 use std::sync::{Arc, mpsc};
 use std::time::Duration;
 use tessla_engine::snapshot::{self, Snapshot};
-use tessla_engine::{LoadOptions, Monitor, OutputEvent, Program, Value};
+use tessla_engine::{Monitor, OutputEvent, Program, Value};
 use tessla_telegraf::trace::reader;
-
-fn suite() -> Option<PathBuf> {
-    let dir = std::env::var_os("TESSLA_SUITE")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/tessla-suite"));
-    dir.is_dir().then_some(dir)
-}
-
-/// Every `*.json` descriptor with a `spec` (`_.ext` = the file named like the descriptor).
-fn cases(root: &Path) -> Vec<(PathBuf, serde_json::Value)> {
-    let mut out = Vec::new();
-    let mut stack = vec![root.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for e in std::fs::read_dir(&d).unwrap().flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                stack.push(p);
-                continue;
-            }
-            let Some(mut v) = (p.extension().is_some_and(|x| x == "json"))
-                .then(|| std::fs::read_to_string(&p).ok())
-                .flatten()
-                .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-                .filter(|v| v.get("spec").is_some())
-            else {
-                continue;
-            };
-            let stem = p.file_stem().unwrap().to_string_lossy().into_owned();
-            for val in v.as_object_mut().unwrap().values_mut() {
-                if let Some(ext) = val.as_str().and_then(|s| s.strip_prefix("_.")) {
-                    *val = serde_json::Value::String(format!("{stem}.{ext}"));
-                }
-            }
-            out.push((p, v));
-        }
-    }
-    out.sort_by(|a, b| a.0.cmp(&b.0));
-    out
-}
 
 type Ev = (i64, usize, Value);
 
@@ -85,15 +49,8 @@ enum Result_ {
 }
 
 fn check_case(dir: &Path, desc: &serde_json::Value) -> Result_ {
-    let get = |k: &str| desc.get(k).and_then(|v| v.as_str()).map(|f| dir.join(f));
-    let options = LoadOptions {
-        base_time: desc
-            .get("baseTime")
-            .and_then(|v| v.as_str())
-            .map(str::to_string),
-        overrides: Vec::new(),
-        time_units_need_base: true,
-    };
+    let get = |k: &str| tessla_suite::file(dir, desc, k);
+    let options = tessla_suite::load_options(desc);
     let Some(spec) = get("spec") else {
         return Result_::Skipped;
     };
@@ -157,18 +114,12 @@ fn check_case(dir: &Path, desc: &serde_json::Value) -> Result_ {
 
 #[test]
 fn restored_monitors_continue_every_suite_case_exactly() {
-    let Some(root) = suite() else {
-        assert!(
-            std::env::var_os("REQUIRE_TESSLA_SUITE").is_none(),
-            "REQUIRE_TESSLA_SUITE is set but the suite is missing"
-        );
-        eprintln!("tessla suite not found; skipped");
+    let Some(root) = tessla_suite::suite_or_skip("snapshots") else {
         return;
     };
     let (mut cases_checked, mut cuts, mut skipped, mut unsaved) = (0, 0, 0, 0);
     let mut failures = Vec::new();
-    for (path, desc) in cases(&root) {
-        let dir = path.parent().unwrap().to_path_buf();
+    for tessla_suite::Case { name, dir, desc } in tessla_suite::cases(&root) {
         let (tx, rx) = mpsc::channel();
         std::thread::spawn(move || {
             let _ = tx.send(check_case(&dir, &desc));
@@ -180,7 +131,7 @@ fn restored_monitors_continue_every_suite_case_exactly() {
             }
             Ok(Result_::Skipped) | Err(mpsc::RecvTimeoutError::Disconnected) => skipped += 1,
             Ok(Result_::Unsaved) => unsaved += 1,
-            Ok(Result_::Differs(why)) => failures.push(format!("{}: {why}", path.display())),
+            Ok(Result_::Differs(why)) => failures.push(format!("{name}: {why}")),
             Err(mpsc::RecvTimeoutError::Timeout) => skipped += 1,
         }
     }
