@@ -14,7 +14,7 @@
 //!
 //! Every name of NAMES.txt must have a case, and every stdlib case must belong to a listed name.
 //! Prints `N of M pass` and the first error line of each failure, and writes the same to
-//! `target/stdlib-summary.txt`. Fails when a case listed in `tests/stdlib-pass.txt` (or
+//! `target/stdlib-summary.txt` (and `target/broken-specs-pending-summary.txt`). Fails when a case listed in `tests/stdlib-pass.txt` (or
 //! `tests/broken-specs-pending-pass.txt`) stops passing; `UPDATE_STDLIB=1` (`make stdlib`) rewrites
 //! both lists from the current results (they may only grow: a shrinking list is a regression to
 //! explain in the commit).
@@ -124,14 +124,12 @@ fn run_trace_case(spec: &Path) -> Result<(), String> {
     let want_err = std::fs::read_to_string(&error).ok().map(|s| first_line(&s));
     let spec_s = spec.display().to_string();
     let mut args = vec!["trace", spec_s.as_str()];
+    // Without an input file the trace is empty (stdin, closed at once).
     let input_s = input.display().to_string();
-    let stdin = if input.exists() {
+    if input.exists() {
         args.push(input_s.as_str());
-        Vec::new()
-    } else {
-        Vec::new()
-    };
-    let f = child::run_bytes(&args, stdin, CASE_LIMIT);
+    }
+    let f = child::run_bytes(&args, Vec::new(), CASE_LIMIT);
     if f.stderr.contains("panicked") {
         return Err(format!("panicked: {}", first_line(&f.stderr)));
     }
@@ -232,7 +230,7 @@ fn run_all(
 }
 
 /// Print and record the results, rewrite or check the pass list at `list` (relative to the root).
-fn report(title: &str, results: &BTreeMap<String, Result<(), String>>, list: &str) {
+fn report(title: &str, results: &BTreeMap<String, Result<(), String>>, list: &str, summary: &str) {
     let passed = results.values().filter(|r| r.is_ok()).count();
     let mut text = format!("{title}: {passed} of {} pass\n", results.len());
     for (id, r) in results {
@@ -243,8 +241,7 @@ fn report(title: &str, results: &BTreeMap<String, Result<(), String>>, list: &st
     eprintln!("{text}");
     let target = root().join("target");
     let _ = std::fs::create_dir_all(&target);
-    let file = target.join(format!("{}-summary.txt", list.replace(['/', '.'], "_")));
-    let _ = std::fs::write(file, &text);
+    let _ = std::fs::write(target.join(summary), &text);
 
     let list_path = root().join(list);
     if std::env::var_os("UPDATE_STDLIB").is_some() {
@@ -253,9 +250,8 @@ fn report(title: &str, results: &BTreeMap<String, Result<(), String>>, list: &st
             .filter(|(_, r)| r.is_ok())
             .map(|(id, _)| format!("{id}\n"))
             .collect();
-        let head = format!(
-            "# Cases of {title} that pass; may only grow. Rewritten by `make stdlib`.\n"
-        );
+        let head =
+            format!("# Cases of {title} that pass; may only grow. Rewritten by `make stdlib`.\n");
         std::fs::write(&list_path, head + &body).expect("write the pass list");
         return;
     }
@@ -292,12 +288,10 @@ fn every_library_name_has_a_case() {
             if !known.contains(&key) {
                 strays.push(format!("{module}/{s}"));
             }
-            for ext in ["expected"] {
-                assert!(
-                    spec.with_extension(ext).exists(),
-                    "{module}/{s}: no .{ext} file"
-                );
-            }
+            assert!(
+                spec.with_extension("expected").exists(),
+                "{module}/{s}: no .expected file"
+            );
             cases.insert(key);
         }
     }
@@ -338,7 +332,12 @@ fn library_and_user_specs() {
     }
     assert!(!cases.is_empty(), "no cases found");
     let results = run_all(cases, run_trace_case);
-    report("library and user specs", &results, "tests/stdlib-pass.txt");
+    report(
+        "library and user specs",
+        &results,
+        "tests/stdlib-pass.txt",
+        "stdlib-summary.txt",
+    );
 }
 
 #[test]
@@ -353,5 +352,6 @@ fn pending_broken_specs() {
         "pending broken specs",
         &results,
         "tests/broken-specs-pending-pass.txt",
+        "broken-specs-pending-summary.txt",
     );
 }
