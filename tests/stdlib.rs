@@ -14,10 +14,10 @@
 //!
 //! Every name of NAMES.txt must have a case, and every stdlib case must belong to a listed name.
 //! Prints `N of M pass` and the first error line of each failure, and writes the same to
-//! `target/stdlib-summary.txt` (and `target/broken-specs-pending-summary.txt`). Fails when a case listed in `tests/stdlib-pass.txt` (or
-//! `tests/broken-specs-pending-pass.txt`) stops passing; `UPDATE_STDLIB=1` (`make stdlib`) rewrites
-//! both lists from the current results (they may only grow: a shrinking list is a regression to
-//! explain in the commit).
+//! `target/stdlib-summary.txt` (and `target/broken-specs-pending-summary.txt`). Fails when a
+//! case listed in `tests/stdlib-pass.txt` (or `tests/broken-specs-pending-pass.txt`) stops
+//! passing; `UPDATE_STDLIB=1` (`make stdlib`) rewrites both lists from the current results (they
+//! may only grow: a shrinking list is a regression to explain in the commit).
 
 #[path = "support/child.rs"]
 mod child;
@@ -280,7 +280,17 @@ fn every_library_name_has_a_case() {
     let mut cases: BTreeSet<(String, String)> = BTreeSet::new();
     let mut strays = Vec::new();
     let known: BTreeSet<&(String, String)> = names.iter().collect();
-    for module in names.iter().map(|(m, _)| m).collect::<BTreeSet<_>>() {
+    let modules: BTreeSet<&String> = names.iter().map(|(m, _)| m).collect();
+    for entry in std::fs::read_dir(&dir)
+        .expect("tests/fixtures/stdlib")
+        .flatten()
+    {
+        let folder = entry.file_name().to_string_lossy().into_owned();
+        if entry.path().is_dir() && !modules.contains(&folder) {
+            strays.push(format!("{folder}/ (no such module in NAMES.txt)"));
+        }
+    }
+    for module in modules {
         for spec in specs_in(&dir.join(module)) {
             let s = stem(&spec);
             let name = s.split('.').next().unwrap_or_default().to_string();
