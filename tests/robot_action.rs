@@ -426,3 +426,43 @@ fn check_lists_only_parameters_under_set() {
         "{params:?}"
     );
 }
+
+#[test]
+fn the_summary_and_the_report_show_reasons_and_the_cap() {
+    let fixture = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/fixtures/robot/recorded_run.lp");
+    let input = std::fs::read_to_string(fixture).unwrap();
+    let (out, err, code) = run_all(&["--no-passthrough"], &input);
+    assert_eq!(code, 0, "{err}");
+    // What `make run` prints after the verdicts and actions.
+    let (summary, err, code) = run_all(&["report", "--summary", "-"], &out);
+    assert_eq!(code, 0, "{err}");
+    for part in [
+        "300 steps",
+        "P1 braking distance: 36 violated, 6 unknown",
+        "P2 speed tolerance: 60 violated of 300",
+        "augmented; why: p1 ",
+        "capped at unknown_speed_cap while P1 was unknown: 6",
+        "final MSE expected/actual speed: 3.756353e-4",
+    ] {
+        assert!(summary.contains(part), "`{part}` missing in:\n{summary}");
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let lp = dir.path().join("run.lp");
+    std::fs::write(&lp, &out).unwrap();
+    let report = dir.path().join("report");
+    let (_, err, code) = run_all(
+        &[
+            "report",
+            lp.to_str().unwrap(),
+            "-o",
+            report.to_str().unwrap(),
+        ],
+        "",
+    );
+    assert_eq!(code, 0, "{err}");
+    let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+    assert!(html.contains("id=\"reason-p1\""), "{html}");
+    assert!(html.contains("id=\"reason-p1-p2\""), "{html}");
+    assert!(html.contains("id=\"capped\" data-value=\"6e0\""), "{html}");
+}
