@@ -233,6 +233,14 @@ fn missing_trailing_beams_are_dropouts_at_their_own_angles() {
 
 #[test]
 fn odd_beam_counts_with_the_count_set_place_beams_right() {
+    // A 359-beam scan under the default count is one missing beam: still read right.
+    let (ms, _) = metrics(
+        &["--no-passthrough"],
+        &message(0.2, 0.2, &scan(359, 2.0, 0.15), TS),
+        "action",
+    );
+    assert_eq!(string(&ms[0], "p1_status").as_deref(), Some("violated"));
+    assert_eq!(ms[0].field("p3_dropouts"), Some(&FieldValue::Int(1)));
     for n in [45usize, 229, 361, 719] {
         let beams = scan(n, 2.0, 0.15);
         let count = format!("lidar_beams={n}");
@@ -262,17 +270,21 @@ fn a_scan_longer_than_the_beam_count_is_warned_about_and_kept() {
         "{err}"
     );
     assert_eq!(string(&ms[0], "p1_status").as_deref(), Some("violated"));
-    // A robot whose scans never reach the count (a 180-beam lidar) is told at the end.
-    let beams = scan(180, 2.0, 2.0);
-    let (_, err) = metrics(
+    // A robot whose scans fall far short of the count (a 180-beam lidar) is told, and its scans
+    // are read at their own length.
+    let beams = scan(180, 2.0, 0.15);
+    let (ms, err) = metrics(
         &["--no-passthrough"],
-        &message(0.1, 0.1, &beams, TS),
+        &message(0.2, 0.2, &beams, TS),
         "action",
     );
     assert!(
-        err.contains("at most 180 elements") && err.contains("--set lidar_beams=180"),
+        err.contains("180 elements") && err.contains("--set lidar_beams=180"),
         "{err}"
     );
+    assert!(err.contains("at most 180 elements"), "{err}");
+    assert_eq!(string(&ms[0], "p1_status").as_deref(), Some("violated"));
+    assert_eq!(ms[0].field("p3_dropouts"), Some(&FieldValue::Int(0)));
 }
 
 #[test]

@@ -3,8 +3,8 @@
 //! Owns: reading `@TelegrafIn(measurement, tags, field)` from the program's inputs (an input
 //! without it binds to the field of the same name in any metric), field patterns ending in `_*`
 //! that gather `name_0 .. name_N` into one `List[Float]` (a missing index becomes NaN), the
-//! list's known length (`@TelegrafListLength(n)`: a shorter record is filled up with NaN, a longer
-//! one is warned about and kept as it came), and the lossless conversions from line-protocol
+//! list's known length (`@TelegrafListLength(n)`: a record up to a quarter short is filled up
+//! with NaN, a longer or much shorter one is warned about and kept as it came), and the lossless conversions from line-protocol
 //! values to [`Value`]s of the input's type.
 
 use lineproto::{FieldValue, Metric};
@@ -188,26 +188,27 @@ impl InputBinding {
         }
     }
 
-    /// `list` at the known length: filled up with NaN when shorter (Telegraf's JSON parser drops a
-    /// trailing `null`, so a scan's last beams can vanish), kept as it came with a warning when
-    /// longer (then the length is wrong, and the list's own length places the beams).
+    /// `list` at the known length: filled up with NaN when a few elements are missing
+    /// (Telegraf's JSON parser drops a trailing `null`, so a scan's last beams can vanish: up to a
+    /// quarter of the length is filled), kept as it came with a warning when longer or much
+    /// shorter (then the length looks wrong, e.g. another lidar, and the list's own length places
+    /// the beams).
     fn to_length(&self, mut list: Vec<Value>) -> Vec<Value> {
         let Some(n) = self.length else {
             return list;
         };
-        if list.len() < n {
+        let len = list.len();
+        if len < n && len.saturating_mul(4) >= n.saturating_mul(3) {
             list.resize(n, Value::Float(f64::NAN));
-        } else if list.len() > n {
+        } else if len != n {
             crate::log::warn_limited("list length", || {
+                let than = if len > n { "more" } else { "far fewer" };
                 format!(
-                    "input `{}`: a record has {} elements in `{}*`, more than \
-                     @TelegrafListLength({n}); the list is used as it came; if every scan has {} \
-                     beams, set that length (bundled robot specs: --set lidar_beams={})",
+                    "input `{}`: a record has {len} elements in `{}*`, {than} than \
+                     @TelegrafListLength({n}); the list is used as it came; if every scan has \
+                     {len} beams, set that length (bundled robot specs: --set lidar_beams={len})",
                     self.name,
-                    list.len(),
                     self.prefix(),
-                    list.len(),
-                    list.len()
                 )
             });
         }
@@ -395,7 +396,10 @@ mod tests {
             FieldPattern::Indexed("lidar_".into()),
         );
         l.length = Some(4);
-        for line in ["m lidar_0=1,lidar_1=2 1", "m lidar_1=2,lidar_0=1 1"] {
+        for line in [
+            "m lidar_0=1,lidar_1=2,lidar_2=3 1",
+            "m lidar_1=2,lidar_2=3,lidar_0=1 1",
+        ] {
             let Some(Ok(Value::List(items))) = l.extract(&metric(line)) else {
                 panic!("no list from {line}")
             };
@@ -403,6 +407,17 @@ mod tests {
             assert_eq!(items[1], Value::Float(2.0));
             assert!(matches!(items[3], Value::Float(f) if f.is_nan()));
         }
+        // Much shorter (another lidar?): kept as it came.
+        let Some(Ok(Value::List(items))) = l.extract(&metric("m lidar_0=1,lidar_1=2 1")) else {
+            panic!()
+        };
+        assert_eq!(items.len(), 2);
+        l.length = Some(2);
+        let Some(Ok(Value::List(items))) = l.extract(&metric("m lidar_0=1 1")) else {
+            panic!()
+        };
+        assert_eq!(items.len(), 1, "half missing is not filled");
+        l.length = Some(4);
         // Longer than the length: kept as it came.
         let Some(Ok(Value::List(items))) = l.extract(&metric(
             "m lidar_0=1,lidar_1=2,lidar_2=3,lidar_3=4,lidar_4=5 1",
