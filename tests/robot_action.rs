@@ -477,4 +477,8 @@ fn the_summary_and_the_report_show_reasons_and_the_cap() {
     assert!(html.contains("id=\"reason-p1\""), "{html}");
     assert!(html.contains("id=\"reason-p1-p2\""), "{html}");
     assert!(html.contains("id=\"capped\" data-value=\"6e0\""), "{html}");
+    let speeds = std::fs::read_to_string(report.join("speeds.svg")).unwrap();
+    for label in ["augmented: p1", "augmented: p2", "capped: P1 unknown"] {
+        assert!(speeds.contains(label), "the speeds plot marks `{label}`");
+    }
 }
