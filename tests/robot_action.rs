@@ -392,6 +392,9 @@ fn a_spec_without_outputs_is_a_spec_error() {
         err.contains("no outputs") && err.contains("silent.tessla"),
         "{err}"
     );
+    let (_, err, code) = run_all(&["trace", p], "1: x = 1\n");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("no outputs"), "{err}");
     let (out, err, code) = run_all(&["run", "--spec", p], "m x=1 1\n");
     assert_eq!(code, 2, "{err}");
     assert!(out.is_empty(), "nothing is read or written: {out}");
