@@ -345,6 +345,12 @@ fn show(v: &FieldValue) -> String {
 
 /// The binding as the spec wrote it.
 fn annotation(b: &InputBinding) -> String {
+    if b.measurement.is_none()
+        && b.tags.is_empty()
+        && b.field == FieldPattern::Exact(b.name.clone())
+    {
+        return format!("no @TelegrafIn: field `{}` of any metric", b.name);
+    }
     let field = match &b.field {
         FieldPattern::Exact(f) => f.clone(),
         FieldPattern::Indexed(p) => format!("{p}*"),
@@ -411,6 +417,32 @@ mod tests {
             Some("expectedSpeed")
         );
         assert_eq!(nearest("battery", c.into_iter()), None);
+    }
+
+    #[test]
+    fn an_input_without_annotation_is_described_as_such() {
+        let mut b = InputBinding {
+            input: 0,
+            name: "x".into(),
+            ty: Type::Float,
+            measurement: None,
+            tags: Vec::new(),
+            field: FieldPattern::Exact("x".into()),
+            length: None,
+        };
+        assert_eq!(annotation(&b), "no @TelegrafIn: field `x` of any metric");
+        b.measurement = Some("m".into());
+        b.tags = vec![("topic".into(), "t".into())];
+        assert_eq!(annotation(&b), "@TelegrafIn(\"m\", \"topic=t\", \"x\")");
+        // What a run without metrics of that shape reports.
+        let mut w = WiringCheck::new(std::slice::from_ref(&b));
+        let m = lineproto::parse_record(b"n,topic=t y=1 1")
+            .unwrap()
+            .unwrap();
+        w.observe(&m, std::slice::from_ref(&b));
+        let msg = w.unmatched(&b, &w.inputs[0], "in 1 records");
+        assert!(msg.contains("seen: n,topic=t fields y"), "{msg}");
+        assert!(msg.contains("no metric named `m`"), "{msg}");
     }
 
     #[test]
