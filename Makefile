@@ -4,9 +4,13 @@
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
 
-# The main job on its bundled default: the robot monitors over the recorded-run fixture.
+# The main job on its bundled default: the robot monitors over the recorded-run fixture, their
+# verdicts and actions (no pass-through), then a short summary (steps, violations per property,
+# augmented actions and why, final MSE). `make run PASSTHROUGH=1` echoes every record as well.
 run: build
-	./target/release/tessla-telegraf < $(RUN_FIXTURE)
+	./target/release/tessla-telegraf run $(if $(PASSTHROUGH),,--no-passthrough) < $(RUN_FIXTURE) > target/run.lp
+	cat target/run.lp
+	./target/release/tessla-telegraf report --summary target/run.lp
 
 build:
 	$(CARGO) build --release

@@ -19,6 +19,18 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../specs/p2_tolerance.tessla"),
     ),
     ("p3_lidar.tessla", include_str!("../specs/p3_lidar.tessla")),
+    (
+        "lib/p1_braking.tessla",
+        include_str!("../specs/lib/p1_braking.tessla"),
+    ),
+    (
+        "lib/p2_tolerance.tessla",
+        include_str!("../specs/lib/p2_tolerance.tessla"),
+    ),
+    (
+        "lib/p3_lidar.tessla",
+        include_str!("../specs/lib/p3_lidar.tessla"),
+    ),
     ("robot.tessla", include_str!("../specs/robot.tessla")),
 ];
 

@@ -1,5 +1,6 @@
 //! `tessla-telegraf check SPEC`: parse and check a spec, print its inputs and outputs with types
-//! and annotations; exit 0, or 2 with diagnostics.
+//! and annotations, then its parameters (the top-level constants `--set` can change, with the
+//! comment above each); exit 0, or 2 with diagnostics (also for a spec without outputs).
 
 use super::{CheckArgs, EXIT_IO, EXIT_OK, EXIT_SPEC};
 use std::io::Write;
@@ -7,6 +8,18 @@ use std::io::Write;
 /// Write to stderr; a closed stderr is not worth a panic (the exit code still tells).
 fn report(text: &str) {
     let _ = std::io::stderr().lock().write_all(text.as_bytes());
+}
+
+/// A spec without outputs checks nothing and writes nothing: a spec error for `check` and `run`.
+pub fn require_outputs(program: &tessla_engine::Program, spec: &str) -> Result<(), String> {
+    if program.outputs.is_empty() {
+        Err(format!(
+            "{spec}: the spec has no outputs, so it would check nothing and write nothing; \
+             add `out NAME` for each stream to report (or `out *`)"
+        ))
+    } else {
+        Ok(())
+    }
 }
 
 pub fn run(args: CheckArgs) -> i32 {
@@ -33,6 +46,10 @@ pub fn run(args: CheckArgs) -> i32 {
     }
     // The Telegraf binding reads the annotations: check them as `run` does.
     if let Err(e) = crate::telegraf::binding::bindings(&loaded.program) {
+        report(&format!("error: {e}\n"));
+        return EXIT_SPEC;
+    }
+    if let Err(e) = require_outputs(&loaded.program, &args.spec.display().to_string()) {
         report(&format!("error: {e}\n"));
         return EXIT_SPEC;
     }
@@ -69,6 +86,18 @@ pub fn run(args: CheckArgs) -> i32 {
             ann(&o.annotations)
         ));
     }
+    let params = parameters(&args.spec, &options.overrides);
+    if !params.is_empty() {
+        out.push_str("parameters (`--set`):\n");
+        let width = params.iter().map(|p| p.0.len()).max().unwrap_or(0);
+        for (name_value, comment) in &params {
+            if comment.is_empty() {
+                out.push_str(&format!("  {name_value}\n"));
+            } else {
+                out.push_str(&format!("  {name_value:width$}  -- {comment}\n"));
+            }
+        }
+    }
     out.push_str(&format!(
         "{} inputs, {} outputs, {} stream nodes\n",
         p.inputs.len(),
@@ -85,5 +114,75 @@ pub fn run(args: CheckArgs) -> i32 {
             report(&format!("error: writing the result: {e}\n"));
             EXIT_IO
         }
+    }
+}
+
+/// The spec's parameters: top-level definitions without parameters whose body is a literal
+/// (a number, possibly negated, a string, `true`/`false`), as `name = value` (the `--set` value
+/// when given) with the comment lines right above each, in file order (includes first).
+fn parameters(spec: &std::path::Path, overrides: &[(String, String)]) -> Vec<(String, String)> {
+    use tessla_syntax::ast::{Body, ExprKind, Statement};
+    let mut sources = tessla_syntax::source::SourceMap::new();
+    let Ok(files) = tessla_syntax::include::load_spec(
+        &spec.display().to_string(),
+        &tessla_syntax::include::FsResolver,
+        &mut sources,
+    ) else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for (id, file) in &files {
+        let text = &sources.get(*id).text;
+        for st in &file.statements {
+            let Statement::Def(d) = st else { continue };
+            let Body::Expr { expr, .. } = &d.body else {
+                continue;
+            };
+            let literal = match &expr.kind {
+                ExprKind::Int { .. } | ExprKind::Float(_) | ExprKind::Str { .. } => true,
+                ExprKind::Var(v) => v.name == "true" || v.name == "false",
+                ExprKind::Unary { operand, .. } => {
+                    matches!(operand.kind, ExprKind::Int { .. } | ExprKind::Float(_))
+                }
+                _ => false,
+            };
+            if d.params.is_some() || !literal {
+                continue;
+            }
+            let name = &d.name.name;
+            let spec_value = text
+                .get(expr.span.start as usize..expr.span.end as usize)
+                .unwrap_or("?")
+                .trim();
+            let shown = match overrides.iter().rev().find(|(n, _)| n == name) {
+                Some((_, v)) => format!("{name} = {v} (--set; spec {spec_value})"),
+                None => format!("{name} = {spec_value}"),
+            };
+            out.push((shown, comment_above(text, d.span.start as usize)));
+        }
+    }
+    out
+}
+
+/// The `--` comment lines directly above byte `at` (the start of a definition), joined.
+fn comment_above(text: &str, at: usize) -> String {
+    let before = text.get(..at).unwrap_or("");
+    let mut lines: Vec<&str> = Vec::new();
+    for line in before
+        .lines()
+        .rev()
+        .skip(usize::from(!before.ends_with('\n')))
+    {
+        match line.trim().strip_prefix("--") {
+            Some(c) => lines.push(c.trim()),
+            None => break,
+        }
+    }
+    lines.reverse();
+    // The first sentence: the unit and what the parameter is; the spec has the rest.
+    let all = lines.join(" ");
+    match all.find(". ") {
+        Some(i) => all[..=i].to_string(),
+        None => all,
     }
 }

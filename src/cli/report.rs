@@ -11,8 +11,17 @@ pub struct ReportArgs {
     /// `-` reads stdin.
     pub file: PathBuf,
     /// Folder to write `index.html` and the SVG plots into (created when missing).
-    #[arg(short = 'o', long = "output", value_name = "DIR")]
-    pub output: PathBuf,
+    #[arg(
+        short = 'o',
+        long = "output",
+        value_name = "DIR",
+        required_unless_present = "summary"
+    )]
+    pub output: Option<PathBuf>,
+    /// Print a short summary to stdout (steps, violations per property, augmented actions and
+    /// why, the final MSE); without `-o`, write no files.
+    #[arg(long)]
+    pub summary: bool,
 }
 
 /// Run the subcommand; returns the exit code.
@@ -33,9 +42,17 @@ pub fn run(args: ReportArgs) -> i32 {
             }
         }
     };
-    match crate::report::write_report(&text, &name, &args.output) {
+    let Some(output) = &args.output else {
+        let s = crate::report::summarize(&text);
+        print!("{}", s.text(&name));
+        return EXIT_OK;
+    };
+    match crate::report::write_report(&text, &name, output) {
         Ok(written) => {
             let s = &written.summary;
+            if args.summary {
+                print!("{}", s.text(&name));
+            }
             println!("{}", written.html.display());
             for svg in &written.svgs {
                 println!("{}", svg.display());

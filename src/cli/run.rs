@@ -36,6 +36,14 @@ pub fn run(args: RunArgs) -> i32 {
             &tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false),
         );
     }
+    let spec_name = args.spec.as_ref().map_or_else(
+        || format!("<bundled>/{}", crate::bundled::DEFAULT),
+        |p| p.display().to_string(),
+    );
+    if let Err(e) = super::check::require_outputs(&loaded.program, &spec_name) {
+        log::log(Level::Error, &e);
+        return EXIT_SPEC;
+    }
     let tags = match args
         .tags
         .iter()
@@ -120,6 +128,7 @@ pub fn run(args: RunArgs) -> i32 {
             None => transport::stdio::run(&mut proc, hooks).await,
         }
     });
+    proc.finish_wiring();
     // Every ending (EOF, signal, closed stdout, I/O error) has evaluated what it could: save.
     if let Some(path) = &args.state {
         save_state(path, &proc, &state_ctx, Level::Info);

@@ -61,6 +61,11 @@ pub fn run(args: TraceArgs) -> i32 {
             tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, color)
         );
     }
+    if let Err(e) = super::check::require_outputs(&loaded.program, &args.spec.display().to_string())
+    {
+        eprintln!("error: {e}");
+        return EXIT_SPEC;
+    }
     let stdout = std::io::stdout();
     let result = match &args.trace {
         // A trace file is read as fast as possible: outputs are block-buffered.

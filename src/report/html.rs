@@ -118,6 +118,20 @@ pub fn page(source_name: &str, s: &Summary, plots: &[(&str, &str)], run: &Run) -
         s.augmented_actions,
         Some(s.actions),
     ));
+    for (reason, n) in &s.reasons {
+        out.push_str(&count_row(
+            &format!("reason-{}", reason.replace(',', "-")),
+            &format!("Augmented actions, reason {reason}"),
+            *n,
+            Some(s.augmented_actions),
+        ));
+    }
+    out.push_str(&count_row(
+        "capped",
+        "Actions capped at unknown_speed_cap (reason p1 while P1 unknown)",
+        s.capped_actions,
+        Some(s.augmented_actions),
+    ));
     out.push_str(&count_row(
         "p3-scans-with-spikes",
         "P3 lidar: scans with spikes",

@@ -22,6 +22,13 @@ pub struct Written {
     pub summary: stats::Summary,
 }
 
+/// The summary of `text` (line protocol) alone, without plots or files.
+pub fn summarize(text: &str) -> stats::Summary {
+    let run = data::Run::parse(text);
+    let picked = series::Picked::from_run(&run);
+    stats::Summary::compute(&run, &picked)
+}
+
 /// Read `text` (line protocol) and write `index.html` and the SVG plots into `dir`.
 pub fn write_report(text: &str, source_name: &str, dir: &Path) -> Result<Written, String> {
     let run = data::Run::parse(text);

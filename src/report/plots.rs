@@ -2,7 +2,7 @@
 //! built without its `ttf` feature, so text is written as SVG `<text>` and sized by estimate).
 //!
 //! - `speeds.svg`: expected and actual speed over time, the action sent to the robot, and the
-//!   augmented actions marked (as the paper's figures);
+//!   augmented actions marked (as the paper's figures) by reason, capped ones apart;
 //! - `p1.svg`: P1's margin `Ldist − Bdist` over time, each step coloured by its status;
 //! - `p3.svg`: P3's spikes and dropouts per scan;
 //! - `mse.svg`: the running MSE between expected and actual speed.
@@ -165,6 +165,9 @@ fn legend_box<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>) -> DrawResult {
     Ok(())
 }
 
+/// Augmented actions of one kind: legend label, colour, (time, speed sent).
+type MarkGroup = (&'static str, RGBColor, Vec<(f64, f64)>);
+
 fn speeds(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
     let ys = picked
         .expected_speed
@@ -195,29 +198,62 @@ fn speeds(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
         1,
         "action speed",
     )?;
-    // Mark each augmented action at the speed sent (a step's action and flag share its time).
-    let marks: Vec<(f64, f64)> = picked
-        .augmented
-        .points
-        .iter()
-        .filter(|(_, augmented)| *augmented)
-        .filter_map(|(t, _)| {
-            picked
-                .action_speed
-                .points
-                .iter()
-                .find(|(ta, _)| ta == t)
-                .map(|(_, v)| (*t, *v))
-        })
-        .collect();
-    chart
-        .draw_series(
-            marks
-                .into_iter()
-                .map(|p| TriangleMarker::new(p, 5, AUGMENTED.filled())),
-        )?
-        .label("augmented action")
-        .legend(|(x, y)| TriangleMarker::new((x + 10, y), 5, AUGMENTED.filled()));
+    // Mark each augmented action at the speed sent (a step's action and flag share its time),
+    // by why: P2's correction, P1's safe speed, both, or the cap while P1 was `unknown`.
+    let reason_at = |t: f64| {
+        picked
+            .reason
+            .points
+            .iter()
+            .find(|(tr, _)| *tr == t)
+            .map(|(_, r)| r.as_str())
+    };
+    let unknown_at = |t: f64| {
+        picked
+            .action_p1_status
+            .points
+            .iter()
+            .any(|(ts, s)| *ts == t && s == "unknown")
+    };
+    let mut groups: Vec<MarkGroup> = vec![
+        ("augmented action", AUGMENTED, Vec::new()),
+        ("augmented: p2", AUGMENTED, Vec::new()),
+        ("augmented: p1", ACTUAL, Vec::new()),
+        ("augmented: p1,p2", DROPOUT, Vec::new()),
+        ("capped: P1 unknown", UNKNOWN, Vec::new()),
+    ];
+    for (t, _) in picked.augmented.points.iter().filter(|(_, a)| *a) {
+        let Some(v) = picked
+            .action_speed
+            .points
+            .iter()
+            .find(|(ta, _)| ta == t)
+            .map(|(_, v)| *v)
+        else {
+            continue;
+        };
+        let g = match reason_at(*t) {
+            None => 0,
+            Some(r) if r.split(',').any(|p| p == "p1") && unknown_at(*t) => 4,
+            Some("p2") => 1,
+            Some("p1") => 2,
+            Some(_) => 3,
+        };
+        groups[g].2.push((*t, v));
+    }
+    for (label, color, marks) in groups {
+        if marks.is_empty() {
+            continue;
+        }
+        chart
+            .draw_series(
+                marks
+                    .into_iter()
+                    .map(move |p| TriangleMarker::new(p, 5, color.filled())),
+            )?
+            .label(label)
+            .legend(move |(x, y)| TriangleMarker::new((x + 10, y), 5, color.filled()));
+    }
     legend_box(&mut chart)
 }
 

@@ -36,6 +36,10 @@ pub struct Picked {
     pub action_speed: Series<f64>,
     /// Whether that action was augmented: `action.augmented`, else `p2_augmented`.
     pub augmented: Series<bool>,
+    /// Why an action was augmented (`action.reason`: `p1`, `p2`, `p1,p2`).
+    pub reason: Series<String>,
+    /// P1's status as the action carried it (tells the cap, `unknown`, from a violation).
+    pub action_p1_status: Series<String>,
     pub p2_violated: Series<bool>,
     pub speed_mse: Series<f64>,
     /// The running MSE computed by the report from the pass-through telemetry.
@@ -58,6 +62,8 @@ impl Picked {
             augmented: first_non_empty(pick_in(run, "action", "augmented", Value::as_bool), || {
                 pick(run, "p2_augmented", Value::as_bool)
             }),
+            reason: pick_in(run, "action", "reason", |v| Some(v.as_text())),
+            action_p1_status: pick_in(run, "action", "p1_status", |v| Some(v.as_text())),
             p2_violated: pick(run, "p2_violated", Value::as_bool),
             speed_mse: pick(run, "speed_mse", Value::as_f64),
             running_mse: Series {

@@ -25,6 +25,10 @@ pub struct Summary {
     /// Actions that differ from the robot's own command.
     pub augmented_actions: usize,
     pub actions: usize,
+    /// Augmented actions per `reason` (`p1`, `p2`, `p1,p2`), in that order, then any other.
+    pub reasons: Vec<(String, usize)>,
+    /// Augmented actions P1 lowered while its status was `unknown`: the `unknown_speed_cap`.
+    pub capped_actions: usize,
     /// P1: steps per status.
     pub p1_violated: usize,
     pub p1_unknown: usize,
@@ -60,6 +64,8 @@ impl Summary {
             p2_steps: picked.p2_violated.points.len(),
             augmented_actions: picked.augmented.points.iter().filter(|(_, v)| *v).count(),
             actions: picked.augmented.points.len(),
+            reasons: reasons(picked),
+            capped_actions: capped(picked),
             p1_violated: status_count("violated"),
             p1_unknown: status_count("unknown"),
             p1_ok: status_count("ok"),
@@ -77,6 +83,80 @@ impl Summary {
                 .len()
                 .max(picked.p3_dropouts.points.len()),
         }
+    }
+}
+
+/// Augmented actions per reason, `p1`, `p2`, `p1,p2` first (also when 0), then others.
+fn reasons(picked: &Picked) -> Vec<(String, usize)> {
+    let mut out: Vec<(String, usize)> = ["p1", "p2", "p1,p2"]
+        .iter()
+        .map(|r| (r.to_string(), 0))
+        .collect();
+    for (_, r) in &picked.reason.points {
+        match out.iter_mut().find(|(k, _)| k == r) {
+            Some((_, n)) => *n += 1,
+            None => out.push((r.clone(), 1)),
+        }
+    }
+    out
+}
+
+/// Actions whose reason names P1 while the action's `p1_status` is `unknown` (same time).
+fn capped(picked: &Picked) -> usize {
+    let unknown: std::collections::HashSet<u64> = picked
+        .action_p1_status
+        .points
+        .iter()
+        .filter(|(_, s)| s == "unknown")
+        .map(|(t, _)| t.to_bits())
+        .collect();
+    picked
+        .reason
+        .points
+        .iter()
+        .filter(|(t, r)| r.split(',').any(|p| p == "p1") && unknown.contains(&t.to_bits()))
+        .count()
+}
+
+impl Summary {
+    /// A few lines for a person (`report --summary`, `make run`): steps, violations per
+    /// property, augmented actions and why, the final MSE.
+    pub fn text(&self, source: &str) -> String {
+        let steps = self.actions.max(self.p2_steps).max(self.p3_scans);
+        let p1_steps = self.p1_violated + self.p1_unknown + self.p1_ok;
+        let reasons: Vec<String> = self
+            .reasons
+            .iter()
+            .map(|(r, n)| format!("{r} {n}"))
+            .collect();
+        let (mse, how) = match (self.mse, self.spec_mse) {
+            (Some(m), _) => (Some(m), "from the telemetry"),
+            (None, Some(m)) => (Some(m), "the spec's speed_mse at the end"),
+            (None, None) => (None, ""),
+        };
+        let mse = mse.map_or_else(|| "no data".to_string(), |m| format!("{m:.6e} ({how})"));
+        format!(
+            "summary of {source}: {steps} steps over {:.1} s\n\
+             \x20 P1 braking distance: {} violated, {} unknown (sector ahead blinded), {} ok, of {p1_steps}\n\
+             \x20 P2 speed tolerance: {} violated of {}\n\
+             \x20 P3 lidar: {} spikes in {} of {} scans, {} dropouts\n\
+             \x20 actions: {} of {} augmented; why: {}; capped at unknown_speed_cap while P1 was unknown: {}\n\
+             \x20 final MSE expected/actual speed: {mse}\n",
+            self.duration_s,
+            self.p1_violated,
+            self.p1_unknown,
+            self.p1_ok,
+            self.p2_violations,
+            self.p2_steps,
+            self.p3_spikes,
+            self.p3_scans_with_spikes,
+            self.p3_scans,
+            self.p3_dropouts,
+            self.augmented_actions,
+            self.actions,
+            reasons.join(", "),
+            self.capped_actions,
+        )
     }
 }
 

@@ -2,8 +2,10 @@
 //!
 //! Owns: reading `@TelegrafIn(measurement, tags, field)` from the program's inputs (an input
 //! without it binds to the field of the same name in any metric), field patterns ending in `_*`
-//! that gather `name_0 .. name_N` into one `List[Float]` (a missing index becomes NaN), and the
-//! lossless conversions from line-protocol values to [`Value`]s of the input's type.
+//! that gather `name_0 .. name_N` into one `List[Float]` (a missing index becomes NaN), the
+//! list's known length (`@TelegrafListLength(n)`: a record up to a quarter short is filled up
+//! with NaN, a longer or much shorter one is warned about and kept as it came), and the lossless conversions from line-protocol
+//! values to [`Value`]s of the input's type.
 
 use lineproto::{FieldValue, Metric};
 use std::sync::Arc;
@@ -25,6 +27,8 @@ pub struct InputBinding {
     pub measurement: Option<String>,
     pub tags: Vec<(String, String)>,
     pub field: FieldPattern,
+    /// `@TelegrafListLength(n)` on an indexed pattern: the list's known length.
+    pub length: Option<usize>,
 }
 
 /// Why a field value could not become an event.
@@ -76,6 +80,14 @@ pub fn bindings(program: &Program) -> Result<Vec<InputBinding>, String> {
                 info.name, info.ty
             ));
         }
+        let length = match info
+            .annotations
+            .iter()
+            .find(|a| a.name == "TelegrafListLength")
+        {
+            None => None,
+            Some(a) => Some(list_length(&info.name, &a.args, &field)?),
+        };
         out.push(InputBinding {
             input: i,
             name: info.name.clone(),
@@ -83,10 +95,40 @@ pub fn bindings(program: &Program) -> Result<Vec<InputBinding>, String> {
             measurement,
             tags,
             field,
+            length,
         });
     }
     Ok(out)
 }
+
+/// The length of `@TelegrafListLength(length)` on input `name`: a whole number 1..=1000000 on an
+/// input with a `_*` pattern.
+fn list_length(
+    name: &str,
+    args: &[(String, Value)],
+    field: &FieldPattern,
+) -> Result<usize, String> {
+    if !matches!(field, FieldPattern::Indexed(_)) {
+        return Err(format!(
+            "input `{name}`: @TelegrafListLength needs a `_*` field pattern in its @TelegrafIn"
+        ));
+    }
+    let n = args
+        .iter()
+        .find(|(n, _)| n == "length")
+        .or_else(|| args.first())
+        .map(|(_, v)| v);
+    match n {
+        Some(Value::Int(n)) if (1..=MAX_LIST_LENGTH as i64).contains(n) => Ok(*n as usize),
+        other => Err(format!(
+            "input `{name}`: @TelegrafListLength needs a whole number from 1 to {MAX_LIST_LENGTH}, found {}",
+            other.map_or_else(|| "nothing".to_string(), ToString::to_string)
+        )),
+    }
+}
+
+/// Largest list an indexed pattern builds: an absurd index must not allocate gigabytes.
+const MAX_LIST_LENGTH: usize = 1_000_000;
 
 /// `"k=v,k2=v2"` (may be empty).
 pub fn parse_tags(s: &str) -> Result<Vec<(String, String)>, String> {
@@ -115,7 +157,7 @@ impl InputBinding {
             FieldPattern::Exact(f) => m.field(f).map(|v| self.convert(v)),
             FieldPattern::Indexed(prefix) => {
                 if let Some(list) = in_order(prefix, &m.fields) {
-                    return Some(Ok(Value::List(Arc::new(list))));
+                    return Some(Ok(Value::List(Arc::new(self.to_length(list)))));
                 }
                 let mut beams: Vec<(usize, f64)> = Vec::new();
                 for (k, v) in &m.fields {
@@ -129,7 +171,7 @@ impl InputBinding {
                 }
                 let n = beams.iter().map(|(i, _)| i + 1).max()?;
                 // Bound the list: an absurd index must not allocate gigabytes.
-                if n > 1_000_000 {
+                if n > MAX_LIST_LENGTH {
                     return Some(Err(ConvertError {
                         input: self.name.clone(),
                         reason: format!("index {} in `{prefix}*` is beyond 1000000", n - 1),
@@ -141,8 +183,42 @@ impl InputBinding {
                         *slot = Value::Float(x);
                     }
                 }
-                Some(Ok(Value::List(Arc::new(list))))
+                Some(Ok(Value::List(Arc::new(self.to_length(list)))))
             }
+        }
+    }
+
+    /// `list` at the known length: filled up with NaN when a few elements are missing
+    /// (Telegraf's JSON parser drops a trailing `null`, so a scan's last beams can vanish: up to a
+    /// quarter of the length is filled), kept as it came with a warning when longer or much
+    /// shorter (then the length looks wrong, e.g. another lidar, and the list's own length places
+    /// the beams).
+    fn to_length(&self, mut list: Vec<Value>) -> Vec<Value> {
+        let Some(n) = self.length else {
+            return list;
+        };
+        let len = list.len();
+        if len < n && len.saturating_mul(4) >= n.saturating_mul(3) {
+            list.resize(n, Value::Float(f64::NAN));
+        } else if len != n {
+            crate::log::warn_limited("list length", || {
+                let than = if len > n { "more" } else { "far fewer" };
+                format!(
+                    "input `{}`: a record has {len} elements in `{}*`, {than} than \
+                     @TelegrafListLength({n}); the list is used as it came; if every scan has \
+                     {len} beams, set that length (bundled robot specs: --set lidar_beams={len})",
+                    self.name,
+                    self.prefix(),
+                )
+            });
+        }
+        list
+    }
+
+    /// The prefix of an indexed pattern (`lidar_`), or the exact field name.
+    pub fn prefix(&self) -> &str {
+        match &self.field {
+            FieldPattern::Exact(f) | FieldPattern::Indexed(f) => f,
         }
     }
 
@@ -236,6 +312,7 @@ mod tests {
             measurement: Some("m".into()),
             tags: vec![("topic".into(), "tessla".into())],
             field,
+            length: None,
         }
     }
 
@@ -310,6 +387,44 @@ mod tests {
                 Value::Float(2.0)
             ]))))
         );
+    }
+
+    #[test]
+    fn a_known_length_fills_missing_trailing_beams() {
+        let mut l = b(
+            Type::List(Box::new(Type::Float)),
+            FieldPattern::Indexed("lidar_".into()),
+        );
+        l.length = Some(4);
+        for line in [
+            "m lidar_0=1,lidar_1=2,lidar_2=3 1",
+            "m lidar_1=2,lidar_2=3,lidar_0=1 1",
+        ] {
+            let Some(Ok(Value::List(items))) = l.extract(&metric(line)) else {
+                panic!("no list from {line}")
+            };
+            assert_eq!(items.len(), 4, "{line}");
+            assert_eq!(items[1], Value::Float(2.0));
+            assert!(matches!(items[3], Value::Float(f) if f.is_nan()));
+        }
+        // Much shorter (another lidar?): kept as it came.
+        let Some(Ok(Value::List(items))) = l.extract(&metric("m lidar_0=1,lidar_1=2 1")) else {
+            panic!()
+        };
+        assert_eq!(items.len(), 2);
+        l.length = Some(2);
+        let Some(Ok(Value::List(items))) = l.extract(&metric("m lidar_0=1 1")) else {
+            panic!()
+        };
+        assert_eq!(items.len(), 1, "half missing is not filled");
+        l.length = Some(4);
+        // Longer than the length: kept as it came.
+        let Some(Ok(Value::List(items))) = l.extract(&metric(
+            "m lidar_0=1,lidar_1=2,lidar_2=3,lidar_3=4,lidar_4=5 1",
+        )) else {
+            panic!()
+        };
+        assert_eq!(items.len(), 5);
     }
 
     #[test]

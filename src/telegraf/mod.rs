@@ -3,7 +3,7 @@
 //! Owns: how a spec's inputs bind to metrics ([`binding`]: `@TelegrafIn`, indexed `_*` fields,
 //! value conversion), how outputs become metrics ([`encode`]: `@TelegrafOut`, `@TelegrafField`,
 //! the default grouped metric), and the step loop with pass-through, late records and counters
-//! ([`processor`]), `--state` persistence ([`state`]) and SIGHUP spec reloads ([`reload`]).
+//! ([`processor`]), `--state` persistence ([`state`]) and SIGHUP spec reloads ([`reload`]), and warnings about inputs no metric feeds ([`wiring`]).
 //! Transports (stdin/stdout, UDP) feed bytes to a [`processor::Processor`].
 
 pub mod binding;
@@ -12,3 +12,4 @@ pub mod instances;
 pub mod processor;
 pub mod reload;
 pub mod state;
+pub mod wiring;

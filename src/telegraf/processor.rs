@@ -104,6 +104,8 @@ pub struct Processor {
     single: Option<usize>,
     /// Reused for every record's parse (keeps its strings' and vectors' capacity).
     scratch: Metric,
+    /// Warns about inputs the first records never feed (see [`super::wiring`]).
+    wiring: super::wiring::WiringCheck,
 }
 
 fn now_ns() -> i64 {
@@ -126,6 +128,7 @@ impl Processor {
     pub fn new(program: Arc<Program>, opts: Options) -> Result<Processor, String> {
         let bindings = binding::bindings(&program)?;
         let encodings = encode::encodings(&program);
+        let wiring = super::wiring::WiringCheck::new(&bindings);
         Ok(Processor {
             program,
             bindings,
@@ -141,6 +144,7 @@ impl Processor {
             epoch: Instant::now(),
             single: None,
             scratch: Metric::default(),
+            wiring,
         })
     }
 
@@ -366,6 +370,7 @@ impl Processor {
 
     /// Feed the metric's bound fields to instance `slot` as events at `ts`.
     fn push_fields(&mut self, metric: &Metric, line: u64, ts: i64, slot: usize, out: &mut Vec<u8>) {
+        self.wiring.observe(metric, &self.bindings);
         let Some(inst) = self.instances.get_mut(slot) else {
             return;
         };
@@ -423,6 +428,11 @@ impl Processor {
         self.evict(now, out);
     }
 
+    /// The input ended: warn about inputs that what was seen never fed (once).
+    pub fn finish_wiring(&mut self) {
+        self.wiring.finish(&self.bindings);
+    }
+
     /// The program every instance runs.
     pub fn program(&self) -> &Arc<Program> {
         &self.program
@@ -456,6 +466,7 @@ impl Processor {
             inst.monitor = carry(&inst.monitor);
         }
         self.emitter.encodings = encode::encodings(&program);
+        self.wiring = super::wiring::WiringCheck::new(&bindings);
         self.bindings = bindings;
         self.program = program;
         Ok(())

@@ -1,0 +1,456 @@
+//! Wiring diagnostics: a spec input that Telegraf's metrics never feed says so.
+//!
+//! Owns: watching the first records of a run (the first [`WINDOW_RECORDS`] records or
+//! [`WINDOW`] of wall time, whichever ends first, or the end of the input if that comes sooner)
+//! and then warning once per input that
+//! - matched no metric: the warning names the input and its `@TelegrafIn`, lists the
+//!   measurements, tag sets and field names actually seen, and names the nearest match (a wrong
+//!   `namepass`, measurement, tag filter or field name, or a JSON string Telegraf's JSON parser
+//!   dropped because it is not in `json_string_fields`);
+//! - had its field present but never converting to the input's type, with the fix;
+//! - gathers a list (`_*` with `@TelegrafListLength(n)`) whose records never reached `n`.
+//!
+//! After the window it costs one branch per record. The processor calls [`WiringCheck::observe`]
+//! for each record and [`WiringCheck::finish`] when the input ends.
+
+use super::binding::{FieldPattern, InputBinding};
+use crate::log::{self, Level};
+use lineproto::{FieldValue, Metric};
+use std::collections::{BTreeMap, BTreeSet};
+use std::time::{Duration, Instant};
+use tessla_engine::Type;
+
+/// Records watched before the verdict.
+pub const WINDOW_RECORDS: u64 = 1000;
+/// Wall time watched before the verdict (from the first record).
+pub const WINDOW: Duration = Duration::from_secs(10);
+/// Distinct tag sets and field names kept per measurement (a fleet has many tag values).
+const MAX_TAG_SETS: usize = 4;
+const MAX_FIELDS: usize = 64;
+const MAX_MEASUREMENTS: usize = 16;
+
+/// What one input got during the window.
+#[derive(Debug, Default, Clone)]
+struct InputSeen {
+    /// Records whose measurement and tags matched.
+    selected: u64,
+    /// Records that had the field (or an element of the list).
+    present: u64,
+    converted: u64,
+    /// The first value that did not convert.
+    failed_example: Option<FieldValue>,
+    /// Longest list gathered (indexed patterns).
+    max_len: usize,
+}
+
+/// What one measurement looked like.
+#[derive(Debug, Default, Clone)]
+struct MeasurementSeen {
+    tag_sets: BTreeSet<String>,
+    more_tag_sets: bool,
+    /// Field name (an indexed name `lidar_12` as its prefix `lidar_`) -> largest index seen.
+    fields: BTreeMap<String, Option<usize>>,
+    more_fields: bool,
+}
+
+/// The watch over the first records of a run.
+#[derive(Debug, Default)]
+pub struct WiringCheck {
+    done: bool,
+    records: u64,
+    started: Option<Instant>,
+    inputs: Vec<InputSeen>,
+    measurements: BTreeMap<String, MeasurementSeen>,
+}
+
+impl WiringCheck {
+    pub fn new(bindings: &[InputBinding]) -> WiringCheck {
+        WiringCheck {
+            inputs: vec![InputSeen::default(); bindings.len()],
+            done: bindings.is_empty(),
+            ..WiringCheck::default()
+        }
+    }
+
+    /// Watch one record; at the end of the window, report (once).
+    pub fn observe(&mut self, m: &Metric, bindings: &[InputBinding]) {
+        if self.done {
+            return;
+        }
+        let started = *self.started.get_or_insert_with(Instant::now);
+        self.records += 1;
+        self.note_shape(m);
+        for (seen, b) in self.inputs.iter_mut().zip(bindings) {
+            if !b.matches(m) {
+                continue;
+            }
+            seen.selected += 1;
+            match &b.field {
+                FieldPattern::Exact(f) => {
+                    if let Some(v) = m.field(f) {
+                        seen.present += 1;
+                        if b.convert(v).is_ok() {
+                            seen.converted += 1;
+                        } else if seen.failed_example.is_none() {
+                            seen.failed_example = Some(v.clone());
+                        }
+                    }
+                }
+                FieldPattern::Indexed(prefix) => {
+                    let len = m
+                        .fields
+                        .iter()
+                        .filter_map(|(k, _)| index_of(k, prefix))
+                        .max()
+                        .map(|i| i + 1);
+                    if let Some(len) = len {
+                        seen.present += 1;
+                        seen.converted += 1;
+                        seen.max_len = seen.max_len.max(len);
+                    }
+                }
+            }
+        }
+        if self.records >= WINDOW_RECORDS || started.elapsed() >= WINDOW {
+            self.report(bindings);
+        }
+    }
+
+    /// The input ended before the window did: report on what was seen.
+    pub fn finish(&mut self, bindings: &[InputBinding]) {
+        if !self.done && self.records > 0 {
+            self.report(bindings);
+        }
+        self.done = true;
+    }
+
+    fn note_shape(&mut self, m: &Metric) {
+        if !self.measurements.contains_key(&m.measurement)
+            && self.measurements.len() >= MAX_MEASUREMENTS
+        {
+            return;
+        }
+        let seen = self.measurements.entry(m.measurement.clone()).or_default();
+        let mut tags: Vec<String> = m.tags.iter().map(|(k, v)| format!("{k}={v}")).collect();
+        tags.sort();
+        let tags = tags.join(",");
+        if !seen.tag_sets.contains(&tags) {
+            if seen.tag_sets.len() < MAX_TAG_SETS {
+                seen.tag_sets.insert(tags);
+            } else {
+                seen.more_tag_sets = true;
+            }
+        }
+        for (k, _) in &m.fields {
+            let (name, idx) = match split_index(k) {
+                Some((prefix, i)) => (prefix, Some(i)),
+                None => (k.as_str(), None),
+            };
+            let full = seen.fields.len() >= MAX_FIELDS;
+            match seen.fields.get_mut(name) {
+                Some(max) => {
+                    if let (Some(old), Some(i)) = (max.as_mut(), idx) {
+                        *old = (*old).max(i);
+                    }
+                }
+                None if !full => {
+                    seen.fields.insert(name.to_string(), idx);
+                }
+                None => seen.more_fields = true,
+            }
+        }
+    }
+
+    fn report(&mut self, bindings: &[InputBinding]) {
+        self.done = true;
+        let within = if self.records >= WINDOW_RECORDS {
+            format!("in the first {} records", self.records)
+        } else {
+            format!("in {} records", self.records)
+        };
+        for (seen, b) in self.inputs.iter().zip(bindings) {
+            if seen.present == 0 {
+                log::log(Level::Warn, &self.unmatched(b, seen, &within));
+            } else if seen.converted == 0 {
+                log::log(Level::Warn, &not_converting(b, seen, &within));
+            } else if let Some(n) = b.length
+                && seen.max_len < n
+            {
+                log::log(
+                    Level::Warn,
+                    &format!(
+                        "input `{}` ({}): lists had at most {} elements {within}, fewer than \
+                         @TelegrafListLength({n}); the missing ones are filled as dropouts. If the \
+                         lidar has {} beams, set that length (bundled robot specs: --set lidar_beams={})",
+                        b.name,
+                        annotation(b),
+                        seen.max_len,
+                        seen.max_len,
+                        seen.max_len
+                    ),
+                );
+            }
+        }
+        self.measurements.clear();
+    }
+
+    /// The warning for an input that matched nothing: what was seen and the nearest match.
+    fn unmatched(&self, b: &InputBinding, seen: &InputSeen, within: &str) -> String {
+        let mut msg = format!(
+            "input `{}` ({}) matched nothing {within}; seen: {}",
+            b.name,
+            annotation(b),
+            self.describe_seen()
+        );
+        let wanted_field = match &b.field {
+            FieldPattern::Exact(f) => f.clone(),
+            FieldPattern::Indexed(p) => format!("{p}*"),
+        };
+        let hint = if let Some(m) = &b.measurement
+            && !self.measurements.contains_key(m)
+        {
+            let near = nearest(m, self.measurements.keys().map(String::as_str));
+            Some(match near {
+                Some(n) => format!(
+                    "no metric named `{m}` (did you mean `{n}`? check @TelegrafIn and Telegraf's namepass)"
+                ),
+                None => format!("no metric named `{m}`: check @TelegrafIn and Telegraf's namepass"),
+            })
+        } else if seen.selected == 0 && !b.tags.is_empty() {
+            let want: Vec<String> = b.tags.iter().map(|(k, v)| format!("{k}={v}")).collect();
+            Some(format!(
+                "no metric carries the tags {} (the tag sets seen are listed above)",
+                want.join(",")
+            ))
+        } else {
+            let fields: Vec<String> = self
+                .measurements
+                .iter()
+                .filter(|(name, _)| b.measurement.as_ref().is_none_or(|m| m == *name))
+                .flat_map(|(_, s)| {
+                    s.fields.iter().map(|(f, idx)| match idx {
+                        Some(_) => format!("{f}*"),
+                        None => f.clone(),
+                    })
+                })
+                .collect();
+            let near = nearest(&wanted_field, fields.iter().map(String::as_str));
+            let mut h = match near {
+                Some(n) => format!("no field `{wanted_field}` (did you mean `{n}`?)"),
+                None => format!("no field `{wanted_field}`"),
+            };
+            if matches!(b.field, FieldPattern::Exact(_)) {
+                h.push_str(&format!(
+                    "; if the robot sends `{wanted_field}` as a JSON string, Telegraf's JSON parser \
+                     drops it unless it is listed in json_string_fields"
+                ));
+            }
+            Some(h)
+        };
+        if let Some(h) = hint {
+            msg.push_str("; ");
+            msg.push_str(&h);
+        }
+        msg
+    }
+
+    /// `mqtt_consumer,host=tb3,topic=tessla fields expectedSpeed, lidar_0..lidar_359; other ...`
+    fn describe_seen(&self) -> String {
+        if self.measurements.is_empty() {
+            return "no metrics".to_string();
+        }
+        let parts: Vec<String> = self
+            .measurements
+            .iter()
+            .map(|(name, s)| {
+                let mut tag_sets: Vec<String> = s
+                    .tag_sets
+                    .iter()
+                    .map(|t| {
+                        if t.is_empty() {
+                            name.clone()
+                        } else {
+                            format!("{name},{t}")
+                        }
+                    })
+                    .collect();
+                if s.more_tag_sets {
+                    tag_sets.push("...".into());
+                }
+                let mut fields: Vec<String> = s
+                    .fields
+                    .iter()
+                    .map(|(f, idx)| match idx {
+                        Some(max) => format!("{f}0..{f}{max}"),
+                        None => f.clone(),
+                    })
+                    .collect();
+                if s.more_fields {
+                    fields.push("...".into());
+                }
+                format!("{} fields {}", tag_sets.join(" | "), fields.join(", "))
+            })
+            .collect();
+        parts.join("; ")
+    }
+}
+
+/// The warning for an input whose field was present but never converted, with the fix.
+fn not_converting(b: &InputBinding, seen: &InputSeen, within: &str) -> String {
+    let field = b.prefix();
+    let example = seen
+        .failed_example
+        .as_ref()
+        .map_or_else(String::new, |v| format!(" (e.g. {})", show(v)));
+    let fix = match (&b.ty, seen.failed_example.as_ref()) {
+        (Type::Float | Type::Int, Some(FieldValue::Str(_))) => format!(
+            "send a number (a numeric string such as \"0.05\" converts), or declare `in {}: Events[String]`",
+            b.name
+        ),
+        (Type::Float | Type::Int, Some(FieldValue::Bool(_))) => {
+            format!("declare `in {}: Events[Bool]`", b.name)
+        }
+        (Type::Int, Some(FieldValue::Float(_))) => {
+            format!("declare `in {}: Events[Float]`", b.name)
+        }
+        (Type::Bool, _) => "send true/false (or the strings \"true\"/\"false\")".to_string(),
+        (Type::String, Some(FieldValue::Bool(_))) => {
+            format!("declare `in {}: Events[Bool]`", b.name)
+        }
+        (Type::String, _) => format!(
+            "the value is a number: declare `in {}: Events[Float]` (Telegraf's json_string_fields keeps only JSON strings as strings)",
+            b.name
+        ),
+        _ => format!("declare the input with the field's type, or change what {field} carries"),
+    };
+    format!(
+        "input `{}` ({}): field `{field}` came {} times {within} and never converted to {}{example}; fix: {fix}",
+        b.name,
+        annotation(b),
+        seen.present,
+        b.ty
+    )
+}
+
+/// A field value as line protocol writes it.
+fn show(v: &FieldValue) -> String {
+    match v {
+        FieldValue::Str(s) => format!("{s:?}"),
+        FieldValue::Float(f) => f.to_string(),
+        FieldValue::Int(i) => format!("{i}i"),
+        FieldValue::UInt(u) => format!("{u}u"),
+        FieldValue::Bool(b) => b.to_string(),
+    }
+}
+
+/// The binding as the spec wrote it.
+fn annotation(b: &InputBinding) -> String {
+    if b.measurement.is_none()
+        && b.tags.is_empty()
+        && b.field == FieldPattern::Exact(b.name.clone())
+    {
+        return format!("no @TelegrafIn: field `{}` of any metric", b.name);
+    }
+    let field = match &b.field {
+        FieldPattern::Exact(f) => f.clone(),
+        FieldPattern::Indexed(p) => format!("{p}*"),
+    };
+    let tags: Vec<String> = b.tags.iter().map(|(k, v)| format!("{k}={v}")).collect();
+    format!(
+        "@TelegrafIn({:?}, {:?}, {field:?})",
+        b.measurement.as_deref().unwrap_or(""),
+        tags.join(",")
+    )
+}
+
+/// `lidar_12` with prefix `lidar_` -> 12.
+fn index_of(key: &str, prefix: &str) -> Option<usize> {
+    key.strip_prefix(prefix)
+        .filter(|s| !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit()))
+        .and_then(|s| s.parse().ok())
+}
+
+/// `lidar_12` -> (`lidar_`, 12); names without a `_<digits>` tail -> None.
+fn split_index(key: &str) -> Option<(&str, usize)> {
+    let cut = key.rfind('_')? + 1;
+    let (prefix, digits) = key.split_at(cut);
+    if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    Some((prefix, digits.parse().ok()?))
+}
+
+/// The candidate closest to `wanted`: equal ignoring case and `_`/`-`, else the best
+/// Jaro-Winkler similarity of at least 0.8.
+fn nearest<'a>(wanted: &str, candidates: impl Iterator<Item = &'a str>) -> Option<&'a str> {
+    let norm = |s: &str| {
+        s.chars()
+            .filter(|c| *c != '_' && *c != '-')
+            .flat_map(char::to_lowercase)
+            .collect::<String>()
+    };
+    let w = norm(wanted);
+    let mut best: Option<(f64, &str)> = None;
+    for c in candidates {
+        let score = if norm(c) == w {
+            2.0
+        } else {
+            strsim::jaro_winkler(&w, &norm(c))
+        };
+        if score >= 0.8 && best.is_none_or(|(s, _)| score > s) {
+            best = Some((score, c));
+        }
+    }
+    best.map(|(_, c)| c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nearest_names_ignore_case_and_underscores() {
+        let c = ["expectedSpeed", "actual_speed", "lidar_*"];
+        assert_eq!(nearest("actualSpeed", c.into_iter()), Some("actual_speed"));
+        assert_eq!(
+            nearest("expectedSped", c.into_iter()),
+            Some("expectedSpeed")
+        );
+        assert_eq!(nearest("battery", c.into_iter()), None);
+    }
+
+    #[test]
+    fn an_input_without_annotation_is_described_as_such() {
+        let mut b = InputBinding {
+            input: 0,
+            name: "x".into(),
+            ty: Type::Float,
+            measurement: None,
+            tags: Vec::new(),
+            field: FieldPattern::Exact("x".into()),
+            length: None,
+        };
+        assert_eq!(annotation(&b), "no @TelegrafIn: field `x` of any metric");
+        b.measurement = Some("m".into());
+        b.tags = vec![("topic".into(), "t".into())];
+        assert_eq!(annotation(&b), "@TelegrafIn(\"m\", \"topic=t\", \"x\")");
+        // What a run without metrics of that shape reports.
+        let mut w = WiringCheck::new(std::slice::from_ref(&b));
+        let m = lineproto::parse_record(b"n,topic=t y=1 1")
+            .unwrap()
+            .unwrap();
+        w.observe(&m, std::slice::from_ref(&b));
+        let msg = w.unmatched(&b, &w.inputs[0], "in 1 records");
+        assert!(msg.contains("seen: n,topic=t fields y"), "{msg}");
+        assert!(msg.contains("no metric named `m`"), "{msg}");
+    }
+
+    #[test]
+    fn indexed_names_split() {
+        assert_eq!(split_index("lidar_12"), Some(("lidar_", 12)));
+        assert_eq!(split_index("lidar_x"), None);
+        assert_eq!(split_index("speed"), None);
+        assert_eq!(index_of("lidar_3", "lidar_"), Some(3));
+        assert_eq!(index_of("lidar_+3", "lidar_"), None);
+    }
+}
