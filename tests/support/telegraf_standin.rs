@@ -915,6 +915,26 @@ impl Conf {
             outputs,
         }
     }
+
+    /// The topics the conf's `outputs.mqtt` publish `m` on (none when their filters drop it).
+    pub fn mqtt_topics(&self, m: &Metric) -> Vec<String> {
+        self.outputs
+            .iter()
+            .filter_map(|o| match o {
+                Output::Mqtt { topic, select, .. } if select.passes(m) => {
+                    Some(render_topic(topic, m))
+                }
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Whether a metric an input made reaches the processors (the inputs' own filters).
+    pub fn input_accepts(&self, input: usize, m: &Metric) -> bool {
+        match &self.inputs[input] {
+            Input::Mqtt { select, .. } | Input::Udp { select, .. } => select.passes(m),
+        }
+    }
 }
 
 // ---------------------------------------------------------------- the running stand-in
