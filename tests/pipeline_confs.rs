@@ -627,3 +627,36 @@ fn the_routing_catches_the_loop_of_the_old_udp_wiring() {
     telegraf.stop();
     assert!(sent > 50, "one message sent {sent} times: the loop");
 }
+
+#[test]
+fn main_conf_gets_what_the_robot_sent_while_telegraf_was_away() {
+    // QoS 1, persistent session, fixed client id: the broker keeps the robot's messages for
+    // Telegraf while it is stopped and hands them over when it is back.
+    let Some(broker) = servers::Mosquitto::start() else {
+        return;
+    };
+    let env = endpoints(broker.port, None);
+    let conf = Conf::read(&conf_text("telegraf.conf"), &env);
+    let robot = mqtt_client::subscribe(broker.port, "action", "robot");
+    let dir = tempfile::tempdir().unwrap();
+    let file = head(&dir, 5);
+    // The first start makes the session; then Telegraf goes away.
+    Telegraf::start(&conf, &env).stop();
+    replay(&file, broker.port, "tessla");
+    let telegraf = Telegraf::start(&conf, &env);
+    let got = actions(&robot, 5);
+    let stats = telegraf.stop();
+    assert_eq!(got.len(), 5, "every message sent while Telegraf was away");
+    assert_quiet(&stats, 5);
+    // Without the persistent session (Telegraf's default) they are lost.
+    let text = conf_text("telegraf.conf")
+        .replace("persistent_session = true", "persistent_session = false");
+    let conf = Conf::read(&text, &env);
+    Telegraf::start(&conf, &env).stop();
+    replay(&file, broker.port, "tessla");
+    let telegraf = Telegraf::start(&conf, &env);
+    std::thread::sleep(Duration::from_millis(500));
+    let stats = telegraf.stop();
+    assert!(robot.recv_timeout(Duration::from_millis(500)).is_err());
+    assert_eq!(stats.to_processor, 0);
+}
