@@ -1,9 +1,16 @@
 //! Logging to stderr in the form Telegraf's execd plugin understands.
 //!
-//! Owns: the level prefixes (`E! `, `W! `, `I! `, `D! `, which Telegraf >= 1.37 maps to its own
-//! log levels), the `--log-level` filter, the 64 KiB line cap (Telegraf's stderr reader drops
-//! longer lines), and rate limiting of repeated warnings: each kind of warning is printed the
+//! Owns: the level prefixes (`E! `, `W! `, `I! `, `D! `: `processors.execd` maps them to its log
+//! levels since Telegraf 1.37.0; older versions log every stderr line, the summary included, as an
+//! error `stderr: "<line>"`), the `--log-level` filter (a default run writes only the summary),
+//! the line cap, and rate limiting of repeated warnings: each kind of warning is printed the
 //! first 10 times, then once per 1000 occurrences with the running count.
+//!
+//! The cap: Telegraf reads the child's stderr with a `bufio.Scanner` of the default 64 KiB
+//! buffer. A longer line does not just get dropped: the scanner fails and Telegraf stops reading
+//! stderr for good, so once the pipe fills every later write here would block the monitor. Every
+//! line is therefore cut (on a char boundary) to at most [`MAX_LINE`] bytes plus the prefix and the
+//! truncation mark, well under 64 KiB.
 
 use std::collections::HashMap;
 use std::io::Write;
@@ -21,7 +28,8 @@ pub enum Level {
 static LEVEL: Mutex<Level> = Mutex::new(Level::Info);
 static COUNTS: Mutex<Option<HashMap<&'static str, u64>>> = Mutex::new(None);
 
-const MAX_LINE: usize = 60 * 1024;
+/// Longest message text of one stderr line, in bytes (see the module doc).
+pub const MAX_LINE: usize = 60 * 1024;
 
 pub fn set_level(level: Level) {
     if let Ok(mut l) = LEVEL.lock() {
@@ -44,7 +52,7 @@ pub fn log(level: Level, msg: &str) {
 }
 
 /// The stderr text of one message: each line prefixed, cut (on a char boundary) to stay under
-/// Telegraf's 64 KiB line limit.
+/// the 64 KiB line Telegraf's stderr reader can take.
 fn format(level: Level, msg: &str) -> String {
     let prefix = match level {
         Level::Error => "E! ",
@@ -116,6 +124,23 @@ mod tests {
         assert!(out.len() < 64 * 1024, "{}", out.len());
         assert!(out.starts_with("I! é"));
         assert!(out.ends_with(" …(truncated)\n"));
+    }
+
+    #[test]
+    fn every_cut_line_fits_telegrafs_64_kib_reader() {
+        // Telegraf's scanner needs the line and its newline in 64 KiB.
+        for msg in [
+            "x".repeat(200_000),
+            "€".repeat(70_000),
+            "a\n".repeat(3) + &"b".repeat(MAX_LINE),
+        ] {
+            for line in format(Level::Error, &msg).split_inclusive('\n') {
+                assert!(line.len() < 64 * 1024, "{}", line.len());
+            }
+        }
+        // A line up to the cap is kept whole.
+        let exact = "y".repeat(MAX_LINE);
+        assert_eq!(format(Level::Info, &exact), format!("I! {exact}\n"));
     }
 
     #[test]

@@ -316,7 +316,7 @@ fn shipped_udp_conf_matches_the_udp_defaults() {
     let recv = std::net::UdpSocket::bind(from_us.strip_prefix("udp://").unwrap()).unwrap();
     recv.set_read_timeout(Some(Duration::from_millis(300)))
         .unwrap();
-    let mut child = spawn(&["run", "--udp-listen", "--no-passthrough"]);
+    let mut child = spawn(&["run", "--udp-listen"]);
     let sock = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     let line = fixture_lines(1).concat();
     let mut got = String::new();

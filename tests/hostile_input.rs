@@ -274,7 +274,10 @@ fn decreasing_and_repeated_timestamps_are_reported_and_answered() {
     input.push_str(&robot(2000));
     input.push_str(&robot(1500)); // decreasing: late, joins the open step at 2000
     input.push_str(&robot(3000));
-    input.push_str(&robot(3000)); // repeated: the same step, a second event per input
+    // Repeated timestamp, other values: the same step, a second event per input. (An exact
+    // repeat would be a redelivered message, dropped as a duplicate.)
+    input.push_str(&robot(3000).replace("expectedSpeed=0.015", "expectedSpeed=0.02"));
+    input.push_str(&robot(3000));
     input.push_str(&robot(4000));
     let f = run_bytes(&["run", "--no-passthrough"], input.into_bytes(), DEADLINE);
     assert_survived(&f, 3, &[1000, 2000, 3000, 4000]);
@@ -284,6 +287,8 @@ fn decreasing_and_repeated_timestamps_are_reported_and_answered() {
         "{}",
         f.stderr
     );
+    assert!(f.stderr.contains("line 6: exact repeat"), "{}", f.stderr);
+    assert!(f.stderr.contains(", 1 duplicates"), "{}", f.stderr);
     // --late drop: the late record's events are dropped, the rest answered.
     let mut input = robot(1000);
     input.push_str(&robot(500));

@@ -1,6 +1,9 @@
 #!/usr/bin/env python3
-"""Generate the recorded-run fixture: a TurtleBot3 "yoga mat" run as in the paper, shaped exactly as
-Telegraf's mqtt_consumer JSON parser makes it, plus an independent ground truth of the verdicts.
+"""Generate the recorded-run fixture: a TurtleBot3 "yoga mat" run as in the paper, in the line protocol
+Telegraf's processors.execd writes for what its mqtt_consumer JSON parser makes of the robot's messages
+(tags sorted; every number a float in Telegraf's form; actualSpeed a string; the fields in Go map order,
+that is a different order on every record: a seeded shuffle here), plus an independent ground truth of
+the verdicts.
 
 Fixed seed, standard library only. Writes tests/fixtures/robot/recorded_run.lp and
 tests/fixtures/robot/recorded_run.truth.json. The ground truth is computed here from the
@@ -45,6 +48,8 @@ def expected_speed(i):
 
 def main():
     rnd = random.Random(SEED)
+    # Go map order of the fields: its own generator, so the values do not depend on it.
+    order = random.Random(SEED + 1)
     root = Path(__file__).resolve().parent.parent / "tests" / "fixtures" / "robot"
     root.mkdir(parents=True, exist_ok=True)
     lines, truth = [], []
@@ -70,7 +75,9 @@ def main():
             if i in SPIKES and abs(b - SPIKES[i]) <= 1:
                 continue
             scan[b] = 0.0
-        # A missing beam (Telegraf drops NaN fields) now and then.
+        # A missing beam now and then: the robot sends `null`, which Telegraf's JSON parser skips (the
+        # other beams keep their indices). A NaN or Infinity instead would make the whole message
+        # invalid JSON, and Telegraf would drop the message, not the field.
         if i % 40 == 5:
             b = 200 + i % 30
             if not (i in SPIKES and abs(b - SPIKES[i]) <= 1):
@@ -84,6 +91,7 @@ def main():
         fields = [f"actualAngular={fmt(act_ang)}", f'actualSpeed="{act}"', f"expectedAngular={fmt(exp_ang)}",
                   f"expectedSpeed={fmt(exp)}"]
         fields += [f"lidar_{b}={fmt(v)}" for b, v in enumerate(scan) if b not in missing]
+        order.shuffle(fields)
         lines.append(f"mqtt_consumer,host=turtlebot3,topic=tessla {','.join(fields)} {ts}\n")
 
         # ---- ground truth, from the property definitions ----

@@ -89,7 +89,8 @@ pub struct RunArgs {
     pub spec: Option<PathBuf>,
     #[command(flatten)]
     pub spec_options: SpecOptions,
-    /// Do not echo input records (by default each is written back unchanged before its outputs).
+    /// Do not echo input records (by default each is written back unchanged before its outputs;
+    /// never in UDP mode).
     #[arg(long)]
     pub no_passthrough: bool,
     /// What to do with a record whose timestamp is not after the last evaluated step.

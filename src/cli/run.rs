@@ -62,7 +62,9 @@ pub fn run(args: RunArgs) -> i32 {
         instance_by: Vec::new(),
     };
     let opts = Options {
-        passthrough: !args.no_passthrough,
+        // UDP mode never echoes: Telegraf already routes the robot metric to its other outputs,
+        // and an echo sent back to Telegraf is one step from a feedback loop.
+        passthrough: !args.no_passthrough && args.udp_listen.is_none(),
         late: args.late,
         measurement: args.measurement.clone(),
         tags,

@@ -4,10 +4,11 @@
 //! robot message, hand it to the [`Twin`], queue the returned action until the twin's round-trip
 //! delay has passed, integrate the physics to the next period), the robot's speed estimate
 //! (as hector SLAM: pose differences over one period, each pose with Gaussian noise), the
-//! message as Telegraf's JSON parser delivers it ([`Message::to_line`]), and the run's
-//! measures ([`Outcome`]). Which speed the robot executes: with the monitor on, the latest
-//! action that has arrived, as long as the program's own speed has not changed since the
-//! action's message was sent; otherwise (and always with the monitor off) the program's speed.
+//! message as Telegraf's JSON parser delivers it, fields in Go map order
+//! ([`Message::to_line`]), and the run's measures ([`Outcome`]). Which speed the robot
+//! executes: with the monitor on, the latest action that has arrived, as long as the program's
+//! own speed has not changed since the action's message was sent; otherwise (and always with the
+//! monitor off) the program's speed.
 
 use super::lidar::{LidarParams, Map};
 use super::program::Program;
@@ -15,6 +16,7 @@ use super::robot::{Params, Robot};
 use super::terrain::Terrain;
 use lineproto::{FieldValue, LineWriter};
 use rand::SeedableRng;
+use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use std::collections::VecDeque;
@@ -67,20 +69,36 @@ impl Message {
         format!("{}", (self.actual_speed * 1e4).round() / 1e4)
     }
 
-    /// The line Telegraf's `mqtt_consumer` JSON parser makes of this message (fields sorted as
-    /// the JSON object's keys, numbers as floats, `actualSpeed` kept as a string).
+    /// The line Telegraf's `mqtt_consumer` JSON parser makes of this message: numbers as
+    /// floats, `actualSpeed` kept as a string, tags sorted, and the fields in Go map order, a
+    /// different order for every message (a shuffle seeded by the message's time, so runs repeat).
     pub fn to_line(&self, host: &str) -> String {
+        let mut fields = vec![
+            (
+                "actualAngular".to_string(),
+                FieldValue::Float((self.actual_angular * 1e4).round() / 1e4),
+            ),
+            (
+                "actualSpeed".to_string(),
+                FieldValue::Str(self.actual_speed_text()),
+            ),
+            (
+                "expectedAngular".to_string(),
+                FieldValue::Float(self.expected_angular),
+            ),
+            (
+                "expectedSpeed".to_string(),
+                FieldValue::Float(self.expected_speed),
+            ),
+        ];
+        for (i, r) in self.lidar.iter().enumerate() {
+            fields.push((format!("lidar_{i}"), FieldValue::Float(*r)));
+        }
+        fields.shuffle(&mut ChaCha8Rng::seed_from_u64(self.time_ns as u64));
         let mut w = LineWriter::new("mqtt_consumer");
         w.tag("host", host).tag("topic", "tessla");
-        w.field(
-            "actualAngular",
-            &FieldValue::Float((self.actual_angular * 1e4).round() / 1e4),
-        )
-        .field("actualSpeed", &FieldValue::Str(self.actual_speed_text()))
-        .field("expectedAngular", &FieldValue::Float(self.expected_angular))
-        .field("expectedSpeed", &FieldValue::Float(self.expected_speed));
-        for (i, r) in self.lidar.iter().enumerate() {
-            w.field(&format!("lidar_{i}"), &FieldValue::Float(*r));
+        for (k, v) in &fields {
+            w.field(k, v);
         }
         w.finish(Some(self.time_ns)).0.unwrap_or_default()
     }

@@ -2,11 +2,13 @@
 //!
 //! Owns: how a spec's inputs bind to metrics ([`binding`]: `@TelegrafIn`, indexed `_*` fields,
 //! value conversion), how outputs become metrics ([`encode`]: `@TelegrafOut`, `@TelegrafField`,
-//! the default grouped metric), and the step loop with pass-through, late records and counters
-//! ([`processor`]), `--state` persistence ([`state`]) and SIGHUP spec reloads ([`reload`]), and warnings about inputs no metric feeds ([`wiring`]).
+//! the default grouped metric), and the step loop with pass-through, late records, exact
+//! duplicates ([`dedup`]) and counters ([`processor`]), `--state` persistence ([`state`]), SIGHUP
+//! spec reloads ([`reload`]) and warnings about inputs no metric feeds ([`wiring`]).
 //! Transports (stdin/stdout, UDP) feed bytes to a [`processor::Processor`].
 
 pub mod binding;
+pub mod dedup;
 pub mod encode;
 pub mod instances;
 pub mod processor;

@@ -74,12 +74,15 @@ pub struct Counters {
     pub instances: u64,
     /// Monitor instances evicted (LRU or idle).
     pub evicted: u64,
+    /// Exact repeats of a recent record, dropped ([`super::dedup`]).
+    pub duplicates: u64,
 }
 
 /// One monitor and the tags its output lines carry (static tags and instance tags).
 struct Instance {
     monitor: Monitor,
     tags: Vec<(String, String)>,
+    recent: super::dedup::Recent,
 }
 
 /// What writing a step's outputs needs, apart from the instance.
@@ -204,7 +207,15 @@ impl Processor {
         if !self.opts.instance_by.is_empty() {
             tags.sort();
         }
-        let i = self.instances.insert(key, Instance { monitor, tags }, now);
+        let i = self.instances.insert(
+            key,
+            Instance {
+                monitor,
+                tags,
+                recent: Default::default(),
+            },
+            now,
+        );
         if self.opts.instance_by.is_empty() && self.opts.instance_idle.is_none() {
             self.single = Some(i);
         }
@@ -296,6 +307,18 @@ impl Processor {
         let Some(inst) = self.instances.get_mut(slot) else {
             return;
         };
+        if let Some(t) = metric.timestamp
+            && inst.recent.is_duplicate(t, metric)
+        {
+            self.counters.duplicates += 1;
+            log::warn_limited("duplicate", || {
+                format!(
+                    "line {}: exact repeat of a recent record (a redelivered message); dropped",
+                    rec.line
+                )
+            });
+            return;
+        }
         let monitor = &mut inst.monitor;
         let mut late = false;
         // The earliest timestamp still accepted: the open step, or just after the last evaluated one.
@@ -476,8 +499,8 @@ impl Processor {
     pub fn summary(&self) -> String {
         let c = &self.counters;
         let mut s = format!(
-            "summary: {} records, {} events, {} outputs, {} parse errors, {} late records, {} dropped values",
-            c.records, c.events, c.outputs, c.parse_errors, c.late, c.dropped_values
+            "summary: {} records, {} events, {} outputs, {} parse errors, {} late records, {} dropped values, {} duplicates",
+            c.records, c.events, c.outputs, c.parse_errors, c.late, c.dropped_values, c.duplicates
         );
         if !self.opts.instance_by.is_empty() {
             s.push_str(&format!(

@@ -2,7 +2,9 @@
 //!
 //! Owns: receiving datagrams (several lines each; every line parsed alone, so one bad line costs
 //! only itself), evaluating the step at the end of each datagram, and sending outputs packed
-//! into datagrams of at most `max_datagram` bytes without splitting a line.
+//! into datagrams of at most `max_datagram` bytes without splitting a line. Input records are
+//! never echoed in this mode (see `run`'s options): Telegraf already sends the robot metric to
+//! its other outputs.
 
 use super::{Ending, Hooks};
 use crate::telegraf::processor::Processor;
