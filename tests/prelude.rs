@@ -464,7 +464,7 @@ fn build_spec(p: &Prelude, id: &str, case: &Path) -> Result<PathBuf, String> {
 }
 
 #[test]
-fn every_prelude_module_is_a_library_module() {
+fn prelude_defines_every_library_name() {
     let p = load_prelude();
     let modules: BTreeSet<String> = names().into_iter().map(|(m, _)| m).collect();
     let strays: Vec<&String> = p.modules.keys().filter(|m| !modules.contains(*m)).collect();
