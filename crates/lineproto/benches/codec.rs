@@ -1,9 +1,10 @@
 //! Codec throughput: splitting, parsing (the bare crate vs. our Telegraf-rule wrapper) and writing,
 //! on a P2-shaped robot line (two speeds) and a 360-sample lidar line, as Telegraf's JSON parser
-//! makes them.
+//! makes them (fields sorted, and in the random order Telegraf writes them: `*_unordered`), and
+//! float formatting (`Display` vs. [`lineproto::write_float`]).
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use lineproto::{FieldValue, LineWriter, RecordSplitter, parse_record};
+use lineproto::{FieldValue, LineWriter, RecordSplitter, parse_record, write_float};
 use std::hint::black_box;
 
 fn p2_line() -> String {
@@ -21,6 +22,22 @@ fn lidar_line() -> String {
     }
     s.push_str(" 1719231000123456789\n");
     s
+}
+
+/// The lidar line with its fields in a fixed pseudo-random order (Telegraf's Go map order).
+fn lidar_line_unordered() -> String {
+    let line = lidar_line();
+    let (head, rest) = line.split_once(' ').unwrap_or_default();
+    let (fields, ts) = rest.rsplit_once(' ').unwrap_or_default();
+    let mut fields: Vec<&str> = fields.split(',').collect();
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    for i in (1..fields.len()).rev() {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        fields.swap(i, (seed % (i as u64 + 1)) as usize);
+    }
+    format!("{head} {} {ts}", fields.join(","))
 }
 
 fn bench_parse(c: &mut Criterion, name: &str, line: &str) {
@@ -85,6 +102,46 @@ fn bench_write(c: &mut Criterion) {
     g.finish();
 }
 
+/// Output values as a P2 step makes them: differences and means of short decimals (16 to 17
+/// digits) next to the short decimals themselves.
+fn bench_format(c: &mut Criterion) {
+    let values: Vec<f64> = (0..1000)
+        .map(|i| {
+            let a = f64::from(i % 97) / 1000.0;
+            let b = f64::from(i % 89) / 10000.0 + 0.015;
+            match i % 3 {
+                0 => a - b,
+                1 => (a - b) * (a - b) / f64::from(i + 1),
+                _ => b,
+            }
+        })
+        .collect();
+    let mut g = c.benchmark_group("format_f64");
+    g.throughput(Throughput::Elements(values.len() as u64));
+    g.bench_function("display", |b| {
+        let mut s = String::with_capacity(32 * 1024);
+        b.iter(|| {
+            use std::fmt::Write as _;
+            s.clear();
+            for v in &values {
+                let _ = write!(s, "{}", black_box(*v));
+            }
+            black_box(s.len())
+        })
+    });
+    g.bench_function("write_float", |b| {
+        let mut s = String::with_capacity(32 * 1024);
+        b.iter(|| {
+            s.clear();
+            for v in &values {
+                write_float(&mut s, black_box(*v));
+            }
+            black_box(s.len())
+        })
+    });
+    g.finish();
+}
+
 fn benches(c: &mut Criterion) {
     let p2 = p2_line();
     let lidar = lidar_line();
@@ -92,7 +149,11 @@ fn benches(c: &mut Criterion) {
     bench_parse(c, "lidar360", &lidar);
     bench_split(c, "p2", &p2);
     bench_split(c, "lidar360", &lidar);
+    let unordered = lidar_line_unordered();
+    bench_parse(c, "lidar360_unordered", &unordered);
+    bench_split(c, "lidar360_unordered", &unordered);
     bench_write(c);
+    bench_format(c);
 }
 
 criterion_group!(codec, benches);
