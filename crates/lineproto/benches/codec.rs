@@ -4,7 +4,9 @@
 //! float formatting (`Display` vs. [`lineproto::write_float`]).
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use lineproto::{FieldValue, LineWriter, RecordSplitter, parse_record, write_float};
+use lineproto::{
+    FieldValue, LineWriter, Metric, RecordSplitter, parse_record, parse_record_into, write_float,
+};
 use std::hint::black_box;
 
 fn p2_line() -> String {
@@ -56,6 +58,14 @@ fn bench_parse(c: &mut Criterion, name: &str, line: &str) {
         b.iter(|| {
             let m = parse_record(black_box(line.as_bytes()));
             black_box(m.map(|m| m.map(|m| m.fields.len())))
+        })
+    });
+    // As the step loop parses: into one reused metric (no key strings allocated).
+    g.bench_function("lineproto_parse_record_into_reused", |b| {
+        let mut m = Metric::default();
+        b.iter(|| {
+            let ok = parse_record_into(black_box(line.as_bytes()), &mut m);
+            black_box((ok.is_ok(), m.fields.len()))
         })
     });
     g.finish();
