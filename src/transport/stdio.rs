@@ -4,6 +4,11 @@
 //! returns less than a full buffer (no more input right now: never wait for the next record to
 //! answer this one), flushing stdout after every batch, SIGTERM/SIGINT, SIGHUP (handed to the
 //! caller's reload between reads), and a closed stdout.
+//!
+//! A pipe on stdin (Telegraf's execd, `cat file |`) is read in non-blocking mode by the runtime
+//! thread itself when the pipe is readable; anything else (a file, a terminal) through tokio's
+//! stdin, which reads on a helper thread and hands each read over (two thread wake-ups per
+//! read: most of the answer latency of a single record on a busy machine).
 
 use super::{Ending, Hooks};
 use crate::telegraf::processor::Processor;
@@ -13,9 +18,38 @@ use tokio::io::AsyncReadExt;
 
 const BUF: usize = 64 * 1024;
 
+/// Standard input: the pipe read directly when it is one, tokio's stdin otherwise.
+enum Input {
+    Pipe(tokio::net::unix::pipe::Receiver),
+    Other(tokio::io::Stdin),
+}
+
+impl Input {
+    fn open() -> Input {
+        use std::os::fd::AsFd;
+        // A duplicate of fd 0 (the same pipe): the receiver sets it non-blocking and checks that
+        // it is a FIFO; on any failure tokio's stdin is used.
+        let pipe = std::io::stdin()
+            .as_fd()
+            .try_clone_to_owned()
+            .and_then(tokio::net::unix::pipe::Receiver::from_owned_fd);
+        match pipe {
+            Ok(r) => Input::Pipe(r),
+            Err(_) => Input::Other(tokio::io::stdin()),
+        }
+    }
+
+    async fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        match self {
+            Input::Pipe(r) => r.read(buf).await,
+            Input::Other(s) => s.read(buf).await,
+        }
+    }
+}
+
 /// Run until EOF, a signal, or a closed stdout. Pending steps are always evaluated and written.
 pub async fn run(proc: &mut Processor, hooks: Hooks<'_>) -> std::io::Result<Ending> {
-    let mut stdin = tokio::io::stdin();
+    let mut stdin = Input::open();
     let mut splitter = RecordSplitter::default();
     let mut buf = vec![0u8; BUF];
     let mut out = Vec::with_capacity(BUF);
