@@ -235,14 +235,23 @@ def main():
     log("== latency (bench/latency.rs, P2 spec, pass-through on)")
     lines = ["### Answer latency: write a record into stdin -> read its verdict line (P2 spec)", "",
              "| rate | records measured | p50 µs | p90 µs | p99 µs | p99.9 µs | max µs |", "|---|---|---|---|---|---|---|"]
-    for rate, secs in [(1000, 10), (10000, 5)]:
-        r = subprocess.run([str(EXAMPLES / "latency"), "--bin", str(BIN), "--rate", str(rate), "--seconds",
+    # The machine is shared: the last row runs the tool and the child (it inherits the policy)
+    # at real-time priority (`chrt -f 50`, needs root or CAP_SYS_NICE), so that other processes
+    # cannot delay their wake-ups; left out when chrt is refused.
+    runs = [(1000, 10, []), (10000, 5, [])]
+    if shutil.which("chrt") and subprocess.run(["chrt", "-f", "50", "true"], capture_output=True).returncode == 0:
+        runs.append((1000, 10, ["chrt", "-f", "50"]))
+    for rate, secs, prefix in runs:
+        r = subprocess.run([*prefix, str(EXAMPLES / "latency"), "--bin", str(BIN), "--rate", str(rate), "--seconds",
                             str(secs), "--", "run", "--spec", str(P2_SPEC)], capture_output=True, text=True,
                            check=True).stdout.strip()
         log(f"   {r}")
         kv = dict(x.split("=", 1) for x in r.split())
-        lines.append(f"| {rate:,}/s | {kv['measured']} | {kv['p50_us']} | {kv['p90_us']} | {kv['p99_us']} | "
+        label = f"{rate:,}/s" + (" (`chrt -f 50`)" if prefix else "")
+        lines.append(f"| {label} | {kv['measured']} | {kv['p50_us']} | {kv['p90_us']} | {kv['p99_us']} | "
                      f"{kv['p999_us']} | {kv['max_us']} |")
+    lines.append("")
+    lines.append(f"Load average after the latency runs: {os.getloadavg()[0]:.1f}.")
     report.append("\n".join(lines) + "\n")
 
     text = "\n".join(report)
