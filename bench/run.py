@@ -9,7 +9,8 @@ pipe (`cat FILE | CMD > /dev/null`, as Telegraf's execd feeds its child) and is 
 tables show medians. Rows:
   cat            the pipe floor (`cat` copying the same bytes)
   parse-only     crates/lineproto splitting + parsing, nothing evaluated or written (bench/parse_only.rs)
-  tessla-telegraf  `tessla-telegraf run` (pass-through on), stdin to stdout
+  tessla-telegraf  `tessla-telegraf run` (pass-through on), stdin to stdout; the fleet also with
+                   `--threads 2` (instances spread over two threads)
   python P2      bench/p2_processor.py (the paper's DT language, standard library only), P2 only
   rtlola-cli     `rtlola-cli monitor` on bench/p2.lola over the same events as CSV, P2 only
 Also: spec load (start-up of `run` on empty input), answer latency at 1k and 10k lines/s
@@ -209,6 +210,8 @@ def main():
                      a.reps)
     rows.append(ours_f)
     rows.append(measure("same, fields sorted", [*ours, "--instance-by", "robot"], fleet_sorted, n, a.reps))
+    rows.append(measure("same, --threads 2", [*ours, "--instance-by", "robot", "--threads", "2"], fleet_lp, n,
+                        a.reps))
     report.append(table(f"Fleet: {n:,} records from 10,000 robots interleaved (robot spec)", "records", rows,
                         ours_f))
 
