@@ -313,4 +313,30 @@ mod tests {
         assert_eq!(t.take_open(), vec![a]);
         assert_eq!(t.take_open(), Vec::<usize>::new());
     }
+
+    /// A record's shard depends only on its instance key, whether read from the raw series key
+    /// or from the parsed record (escapes elsewhere in the series key force the parse).
+    #[test]
+    fn shards_follow_the_instance_key() {
+        let by = vec!["robot".to_string()];
+        for n in [2, 3, 7] {
+            for r in 0..50 {
+                let plain = format!("m,robot=r{r} x=1 1");
+                let other_tags = format!("n,a=1,robot=r{r},z=2 y=\"s\" 2");
+                let escaped = format!("m,robot=r{r},t=a\\ b x=1 1");
+                let s = shard_of(plain.as_bytes(), &by, n);
+                assert!(s < n);
+                assert_eq!(s, shard_of(other_tags.as_bytes(), &by, n), "{other_tags}");
+                assert_eq!(s, shard_of(escaped.as_bytes(), &by, n), "{escaped}");
+            }
+            let absent = shard_of(b"m x=1 1", &by, n);
+            assert_eq!(absent, shard_of(b"m,t=a\\ b x=1 1", &by, n));
+        }
+        // Eight robots use both of two shards (the reload test relies on it).
+        let used: std::collections::BTreeSet<usize> = (0..8)
+            .map(|r| shard_of(format!("m,robot=r{r} x=1i 10\n").as_bytes(), &by, 2))
+            .collect();
+        assert_eq!(used.len(), 2);
+        assert_eq!(shard_of(b"m,robot=a x=1 1", &by, 1), 0);
+    }
 }
