@@ -105,7 +105,8 @@ def robot_fields(rnd, i, period):
 
 
 def suffix(order):
-    return "" if order == "telegraf" else f"_{order}"
+    """`_telegraf` or `_sorted`: files cached by an older version (sorted, no suffix) are not reused."""
+    return f"_{order}"
 
 
 def write_p2(out, n, seed, order):
