@@ -1,6 +1,7 @@
 //! Criterion guard of the record path's middle: binding a parsed metric to the spec's inputs
 //! (`InputBinding::matches` + `extract`, value conversion) for the P2 record (two speeds, one a
-//! string) and a full robot message with a 360-beam scan gathered by `lidar_*` into one list.
+//! string) and a full robot message with a 360-beam scan gathered by `lidar_*` into one list
+//! (fields sorted, and in Telegraf's random order: `bind_lidar360_unordered`).
 //! Run with `make bench` (or `cargo bench --bench binding`).
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
@@ -20,6 +21,21 @@ fn lidar_line() -> String {
     }
     s.push_str(" 1719231000123456789\n");
     s
+}
+
+/// `line` with its fields in a fixed pseudo-random order, as Telegraf writes them (Go map order).
+fn unordered(line: &str) -> String {
+    let (head, rest) = line.split_once(' ').unwrap();
+    let (fields, ts) = rest.rsplit_once(' ').unwrap();
+    let mut fields: Vec<&str> = fields.split(',').collect();
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    for i in (1..fields.len()).rev() {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        fields.swap(i, (seed % (i as u64 + 1)) as usize);
+    }
+    format!("{head} {} {ts}", fields.join(","))
 }
 
 fn bind(c: &mut Criterion, name: &str, line: &str) {
@@ -50,6 +66,7 @@ fn bind(c: &mut Criterion, name: &str, line: &str) {
 fn benches(c: &mut Criterion) {
     bind(c, "p2", P2_LINE);
     bind(c, "lidar360", &lidar_line());
+    bind(c, "lidar360_unordered", &unordered(&lidar_line()));
 }
 
 criterion_group!(binding, benches);

@@ -1,7 +1,8 @@
 //! Criterion guard of the whole record path inside the process: `Processor::record` on one record
 //! (split record in, parse, bind, engine step, output formatting, pass-through) for the P2
 //! workload's record with bench/p2.tessla, and a full robot message (360 beams) with the bundled
-//! robot spec. The timestamp advances every iteration, as in a real run.
+//! robot spec, its fields sorted and in Telegraf's random order (`*_unordered`). The timestamp
+//! advances every iteration, as in a real run.
 //! Run with `make bench` (or `cargo bench --bench record_path`).
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
@@ -23,6 +24,21 @@ fn lidar_line() -> String {
     }
     s.push_str(" 1719231000123456789\n");
     s
+}
+
+/// `line` with its fields in a fixed pseudo-random order, as Telegraf writes them (Go map order).
+fn unordered(line: &str) -> String {
+    let (head, rest) = line.split_once(' ').unwrap();
+    let (fields, ts) = rest.rsplit_once(' ').unwrap();
+    let mut fields: Vec<&str> = fields.split(',').collect();
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    for i in (1..fields.len()).rev() {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        fields.swap(i, (seed % (i as u64 + 1)) as usize);
+    }
+    format!("{head} {} {ts}", fields.join(","))
 }
 
 /// Overwrite the record's 19-digit timestamp (just before its newline) with `ts`.
@@ -75,8 +91,14 @@ fn benches(c: &mut Criterion) {
     run(
         c,
         "robot_spec_lidar360_record",
-        Processor::new(robot, Options::default()).unwrap(),
+        Processor::new(robot.clone(), Options::default()).unwrap(),
         &lidar_line(),
+    );
+    run(
+        c,
+        "robot_spec_lidar360_record_unordered",
+        Processor::new(robot, Options::default()).unwrap(),
+        &unordered(&lidar_line()),
     );
 }
 

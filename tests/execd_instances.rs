@@ -274,3 +274,52 @@ fn shipped_fleet_conf_command_keeps_robots_apart() {
         assert_eq!(actions, PER_ROBOT, "robot {k}");
     }
 }
+
+/// Lines grouped by the instance they belong to (its `topic` tag), each group in output order.
+fn per_instance(out: &str) -> std::collections::BTreeMap<String, Vec<String>> {
+    let mut m = std::collections::BTreeMap::<String, Vec<String>>::new();
+    for l in out.lines() {
+        let topic = l
+            .split([',', ' '])
+            .find_map(|p| p.strip_prefix("topic="))
+            .unwrap_or("")
+            .to_string();
+        m.entry(topic).or_default().push(l.to_string());
+    }
+    m
+}
+
+/// `--threads N` spreads the instances over N threads: the output set and every instance's
+/// output order (pass-through included) are those of one thread.
+#[test]
+fn threads_keep_the_output_set_and_each_instances_order() {
+    // The recorded robots, and 300 more robots sending P2 records round by round.
+    let mut input = fleet(&[0, 1, 2]);
+    for round in 0..6 {
+        for r in 0..300 {
+            input.push_str(&format!(
+                "mqtt_consumer,host=h,topic=fleet/r{r} expectedSpeed=0.05,actualSpeed=\"0.0{}\" {}\n",
+                (r + round) % 9 + 1,
+                1_800_000_000_000_000_000i64 + round * 200_000_000 + r
+            ));
+        }
+    }
+    let (one, err, code) = run(&["--instance-by", "topic", "--threads", "1"], &input);
+    assert_eq!(code, 0, "{err}");
+    assert!(one.lines().count() > input.lines().count());
+    for threads in ["2", "3"] {
+        let (many, err, code) = run(&["--instance-by", "topic", "--threads", threads], &input);
+        assert_eq!(code, 0, "{err}");
+        assert_eq!(
+            sorted_lines(&one),
+            sorted_lines(&many),
+            "--threads {threads}"
+        );
+        assert_eq!(
+            per_instance(&one),
+            per_instance(&many),
+            "--threads {threads}"
+        );
+        assert!(err.contains("303 instances"), "{err}");
+    }
+}

@@ -178,3 +178,45 @@ fn udp_mode_reloads_on_sighup() {
     let (_, err, code) = c.finish();
     assert_eq!(code, 0, "{err}");
 }
+
+/// With `--threads 2` the instances live in two threads: a reload reaches every one of them.
+#[test]
+fn a_reload_reaches_every_thread() {
+    let dir = tempfile::tempdir().unwrap();
+    let main = dir.path().join("main.tessla");
+    let lib = dir.path().join("lib.tessla");
+    std::fs::write(&main, MAIN_V1).unwrap();
+    std::fs::write(&lib, LIB_V1).unwrap();
+    let args = [
+        "--spec",
+        s(&main),
+        "--no-passthrough",
+        "--instance-by",
+        "robot",
+        "--threads",
+        "2",
+    ];
+    let mut c = LiveChild::spawn(&args);
+    let robots = 8;
+    for r in 0..robots {
+        c.write(&format!("m,robot=r{r} x=1i 10\n"));
+    }
+    for r in 0..robots {
+        let want = format!("tessla,robot=r{r} c=1i,m=2i 10\n");
+        c.wait_out(&format!("robot r{r} at 10"), |l| l == want);
+    }
+    std::fs::write(&lib, LIB_V2).unwrap();
+    hangup(&mut c, "I! reload:");
+    for r in 0..robots {
+        c.write(&format!("m,robot=r{r} x=3i 20\n"));
+    }
+    for r in 0..robots {
+        // The count kept its state; `m` is the new definition in every thread.
+        let want = format!("tessla,robot=r{r} c=2i,m=6i 20\n");
+        c.wait_out(&format!("robot r{r} at 20 under the new spec"), |l| {
+            l == want
+        });
+    }
+    let (_, err, code) = c.finish();
+    assert_eq!(code, 0, "{err}");
+}

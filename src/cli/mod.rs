@@ -122,6 +122,13 @@ pub struct RunArgs {
     #[arg(long, value_name = "N", default_value_t = crate::telegraf::processor::DEFAULT_MAX_INSTANCES,
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
     pub max_instances: usize,
+    /// With --instance-by, on stdin: spread the instances over this many threads (default 1;
+    /// always 1 with --state and in UDP mode). Each instance's outputs keep their order and the output set is the same
+    /// as with one thread, but lines of different instances read together may come in another
+    /// order (pass-through included), and --max-instances bounds each thread's instances.
+    #[arg(long, value_name = "N",
+          value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1024))]
+    pub threads: Option<usize>,
     /// Evict a monitor instance that received no record for this long (wall clock): `30s`, `5m`, `1h`.
     #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration)]
     pub instance_idle: Option<std::time::Duration>,

@@ -105,6 +105,11 @@ pub fn run(args: RunArgs) -> i32 {
             .state_interval
             .map(|d| (d, &mut save_now as &mut dyn FnMut(&Processor))),
     };
+    // Threads spread instances; the state file holds one processor's instances, so one thread.
+    let threads = match (&args.state, args.threads) {
+        (None, Some(n)) => n,
+        _ => 1,
+    };
     let rt = match tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
@@ -127,7 +132,7 @@ pub fn run(args: RunArgs) -> i32 {
                 )
                 .await
             }
-            None => transport::stdio::run(&mut proc, hooks).await,
+            None => transport::stdio::run(&mut proc, hooks, threads).await,
         }
     });
     proc.finish_wiring();

@@ -128,7 +128,7 @@ fn list_length(
 }
 
 /// Largest list an indexed pattern builds: an absurd index must not allocate gigabytes.
-const MAX_LIST_LENGTH: usize = 1_000_000;
+const MAX_LIST_LENGTH: usize = MAX_INDEX;
 
 /// `"k=v,k2=v2"` (may be empty).
 pub fn parse_tags(s: &str) -> Result<Vec<(String, String)>, String> {
@@ -155,36 +155,13 @@ impl InputBinding {
     pub fn extract(&self, m: &Metric) -> Option<Result<Value, ConvertError>> {
         match &self.field {
             FieldPattern::Exact(f) => m.field(f).map(|v| self.convert(v)),
-            FieldPattern::Indexed(prefix) => {
-                if let Some(list) = in_order(prefix, &m.fields) {
-                    return Some(Ok(Value::List(Arc::new(self.to_length(list)))));
-                }
-                let mut beams: Vec<(usize, f64)> = Vec::new();
-                for (k, v) in &m.fields {
-                    let Some(idx) = k
-                        .strip_prefix(prefix.as_str())
-                        .and_then(|s| s.parse::<usize>().ok())
-                    else {
-                        continue;
-                    };
-                    beams.push((idx, beam(v)));
-                }
-                let n = beams.iter().map(|(i, _)| i + 1).max()?;
-                // Bound the list: an absurd index must not allocate gigabytes.
-                if n > MAX_LIST_LENGTH {
-                    return Some(Err(ConvertError {
-                        input: self.name.clone(),
-                        reason: format!("index {} in `{prefix}*` is beyond 1000000", n - 1),
-                    }));
-                }
-                let mut list = vec![Value::Float(f64::NAN); n];
-                for (i, x) in beams {
-                    if let Some(slot) = list.get_mut(i) {
-                        *slot = Value::Float(x);
-                    }
-                }
-                Some(Ok(Value::List(Arc::new(self.to_length(list)))))
-            }
+            FieldPattern::Indexed(prefix) => match gather(prefix, &m.fields)? {
+                Ok(list) => Some(Ok(Value::List(Arc::new(self.to_length(list))))),
+                Err(max) => Some(Err(ConvertError {
+                    input: self.name.clone(),
+                    reason: format!("index {max} in `{prefix}*` is beyond {MAX_INDEX}"),
+                })),
+            },
         }
     }
 
@@ -273,27 +250,41 @@ fn beam(v: &FieldValue) -> f64 {
     }
 }
 
-/// The usual case of an indexed pattern, built in one pass: the matching fields are
-/// `prefix0, prefix1, ...` in this order (as Telegraf's JSON parser writes an array). `None`
-/// when they are not (gaps, other order, no match): the general path handles that.
-fn in_order(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Vec<Value>> {
+/// Largest index an indexed pattern accepts: an absurd index must not allocate gigabytes.
+const MAX_INDEX: usize = 1_000_000;
+
+/// The list of an indexed pattern in one pass over the fields, in whatever order they come
+/// (Telegraf writes a metric's fields in random order): `prefixN` sets element N (a later
+/// field overwrites), missing indices are NaN. `None` when no field matches; `Err(largest
+/// index)` when an index is beyond [`MAX_INDEX`].
+fn gather(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Result<Vec<Value>, usize>> {
     let mut list: Vec<Value> = Vec::new();
+    let mut found = false;
     for (k, v) in fields {
-        let Some(idx) = k.strip_prefix(prefix) else {
+        let Some(idx) = k.strip_prefix(prefix).and_then(|s| s.parse::<usize>().ok()) else {
             continue;
         };
-        if idx.is_empty() || !idx.bytes().all(|b| b.is_ascii_digit()) {
-            if idx.parse::<usize>().is_ok() {
-                return None;
-            }
-            continue;
+        if idx >= MAX_INDEX {
+            let max = fields
+                .iter()
+                .filter_map(|(k, _)| k.strip_prefix(prefix)?.parse::<usize>().ok())
+                .max()
+                .unwrap_or(idx);
+            return Some(Err(max));
         }
-        if idx.parse::<usize>().ok()? != list.len() {
-            return None;
+        if list.capacity() == 0 {
+            // Sized for every field: one allocation for a whole scan.
+            list.reserve(fields.len().max(idx + 1));
         }
-        list.push(Value::Float(beam(v)));
+        if idx >= list.len() {
+            list.resize(idx + 1, Value::Float(f64::NAN));
+        }
+        if let Some(slot) = list.get_mut(idx) {
+            *slot = Value::Float(beam(v));
+        }
+        found = true;
     }
-    (!list.is_empty()).then_some(list)
+    found.then_some(Ok(list))
 }
 
 fn whole(f: f64) -> Option<i64> {

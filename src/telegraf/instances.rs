@@ -5,6 +5,7 @@
 //! `--max-instances`, wall-clock idleness for `--instance-idle`, and the list of instances with
 //! a step still open (so "no more input right now" evaluates only those, not the whole fleet).
 //! What an instance holds is up to the caller (the step loop stores a monitor and its tags).
+//! Also: which worker thread a record's instance belongs to ([`shard_of`], `--threads`).
 
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::time::{Duration, Instant};
@@ -178,6 +179,65 @@ impl<T> Table<T> {
     }
 }
 
+/// Which of `shards` workers owns the instance of the record `bytes` (its `instance_by` tag
+/// values hashed; the same key always gives the same shard, so an instance lives in one worker).
+/// Read from the raw series key when it holds no backslash or quote and no instance tag twice
+/// (the values are then exactly the parsed ones); otherwise from the parsed record. A record
+/// that does not parse goes to shard 0 (it only produces its error there).
+pub fn shard_of(bytes: &[u8], instance_by: &[String], shards: usize) -> usize {
+    use std::hash::{Hash, Hasher};
+    if shards <= 1 {
+        return 0;
+    }
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    let end = bytes
+        .iter()
+        .position(|&b| b == b' ' || b == b'\t' || b == b'\n' || b == b'\r')
+        .unwrap_or(bytes.len());
+    let series = bytes.get(..end).unwrap_or_default();
+    let plain = !series.is_empty()
+        && series.first() != Some(&b'#')
+        && !series.iter().any(|&b| b == b'\\' || b == b'"');
+    let mut from_raw = plain;
+    if plain {
+        for t in instance_by {
+            match raw_tag(series, t.as_bytes()) {
+                Some(v) => v.hash(&mut h),
+                None => {
+                    from_raw = false;
+                    break;
+                }
+            }
+        }
+    }
+    if !from_raw {
+        let Ok(Some(m)) = lineproto::parse_record(bytes) else {
+            return 0;
+        };
+        h = std::collections::hash_map::DefaultHasher::new();
+        for t in instance_by {
+            m.tag(t).map(str::as_bytes).hash(&mut h);
+        }
+    }
+    (h.finish() % shards as u64) as usize
+}
+
+/// The value of tag `key` in a plain series key (`Some(None)`: absent); `None` when the key
+/// appears twice.
+fn raw_tag<'a>(series: &'a [u8], key: &[u8]) -> Option<Option<&'a [u8]>> {
+    let mut found = None;
+    for kv in series.split(|&b| b == b',').skip(1) {
+        let mut it = kv.splitn(2, |&b| b == b'=');
+        if it.next() == Some(key) {
+            if found.is_some() {
+                return None;
+            }
+            found = Some(it.next().unwrap_or_default());
+        }
+    }
+    Some(found)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -252,5 +312,31 @@ mod tests {
         t.remove(b);
         assert_eq!(t.take_open(), vec![a]);
         assert_eq!(t.take_open(), Vec::<usize>::new());
+    }
+
+    /// A record's shard depends only on its instance key, whether read from the raw series key
+    /// or from the parsed record (escapes elsewhere in the series key force the parse).
+    #[test]
+    fn shards_follow_the_instance_key() {
+        let by = vec!["robot".to_string()];
+        for n in [2, 3, 7] {
+            for r in 0..50 {
+                let plain = format!("m,robot=r{r} x=1 1");
+                let other_tags = format!("n,a=1,robot=r{r},z=2 y=\"s\" 2");
+                let escaped = format!("m,robot=r{r},t=a\\ b x=1 1");
+                let s = shard_of(plain.as_bytes(), &by, n);
+                assert!(s < n);
+                assert_eq!(s, shard_of(other_tags.as_bytes(), &by, n), "{other_tags}");
+                assert_eq!(s, shard_of(escaped.as_bytes(), &by, n), "{escaped}");
+            }
+            let absent = shard_of(b"m x=1 1", &by, n);
+            assert_eq!(absent, shard_of(b"m,t=a\\ b x=1 1", &by, n));
+        }
+        // Eight robots use both of two shards (the reload test relies on it).
+        let used: std::collections::BTreeSet<usize> = (0..8)
+            .map(|r| shard_of(format!("m,robot=r{r} x=1i 10\n").as_bytes(), &by, 2))
+            .collect();
+        assert_eq!(used.len(), 2);
+        assert_eq!(shard_of(b"m,robot=a x=1 1", &by, 1), 0);
     }
 }

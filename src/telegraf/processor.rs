@@ -78,6 +78,20 @@ pub struct Counters {
     pub duplicates: u64,
 }
 
+impl Counters {
+    /// Add `other`'s counts (a `--threads` worker's, at the end of a run).
+    pub fn add(&mut self, other: &Counters) {
+        self.records += other.records;
+        self.events += other.events;
+        self.outputs += other.outputs;
+        self.parse_errors += other.parse_errors;
+        self.late += other.late;
+        self.dropped_values += other.dropped_values;
+        self.instances += other.instances;
+        self.evicted += other.evicted;
+    }
+}
+
 /// One monitor and the tags its output lines carry (static tags and instance tags).
 struct Instance {
     monitor: Monitor,
@@ -149,6 +163,16 @@ impl Processor {
             scratch: Metric::default(),
             wiring,
         })
+    }
+
+    /// A processor with this one's program and options and no instances (a `--threads` worker).
+    pub fn sibling(&self) -> Result<Processor, String> {
+        Processor::new(self.program.clone(), self.opts.clone())
+    }
+
+    /// The tags that select an instance (`--instance-by`).
+    pub fn instance_by(&self) -> &[String] {
+        &self.opts.instance_by
     }
 
     /// Monitor instances alive now.

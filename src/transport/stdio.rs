@@ -4,18 +4,242 @@
 //! returns less than a full buffer (no more input right now: never wait for the next record to
 //! answer this one), flushing stdout after every batch, SIGTERM/SIGINT, SIGHUP (handed to the
 //! caller's reload between reads), and a closed stdout.
+//!
+//! With `--threads N` and `--instance-by`, instances are spread over N threads ([`Shards`]): each
+//! read's records are routed by instance key (one instance always to the same thread), every
+//! thread steps its records, and the read's outputs are written once all threads are done, so a
+//! record is still answered before the next read. Each instance's outputs keep their order; the
+//! order between instances within one read follows the threads.
+//!
+//! A pipe on stdin (Telegraf's execd, `cat file |`) is read in non-blocking mode by the runtime
+//! thread itself when the pipe is readable; anything else (a file, a terminal) through tokio's
+//! stdin, which reads on a helper thread and hands each read over (two thread wake-ups per
+//! read: most of the answer latency of a single record on a busy machine).
 
 use super::{Ending, Hooks};
+use crate::telegraf::instances::shard_of;
 use crate::telegraf::processor::Processor;
-use lineproto::RecordSplitter;
+use lineproto::{Record, RecordSplitter};
 use std::io::Write;
+use std::sync::mpsc;
 use tokio::io::AsyncReadExt;
 
 const BUF: usize = 64 * 1024;
 
+/// Standard input: the pipe read directly when it is one, tokio's stdin otherwise.
+enum Input {
+    Pipe(tokio::net::unix::pipe::Receiver),
+    Other(tokio::io::Stdin),
+}
+
+impl Input {
+    fn open() -> Input {
+        use std::os::fd::AsFd;
+        // A duplicate of fd 0 (the same pipe): the receiver sets it non-blocking and checks that
+        // it is a FIFO; on any failure tokio's stdin is used.
+        let pipe = std::io::stdin()
+            .as_fd()
+            .try_clone_to_owned()
+            .and_then(tokio::net::unix::pipe::Receiver::from_owned_fd);
+        match pipe {
+            Ok(r) => Input::Pipe(r),
+            Err(_) => Input::Other(tokio::io::stdin()),
+        }
+    }
+
+    async fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        match self {
+            Input::Pipe(r) => r.read(buf).await,
+            Input::Other(s) => s.read(buf).await,
+        }
+    }
+}
+
+/// One step of a worker thread: its processor, its records, whether to flush afterwards.
+type Job = (Box<Processor>, Vec<Record>, bool);
+/// A worker's answer: its shard, its processor back, the emptied batch (reused), its output.
+type Done = (usize, Box<Processor>, Vec<Record>, Vec<u8>);
+
+struct Worker {
+    tx: Option<mpsc::Sender<Job>>,
+    proc: Option<Box<Processor>>,
+    handle: Option<std::thread::JoinHandle<()>>,
+}
+
+/// The caller's processor (shard 0, stepped on the calling thread) and `threads - 1` worker
+/// threads, each owning the processor of its shard between jobs.
+struct Shards {
+    instance_by: Vec<String>,
+    workers: Vec<Worker>,
+    batches: Vec<Vec<Record>>,
+    outs: Vec<Vec<u8>>,
+    done: mpsc::Receiver<Done>,
+}
+
+impl Shards {
+    fn new(proc: &Processor, threads: usize) -> Result<Shards, String> {
+        let threads = if proc.instance_by().is_empty() {
+            1
+        } else {
+            threads.max(1)
+        };
+        let (done_tx, done) = mpsc::channel::<Done>();
+        let mut workers = Vec::new();
+        for shard in 1..threads {
+            let (tx, rx) = mpsc::channel::<Job>();
+            let done_tx = done_tx.clone();
+            let handle = std::thread::Builder::new()
+                .name(format!("shard-{shard}"))
+                .spawn(move || {
+                    while let Ok((mut p, mut recs, flush)) = rx.recv() {
+                        let mut out = Vec::new();
+                        for r in recs.drain(..) {
+                            p.record(&r, &mut out);
+                        }
+                        if flush {
+                            p.flush(&mut out);
+                        }
+                        if done_tx.send((shard, p, recs, out)).is_err() {
+                            break;
+                        }
+                    }
+                })
+                .map_err(|e| format!("cannot start a worker thread: {e}"))?;
+            workers.push(Worker {
+                tx: Some(tx),
+                proc: Some(Box::new(proc.sibling()?)),
+                handle: Some(handle),
+            });
+        }
+        Ok(Shards {
+            instance_by: proc.instance_by().to_vec(),
+            workers,
+            batches: (0..threads).map(|_| Vec::new()).collect(),
+            outs: (0..threads).map(|_| Vec::new()).collect(),
+            done,
+        })
+    }
+
+    /// Put `rec` into its shard's batch. A record spanning several lines that does not parse
+    /// is routed line by line, as the processor would take it apart.
+    fn route(&mut self, rec: Record) {
+        let n = self.batches.len();
+        let spans = rec
+            .bytes
+            .split_last()
+            .is_some_and(|(_, head)| head.contains(&b'\n'));
+        if spans && !rec.oversized && lineproto::parse_record(&rec.bytes).is_err() {
+            for (line, part) in (rec.line..).zip(rec.bytes.split_inclusive(|&b| b == b'\n')) {
+                self.route(Record {
+                    bytes: part.to_vec(),
+                    line,
+                    oversized: false,
+                });
+            }
+            return;
+        }
+        let s = if rec.oversized {
+            0
+        } else {
+            shard_of(&rec.bytes, &self.instance_by, n)
+        };
+        if let Some(b) = self.batches.get_mut(s) {
+            b.push(rec);
+        }
+    }
+
+    /// Step `records` (then flush every shard when `flush`), appending the outputs to `out`.
+    fn process(
+        &mut self,
+        proc: &mut Processor,
+        records: impl Iterator<Item = Record>,
+        flush: bool,
+        out: &mut Vec<u8>,
+    ) -> std::io::Result<()> {
+        if self.workers.is_empty() {
+            for rec in records {
+                proc.record(&rec, out);
+            }
+            if flush {
+                proc.flush(out);
+            }
+            return Ok(());
+        }
+        for rec in records {
+            self.route(rec);
+        }
+        let lost = || std::io::Error::other("a worker thread stopped");
+        for (i, w) in self.workers.iter_mut().enumerate() {
+            let batch = std::mem::take(self.batches.get_mut(i + 1).ok_or_else(lost)?);
+            let p = w.proc.take().ok_or_else(lost)?;
+            w.tx.as_ref()
+                .ok_or_else(lost)?
+                .send((p, batch, flush))
+                .map_err(|_| lost())?;
+        }
+        if let Some(b) = self.batches.first_mut() {
+            for rec in b.drain(..) {
+                proc.record(&rec, out);
+            }
+        }
+        if flush {
+            proc.flush(out);
+        }
+        for _ in 0..self.workers.len() {
+            let (shard, p, batch, o) = self.done.recv().map_err(|_| lost())?;
+            self.workers.get_mut(shard - 1).ok_or_else(lost)?.proc = Some(p);
+            *self.batches.get_mut(shard).ok_or_else(lost)? = batch;
+            *self.outs.get_mut(shard).ok_or_else(lost)? = o;
+        }
+        for o in self.outs.iter_mut().skip(1) {
+            out.append(o);
+        }
+        Ok(())
+    }
+
+    /// Every worker's processor (all are at home between reads).
+    fn each(&mut self, mut f: impl FnMut(&mut Processor)) {
+        for w in &mut self.workers {
+            if let Some(p) = w.proc.as_mut() {
+                f(p);
+            }
+        }
+    }
+
+    /// Stop the workers and add their counters to `proc`'s (the summary covers every thread).
+    fn finish(mut self, proc: &mut Processor) {
+        for w in &mut self.workers {
+            w.tx = None;
+            if let Some(h) = w.handle.take() {
+                let _ = h.join();
+            }
+            if let Some(p) = &w.proc {
+                proc.counters.add(&p.counters);
+            }
+        }
+        self.workers.clear();
+    }
+}
+
 /// Run until EOF, a signal, or a closed stdout. Pending steps are always evaluated and written.
-pub async fn run(proc: &mut Processor, hooks: Hooks<'_>) -> std::io::Result<Ending> {
-    let mut stdin = tokio::io::stdin();
+/// `threads` > 1 spreads `--instance-by` instances over that many threads.
+pub async fn run(
+    proc: &mut Processor,
+    hooks: Hooks<'_>,
+    threads: usize,
+) -> std::io::Result<Ending> {
+    let mut shards = Shards::new(proc, threads).map_err(std::io::Error::other)?;
+    let r = run_shards(proc, hooks, &mut shards).await;
+    shards.finish(proc);
+    r
+}
+
+async fn run_shards(
+    proc: &mut Processor,
+    hooks: Hooks<'_>,
+    shards: &mut Shards,
+) -> std::io::Result<Ending> {
+    let mut stdin = Input::open();
     let mut splitter = RecordSplitter::default();
     let mut buf = vec![0u8; BUF];
     let mut out = Vec::with_capacity(BUF);
@@ -38,6 +262,7 @@ pub async fn run(proc: &mut Processor, hooks: Hooks<'_>) -> std::io::Result<Endi
             }
             _ = sighup.recv() => {
                 on_hangup(proc, &mut out);
+                shards.each(|p| on_hangup(p, &mut out));
                 if write_out(&mut out).is_err() {
                     return Ok(Ending::OutputClosed);
                 }
@@ -50,20 +275,14 @@ pub async fn run(proc: &mut Processor, hooks: Hooks<'_>) -> std::io::Result<Endi
             break Ending::Eof;
         }
         splitter.push(&buf[..n]);
-        while let Some(rec) = splitter.next_record() {
-            proc.record(&rec, &mut out);
-        }
-        if n < BUF {
-            proc.flush(&mut out);
-        }
+        let records = std::iter::from_fn(|| splitter.next_record());
+        shards.process(proc, records, n < BUF, &mut out)?;
         if write_out(&mut out).is_err() {
             return Ok(Ending::OutputClosed);
         }
     };
-    while let Some(rec) = splitter.finish() {
-        proc.record(&rec, &mut out);
-    }
-    proc.flush(&mut out);
+    let records = std::iter::from_fn(|| splitter.finish());
+    shards.process(proc, records, true, &mut out)?;
     if write_out(&mut out).is_err() {
         return Ok(Ending::OutputClosed);
     }

@@ -1,9 +1,12 @@
 //! Codec throughput: splitting, parsing (the bare crate vs. our Telegraf-rule wrapper) and writing,
 //! on a P2-shaped robot line (two speeds) and a 360-sample lidar line, as Telegraf's JSON parser
-//! makes them.
+//! makes them (fields sorted, and in the random order Telegraf writes them: `*_unordered`), and
+//! float formatting (`Display` vs. [`lineproto::write_float`]).
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
-use lineproto::{FieldValue, LineWriter, RecordSplitter, parse_record};
+use lineproto::{
+    FieldValue, LineWriter, Metric, RecordSplitter, parse_record, parse_record_into, write_float,
+};
 use std::hint::black_box;
 
 fn p2_line() -> String {
@@ -23,6 +26,22 @@ fn lidar_line() -> String {
     s
 }
 
+/// The lidar line with its fields in a fixed pseudo-random order (Telegraf's Go map order).
+fn lidar_line_unordered() -> String {
+    let line = lidar_line();
+    let (head, rest) = line.split_once(' ').unwrap_or_default();
+    let (fields, ts) = rest.rsplit_once(' ').unwrap_or_default();
+    let mut fields: Vec<&str> = fields.split(',').collect();
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    for i in (1..fields.len()).rev() {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        fields.swap(i, (seed % (i as u64 + 1)) as usize);
+    }
+    format!("{head} {} {ts}", fields.join(","))
+}
+
 fn bench_parse(c: &mut Criterion, name: &str, line: &str) {
     let mut g = c.benchmark_group(format!("parse_{name}"));
     g.throughput(Throughput::Bytes(line.len() as u64));
@@ -39,6 +58,14 @@ fn bench_parse(c: &mut Criterion, name: &str, line: &str) {
         b.iter(|| {
             let m = parse_record(black_box(line.as_bytes()));
             black_box(m.map(|m| m.map(|m| m.fields.len())))
+        })
+    });
+    // As the step loop parses: into one reused metric (no key strings allocated).
+    g.bench_function("lineproto_parse_record_into_reused", |b| {
+        let mut m = Metric::default();
+        b.iter(|| {
+            let ok = parse_record_into(black_box(line.as_bytes()), &mut m);
+            black_box((ok.is_ok(), m.fields.len()))
         })
     });
     g.finish();
@@ -85,6 +112,46 @@ fn bench_write(c: &mut Criterion) {
     g.finish();
 }
 
+/// Output values as a P2 step makes them: differences and means of short decimals (16 to 17
+/// digits) next to the short decimals themselves.
+fn bench_format(c: &mut Criterion) {
+    let values: Vec<f64> = (0..1000)
+        .map(|i| {
+            let a = f64::from(i % 97) / 1000.0;
+            let b = f64::from(i % 89) / 10000.0 + 0.015;
+            match i % 3 {
+                0 => a - b,
+                1 => (a - b) * (a - b) / f64::from(i + 1),
+                _ => b,
+            }
+        })
+        .collect();
+    let mut g = c.benchmark_group("format_f64");
+    g.throughput(Throughput::Elements(values.len() as u64));
+    g.bench_function("display", |b| {
+        let mut s = String::with_capacity(32 * 1024);
+        b.iter(|| {
+            use std::fmt::Write as _;
+            s.clear();
+            for v in &values {
+                let _ = write!(s, "{}", black_box(*v));
+            }
+            black_box(s.len())
+        })
+    });
+    g.bench_function("write_float", |b| {
+        let mut s = String::with_capacity(32 * 1024);
+        b.iter(|| {
+            s.clear();
+            for v in &values {
+                write_float(&mut s, black_box(*v));
+            }
+            black_box(s.len())
+        })
+    });
+    g.finish();
+}
+
 fn benches(c: &mut Criterion) {
     let p2 = p2_line();
     let lidar = lidar_line();
@@ -92,7 +159,11 @@ fn benches(c: &mut Criterion) {
     bench_parse(c, "lidar360", &lidar);
     bench_split(c, "p2", &p2);
     bench_split(c, "lidar360", &lidar);
+    let unordered = lidar_line_unordered();
+    bench_parse(c, "lidar360_unordered", &unordered);
+    bench_split(c, "lidar360_unordered", &unordered);
     bench_write(c);
+    bench_format(c);
 }
 
 criterion_group!(codec, benches);

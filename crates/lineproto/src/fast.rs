@@ -176,6 +176,11 @@ fn value(c: &mut Cursor<'_>, out: &mut FieldValue) -> Option<()> {
         }
         return Some(());
     }
+    if let Some((f, end)) = short_float(b, start) {
+        *out = FieldValue::Float(f);
+        c.i = end;
+        return Some(());
+    }
     while b.get(c.i).is_some_and(|&x| x != b',' && x != b' ') {
         c.i += 1;
     }
@@ -186,6 +191,42 @@ fn value(c: &mut Cursor<'_>, out: &mut FieldValue) -> Option<()> {
         _ => number(tok)?,
     };
     Some(())
+}
+
+/// The usual field value, a short decimal float (`-?int(.frac)?`, at most 15 digits, no
+/// leading zero), read in the same pass that finds its end: its value (the same arithmetic as
+/// [`number`]) and the index after it. `None` for anything else, which [`number`] then reads.
+#[inline]
+fn short_float(b: &[u8], start: usize) -> Option<(f64, usize)> {
+    let neg = b.get(start) == Some(&b'-');
+    let mut i = start + usize::from(neg);
+    let int_start = i;
+    let mut mantissa: u64 = 0;
+    while let Some(d) = b.get(i).filter(|d| d.is_ascii_digit()) {
+        mantissa = mantissa.wrapping_mul(10).wrapping_add(u64::from(d - b'0'));
+        i += 1;
+    }
+    let int_len = i - int_start;
+    if int_len == 0 || (int_len > 1 && b.get(int_start) == Some(&b'0')) {
+        return None;
+    }
+    let mut frac_len = 0;
+    if b.get(i) == Some(&b'.') {
+        i += 1;
+        while let Some(d) = b.get(i).filter(|d| d.is_ascii_digit()) {
+            mantissa = mantissa.wrapping_mul(10).wrapping_add(u64::from(d - b'0'));
+            i += 1;
+            frac_len += 1;
+        }
+        if frac_len == 0 {
+            return None;
+        }
+    }
+    if !matches!(b.get(i), None | Some(b',' | b' ')) || int_len + frac_len > 15 {
+        return None;
+    }
+    let x = mantissa as f64 / POW10.get(frac_len)?;
+    Some((if neg { -x } else { x }, i))
 }
 
 /// Powers of ten exactly representable as f64.
@@ -387,6 +428,37 @@ mod tests {
             assert_eq!(number(&tok), Some(FieldValue::Float(want)), "{tok}");
             let neg = format!("-{tok}");
             assert_eq!(number(&neg), Some(FieldValue::Float(-want)), "{neg}");
+        }
+    }
+
+    /// The one-pass reader of short floats gives `number`'s value and ends where the token ends.
+    #[test]
+    fn short_float_equals_number() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let alphabet = b"0123456789.-iue,";
+        for _ in 0..300_000 {
+            let mut tok = Vec::new();
+            for _ in 0..(seed % 19) {
+                seed ^= seed << 13;
+                seed ^= seed >> 7;
+                seed ^= seed << 17;
+                tok.push(alphabet[(seed % alphabet.len() as u64) as usize]);
+            }
+            let text = String::from_utf8(tok).unwrap();
+            let end = text.find([',', ' ']).unwrap_or(text.len());
+            let want = number(&text[..end]);
+            match short_float(text.as_bytes(), 0) {
+                Some((f, i)) => {
+                    assert_eq!(i, end, "{text}");
+                    assert_eq!(want, Some(FieldValue::Float(f)), "{text}");
+                }
+                None => assert!(
+                    !matches!(want, Some(FieldValue::Float(_)))
+                        || text[..end].len() > 15
+                        || text[..end].trim_start_matches('-').len() > 15,
+                    "{text}: {want:?}"
+                ),
+            }
         }
     }
 

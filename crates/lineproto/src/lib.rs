@@ -15,5 +15,5 @@ pub use parse::{FieldValue, Metric, ParseError, parse_record, parse_record_into}
 pub use split::{DEFAULT_MAX_RECORD, OVERSIZED_HEAD, Record, RecordSplitter};
 pub use write::{
     LineWriter, NotFinite, measurement_is_writable, write_field_key, write_field_value,
-    write_measurement, write_tag_key, write_tag_value, write_value,
+    write_float, write_measurement, write_tag_key, write_tag_value, write_value,
 };

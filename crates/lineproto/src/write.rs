@@ -164,7 +164,8 @@ impl LineWriter {
             return (None, self.skipped);
         }
         if let Some(ts) = timestamp {
-            let _ = write!(self.line, " {ts}");
+            self.line.push(' ');
+            self.line.push_str(itoa::Buffer::new().format(ts));
         }
         self.line.push('\n');
         (Some(self.line), self.skipped)
@@ -175,15 +176,14 @@ impl LineWriter {
 pub fn write_value(out: &mut String, value: &FieldValue) -> Result<(), NotFinite> {
     match value {
         FieldValue::Float(f) if !f.is_finite() => return Err(NotFinite),
-        // Rust's Display for f64 is the shortest round-trip form and never uses an exponent.
-        FieldValue::Float(f) => {
-            let _ = write!(out, "{f}");
-        }
+        FieldValue::Float(f) => write_float(out, *f),
         FieldValue::Int(i) => {
-            let _ = write!(out, "{i}i");
+            out.push_str(itoa::Buffer::new().format(*i));
+            out.push('i');
         }
         FieldValue::UInt(u) => {
-            let _ = write!(out, "{u}u");
+            out.push_str(itoa::Buffer::new().format(*u));
+            out.push('u');
         }
         FieldValue::Bool(b) => out.push_str(if *b { "true" } else { "false" }),
         FieldValue::Str(s) => {
@@ -198,6 +198,139 @@ pub fn write_value(out: &mut String, value: &FieldValue) -> Result<(), NotFinite
         }
     }
     Ok(())
+}
+
+/// Append a finite float exactly as Rust's `Display` writes it: the shortest digits that read
+/// back to the same value (the closest such when there are several), no exponent, no `.0`
+/// (`87`, `-0`, `0.0000001`, `1000000000000000000000`).
+///
+/// The digits come from the `ryu` crate (same shortest-and-closest rule as `Display`, faster:
+/// `cargo bench -p lineproto --bench codec -- format_f64`; float formatting was the largest
+/// single item of a P2 record's profile); only its exponent form is rewritten here. The two differ where the value lies exactly halfway
+/// between two shortest candidates (ryu rounds such a tie to even, `Display` up: exactly
+/// 1658206780088562.25 is `...562.2` for ryu, `...562.3` for `Display`); [`is_tie`] finds those
+/// values exactly and they are written by `Display` itself. A test compares both on millions of
+/// values.
+pub fn write_float(out: &mut String, f: f64) {
+    let mut buf = ryu::Buffer::new();
+    let s = buf.format_finite(f);
+    // Usual case: ryu wrote plain decimal form `-?\d+\.\d+` (at most 17 significant digits).
+    let body = s.strip_prefix('-').unwrap_or(s);
+    if !body.bytes().any(|b| b == b'e')
+        && let Some(dot) = body.find('.')
+    {
+        let frac_len = body.len() - dot - 1;
+        if body.ends_with(".0") {
+            // A whole number: below 2^53 exact, above it even, never halfway at this digit.
+            if body.len() < 18 {
+                out.push_str(s.get(..s.len() - 2).unwrap_or(s));
+                return;
+            }
+        } else if body.len() < 17 || !is_tie(f, body.bytes(), -(frac_len as i32) - 1) {
+            out.push_str(s);
+            return;
+        } else {
+            let _ = write!(out, "{f}");
+            return;
+        }
+    }
+    let (neg, s) = match s.strip_prefix('-') {
+        Some(rest) => (true, rest),
+        None => (false, s),
+    };
+    let (mantissa, exp) = match s.split_once('e') {
+        Some((m, e)) => (m, e.parse::<i32>().unwrap_or(0)),
+        None => (s, 0),
+    };
+    let (int, frac) = mantissa.split_once('.').unwrap_or((mantissa, ""));
+    // The significant digits `int ++ frac` without leading and trailing zeros, and where the
+    // decimal point goes relative to their start (ryu writes at most 17 digits and a few zeros).
+    let digits_all = int.len() + frac.len();
+    let mut digits = [0u8; 40];
+    let mut n = 0;
+    for b in int.bytes().chain(frac.bytes()) {
+        if let Some(d) = digits.get_mut(n) {
+            *d = b;
+        }
+        n += 1;
+    }
+    let n = n.min(digits.len());
+    let lead = digits.iter().take(n).take_while(|&&d| d == b'0').count();
+    let trail = digits
+        .iter()
+        .take(n)
+        .skip(lead)
+        .rev()
+        .take_while(|&&d| d == b'0')
+        .count();
+    let sig = digits.get(lead..n - trail).unwrap_or_default();
+    if neg {
+        out.push('-');
+    }
+    if sig.is_empty() {
+        out.push('0');
+        return;
+    }
+    let point = int.len() as i32 + exp - lead as i32;
+    let len = sig.len() as i32;
+    // Ties need more digits than a double's 15.65 decimal digits leave room for below 16.
+    if n != digits_all || (len >= 16 && is_tie(f, sig.iter().copied(), point - len - 1)) {
+        if neg {
+            out.pop();
+        }
+        let _ = write!(out, "{f}");
+        return;
+    }
+    // `sig` holds ASCII digits only.
+    let sig = std::str::from_utf8(sig).unwrap_or_default();
+    if point <= 0 {
+        out.push_str("0.");
+        out.extend(std::iter::repeat_n('0', (-point) as usize));
+        out.push_str(sig);
+    } else if point >= len {
+        out.push_str(sig);
+        out.extend(std::iter::repeat_n('0', (point - len) as usize));
+    } else {
+        let (a, b) = sig.split_at(point as usize);
+        out.push_str(a);
+        out.push('.');
+        out.push_str(b);
+    }
+}
+
+/// Whether `|f|` is exactly `(sig ++ "5") * 10^j` (`sig`'s digits, other bytes skipped), the midpoint between the decimal `sig` (at
+/// the same scale) and its neighbour: exact integer arithmetic on `f = m * 2^e` (m odd), where
+/// equality with the odd `N * 10^j = N * 5^j * 2^j` needs `e == j` and `m * 5^-j == N`
+/// (or `m == N * 5^j`).
+fn is_tie(f: f64, sig: impl Iterator<Item = u8>, j: i32) -> bool {
+    let bits = f.to_bits();
+    let biased = ((bits >> 52) & 0x7ff) as i32;
+    let frac = bits & ((1u64 << 52) - 1);
+    let (mut m, mut e) = if biased == 0 {
+        (frac, -1074)
+    } else {
+        (frac | (1u64 << 52), biased - 1075)
+    };
+    if m == 0 {
+        return false;
+    }
+    let tz = m.trailing_zeros();
+    m >>= tz;
+    e += tz as i32;
+    if e != j || j.unsigned_abs() > 26 {
+        return false;
+    }
+    let mut n: u128 = 0;
+    for d in sig.filter(u8::is_ascii_digit) {
+        n = n.saturating_mul(10).saturating_add(u128::from(d - b'0'));
+    }
+    let n = n * 10 + 5;
+    let p = 5u128.pow(j.unsigned_abs());
+    if j < 0 {
+        u128::from(m) * p == n
+    } else {
+        u128::from(m) == n * p
+    }
 }
 
 #[cfg(test)]
@@ -240,6 +373,79 @@ mod tests {
         let mut w = LineWriter::new("m");
         w.field("x", &FieldValue::Float(f64::INFINITY));
         assert_eq!(w.finish(Some(1)), (None, 1));
+    }
+
+    fn check_float(f: f64) {
+        let mut s = String::new();
+        write_float(&mut s, f);
+        assert_eq!(s, format!("{f}"), "bits {:#x}", f.to_bits());
+    }
+
+    /// `write_float` writes exactly what `Display` writes: on every kind of finite value (random
+    /// bit patterns cover all exponents, short decimals are the usual sensor values, and the
+    /// neighbours of powers of ten and of halfway cases are where two shortest forms compete).
+    #[test]
+    fn write_float_equals_display_on_millions_of_values() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        let mut n = 0;
+        for _ in 0..1_000_000 {
+            let f = f64::from_bits(next());
+            if f.is_finite() {
+                check_float(f);
+                n += 1;
+            }
+        }
+        for _ in 0..500_000 {
+            let r = next();
+            let scale = 10f64.powi((r % 12) as i32);
+            let f = ((r >> 8) % 10_000_000) as f64 / scale;
+            check_float(f);
+            check_float(-f);
+            check_float(f64::from_bits(f.to_bits() + 1));
+            n += 3;
+        }
+        // Exact halves and quarters where 16 and 17 digits meet: ties between two candidates.
+        for i in 0..200_000u64 {
+            for (base, scale) in [(1u64 << 52, 0.25), (1u64 << 53, 0.5), (1u64 << 51, 0.125)] {
+                check_float(((base + i * 7919) as f64) * scale);
+                n += 1;
+            }
+        }
+        for e in -324..=308 {
+            let p: f64 = format!("1e{e}").parse().unwrap();
+            for d in [-2i64, -1, 0, 1, 2] {
+                let bits = (p.to_bits() as i64 + d) as u64;
+                let f = f64::from_bits(bits);
+                if f.is_finite() {
+                    check_float(f);
+                    n += 1;
+                }
+            }
+        }
+        for f in [
+            0.0,
+            -0.0,
+            1.0,
+            87.0,
+            0.1,
+            f64::MAX,
+            f64::MIN,
+            f64::MIN_POSITIVE,
+            5e-324,
+            -937625523621561.3,
+            1e21,
+            1e-7,
+            123456789012345680.0,
+        ] {
+            check_float(f);
+        }
+        assert!(n > 2_000_000);
     }
 
     #[test]
