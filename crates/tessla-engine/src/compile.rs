@@ -10,9 +10,10 @@
 
 use crate::collections;
 use crate::ir::{
-    Annotation, Func, InputInfo, LiftFunc, Node, NodeId, OutputInfo, Program, SArg, ScalarOp, Type,
+    Annotation, Func, InputInfo, LiftFunc, Node, NodeId, OutputInfo, Program, SArg, Scalar, Type,
 };
 use crate::natives;
+use crate::ops::{self, scalar_op};
 use crate::value::{Callable, RuntimeError, Value};
 use std::cell::RefCell;
 use std::collections::HashMap;
@@ -389,144 +390,58 @@ fn call_native(f: natives::NativeFn, args: &[Value]) -> Value {
     f(args)
 }
 
+/// `a op b` as a value: an error operand is the result, a missing result is an error value.
 fn binop(op: BinOp, a: &Value, b: &Value) -> Value {
-    use Value::*;
-    if let Option::Some(e) = is_err(a).or_else(|| is_err(b)) {
+    if let Some(e) = is_err(a).or_else(|| is_err(b)) {
         return e;
     }
-    let ovf = || Error(RuntimeError::Overflow);
-    match (op, a, b) {
-        (BinOp::Add, Int(x), Int(y)) => x.checked_add(*y).map_or_else(ovf, Int),
-        (BinOp::Sub, Int(x), Int(y)) => x.checked_sub(*y).map_or_else(ovf, Int),
-        (BinOp::Mul, Int(x), Int(y)) => x.checked_mul(*y).map_or_else(ovf, Int),
-        (BinOp::Div, Int(_), Int(0)) | (BinOp::Mod, Int(_), Int(0)) => {
-            Error(RuntimeError::DivisionByZero)
-        }
-        (BinOp::Div, Int(x), Int(y)) => x.checked_div(*y).map_or_else(ovf, Int),
-        (BinOp::Mod, Int(x), Int(y)) => x.checked_rem(*y).map_or_else(ovf, Int),
-        (BinOp::Add, Str(x), Str(y)) => Str(format!("{x}{y}").into()),
-        (BinOp::FAdd, Float(x), Float(y)) => Float(x + y),
-        (BinOp::FSub, Float(x), Float(y)) => Float(x - y),
-        (BinOp::FMul, Float(x), Float(y)) => Float(x * y),
-        (BinOp::FDiv, Float(x), Float(y)) => Float(x / y),
-        (BinOp::Lt, Int(x), Int(y)) => Bool(x < y),
-        (BinOp::Gt, Int(x), Int(y)) => Bool(x > y),
-        (BinOp::Le, Int(x), Int(y)) => Bool(x <= y),
-        (BinOp::Ge, Int(x), Int(y)) => Bool(x >= y),
-        (BinOp::FLt, Float(x), Float(y)) => Bool(x < y),
-        (BinOp::FGt, Float(x), Float(y)) => Bool(x > y),
-        (BinOp::FLe, Float(x), Float(y)) => Bool(x <= y),
-        (BinOp::FGe, Float(x), Float(y)) => Bool(x >= y),
-        (BinOp::Eq, x, y) => Bool(x == y),
-        (BinOp::Ne, x, y) => Bool(x != y),
-        (BinOp::And, Bool(x), Bool(y)) => Bool(*x && *y),
-        (BinOp::Or, Bool(x), Bool(y)) => Bool(*x || *y),
-        (BinOp::BitAnd, Int(x), Int(y)) => Int(x & y),
-        (BinOp::BitOr, Int(x), Int(y)) => Int(x | y),
-        (BinOp::BitXor, Int(x), Int(y)) => Int(x ^ y),
-        (BinOp::Shl, Int(x), Int(y)) => shift_left(*x, *y).map_or_else(ovf, Int),
-        (BinOp::Shr, Int(x), Int(y)) => match y.checked_neg() {
-            Option::Some(n) => shift_left(*x, n).map_or_else(ovf, Int),
-            Option::None => Int(if *x < 0 { -1 } else { 0 }),
-        },
-        _ => Error(RuntimeError::Other(
-            format!("`{}` is not defined for {a:?} and {b:?}", op.symbol()).into(),
-        )),
-    }
+    ops::binary(op, a, b).unwrap_or_else(|e| {
+        Value::Error(match e {
+            ops::OpError::Overflow => RuntimeError::Overflow,
+            ops::OpError::DivisionByZero => RuntimeError::DivisionByZero,
+            ops::OpError::Undefined => RuntimeError::Other(
+                format!("`{}` is not defined for {a:?} and {b:?}", op.symbol()).into(),
+            ),
+        })
+    })
 }
 
-/// The closure of a binary operator, with a fast path for its usual operand types (the
-/// evaluator's hot path: no dispatch on the operator per event).
+/// The closure of a binary operator, with the inline scalar path for its usual operand types
+/// ([`ScalarOp::eval`], as the evaluator's `Bin` nodes use it) before the general one.
 fn binop_fn(op: BinOp) -> Func {
-    use Value::{Bool, Float, Int};
-    macro_rules! fast {
-        ($($pat:pat => $e:expr),+) => {
-            Arc::new(move |v: &[Value]| match v {
-                $($pat => $e,)+
-                [a, b] => binop(op, a, b),
-                _ => Value::Error(RuntimeError::Other("an operator needs two operands".into())),
-            })
-        };
-    }
-    match op {
-        BinOp::FAdd => fast!([Float(x), Float(y)] => Float(x + y)),
-        BinOp::FSub => fast!([Float(x), Float(y)] => Float(x - y)),
-        BinOp::FMul => fast!([Float(x), Float(y)] => Float(x * y)),
-        BinOp::FDiv => fast!([Float(x), Float(y)] => Float(x / y)),
-        BinOp::FLt => fast!([Float(x), Float(y)] => Bool(x < y)),
-        BinOp::FGt => fast!([Float(x), Float(y)] => Bool(x > y)),
-        BinOp::FLe => fast!([Float(x), Float(y)] => Bool(x <= y)),
-        BinOp::FGe => fast!([Float(x), Float(y)] => Bool(x >= y)),
-        BinOp::Lt => fast!([Int(x), Int(y)] => Bool(x < y)),
-        BinOp::Gt => fast!([Int(x), Int(y)] => Bool(x > y)),
-        BinOp::Le => fast!([Int(x), Int(y)] => Bool(x <= y)),
-        BinOp::Ge => fast!([Int(x), Int(y)] => Bool(x >= y)),
-        BinOp::And => fast!([Bool(x), Bool(y)] => Bool(*x && *y)),
-        BinOp::Or => fast!([Bool(x), Bool(y)] => Bool(*x || *y)),
-        BinOp::Add => {
-            fast!([Int(x), Int(y)] => x.checked_add(*y).map_or(Value::Error(RuntimeError::Overflow), Int))
-        }
-        BinOp::Sub => {
-            fast!([Int(x), Int(y)] => x.checked_sub(*y).map_or(Value::Error(RuntimeError::Overflow), Int))
-        }
-        _ => Arc::new(move |v: &[Value]| match v {
+    let two = || Value::Error(RuntimeError::Other("an operator needs two operands".into()));
+    match scalar_op(op) {
+        Some(sop) => Arc::new(move |v: &[Value]| match v {
+            [a, b] => match (Scalar::of(a), Scalar::of(b)) {
+                (Some(x), Some(y)) => match sop.eval(x, y) {
+                    Some(r) => r.value(),
+                    None => binop(op, a, b),
+                },
+                _ => binop(op, a, b),
+            },
+            _ => two(),
+        }),
+        None => Arc::new(move |v: &[Value]| match v {
             [a, b] => binop(op, a, b),
-            _ => Value::Error(RuntimeError::Other("an operator needs two operands".into())),
+            _ => two(),
         }),
     }
 }
 
-/// The operators the evaluator runs inline on scalars ([`Node::Bin`]).
-fn scalar_op(op: BinOp) -> Option<ScalarOp> {
-    Some(match op {
-        BinOp::FAdd => ScalarOp::FAdd,
-        BinOp::FSub => ScalarOp::FSub,
-        BinOp::FMul => ScalarOp::FMul,
-        BinOp::FDiv => ScalarOp::FDiv,
-        BinOp::FLt => ScalarOp::FLt,
-        BinOp::FGt => ScalarOp::FGt,
-        BinOp::FLe => ScalarOp::FLe,
-        BinOp::FGe => ScalarOp::FGe,
-        BinOp::Add => ScalarOp::IAdd,
-        BinOp::Sub => ScalarOp::ISub,
-        BinOp::Lt => ScalarOp::ILt,
-        BinOp::Gt => ScalarOp::IGt,
-        BinOp::Le => ScalarOp::ILe,
-        BinOp::Ge => ScalarOp::IGe,
-        BinOp::And => ScalarOp::And,
-        BinOp::Or => ScalarOp::Or,
-        _ => return None,
-    })
-}
-
-/// `x << s` on unbounded integers (TeSSLa's semantics): a negative `s` shifts right
-/// (arithmetically); a result outside i64 is `None` (an overflow error).
-fn shift_left(x: i64, s: i64) -> Option<i64> {
-    if s < 0 {
-        let r = u32::try_from(s.unsigned_abs()).unwrap_or(u32::MAX).min(63);
-        return Some(x >> r);
-    }
-    if x == 0 {
-        return Some(0);
-    }
-    let r = u32::try_from(s).ok().filter(|r| *r < 64)?;
-    let shifted = x.checked_shl(r)?;
-    (shifted >> r == x).then_some(shifted)
-}
-
+/// `op a` as a value: an error operand is the result, a missing result is an error value.
 fn unop(op: UnaryOp, a: &Value) -> Value {
-    match (op, a) {
-        (_, Value::Error(_)) => a.clone(),
-        (UnaryOp::Not, Value::Bool(b)) => Value::Bool(!b),
-        (UnaryOp::BitNot, Value::Int(i)) => Value::Int(!i),
-        (UnaryOp::Neg, Value::Int(i)) => i
-            .checked_neg()
-            .map_or(Value::Error(RuntimeError::Overflow), Value::Int),
-        (UnaryOp::FNeg, Value::Float(f)) => Value::Float(-f),
-        _ => Value::Error(RuntimeError::Other(
-            format!("{op:?} is not defined for {a:?}").into(),
-        )),
+    if let Value::Error(_) = a {
+        return a.clone();
     }
+    ops::unary(op, a).unwrap_or_else(|e| {
+        Value::Error(match e {
+            ops::OpError::Overflow => RuntimeError::Overflow,
+            ops::OpError::DivisionByZero => RuntimeError::DivisionByZero,
+            ops::OpError::Undefined => {
+                RuntimeError::Other(format!("{op:?} is not defined for {a:?}").into())
+            }
+        })
+    })
 }
 
 /// A runtime function value (closure over a captured frame).

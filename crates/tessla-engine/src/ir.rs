@@ -91,7 +91,8 @@ pub enum SArg {
     Const(Value),
 }
 
-/// Operators with an inline fast path in the evaluator (see [`Node::Bin`]).
+/// Operators with an inline fast path in the evaluator (see [`Node::Bin`]); their semantics are
+/// in [`crate::ops`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ScalarOp {
     FAdd,
@@ -139,35 +140,6 @@ impl Scalar {
             Scalar::I(x) => Value::Int(x),
             Scalar::B(x) => Value::Bool(x),
         }
-    }
-}
-
-impl ScalarOp {
-    /// The result on scalar operands of the operator's types, or `None` otherwise (the general
-    /// closure then decides: overflow is an error value, other types are errors).
-    #[inline]
-    pub fn eval(self, a: Scalar, b: Scalar) -> Option<Scalar> {
-        use Scalar::{B, F, I};
-        use ScalarOp::*;
-        Some(match (self, a, b) {
-            (FAdd, F(x), F(y)) => F(x + y),
-            (FSub, F(x), F(y)) => F(x - y),
-            (FMul, F(x), F(y)) => F(x * y),
-            (FDiv, F(x), F(y)) => F(x / y),
-            (FLt, F(x), F(y)) => B(x < y),
-            (FGt, F(x), F(y)) => B(x > y),
-            (FLe, F(x), F(y)) => B(x <= y),
-            (FGe, F(x), F(y)) => B(x >= y),
-            (IAdd, I(x), I(y)) => I(x.checked_add(y)?),
-            (ISub, I(x), I(y)) => I(x.checked_sub(y)?),
-            (ILt, I(x), I(y)) => B(x < y),
-            (IGt, I(x), I(y)) => B(x > y),
-            (ILe, I(x), I(y)) => B(x <= y),
-            (IGe, I(x), I(y)) => B(x >= y),
-            (And, B(x), B(y)) => B(x && y),
-            (Or, B(x), B(y)) => B(x || y),
-            _ => return None,
-        })
     }
 }
 

@@ -10,6 +10,7 @@ pub mod ir;
 pub mod load;
 pub mod monitor;
 pub mod natives;
+pub mod ops;
 pub mod snapshot;
 pub mod typeck;
 pub mod value;
