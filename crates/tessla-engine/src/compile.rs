@@ -8,6 +8,7 @@
 //! value-level functions are compiled once into closures, so evaluation never walks the AST.
 //! Recursion is allowed only through the lazy first argument of `last` and `delay`.
 
+use crate::builtins::{self, Builtin, Kind, StreamOp};
 use crate::collections;
 use crate::ir::{
     Annotation, Func, InputInfo, LiftFunc, Node, NodeId, OutputInfo, Program, SArg, Scalar, Type,
@@ -35,8 +36,8 @@ enum Term {
 }
 
 enum FuncTerm {
-    /// A stream builtin (`last`, `merge` ...) or a value builtin (native).
-    Builtin(&'static str),
+    /// A stream operator of the builtins table (`last`, `merge` ...).
+    Builtin(&'static Builtin, StreamOp),
     Native(natives::NativeFn),
     User {
         def: Rc<Def>,
@@ -106,110 +107,6 @@ impl Env {
 
 struct Fail;
 type R<T> = Result<T, Fail>;
-
-const STREAM_BUILTINS: &[&str] = &[
-    "nil",
-    "unit",
-    "time",
-    "last",
-    "delay",
-    "default",
-    "defaultFrom",
-    "lift",
-    "lift1",
-    "lift2",
-    "lift3",
-    "lift4",
-    "lift5",
-    "slift",
-    "slift1",
-    "slift2",
-    "slift3",
-    "slift4",
-    "slift5",
-    "merge",
-    "merge2",
-    "merge3",
-    "merge4",
-    "merge5",
-    "merge6",
-    "merge7",
-    "merge8",
-    "const",
-    "first",
-    "filter",
-    "count",
-    "sum",
-    "fold",
-    "reduce",
-    "prev",
-    "pure",
-    "isFirst",
-    "firstEvent",
-    "defined",
-    "on",
-    "constIf",
-    "unitIf",
-    "rising",
-    "falling",
-    "resetCount",
-    "noEvent",
-    "period",
-    "runtime",
-    "maximum",
-    "minimum",
-    "average",
-    "Set.collect",
-    "Set.collectWithRemove",
-];
-
-const VALUE_BUILTINS: &[(&str, natives::NativeFn)] = &[
-    ("intToFloat", natives::core::int_to_float),
-    ("floatToInt", natives::core::float_to_int),
-    ("pow", natives::core::pow),
-    ("log", natives::core::log),
-    ("sin", natives::core::sin),
-    ("cos", natives::core::cos),
-    ("tan", natives::core::tan),
-    ("atan", natives::core::atan),
-    ("sqrt", natives::core::sqrt),
-    ("abs", natives::core::abs),
-    ("max", natives::core::max),
-    ("min", natives::core::min),
-    ("toString", natives::core::to_string),
-    ("String.concat", natives::core::concat),
-    ("Some", natives::core::some),
-    ("isNone", natives::core::is_none),
-    ("isSome", natives::core::is_some),
-    ("getSome", natives::core::get_some),
-    ("getSomeOrElse", natives::core::get_some_or_else),
-    ("List.empty", natives::core::list_empty),
-    ("List.size", natives::core::list_size),
-    ("List.append", natives::core::list_append),
-    ("List.prepend", natives::core::list_prepend),
-    ("List.get", natives::core::list_get),
-    ("List.set", natives::core::list_set),
-    ("List.head", natives::core::list_head),
-    ("List.last", natives::core::list_last),
-    ("List.tail", natives::core::list_tail),
-    ("List.init", natives::core::list_init),
-    ("List.fold", natives::core::list_fold),
-    ("List.map", natives::core::list_map),
-    ("ite", ite_native),
-    ("Option.map", natives::core::option_map),
-    ("OptionUtils.map", natives::core::option_map),
-    ("Option.flatMap", natives::core::option_flat_map),
-    ("OptionUtils.flatMap", natives::core::option_flat_map),
-];
-
-/// A value function by name: the core builtins, then the collection functions.
-fn value_builtin(name: &str) -> Option<natives::NativeFn> {
-    VALUE_BUILTINS
-        .iter()
-        .chain(collections::FUNCTIONS)
-        .find(|(n, _)| *n == name)
-        .map(|(_, f)| *f)
-}
 
 pub struct Compiler<'a> {
     sources: &'a SourceMap,
@@ -301,76 +198,6 @@ pub fn parse_base_parts(s: &str) -> Result<(i128, i128), String> {
     Ok((n, f))
 }
 
-/// Two operands of an operator function (missing ones are Unit, which no operator accepts).
-fn operands(a: &[Value]) -> (Value, Value) {
-    (
-        a.first().cloned().unwrap_or(Value::Unit),
-        a.get(1).cloned().unwrap_or(Value::Unit),
-    )
-}
-
-/// TeSSLa's `Operators.<name>` functions (`slift(x, y, Operators.add)`) as natives.
-fn operator_fn(name: &str) -> Option<natives::NativeFn> {
-    macro_rules! bin {
-        ($op:expr) => {{
-            let f: natives::NativeFn = |a: &[Value]| {
-                let (x, y) = operands(a);
-                binop($op, &x, &y)
-            };
-            f
-        }};
-    }
-    macro_rules! un {
-        ($op:expr) => {{
-            let f: natives::NativeFn = |a: &[Value]| unop($op, &operands(a).0);
-            f
-        }};
-    }
-    Some(match name {
-        "add" => bin!(BinOp::Add),
-        "sub" => bin!(BinOp::Sub),
-        "mul" => bin!(BinOp::Mul),
-        "div" => bin!(BinOp::Div),
-        "mod" => bin!(BinOp::Mod),
-        "lt" => bin!(BinOp::Lt),
-        "gt" => bin!(BinOp::Gt),
-        "leq" => bin!(BinOp::Le),
-        "geq" => bin!(BinOp::Ge),
-        "eq" => bin!(BinOp::Eq),
-        "neq" => bin!(BinOp::Ne),
-        "fadd" => bin!(BinOp::FAdd),
-        "fsub" => bin!(BinOp::FSub),
-        "fmul" => bin!(BinOp::FMul),
-        "fdiv" => bin!(BinOp::FDiv),
-        "flt" => bin!(BinOp::FLt),
-        "fgt" => bin!(BinOp::FGt),
-        "fleq" => bin!(BinOp::FLe),
-        "fgeq" => bin!(BinOp::FGe),
-        "and" => bin!(BinOp::And),
-        "or" => bin!(BinOp::Or),
-        "bitand" => bin!(BinOp::BitAnd),
-        "bitor" => bin!(BinOp::BitOr),
-        "bitxor" => bin!(BinOp::BitXor),
-        "leftshift" => bin!(BinOp::Shl),
-        "rightshift" => bin!(BinOp::Shr),
-        "not" => un!(UnaryOp::Not),
-        "negate" => un!(UnaryOp::Neg),
-        "fnegate" => un!(UnaryOp::FNeg),
-        "bitflip" => un!(UnaryOp::BitNot),
-        _ => return None,
-    })
-}
-
-/// `ite(c, a, b)`: `a` if `c` else `b` (any values, also functions).
-fn ite_native(a: &[Value]) -> Value {
-    match a {
-        [Value::Bool(true), x, _] => x.clone(),
-        [Value::Bool(false), _, y] => y.clone(),
-        [e @ Value::Error(_), ..] => e.clone(),
-        _ => Value::Error(RuntimeError::Other("ite: expected (Bool, A, A)".into())),
-    }
-}
-
 fn unknown_extern(_: &[Value]) -> Value {
     Value::Error(RuntimeError::Other("call of an unknown extern".into()))
 }
@@ -390,20 +217,8 @@ fn call_native(f: natives::NativeFn, args: &[Value]) -> Value {
     f(args)
 }
 
-/// `a op b` as a value: an error operand is the result, a missing result is an error value.
 fn binop(op: BinOp, a: &Value, b: &Value) -> Value {
-    if let Some(e) = is_err(a).or_else(|| is_err(b)) {
-        return e;
-    }
-    ops::binary(op, a, b).unwrap_or_else(|e| {
-        Value::Error(match e {
-            ops::OpError::Overflow => RuntimeError::Overflow,
-            ops::OpError::DivisionByZero => RuntimeError::DivisionByZero,
-            ops::OpError::Undefined => RuntimeError::Other(
-                format!("`{}` is not defined for {a:?} and {b:?}", op.symbol()).into(),
-            ),
-        })
-    })
+    ops::binary_value(op, a, b)
 }
 
 /// The closure of a binary operator, with the inline scalar path for its usual operand types
@@ -428,20 +243,8 @@ fn binop_fn(op: BinOp) -> Func {
     }
 }
 
-/// `op a` as a value: an error operand is the result, a missing result is an error value.
 fn unop(op: UnaryOp, a: &Value) -> Value {
-    if let Value::Error(_) = a {
-        return a.clone();
-    }
-    ops::unary(op, a).unwrap_or_else(|e| {
-        Value::Error(match e {
-            ops::OpError::Overflow => RuntimeError::Overflow,
-            ops::OpError::DivisionByZero => RuntimeError::DivisionByZero,
-            ops::OpError::Undefined => {
-                RuntimeError::Other(format!("{op:?} is not defined for {a:?}").into())
-            }
-        })
-    })
+    ops::unary_value(op, a)
 }
 
 /// A runtime function value (closure over a captured frame).
@@ -1217,21 +1020,17 @@ impl<'a> Compiler<'a> {
                     d.name.name
                 ),
             ),
-            Body::Extern { name, .. } => match natives::lookup(name) {
-                Some(n) => Ok(Term::Func(Rc::new(FuncTerm::Native(n.func)))),
-                None => match value_builtin(name) {
-                    Some(f) => Ok(Term::Func(Rc::new(FuncTerm::Native(f)))),
-                    // As in TeSSLa, an unknown extern is an error when it is evaluated.
-                    None => {
-                        if d.params.is_some() {
-                            let f: natives::NativeFn = unknown_extern;
-                            Ok(Term::Func(Rc::new(FuncTerm::Native(f))))
-                        } else {
-                            let msg: Arc<str> = format!("unknown extern `{name}`").into();
-                            Ok(Term::Const(Value::Error(RuntimeError::Other(msg))))
-                        }
-                    }
-                },
+            Body::Extern { name, .. } => match builtins::extern_native(name) {
+                Some(f) => Ok(Term::Func(Rc::new(FuncTerm::Native(f)))),
+                // As in TeSSLa, an unknown extern is an error when it is evaluated.
+                None if d.params.is_some() => {
+                    let f: natives::NativeFn = unknown_extern;
+                    Ok(Term::Func(Rc::new(FuncTerm::Native(f))))
+                }
+                None => {
+                    let msg: Arc<str> = format!("unknown extern `{name}`").into();
+                    Ok(Term::Const(Value::Error(RuntimeError::Other(msg))))
+                }
             },
             Body::Expr { expr, where_defs } => {
                 if where_defs.is_empty() {
@@ -1280,30 +1079,30 @@ impl<'a> Compiler<'a> {
                 if name == "None" {
                     return Ok(Term::Const(Value::None));
                 }
-                if name == "unit" {
-                    let u = self.unit();
-                    return Ok(Term::Stream(u));
+                if let Some(b) = builtins::get(name) {
+                    return Ok(match b.kind {
+                        Kind::Stream(StreamOp::Nil) => Term::Stream(self.node(Node::Nil)),
+                        Kind::Stream(StreamOp::Unit) => Term::Stream(self.unit()),
+                        Kind::Stream(op) => Term::Func(Rc::new(FuncTerm::Builtin(b, op))),
+                        Kind::Constant(v) => Term::Const(v()),
+                        Kind::Value(f) | Kind::Operator(f) => {
+                            Term::Func(Rc::new(FuncTerm::Native(f)))
+                        }
+                        // Only through `extern("name")`.
+                        Kind::Extern(_) => return self.unknown_name(name, span, env),
+                    });
                 }
-                if let Some(f) = name.strip_prefix("Operators.").and_then(operator_fn) {
-                    return Ok(Term::Func(Rc::new(FuncTerm::Native(f))));
-                }
-                if name == "nil" {
-                    return Ok(Term::Stream(self.node(Node::Nil)));
-                }
-                if let Some(b) = STREAM_BUILTINS.iter().find(|b| **b == name) {
-                    return Ok(Term::Func(Rc::new(FuncTerm::Builtin(b))));
-                }
-                if let Some(v) = collections::empty(name) {
-                    return Ok(Term::Const(v));
-                }
-                if let Some(f) = value_builtin(name) {
-                    return Ok(Term::Func(Rc::new(FuncTerm::Native(f))));
-                }
+                self.unknown_name(name, span, env)
+            }
+        }
+    }
+
+    fn unknown_name<T>(&mut self, name: &str, span: Span, env: &Env) -> R<T> {
+        {
+            {
                 let mut known = Vec::new();
                 env.all_names(&mut known);
-                known.extend(STREAM_BUILTINS.iter().map(|s| s.to_string()));
-                known.extend(VALUE_BUILTINS.iter().map(|(s, _)| s.to_string()));
-                known.extend(collections::FUNCTIONS.iter().map(|(s, _)| s.to_string()));
+                known.extend(builtins::names().map(str::to_string));
                 let near = nearest(name, known.iter().map(String::as_str));
                 let mut d =
                     Diagnostic::error(Category::Name, Some(span), format!("unknown name `{name}`"));
@@ -1638,7 +1437,7 @@ impl<'a> Compiler<'a> {
                     return Ok(f);
                 };
                 // `last` and `delay`: the first argument is lazy (may refer back recursively).
-                let lazy_first = matches!(&f, Term::Func(ft) if matches!(&**ft, FuncTerm::Builtin("last" | "delay")));
+                let lazy_first = matches!(&f, Term::Func(ft) if matches!(&**ft, FuncTerm::Builtin(b, _) if b.lazy == [0]));
                 let mut terms = Vec::with_capacity(args.len());
                 for (i, a) in args.iter().enumerate() {
                     if lazy_first && i == 0 {
@@ -1841,10 +1640,10 @@ impl<'a> Compiler<'a> {
                     })))
                 }
             }
-            FuncTerm::Builtin(b) => self.error(
+            FuncTerm::Builtin(b, _) => self.error(
                 Category::Unsupported,
                 span,
-                format!("the stream function `{b}` cannot be used as a value"),
+                format!("the stream function `{}` cannot be used as a value", b.name),
             ),
         }
     }
@@ -1944,7 +1743,7 @@ impl<'a> Compiler<'a> {
             return self.error(Category::Type, span, "this is not a function");
         };
         match &*ft {
-            FuncTerm::Builtin(name) => self.builtin(name, args, span, env),
+            FuncTerm::Builtin(b, op) => self.stream_builtin(b.name, *op, args, span),
             FuncTerm::Native(n) => {
                 let n = *n;
                 self.apply_value_fn(Arc::new(move |a: &[Value]| call_native(n, a)), args, span)
@@ -2118,45 +1917,44 @@ impl<'a> Compiler<'a> {
         }
     }
 
-    fn builtin(&mut self, name: &str, args: Vec<Term>, span: Span, env: &Env) -> R<Term> {
-        let _ = env;
+    /// The nodes of a stream operator of the builtins table applied to `args`.
+    fn stream_builtin(&mut self, name: &str, op: StreamOp, args: Vec<Term>, span: Span) -> R<Term> {
         let n = args.len();
-        let node = match name {
-            "time" => Node::Time(self.stream_arg(&args, 0, span)?),
-            "last" => Node::Last {
+        let node = match op {
+            StreamOp::Time => Node::Time(self.stream_arg(&args, 0, span)?),
+            StreamOp::Last => Node::Last {
                 value: self.stream_arg(&args, 0, span)?,
                 trigger: self.stream_arg(&args, 1, span)?,
             },
-            "prev" => {
+            StreamOp::Prev => {
                 let s = self.stream_arg(&args, 0, span)?;
                 Node::Last {
                     value: s,
                     trigger: s,
                 }
             }
-            "delay" => Node::Delay {
+            StreamOp::Delay => Node::Delay {
                 delay: self.stream_arg(&args, 0, span)?,
                 reset: self.stream_arg(&args, 1, span)?,
             },
-            "default" => Node::Default {
+            StreamOp::Default => Node::Default {
                 stream: self.stream_arg(&args, 0, span)?,
                 value: self.const_arg(&args, 1, span)?,
             },
-            "defaultFrom" => Node::DefaultFrom {
+            StreamOp::DefaultFrom => Node::DefaultFrom {
                 stream: self.stream_arg(&args, 0, span)?,
                 from: self.stream_arg(&args, 1, span)?,
             },
-            "merge" | "merge2" | "merge3" | "merge4" | "merge5" | "merge6" | "merge7"
-            | "merge8" => Node::Merge(
+            StreamOp::Merge => Node::Merge(
                 (0..n)
                     .map(|i| self.stream_arg(&args, i, span))
                     .collect::<R<Vec<_>>>()?,
             ),
-            "filter" => Node::Filter {
+            StreamOp::Filter => Node::Filter {
                 stream: self.stream_arg(&args, 0, span)?,
                 cond: self.stream_arg(&args, 1, span)?,
             },
-            "const" => {
+            StreamOp::Const => {
                 let v = self.const_arg(&args, 0, span)?;
                 let s = self.stream_arg(&args, 1, span)?;
                 Node::SLift {
@@ -2164,7 +1962,7 @@ impl<'a> Compiler<'a> {
                     f: Arc::new(move |_: &[Value]| v.clone()),
                 }
             }
-            "first" => {
+            StreamOp::First => {
                 let a = self.stream_arg(&args, 0, span)?;
                 let b = self.stream_arg(&args, 1, span)?;
                 Node::SLift {
@@ -2172,7 +1970,7 @@ impl<'a> Compiler<'a> {
                     f: Arc::new(|v: &[Value]| v[0].clone()),
                 }
             }
-            "on" => {
+            StreamOp::On => {
                 // At each event of the trigger, the latest value of the stream (this step's or
                 // an earlier one); nothing before the stream's first event.
                 let t = self.stream_arg(&args, 0, span)?;
@@ -2190,35 +1988,34 @@ impl<'a> Compiler<'a> {
                     }),
                 }
             }
-            "count" => Node::Fold {
+            StreamOp::Count => Node::Fold {
                 stream: self.stream_arg(&args, 0, span)?,
                 init: Value::Int(0),
                 f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &Value::Int(1))),
             },
-            "sum" => Node::Fold {
+            StreamOp::Sum => Node::Fold {
                 stream: self.stream_arg(&args, 0, span)?,
                 init: Value::Int(0),
                 f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &a[1])),
             },
-            "fold" => Node::Fold {
+            StreamOp::Fold => Node::Fold {
                 stream: self.stream_arg(&args, 0, span)?,
                 init: self.const_arg(&args, 1, span)?,
                 f: self.value_fn_arg(&args, 2, span)?,
             },
-            "reduce" => Node::Reduce {
+            StreamOp::Reduce => Node::Reduce {
                 stream: self.stream_arg(&args, 0, span)?,
                 f: self.value_fn_arg(&args, 1, span)?,
             },
-            "maximum" => Node::Reduce {
+            StreamOp::Maximum => Node::Reduce {
                 stream: self.stream_arg(&args, 0, span)?,
                 f: Arc::new(|a: &[Value]| call_native(natives::core::max, a)),
             },
-            "minimum" => Node::Reduce {
+            StreamOp::Minimum => Node::Reduce {
                 stream: self.stream_arg(&args, 0, span)?,
                 f: Arc::new(|a: &[Value]| call_native(natives::core::min, a)),
             },
-            "lift" | "lift1" | "lift2" | "lift3" | "lift4" | "lift5" | "slift" | "slift1"
-            | "slift2" | "slift3" | "slift4" | "slift5" => {
+            StreamOp::Lift | StreamOp::SLift => {
                 let Some(ft) = args.last().cloned() else {
                     return self.error(
                         Category::Type,
@@ -2242,7 +2039,7 @@ impl<'a> Compiler<'a> {
                 let streams = (0..n - 1)
                     .map(|i| self.stream_arg(&args, i, span))
                     .collect::<R<Vec<_>>>()?;
-                if name.starts_with('s') {
+                if op == StreamOp::SLift {
                     Node::SLift {
                         args: streams.into_iter().map(SArg::Stream).collect(),
                         f,
@@ -2268,7 +2065,7 @@ impl<'a> Compiler<'a> {
                     }
                 }
             }
-            "pure" => {
+            StreamOp::Pure => {
                 let s = self.stream_arg(&args, 0, span)?;
                 Node::Lift {
                     args: vec![s, self.node(Node::Nil)],
@@ -2276,7 +2073,7 @@ impl<'a> Compiler<'a> {
                 }
                 .pipe_pure(self, s)
             }
-            "isFirst" => {
+            StreamOp::IsFirst => {
                 let s = self.stream_arg(&args, 0, span)?;
                 let cnt = self.node(Node::Fold {
                     stream: s,
@@ -2288,7 +2085,7 @@ impl<'a> Compiler<'a> {
                     f: Arc::new(|v: &[Value]| Value::Bool(v[1] == Value::Int(1))),
                 }
             }
-            "firstEvent" => {
+            StreamOp::FirstEvent => {
                 let s = self.stream_arg(&args, 0, span)?;
                 Node::Lift {
                     args: vec![s],
@@ -2296,7 +2093,7 @@ impl<'a> Compiler<'a> {
                 }
                 .first_only(self)
             }
-            "defined" => {
+            StreamOp::Defined => {
                 let s = self.stream_arg(&args, 0, span)?;
                 let t = self.node(Node::SLift {
                     args: vec![SArg::Stream(s)],
@@ -2307,7 +2104,7 @@ impl<'a> Compiler<'a> {
                     value: Value::Bool(false),
                 }
             }
-            "constIf" => {
+            StreamOp::ConstIf => {
                 let v = self.const_arg(&args, 0, span)?;
                 let c = self.stream_arg(&args, 1, span)?;
                 let k = self.node(Node::SLift {
@@ -2316,7 +2113,7 @@ impl<'a> Compiler<'a> {
                 });
                 Node::Filter { stream: k, cond: c }
             }
-            "unitIf" => {
+            StreamOp::UnitIf => {
                 let c = self.stream_arg(&args, 0, span)?;
                 let k = self.node(Node::SLift {
                     args: vec![SArg::Stream(c)],
@@ -2324,13 +2121,13 @@ impl<'a> Compiler<'a> {
                 });
                 Node::Filter { stream: k, cond: c }
             }
-            "rising" | "falling" => {
+            StreamOp::Rising | StreamOp::Falling => {
                 let c = self.stream_arg(&args, 0, span)?;
                 let prev = self.node(Node::Last {
                     value: c,
                     trigger: c,
                 });
-                let want = name == "rising";
+                let want = op == StreamOp::Rising;
                 let edge = self.node(Node::Lift {
                     args: vec![c, prev],
                     f: Arc::new(move |a: &[Option<Value>]| match (&a[0], &a[1]) {
@@ -2352,7 +2149,7 @@ impl<'a> Compiler<'a> {
                     cond: edge,
                 }
             }
-            "period" => {
+            StreamOp::Period => {
                 let d = self.const_arg(&args, 0, span)?;
                 let u = self.unit();
                 let alias = self.node(Node::Alias(usize::MAX));
@@ -2370,7 +2167,7 @@ impl<'a> Compiler<'a> {
                 // The periodic events: the delay's firings, plus the start at t = 0.
                 Node::Merge(vec![u, delay])
             }
-            "resetCount" => {
+            StreamOp::ResetCount => {
                 // Events of `x` since the last `reset` (a reset with an event counts it).
                 let x = self.stream_arg(&args, 0, span)?;
                 let reset = self.stream_arg(&args, 1, span)?;
@@ -2393,12 +2190,12 @@ impl<'a> Compiler<'a> {
                     }),
                 }
             }
-            "Set.collect" => Node::Fold {
+            StreamOp::SetCollect => Node::Fold {
                 stream: self.stream_arg(&args, 0, span)?,
                 init: Value::Set(Arc::new(Vec::new())),
                 f: Arc::new(collections::set_add),
             },
-            "Set.collectWithRemove" => {
+            StreamOp::SetCollectWithRemove => {
                 // Add this step's `add` value, then remove this step's `remove` value.
                 let add = self.stream_arg(&args, 0, span)?;
                 let remove = self.stream_arg(&args, 1, span)?;
@@ -2430,14 +2227,7 @@ impl<'a> Compiler<'a> {
                     }),
                 }
             }
-            "noEvent" | "runtime" | "average" => {
-                return self.error(
-                    Category::Unsupported,
-                    span,
-                    format!("`{name}` is not supported yet"),
-                );
-            }
-            _ => {
+            StreamOp::Unsupported | StreamOp::Nil | StreamOp::Unit => {
                 return self.error(
                     Category::Unsupported,
                     span,

@@ -4,6 +4,7 @@
 //! (`compile`), the IR (`ir`), values (`value`), monitor instances (`monitor`) and their
 //! snapshots (`snapshot`).
 
+pub mod builtins;
 pub mod collections;
 pub mod compile;
 pub mod ir;

@@ -2,7 +2,9 @@
 //! operators on values.
 //!
 //! Owns: [`binary`] and [`unary`] (the result of an operator on two or one non-error values, or
-//! why there is none), the inline scalar fast path [`ScalarOp::eval`] (which must agree with
+//! why there is none), their forms on values ([`binary_value`], [`unary_value`]: an error
+//! operand is the result, no result is an error value), `Operators.add` and friends as natives
+//! ([`natives`]), the inline scalar fast path [`ScalarOp::eval`] (which must agree with
 //! [`binary`]; a test checks it) and [`shift_left`]. The lowering (operators in specs,
 //! `Operators.add` and friends, the stream builtins that add) and the trace reader (operators in
 //! trace values) both call these, so an operator cannot mean one thing in a spec and another in a
@@ -15,7 +17,7 @@
 //! itself.
 
 use crate::ir::{Scalar, ScalarOp};
-use crate::value::Value;
+use crate::value::{RuntimeError, Value};
 use tessla_syntax::ast::{BinOp, UnaryOp};
 
 /// Why an operator has no value.
@@ -79,6 +81,80 @@ pub fn unary(op: UnaryOp, a: &Value) -> Result<Value, OpError> {
         (UnaryOp::FNeg, Value::Float(f)) => Value::Float(-f),
         _ => return Err(OpError::Undefined),
     })
+}
+
+/// `a op b` as a value: an error operand is the result, a missing result is an error value.
+pub fn binary_value(op: BinOp, a: &Value, b: &Value) -> Value {
+    if let Value::Error(_) = a {
+        return a.clone();
+    }
+    if let Value::Error(_) = b {
+        return b.clone();
+    }
+    binary(op, a, b).unwrap_or_else(|e| {
+        Value::Error(match e {
+            OpError::Overflow => RuntimeError::Overflow,
+            OpError::DivisionByZero => RuntimeError::DivisionByZero,
+            OpError::Undefined => RuntimeError::Other(
+                format!("`{}` is not defined for {a:?} and {b:?}", op.symbol()).into(),
+            ),
+        })
+    })
+}
+
+/// `op a` as a value: an error operand is the result, a missing result is an error value.
+pub fn unary_value(op: UnaryOp, a: &Value) -> Value {
+    if let Value::Error(_) = a {
+        return a.clone();
+    }
+    unary(op, a).unwrap_or_else(|e| {
+        Value::Error(match e {
+            OpError::Overflow => RuntimeError::Overflow,
+            OpError::DivisionByZero => RuntimeError::DivisionByZero,
+            OpError::Undefined => {
+                RuntimeError::Other(format!("{op:?} is not defined for {a:?}").into())
+            }
+        })
+    })
+}
+
+/// TeSSLa's `Operators.<name>` functions as natives (`slift(x, y, Operators.add)`); missing
+/// operands are Unit, which no operator accepts.
+pub mod natives {
+    use super::{binary_value, unary_value};
+    use crate::value::Value;
+    use tessla_syntax::ast::{BinOp, UnaryOp};
+
+    fn operand(a: &[Value], i: usize) -> Value {
+        a.get(i).cloned().unwrap_or(Value::Unit)
+    }
+
+    macro_rules! bin {
+        ($($name:ident => $op:expr),+ $(,)?) => {
+            $(pub fn $name(a: &[Value]) -> Value {
+                binary_value($op, &operand(a, 0), &operand(a, 1))
+            })+
+        };
+    }
+    macro_rules! un {
+        ($($name:ident => $op:expr),+ $(,)?) => {
+            $(pub fn $name(a: &[Value]) -> Value {
+                unary_value($op, &operand(a, 0))
+            })+
+        };
+    }
+    bin! {
+        add => BinOp::Add, sub => BinOp::Sub, mul => BinOp::Mul, div => BinOp::Div,
+        rem => BinOp::Mod, lt => BinOp::Lt, gt => BinOp::Gt, le => BinOp::Le, ge => BinOp::Ge,
+        eq => BinOp::Eq, ne => BinOp::Ne, fadd => BinOp::FAdd, fsub => BinOp::FSub,
+        fmul => BinOp::FMul, fdiv => BinOp::FDiv, flt => BinOp::FLt, fgt => BinOp::FGt,
+        fle => BinOp::FLe, fge => BinOp::FGe, and => BinOp::And, or => BinOp::Or,
+        bitand => BinOp::BitAnd, bitor => BinOp::BitOr, bitxor => BinOp::BitXor,
+        shl => BinOp::Shl, shr => BinOp::Shr,
+    }
+    un! {
+        not => UnaryOp::Not, neg => UnaryOp::Neg, fneg => UnaryOp::FNeg, bitflip => UnaryOp::BitNot,
+    }
 }
 
 /// `x << s` on unbounded integers: a negative `s` shifts right (arithmetically); a result

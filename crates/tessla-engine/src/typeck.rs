@@ -16,6 +16,7 @@
 //! fits everything. Definitions are generalised (let-polymorphism) when they are done, so generic
 //! functions and constants may be used at several types.
 
+use crate::builtins::{self, Sig};
 use std::cell::RefCell;
 use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
@@ -981,6 +982,7 @@ impl<'a> Checker<'a> {
         // Variadic builtins get their signature from the number of arguments.
         if let ExprKind::Var(id) = &function.kind
             && self.find(&id.name, scope).is_none()
+            && builtins::get(&id.name).is_some_and(|b| b.sig == Sig::Variadic)
             && let Some(sig) = self.variadic(&id.name, ts.len())
         {
             return self.apply(sig, &ts, args, span, &id.name);
@@ -1094,108 +1096,98 @@ impl<'a> Checker<'a> {
         None
     }
 
-    /// The type of a builtin name (stream functions, value functions, collection functions).
+    /// The type of a builtin name, from its signature in the builtins table (`None`: not a
+    /// builtin or one without a fixed signature).
     fn builtin(&mut self, name: &str) -> Option<Ty> {
-        let a = self.fresh();
-        let b = self.fresh();
-        let (k, v) = (a.clone(), b.clone());
-        let f = |ps: Vec<Ty>, r: Ty| func(ps, r);
+        // Two variables per use, `A`/`K` and `B`/`V`, whether the signature uses them or not.
+        let vars = [self.fresh(), self.fresh()];
+        match builtins::get(name)?.sig {
+            Sig::Fixed(sig) => signature(sig, &vars),
+            Sig::Any | Sig::Variadic => None,
+        }
+    }
+}
+
+/// A type in TeSSLa's notation (`(Events[A], (B, A) => B) => Events[B]`) with `A`/`K` and
+/// `B`/`V` standing for `vars`; `None` when it does not parse (a test parses every signature
+/// of the builtins table).
+fn signature(sig: &'static str, vars: &[Ty; 2]) -> Option<Ty> {
+    let mut p = SigParser { rest: sig, vars };
+    let t = p.ty()?;
+    p.rest.trim().is_empty().then_some(t)
+}
+
+struct SigParser<'v> {
+    rest: &'static str,
+    vars: &'v [Ty; 2],
+}
+
+impl SigParser<'_> {
+    fn eat(&mut self, tok: &str) -> bool {
+        let r = self.rest.trim_start();
+        match r.strip_prefix(tok) {
+            Some(after) => {
+                self.rest = after;
+                true
+            }
+            None => {
+                self.rest = r;
+                false
+            }
+        }
+    }
+
+    /// Types separated by commas up to `close`.
+    fn list(&mut self, close: &str) -> Option<Vec<Ty>> {
+        let mut out = Vec::new();
+        if self.eat(close) {
+            return Some(out);
+        }
+        loop {
+            out.push(self.ty()?);
+            if self.eat(close) {
+                return Some(out);
+            }
+            if !self.eat(",") {
+                return None;
+            }
+        }
+    }
+
+    fn ty(&mut self) -> Option<Ty> {
+        if self.eat("(") {
+            let params = self.list(")")?;
+            if !self.eat("=>") {
+                return None;
+            }
+            return Some(func(params, self.ty()?));
+        }
+        let r = self.rest.trim_start();
+        let end = r
+            .find(|c: char| !c.is_ascii_alphanumeric())
+            .unwrap_or(r.len());
+        let (name, after) = r.split_at(end);
+        self.rest = after;
+        let args = if self.eat("[") {
+            self.list("]")?
+        } else {
+            Vec::new()
+        };
+        let mut args = args.into_iter();
+        let mut arg = || args.next();
         Some(match name {
-            "time" => f(vec![ev(a)], ev(int())),
-            "last" => f(vec![ev(a.clone()), ev(b)], ev(a)),
-            "prev" | "pure" | "firstEvent" => f(vec![ev(a.clone())], ev(a)),
-            "delay" => f(vec![ev(int()), ev(a)], ev(unit())),
-            "default" => f(vec![ev(a.clone()), a.clone()], ev(a)),
-            "defaultFrom" => f(vec![ev(a.clone()), ev(a.clone())], ev(a)),
-            "const" => f(vec![a.clone(), ev(b)], ev(a)),
-            "first" => f(vec![ev(a.clone()), ev(b)], ev(a)),
-            "filter" => f(vec![ev(a.clone()), ev(boolean())], ev(a)),
-            "count" => f(vec![ev(a)], ev(int())),
-            "fold" => f(
-                vec![
-                    ev(a.clone()),
-                    b.clone(),
-                    func(vec![b.clone(), a], b.clone()),
-                ],
-                ev(b),
-            ),
-            "reduce" => f(
-                vec![ev(a.clone()), func(vec![a.clone(), a.clone()], a.clone())],
-                ev(a),
-            ),
-            "isFirst" | "defined" => f(vec![ev(a)], ev(boolean())),
-            "on" => f(vec![ev(a), ev(b.clone())], ev(b)),
-            "constIf" => f(vec![a.clone(), ev(boolean())], ev(a)),
-            "unitIf" => f(vec![ev(boolean())], ev(unit())),
-            "rising" | "falling" => f(vec![ev(boolean())], ev(b)),
-            "resetCount" => f(vec![ev(a), ev(b)], ev(int())),
-            "noEvent" => f(vec![ev(a), ev(b)], ev(boolean())),
-            "period" => f(vec![int()], ev(unit())),
-            "Set.collect" => f(vec![ev(a.clone())], ev(set(a))),
-            "Set.collectWithRemove" => f(vec![ev(a.clone()), ev(a.clone())], ev(set(a))),
-            "intToFloat" => f(vec![int()], float()),
-            "floatToInt" => f(vec![float()], int()),
-            "pow" => f(vec![float(), float()], float()),
-            "sin" | "cos" | "tan" | "atan" | "sqrt" => f(vec![float()], float()),
-            "abs" => f(vec![a.clone()], a),
-            "max" | "min" => f(vec![a.clone(), a.clone()], a),
-            "toString" => f(vec![a], string()),
-            "String.concat" => f(vec![string(), string()], string()),
-            "Some" => f(vec![a.clone()], opt(a)),
-            "isNone" | "isSome" => f(vec![opt(a)], boolean()),
-            "getSome" => f(vec![opt(a.clone())], a),
-            "getSomeOrElse" => f(vec![opt(a.clone()), a.clone()], a),
-            "ite" => f(vec![boolean(), a.clone(), a.clone()], a),
-            "Option.map" | "OptionUtils.map" => {
-                f(vec![opt(a.clone()), func(vec![a], b.clone())], opt(b))
-            }
-            "Option.flatMap" | "OptionUtils.flatMap" => {
-                f(vec![opt(a.clone()), func(vec![a], opt(b.clone()))], opt(b))
-            }
-            "List.empty" => list(a),
-            "Set.empty" => set(a),
-            "Map.empty" => map(a, b),
-            "List.size" => f(vec![list(a)], int()),
-            "List.isEmpty" => f(vec![list(a)], boolean()),
-            "List.append" => f(vec![list(a.clone()), a.clone()], list(a)),
-            "List.prepend" => f(vec![a.clone(), list(a.clone())], list(a)),
-            "List.get" => f(vec![list(a.clone()), int()], a),
-            "List.set" => f(vec![list(a.clone()), int(), a.clone()], list(a)),
-            "List.head" | "List.last" => f(vec![list(a.clone())], a),
-            "List.tail" | "List.init" => f(vec![list(a.clone())], list(a)),
-            "List.fold" => f(
-                vec![
-                    list(a.clone()),
-                    b.clone(),
-                    func(vec![b.clone(), a], b.clone()),
-                ],
-                b,
-            ),
-            "List.map" => f(vec![list(a.clone()), func(vec![a], b.clone())], list(b)),
-            "Set.add" | "Set.remove" => f(vec![set(a.clone()), a.clone()], set(a)),
-            "Set.contains" => f(vec![set(a.clone()), a], boolean()),
-            "Set.size" => f(vec![set(a)], int()),
-            "Set.union" | "Set.intersection" | "Set.minus" => {
-                f(vec![set(a.clone()), set(a.clone())], set(a))
-            }
-            "Set.fold" => f(
-                vec![
-                    set(a.clone()),
-                    b.clone(),
-                    func(vec![b.clone(), a], b.clone()),
-                ],
-                b,
-            ),
-            "Set.map" => f(vec![set(a.clone()), func(vec![a], b.clone())], set(b)),
-            "Map.add" => f(
-                vec![map(k.clone(), v.clone()), k.clone(), v.clone()],
-                map(k, v),
-            ),
-            "Map.contains" => f(vec![map(k.clone(), v), k], boolean()),
-            "Map.get" => f(vec![map(k.clone(), v.clone()), k], v),
-            "Map.getOrElse" => f(vec![map(k.clone(), v.clone()), k, v.clone()], v),
-            "Map.remove" => f(vec![map(k.clone(), v.clone()), k.clone()], map(k, v)),
-            "Map.size" => f(vec![map(k, v)], int()),
+            "A" | "K" => self.vars[0].clone(),
+            "B" | "V" => self.vars[1].clone(),
+            "Int" => int(),
+            "Float" => float(),
+            "Bool" => boolean(),
+            "String" => string(),
+            "Unit" => unit(),
+            "Events" => ev(arg()?),
+            "Option" => opt(arg()?),
+            "List" => list(arg()?),
+            "Set" => set(arg()?),
+            "Map" => map(arg()?, arg()?),
             _ => return None,
         })
     }
@@ -1271,5 +1263,36 @@ fn dotted(e: &Expr) -> Option<String> {
         ExprKind::Var(id) => Some(id.name.clone()),
         ExprKind::Member { object, field } => Some(format!("{}.{}", dotted(object)?, field.name)),
         _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_builtin_signature_parses() {
+        let vars = [Ty::Var(0), Ty::Var(1)];
+        for b in builtins::BUILTINS {
+            if let Sig::Fixed(sig) = b.sig {
+                assert!(signature(sig, &vars).is_some(), "{}: {sig}", b.name);
+            }
+        }
+        assert_eq!(
+            signature("(Events[A], B, (B, A) => B) => Events[B]", &vars),
+            Some(func(
+                vec![
+                    ev(Ty::Var(0)),
+                    Ty::Var(1),
+                    func(vec![Ty::Var(1), Ty::Var(0)], Ty::Var(1))
+                ],
+                ev(Ty::Var(1))
+            ))
+        );
+        assert_eq!(
+            signature("Map[K, V]", &vars),
+            Some(map(Ty::Var(0), Ty::Var(1)))
+        );
+        assert_eq!(signature("(Int) =>", &vars), None);
     }
 }
