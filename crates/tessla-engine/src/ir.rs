@@ -276,17 +276,7 @@ impl Node {
     }
 }
 
-/// Mark the stream arguments of a signal lift when there are at least two.
-fn mark_all(mark: &mut impl FnMut(NodeId), args: &[&SArg]) {
-    let streams = stream_args(args);
-    if streams.len() >= 2 {
-        for n in streams {
-            mark(n);
-        }
-    }
-}
-
-fn stream_args(args: &[&SArg]) -> Vec<NodeId> {
+pub(crate) fn stream_args(args: &[&SArg]) -> Vec<NodeId> {
     args.iter()
         .filter_map(|a| match a {
             SArg::Stream(n) => Some(*n),
@@ -311,7 +301,7 @@ pub struct Program {
     /// The `Delay` nodes (the monitor arms and fires only these).
     pub delays: Vec<NodeId>,
     /// Per node: its slot among the values a monitor keeps from earlier steps, or [`NO_SLOT`]
-    /// when no node reads it across steps (see [`last_slots`]).
+    /// when no node reads it across steps (see [`crate::schedule::last_slots`]).
     pub last_slot: Vec<u32>,
     /// Number of slots in use in `last_slot`.
     pub n_last_slots: usize,
@@ -319,52 +309,6 @@ pub struct Program {
 
 /// `last_slot` of a node whose earlier values nobody reads.
 pub const NO_SLOT: u32 = u32::MAX;
-
-/// Which nodes' latest values must persist between steps: the lazy argument of `last`, the
-/// arguments of signal lifts (they use the latest value of silent arguments), the condition of
-/// `filter`, both arguments of `defaultFrom`, and `fold`/`reduce` accumulators. Returns the slot
-/// of each node (or [`NO_SLOT`]) and the number of slots; a monitor instance stores only these.
-pub fn last_slots(nodes: &[Node], order: &[NodeId]) -> (Vec<u32>, usize) {
-    let mut need = vec![false; nodes.len()];
-    let mut mark = |n: NodeId| {
-        if let Some(x) = need.get_mut(n) {
-            *x = true;
-        }
-    };
-    for &i in order {
-        match nodes.get(i) {
-            Some(Node::Last { value, .. }) => mark(*value),
-            Some(Node::DefaultFrom { stream, from }) => {
-                mark(*stream);
-                mark(*from);
-            }
-            // A lift reads the latest value of a silent argument only when it has two or more
-            // stream arguments: with one, it fires only with that argument's event.
-            Some(Node::SLift { args, .. }) => {
-                let streams: Vec<&SArg> = args.iter().collect();
-                mark_all(&mut mark, &streams);
-            }
-            Some(Node::Filter { cond, .. }) => mark(*cond),
-            Some(Node::Bin { a, b, .. }) => mark_all(&mut mark, &[a, b]),
-            Some(Node::Ite { cond, then, other }) => mark_all(&mut mark, &[cond, then, other]),
-            Some(Node::Fold { .. } | Node::Reduce { .. }) => mark(i),
-            _ => {}
-        }
-    }
-    let mut next = 0u32;
-    let slots = need
-        .iter()
-        .map(|&n| {
-            if n {
-                next += 1;
-                next - 1
-            } else {
-                NO_SLOT
-            }
-        })
-        .collect();
-    (slots, next as usize)
-}
 
 impl Program {
     pub fn input_index(&self, name: &str) -> Option<usize> {

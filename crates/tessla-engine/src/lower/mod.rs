@@ -1,14 +1,25 @@
-//! From parsed files to a [`Program`]: name resolution, macro expansion, constant folding,
-//! implicit signal lift, and closure compilation of value-level code.
+//! Lowering: from the checked syntax of a spec to a [`Program`] (the IR the monitor runs).
 //!
-//! Owns: the compile-time evaluation of a spec. Every expression becomes a [`Term`]: a constant,
-//! a stream node, runtime value code (a closure over a frame of variables, used inside function
-//! bodies and lambdas), or a function. Functions applied to stream arguments are expanded in
-//! place (TeSSLa's macros); operators and liftable functions on streams become signal lifts;
-//! value-level functions are compiled once into closures, so evaluation never walks the AST.
-//! Recursion is allowed only through the lazy first argument of `last` and `delay`.
+//! Every expression becomes a [`Term`]: a constant, a stream node, runtime value code (a closure
+//! over a frame of variables, used inside function bodies and lambdas), or a function. Functions
+//! applied to stream arguments are expanded in place (TeSSLa's macros); operators and liftable
+//! functions on streams become signal lifts; value-level functions are compiled once into
+//! closures, so evaluation never walks the AST. Recursion is allowed only through the lazy
+//! arguments of the builtins table (`last`, `delay`).
+//!
+//! Owns: the [`Compiler`] (scopes, definitions, `--set` overrides, annotations, the outputs)
+//! here; the stream operators in `stream`; base time and time units in `time`. Names and
+//! signatures of builtins are `crate::builtins`, operator semantics `crate::ops`, format strings
+//! `crate::format`, evaluation order and cross-step slots `crate::schedule`.
 
 use crate::builtins::{self, Builtin, Kind, StreamOp};
+use crate::format::format_value;
+use crate::schedule;
+use time::unit_factor;
+
+mod stream;
+pub mod time;
+
 use crate::collections;
 use crate::ir::{
     Annotation, Func, InputInfo, LiftFunc, Node, NodeId, OutputInfo, Program, SArg, Scalar, Type,
@@ -158,46 +169,7 @@ fn const_type_of(d: &Def) -> Option<Type> {
     }
 }
 
-fn unit_factor(unit: &str) -> Option<i128> {
-    Some(match unit {
-        "fs" => 1,
-        "ps" => 1_000,
-        "ns" => 1_000_000,
-        "us" | "µs" => 1_000_000_000,
-        "ms" => 1_000_000_000_000,
-        "s" => 1_000_000_000_000_000,
-        "min" => 60_000_000_000_000_000,
-        "h" => 3_600_000_000_000_000_000,
-        "d" => 86_400_000_000_000_000_000,
-        _ => return None,
-    })
-}
-
-/// Parse a base time in TeSSLa's form (`1 ns`, `33333 µs`, `1ms`) into femtoseconds.
-pub fn parse_base_time(s: &str) -> Result<i128, String> {
-    parse_base_parts(s).map(|(n, unit)| n * unit)
-}
-
-/// A base time as (count, unit in femtoseconds): `33333 µs` -> (33333, 10^9).
-pub fn parse_base_parts(s: &str) -> Result<(i128, i128), String> {
-    let s = s.trim();
-    let split = s.find(|c: char| !c.is_ascii_digit()).unwrap_or(s.len());
-    let (num, unit) = s.split_at(split);
-    let n: i128 = if num.is_empty() {
-        1
-    } else {
-        num.parse()
-            .map_err(|_| format!("bad number in base time `{s}`"))?
-    };
-    let f = unit_factor(unit.trim()).ok_or_else(|| {
-        format!("unknown unit in base time `{s}`: use fs, ps, ns, us, µs, ms, s, min, h or d")
-    })?;
-    if n <= 0 {
-        return Err(format!("base time `{s}` must be positive"));
-    }
-    Ok((n, f))
-}
-
+/// The native of an `extern` no builtin provides: an error when evaluated.
 fn unknown_extern(_: &[Value]) -> Value {
     Value::Error(RuntimeError::Other("call of an unknown extern".into()))
 }
@@ -707,12 +679,14 @@ impl<'a> Compiler<'a> {
         if self.diags.iter().any(|d| d.is_error()) {
             return Err(self.diags);
         }
-        let order = match self.order(&output_nodes) {
+        let order = match schedule::order(&self.nodes, &output_nodes) {
             Ok(o) => o,
-            Err(()) => return Err(self.diags),
+            Err(d) => {
+                self.diags.push(d);
+                return Err(self.diags);
+            }
         };
-        let _ = self.sources;
-        let (last_slot, n_last_slots) = crate::ir::last_slots(&self.nodes, &order);
+        let (last_slot, n_last_slots) = schedule::last_slots(&self.nodes, &order);
         Ok((
             Program {
                 last_slot,
@@ -835,55 +809,6 @@ impl<'a> Compiler<'a> {
             });
         }
         out
-    }
-
-    /// Evaluation order: strict dependencies first; a cycle not through `last`/`delay` is an error.
-    fn order(&mut self, roots: &[NodeId]) -> Result<Vec<NodeId>, ()> {
-        let n = self.nodes.len();
-        let mut state = vec![0u8; n];
-        let mut order = Vec::with_capacity(n);
-        // Only nodes an output reads (directly, or lazily through `last`/`delay`) are evaluated;
-        // others (leftovers of macro expansion) are left out.
-        let mut reachable = vec![false; n];
-        let mut todo: Vec<NodeId> = roots.iter().copied().filter(|r| *r < n).collect();
-        while let Some(x) = todo.pop() {
-            if std::mem::replace(&mut reachable[x], true) {
-                continue;
-            }
-            todo.extend(self.nodes[x].all_deps().into_iter().filter(|d| *d < n));
-        }
-        for start in 0..n {
-            if state[start] != 0 || !reachable[start] {
-                continue;
-            }
-            let mut stack: Vec<(NodeId, usize)> = vec![(start, 0)];
-            state[start] = 1;
-            while let Some(&mut (node, ref mut idx)) = stack.last_mut() {
-                let deps = self.nodes[node].strict_deps();
-                if let Some(&d) = deps.get(*idx) {
-                    *idx += 1;
-                    match state.get(d) {
-                        Some(0) => {
-                            state[d] = 1;
-                            stack.push((d, 0));
-                        }
-                        Some(1) => {
-                            self.diags.push(
-                                Diagnostic::error(Category::Recursion, None, "a stream depends on itself without `last` or `delay` in between")
-                                    .with_help("recursion is allowed only through the first argument of `last` or `delay`"),
-                            );
-                            return Err(());
-                        }
-                        _ => {}
-                    }
-                } else {
-                    state[node] = 2;
-                    order.push(node);
-                    stack.pop();
-                }
-            }
-        }
-        Ok(order)
     }
 
     fn unit(&mut self) -> NodeId {
@@ -1916,327 +1841,6 @@ impl<'a> Compiler<'a> {
             ),
         }
     }
-
-    /// The nodes of a stream operator of the builtins table applied to `args`.
-    fn stream_builtin(&mut self, name: &str, op: StreamOp, args: Vec<Term>, span: Span) -> R<Term> {
-        let n = args.len();
-        let node = match op {
-            StreamOp::Time => Node::Time(self.stream_arg(&args, 0, span)?),
-            StreamOp::Last => Node::Last {
-                value: self.stream_arg(&args, 0, span)?,
-                trigger: self.stream_arg(&args, 1, span)?,
-            },
-            StreamOp::Prev => {
-                let s = self.stream_arg(&args, 0, span)?;
-                Node::Last {
-                    value: s,
-                    trigger: s,
-                }
-            }
-            StreamOp::Delay => Node::Delay {
-                delay: self.stream_arg(&args, 0, span)?,
-                reset: self.stream_arg(&args, 1, span)?,
-            },
-            StreamOp::Default => Node::Default {
-                stream: self.stream_arg(&args, 0, span)?,
-                value: self.const_arg(&args, 1, span)?,
-            },
-            StreamOp::DefaultFrom => Node::DefaultFrom {
-                stream: self.stream_arg(&args, 0, span)?,
-                from: self.stream_arg(&args, 1, span)?,
-            },
-            StreamOp::Merge => Node::Merge(
-                (0..n)
-                    .map(|i| self.stream_arg(&args, i, span))
-                    .collect::<R<Vec<_>>>()?,
-            ),
-            StreamOp::Filter => Node::Filter {
-                stream: self.stream_arg(&args, 0, span)?,
-                cond: self.stream_arg(&args, 1, span)?,
-            },
-            StreamOp::Const => {
-                let v = self.const_arg(&args, 0, span)?;
-                let s = self.stream_arg(&args, 1, span)?;
-                Node::SLift {
-                    args: vec![SArg::Stream(s)],
-                    f: Arc::new(move |_: &[Value]| v.clone()),
-                }
-            }
-            StreamOp::First => {
-                let a = self.stream_arg(&args, 0, span)?;
-                let b = self.stream_arg(&args, 1, span)?;
-                Node::SLift {
-                    args: vec![SArg::Stream(a), SArg::Stream(b)],
-                    f: Arc::new(|v: &[Value]| v[0].clone()),
-                }
-            }
-            StreamOp::On => {
-                // At each event of the trigger, the latest value of the stream (this step's or
-                // an earlier one); nothing before the stream's first event.
-                let t = self.stream_arg(&args, 0, span)?;
-                let s = self.stream_arg(&args, 1, span)?;
-                let before = self.node(Node::Last {
-                    value: s,
-                    trigger: t,
-                });
-                Node::Lift {
-                    args: vec![t, s, before],
-                    f: Arc::new(|a: &[Option<Value>]| match a {
-                        [Some(_), Some(now), _] => Some(now.clone()),
-                        [Some(_), None, Some(prev)] => Some(prev.clone()),
-                        _ => None,
-                    }),
-                }
-            }
-            StreamOp::Count => Node::Fold {
-                stream: self.stream_arg(&args, 0, span)?,
-                init: Value::Int(0),
-                f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &Value::Int(1))),
-            },
-            StreamOp::Sum => Node::Fold {
-                stream: self.stream_arg(&args, 0, span)?,
-                init: Value::Int(0),
-                f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &a[1])),
-            },
-            StreamOp::Fold => Node::Fold {
-                stream: self.stream_arg(&args, 0, span)?,
-                init: self.const_arg(&args, 1, span)?,
-                f: self.value_fn_arg(&args, 2, span)?,
-            },
-            StreamOp::Reduce => Node::Reduce {
-                stream: self.stream_arg(&args, 0, span)?,
-                f: self.value_fn_arg(&args, 1, span)?,
-            },
-            StreamOp::Maximum => Node::Reduce {
-                stream: self.stream_arg(&args, 0, span)?,
-                f: Arc::new(|a: &[Value]| call_native(natives::core::max, a)),
-            },
-            StreamOp::Minimum => Node::Reduce {
-                stream: self.stream_arg(&args, 0, span)?,
-                f: Arc::new(|a: &[Value]| call_native(natives::core::min, a)),
-            },
-            StreamOp::Lift | StreamOp::SLift => {
-                let Some(ft) = args.last().cloned() else {
-                    return self.error(
-                        Category::Type,
-                        span,
-                        format!("`{name}` needs a function as its last argument"),
-                    );
-                };
-                if let Some(arity) = fn_arity(&ft)
-                    && arity != n - 1
-                {
-                    return self.error(
-                        Category::Type,
-                        span,
-                        format!(
-                            "`{name}` is given {} streams but its function takes {arity} arguments",
-                            n - 1
-                        ),
-                    );
-                }
-                let f = self.value_fn_arg(&[ft], 0, span)?;
-                let streams = (0..n - 1)
-                    .map(|i| self.stream_arg(&args, i, span))
-                    .collect::<R<Vec<_>>>()?;
-                if op == StreamOp::SLift {
-                    Node::SLift {
-                        args: streams.into_iter().map(SArg::Stream).collect(),
-                        f,
-                    }
-                } else {
-                    let lf: LiftFunc = Arc::new(move |a: &[Option<Value>]| {
-                        let opts: Vec<Value> = a
-                            .iter()
-                            .map(|o| match o {
-                                Some(v) => Value::Some(Arc::new(v.clone())),
-                                None => Value::None,
-                            })
-                            .collect();
-                        match f(&opts) {
-                            Value::Some(v) => Some((*v).clone()),
-                            Value::None => None,
-                            other => Some(other),
-                        }
-                    });
-                    Node::Lift {
-                        args: streams,
-                        f: lf,
-                    }
-                }
-            }
-            StreamOp::Pure => {
-                let s = self.stream_arg(&args, 0, span)?;
-                Node::Lift {
-                    args: vec![s, self.node(Node::Nil)],
-                    f: Arc::new(|a: &[Option<Value>]| a[0].clone()),
-                }
-                .pipe_pure(self, s)
-            }
-            StreamOp::IsFirst => {
-                let s = self.stream_arg(&args, 0, span)?;
-                let cnt = self.node(Node::Fold {
-                    stream: s,
-                    init: Value::Int(0),
-                    f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &Value::Int(1))),
-                });
-                Node::SLift {
-                    args: vec![SArg::Stream(s), SArg::Stream(cnt)],
-                    f: Arc::new(|v: &[Value]| Value::Bool(v[1] == Value::Int(1))),
-                }
-            }
-            StreamOp::FirstEvent => {
-                let s = self.stream_arg(&args, 0, span)?;
-                Node::Lift {
-                    args: vec![s],
-                    f: Arc::new(|a: &[Option<Value>]| a[0].clone()),
-                }
-                .first_only(self)
-            }
-            StreamOp::Defined => {
-                let s = self.stream_arg(&args, 0, span)?;
-                let t = self.node(Node::SLift {
-                    args: vec![SArg::Stream(s)],
-                    f: Arc::new(|_: &[Value]| Value::Bool(true)),
-                });
-                Node::Default {
-                    stream: t,
-                    value: Value::Bool(false),
-                }
-            }
-            StreamOp::ConstIf => {
-                let v = self.const_arg(&args, 0, span)?;
-                let c = self.stream_arg(&args, 1, span)?;
-                let k = self.node(Node::SLift {
-                    args: vec![SArg::Stream(c)],
-                    f: Arc::new(move |_: &[Value]| v.clone()),
-                });
-                Node::Filter { stream: k, cond: c }
-            }
-            StreamOp::UnitIf => {
-                let c = self.stream_arg(&args, 0, span)?;
-                let k = self.node(Node::SLift {
-                    args: vec![SArg::Stream(c)],
-                    f: Arc::new(|_: &[Value]| Value::Unit),
-                });
-                Node::Filter { stream: k, cond: c }
-            }
-            StreamOp::Rising | StreamOp::Falling => {
-                let c = self.stream_arg(&args, 0, span)?;
-                let prev = self.node(Node::Last {
-                    value: c,
-                    trigger: c,
-                });
-                let want = op == StreamOp::Rising;
-                let edge = self.node(Node::Lift {
-                    args: vec![c, prev],
-                    f: Arc::new(move |a: &[Option<Value>]| match (&a[0], &a[1]) {
-                        (Some(Value::Bool(now)), Some(Value::Bool(before)))
-                            if *now == want && *before != want =>
-                        {
-                            Some(Value::Bool(true))
-                        }
-                        (Some(_), _) => Some(Value::Bool(false)),
-                        _ => None,
-                    }),
-                });
-                let k = self.node(Node::SLift {
-                    args: vec![SArg::Stream(edge)],
-                    f: Arc::new(|_: &[Value]| Value::Unit),
-                });
-                Node::Filter {
-                    stream: k,
-                    cond: edge,
-                }
-            }
-            StreamOp::Period => {
-                let d = self.const_arg(&args, 0, span)?;
-                let u = self.unit();
-                let alias = self.node(Node::Alias(usize::MAX));
-                let m = self.node(Node::Merge(vec![u, alias]));
-                let dd = d.clone();
-                let dnode = self.node(Node::SLift {
-                    args: vec![SArg::Stream(m)],
-                    f: Arc::new(move |_: &[Value]| dd.clone()),
-                });
-                let delay = self.node(Node::Delay {
-                    delay: dnode,
-                    reset: u,
-                });
-                self.nodes[alias] = Node::Alias(delay);
-                // The periodic events: the delay's firings, plus the start at t = 0.
-                Node::Merge(vec![u, delay])
-            }
-            StreamOp::ResetCount => {
-                // Events of `x` since the last `reset` (a reset with an event counts it).
-                let x = self.stream_arg(&args, 0, span)?;
-                let reset = self.stream_arg(&args, 1, span)?;
-                let tag = self.node(Node::Lift {
-                    args: vec![x, reset],
-                    f: Arc::new(|a: &[Option<Value>]| match a {
-                        [Some(_), Some(_)] => Some(Value::Int(1)),
-                        [None, Some(_)] => Some(Value::Int(0)),
-                        [Some(_), None] => Some(Value::Int(-1)),
-                        _ => None,
-                    }),
-                });
-                Node::Fold {
-                    stream: tag,
-                    init: Value::Int(0),
-                    f: Arc::new(|a: &[Value]| match a {
-                        [acc, Value::Int(-1)] => binop(BinOp::Add, acc, &Value::Int(1)),
-                        [_, tag] => tag.clone(),
-                        _ => Value::Unit,
-                    }),
-                }
-            }
-            StreamOp::SetCollect => Node::Fold {
-                stream: self.stream_arg(&args, 0, span)?,
-                init: Value::Set(Arc::new(Vec::new())),
-                f: Arc::new(collections::set_add),
-            },
-            StreamOp::SetCollectWithRemove => {
-                // Add this step's `add` value, then remove this step's `remove` value.
-                let add = self.stream_arg(&args, 0, span)?;
-                let remove = self.stream_arg(&args, 1, span)?;
-                let step = self.node(Node::Lift {
-                    args: vec![add, remove],
-                    f: Arc::new(|a: &[Option<Value>]| {
-                        let opt = |o: &Option<Value>| match o {
-                            Some(v) => Value::Some(Arc::new(v.clone())),
-                            None => Value::None,
-                        };
-                        Some(Value::Tuple(a.iter().map(opt).collect::<Vec<_>>().into()))
-                    }),
-                });
-                Node::Fold {
-                    stream: step,
-                    init: Value::Set(Arc::new(Vec::new())),
-                    f: Arc::new(|a: &[Value]| match a {
-                        [set, Value::Tuple(t)] => {
-                            let mut s = set.clone();
-                            if let Some(Value::Some(x)) = t.first() {
-                                s = collections::set_add(&[s, (**x).clone()]);
-                            }
-                            if let Some(Value::Some(x)) = t.get(1) {
-                                s = collections::set_remove(&[s, (**x).clone()]);
-                            }
-                            s
-                        }
-                        _ => Value::Unit,
-                    }),
-                }
-            }
-            StreamOp::Unsupported | StreamOp::Nil | StreamOp::Unit => {
-                return self.error(
-                    Category::Unsupported,
-                    span,
-                    format!("`{name}` is not supported yet"),
-                );
-            }
-        };
-        Ok(Term::Stream(self.node(node)))
-    }
 }
 
 /// `a.b.c` as the string "a.b.c" when the expression is only names and member accesses.
@@ -2247,185 +1851,5 @@ fn dotted_path(e: &Expr) -> Option<String> {
             dotted_path(object).map(|p| format!("{p}.{}", field.name))
         }
         _ => None,
-    }
-}
-
-/// The number of parameters of a lambda or user function term, when known at compile time.
-fn fn_arity(t: &Term) -> Option<usize> {
-    match t {
-        Term::Func(ft) => match &**ft {
-            FuncTerm::Lambda { params, .. } => Some(params.len()),
-            FuncTerm::User { def, .. } if !matches!(def.body, Body::Extern { .. }) => {
-                def.params.as_ref().map(Vec::len)
-            }
-            _ => None,
-        },
-        _ => None,
-    }
-}
-
-trait NodeExt {
-    fn pipe_pure(self, c: &mut Compiler<'_>, s: NodeId) -> Node;
-    fn first_only(self, c: &mut Compiler<'_>) -> Node;
-}
-
-impl NodeExt for Node {
-    /// `pure(s)`: events of `s` whose value differs from the previous event's.
-    fn pipe_pure(self, c: &mut Compiler<'_>, s: NodeId) -> Node {
-        let prev = c.node(Node::Last {
-            value: s,
-            trigger: s,
-        });
-        Node::Lift {
-            args: vec![s, prev],
-            f: Arc::new(|a: &[Option<Value>]| match (&a[0], &a[1]) {
-                (Some(x), Some(p)) if x == p => None,
-                (x, _) => x.clone(),
-            }),
-        }
-    }
-
-    /// Only the first event of the (single-argument) lift's stream.
-    fn first_only(self, c: &mut Compiler<'_>) -> Node {
-        let Node::Lift { args, .. } = &self else {
-            return self;
-        };
-        let s = args[0];
-        let seen = c.node(Node::Last {
-            value: s,
-            trigger: s,
-        });
-        Node::Lift {
-            args: vec![s, seen],
-            f: Arc::new(|a: &[Option<Value>]| match (&a[0], &a[1]) {
-                (Some(x), None) => Some(x.clone()),
-                _ => None,
-            }),
-        }
-    }
-}
-
-/// A printf-style format of one value (`%d`, `%.2f`, `%s`, `%x`, `%e`); best effort.
-/// Java's `%e` exponent layout: `4.2e0` -> `4.2e+00`.
-fn java_exp(s: &str) -> String {
-    match s.split_once('e') {
-        Some((m, e)) => match e.parse::<i32>() {
-            Ok(x) => format!("{m}e{}{:02}", if x < 0 { '-' } else { '+' }, x.abs()),
-            Err(_) => s.to_string(),
-        },
-        None => s.to_string(),
-    }
-}
-
-/// Java's `%a` for a normal double: `0x1.0ccccdp2` (hex digits rounded half-up to `prec`;
-/// without a precision, trailing zeros dropped, at least one digit).
-fn java_hex_float(f: f64, prec: Option<usize>) -> String {
-    let bits = f.to_bits();
-    let sign = if f < 0.0 { "-" } else { "" };
-    let mut exp = ((bits >> 52) & 0x7ff) as i64 - 1023;
-    let mut mant = bits & ((1u64 << 52) - 1);
-    let digits = match prec {
-        Some(p) if p < 13 => {
-            let p = p.max(1);
-            let shift = 52 - 4 * p as u32;
-            mant = (mant + (1u64 << (shift - 1))) >> shift;
-            if mant >> (4 * p) != 0 {
-                // Rounded up to the next power of two.
-                mant = 0;
-                exp += 1;
-            }
-            format!("{mant:0width$x}", width = p)
-        }
-        _ => {
-            let d = format!("{mant:013x}");
-            let t = d.trim_end_matches('0');
-            if t.is_empty() {
-                "0".to_string()
-            } else {
-                t.to_string()
-            }
-        }
-    };
-    format!("{sign}0x1.{digits}p{exp}")
-}
-
-fn format_value(spec: &str, v: &Value) -> String {
-    let conv = spec.chars().last().unwrap_or('s');
-    // The flags/width/precision between `%` and the conversion character (char-safe).
-    let inner: String = spec.chars().skip(1).collect();
-    let mut body_chars: Vec<char> = inner.chars().collect();
-    body_chars.pop();
-    let body_owned: String = body_chars.into_iter().collect();
-    let body = body_owned.as_str();
-    let (width, prec) = match body.split_once('.') {
-        Some((w, p)) => (w, p.parse::<usize>().ok()),
-        None => (body, None),
-    };
-    let flags: String = width
-        .chars()
-        .take_while(|c| "-+ #0,(".contains(*c))
-        .collect();
-    let left = flags.contains('-');
-    let zero = flags.contains('0') && !left;
-    let width: usize = width
-        .trim_start_matches(['-', '+', ' ', '#', '0', ',', '('])
-        .parse()
-        .unwrap_or(0);
-    let s = match (conv, v) {
-        ('d', Value::Int(i)) => i.to_string(),
-        ('x', Value::Int(i)) => format!("{i:x}"),
-        ('X', Value::Int(i)) => format!("{i:X}"),
-        ('o', Value::Int(i)) => format!("{i:o}"),
-        ('f', Value::Float(f)) => format!("{f:.*}", prec.unwrap_or(6)),
-        ('e', Value::Float(f)) if f.is_finite() => java_exp(&format!("{f:.*e}", prec.unwrap_or(6))),
-        ('a', Value::Float(f)) if f.is_normal() => java_hex_float(*f, prec),
-        _ => v.to_string(),
-    };
-    let len = s.chars().count();
-    if len < width {
-        let pad = width - len;
-        if left {
-            format!("{s}{}", " ".repeat(pad))
-        } else if zero {
-            format!("{}{s}", "0".repeat(pad))
-        } else {
-            format!("{}{s}", " ".repeat(pad))
-        }
-    } else {
-        s
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn java_float_formats() {
-        assert_eq!(format_value("%.8e", &Value::Float(4.2)), "4.20000000e+00");
-        assert_eq!(format_value("%.2e", &Value::Float(0.0123)), "1.23e-02");
-        assert_eq!(format_value("%.6a", &Value::Float(4.2)), "0x1.0ccccdp2");
-        assert_eq!(format_value("%.6a", &Value::Float(23.13)), "0x1.72147bp4");
-        assert_eq!(format_value("%a", &Value::Float(1.0)), "0x1.0p0");
-        assert_eq!(format_value("%-4s", &Value::Str("ab".into())), "ab  ");
-    }
-
-    #[test]
-    fn format_specs_never_panic() {
-        for spec in ["%", "%d", "%é", "%5.2f", "%08.3e", "%x", "%-3s"] {
-            let _ = format_value(spec, &Value::Float(1.5));
-            let _ = format_value(spec, &Value::Int(42));
-        }
-        assert_eq!(format_value("%5.2f", &Value::Float(1.23456)), " 1.23");
-        assert_eq!(format_value("%04d", &Value::Int(42)), "0042");
-    }
-
-    #[test]
-    fn base_times_parse_in_tesslas_forms() {
-        assert_eq!(parse_base_time("1 ns"), Ok(1_000_000));
-        assert_eq!(parse_base_time("1ms"), Ok(1_000_000_000_000));
-        assert_eq!(parse_base_time("33333 µs"), Ok(33_333_000_000_000));
-        assert!(parse_base_time("5 parsecs").is_err());
-        assert!(parse_base_time("0 s").is_err());
     }
 }
