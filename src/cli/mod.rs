@@ -68,6 +68,9 @@ pub struct SpecOptions {
 pub struct CheckArgs {
     /// The `.tessla` file.
     pub spec: PathBuf,
+    /// Also print the lowered program: its nodes in evaluation order, and the outputs' nodes.
+    #[arg(long)]
+    pub ir: bool,
     #[command(flatten)]
     pub spec_options: SpecOptions,
 }

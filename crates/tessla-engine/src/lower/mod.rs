@@ -503,7 +503,6 @@ impl<'a> Compiler<'a> {
                 n_last_slots,
                 inputs: self.inputs,
                 outputs,
-                global_annotations: Vec::new(),
                 delays: order
                     .iter()
                     .copied()

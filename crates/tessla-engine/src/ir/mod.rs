@@ -1,10 +1,14 @@
 //! The flat core IR: stream nodes in dependency order with typed value slots.
 //!
 //! Owns: [`Program`] (what the front end produces and the evaluator runs), the metadata the
-//! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s.
+//! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s; its
+//! listing (`print`, `tessla-telegraf check --ir`).
 
 use crate::value::Value;
 use std::sync::Arc;
+
+mod print;
+pub use print::IrListing;
 
 /// A value type, as reported by `check` and used by bindings to convert inputs.
 #[derive(Debug, Clone, PartialEq)]
@@ -290,7 +294,6 @@ pub(crate) fn stream_args(args: &[&SArg]) -> Vec<NodeId> {
 pub struct Program {
     pub inputs: Vec<InputInfo>,
     pub outputs: Vec<OutputInfo>,
-    pub global_annotations: Vec<Annotation>,
     pub nodes: Vec<Node>,
     /// Per node: a hash of the source text that defined it (see [`crate::snapshot`]).
     pub node_origins: Vec<u64>,
