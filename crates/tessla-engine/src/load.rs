@@ -85,7 +85,7 @@ pub fn load_with(
         }
     };
     let asts: Vec<_> = files.into_iter().map(|(_, f)| f).collect();
-    let type_errors = crate::typeck::check(&asts);
+    let (type_errors, types) = crate::typeck::check_typed(&asts);
     if !type_errors.is_empty() {
         return Err(LoadError {
             sources,
@@ -94,6 +94,7 @@ pub fn load_with(
     }
     let result = lower::Compiler::new(&sources, base)
         .with_base_unit(base_unit)
+        .with_types(types)
         .with_time_units(!(options.time_units_need_base && options.base_time.is_none()))
         .program(&asts, &options.overrides);
     match result {

@@ -17,6 +17,7 @@
 //! functions and constants may be used at several types.
 
 use crate::builtins::{self, Sig};
+use crate::ir::Type;
 use std::cell::RefCell;
 use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
@@ -140,8 +141,23 @@ enum Found<'a> {
     Def(Rc<DefInfo<'a>>),
 }
 
+/// The types the checker found that later passes use: the element type of each output
+/// (by the span of its expression) and of each top-level parameterless def (by dotted name).
+/// Types the checker leaves open are [`Type::Unknown`] inside.
+#[derive(Debug, Default)]
+pub struct Types {
+    pub outputs: HashMap<Span, Type>,
+    pub defs: HashMap<String, Type>,
+}
+
 /// Check the statements of all files (includes first); returns the type errors found.
 pub fn check(files: &[ast::File]) -> Vec<Diagnostic> {
+    check_typed(files).0
+}
+
+/// Check the statements of all files; returns the type errors found and the [`Types`] table.
+pub fn check_typed(files: &[ast::File]) -> (Vec<Diagnostic>, Types) {
+    let mut types = Types::default();
     let mut c = Checker::default();
     for f in files {
         collect_type_names(&f.statements, &mut c.declared_types);
@@ -197,6 +213,9 @@ pub fn check(files: &[ast::File]) -> Vec<Diagnostic> {
         if let Statement::Out(o) = s {
             let scope = c.module_scope("");
             let t = c.infer(&o.expr, &scope);
+            types
+                .outputs
+                .insert(o.expr.span, element_type(&c.resolve(&t)));
             // A parameterless function (`def foo() = 42`) is called.
             if let Ty::Fn(ps, _) = c.resolve(&t)
                 && !ps.is_empty()
@@ -213,8 +232,54 @@ pub fn check(files: &[ast::File]) -> Vec<Diagnostic> {
             }
         }
     }
+    for (name, d) in &c.globals {
+        if d.def.params.is_none()
+            && let State::Done(s) = &*d.state.borrow()
+        {
+            types
+                .defs
+                .insert(name.clone(), element_type(&c.resolve(&s.ty)));
+        }
+    }
     c.break_cycles();
-    std::mem::take(&mut c.diags)
+    (std::mem::take(&mut c.diags), types)
+}
+
+/// The element type of a stream (`T` of `Events[T]`; a constant is its own) as an IR type.
+fn element_type(t: &Ty) -> Type {
+    match t {
+        Ty::Con("Events", args) => args.first().map_or(Type::Unknown, ir_type_of),
+        other => ir_type_of(other),
+    }
+}
+
+/// A resolved checker type as an IR type; what the IR cannot name (`Set`, `Map`, functions,
+/// open variables) is [`Type::Unknown`].
+fn ir_type_of(t: &Ty) -> Type {
+    let inner = |args: &[Ty]| Box::new(args.first().map_or(Type::Unknown, ir_type_of));
+    match t {
+        Ty::Con("Unit", _) => Type::Unit,
+        Ty::Con("Bool", _) => Type::Bool,
+        Ty::Con("Int", _) => Type::Int,
+        Ty::Con("Float", _) => Type::Float,
+        Ty::Con("String", _) => Type::String,
+        Ty::Con("Option", args) => Type::Option(inner(args)),
+        Ty::Con("List", args) => Type::List(inner(args)),
+        Ty::Con("Events", args) => Type::Events(inner(args)),
+        Ty::Record(fs)
+            if !fs.is_empty()
+                && fs
+                    .iter()
+                    .enumerate()
+                    .all(|(i, (n, _))| n.strip_prefix('_') == Some(&(i + 1).to_string())) =>
+        {
+            Type::Tuple(fs.iter().map(|(_, t)| ir_type_of(t)).collect())
+        }
+        Ty::Record(fs) if !fs.is_empty() => {
+            Type::Record(fs.iter().map(|(n, t)| (n.clone(), ir_type_of(t))).collect())
+        }
+        _ => Type::Unknown,
+    }
 }
 
 /// The names of every `type` declaration in `statements` and the modules inside them.
@@ -1294,5 +1359,19 @@ mod tests {
             Some(map(Ty::Var(0), Ty::Var(1)))
         );
         assert_eq!(signature("(Int) =>", &vars), None);
+    }
+
+    #[test]
+    fn the_type_table_has_outputs_and_defs() {
+        let spec =
+            "in x: Events[Int]\ndef f(a: Int) = (a, true)\ndef g = f(x)\nout g\nout f(x) as h";
+        let (file, diags) = tessla_syntax::parse(spec, tessla_syntax::source::FileId::default());
+        assert!(diags.is_empty());
+        let (errors, types) = check_typed(&[file]);
+        assert!(errors.is_empty());
+        let pair = Type::Tuple(vec![Type::Int, Type::Bool]);
+        assert_eq!(types.defs.get("g"), Some(&pair));
+        assert_eq!(types.outputs.len(), 2);
+        assert!(types.outputs.values().all(|t| *t == pair));
     }
 }

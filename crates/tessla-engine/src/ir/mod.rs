@@ -23,13 +23,14 @@ pub enum Type {
     Tuple(Vec<Type>),
     Record(Vec<(String, Type)>),
     Events(Box<Type>),
-    /// Not inferred (the engine infers types of inputs and literals only, see `check`).
+    /// Not known: a type the IR cannot name (`Set`, `Map`, functions) or one the checker left
+    /// open.
     Unknown,
 }
 
 impl std::fmt::Display for Type {
     /// TeSSLa's notation: `Float`, `Option[Int]`, `List[Float]`, `(Int, Bool)`, `{a: Int}`;
-    /// an element type the engine does not infer prints as `?`.
+    /// a type that is not known prints as `?`.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Type::Unit => f.write_str("Unit"),
@@ -49,6 +50,19 @@ impl std::fmt::Display for Type {
                 write!(f, "{{{}}}", parts.join(", "))
             }
             Type::Unknown => f.write_str("?"),
+        }
+    }
+}
+
+impl Type {
+    /// No part of the type is [`Type::Unknown`].
+    pub fn is_known(&self) -> bool {
+        match self {
+            Type::Unknown => false,
+            Type::Option(t) | Type::List(t) | Type::Events(t) => t.is_known(),
+            Type::Tuple(ts) => ts.iter().all(Type::is_known),
+            Type::Record(fs) => fs.iter().all(|(_, t)| t.is_known()),
+            _ => true,
         }
     }
 }

@@ -159,6 +159,8 @@ pub struct Compiler<'a> {
     /// compile leaked the whole name table (found by cargo fuzz's leak checker).
     scopes: Vec<Rc<RefCell<Option<Env>>>>,
     states: Vec<Rc<RefCell<DefState>>>,
+    /// The checker's types of outputs and top-level defs (see [`crate::typeck::Types`]).
+    types: crate::typeck::Types,
 }
 
 /// The native of an `extern` no builtin provides: an error when evaluated.
@@ -202,6 +204,7 @@ impl<'a> Compiler<'a> {
             origins: Vec::new(),
             scopes: Vec::new(),
             states: Vec::new(),
+            types: crate::typeck::Types::default(),
         }
     }
 
@@ -236,6 +239,12 @@ impl<'a> Compiler<'a> {
     /// Allow or forbid time literals (forbidden when the spec runs without a base time).
     pub fn with_time_units(mut self, allowed: bool) -> Self {
         self.time_units = allowed;
+        self
+    }
+
+    /// Use the checker's types for outputs whose element type lowering does not know.
+    pub fn with_types(mut self, types: crate::typeck::Types) -> Self {
+        self.types = types;
         self
     }
 
@@ -446,6 +455,7 @@ impl<'a> Compiler<'a> {
                     Term::Stream(n) => self.stream_type(*n),
                     _ => Type::Unknown,
                 };
+                let ty = known_or(ty, self.types.outputs.get(&o.expr.span));
                 if let Ok(n) = self.stream_of(t, o.expr.span) {
                     outputs.push(OutputInfo {
                         name,
@@ -473,9 +483,10 @@ impl<'a> Compiler<'a> {
                     && let Ok(t) = self.def_term(&e, e.def.name.span)
                     && let Term::Stream(n) = t
                 {
+                    let ty = known_or(self.stream_type(n), self.types.defs.get(name));
                     outputs.push(OutputInfo {
                         name: name.clone(),
-                        ty: self.stream_type(n),
+                        ty,
                         annotations: Vec::new(),
                         raw: false,
                     });
@@ -590,5 +601,13 @@ impl<'a> Compiler<'a> {
                 )
             }
         }
+    }
+}
+
+/// `lowered` when it is fully known, else the checker's type when that is, else `lowered`.
+fn known_or(lowered: Type, checked: Option<&Type>) -> Type {
+    match checked {
+        Some(c) if !lowered.is_known() && c.is_known() => c.clone(),
+        _ => lowered,
     }
 }
