@@ -17,6 +17,8 @@ use crate::collections;
 use crate::natives::{self, NativeFn, core};
 use crate::ops;
 use crate::value::Value;
+use std::collections::HashMap;
+use std::sync::OnceLock;
 
 /// A stream operator the lowering builds nodes for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -98,7 +100,11 @@ pub struct Builtin {
 
 /// The builtin named `name`, if any.
 pub fn get(name: &str) -> Option<&'static Builtin> {
-    BUILTINS.iter().find(|b| b.name == name)
+    static INDEX: OnceLock<HashMap<&'static str, &'static Builtin>> = OnceLock::new();
+    INDEX
+        .get_or_init(|| BUILTINS.iter().map(|b| (b.name, b)).collect())
+        .get(name)
+        .copied()
 }
 
 /// The native `extern("name")` refers to, if any.

@@ -232,7 +232,11 @@ pub fn check_typed(files: &[ast::File]) -> (Vec<Diagnostic>, Types) {
             }
         }
     }
-    for (name, d) in &c.globals {
+    // Def types only serve `out *`.
+    let out_all = statements
+        .iter()
+        .any(|(_, s)| matches!(s, Statement::OutAll { .. }));
+    for (name, d) in c.globals.iter().filter(|_| out_all) {
         if d.def.params.is_none()
             && let State::Done(s) = &*d.state.borrow()
         {
@@ -1363,8 +1367,7 @@ mod tests {
 
     #[test]
     fn the_type_table_has_outputs_and_defs() {
-        let spec =
-            "in x: Events[Int]\ndef f(a: Int) = (a, true)\ndef g = f(x)\nout g\nout f(x) as h";
+        let spec = "in x: Events[Int]\ndef f(a: Int) = (a, true)\ndef g = f(x)\nout g\nout f(x) as h\nout *";
         let (file, diags) = tessla_syntax::parse(spec, tessla_syntax::source::FileId::default());
         assert!(diags.is_empty());
         let (errors, types) = check_typed(&[file]);
