@@ -17,5 +17,6 @@ pub mod report;
 #[cfg(feature = "tools")]
 pub mod simulate;
 pub mod telegraf;
-pub mod trace;
+/// TeSSLa's trace formats (crate `tessla-trace`), re-exported where the CLI and tests use them.
+pub use tessla_trace as trace;
 pub mod transport;
