@@ -4,7 +4,7 @@
 //! Owns: [`BUILTINS`], each entry with its name, [`Kind`] (what the lowering does with it),
 //! TeSSLa signature (what the checker types a use with; `None`: any type, checked at lowering)
 //! and which arguments are lazy (read from earlier steps, so they may refer forward). The
-//! checker (`typeck`), the lowering (`compile`) and the unknown-name listing all read this table.
+//! checker (`typeck`), the lowering (`lower`) and the unknown-name listing all read this table.
 //! A new stream operator is one entry here plus its nodes in the lowering's `stream_builtin`; a
 //! new value function is one entry here plus its native in `natives`.
 //!
