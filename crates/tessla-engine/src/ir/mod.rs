@@ -303,6 +303,17 @@ pub(crate) fn stream_args(args: &[&SArg]) -> Vec<NodeId> {
         .collect()
 }
 
+/// The compiled bodies of recursive functions. Their recursive calls refer to them weakly (no
+/// reference cycle, so nothing outlives the program); the program holds them.
+#[derive(Default)]
+pub struct Functions(pub(crate) Vec<Arc<std::sync::OnceLock<Func>>>);
+
+impl std::fmt::Debug for Functions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} recursive functions", self.0.len())
+    }
+}
+
 /// A compiled specification, shared (in an `Arc`) by every monitor instance.
 #[derive(Debug)]
 pub struct Program {
@@ -322,6 +333,8 @@ pub struct Program {
     pub last_slot: Vec<u32>,
     /// Number of slots in use in `last_slot`.
     pub n_last_slots: usize,
+    /// Keeps the bodies of recursive functions alive as long as the program.
+    pub functions: Functions,
 }
 
 /// `last_slot` of a node whose earlier values nobody reads.

@@ -143,11 +143,18 @@ impl Compiler<'_> {
             if let Some(f) = cell.get() {
                 return Ok((f.clone(), true));
             }
-            let cell = cell.clone();
+            // A recursive call inside the body being compiled refers to its cell weakly (the
+            // body is in the cell: a strong reference would be a cycle that outlives the
+            // program); the program holds the cell (`Program::functions`).
+            self.recursive_cells.push(cell.clone());
+            let cell = Arc::downgrade(cell);
             return Ok((
-                Arc::new(move |a: &[Value]| match cell.get() {
-                    Some(f) => f(a),
-                    None => Value::Error(RuntimeError::Other("function not compiled".into())),
+                Arc::new(move |a: &[Value]| match cell.upgrade() {
+                    Some(c) => match c.get() {
+                        Some(f) => f(a),
+                        None => not_compiled(),
+                    },
+                    None => not_compiled(),
                 }),
                 false,
             ));
@@ -235,4 +242,8 @@ impl Callable for FnValue {
     fn call(&self, args: &[Value]) -> Value {
         (self.0)(args)
     }
+}
+
+fn not_compiled() -> Value {
+    Value::Error(RuntimeError::Other("function not compiled".into()))
 }

@@ -142,6 +142,8 @@ pub struct Compiler<'a> {
     input_nodes: Vec<NodeId>,
     annotation_params: HashMap<String, Vec<String>>,
     compiled_fns: HashMap<*const Def, Arc<OnceLock<Func>>>,
+    /// The cells of functions that call themselves (they go to `Program::functions`).
+    recursive_cells: Vec<Arc<OnceLock<Func>>>,
     unit_node: Option<NodeId>,
     /// Element types of stream nodes known from operators and declarations.
     node_types: HashMap<NodeId, Type>,
@@ -196,6 +198,7 @@ impl<'a> Compiler<'a> {
             input_nodes: Vec::new(),
             annotation_params: HashMap::new(),
             compiled_fns: HashMap::new(),
+            recursive_cells: Vec::new(),
             unit_node: None,
             base_unit: None,
             time_units: true,
@@ -510,6 +513,7 @@ impl<'a> Compiler<'a> {
         let (last_slot, n_last_slots) = schedule::last_slots(&self.nodes, &order);
         Ok((
             Program {
+                functions: crate::ir::Functions(std::mem::take(&mut self.recursive_cells)),
                 last_slot,
                 n_last_slots,
                 inputs: self.inputs,
