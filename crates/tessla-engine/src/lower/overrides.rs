@@ -71,10 +71,14 @@ impl Compiler<'_> {
             let new_ty = const_type_of(&new_def);
             if old_ty != new_ty || new_ty.is_none() {
                 self.diags.push(Diagnostic::error(
-                Category::Type,
-                Some(entry.def.name.span),
-                format!("--set {name}={value}: expected a constant of type {old_ty:?}, found {new_ty:?}"),
-            ));
+                    Category::Type,
+                    Some(entry.def.name.span),
+                    format!(
+                        "--set {name}={value}: expected a constant of type {}, found {}",
+                        shown(old_ty.as_ref()),
+                        shown(new_ty.as_ref())
+                    ),
+                ));
                 continue;
             }
             let mut d = (*entry.def).clone();
@@ -89,4 +93,12 @@ impl Compiler<'_> {
             );
         }
     }
+}
+
+/// A constant's type for a message: `Float`, or what it is when it is not a literal constant.
+fn shown(t: Option<&Type>) -> String {
+    t.map_or_else(
+        || "an expression that is not a literal".to_string(),
+        ToString::to_string,
+    )
 }
