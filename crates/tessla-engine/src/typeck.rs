@@ -21,6 +21,7 @@ use crate::ir::Type;
 use std::cell::RefCell;
 use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
+use std::sync::OnceLock;
 use tessla_syntax::ast::{self, BinOp, Body, Def, Expr, ExprKind, Statement, StrPart, UnaryOp};
 use tessla_syntax::diag::{Category, Diagnostic};
 use tessla_syntax::source::Span;
@@ -1170,10 +1171,44 @@ impl<'a> Checker<'a> {
     fn builtin(&mut self, name: &str) -> Option<Ty> {
         // Two variables per use, `A`/`K` and `B`/`V`, whether the signature uses them or not.
         let vars = [self.fresh(), self.fresh()];
-        match builtins::get(name)?.sig {
-            Sig::Fixed(sig) => signature(sig, &vars),
-            Sig::Any | Sig::Variadic => None,
-        }
+        let template = template(builtins::get(name)?.name)?;
+        Some(with_vars(template, &vars))
+    }
+}
+
+/// Stand-ins for `A`/`K` and `B`/`V` in a parsed signature (never a checker variable: those
+/// count up from 0).
+const TEMPLATE_VARS: [u32; 2] = [u32::MAX, u32::MAX - 1];
+
+/// The parsed signature of a builtin with a fixed one, parsed once per process on first use.
+fn template(name: &'static str) -> Option<&'static Ty> {
+    static TEMPLATES: OnceLock<HashMap<&'static str, OnceLock<Option<Ty>>>> = OnceLock::new();
+    let cells = TEMPLATES.get_or_init(|| {
+        builtins::BUILTINS
+            .iter()
+            .filter(|b| matches!(b.sig, Sig::Fixed(_)))
+            .map(|b| (b.name, OnceLock::new()))
+            .collect()
+    });
+    let Sig::Fixed(sig) = builtins::get(name)?.sig else {
+        return None;
+    };
+    cells
+        .get(name)?
+        .get_or_init(|| signature(sig, &TEMPLATE_VARS.map(Ty::Var)))
+        .as_ref()
+}
+
+/// `t` with the template variables replaced by `vars`.
+fn with_vars(t: &Ty, vars: &[Ty; 2]) -> Ty {
+    let w = |x: &Ty| with_vars(x, vars);
+    match t {
+        Ty::Var(v) if *v == TEMPLATE_VARS[0] => vars[0].clone(),
+        Ty::Var(v) if *v == TEMPLATE_VARS[1] => vars[1].clone(),
+        Ty::Var(_) => t.clone(),
+        Ty::Con(n, args) => Ty::Con(n, args.iter().map(w).collect()),
+        Ty::Fn(ps, r) => Ty::Fn(ps.iter().map(w).collect(), Box::new(w(r))),
+        Ty::Record(fs) => Ty::Record(fs.iter().map(|(n, t)| (n.clone(), w(t))).collect()),
     }
 }
 
@@ -1363,6 +1398,13 @@ mod tests {
             Some(map(Ty::Var(0), Ty::Var(1)))
         );
         assert_eq!(signature("(Int) =>", &vars), None);
+        for b in builtins::BUILTINS {
+            if let Sig::Fixed(sig) = b.sig {
+                let direct = signature(sig, &vars);
+                let cached = template(b.name).map(|t| with_vars(t, &vars));
+                assert_eq!(direct, cached, "{}", b.name);
+            }
+        }
     }
 
     #[test]
