@@ -5,14 +5,18 @@
 //! [`trace`]) -> input events bound to streams ([`telegraf`]) -> the evaluation engine (crate
 //! `tessla-engine`, running a program checked from a spec parsed by `tessla-syntax`) -> output
 //! events -> bytes out. [`transport`] moves the bytes (stdin/stdout, UDP); [`cli`] wires the
-//! subcommands.
+//! subcommands. `replay`, `report` and `simulate` are built with the `tools` feature (default on).
 
 pub mod bundled;
 pub mod cli;
 pub mod log;
+#[cfg(feature = "tools")]
 pub mod replay;
+#[cfg(feature = "tools")]
 pub mod report;
+#[cfg(feature = "tools")]
 pub mod simulate;
 pub mod telegraf;
-pub mod trace;
+/// TeSSLa's trace formats (crate `tessla-trace`), re-exported where the CLI and tests use them.
+pub use tessla_trace as trace;
 pub mod transport;

@@ -104,6 +104,9 @@ pub fn run(args: CheckArgs) -> i32 {
         p.outputs.len(),
         p.nodes.len()
     ));
+    if args.ir {
+        out.push_str(&p.ir().to_string());
+    }
     let mut stdout = std::io::stdout().lock();
     match stdout
         .write_all(out.as_bytes())

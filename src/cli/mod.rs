@@ -12,8 +12,11 @@ pub mod trace;
 
 use clap::{Args, Parser, Subcommand};
 
+#[cfg(feature = "tools")]
 pub mod replay;
+#[cfg(feature = "tools")]
 pub mod report;
+#[cfg(feature = "tools")]
 pub mod simulate;
 use std::path::PathBuf;
 
@@ -46,10 +49,13 @@ pub enum Command {
     /// Run a spec over a TeSSLa input trace and print TeSSLa's output trace format.
     Trace(TraceArgs),
     /// Publish a recorded robot run to MQTT as the robot's JSON messages.
+    #[cfg(feature = "tools")]
     Replay(replay::ReplayArgs),
     /// Render a run's line protocol (pass-through and verdicts) as an HTML report with SVG plots.
+    #[cfg(feature = "tools")]
     Report(report::ReportArgs),
     /// Run a simulated TurtleBot3 in closed loop with the monitors (the digital twin's behaviour).
+    #[cfg(feature = "tools")]
     Simulate(simulate::SimulateArgs),
 }
 
@@ -68,6 +74,9 @@ pub struct SpecOptions {
 pub struct CheckArgs {
     /// The `.tessla` file.
     pub spec: PathBuf,
+    /// Also print the lowered program: its nodes in evaluation order, and the outputs' nodes.
+    #[arg(long)]
+    pub ir: bool,
     #[command(flatten)]
     pub spec_options: SpecOptions,
 }
@@ -149,8 +158,11 @@ pub fn main() -> i32 {
         Some(Command::Run(a)) => run(a),
         Some(Command::Check(a)) => check(a),
         Some(Command::Trace(a)) => trace(a),
+        #[cfg(feature = "tools")]
         Some(Command::Replay(a)) => replay::run(a),
+        #[cfg(feature = "tools")]
         Some(Command::Report(a)) => report::run(a),
+        #[cfg(feature = "tools")]
         Some(Command::Simulate(a)) => simulate::run(a),
     }
 }

@@ -1,12 +1,11 @@
 //! TeSSLa's immutable `Set[T]` and `Map[K, V]` value functions (`Set.add`, `Map.get`, ...)
 //! and the few `List` functions the core natives lack (`List.isEmpty`, `List.zip`, ...).
 //!
-//! Owns: these pure functions over [`Value::Set`] / [`Value::Map`]. Elements are kept in
+//! Owns: these pure functions (listed by name in `builtins`) over [`Value::Set`] / [`Value::Map`]. Elements are kept in
 //! insertion order (values have no total order or hash: floats and closures), so membership is a
 //! linear scan; sets in monitors are small. Errors in arguments are handled by the caller (the
 //! compiler never passes an error value into a value function).
 
-use crate::natives::NativeFn;
 use crate::value::{RuntimeError, Value};
 use std::sync::Arc;
 
@@ -25,39 +24,17 @@ fn call(f: &Value, args: &[Value]) -> Value {
     }
 }
 
-/// The value functions of this module by TeSSLa name.
-pub const FUNCTIONS: &[(&str, NativeFn)] = &[
-    ("Set.add", set_add),
-    ("Set.contains", set_contains),
-    ("Set.remove", set_remove),
-    ("Set.size", set_size),
-    ("Set.union", set_union),
-    ("Set.intersection", set_intersection),
-    ("Set.minus", set_minus),
-    ("Set.fold", set_fold),
-    ("Set.map", set_map),
-    ("Map.add", map_add),
-    ("Map.contains", map_contains),
-    ("Map.get", map_get),
-    ("Map.getOrElse", map_get_or_else),
-    ("Map.remove", map_remove),
-    ("Map.size", map_size),
-    ("Map.keys", map_keys),
-    ("Map.fold", map_fold),
-    ("Map.map", map_map),
-    ("List.isEmpty", list_is_empty),
-    ("List.zip", list_zip),
-    ("List.zipWithIndex", list_zip_with_index),
-];
+/// `List.empty`, `Set.empty`, `Map.empty`.
+pub fn empty_list() -> Value {
+    Value::List(Arc::new(Vec::new()))
+}
 
-/// Names that denote a constant empty collection (`Set.empty[Int]`).
-pub fn empty(name: &str) -> Option<Value> {
-    match name {
-        "Set.empty" => Some(Value::Set(Arc::new(Vec::new()))),
-        "Map.empty" => Some(Value::Map(Arc::new(Vec::new()))),
-        "List.empty" => Some(Value::List(Arc::new(Vec::new()))),
-        _ => None,
-    }
+pub fn empty_set() -> Value {
+    Value::Set(Arc::new(Vec::new()))
+}
+
+pub fn empty_map() -> Value {
+    Value::Map(Arc::new(Vec::new()))
 }
 
 fn with(s: &Arc<Vec<Value>>, x: &Value) -> Arc<Vec<Value>> {
@@ -322,7 +299,7 @@ mod tests {
 
     #[test]
     fn maps_replace_values_of_existing_keys() {
-        let m = map_add(&[empty("Map.empty").unwrap(), Value::Int(1), Value::Int(10)]);
+        let m = map_add(&[empty_map(), Value::Int(1), Value::Int(10)]);
         let m = map_add(&[m, Value::Int(1), Value::Int(11)]);
         assert_eq!(m.to_string(), "Map(1 -> 11)");
         assert_eq!(map_get(&[m.clone(), Value::Int(1)]), Value::Int(11));

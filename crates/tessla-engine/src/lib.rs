@@ -1,15 +1,20 @@
 //! tessla-engine: checks a parsed TeSSLa spec, lowers it to a flat core IR and evaluates it.
 //!
-//! Owns: type checking (`typeck`, run before compilation), name resolution and macro expansion
-//! (`compile`), the IR (`ir`), values (`value`), monitor instances (`monitor`) and their
-//! snapshots (`snapshot`).
+//! A spec flows text -> syntax (`tessla_syntax`) -> checked (`typeck`, reading `builtins`) ->
+//! IR (`lower`, then `schedule`; the IR is `ir`) -> monitor (`monitor`, with `snapshot`).
+//! `load` runs the whole pipeline. Semantics used on the way: `ops` (operators), `natives` and
+//! `collections` (value functions), `format` (format strings), `value` (what events carry).
 
+pub mod builtins;
 pub mod collections;
-pub mod compile;
+pub mod format;
 pub mod ir;
 pub mod load;
+pub mod lower;
 pub mod monitor;
 pub mod natives;
+pub mod ops;
+pub mod schedule;
 pub mod snapshot;
 pub mod typeck;
 pub mod value;

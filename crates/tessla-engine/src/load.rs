@@ -4,8 +4,8 @@
 //! monitors), the options that affect compilation (base time, `--set` overrides) and the error
 //! type carrying rendered-ready diagnostics.
 
-use crate::compile;
 use crate::ir::Program;
+use crate::lower;
 use std::path::Path;
 use std::sync::Arc;
 use tessla_syntax::diag::Category;
@@ -61,7 +61,11 @@ pub fn load_with(
     options: &LoadOptions,
 ) -> Result<Loaded, LoadError> {
     let mut sources = SourceMap::new();
-    let (base, base_unit) = match options.base_time.as_deref().map(compile::parse_base_parts) {
+    let (base, base_unit) = match options
+        .base_time
+        .as_deref()
+        .map(lower::time::parse_base_parts)
+    {
         None => (1_000_000, 1_000_000),
         Some(Ok((count, unit))) => (count * unit, unit),
         Some(Err(msg)) => {
@@ -81,15 +85,16 @@ pub fn load_with(
         }
     };
     let asts: Vec<_> = files.into_iter().map(|(_, f)| f).collect();
-    let type_errors = crate::typeck::check(&asts);
+    let (type_errors, types) = crate::typeck::check_typed(&asts);
     if !type_errors.is_empty() {
         return Err(LoadError {
             sources,
             diagnostics: type_errors,
         });
     }
-    let result = compile::Compiler::new(&sources, base)
+    let result = lower::Compiler::new(&sources, base)
         .with_base_unit(base_unit)
+        .with_types(types)
         .with_time_units(!(options.time_units_need_base && options.base_time.is_none()))
         .program(&asts, &options.overrides);
     match result {

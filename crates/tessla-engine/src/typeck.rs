@@ -16,9 +16,12 @@
 //! fits everything. Definitions are generalised (let-polymorphism) when they are done, so generic
 //! functions and constants may be used at several types.
 
+use crate::builtins::{self, Sig};
+use crate::ir::Type;
 use std::cell::RefCell;
 use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
+use std::sync::OnceLock;
 use tessla_syntax::ast::{self, BinOp, Body, Def, Expr, ExprKind, Statement, StrPart, UnaryOp};
 use tessla_syntax::diag::{Category, Diagnostic};
 use tessla_syntax::source::Span;
@@ -139,8 +142,23 @@ enum Found<'a> {
     Def(Rc<DefInfo<'a>>),
 }
 
+/// The types the checker found that later passes use: the element type of each output
+/// (by the span of its expression) and of each top-level parameterless def (by dotted name).
+/// Types the checker leaves open are [`Type::Unknown`] inside.
+#[derive(Debug, Default)]
+pub struct Types {
+    pub outputs: HashMap<Span, Type>,
+    pub defs: HashMap<String, Type>,
+}
+
 /// Check the statements of all files (includes first); returns the type errors found.
 pub fn check(files: &[ast::File]) -> Vec<Diagnostic> {
+    check_typed(files).0
+}
+
+/// Check the statements of all files; returns the type errors found and the [`Types`] table.
+pub fn check_typed(files: &[ast::File]) -> (Vec<Diagnostic>, Types) {
+    let mut types = Types::default();
     let mut c = Checker::default();
     for f in files {
         collect_type_names(&f.statements, &mut c.declared_types);
@@ -196,6 +214,9 @@ pub fn check(files: &[ast::File]) -> Vec<Diagnostic> {
         if let Statement::Out(o) = s {
             let scope = c.module_scope("");
             let t = c.infer(&o.expr, &scope);
+            types
+                .outputs
+                .insert(o.expr.span, element_type(&c.resolve(&t)));
             // A parameterless function (`def foo() = 42`) is called.
             if let Ty::Fn(ps, _) = c.resolve(&t)
                 && !ps.is_empty()
@@ -212,8 +233,58 @@ pub fn check(files: &[ast::File]) -> Vec<Diagnostic> {
             }
         }
     }
+    // Def types only serve `out *`.
+    let out_all = statements
+        .iter()
+        .any(|(_, s)| matches!(s, Statement::OutAll { .. }));
+    for (name, d) in c.globals.iter().filter(|_| out_all) {
+        if d.def.params.is_none()
+            && let State::Done(s) = &*d.state.borrow()
+        {
+            types
+                .defs
+                .insert(name.clone(), element_type(&c.resolve(&s.ty)));
+        }
+    }
     c.break_cycles();
-    std::mem::take(&mut c.diags)
+    (std::mem::take(&mut c.diags), types)
+}
+
+/// The element type of a stream (`T` of `Events[T]`; a constant is its own) as an IR type.
+fn element_type(t: &Ty) -> Type {
+    match t {
+        Ty::Con("Events", args) => args.first().map_or(Type::Unknown, ir_type_of),
+        other => ir_type_of(other),
+    }
+}
+
+/// A resolved checker type as an IR type; what the IR cannot name (`Set`, `Map`, functions,
+/// open variables) is [`Type::Unknown`].
+fn ir_type_of(t: &Ty) -> Type {
+    let inner = |args: &[Ty]| Box::new(args.first().map_or(Type::Unknown, ir_type_of));
+    match t {
+        Ty::Con("Unit", _) => Type::Unit,
+        Ty::Con("Bool", _) => Type::Bool,
+        Ty::Con("Int", _) => Type::Int,
+        Ty::Con("Float", _) => Type::Float,
+        Ty::Con("String", _) => Type::String,
+        Ty::Con("Option", args) => Type::Option(inner(args)),
+        Ty::Con("List", args) => Type::List(inner(args)),
+        Ty::Con("Events", args) => Type::Events(inner(args)),
+        Ty::Record(fs)
+            if !fs.is_empty()
+                && fs
+                    .iter()
+                    .enumerate()
+                    .all(|(i, (n, _))| n.strip_prefix('_') == Some(&(i + 1).to_string())) =>
+        {
+            Type::Tuple(fs.iter().map(|(_, t)| ir_type_of(t)).collect())
+        }
+        Ty::Record(fs) if !fs.is_empty() => {
+            Type::Record(fs.iter().map(|(n, t)| (n.clone(), ir_type_of(t))).collect())
+        }
+        _ => Type::Unknown,
+    }
 }
 
 /// The names of every `type` declaration in `statements` and the modules inside them.
@@ -981,6 +1052,7 @@ impl<'a> Checker<'a> {
         // Variadic builtins get their signature from the number of arguments.
         if let ExprKind::Var(id) = &function.kind
             && self.find(&id.name, scope).is_none()
+            && builtins::get(&id.name).is_some_and(|b| b.sig == Sig::Variadic)
             && let Some(sig) = self.variadic(&id.name, ts.len())
         {
             return self.apply(sig, &ts, args, span, &id.name);
@@ -1094,108 +1166,132 @@ impl<'a> Checker<'a> {
         None
     }
 
-    /// The type of a builtin name (stream functions, value functions, collection functions).
+    /// The type of a builtin name, from its signature in the builtins table (`None`: not a
+    /// builtin or one without a fixed signature).
     fn builtin(&mut self, name: &str) -> Option<Ty> {
-        let a = self.fresh();
-        let b = self.fresh();
-        let (k, v) = (a.clone(), b.clone());
-        let f = |ps: Vec<Ty>, r: Ty| func(ps, r);
+        // Two variables per use, `A`/`K` and `B`/`V`, whether the signature uses them or not.
+        let vars = [self.fresh(), self.fresh()];
+        let template = template(builtins::get(name)?.name)?;
+        Some(with_vars(template, &vars))
+    }
+}
+
+/// Stand-ins for `A`/`K` and `B`/`V` in a parsed signature (never a checker variable: those
+/// count up from 0).
+const TEMPLATE_VARS: [u32; 2] = [u32::MAX, u32::MAX - 1];
+
+/// The parsed signature of a builtin with a fixed one, parsed once per process on first use.
+fn template(name: &'static str) -> Option<&'static Ty> {
+    static TEMPLATES: OnceLock<HashMap<&'static str, OnceLock<Option<Ty>>>> = OnceLock::new();
+    let cells = TEMPLATES.get_or_init(|| {
+        builtins::BUILTINS
+            .iter()
+            .filter(|b| matches!(b.sig, Sig::Fixed(_)))
+            .map(|b| (b.name, OnceLock::new()))
+            .collect()
+    });
+    let Sig::Fixed(sig) = builtins::get(name)?.sig else {
+        return None;
+    };
+    cells
+        .get(name)?
+        .get_or_init(|| signature(sig, &TEMPLATE_VARS.map(Ty::Var)))
+        .as_ref()
+}
+
+/// `t` with the template variables replaced by `vars`.
+fn with_vars(t: &Ty, vars: &[Ty; 2]) -> Ty {
+    let w = |x: &Ty| with_vars(x, vars);
+    match t {
+        Ty::Var(v) if *v == TEMPLATE_VARS[0] => vars[0].clone(),
+        Ty::Var(v) if *v == TEMPLATE_VARS[1] => vars[1].clone(),
+        Ty::Var(_) => t.clone(),
+        Ty::Con(n, args) => Ty::Con(n, args.iter().map(w).collect()),
+        Ty::Fn(ps, r) => Ty::Fn(ps.iter().map(w).collect(), Box::new(w(r))),
+        Ty::Record(fs) => Ty::Record(fs.iter().map(|(n, t)| (n.clone(), w(t))).collect()),
+    }
+}
+
+/// A type in TeSSLa's notation (`(Events[A], (B, A) => B) => Events[B]`) with `A`/`K` and
+/// `B`/`V` standing for `vars`; `None` when it does not parse (a test parses every signature
+/// of the builtins table).
+fn signature(sig: &'static str, vars: &[Ty; 2]) -> Option<Ty> {
+    let mut p = SigParser { rest: sig, vars };
+    let t = p.ty()?;
+    p.rest.trim().is_empty().then_some(t)
+}
+
+struct SigParser<'v> {
+    rest: &'static str,
+    vars: &'v [Ty; 2],
+}
+
+impl SigParser<'_> {
+    fn eat(&mut self, tok: &str) -> bool {
+        let r = self.rest.trim_start();
+        match r.strip_prefix(tok) {
+            Some(after) => {
+                self.rest = after;
+                true
+            }
+            None => {
+                self.rest = r;
+                false
+            }
+        }
+    }
+
+    /// Types separated by commas up to `close`.
+    fn list(&mut self, close: &str) -> Option<Vec<Ty>> {
+        let mut out = Vec::new();
+        if self.eat(close) {
+            return Some(out);
+        }
+        loop {
+            out.push(self.ty()?);
+            if self.eat(close) {
+                return Some(out);
+            }
+            if !self.eat(",") {
+                return None;
+            }
+        }
+    }
+
+    fn ty(&mut self) -> Option<Ty> {
+        if self.eat("(") {
+            let params = self.list(")")?;
+            if !self.eat("=>") {
+                return None;
+            }
+            return Some(func(params, self.ty()?));
+        }
+        let r = self.rest.trim_start();
+        let end = r
+            .find(|c: char| !c.is_ascii_alphanumeric())
+            .unwrap_or(r.len());
+        let (name, after) = r.split_at(end);
+        self.rest = after;
+        let args = if self.eat("[") {
+            self.list("]")?
+        } else {
+            Vec::new()
+        };
+        let mut args = args.into_iter();
+        let mut arg = || args.next();
         Some(match name {
-            "time" => f(vec![ev(a)], ev(int())),
-            "last" => f(vec![ev(a.clone()), ev(b)], ev(a)),
-            "prev" | "pure" | "firstEvent" => f(vec![ev(a.clone())], ev(a)),
-            "delay" => f(vec![ev(int()), ev(a)], ev(unit())),
-            "default" => f(vec![ev(a.clone()), a.clone()], ev(a)),
-            "defaultFrom" => f(vec![ev(a.clone()), ev(a.clone())], ev(a)),
-            "const" => f(vec![a.clone(), ev(b)], ev(a)),
-            "first" => f(vec![ev(a.clone()), ev(b)], ev(a)),
-            "filter" => f(vec![ev(a.clone()), ev(boolean())], ev(a)),
-            "count" => f(vec![ev(a)], ev(int())),
-            "fold" => f(
-                vec![
-                    ev(a.clone()),
-                    b.clone(),
-                    func(vec![b.clone(), a], b.clone()),
-                ],
-                ev(b),
-            ),
-            "reduce" => f(
-                vec![ev(a.clone()), func(vec![a.clone(), a.clone()], a.clone())],
-                ev(a),
-            ),
-            "isFirst" | "defined" => f(vec![ev(a)], ev(boolean())),
-            "on" => f(vec![ev(a), ev(b.clone())], ev(b)),
-            "constIf" => f(vec![a.clone(), ev(boolean())], ev(a)),
-            "unitIf" => f(vec![ev(boolean())], ev(unit())),
-            "rising" | "falling" => f(vec![ev(boolean())], ev(b)),
-            "resetCount" => f(vec![ev(a), ev(b)], ev(int())),
-            "noEvent" => f(vec![ev(a), ev(b)], ev(boolean())),
-            "period" => f(vec![int()], ev(unit())),
-            "Set.collect" => f(vec![ev(a.clone())], ev(set(a))),
-            "Set.collectWithRemove" => f(vec![ev(a.clone()), ev(a.clone())], ev(set(a))),
-            "intToFloat" => f(vec![int()], float()),
-            "floatToInt" => f(vec![float()], int()),
-            "pow" => f(vec![float(), float()], float()),
-            "sin" | "cos" | "tan" | "atan" | "sqrt" => f(vec![float()], float()),
-            "abs" => f(vec![a.clone()], a),
-            "max" | "min" => f(vec![a.clone(), a.clone()], a),
-            "toString" => f(vec![a], string()),
-            "String.concat" => f(vec![string(), string()], string()),
-            "Some" => f(vec![a.clone()], opt(a)),
-            "isNone" | "isSome" => f(vec![opt(a)], boolean()),
-            "getSome" => f(vec![opt(a.clone())], a),
-            "getSomeOrElse" => f(vec![opt(a.clone()), a.clone()], a),
-            "ite" => f(vec![boolean(), a.clone(), a.clone()], a),
-            "Option.map" | "OptionUtils.map" => {
-                f(vec![opt(a.clone()), func(vec![a], b.clone())], opt(b))
-            }
-            "Option.flatMap" | "OptionUtils.flatMap" => {
-                f(vec![opt(a.clone()), func(vec![a], opt(b.clone()))], opt(b))
-            }
-            "List.empty" => list(a),
-            "Set.empty" => set(a),
-            "Map.empty" => map(a, b),
-            "List.size" => f(vec![list(a)], int()),
-            "List.isEmpty" => f(vec![list(a)], boolean()),
-            "List.append" => f(vec![list(a.clone()), a.clone()], list(a)),
-            "List.prepend" => f(vec![a.clone(), list(a.clone())], list(a)),
-            "List.get" => f(vec![list(a.clone()), int()], a),
-            "List.set" => f(vec![list(a.clone()), int(), a.clone()], list(a)),
-            "List.head" | "List.last" => f(vec![list(a.clone())], a),
-            "List.tail" | "List.init" => f(vec![list(a.clone())], list(a)),
-            "List.fold" => f(
-                vec![
-                    list(a.clone()),
-                    b.clone(),
-                    func(vec![b.clone(), a], b.clone()),
-                ],
-                b,
-            ),
-            "List.map" => f(vec![list(a.clone()), func(vec![a], b.clone())], list(b)),
-            "Set.add" | "Set.remove" => f(vec![set(a.clone()), a.clone()], set(a)),
-            "Set.contains" => f(vec![set(a.clone()), a], boolean()),
-            "Set.size" => f(vec![set(a)], int()),
-            "Set.union" | "Set.intersection" | "Set.minus" => {
-                f(vec![set(a.clone()), set(a.clone())], set(a))
-            }
-            "Set.fold" => f(
-                vec![
-                    set(a.clone()),
-                    b.clone(),
-                    func(vec![b.clone(), a], b.clone()),
-                ],
-                b,
-            ),
-            "Set.map" => f(vec![set(a.clone()), func(vec![a], b.clone())], set(b)),
-            "Map.add" => f(
-                vec![map(k.clone(), v.clone()), k.clone(), v.clone()],
-                map(k, v),
-            ),
-            "Map.contains" => f(vec![map(k.clone(), v), k], boolean()),
-            "Map.get" => f(vec![map(k.clone(), v.clone()), k], v),
-            "Map.getOrElse" => f(vec![map(k.clone(), v.clone()), k, v.clone()], v),
-            "Map.remove" => f(vec![map(k.clone(), v.clone()), k.clone()], map(k, v)),
-            "Map.size" => f(vec![map(k, v)], int()),
+            "A" | "K" => self.vars[0].clone(),
+            "B" | "V" => self.vars[1].clone(),
+            "Int" => int(),
+            "Float" => float(),
+            "Bool" => boolean(),
+            "String" => string(),
+            "Unit" => unit(),
+            "Events" => ev(arg()?),
+            "Option" => opt(arg()?),
+            "List" => list(arg()?),
+            "Set" => set(arg()?),
+            "Map" => map(arg()?, arg()?),
             _ => return None,
         })
     }
@@ -1271,5 +1367,56 @@ fn dotted(e: &Expr) -> Option<String> {
         ExprKind::Var(id) => Some(id.name.clone()),
         ExprKind::Member { object, field } => Some(format!("{}.{}", dotted(object)?, field.name)),
         _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_builtin_signature_parses() {
+        let vars = [Ty::Var(0), Ty::Var(1)];
+        for b in builtins::BUILTINS {
+            if let Sig::Fixed(sig) = b.sig {
+                assert!(signature(sig, &vars).is_some(), "{}: {sig}", b.name);
+            }
+        }
+        assert_eq!(
+            signature("(Events[A], B, (B, A) => B) => Events[B]", &vars),
+            Some(func(
+                vec![
+                    ev(Ty::Var(0)),
+                    Ty::Var(1),
+                    func(vec![Ty::Var(1), Ty::Var(0)], Ty::Var(1))
+                ],
+                ev(Ty::Var(1))
+            ))
+        );
+        assert_eq!(
+            signature("Map[K, V]", &vars),
+            Some(map(Ty::Var(0), Ty::Var(1)))
+        );
+        assert_eq!(signature("(Int) =>", &vars), None);
+        for b in builtins::BUILTINS {
+            if let Sig::Fixed(sig) = b.sig {
+                let direct = signature(sig, &vars);
+                let cached = template(b.name).map(|t| with_vars(t, &vars));
+                assert_eq!(direct, cached, "{}", b.name);
+            }
+        }
+    }
+
+    #[test]
+    fn the_type_table_has_outputs_and_defs() {
+        let spec = "in x: Events[Int]\ndef f(a: Int) = (a, true)\ndef g = f(x)\nout g\nout f(x) as h\nout *";
+        let (file, diags) = tessla_syntax::parse(spec, tessla_syntax::source::FileId::default());
+        assert!(diags.is_empty());
+        let (errors, types) = check_typed(&[file]);
+        assert!(errors.is_empty());
+        let pair = Type::Tuple(vec![Type::Int, Type::Bool]);
+        assert_eq!(types.defs.get("g"), Some(&pair));
+        assert_eq!(types.outputs.len(), 2);
+        assert!(types.outputs.values().all(|t| *t == pair));
     }
 }

@@ -29,8 +29,8 @@ unsafe impl GlobalAlloc for Counting {
 #[global_allocator]
 static ALLOC: Counting = Counting;
 
-/// Top-level defs, a function, a module, `where` defs and a block. (A recursive function still
-/// leaks: its compiled body refers to itself through an `Arc`; RELIABILITY.md.)
+/// Top-level defs, a function, a module, `where` defs and a block. (Recursive functions:
+/// `no_leak_recursive.rs`.)
 const SPEC: &str = "in x: Events[Int]\n\
     def f(n: Int): Int = ${def m = n + 1; m}\n\
     module M {\n  def k = 3\n  def twice(a: Int) = a * k\n}\n\

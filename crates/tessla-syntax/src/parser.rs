@@ -1183,11 +1183,7 @@ impl<'a> Parser<'a> {
                 for p in parts {
                     match p {
                         LexStrPart::Text(t) => out.push(StrPart::Text(t)),
-                        LexStrPart::Interp {
-                            tokens,
-                            span,
-                            format,
-                        } => {
+                        LexStrPart::Interp { tokens, format, .. } => {
                             let mut sub = self.sub(tokens);
                             sub.skip_nl();
                             let r = sub.expr();
@@ -1201,7 +1197,6 @@ impl<'a> Parser<'a> {
                                 Ok(expr) if !failed => out.push(StrPart::Interp { expr, format }),
                                 _ => return Err(Fail),
                             }
-                            let _ = span;
                         }
                     }
                 }
@@ -1269,11 +1264,8 @@ impl<'a> Parser<'a> {
         let is_record = match (self.peek(), self.peek_n(1)) {
             (Tok::Punct("}"), _) => true,
             (Tok::Ident(n), Tok::Punct("=" | ":" | ",")) => !KEYWORDS.contains(&n.as_str()),
-            (Tok::Ident(n), Tok::Newline | Tok::Punct("}")) => {
-                // `{a}` is a block whose value is `a`; `{a,\n b}` was handled above.
-                let _ = n;
-                false
-            }
+            // `{a}` is a block whose value is `a`; `{a,\n b}` was handled above.
+            (Tok::Ident(_), Tok::Newline | Tok::Punct("}")) => false,
             _ => false,
         };
         if is_record {

@@ -149,10 +149,6 @@ pub fn get_some_or_else(a: &[Value]) -> Value {
     }
 }
 
-pub fn list_empty(_: &[Value]) -> Value {
-    Value::List(Arc::new(Vec::new()))
-}
-
 pub fn list_size(a: &[Value]) -> Value {
     match a {
         [Value::List(l)] => Value::Int(l.len() as i64),
@@ -294,6 +290,16 @@ pub fn list_map(a: &[Value]) -> Value {
     }
 }
 
+/// `ite(c, a, b)`: `a` if `c` else `b` (any values, also functions).
+pub fn ite(a: &[Value]) -> Value {
+    match a {
+        [Value::Bool(true), x, _] => x.clone(),
+        [Value::Bool(false), _, y] => y.clone(),
+        [e @ Value::Error(_), ..] => e.clone(),
+        _ => Value::Error(RuntimeError::Other("ite: expected (Bool, A, A)".into())),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -394,11 +400,8 @@ mod tests {
         assert_eq!(list_last(std::slice::from_ref(&l)), int(3));
         assert_eq!(list_tail(std::slice::from_ref(&l)), list(&[2, 3]));
         assert_eq!(list_init(std::slice::from_ref(&l)), list(&[1, 2]));
-        assert_eq!(
-            list_head(&[list_empty(&[])]),
-            err(RuntimeError::IndexOutOfBounds)
-        );
-        assert_eq!(list_init(&[list_empty(&[])]), list(&[]));
+        assert_eq!(list_head(&[list(&[])]), err(RuntimeError::IndexOutOfBounds));
+        assert_eq!(list_init(&[list(&[])]), list(&[]));
         let add = Value::Closure(Arc::new(Add));
         assert_eq!(list_fold(&[l.clone(), int(100), add.clone()]), int(106));
         assert_eq!(

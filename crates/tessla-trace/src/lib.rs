@@ -1,6 +1,7 @@
 //! TeSSLa's trace formats: running a monitor over an input trace (`TS: name = value` lines,
 //! see [`reader`]) and printing TeSSLa's output format (see [`writer`]). Used by
-//! `tessla-telegraf trace` and by the conformance test, so both take the same path.
+//! `tessla-telegraf trace` and by the conformance test, so both take the same path. A crate of
+//! its own: the execd plugin's record path never reads traces.
 //!
 //! Owns: the run semantics of TeSSLa's interpreter for traces. A bad trace line, decreasing
 //! timestamps and two events on one stream at one timestamp are errors that stop the run: the

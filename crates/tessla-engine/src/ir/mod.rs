@@ -1,10 +1,14 @@
 //! The flat core IR: stream nodes in dependency order with typed value slots.
 //!
 //! Owns: [`Program`] (what the front end produces and the evaluator runs), the metadata the
-//! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s.
+//! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s; its
+//! listing (`print`, `tessla-telegraf check --ir`).
 
 use crate::value::Value;
 use std::sync::Arc;
+
+mod print;
+pub use print::IrListing;
 
 /// A value type, as reported by `check` and used by bindings to convert inputs.
 #[derive(Debug, Clone, PartialEq)]
@@ -19,13 +23,14 @@ pub enum Type {
     Tuple(Vec<Type>),
     Record(Vec<(String, Type)>),
     Events(Box<Type>),
-    /// Not inferred (the engine infers types of inputs and literals only, see `check`).
+    /// Not known: a type the IR cannot name (`Set`, `Map`, functions) or one the checker left
+    /// open.
     Unknown,
 }
 
 impl std::fmt::Display for Type {
     /// TeSSLa's notation: `Float`, `Option[Int]`, `List[Float]`, `(Int, Bool)`, `{a: Int}`;
-    /// an element type the engine does not infer prints as `?`.
+    /// a type that is not known prints as `?`.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Type::Unit => f.write_str("Unit"),
@@ -45,6 +50,19 @@ impl std::fmt::Display for Type {
                 write!(f, "{{{}}}", parts.join(", "))
             }
             Type::Unknown => f.write_str("?"),
+        }
+    }
+}
+
+impl Type {
+    /// No part of the type is [`Type::Unknown`].
+    pub fn is_known(&self) -> bool {
+        match self {
+            Type::Unknown => false,
+            Type::Option(t) | Type::List(t) | Type::Events(t) => t.is_known(),
+            Type::Tuple(ts) => ts.iter().all(Type::is_known),
+            Type::Record(fs) => fs.iter().all(|(_, t)| t.is_known()),
+            _ => true,
         }
     }
 }
@@ -91,7 +109,8 @@ pub enum SArg {
     Const(Value),
 }
 
-/// Operators with an inline fast path in the evaluator (see [`Node::Bin`]).
+/// Operators with an inline fast path in the evaluator (see [`Node::Bin`]); their semantics are
+/// in [`crate::ops`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ScalarOp {
     FAdd,
@@ -139,35 +158,6 @@ impl Scalar {
             Scalar::I(x) => Value::Int(x),
             Scalar::B(x) => Value::Bool(x),
         }
-    }
-}
-
-impl ScalarOp {
-    /// The result on scalar operands of the operator's types, or `None` otherwise (the general
-    /// closure then decides: overflow is an error value, other types are errors).
-    #[inline]
-    pub fn eval(self, a: Scalar, b: Scalar) -> Option<Scalar> {
-        use Scalar::{B, F, I};
-        use ScalarOp::*;
-        Some(match (self, a, b) {
-            (FAdd, F(x), F(y)) => F(x + y),
-            (FSub, F(x), F(y)) => F(x - y),
-            (FMul, F(x), F(y)) => F(x * y),
-            (FDiv, F(x), F(y)) => F(x / y),
-            (FLt, F(x), F(y)) => B(x < y),
-            (FGt, F(x), F(y)) => B(x > y),
-            (FLe, F(x), F(y)) => B(x <= y),
-            (FGe, F(x), F(y)) => B(x >= y),
-            (IAdd, I(x), I(y)) => I(x.checked_add(y)?),
-            (ISub, I(x), I(y)) => I(x.checked_sub(y)?),
-            (ILt, I(x), I(y)) => B(x < y),
-            (IGt, I(x), I(y)) => B(x > y),
-            (ILe, I(x), I(y)) => B(x <= y),
-            (IGe, I(x), I(y)) => B(x >= y),
-            (And, B(x), B(y)) => B(x && y),
-            (Or, B(x), B(y)) => B(x || y),
-            _ => return None,
-        })
     }
 }
 
@@ -304,17 +294,7 @@ impl Node {
     }
 }
 
-/// Mark the stream arguments of a signal lift when there are at least two.
-fn mark_all(mark: &mut impl FnMut(NodeId), args: &[&SArg]) {
-    let streams = stream_args(args);
-    if streams.len() >= 2 {
-        for n in streams {
-            mark(n);
-        }
-    }
-}
-
-fn stream_args(args: &[&SArg]) -> Vec<NodeId> {
+pub(crate) fn stream_args(args: &[&SArg]) -> Vec<NodeId> {
     args.iter()
         .filter_map(|a| match a {
             SArg::Stream(n) => Some(*n),
@@ -323,12 +303,22 @@ fn stream_args(args: &[&SArg]) -> Vec<NodeId> {
         .collect()
 }
 
+/// The compiled bodies of recursive functions. Their recursive calls refer to them weakly (no
+/// reference cycle, so nothing outlives the program); the program holds them.
+#[derive(Default)]
+pub struct Functions(pub(crate) Vec<Arc<std::sync::OnceLock<Func>>>);
+
+impl std::fmt::Debug for Functions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} recursive functions", self.0.len())
+    }
+}
+
 /// A compiled specification, shared (in an `Arc`) by every monitor instance.
 #[derive(Debug)]
 pub struct Program {
     pub inputs: Vec<InputInfo>,
     pub outputs: Vec<OutputInfo>,
-    pub global_annotations: Vec<Annotation>,
     pub nodes: Vec<Node>,
     /// Per node: a hash of the source text that defined it (see [`crate::snapshot`]).
     pub node_origins: Vec<u64>,
@@ -339,60 +329,16 @@ pub struct Program {
     /// The `Delay` nodes (the monitor arms and fires only these).
     pub delays: Vec<NodeId>,
     /// Per node: its slot among the values a monitor keeps from earlier steps, or [`NO_SLOT`]
-    /// when no node reads it across steps (see [`last_slots`]).
+    /// when no node reads it across steps (see [`crate::schedule::last_slots`]).
     pub last_slot: Vec<u32>,
     /// Number of slots in use in `last_slot`.
     pub n_last_slots: usize,
+    /// Keeps the bodies of recursive functions alive as long as the program.
+    pub functions: Functions,
 }
 
 /// `last_slot` of a node whose earlier values nobody reads.
 pub const NO_SLOT: u32 = u32::MAX;
-
-/// Which nodes' latest values must persist between steps: the lazy argument of `last`, the
-/// arguments of signal lifts (they use the latest value of silent arguments), the condition of
-/// `filter`, both arguments of `defaultFrom`, and `fold`/`reduce` accumulators. Returns the slot
-/// of each node (or [`NO_SLOT`]) and the number of slots; a monitor instance stores only these.
-pub fn last_slots(nodes: &[Node], order: &[NodeId]) -> (Vec<u32>, usize) {
-    let mut need = vec![false; nodes.len()];
-    let mut mark = |n: NodeId| {
-        if let Some(x) = need.get_mut(n) {
-            *x = true;
-        }
-    };
-    for &i in order {
-        match nodes.get(i) {
-            Some(Node::Last { value, .. }) => mark(*value),
-            Some(Node::DefaultFrom { stream, from }) => {
-                mark(*stream);
-                mark(*from);
-            }
-            // A lift reads the latest value of a silent argument only when it has two or more
-            // stream arguments: with one, it fires only with that argument's event.
-            Some(Node::SLift { args, .. }) => {
-                let streams: Vec<&SArg> = args.iter().collect();
-                mark_all(&mut mark, &streams);
-            }
-            Some(Node::Filter { cond, .. }) => mark(*cond),
-            Some(Node::Bin { a, b, .. }) => mark_all(&mut mark, &[a, b]),
-            Some(Node::Ite { cond, then, other }) => mark_all(&mut mark, &[cond, then, other]),
-            Some(Node::Fold { .. } | Node::Reduce { .. }) => mark(i),
-            _ => {}
-        }
-    }
-    let mut next = 0u32;
-    let slots = need
-        .iter()
-        .map(|&n| {
-            if n {
-                next += 1;
-                next - 1
-            } else {
-                NO_SLOT
-            }
-        })
-        .collect();
-    (slots, next as usize)
-}
 
 impl Program {
     pub fn input_index(&self, name: &str) -> Option<usize> {

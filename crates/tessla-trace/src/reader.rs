@@ -9,8 +9,11 @@
 //! record `{_1 = a, _2 = b}` is a tuple, as TeSSLa treats tuples as records). `Set(...)` and
 //! `Map(k -> v, ...)` build set and map values (`->` only occurs in maps, so it is read as a
 //! comma and the arguments are paired). Integers beyond 64 bits are reported as unsupported.
+//! Operators mean what they mean in a spec: their semantics are `tessla_engine::ops` (so a
+//! negative shift shifts the other way, as TeSSLa's unbounded integers do).
 
 use std::sync::Arc;
+use tessla_engine::ops::{self, OpError};
 use tessla_engine::{Program, Type, Value};
 use tessla_syntax::ast::{BinOp, Expr, ExprKind, StrPart, UnaryOp};
 use tessla_syntax::source::FileId;
@@ -360,63 +363,38 @@ fn bool_of(v: Value) -> Result<Value, String> {
     }
 }
 
+/// An operator's semantics are the engine's ([`tessla_engine::ops`]); only the messages are
+/// the trace reader's.
+fn op_error(e: OpError, undefined: impl FnOnce() -> String) -> String {
+    match e {
+        OpError::Overflow => "Int overflow".into(),
+        OpError::DivisionByZero => "Division by zero".into(),
+        OpError::Undefined => undefined(),
+    }
+}
+
 fn unary(op: UnaryOp, v: Value) -> Result<Value, String> {
     match (op, v) {
-        (UnaryOp::Not, Value::Bool(b)) => Ok(Value::Bool(!b)),
-        (UnaryOp::BitNot, Value::Int(i)) => Ok(Value::Int(!i)),
-        (UnaryOp::Neg, Value::Int(i)) => i
-            .checked_neg()
-            .map(Value::Int)
-            .ok_or_else(|| "Int overflow".to_string()),
-        (UnaryOp::FNeg, Value::Float(f)) => Ok(Value::Float(-f)),
         // A negative float literal: `-1.5` (TeSSLa's trace lexer reads it as one literal).
         (UnaryOp::Neg, Value::Float(f)) => Ok(Value::Float(-f)),
-        (op, v) => Err(format!("operator {op:?} does not apply to {}", show(&v))),
+        (op, v) => ops::unary(op, &v).map_err(|e| {
+            op_error(e, || {
+                format!("operator {op:?} does not apply to {}", show(&v))
+            })
+        }),
     }
 }
 
 fn binary(op: BinOp, a: Value, b: Value) -> Result<Value, String> {
-    use BinOp::*;
-    use Value::{Bool, Float, Int};
-    let overflow = || "Int overflow".to_string();
-    Ok(match (op, &a, &b) {
-        (Add, Int(x), Int(y)) => Int(x.checked_add(*y).ok_or_else(overflow)?),
-        (Sub, Int(x), Int(y)) => Int(x.checked_sub(*y).ok_or_else(overflow)?),
-        (Mul, Int(x), Int(y)) => Int(x.checked_mul(*y).ok_or_else(overflow)?),
-        (Div | Mod, Int(_), Int(0)) => return Err("Division by zero".into()),
-        (Div, Int(x), Int(y)) => Int(x.checked_div(*y).ok_or_else(overflow)?),
-        (Mod, Int(x), Int(y)) => Int(x.checked_rem(*y).ok_or_else(overflow)?),
-        (Shl, Int(x), Int(y)) => Int(x
-            .checked_shl(u32::try_from(*y).map_err(|_| overflow())?)
-            .ok_or_else(overflow)?),
-        (Shr, Int(x), Int(y)) => Int(x
-            .checked_shr(u32::try_from(*y).map_err(|_| overflow())?)
-            .ok_or_else(overflow)?),
-        (BitAnd, Int(x), Int(y)) => Int(x & y),
-        (BitOr, Int(x), Int(y)) => Int(x | y),
-        (BitXor, Int(x), Int(y)) => Int(x ^ y),
-        (Lt, Int(x), Int(y)) => Bool(x < y),
-        (Gt, Int(x), Int(y)) => Bool(x > y),
-        (Le, Int(x), Int(y)) => Bool(x <= y),
-        (Ge, Int(x), Int(y)) => Bool(x >= y),
-        (FAdd, Float(x), Float(y)) => Float(x + y),
-        (FSub, Float(x), Float(y)) => Float(x - y),
-        (FMul, Float(x), Float(y)) => Float(x * y),
-        (FDiv, Float(x), Float(y)) => Float(x / y),
-        (FLt, Float(x), Float(y)) => Bool(x < y),
-        (FGt, Float(x), Float(y)) => Bool(x > y),
-        (FLe, Float(x), Float(y)) => Bool(x <= y),
-        (FGe, Float(x), Float(y)) => Bool(x >= y),
-        (Eq, _, _) => Bool(a == b),
-        (Ne, _, _) => Bool(a != b),
-        _ => {
-            return Err(format!(
+    ops::binary(op, &a, &b).map_err(|e| {
+        op_error(e, || {
+            format!(
                 "operator `{}` does not apply to {} and {}",
                 op.symbol(),
                 show(&a),
                 show(&b)
-            ));
-        }
+            )
+        })
     })
 }
 
@@ -551,6 +529,17 @@ mod tests {
             read(s, r#"1: s = "a ${2 + 40} \"q\" \$ -- no comment""#).unwrap(),
             Value::Str("a 42 \"q\" $ -- no comment".into())
         );
+    }
+
+    #[test]
+    fn operators_mean_what_they_mean_in_a_spec() {
+        let spec = "in x: Events[Int]\nout x";
+        // A negative shift shifts the other way (TeSSLa's unbounded integers), in a trace as in
+        // a spec; a result beyond 64 bits is an overflow, not a wrapped value.
+        assert_eq!(read(spec, "1: x = 8 << -3").unwrap(), Value::Int(1));
+        assert_eq!(read(spec, "1: x = 1 >> -3").unwrap(), Value::Int(8));
+        assert!(read(spec, "1: x = 1 << 63").is_err());
+        assert!(read(spec, "1: x = 1 / 0").is_err());
     }
 
     #[test]

@@ -1,0 +1,290 @@
+//! Calls: a function term applied to argument terms (macro expansion of user functions on
+//! streams, builtins, natives, closures), named arguments, and the argument accessors the
+//! stream operators use.
+//!
+//! Owns: `Compiler::call`, `call_compiled`, `order_named_args`, `typed_as_declared`,
+//! `stream_arg`, `value_fn_arg`, `const_arg`.
+
+use super::*;
+
+impl Compiler<'_> {
+    /// Put named arguments (`f(b = 1, a = x)`) in the order of the function's parameters.
+    pub(super) fn order_named_args(
+        &mut self,
+        f: &Term,
+        args: &[ast::Arg],
+        terms: Vec<Term>,
+        span: Span,
+    ) -> R<Vec<Term>> {
+        if args.iter().all(|a| a.name.is_none()) {
+            return Ok(terms);
+        }
+        let params: Vec<String> = match f {
+            Term::Func(ft) => match &**ft {
+                FuncTerm::User { def, .. } => def
+                    .params
+                    .iter()
+                    .flatten()
+                    .map(|p| p.name.name.clone())
+                    .collect(),
+                FuncTerm::Lambda { params, .. } => {
+                    params.iter().map(|p| p.name.name.clone()).collect()
+                }
+                _ => {
+                    return self.error(
+                        Category::Unsupported,
+                        span,
+                        "named arguments need a function with named parameters",
+                    );
+                }
+            },
+            _ => return self.error(Category::Type, span, "named arguments need a function"),
+        };
+        let mut slots: Vec<Option<Term>> = vec![None; params.len()];
+        let mut next = 0;
+        for (a, t) in args.iter().zip(terms) {
+            let idx = match &a.name {
+                Some(n) => match params.iter().position(|p| *p == n.name) {
+                    Some(i) => i,
+                    None => {
+                        let near = nearest(&n.name, params.iter().map(String::as_str)).join(", ");
+                        self.diags.push(
+                            Diagnostic::error(
+                                Category::Name,
+                                Some(n.span),
+                                format!("no parameter named `{}`", n.name),
+                            )
+                            .with_help(format!(
+                                "parameters: {}",
+                                if near.is_empty() {
+                                    params.join(", ")
+                                } else {
+                                    near
+                                }
+                            )),
+                        );
+                        return Err(Fail);
+                    }
+                },
+                None => {
+                    while next < slots.len() && slots[next].is_some() {
+                        next += 1;
+                    }
+                    next
+                }
+            };
+            match slots.get_mut(idx) {
+                Some(slot @ None) => *slot = Some(t),
+                _ => {
+                    return self.error(
+                        Category::Type,
+                        span,
+                        "an argument is given twice or there are too many arguments",
+                    );
+                }
+            }
+        }
+        slots
+            .into_iter()
+            .map(|s| s.ok_or(Fail))
+            .collect::<R<Vec<_>>>()
+            .or_else(|_| self.error(Category::Type, span, "missing arguments"))
+    }
+
+    pub(super) fn call(&mut self, f: Term, args: Vec<Term>, span: Span, env: &Env) -> R<Term> {
+        let Term::Func(ft) = f else {
+            // Calling a closure value at runtime.
+            if let Term::Dyn(_) | Term::Const(Value::Closure(_)) = f {
+                let mut all = vec![f];
+                all.extend(args);
+                let call: Func = Arc::new(|a: &[Value]| match &a[0] {
+                    Value::Closure(c) => c.call(&a[1..]),
+                    other => Value::Error(RuntimeError::Other(
+                        format!("{other:?} is not a function").into(),
+                    )),
+                });
+                return self.apply_value_fn(call, all, span);
+            }
+            return self.error(Category::Type, span, "this is not a function");
+        };
+        match &*ft {
+            FuncTerm::Builtin(b, op) => self.stream_builtin(b.name, *op, args, span),
+            FuncTerm::Native(n) => {
+                let n = *n;
+                self.apply_value_fn(Arc::new(move |a: &[Value]| call_native(n, a)), args, span)
+            }
+            FuncTerm::User { def, env: denv } => {
+                let params = def.params.clone().unwrap_or_default();
+                if let Body::Extern { .. } = def.body {
+                    let r = match self.body(def, denv)? {
+                        Term::Func(inner) => self.call(Term::Func(inner), args, span, env)?,
+                        other => other,
+                    };
+                    return Ok(self.typed_as_declared(r, def));
+                }
+                if params.len() != args.len() {
+                    return self.error(
+                        Category::Type,
+                        span,
+                        format!(
+                            "`{}` takes {} arguments, {} given",
+                            def.name.name,
+                            params.len(),
+                            args.len()
+                        ),
+                    );
+                }
+                let has_func = args.iter().any(|a| matches!(a, Term::Func(_)));
+                let has_stream = args.iter().any(|a| matches!(a, Term::Stream(_)));
+                let stream_params = def.params.as_ref().is_some_and(|ps| ps.iter().any(|p| matches!(&p.ty, Some(ast::Type::App { name, .. }) if name.name == "Events")));
+                // `liftable` functions on streams are signal-lifted, not expanded.
+                let lift = def.liftable && has_stream && !has_func && !stream_params;
+                let mut expand = !lift && (has_func || has_stream || stream_params);
+                if !expand {
+                    let saved = self.diags.len();
+                    match self.call_compiled(def, denv, args.clone(), span) {
+                        Ok(t) => return Ok(t),
+                        // A body that makes streams from its parameters (`static if`, `const`
+                        // ...) cannot be a value function: expand it like a macro instead.
+                        Err(Fail) if !lift => {
+                            self.diags.truncate(saved);
+                            expand = true;
+                        }
+                        Err(Fail) => return Err(Fail),
+                    }
+                }
+                if expand {
+                    self.inline_depth += 1;
+                    if self.inline_depth > 200 {
+                        self.inline_depth -= 1;
+                        return self.error(
+                            Category::Recursion,
+                            span,
+                            format!("`{}` expands without end (recursive macro)", def.name.name),
+                        );
+                    }
+                    let names: HashMap<String, Binding> = params
+                        .iter()
+                        .zip(args)
+                        .map(|(p, a)| (p.name.name.clone(), Binding::Term(a)))
+                        .collect();
+                    // The expansion runs in the caller's runtime frame (its arguments read it):
+                    // lambdas made inside capture that frame and put parameters after it.
+                    let inner = denv.child(names, env.frame.max(denv.frame));
+                    let r = self.body(def, &inner);
+                    self.inline_depth -= 1;
+                    r
+                } else {
+                    self.call_compiled(def, denv, args, span)
+                }
+            }
+            FuncTerm::Lambda {
+                params,
+                body,
+                env: lenv,
+            } => {
+                if params.len() != args.len() {
+                    return self.error(
+                        Category::Type,
+                        span,
+                        format!(
+                            "the function takes {} arguments, {} given",
+                            params.len(),
+                            args.len()
+                        ),
+                    );
+                }
+                let names: HashMap<String, Binding> = params
+                    .iter()
+                    .zip(args)
+                    .map(|(p, a)| (p.name.name.clone(), Binding::Term(a)))
+                    .collect();
+                // Inlined in the caller's runtime frame (see the expansion of user functions).
+                let inner = lenv.child(names, env.frame.max(lenv.frame));
+                self.expr(body, &inner)
+            }
+        }
+    }
+
+    /// Call a user function compiled to a value function (lifted over stream arguments).
+    pub(super) fn call_compiled(
+        &mut self,
+        def: &Rc<Def>,
+        denv: &Env,
+        args: Vec<Term>,
+        span: Span,
+    ) -> R<Term> {
+        let (f, ready) = self.compile_fn(def, denv, span)?;
+        // A function defined inside a function body also gets the enclosing frame.
+        let mut all: Vec<Term> = (0..denv.frame)
+            .map(|slot| {
+                let d: Dyn =
+                    Arc::new(move |fr: &[Value]| fr.get(slot).cloned().unwrap_or(Value::Unit));
+                Term::Dyn(d)
+            })
+            .collect();
+        all.extend(args);
+        if !ready && all.iter().all(|a| matches!(a, Term::Const(_))) {
+            // A recursive call with constant arguments: evaluated at run time.
+            let vals: Vec<Value> = all
+                .into_iter()
+                .filter_map(|a| match a {
+                    Term::Const(v) => Some(v),
+                    _ => None,
+                })
+                .collect();
+            return Ok(Term::Dyn(Arc::new(move |_: &[Value]| f(&vals))));
+        }
+        let r = self.apply_value_fn(f, all, span)?;
+        Ok(self.typed_as_declared(r, def))
+    }
+
+    /// Record a function's declared result type on the stream its call made.
+    pub(super) fn typed_as_declared(&mut self, t: Term, def: &Def) -> Term {
+        match def.result_type.as_ref().map(ir_type) {
+            Some(Type::Events(ty)) => self.typed(t, *ty),
+            Some(ty) => self.typed(t, ty),
+            None => t,
+        }
+    }
+
+    pub(super) fn stream_arg(&mut self, args: &[Term], i: usize, span: Span) -> R<NodeId> {
+        match args.get(i) {
+            Some(t) => self.stream_of(t.clone(), span),
+            None => self.error(Category::Type, span, format!("missing argument {}", i + 1)),
+        }
+    }
+
+    pub(super) fn value_fn_arg(&mut self, args: &[Term], i: usize, span: Span) -> R<Func> {
+        match args.get(i) {
+            Some(Term::Func(ft)) => match self.func_value(ft, span)? {
+                Term::Const(Value::Closure(c)) => Ok(Arc::new(move |a: &[Value]| c.call(a))),
+                _ => self.error(
+                    Category::Unsupported,
+                    span,
+                    "this function cannot be compiled to a value",
+                ),
+            },
+            Some(Term::Const(Value::Closure(c))) => {
+                let c = c.clone();
+                Ok(Arc::new(move |a: &[Value]| c.call(a)))
+            }
+            _ => self.error(
+                Category::Type,
+                span,
+                format!("argument {} must be a function", i + 1),
+            ),
+        }
+    }
+
+    pub(super) fn const_arg(&mut self, args: &[Term], i: usize, span: Span) -> R<Value> {
+        match args.get(i) {
+            Some(Term::Const(v)) => Ok(v.clone()),
+            _ => self.error(
+                Category::Type,
+                span,
+                format!("argument {} must be a constant", i + 1),
+            ),
+        }
+    }
+}

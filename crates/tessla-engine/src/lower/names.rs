@@ -1,0 +1,209 @@
+//! Names during lowering: scopes, definitions compiled on first use (recursion through the lazy
+//! arguments of `last`/`delay`), `extern` bodies, and the unknown-name diagnostic.
+//!
+//! Owns: [`Env`] lookups, `Compiler::lookup`, `def_term`, `body`, `local_defs`,
+//! `unknown_name`.
+
+use super::*;
+
+impl Compiler<'_> {
+    pub(super) fn def_term(&mut self, e: &Entry, span: Span) -> R<Term> {
+        if e.def.params.is_some() {
+            let env = e.env_cell.borrow().clone().unwrap_or_default();
+            return Ok(Term::Func(Rc::new(FuncTerm::User {
+                def: e.def.clone(),
+                env,
+            })));
+        }
+        let st = std::mem::replace(&mut *e.state.borrow_mut(), DefState::Todo);
+        match st {
+            DefState::Done(t) => {
+                *e.state.borrow_mut() = DefState::Done(t.clone());
+                Ok(t)
+            }
+            DefState::Failed => {
+                *e.state.borrow_mut() = DefState::Failed;
+                Err(Fail)
+            }
+            DefState::InProgress { alias } => {
+                if self.lazy_depth == 0 {
+                    *e.state.borrow_mut() = DefState::InProgress { alias };
+                    self.diags.push(
+                        Diagnostic::error(Category::Recursion, Some(span), format!("`{}` is defined in terms of itself", e.def.name.name))
+                            .with_help("recursion is allowed only through the first argument of `last` or `delay`"),
+                    );
+                    return Err(Fail);
+                }
+                let a = match alias {
+                    Some(a) => a,
+                    None => self.node(Node::Alias(usize::MAX)),
+                };
+                *e.state.borrow_mut() = DefState::InProgress { alias: Some(a) };
+                Ok(Term::Stream(a))
+            }
+            DefState::Todo => {
+                *e.state.borrow_mut() = DefState::InProgress { alias: None };
+                let env = e.env_cell.borrow().clone().unwrap_or_default();
+                let saved = self.lazy_depth;
+                self.lazy_depth = 0;
+                let saved_origin = self.origin;
+                self.origin = crate::snapshot::text_hash(self.sources.text(e.def.span));
+                let r = self.body(&e.def, &env);
+                self.origin = saved_origin;
+                let r = match (r, &e.def.result_type) {
+                    (Ok(t), Some(declared)) => {
+                        let ty = match ir_type(declared) {
+                            Type::Events(t) => *t,
+                            t => t,
+                        };
+                        Ok(self.typed(t, ty))
+                    }
+                    (r, _) => r,
+                };
+                self.lazy_depth = saved;
+                let alias = match &*e.state.borrow() {
+                    DefState::InProgress { alias } => *alias,
+                    _ => None,
+                };
+                match r {
+                    Ok(t) => {
+                        if let Some(a) = alias {
+                            match &t {
+                                Term::Stream(n) => self.nodes[a] = Node::Alias(*n),
+                                Term::Const(v) => self.nodes[a] = Node::Const(v.clone()),
+                                _ => {
+                                    *e.state.borrow_mut() = DefState::Todo;
+                                    return self.error(
+                                        Category::Recursion,
+                                        span,
+                                        "only streams may be defined recursively",
+                                    );
+                                }
+                            }
+                        }
+                        *e.state.borrow_mut() = DefState::Done(t.clone());
+                        Ok(t)
+                    }
+                    Err(Fail) => {
+                        if let Some(a) = alias {
+                            self.nodes[a] = Node::Nil;
+                        }
+                        *e.state.borrow_mut() = DefState::Failed;
+                        Err(Fail)
+                    }
+                }
+            }
+        }
+    }
+
+    pub(super) fn body(&mut self, d: &Def, env: &Env) -> R<Term> {
+        match &d.body {
+            Body::Extern { span, .. } if d.result_type.is_none() => self.error(
+                Category::Type,
+                *span,
+                format!(
+                    "extern definition `{}` needs a type annotation",
+                    d.name.name
+                ),
+            ),
+            Body::Extern { name, .. } => match builtins::extern_native(name) {
+                Some(f) => Ok(Term::Func(Rc::new(FuncTerm::Native(f)))),
+                // As in TeSSLa, an unknown extern is an error when it is evaluated.
+                None if d.params.is_some() => {
+                    let f: natives::NativeFn = unknown_extern;
+                    Ok(Term::Func(Rc::new(FuncTerm::Native(f))))
+                }
+                None => {
+                    let msg: Arc<str> = format!("unknown extern `{name}`").into();
+                    Ok(Term::Const(Value::Error(RuntimeError::Other(msg))))
+                }
+            },
+            Body::Expr { expr, where_defs } => {
+                if where_defs.is_empty() {
+                    self.expr(expr, env)
+                } else {
+                    let env = self.local_defs(where_defs, env);
+                    self.expr(expr, &env)
+                }
+            }
+        }
+    }
+
+    pub(super) fn local_defs(&mut self, defs: &[Def], env: &Env) -> Env {
+        let cell: Rc<RefCell<Option<Env>>> = self.new_scope();
+        let mut names = HashMap::new();
+        for d in defs {
+            names.insert(
+                d.name.name.clone(),
+                Binding::Def(Entry {
+                    def: Rc::new(d.clone()),
+                    env_cell: cell.clone(),
+                    state: self.new_state(),
+                }),
+            );
+        }
+        let child = env.child(names, env.frame);
+        *cell.borrow_mut() = Some(child.clone());
+        child
+    }
+
+    pub(super) fn lookup(&mut self, name: &str, span: Span, env: &Env) -> R<Term> {
+        match env.lookup(name) {
+            Some(Binding::Term(t)) => Ok(t),
+            Some(Binding::Def(e)) => {
+                let text = crate::snapshot::text_hash(self.sources.text(e.def.span));
+                self.origin = crate::snapshot::mix(self.origin, text);
+                self.def_term(&e, span)
+            }
+            None => {
+                if name == "true" {
+                    return Ok(Term::Const(Value::Bool(true)));
+                }
+                if name == "false" {
+                    return Ok(Term::Const(Value::Bool(false)));
+                }
+                if name == "None" {
+                    return Ok(Term::Const(Value::None));
+                }
+                if let Some(b) = builtins::get(name) {
+                    return Ok(match b.kind {
+                        Kind::Stream(StreamOp::Nil) => Term::Stream(self.node(Node::Nil)),
+                        Kind::Stream(StreamOp::Unit) => Term::Stream(self.unit()),
+                        Kind::Stream(op) => Term::Func(Rc::new(FuncTerm::Builtin(b, op))),
+                        Kind::Constant(v) => Term::Const(v()),
+                        Kind::Value(f) | Kind::Operator(f) => {
+                            Term::Func(Rc::new(FuncTerm::Native(f)))
+                        }
+                        // Only through `extern("name")`.
+                        Kind::Extern(_) => return self.unknown_name(name, span, env),
+                    });
+                }
+                self.unknown_name(name, span, env)
+            }
+        }
+    }
+
+    pub(super) fn unknown_name<T>(&mut self, name: &str, span: Span, env: &Env) -> R<T> {
+        {
+            {
+                let mut known = Vec::new();
+                env.all_names(&mut known);
+                known.extend(builtins::names().map(str::to_string));
+                let near = nearest(name, known.iter().map(String::as_str));
+                let mut d =
+                    Diagnostic::error(Category::Name, Some(span), format!("unknown name `{name}`"));
+                if !near.is_empty() {
+                    d = d.with_help(format!(
+                        "did you mean {}?",
+                        near.iter()
+                            .map(|n| format!("`{n}`"))
+                            .collect::<Vec<_>>()
+                            .join(" or ")
+                    ));
+                }
+                self.diags.push(d);
+                Err(Fail)
+            }
+        }
+    }
+}

@@ -1,0 +1,104 @@
+//! `--set NAME=VALUE`: replace the body of a top-level constant before lowering.
+//!
+//! Owns: `Compiler::apply_overrides`. Only top-level defs whose value is a literal constant can
+//! be set; the new value must be a literal of the same type (`--set delta=-0.5` is the Float
+//! -0.5, written `-.0.5` in a spec). Errors name the known constants.
+
+use super::*;
+
+impl Compiler<'_> {
+    /// Apply `overrides` to the top-level `names`; errors go to the diagnostics.
+    pub(super) fn apply_overrides(
+        &mut self,
+        names: &mut HashMap<String, Binding>,
+        overrides: &[(String, String)],
+    ) {
+        for (name, value) in overrides {
+            // Parameters: top-level defs whose value is a constant literal.
+            let known: Vec<String> = names
+                .iter()
+                .filter_map(|(n, b)| match b {
+                    Binding::Def(e)
+                        if e.def.params.is_none()
+                            && !n.contains('.')
+                            && const_type_of(&e.def).is_some() =>
+                    {
+                        Some(n.clone())
+                    }
+                    _ => None,
+                })
+                .collect();
+            let Some(Binding::Def(entry)) = names.get(name).cloned() else {
+                let mut k = known.clone();
+                k.sort();
+                self.diags.push(
+                    Diagnostic::error(
+                        Category::Name,
+                        None,
+                        format!("--set {name}: the spec has no top-level constant `{name}`"),
+                    )
+                    .with_help(format!("known constants: {}", k.join(", "))),
+                );
+                continue;
+            };
+            let mut map = SourceMap::new();
+            let fid = map.add("--set", None, format!("def {name} = {value}\n"));
+            let (file, diags) = tessla_syntax::parse(&map.get(fid).text, fid);
+            let new_def = match (diags.is_empty(), file.statements.first()) {
+                (true, Some(Statement::Def(d))) => {
+                    let mut d = d.clone();
+                    // `--set delta=-0.5` means the Float -0.5 (in a spec it is written `-.0.5`).
+                    if let Body::Expr { expr, .. } = &mut d.body
+                        && let ExprKind::Unary { op, operand } = &mut expr.kind
+                        && *op == UnaryOp::Neg
+                        && matches!(operand.kind, ExprKind::Float(_))
+                    {
+                        *op = UnaryOp::FNeg;
+                    }
+                    d
+                }
+                _ => {
+                    self.diags.push(Diagnostic::error(
+                        Category::Syntax,
+                        None,
+                        format!("--set {name}={value}: not an expression"),
+                    ));
+                    continue;
+                }
+            };
+            // Type check: the new value must be a constant of the old value's type.
+            let old_ty = const_type_of(&entry.def);
+            let new_ty = const_type_of(&new_def);
+            if old_ty != new_ty || new_ty.is_none() {
+                self.diags.push(Diagnostic::error(
+                    Category::Type,
+                    Some(entry.def.name.span),
+                    format!(
+                        "--set {name}={value}: expected a constant of type {}, found {}",
+                        shown(old_ty.as_ref()),
+                        shown(new_ty.as_ref())
+                    ),
+                ));
+                continue;
+            }
+            let mut d = (*entry.def).clone();
+            d.body = new_def.body;
+            names.insert(
+                name.clone(),
+                Binding::Def(Entry {
+                    def: Rc::new(d),
+                    env_cell: entry.env_cell.clone(),
+                    state: self.new_state(),
+                }),
+            );
+        }
+    }
+}
+
+/// A constant's type for a message: `Float`, or what it is when it is not a literal constant.
+fn shown(t: Option<&Type>) -> String {
+    t.map_or_else(
+        || "an expression that is not a literal".to_string(),
+        ToString::to_string,
+    )
+}

@@ -1,0 +1,390 @@
+//! The stream operators of the builtins table (`last`, `merge`, `fold`, `lift` ...) as IR nodes.
+//!
+//! Owns: [`Compiler::stream_builtin`], one arm per [`StreamOp`]: what a stream operator's
+//! arguments become. Names, signatures and lazy arguments are in `crate::builtins`.
+
+use super::*;
+
+impl Compiler<'_> {
+    /// The nodes of a stream operator of the builtins table applied to `args`.
+    pub(super) fn stream_builtin(
+        &mut self,
+        name: &str,
+        op: StreamOp,
+        args: Vec<Term>,
+        span: Span,
+    ) -> R<Term> {
+        let n = args.len();
+        let node = match op {
+            StreamOp::Time => Node::Time(self.stream_arg(&args, 0, span)?),
+            StreamOp::Last => Node::Last {
+                value: self.stream_arg(&args, 0, span)?,
+                trigger: self.stream_arg(&args, 1, span)?,
+            },
+            StreamOp::Prev => {
+                let s = self.stream_arg(&args, 0, span)?;
+                Node::Last {
+                    value: s,
+                    trigger: s,
+                }
+            }
+            StreamOp::Delay => Node::Delay {
+                delay: self.stream_arg(&args, 0, span)?,
+                reset: self.stream_arg(&args, 1, span)?,
+            },
+            StreamOp::Default => Node::Default {
+                stream: self.stream_arg(&args, 0, span)?,
+                value: self.const_arg(&args, 1, span)?,
+            },
+            StreamOp::DefaultFrom => Node::DefaultFrom {
+                stream: self.stream_arg(&args, 0, span)?,
+                from: self.stream_arg(&args, 1, span)?,
+            },
+            StreamOp::Merge => Node::Merge(
+                (0..n)
+                    .map(|i| self.stream_arg(&args, i, span))
+                    .collect::<R<Vec<_>>>()?,
+            ),
+            StreamOp::Filter => Node::Filter {
+                stream: self.stream_arg(&args, 0, span)?,
+                cond: self.stream_arg(&args, 1, span)?,
+            },
+            StreamOp::Const => {
+                let v = self.const_arg(&args, 0, span)?;
+                let s = self.stream_arg(&args, 1, span)?;
+                Node::SLift {
+                    args: vec![SArg::Stream(s)],
+                    f: Arc::new(move |_: &[Value]| v.clone()),
+                }
+            }
+            StreamOp::First => {
+                let a = self.stream_arg(&args, 0, span)?;
+                let b = self.stream_arg(&args, 1, span)?;
+                Node::SLift {
+                    args: vec![SArg::Stream(a), SArg::Stream(b)],
+                    f: Arc::new(|v: &[Value]| v[0].clone()),
+                }
+            }
+            StreamOp::On => {
+                // At each event of the trigger, the latest value of the stream (this step's or
+                // an earlier one); nothing before the stream's first event.
+                let t = self.stream_arg(&args, 0, span)?;
+                let s = self.stream_arg(&args, 1, span)?;
+                let before = self.node(Node::Last {
+                    value: s,
+                    trigger: t,
+                });
+                Node::Lift {
+                    args: vec![t, s, before],
+                    f: Arc::new(|a: &[Option<Value>]| match a {
+                        [Some(_), Some(now), _] => Some(now.clone()),
+                        [Some(_), None, Some(prev)] => Some(prev.clone()),
+                        _ => None,
+                    }),
+                }
+            }
+            StreamOp::Count => Node::Fold {
+                stream: self.stream_arg(&args, 0, span)?,
+                init: Value::Int(0),
+                f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &Value::Int(1))),
+            },
+            StreamOp::Sum => Node::Fold {
+                stream: self.stream_arg(&args, 0, span)?,
+                init: Value::Int(0),
+                f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &a[1])),
+            },
+            StreamOp::Fold => Node::Fold {
+                stream: self.stream_arg(&args, 0, span)?,
+                init: self.const_arg(&args, 1, span)?,
+                f: self.value_fn_arg(&args, 2, span)?,
+            },
+            StreamOp::Reduce => Node::Reduce {
+                stream: self.stream_arg(&args, 0, span)?,
+                f: self.value_fn_arg(&args, 1, span)?,
+            },
+            StreamOp::Maximum => Node::Reduce {
+                stream: self.stream_arg(&args, 0, span)?,
+                f: Arc::new(|a: &[Value]| call_native(natives::core::max, a)),
+            },
+            StreamOp::Minimum => Node::Reduce {
+                stream: self.stream_arg(&args, 0, span)?,
+                f: Arc::new(|a: &[Value]| call_native(natives::core::min, a)),
+            },
+            StreamOp::Lift | StreamOp::SLift => {
+                let Some(ft) = args.last().cloned() else {
+                    return self.error(
+                        Category::Type,
+                        span,
+                        format!("`{name}` needs a function as its last argument"),
+                    );
+                };
+                if let Some(arity) = fn_arity(&ft)
+                    && arity != n - 1
+                {
+                    return self.error(
+                        Category::Type,
+                        span,
+                        format!(
+                            "`{name}` is given {} streams but its function takes {arity} arguments",
+                            n - 1
+                        ),
+                    );
+                }
+                let f = self.value_fn_arg(&[ft], 0, span)?;
+                let streams = (0..n - 1)
+                    .map(|i| self.stream_arg(&args, i, span))
+                    .collect::<R<Vec<_>>>()?;
+                if op == StreamOp::SLift {
+                    Node::SLift {
+                        args: streams.into_iter().map(SArg::Stream).collect(),
+                        f,
+                    }
+                } else {
+                    let lf: LiftFunc = Arc::new(move |a: &[Option<Value>]| {
+                        let opts: Vec<Value> = a
+                            .iter()
+                            .map(|o| match o {
+                                Some(v) => Value::Some(Arc::new(v.clone())),
+                                None => Value::None,
+                            })
+                            .collect();
+                        match f(&opts) {
+                            Value::Some(v) => Some((*v).clone()),
+                            Value::None => None,
+                            other => Some(other),
+                        }
+                    });
+                    Node::Lift {
+                        args: streams,
+                        f: lf,
+                    }
+                }
+            }
+            StreamOp::Pure => {
+                let s = self.stream_arg(&args, 0, span)?;
+                Node::Lift {
+                    args: vec![s, self.node(Node::Nil)],
+                    f: Arc::new(|a: &[Option<Value>]| a[0].clone()),
+                }
+                .pipe_pure(self, s)
+            }
+            StreamOp::IsFirst => {
+                let s = self.stream_arg(&args, 0, span)?;
+                let cnt = self.node(Node::Fold {
+                    stream: s,
+                    init: Value::Int(0),
+                    f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &Value::Int(1))),
+                });
+                Node::SLift {
+                    args: vec![SArg::Stream(s), SArg::Stream(cnt)],
+                    f: Arc::new(|v: &[Value]| Value::Bool(v[1] == Value::Int(1))),
+                }
+            }
+            StreamOp::FirstEvent => {
+                let s = self.stream_arg(&args, 0, span)?;
+                Node::Lift {
+                    args: vec![s],
+                    f: Arc::new(|a: &[Option<Value>]| a[0].clone()),
+                }
+                .first_only(self)
+            }
+            StreamOp::Defined => {
+                let s = self.stream_arg(&args, 0, span)?;
+                let t = self.node(Node::SLift {
+                    args: vec![SArg::Stream(s)],
+                    f: Arc::new(|_: &[Value]| Value::Bool(true)),
+                });
+                Node::Default {
+                    stream: t,
+                    value: Value::Bool(false),
+                }
+            }
+            StreamOp::ConstIf => {
+                let v = self.const_arg(&args, 0, span)?;
+                let c = self.stream_arg(&args, 1, span)?;
+                let k = self.node(Node::SLift {
+                    args: vec![SArg::Stream(c)],
+                    f: Arc::new(move |_: &[Value]| v.clone()),
+                });
+                Node::Filter { stream: k, cond: c }
+            }
+            StreamOp::UnitIf => {
+                let c = self.stream_arg(&args, 0, span)?;
+                let k = self.node(Node::SLift {
+                    args: vec![SArg::Stream(c)],
+                    f: Arc::new(|_: &[Value]| Value::Unit),
+                });
+                Node::Filter { stream: k, cond: c }
+            }
+            StreamOp::Rising | StreamOp::Falling => {
+                let c = self.stream_arg(&args, 0, span)?;
+                let prev = self.node(Node::Last {
+                    value: c,
+                    trigger: c,
+                });
+                let want = op == StreamOp::Rising;
+                let edge = self.node(Node::Lift {
+                    args: vec![c, prev],
+                    f: Arc::new(move |a: &[Option<Value>]| match (&a[0], &a[1]) {
+                        (Some(Value::Bool(now)), Some(Value::Bool(before)))
+                            if *now == want && *before != want =>
+                        {
+                            Some(Value::Bool(true))
+                        }
+                        (Some(_), _) => Some(Value::Bool(false)),
+                        _ => None,
+                    }),
+                });
+                let k = self.node(Node::SLift {
+                    args: vec![SArg::Stream(edge)],
+                    f: Arc::new(|_: &[Value]| Value::Unit),
+                });
+                Node::Filter {
+                    stream: k,
+                    cond: edge,
+                }
+            }
+            StreamOp::Period => {
+                let d = self.const_arg(&args, 0, span)?;
+                let u = self.unit();
+                let alias = self.node(Node::Alias(usize::MAX));
+                let m = self.node(Node::Merge(vec![u, alias]));
+                let dd = d.clone();
+                let dnode = self.node(Node::SLift {
+                    args: vec![SArg::Stream(m)],
+                    f: Arc::new(move |_: &[Value]| dd.clone()),
+                });
+                let delay = self.node(Node::Delay {
+                    delay: dnode,
+                    reset: u,
+                });
+                self.nodes[alias] = Node::Alias(delay);
+                // The periodic events: the delay's firings, plus the start at t = 0.
+                Node::Merge(vec![u, delay])
+            }
+            StreamOp::ResetCount => {
+                // Events of `x` since the last `reset` (a reset with an event counts it).
+                let x = self.stream_arg(&args, 0, span)?;
+                let reset = self.stream_arg(&args, 1, span)?;
+                let tag = self.node(Node::Lift {
+                    args: vec![x, reset],
+                    f: Arc::new(|a: &[Option<Value>]| match a {
+                        [Some(_), Some(_)] => Some(Value::Int(1)),
+                        [None, Some(_)] => Some(Value::Int(0)),
+                        [Some(_), None] => Some(Value::Int(-1)),
+                        _ => None,
+                    }),
+                });
+                Node::Fold {
+                    stream: tag,
+                    init: Value::Int(0),
+                    f: Arc::new(|a: &[Value]| match a {
+                        [acc, Value::Int(-1)] => binop(BinOp::Add, acc, &Value::Int(1)),
+                        [_, tag] => tag.clone(),
+                        _ => Value::Unit,
+                    }),
+                }
+            }
+            StreamOp::SetCollect => Node::Fold {
+                stream: self.stream_arg(&args, 0, span)?,
+                init: Value::Set(Arc::new(Vec::new())),
+                f: Arc::new(collections::set_add),
+            },
+            StreamOp::SetCollectWithRemove => {
+                // Add this step's `add` value, then remove this step's `remove` value.
+                let add = self.stream_arg(&args, 0, span)?;
+                let remove = self.stream_arg(&args, 1, span)?;
+                let step = self.node(Node::Lift {
+                    args: vec![add, remove],
+                    f: Arc::new(|a: &[Option<Value>]| {
+                        let opt = |o: &Option<Value>| match o {
+                            Some(v) => Value::Some(Arc::new(v.clone())),
+                            None => Value::None,
+                        };
+                        Some(Value::Tuple(a.iter().map(opt).collect::<Vec<_>>().into()))
+                    }),
+                });
+                Node::Fold {
+                    stream: step,
+                    init: Value::Set(Arc::new(Vec::new())),
+                    f: Arc::new(|a: &[Value]| match a {
+                        [set, Value::Tuple(t)] => {
+                            let mut s = set.clone();
+                            if let Some(Value::Some(x)) = t.first() {
+                                s = collections::set_add(&[s, (**x).clone()]);
+                            }
+                            if let Some(Value::Some(x)) = t.get(1) {
+                                s = collections::set_remove(&[s, (**x).clone()]);
+                            }
+                            s
+                        }
+                        _ => Value::Unit,
+                    }),
+                }
+            }
+            StreamOp::Unsupported | StreamOp::Nil | StreamOp::Unit => {
+                return self.error(
+                    Category::Unsupported,
+                    span,
+                    format!("`{name}` is not supported yet"),
+                );
+            }
+        };
+        Ok(Term::Stream(self.node(node)))
+    }
+}
+
+/// The number of parameters of a lambda or user function term, when known at compile time.
+fn fn_arity(t: &Term) -> Option<usize> {
+    match t {
+        Term::Func(ft) => match &**ft {
+            FuncTerm::Lambda { params, .. } => Some(params.len()),
+            FuncTerm::User { def, .. } if !matches!(def.body, Body::Extern { .. }) => {
+                def.params.as_ref().map(Vec::len)
+            }
+            _ => None,
+        },
+        _ => None,
+    }
+}
+
+trait NodeExt {
+    fn pipe_pure(self, c: &mut Compiler<'_>, s: NodeId) -> Node;
+    fn first_only(self, c: &mut Compiler<'_>) -> Node;
+}
+
+impl NodeExt for Node {
+    /// `pure(s)`: events of `s` whose value differs from the previous event's.
+    fn pipe_pure(self, c: &mut Compiler<'_>, s: NodeId) -> Node {
+        let prev = c.node(Node::Last {
+            value: s,
+            trigger: s,
+        });
+        Node::Lift {
+            args: vec![s, prev],
+            f: Arc::new(|a: &[Option<Value>]| match (&a[0], &a[1]) {
+                (Some(x), Some(p)) if x == p => None,
+                (x, _) => x.clone(),
+            }),
+        }
+    }
+
+    /// Only the first event of the (single-argument) lift's stream.
+    fn first_only(self, c: &mut Compiler<'_>) -> Node {
+        let Node::Lift { args, .. } = &self else {
+            return self;
+        };
+        let s = args[0];
+        let seen = c.node(Node::Last {
+            value: s,
+            trigger: s,
+        });
+        Node::Lift {
+            args: vec![s, seen],
+            f: Arc::new(|a: &[Option<Value>]| match (&a[0], &a[1]) {
+                (Some(x), None) => Some(x.clone()),
+                _ => None,
+            }),
+        }
+    }
+}

@@ -1,0 +1,333 @@
+//! The semantics of TeSSLa's operators, once: arithmetic, comparison, bitwise and boolean
+//! operators on values.
+//!
+//! Owns: [`binary`] and [`unary`] (the result of an operator on two or one non-error values, or
+//! why there is none), their forms on values ([`binary_value`], [`unary_value`]: an error
+//! operand is the result, no result is an error value), `Operators.add` and friends as natives
+//! ([`natives`]), the inline scalar fast path [`ScalarOp::eval`] (which must agree with
+//! [`binary`]; a test checks it) and [`shift_left`]. The lowering (operators in specs,
+//! `Operators.add` and friends, the stream builtins that add) and the trace reader (operators in
+//! trace values) both call these, so an operator cannot mean one thing in a spec and another in a
+//! trace.
+//!
+//! Semantics follow TeSSLa's reference interpreter on its unbounded integers, restricted to
+//! 64 bits: a result outside `i64` is an overflow; `x << s` with a negative `s` shifts right (and
+//! `x >> s` with a negative `s` shifts left), as `BigInt.<<` does; division and remainder by zero
+//! are their own error. `&&` and `||` here are strict; the trace reader short-circuits them
+//! itself.
+
+use crate::ir::{Scalar, ScalarOp};
+use crate::value::{RuntimeError, Value};
+use tessla_syntax::ast::{BinOp, UnaryOp};
+
+/// Why an operator has no value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OpError {
+    /// The result does not fit in 64 bits.
+    Overflow,
+    /// `x / 0` or `x % 0`.
+    DivisionByZero,
+    /// The operator is not defined for the operands' types.
+    Undefined,
+}
+
+/// `a op b` for two values that are not errors (callers propagate error values first).
+pub fn binary(op: BinOp, a: &Value, b: &Value) -> Result<Value, OpError> {
+    use Value::*;
+    let ovf = OpError::Overflow;
+    Ok(match (op, a, b) {
+        (BinOp::Add, Int(x), Int(y)) => Int(x.checked_add(*y).ok_or(ovf)?),
+        (BinOp::Sub, Int(x), Int(y)) => Int(x.checked_sub(*y).ok_or(ovf)?),
+        (BinOp::Mul, Int(x), Int(y)) => Int(x.checked_mul(*y).ok_or(ovf)?),
+        (BinOp::Div | BinOp::Mod, Int(_), Int(0)) => return Err(OpError::DivisionByZero),
+        (BinOp::Div, Int(x), Int(y)) => Int(x.checked_div(*y).ok_or(ovf)?),
+        (BinOp::Mod, Int(x), Int(y)) => Int(x.checked_rem(*y).ok_or(ovf)?),
+        (BinOp::Add, Str(x), Str(y)) => Str(format!("{x}{y}").into()),
+        (BinOp::FAdd, Float(x), Float(y)) => Float(x + y),
+        (BinOp::FSub, Float(x), Float(y)) => Float(x - y),
+        (BinOp::FMul, Float(x), Float(y)) => Float(x * y),
+        (BinOp::FDiv, Float(x), Float(y)) => Float(x / y),
+        (BinOp::Lt, Int(x), Int(y)) => Bool(x < y),
+        (BinOp::Gt, Int(x), Int(y)) => Bool(x > y),
+        (BinOp::Le, Int(x), Int(y)) => Bool(x <= y),
+        (BinOp::Ge, Int(x), Int(y)) => Bool(x >= y),
+        (BinOp::FLt, Float(x), Float(y)) => Bool(x < y),
+        (BinOp::FGt, Float(x), Float(y)) => Bool(x > y),
+        (BinOp::FLe, Float(x), Float(y)) => Bool(x <= y),
+        (BinOp::FGe, Float(x), Float(y)) => Bool(x >= y),
+        (BinOp::Eq, x, y) => Bool(x == y),
+        (BinOp::Ne, x, y) => Bool(x != y),
+        (BinOp::And, Bool(x), Bool(y)) => Bool(*x && *y),
+        (BinOp::Or, Bool(x), Bool(y)) => Bool(*x || *y),
+        (BinOp::BitAnd, Int(x), Int(y)) => Int(x & y),
+        (BinOp::BitOr, Int(x), Int(y)) => Int(x | y),
+        (BinOp::BitXor, Int(x), Int(y)) => Int(x ^ y),
+        (BinOp::Shl, Int(x), Int(y)) => Int(shift_left(*x, *y).ok_or(ovf)?),
+        (BinOp::Shr, Int(x), Int(y)) => match y.checked_neg() {
+            Option::Some(n) => Int(shift_left(*x, n).ok_or(ovf)?),
+            // A shift right by more than 63 places: only the sign is left.
+            Option::None => Int(if *x < 0 { -1 } else { 0 }),
+        },
+        _ => return Err(OpError::Undefined),
+    })
+}
+
+/// `op a` for a value that is not an error.
+pub fn unary(op: UnaryOp, a: &Value) -> Result<Value, OpError> {
+    Ok(match (op, a) {
+        (UnaryOp::Not, Value::Bool(b)) => Value::Bool(!b),
+        (UnaryOp::BitNot, Value::Int(i)) => Value::Int(!i),
+        (UnaryOp::Neg, Value::Int(i)) => Value::Int(i.checked_neg().ok_or(OpError::Overflow)?),
+        (UnaryOp::FNeg, Value::Float(f)) => Value::Float(-f),
+        _ => return Err(OpError::Undefined),
+    })
+}
+
+/// `a op b` as a value: an error operand is the result, a missing result is an error value.
+pub fn binary_value(op: BinOp, a: &Value, b: &Value) -> Value {
+    if let Value::Error(_) = a {
+        return a.clone();
+    }
+    if let Value::Error(_) = b {
+        return b.clone();
+    }
+    binary(op, a, b).unwrap_or_else(|e| {
+        Value::Error(match e {
+            OpError::Overflow => RuntimeError::Overflow,
+            OpError::DivisionByZero => RuntimeError::DivisionByZero,
+            OpError::Undefined => RuntimeError::Other(
+                format!("`{}` is not defined for {a:?} and {b:?}", op.symbol()).into(),
+            ),
+        })
+    })
+}
+
+/// `op a` as a value: an error operand is the result, a missing result is an error value.
+pub fn unary_value(op: UnaryOp, a: &Value) -> Value {
+    if let Value::Error(_) = a {
+        return a.clone();
+    }
+    unary(op, a).unwrap_or_else(|e| {
+        Value::Error(match e {
+            OpError::Overflow => RuntimeError::Overflow,
+            OpError::DivisionByZero => RuntimeError::DivisionByZero,
+            OpError::Undefined => {
+                RuntimeError::Other(format!("{op:?} is not defined for {a:?}").into())
+            }
+        })
+    })
+}
+
+/// TeSSLa's `Operators.<name>` functions as natives (`slift(x, y, Operators.add)`); missing
+/// operands are Unit, which no operator accepts.
+pub mod natives {
+    use super::{binary_value, unary_value};
+    use crate::value::Value;
+    use tessla_syntax::ast::{BinOp, UnaryOp};
+
+    fn operand(a: &[Value], i: usize) -> Value {
+        a.get(i).cloned().unwrap_or(Value::Unit)
+    }
+
+    macro_rules! bin {
+        ($($name:ident => $op:expr),+ $(,)?) => {
+            $(pub fn $name(a: &[Value]) -> Value {
+                binary_value($op, &operand(a, 0), &operand(a, 1))
+            })+
+        };
+    }
+    macro_rules! un {
+        ($($name:ident => $op:expr),+ $(,)?) => {
+            $(pub fn $name(a: &[Value]) -> Value {
+                unary_value($op, &operand(a, 0))
+            })+
+        };
+    }
+    bin! {
+        add => BinOp::Add, sub => BinOp::Sub, mul => BinOp::Mul, div => BinOp::Div,
+        rem => BinOp::Mod, lt => BinOp::Lt, gt => BinOp::Gt, le => BinOp::Le, ge => BinOp::Ge,
+        eq => BinOp::Eq, ne => BinOp::Ne, fadd => BinOp::FAdd, fsub => BinOp::FSub,
+        fmul => BinOp::FMul, fdiv => BinOp::FDiv, flt => BinOp::FLt, fgt => BinOp::FGt,
+        fle => BinOp::FLe, fge => BinOp::FGe, and => BinOp::And, or => BinOp::Or,
+        bitand => BinOp::BitAnd, bitor => BinOp::BitOr, bitxor => BinOp::BitXor,
+        shl => BinOp::Shl, shr => BinOp::Shr,
+    }
+    un! {
+        not => UnaryOp::Not, neg => UnaryOp::Neg, fneg => UnaryOp::FNeg, bitflip => UnaryOp::BitNot,
+    }
+}
+
+/// `x << s` on unbounded integers: a negative `s` shifts right (arithmetically); a result
+/// outside `i64` is `None` (an overflow).
+pub fn shift_left(x: i64, s: i64) -> Option<i64> {
+    if s < 0 {
+        let r = u32::try_from(s.unsigned_abs()).unwrap_or(u32::MAX).min(63);
+        return Some(x >> r);
+    }
+    if x == 0 {
+        return Some(0);
+    }
+    let r = u32::try_from(s).ok().filter(|r| *r < 64)?;
+    let shifted = x.checked_shl(r)?;
+    (shifted >> r == x).then_some(shifted)
+}
+
+/// The operators with an inline scalar fast path, and the operator each one stands for.
+pub fn scalar_op(op: BinOp) -> Option<ScalarOp> {
+    Some(match op {
+        BinOp::FAdd => ScalarOp::FAdd,
+        BinOp::FSub => ScalarOp::FSub,
+        BinOp::FMul => ScalarOp::FMul,
+        BinOp::FDiv => ScalarOp::FDiv,
+        BinOp::FLt => ScalarOp::FLt,
+        BinOp::FGt => ScalarOp::FGt,
+        BinOp::FLe => ScalarOp::FLe,
+        BinOp::FGe => ScalarOp::FGe,
+        BinOp::Add => ScalarOp::IAdd,
+        BinOp::Sub => ScalarOp::ISub,
+        BinOp::Lt => ScalarOp::ILt,
+        BinOp::Gt => ScalarOp::IGt,
+        BinOp::Le => ScalarOp::ILe,
+        BinOp::Ge => ScalarOp::IGe,
+        BinOp::And => ScalarOp::And,
+        BinOp::Or => ScalarOp::Or,
+        _ => return None,
+    })
+}
+
+impl ScalarOp {
+    /// The result on scalar operands of the operator's types, or `None` otherwise (the general
+    /// path, [`binary`], then decides: overflow is an error value, other types are errors).
+    #[inline]
+    pub fn eval(self, a: Scalar, b: Scalar) -> Option<Scalar> {
+        use Scalar::{B, F, I};
+        use ScalarOp::*;
+        Some(match (self, a, b) {
+            (FAdd, F(x), F(y)) => F(x + y),
+            (FSub, F(x), F(y)) => F(x - y),
+            (FMul, F(x), F(y)) => F(x * y),
+            (FDiv, F(x), F(y)) => F(x / y),
+            (FLt, F(x), F(y)) => B(x < y),
+            (FGt, F(x), F(y)) => B(x > y),
+            (FLe, F(x), F(y)) => B(x <= y),
+            (FGe, F(x), F(y)) => B(x >= y),
+            (IAdd, I(x), I(y)) => I(x.checked_add(y)?),
+            (ISub, I(x), I(y)) => I(x.checked_sub(y)?),
+            (ILt, I(x), I(y)) => B(x < y),
+            (IGt, I(x), I(y)) => B(x > y),
+            (ILe, I(x), I(y)) => B(x <= y),
+            (IGe, I(x), I(y)) => B(x >= y),
+            (And, B(x), B(y)) => B(x && y),
+            (Or, B(x), B(y)) => B(x || y),
+            _ => return None,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const ALL: [BinOp; 26] = [
+        BinOp::Mul,
+        BinOp::Div,
+        BinOp::Mod,
+        BinOp::FMul,
+        BinOp::FDiv,
+        BinOp::Add,
+        BinOp::Sub,
+        BinOp::FAdd,
+        BinOp::FSub,
+        BinOp::Shl,
+        BinOp::Shr,
+        BinOp::BitAnd,
+        BinOp::BitOr,
+        BinOp::BitXor,
+        BinOp::Eq,
+        BinOp::Ne,
+        BinOp::Lt,
+        BinOp::Gt,
+        BinOp::Le,
+        BinOp::Ge,
+        BinOp::FLt,
+        BinOp::FGt,
+        BinOp::FLe,
+        BinOp::FGe,
+        BinOp::And,
+        BinOp::Or,
+    ];
+
+    fn samples() -> Vec<Value> {
+        let mut v: Vec<Value> = [0, 1, -1, 2, 63, 64, -64, i64::MAX, i64::MIN]
+            .into_iter()
+            .map(Value::Int)
+            .collect();
+        v.extend(
+            [0.0, -0.0, 1.5, -2.25, f64::NAN, f64::INFINITY]
+                .into_iter()
+                .map(Value::Float),
+        );
+        v.extend([Value::Bool(true), Value::Bool(false)]);
+        v
+    }
+
+    #[test]
+    fn the_scalar_fast_path_agrees_with_the_general_path() {
+        for op in ALL {
+            let Some(sop) = scalar_op(op) else { continue };
+            for a in samples() {
+                for b in samples() {
+                    let (Some(x), Some(y)) = (Scalar::of(&a), Scalar::of(&b)) else {
+                        continue;
+                    };
+                    if let Some(fast) = sop.eval(x, y) {
+                        let slow = binary(op, &a, &b);
+                        assert_eq!(
+                            format!("{:?}", Ok::<_, OpError>(fast.value())),
+                            format!("{slow:?}"),
+                            "{op:?} on {a:?}, {b:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn shifts_follow_unbounded_integers() {
+        let i = |x| Value::Int(x);
+        assert_eq!(binary(BinOp::Shl, &i(1), &i(3)), Ok(i(8)));
+        assert_eq!(binary(BinOp::Shl, &i(8), &i(-3)), Ok(i(1)));
+        assert_eq!(binary(BinOp::Shl, &i(-8), &i(-100)), Ok(i(-1)));
+        assert_eq!(binary(BinOp::Shr, &i(1), &i(-3)), Ok(i(8)));
+        assert_eq!(binary(BinOp::Shr, &i(-8), &i(1)), Ok(i(-4)));
+        assert_eq!(binary(BinOp::Shr, &i(5), &i(i64::MIN)), Ok(i(0)));
+        assert_eq!(
+            binary(BinOp::Shl, &i(1), &i(63)),
+            Err(OpError::Overflow),
+            "2^63 does not fit"
+        );
+        assert_eq!(binary(BinOp::Shl, &i(0), &i(1000)), Ok(i(0)));
+    }
+
+    #[test]
+    fn division_by_zero_and_undefined_operands() {
+        let i = |x| Value::Int(x);
+        assert_eq!(
+            binary(BinOp::Mod, &i(1), &i(0)),
+            Err(OpError::DivisionByZero)
+        );
+        assert_eq!(
+            binary(BinOp::Div, &i(i64::MIN), &i(-1)),
+            Err(OpError::Overflow)
+        );
+        assert_eq!(
+            binary(BinOp::Add, &i(1), &Value::Float(1.0)),
+            Err(OpError::Undefined)
+        );
+        assert_eq!(
+            unary(UnaryOp::Neg, &Value::Float(1.0)),
+            Err(OpError::Undefined)
+        );
+    }
+}
