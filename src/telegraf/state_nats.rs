@@ -192,9 +192,15 @@ async fn open(url: Url) -> Result<kv::Store, String> {
         .connect(url.servers.clone())
         .await
         .map_err(|e| format!("cannot connect to {}: {e}", url.servers.join(",")))?;
-    let js = jetstream::new(client);
+    let js = jetstream::new(client.clone());
     if let Ok(store) = js.get_key_value(url.bucket.clone()).await {
         return Ok(store);
+    }
+    if client.connection_state() != async_nats::connection::State::Connected {
+        return Err(format!(
+            "cannot connect to {}: no server answered (is nats-server running there?)",
+            url.servers.join(",")
+        ));
     }
     // The bucket as `nats kv add` makes it, except that reads go to the stream leader
     // (allow_direct off): a process taking over must see every entry its predecessor wrote.
