@@ -192,19 +192,19 @@ fn throughput(a: &Args, msgs: &[Vec<u8>], partitions: usize) -> f64 {
     let (ready, counter) = count_actions(
         cluster.url(0),
         total,
-        Duration::from_secs(600),
+        Duration::from_secs(120),
         Arc::clone(&answered),
     );
     ready.recv().unwrap();
     let start = Instant::now();
     publish(&cluster.url(1), a.robots, msgs, None, Some(answered));
     let (n, last) = counter.join().unwrap();
-    for s in standins {
-        let _ = s.finish();
-    }
+    let logs: Vec<String> = standins.into_iter().map(|s| s.finish().3).collect();
     assert_eq!(
-        n, total,
-        "{partitions} partitions: {n} of {total} actions arrived"
+        n,
+        total,
+        "{partitions} partitions: {n} of {total} actions arrived; processes' logs:\n{}",
+        logs.join("\n")
     );
     total as f64 / last.duration_since(start).as_secs_f64()
 }
@@ -242,9 +242,47 @@ fn takeover(a: &Args, msgs: &[Vec<u8>], signal: &str) -> f64 {
     first.duration_since(killed).as_secs_f64() * 1000.0
 }
 
+/// The baseline of the same run: one process given the same records on stdin (no NATS, no
+/// Telegraf stand-in), records/s.
+fn baseline(a: &Args, msgs: &[Vec<u8>]) -> f64 {
+    use std::io::Write;
+    let mut input = String::new();
+    for m in msgs {
+        for r in 0..a.robots {
+            let subject = format!("fleet.0.robots.robot{r}.telemetry");
+            if let Some(line) = nats_standin::telemetry_line(&subject, m) {
+                input.push_str(&line);
+                input.push('\n');
+            }
+        }
+    }
+    let start = Instant::now();
+    let mut child = std::process::Command::new(&a.bin)
+        .args(["run", "--instance-by", "robot"])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("the release binary (cargo build --release)");
+    let mut stdin = child.stdin.take().unwrap();
+    stdin.write_all(input.as_bytes()).unwrap();
+    drop(stdin);
+    child.wait().unwrap();
+    (a.robots * msgs.len()) as f64 / start.elapsed().as_secs_f64()
+}
+
 fn main() {
     let a = parse_args();
     let msgs = messages();
+    let runs: Vec<f64> = (0..a.reps).map(|_| baseline(&a, &msgs)).collect();
+    println!(
+        "Baseline, one process on stdin (same records, no NATS): {:.0} records/s (median; runs: {})\n",
+        median(runs.clone()),
+        runs.iter()
+            .map(|r| format!("{r:.0}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
     println!(
         "| partitions | records | throughput (records/s, median of {}) |",
         a.reps

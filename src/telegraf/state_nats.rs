@@ -193,15 +193,31 @@ async fn open(url: Url) -> Result<kv::Store, String> {
         .await
         .map_err(|e| format!("cannot connect to {}: {e}", url.servers.join(",")))?;
     let js = jetstream::new(client.clone());
-    if let Ok(store) = js.get_key_value(url.bucket.clone()).await {
-        return Ok(store);
+    // Processes of a fleet start together: another may be creating the bucket right now, and
+    // a bucket just created may take a moment to answer everywhere. Try a few times.
+    let mut last = String::new();
+    for attempt in 0..5u32 {
+        if attempt > 0 {
+            tokio::time::sleep(Duration::from_millis(300) * attempt).await;
+        }
+        if let Ok(store) = js.get_key_value(url.bucket.clone()).await {
+            return Ok(store);
+        }
+        if client.connection_state() != async_nats::connection::State::Connected {
+            return Err(format!(
+                "cannot connect to {}: no server answered (is nats-server running there?)",
+                url.servers.join(",")
+            ));
+        }
+        match create(&js, &url).await {
+            Ok(store) => return Ok(store),
+            Err(e) => last = e,
+        }
     }
-    if client.connection_state() != async_nats::connection::State::Connected {
-        return Err(format!(
-            "cannot connect to {}: no server answered (is nats-server running there?)",
-            url.servers.join(",")
-        ));
-    }
+    Err(last)
+}
+
+async fn create(js: &jetstream::Context, url: &Url) -> Result<kv::Store, String> {
     // The bucket as `nats kv add` makes it, except that reads go to the stream leader
     // (allow_direct off): a process taking over must see every entry its predecessor wrote.
     let config = stream::Config {
