@@ -1,7 +1,8 @@
 //! `--state nats://...` against a real 3-node NATS cluster, without the lease: a fleet's state
 //! continues across processes exactly (two runs give one uninterrupted run's outputs), one entry
 //! per robot under its sanitised key, and a corrupt or foreign entry is put aside with a
-//! warning, never trusted. Also: an unreachable server is a clear error (exit 3).
+//! warning, never trusted; a holder whose lease another process takes stops stepping and stands
+//! by. Also: an unreachable server is a clear error (exit 3).
 
 #[path = "support/nats_cluster.rs"]
 mod nats_cluster;
@@ -199,4 +200,83 @@ fn an_unreachable_server_is_a_clear_error() {
     let (_, err, code) = run(&["--state", "nats://127.0.0.1:1/bad.name"], "");
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("bucket `bad.name` must be"), "{err}");
+}
+
+#[test]
+fn a_holder_whose_lease_is_taken_stops_stepping_and_stands_by() {
+    let Some(cluster) = Cluster::start(&nats_cluster::mapping(1)) else {
+        return;
+    };
+    let url = format!("nats://{}/leases?lease=p0&ttl=1s", cluster.hosts());
+    let mut child = Command::new(BIN)
+        .args(["run", "--no-passthrough", "--instance-by", "topic"])
+        .args(["--state", &url])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let stdout = child.stdout.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        use std::io::BufRead;
+        std::io::BufReader::new(stdout)
+            .lines()
+            .map_while(Result::ok)
+            .filter(|l| l.starts_with("action,"))
+            .count()
+    });
+    stdin
+        .write_all(fleet(&["robot"], 0..50).as_bytes())
+        .unwrap();
+    stdin.flush().unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    // Another process takes the lease (and keeps renewing it): this one must stop stepping.
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let renewer = {
+        let stop = std::sync::Arc::clone(&stop);
+        let cluster_url = cluster.url(0);
+        std::thread::spawn(move || {
+            let rt = tokio::runtime::Builder::new_current_thread()
+                .enable_all()
+                .build()
+                .unwrap();
+            rt.block_on(async {
+                let client = async_nats::connect(cluster_url).await.unwrap();
+                let kv = async_nats::jetstream::new(client)
+                    .get_key_value("leases")
+                    .await
+                    .unwrap();
+                while !stop.load(std::sync::atomic::Ordering::SeqCst) {
+                    kv.put("lease.vp0", "other:1".into()).await.unwrap();
+                    tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+                }
+            });
+        })
+    };
+    std::thread::sleep(std::time::Duration::from_millis(800));
+    stdin
+        .write_all(fleet(&["robot"], 50..100).as_bytes())
+        .unwrap();
+    stdin.flush().unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    drop(stdin);
+    let out = child.wait_with_output().unwrap();
+    stop.store(true, std::sync::atomic::Ordering::SeqCst);
+    renewer.join().unwrap();
+    let actions = reader.join().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("lease: lease.vp0 was taken over by another process; standing by"),
+        "{err}"
+    );
+    assert_eq!(
+        actions, 50,
+        "only the records before the takeover are stepped:\n{err}"
+    );
+    assert!(
+        err.contains("standing by at the end; nothing saved (50 records buffered"),
+        "{err}"
+    );
 }
