@@ -1,4 +1,4 @@
-//! `--state nats://...` against a real 3-node NATS cluster, without the lease: a fleet's state
+//! `--state nats://...` against a real 3-node NATS cluster: a fleet's state
 //! continues across processes exactly (two runs give one uninterrupted run's outputs), one entry
 //! per robot under its sanitised key, and a corrupt or foreign entry is put aside with a
 //! warning, never trusted; a holder whose lease another process takes stops stepping and stands

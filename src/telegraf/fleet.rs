@@ -64,8 +64,39 @@ impl Loop<'_, '_> {
         Some((key, self.scratch.timestamp))
     }
 
+    /// The instance key of a record from its measurement and tags alone (the step loop parses
+    /// the whole record afterwards; a lidar record's fields cost most of a parse). Falls back
+    /// to [`Loop::key_of`] when the short form does not parse.
+    fn key_only(&mut self, rec: &Record) -> Option<Key> {
+        let bytes = &rec.bytes;
+        let start = bytes
+            .iter()
+            .position(|b| !b.is_ascii_whitespace())
+            .unwrap_or(bytes.len());
+        let mut i = start;
+        while i < bytes.len() && bytes[i] != b' ' && bytes[i] != b'\n' {
+            i += if bytes[i] == b'\\' { 2 } else { 1 };
+        }
+        let series = bytes.get(start..i.min(bytes.len())).unwrap_or_default();
+        if !rec.oversized && !series.is_empty() && series[0] != b'#' {
+            let mut head = Vec::with_capacity(series.len() + 5);
+            head.extend_from_slice(series);
+            head.extend_from_slice(b" _=0i");
+            if matches!(parse_record_into(&head, &mut self.scratch), Ok(true)) {
+                return Some(
+                    self.f
+                        .instance_by
+                        .iter()
+                        .map(|t| self.scratch.tag(t).map(str::to_string))
+                        .collect(),
+                );
+            }
+        }
+        self.key_of(rec).map(|(k, _)| k)
+    }
+
     fn step(&mut self, proc: &mut Processor, rec: &Record, out: &mut Vec<u8>) {
-        if let Some((key, _)) = self.key_of(rec) {
+        if let Some(key) = self.key_only(rec) {
             self.f.backend.arriving(&key, proc);
         }
         proc.record(rec, out);
