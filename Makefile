@@ -1,5 +1,5 @@
 # Every command the README mentions lives here. `make run` and `make test` are the README's first two.
-.PHONY: run test setup build bench bench-criterion bench-process soak fmt lint ci fixtures conformance fuzz reproduce
+.PHONY: run test setup build bench bench-criterion bench-process bench-nats soak fmt lint ci fixtures conformance fuzz reproduce
 
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
@@ -37,6 +37,11 @@ bench-criterion:
 
 bench-process:
 	python3 bench/run.py --reps $(BENCH_REPS)
+
+# Fleet on NATS (BENCHMARKS.md, "Fleet on NATS"): throughput with 1, 2 and 4 partitions and the
+# standby's takeover time, on a 3-node nats-server cluster started on free loopback ports.
+bench-nats: build
+	$(CARGO) run --release --example fleet_nats -- --robots 64 --reps 3
 
 # Soak test (not in CI): 10 million fleet records (1,000 robots) through the release binary with
 # --instance-by robot, RSS sampled every second; fails unless memory stays flat after warm-up.

@@ -1,12 +1,14 @@
 #!/usr/bin/env bash
 # Installs what the tests need on a fresh Debian/Ubuntu machine: the Rust toolchain is assumed
-# (rustup), the MQTT broker and InfluxDB 1.x come from Debian packages. Idempotent: does nothing when
+# (rustup), the MQTT broker, InfluxDB 1.x and nats-server (the fleet tests' 3-node cluster) come
+# from Debian packages. Idempotent: does nothing when
 # everything is present. Needs root (or sudo) only when something is missing.
 set -euo pipefail
 
 need=()
 command -v mosquitto >/dev/null 2>&1 || [ -x /usr/sbin/mosquitto ] || need+=(mosquitto)
 command -v influxd >/dev/null 2>&1 || [ -x /usr/bin/influxd ] || need+=(influxdb)
+command -v nats-server >/dev/null 2>&1 || [ -x /usr/bin/nats-server ] || need+=(nats-server)
 command -v python3 >/dev/null 2>&1 || need+=(python3)
 
 if [ ${#need[@]} -eq 0 ]; then
@@ -25,6 +27,6 @@ export DEBIAN_FRONTEND=noninteractive
 $sudo apt-get update -qq
 $sudo apt-get install -y -qq "${need[@]}"
 # The packages start system services; the tests run their own instances on free ports.
-for svc in mosquitto influxdb; do
+for svc in mosquitto influxdb nats-server; do
     $sudo systemctl stop "$svc" >/dev/null 2>&1 || $sudo service "$svc" stop >/dev/null 2>&1 || true
 done

@@ -8,6 +8,7 @@
 
 pub mod check;
 pub mod run;
+pub mod run_fleet;
 pub mod trace;
 
 use clap::{Args, Parser, Subcommand};
@@ -143,8 +144,10 @@ pub struct RunArgs {
     pub instance_idle: Option<std::time::Duration>,
     /// Save every monitor instance's state to FILE on shutdown (EOF, SIGTERM, SIGINT) and
     /// continue from it at start, so a Telegraf restart or reload keeps the monitors' state.
-    #[arg(long, value_name = "FILE")]
-    pub state: Option<PathBuf>,
+    /// `nats://HOST:PORT[,...]/BUCKET[?lease=NAME&ttl=3s&replicas=3]`: a JetStream key-value
+    /// bucket shared by a fleet's processes (docs/state-and-reload.md).
+    #[arg(long, value_name = "FILE|nats://HOST:PORT/BUCKET", value_parser = crate::telegraf::state::parse_target)]
+    pub state: Option<crate::telegraf::state::Target>,
     /// Also save the state this often while running (`30s`, `5m`), so a crash or SIGKILL
     /// loses at most this much. Needs --state.
     #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration, requires = "state")]

@@ -81,6 +81,7 @@ pub fn run(args: RunArgs) -> i32 {
         instance_by: opts.instance_by.clone(),
         ..state_ctx
     };
+    let fleet_opts = opts.clone();
     let mut proc = match Processor::new(loaded.program, opts) {
         Ok(p) => p,
         Err(e) => {
@@ -88,14 +89,21 @@ pub fn run(args: RunArgs) -> i32 {
             return EXIT_SPEC;
         }
     };
-    if let Some(path) = &args.state {
+    if let Some(state::Target::Nats(url)) = &args.state {
+        return super::run_fleet::run(&args, url, proc, fleet_opts, &source, &state_ctx);
+    }
+    let state_file = match &args.state {
+        Some(state::Target::File(path)) => Some(path.clone()),
+        _ => None,
+    };
+    if let Some(path) = &state_file {
         state::load(path, &mut proc, &state_ctx);
     }
     let mut on_hangup = |p: &mut Processor, out: &mut Vec<u8>| {
         reload::reload(&source, p, out);
     };
     let mut save_now = |p: &Processor| {
-        if let Some(path) = &args.state {
+        if let Some(path) = &state_file {
             save_state(path, p, &state_ctx, Level::Debug);
         }
     };
@@ -137,7 +145,7 @@ pub fn run(args: RunArgs) -> i32 {
     });
     proc.finish_wiring();
     // Every ending (EOF, signal, closed stdout, I/O error) has evaluated what it could: save.
-    if let Some(path) = &args.state {
+    if let Some(path) = &state_file {
         save_state(path, &proc, &state_ctx, Level::Info);
     }
     match result {

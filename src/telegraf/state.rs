@@ -9,6 +9,10 @@
 //!
 //! JSON rather than a binary format: it is readable when something goes wrong, floats are stored
 //! as their bits (exact, NaN included), and the size is measured in `docs/state-and-reload.md`.
+//!
+//! Also owns what `--state` names ([`Target`]: a file, or `nats://HOST:PORT/BUCKET`, whose
+//! backend lives in [`super::state_nats`]) and the format of one instance's entry
+//! ([`encode_entry`], [`check_entry`]: the same magic, version and fingerprint, per instance).
 
 use crate::log::{self, Level};
 use crate::telegraf::instances::Key;
@@ -24,6 +28,26 @@ use tessla_engine::snapshot::{self, Snapshot};
 pub const MAGIC: &str = "tessla-telegraf-state";
 /// Format version; bumped on any incompatible change of the layout below or of node keys.
 pub const VERSION: u32 = 1;
+
+/// Where `--state` keeps the state.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Target {
+    /// `--state FILE`: one file, this module.
+    File(PathBuf),
+    /// `--state nats://HOST:PORT[,HOST:PORT...]/BUCKET[?options]`: a JetStream key-value bucket.
+    Nats(super::state_nats::Url),
+}
+
+/// Parse `--state`: `nats://...` is a bucket, anything else a file path.
+pub fn parse_target(s: &str) -> Result<Target, String> {
+    if s.starts_with("nats://") {
+        super::state_nats::Url::parse(s).map(Target::Nats)
+    } else if s.is_empty() {
+        Err("empty path".into())
+    } else {
+        Ok(Target::File(PathBuf::from(s)))
+    }
+}
 
 /// What, besides the program, decides whether saved state fits this run.
 #[derive(Debug, Clone, Default)]
@@ -74,10 +98,89 @@ struct StateFile {
     instances: Vec<SavedInstance>,
 }
 
-fn unix_now() -> u64 {
+pub(crate) fn unix_now() -> u64 {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_secs())
+}
+
+/// One instance's saved state, as a key-value backend stores it: the file's header, its key and
+/// its monitor.
+#[derive(Serialize, Deserialize)]
+struct Entry {
+    magic: String,
+    version: u32,
+    fingerprint: String,
+    written: u64,
+    key: Key,
+    monitor: Snapshot,
+}
+
+/// The bytes of instance `key`'s entry (JSON, as the file); the second value counts stream
+/// values that are functions and cannot be saved.
+pub fn encode_entry(
+    program: &Program,
+    fingerprint: &str,
+    key: &Key,
+    monitor: &tessla_engine::Monitor,
+) -> (Vec<u8>, usize) {
+    let keys = snapshot::node_keys(program);
+    let monitor = snapshot::snapshot_with_keys(monitor, &keys);
+    let unsaved = monitor.unsaved;
+    let entry = Entry {
+        magic: MAGIC.into(),
+        version: VERSION,
+        fingerprint: fingerprint.to_string(),
+        written: unix_now(),
+        key: key.clone(),
+        monitor,
+    };
+    // Serialising owned plain data to memory cannot fail; an empty entry would be rejected.
+    (serde_json::to_vec(&entry).unwrap_or_default(), unsaved)
+}
+
+/// Check an entry's bytes (magic, version, fingerprint, that it is `key`'s) and restore its
+/// monitor; `Err` says why it is not usable.
+pub fn check_entry(
+    bytes: &[u8],
+    program: &Arc<Program>,
+    fingerprint: &str,
+    key: &Key,
+) -> Result<tessla_engine::Monitor, String> {
+    let header: Header = serde_json::from_slice(bytes)
+        .map_err(|e| format!("not a state entry (corrupt or truncated: {e})"))?;
+    if header.magic != MAGIC {
+        return Err(format!(
+            "not a state entry (magic `{}`, expected `{MAGIC}`)",
+            header.magic
+        ));
+    }
+    if header.version != VERSION {
+        return Err(format!(
+            "written in state format version {}, this build reads version {VERSION}",
+            header.version
+        ));
+    }
+    if header.fingerprint != fingerprint {
+        return Err(format!(
+            "written for another spec or other options (fingerprint {}, this run {fingerprint}; the spec, --set, --base-time and --instance-by must match)",
+            header.fingerprint
+        ));
+    }
+    let entry: Entry =
+        serde_json::from_slice(bytes).map_err(|e| format!("corrupt state entry: {e}"))?;
+    if &entry.key != key {
+        return Err(format!(
+            "the entry holds instance {:?}, not {key:?}",
+            entry.key
+        ));
+    }
+    let keys = snapshot::node_keys(program);
+    Ok(snapshot::restore_with_keys(
+        Arc::clone(program),
+        &entry.monitor,
+        &keys,
+    ))
 }
 
 /// Save every instance of `proc` to `path` atomically. Returns the number of instances saved.
@@ -257,4 +360,41 @@ fn check(text: &[u8], program: &Program, ctx: &Context) -> Result<StateFile, Str
         ));
     }
     serde_json::from_slice(text).map_err(|e| format!("corrupt state file: {e}"))
+}
+
+/// Where the state of a run is kept: a file ([`FileBackend`]) or a shared bucket
+/// ([`super::state_nats::NatsBackend`]). The step loop calls these at its save points.
+pub trait Backend {
+    /// What to name in messages (the file's path, the bucket's URL).
+    fn describe(&self) -> String;
+    /// At start, before the first record: restore what the backend restores up front.
+    fn load(&mut self, proc: &mut Processor);
+    /// Before the first record of instance `key` in this process is stepped (a shared backend
+    /// restores that instance here).
+    fn arriving(&mut self, _key: &Key, _proc: &mut Processor) {}
+    /// Save every instance of `proc`; returns how many.
+    fn save(&mut self, proc: &Processor) -> io::Result<usize>;
+    /// The process dropped all its instances (its partition went to another process): look
+    /// each one up again when it next arrives.
+    fn forget(&mut self) {}
+}
+
+/// `--state FILE`: [`load`] at start, [`save`] at the save points.
+pub struct FileBackend {
+    pub path: PathBuf,
+    pub ctx: Context,
+}
+
+impl Backend for FileBackend {
+    fn describe(&self) -> String {
+        self.path.display().to_string()
+    }
+
+    fn load(&mut self, proc: &mut Processor) {
+        load(&self.path, proc, &self.ctx);
+    }
+
+    fn save(&mut self, proc: &Processor) -> io::Result<usize> {
+        save(&self.path, proc, &self.ctx)
+    }
 }
