@@ -13,6 +13,8 @@
 //! Run: `cargo build --release && cargo run --release --example fleet_nats -- [--robots 64]
 //!       [--reps 3] [--bin target/release/tessla-telegraf]`. Prints a markdown table.
 
+#[path = "../tests/support/servers.rs"]
+mod servers;
 #[path = "../tests/support/nats_cluster.rs"]
 mod nats_cluster;
 #[path = "../tests/support/nats_standin.rs"]

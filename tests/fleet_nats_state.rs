@@ -4,6 +4,8 @@
 //! warning, never trusted; a holder whose lease another process takes stops stepping and stands
 //! by. Also: an unreachable server is a clear error (exit 3).
 
+#[path = "support/servers.rs"]
+mod servers;
 #[path = "support/nats_cluster.rs"]
 mod nats_cluster;
 

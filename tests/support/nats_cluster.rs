@@ -4,43 +4,20 @@
 //! nodes killed and reaped on drop. With `REQUIRE_SERVERS=1` a missing `nats-server` fails the
 //! test; otherwise `start` explains how to install it and returns `None`.
 //!
-//! Include with `#[path = "support/nats_cluster.rs"] mod nats_cluster;`.
+//! Include with `#[path = "support/nats_cluster.rs"] mod nats_cluster;`, after
+//! `#[path = "support/servers.rs"] mod servers;` (port and binary lookup).
 #![allow(dead_code)]
 
-use std::net::{TcpListener, TcpStream};
+use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// A free TCP port on 127.0.0.1 (bound, read, released).
-pub fn free_port() -> u16 {
-    TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port()
-}
-
-fn find_binary(name: &str) -> Option<PathBuf> {
-    let path = std::env::var_os("PATH")?;
-    std::env::split_paths(&path)
-        .chain([PathBuf::from("/usr/sbin"), PathBuf::from("/usr/bin")])
-        .map(|dir| dir.join(name))
-        .find(|candidate| candidate.is_file())
-}
+pub use crate::servers::free_port;
 
 /// `nats-server`, or `None` after explaining how to get it (panics when servers are required).
 pub fn require_nats_server() -> Option<PathBuf> {
-    if let Some(path) = find_binary("nats-server") {
-        return Some(path);
-    }
-    let hint = "`nats-server` not found: install it with `sudo apt-get install nats-server` \
-                (Debian/Ubuntu; .ci/run installs it)";
-    if std::env::var("REQUIRE_SERVERS").is_ok_and(|v| v == "1") {
-        panic!("REQUIRE_SERVERS=1 but {hint}");
-    }
-    eprintln!("SKIPPED: {hint}");
-    None
+    crate::servers::require("nats-server", "nats-server")
 }
 
 /// The shipped mapping (`telegraf/fleet-nats/mapping.conf`, 2 partitions).

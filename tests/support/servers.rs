@@ -31,13 +31,13 @@ fn find_binary(name: &str) -> Option<PathBuf> {
 }
 
 /// The binary, or `None` after explaining how to get it (panics when servers are required).
-fn require(name: &str, package: &str) -> Option<PathBuf> {
+pub fn require(name: &str, package: &str) -> Option<PathBuf> {
     if let Some(path) = find_binary(name) {
         return Some(path);
     }
     let hint = format!(
         "`{name}` not found: install it with `sudo apt-get install {package}` \
-         (Debian/Ubuntu; .ci/run installs mosquitto and influxdb)"
+         (Debian/Ubuntu; .ci/run installs mosquitto, influxdb and nats-server)"
     );
     if std::env::var("REQUIRE_SERVERS").is_ok_and(|v| v == "1") {
         panic!("REQUIRE_SERVERS=1 but {hint}");
