@@ -13,12 +13,12 @@
 //! Run: `cargo build --release && cargo run --release --example fleet_nats -- [--robots 64]
 //!       [--reps 3] [--bin target/release/tessla-telegraf]`. Prints a markdown table.
 
-#[path = "../tests/support/servers.rs"]
-mod servers;
 #[path = "../tests/support/nats_cluster.rs"]
 mod nats_cluster;
 #[path = "../tests/support/nats_standin.rs"]
 mod nats_standin;
+#[path = "../tests/support/servers.rs"]
+mod servers;
 
 use influxdb_line_protocol::{FieldValue, parse_lines};
 use nats_cluster::Cluster;

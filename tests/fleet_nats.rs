@@ -8,12 +8,12 @@
 //! records after SIGKILL, none after SIGTERM); no action differs from it, so no monitor restarted
 //! from zero (and the standby's first action of each robot carries the running counts).
 
-#[path = "support/servers.rs"]
-mod servers;
 #[path = "support/nats_cluster.rs"]
 mod nats_cluster;
 #[path = "support/nats_standin.rs"]
 mod nats_standin;
+#[path = "support/servers.rs"]
+mod servers;
 
 use nats_cluster::Cluster;
 use nats_standin::{NatsStandIn, Published, action_message, robot_of, telemetry_line};

@@ -4,10 +4,10 @@
 //! warning, never trusted; a holder whose lease another process takes stops stepping and stands
 //! by. Also: an unreachable server is a clear error (exit 3).
 
-#[path = "support/servers.rs"]
-mod servers;
 #[path = "support/nats_cluster.rs"]
 mod nats_cluster;
+#[path = "support/servers.rs"]
+mod servers;
 
 use nats_cluster::Cluster;
 use std::io::Write;

@@ -30,7 +30,7 @@ mod stdlib_cases;
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
-use stdlib_cases::{fixtures, names, report, root, run_all, run_case_as, specs_in, stem};
+use stdlib_cases::{fixtures, library_and_user_cases, names, report, root, run_all, run_case_as};
 
 /// The modules TeSSLa's prelude imports unqualified.
 const IMPORTED: &[&str] = &["StreamFunctions", "Option", "PrimitiveFunctions", "Types"];
@@ -502,18 +502,7 @@ fn prelude_defines_every_library_name() {
 fn library_cases_with_the_prelude() {
     let p = load_prelude();
     let _ = std::fs::remove_dir_all(root().join("target/prelude-specs"));
-    let mut cases = Vec::new();
-    let stdlib = fixtures().join("stdlib");
-    let modules: BTreeSet<String> = names().into_iter().map(|(m, _)| m).collect();
-    for module in &modules {
-        for spec in specs_in(&stdlib.join(module)) {
-            cases.push((format!("stdlib/{module}/{}", stem(&spec)), spec));
-        }
-    }
-    for spec in specs_in(&fixtures().join("userspecs")) {
-        cases.push((format!("userspecs/{}", stem(&spec)), spec));
-    }
-    assert!(!cases.is_empty(), "no cases found");
+    let cases = library_and_user_cases();
     // Build every spec first (the workers only run them).
     let mut built = BTreeMap::new();
     for (id, case) in &cases {

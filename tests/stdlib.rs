@@ -27,7 +27,8 @@ mod stdlib_cases;
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 use stdlib_cases::{
-    CASE_LIMIT, first_line, fixtures, names, report, run_all, run_trace_case, specs_in, stem,
+    CASE_LIMIT, first_line, fixtures, library_and_user_cases, names, report, run_all,
+    run_trace_case, specs_in, stem,
 };
 
 /// The place a pending broken spec names in its first comment (`-- error at: f.tessla:3:9`).
@@ -123,18 +124,7 @@ fn every_library_name_has_a_case() {
 
 #[test]
 fn library_and_user_specs() {
-    let mut cases = Vec::new();
-    let stdlib = fixtures().join("stdlib");
-    let modules: BTreeSet<String> = names().into_iter().map(|(m, _)| m).collect();
-    for module in &modules {
-        for spec in specs_in(&stdlib.join(module)) {
-            cases.push((format!("stdlib/{module}/{}", stem(&spec)), spec));
-        }
-    }
-    for spec in specs_in(&fixtures().join("userspecs")) {
-        cases.push((format!("userspecs/{}", stem(&spec)), spec));
-    }
-    assert!(!cases.is_empty(), "no cases found");
+    let cases = library_and_user_cases();
     let results = run_all(cases, run_trace_case);
     report(
         "library and user specs",

@@ -232,3 +232,21 @@ pub fn report(
         regressions.join("\n")
     );
 }
+
+/// Every library case (`stdlib/<Module>/<case>`, modules as NAMES.txt lists them) and every user
+/// spec (`userspecs/<case>`), with its spec file.
+pub fn library_and_user_cases() -> Vec<(String, PathBuf)> {
+    let mut cases = Vec::new();
+    let stdlib = fixtures().join("stdlib");
+    let modules: BTreeSet<String> = names().into_iter().map(|(m, _)| m).collect();
+    for module in &modules {
+        for spec in specs_in(&stdlib.join(module)) {
+            cases.push((format!("stdlib/{module}/{}", stem(&spec)), spec));
+        }
+    }
+    for spec in specs_in(&fixtures().join("userspecs")) {
+        cases.push((format!("userspecs/{}", stem(&spec)), spec));
+    }
+    assert!(!cases.is_empty(), "no cases found");
+    cases
+}
