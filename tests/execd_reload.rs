@@ -1,8 +1,8 @@
 //! SIGHUP against the real binary: a changed spec (or included file) replaces the running one
 //! mid-run, streams whose definition did not change keep their state (a `count` keeps
-//! counting) and the reset ones are named; a broken spec is reported with its diagnostic and
-//! the old one keeps running; the bundled spec reloads without changing anything; state saved
-//! after a reload is the new spec's.
+//! counting) and the reset ones are named; a broken spec (or one without outputs) is reported
+//! with its diagnostic and the old one keeps running; the bundled spec reloads without changing
+//! anything; state saved after a reload is the new spec's.
 
 #[path = "support/live_child.rs"]
 mod live_child;
@@ -110,11 +110,21 @@ fn a_broken_spec_is_reported_and_the_old_one_keeps_running() {
     hangup(&mut c, "E! reload:");
     c.wait_err("naming the file", from, |l| l.contains("main.tessla:3"));
     assert_eq!(step(&mut c, 30, 3), "tessla c=3i,m=4i 30\n");
+    // A spec that has lost its outputs would silently stop every verdict: refused too.
+    std::fs::write(
+        &main,
+        "include \"lib.tessla\"\nin x: Events[Int]\ndef c = count(x)\n",
+    )
+    .unwrap();
+    let msg = hangup(&mut c, "E! reload:");
+    assert!(msg.contains("has no outputs"), "{msg}");
+    assert!(msg.contains("the running spec stays in use"), "{msg}");
+    assert_eq!(step(&mut c, 35, 3), "tessla c=4i,m=4i 35\n");
     // Fixed: the next reload takes it.
     std::fs::write(&main, MAIN_V1).unwrap();
     let msg = hangup(&mut c, "I! reload:");
     assert!(msg.contains("nothing changed"), "{msg}");
-    assert_eq!(step(&mut c, 40, 4), "tessla c=4i,m=5i 40\n");
+    assert_eq!(step(&mut c, 40, 4), "tessla c=5i,m=5i 40\n");
     let (_, err, code) = c.finish();
     assert_eq!(code, 0, "{err}");
 }

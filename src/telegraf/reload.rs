@@ -78,6 +78,19 @@ pub fn reload(src: &SpecSource, proc: &mut Processor, out: &mut Vec<u8>) -> Relo
         );
     }
     let new = loaded.program;
+    if new.outputs.is_empty() {
+        // The same rule as at start-up (exit 2 there): a spec without outputs would silently
+        // stop every verdict and action.
+        log::log(
+            Level::Error,
+            &format!(
+                "reload: {} has no outputs, so it would check nothing and write nothing; \
+                 the running spec stays in use (add `out NAME` for each stream to report)",
+                src.describe()
+            ),
+        );
+        return Reloaded::Refused;
+    }
     let old = Arc::clone(proc.program());
     let changed = snapshot::changed_nodes(&old, &new);
     let old_keys = snapshot::node_keys(&old);
