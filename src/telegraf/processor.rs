@@ -113,6 +113,8 @@ pub struct Processor {
     bindings: Vec<InputBinding>,
     emitter: Emitter,
     opts: Options,
+    /// Most instances kept here: `--max-instances`, or this thread's share of it.
+    keep: usize,
     pub counters: Counters,
     instances: Table<Instance>,
     /// Stands in for "now" when no idle limit needs the clock.
@@ -155,6 +157,7 @@ impl Processor {
                 events: Vec::new(),
                 step: Vec::new(),
             },
+            keep: opts.max_instances.max(1),
             opts,
             counters: Counters::default(),
             instances: Table::default(),
@@ -168,6 +171,16 @@ impl Processor {
     /// A processor with this one's program and options and no instances (a `--threads` worker).
     pub fn sibling(&self) -> Result<Processor, String> {
         Processor::new(self.program.clone(), self.opts.clone())
+    }
+
+    /// `--max-instances`: the most instances kept over all threads.
+    pub fn max_instances(&self) -> usize {
+        self.opts.max_instances
+    }
+
+    /// Keep at most `n` instances here (at least 1): a `--threads` shard's share of the total.
+    pub fn keep_instances(&mut self, n: usize) {
+        self.keep = n.max(1);
     }
 
     /// The tags that select an instance (`--instance-by`).
@@ -248,7 +261,8 @@ impl Processor {
 
     /// Evict instances past `--max-instances` or idle too long, writing their pending outputs.
     fn evict(&mut self, now: Instant, out: &mut Vec<u8>) {
-        let max = self.opts.max_instances.max(1);
+        let max = self.keep;
+        let total = self.opts.max_instances;
         while let Some(i) = self.instances.evictable(max, self.opts.instance_idle, now) {
             let full = self.instances.len() > max;
             let Some((key, mut inst)) = self.instances.remove(i) else {
@@ -259,12 +273,17 @@ impl Processor {
             let by = &self.opts.instance_by;
             log::warn_limited("instance evicted", || {
                 let why = if full {
-                    format!("least recently used, --max-instances {max}")
+                    format!("least recently used, --max-instances {total}")
                 } else {
                     "idle longer than --instance-idle".to_string()
                 };
+                let share = if full && max != total {
+                    format!(" (the threads share the total: this one keeps {max})")
+                } else {
+                    String::new()
+                };
                 format!(
-                    "monitor instance {} evicted ({why}); its state starts afresh with its next record",
+                    "monitor instance {} evicted ({why}); its state starts afresh with its next record{share}",
                     describe(by, &key)
                 )
             });
