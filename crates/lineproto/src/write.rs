@@ -204,17 +204,18 @@ pub fn write_value(out: &mut String, value: &FieldValue) -> Result<(), NotFinite
 /// back to the same value (the closest such when there are several), no exponent, no `.0`
 /// (`87`, `-0`, `0.0000001`, `1000000000000000000000`).
 ///
-/// The digits come from the `ryu` crate (same shortest-and-closest rule as `Display`, faster:
+/// The digits come from the `zmij` crate (dtolnay's successor to `ryu`, already in the tree
+/// through serde_json; same shortest-and-closest rule as `Display`, faster:
 /// `cargo bench -p lineproto --bench codec -- format_f64`; float formatting was the largest
 /// single item of a P2 record's profile); only its exponent form is rewritten here. The two differ where the value lies exactly halfway
-/// between two shortest candidates (ryu rounds such a tie to even, `Display` up: exactly
-/// 1658206780088562.25 is `...562.2` for ryu, `...562.3` for `Display`); [`is_tie`] finds those
+/// between two shortest candidates (zmij, like ryu, rounds such a tie to even, `Display` up:
+/// exactly 1658206780088562.25 is `...562.2` for zmij, `...562.3` for `Display`); [`is_tie`] finds those
 /// values exactly and they are written by `Display` itself. A test compares both on millions of
 /// values.
 pub fn write_float(out: &mut String, f: f64) {
-    let mut buf = ryu::Buffer::new();
+    let mut buf = zmij::Buffer::new();
     let s = buf.format_finite(f);
-    // Usual case: ryu wrote plain decimal form `-?\d+\.\d+` (at most 17 significant digits).
+    // Usual case: zmij wrote plain decimal form `-?\d+\.\d+` (at most 17 significant digits).
     let body = s.strip_prefix('-').unwrap_or(s);
     if !body.bytes().any(|b| b == b'e')
         && let Some(dot) = body.find('.')
@@ -244,7 +245,7 @@ pub fn write_float(out: &mut String, f: f64) {
     };
     let (int, frac) = mantissa.split_once('.').unwrap_or((mantissa, ""));
     // The significant digits `int ++ frac` without leading and trailing zeros, and where the
-    // decimal point goes relative to their start (ryu writes at most 17 digits and a few zeros).
+    // decimal point goes relative to their start (zmij writes at most 17 digits and a few zeros).
     let digits_all = int.len() + frac.len();
     let mut digits = [0u8; 40];
     let mut n = 0;
