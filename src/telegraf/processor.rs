@@ -106,6 +106,8 @@ struct Emitter {
     events: Vec<(i64, usize, Value)>,
     /// Scratch: one timestamp's events.
     step: Vec<(usize, Value)>,
+    /// Scratch: the encoder's buffers.
+    encode: encode::Scratch,
 }
 
 pub struct Processor {
@@ -156,6 +158,7 @@ impl Processor {
                 measurement: opts.measurement.clone(),
                 events: Vec::new(),
                 step: Vec::new(),
+                encode: encode::Scratch::default(),
             },
             keep: opts.max_instances.max(1),
             opts,
@@ -532,6 +535,7 @@ impl Processor {
             inst.monitor = carry(&inst.monitor);
         }
         self.emitter.encodings = encode::encodings(&program);
+        self.emitter.encode = encode::Scratch::default();
         self.wiring = super::wiring::WiringCheck::new(&bindings);
         self.bindings = bindings;
         self.program = program;
@@ -579,8 +583,15 @@ impl Emitter {
                 step.push((o, v));
             }
             counters.outputs += step.len() as u64;
-            let dropped =
-                encode::encode_step(ts, &step, &self.encodings, &self.measurement, tags, out);
+            let dropped = encode::encode_step_with(
+                &mut self.encode,
+                ts,
+                &step,
+                &self.encodings,
+                &self.measurement,
+                tags,
+                out,
+            );
             for d in dropped {
                 counters.dropped_values += 1;
                 log::warn_limited("output value", || {

@@ -97,6 +97,17 @@ pub fn write_field_value(out: &mut String, value: &FieldValue) -> Result<(), Not
     write_value(out, value)
 }
 
+/// Append a timestamp (decimal nanoseconds).
+pub fn write_timestamp(out: &mut String, ts: i64) {
+    out.push_str(itoa::Buffer::new().format(ts));
+}
+
+/// Whether `name` can be written as a tag key, tag value or field key: not empty once trailing
+/// backslashes are dropped ([`LineWriter`] skips such tags and fields).
+pub fn name_is_writable(name: &str) -> bool {
+    writable_name(name)
+}
+
 fn writable_name(s: &str) -> bool {
     !s.trim_end_matches('\\').is_empty()
 }
@@ -116,7 +127,13 @@ impl LineWriter {
     pub fn new(measurement: &str) -> LineWriter {
         // Room for a typical verdict metric (measurement, a few tags, several fields, timestamp)
         // without growing.
-        let mut line = String::with_capacity(256);
+        LineWriter::with_buffer(measurement, String::with_capacity(256))
+    }
+
+    /// Like [`LineWriter::new`], building the line in `line` (cleared first): with
+    /// [`LineWriter::finish_into`] one buffer serves every line, no allocation per line.
+    pub fn with_buffer(measurement: &str, mut line: String) -> LineWriter {
+        line.clear();
         escape_name(&mut line, measurement, false);
         LineWriter {
             line,
@@ -169,6 +186,32 @@ impl LineWriter {
         }
         self.line.push('\n');
         (Some(self.line), self.skipped)
+    }
+
+    /// Like [`LineWriter::finish`], appending the line (if any) to `out`; gives the buffer back
+    /// for the next [`LineWriter::with_buffer`].
+    pub fn finish_into(self, timestamp: Option<i64>, out: &mut Vec<u8>) -> (String, usize) {
+        let mut line = String::new();
+        let skipped = self.skipped;
+        let (written, _) = self.finish_with(timestamp, &mut line);
+        if written {
+            out.extend_from_slice(line.as_bytes());
+        }
+        line.clear();
+        (line, skipped)
+    }
+
+    fn finish_with(mut self, timestamp: Option<i64>, into: &mut String) -> (bool, usize) {
+        let ok = self.fields > 0 && self.measurement_ok;
+        if ok {
+            if let Some(ts) = timestamp {
+                self.line.push(' ');
+                self.line.push_str(itoa::Buffer::new().format(ts));
+            }
+            self.line.push('\n');
+        }
+        *into = std::mem::take(&mut self.line);
+        (ok, self.skipped)
     }
 }
 
