@@ -9,8 +9,8 @@ pipe (`cat FILE | CMD > /dev/null`, as Telegraf's execd feeds its child) and is 
 tables show medians. Rows:
   cat            the pipe floor (`cat` copying the same bytes)
   parse-only     crates/lineproto splitting + parsing, nothing evaluated or written (bench/parse_only.rs)
-  tessla-telegraf  `tessla-telegraf run` (pass-through on), stdin to stdout; the fleet also with
-                   `--threads 2` (instances spread over two threads)
+  tessla-telegraf  `tessla-telegraf run` (pass-through on), stdin to stdout; the fleet with
+                   `--threads 1`, `--threads 2` and the default (the machine's cores)
   python P2      bench/p2_processor.py (the paper's DT language, standard library only), P2 only
   rtlola-cli     `rtlola-cli monitor` on bench/p2.lola over the same events as CSV, P2 only
 Also: spec load (start-up of `run` on empty input), answer latency at 1k and 10k lines/s
@@ -206,12 +206,14 @@ def main():
     n = count_lines(fleet_lp)
     rows = [measure("cat (pipe floor)", ["cat"], fleet_lp, n, a.reps),
             measure("parse-only (lineproto)", parse_only, fleet_lp, n, a.reps)]
-    ours_f = measure("tessla-telegraf run --instance-by robot", [*ours, "--instance-by", "robot"], fleet_lp, n,
-                     a.reps)
+    one = [*ours, "--instance-by", "robot", "--threads", "1"]
+    ours_f = measure("tessla-telegraf run --instance-by robot --threads 1", one, fleet_lp, n, a.reps)
     rows.append(ours_f)
-    rows.append(measure("same, fields sorted", [*ours, "--instance-by", "robot"], fleet_sorted, n, a.reps))
+    rows.append(measure("same, fields sorted", one, fleet_sorted, n, a.reps))
     rows.append(measure("same, --threads 2", [*ours, "--instance-by", "robot", "--threads", "2"], fleet_lp, n,
                         a.reps))
+    rows.append(measure(f"same, default --threads (the machine's {os.cpu_count()} cores)",
+                        [*ours, "--instance-by", "robot"], fleet_lp, n, a.reps))
     report.append(table(f"Fleet: {n:,} records from 10,000 robots interleaved (robot spec)", "records", rows,
                         ours_f))
 

@@ -1,13 +1,14 @@
 //! Criterion guard of output formatting: one step's output events written as line protocol by
-//! `encode::encode_step`, for the P2 spec's default metric (five fields) and the robot spec's
-//! `action` metric with instance tags (eight `@TelegrafField` fields of mixed types).
+//! `encode::encode_step` (fresh buffers) and `encode_step_with` (the processor's reused ones),
+//! for the P2 spec's default metric (five fields) and the robot spec's `action` metric with
+//! instance tags (eight `@TelegrafField` fields of mixed types).
 //! Run with `make bench` (or `cargo bench --bench encode`).
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::sync::Arc;
 use tessla_engine::Value;
-use tessla_telegraf::telegraf::encode::{Encoding, encode_step};
+use tessla_telegraf::telegraf::encode::{Encoding, Scratch, encode_step, encode_step_with};
 
 fn p2(c: &mut Criterion) {
     let encodings: Vec<Encoding> = [
@@ -34,6 +35,23 @@ fn p2(c: &mut Criterion) {
         b.iter(|| {
             out.clear();
             let d = encode_step(
+                1_719_231_000_123_456_789,
+                black_box(&events),
+                &encodings,
+                "tessla",
+                &[],
+                &mut out,
+            );
+            black_box((d, out.len()))
+        })
+    });
+    // The processor's path: buffers and escaped names kept between steps.
+    let mut scratch = Scratch::default();
+    g.bench_function("p2_default_metric_reused", |b| {
+        b.iter(|| {
+            out.clear();
+            let d = encode_step_with(
+                &mut scratch,
                 1_719_231_000_123_456_789,
                 black_box(&events),
                 &encodings,
@@ -79,6 +97,22 @@ fn p2(c: &mut Criterion) {
         b.iter(|| {
             out.clear();
             let d = encode_step(
+                1_719_231_000_123_456_789,
+                black_box(&events),
+                &encodings,
+                "tessla",
+                &tags,
+                &mut out,
+            );
+            black_box((d, out.len()))
+        })
+    });
+    let mut scratch = Scratch::default();
+    g.bench_function("robot_action_metric_reused", |b| {
+        b.iter(|| {
+            out.clear();
+            let d = encode_step_with(
+                &mut scratch,
                 1_719_231_000_123_456_789,
                 black_box(&events),
                 &encodings,

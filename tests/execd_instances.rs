@@ -143,16 +143,30 @@ fn a_fleet_split_across_two_processes_gives_the_same_outputs() {
     assert_eq!(sorted_lines(&all), sorted_lines(&union));
 }
 
+/// Pass-through is unchanged with instances: with one thread the echo is the input in its
+/// order; with the default threads (the machine's cores) every input line is echoed once and
+/// each robot's lines keep their order (the README's ordering guarantee: per instance, not
+/// across instances read together).
 #[test]
 fn pass_through_is_unchanged_with_instances() {
     let input = fleet(&[0, 1]);
-    let (out, err, code) = run(&["--instance-by", "topic"], &input);
+    let echoed = |out: &str| -> String {
+        out.split_inclusive('\n')
+            .filter(|l| l.starts_with("mqtt_consumer"))
+            .collect()
+    };
+    let (out, err, code) = run(&["--instance-by", "topic", "--threads", "1"], &input);
     assert_eq!(code, 0, "{err}");
-    let echoed: String = out
-        .split_inclusive('\n')
-        .filter(|l| l.starts_with("mqtt_consumer"))
-        .collect();
-    assert_eq!(echoed, input);
+    assert_eq!(echoed(&out), input);
+    for threads in [None, Some("2")] {
+        let mut args = vec!["--instance-by", "topic"];
+        args.extend(threads.map(|t| ["--threads", t]).into_iter().flatten());
+        let (out, err, code) = run(&args, &input);
+        assert_eq!(code, 0, "{err}");
+        let echo = echoed(&out);
+        assert_eq!(sorted_lines(&echo), sorted_lines(&input), "{threads:?}");
+        assert_eq!(per_instance(&echo), per_instance(&input), "{threads:?}");
+    }
 }
 
 #[test]
@@ -188,6 +202,30 @@ fn past_max_instances_the_least_recently_used_is_evicted() {
     // outputs differ from the run with room for both.
     let (kept, _, _) = run(&["--no-passthrough", "--instance-by", "topic"], &input);
     assert_ne!(sorted_lines(&out), sorted_lines(&kept));
+}
+
+/// `--max-instances` is the total whatever `--threads`: three robots with room for two keep
+/// evicting on 2 threads as on 1 (the shards split the room: were it per thread, 2 threads
+/// would hold all three).
+#[test]
+fn max_instances_is_the_total_over_threads() {
+    let input = fleet(&[0, 1, 2]);
+    for threads in ["1", "2"] {
+        let args = |max: &'static str| {
+            [
+                "--no-passthrough",
+                "--instance-by",
+                "topic",
+                "--max-instances",
+                max,
+                "--threads",
+                threads,
+            ]
+        };
+        let (_, err, code) = run(&args("2"), &input);
+        assert_eq!(code, 0, "{err}");
+        assert!(!err.contains(" 0 evicted"), "{threads}: {err}");
+    }
 }
 
 #[test]

@@ -175,7 +175,15 @@ fn a_corrupt_state_file_is_set_aside_and_the_run_starts_fresh() {
     let dir = tempfile::tempdir().unwrap();
     let spec = write_spec(dir.path(), "spec.tessla", SPEC);
     let state = dir.path().join("state.json");
-    let args = ["--spec", s(&spec), "--instance-by", "robot"];
+    // One thread, as --state always runs: the fresh run's order across robots is the same.
+    let args = [
+        "--spec",
+        s(&spec),
+        "--instance-by",
+        "robot",
+        "--threads",
+        "1",
+    ];
     let input = robot_events()[..20].concat();
     let (fresh, _, _) = run_all(&args, &input);
     for garbage in [
@@ -225,7 +233,14 @@ fn a_state_file_of_another_spec_is_set_aside_with_a_warning() {
         &input,
     );
     assert_eq!(code, 0, "{err}");
-    let args = ["--spec", s(&spec), "--instance-by", "robot"];
+    let args = [
+        "--spec",
+        s(&spec),
+        "--instance-by",
+        "robot",
+        "--threads",
+        "1",
+    ];
     let (fresh, _, _) = run_all(&args, &input);
     let mut with_state = args.to_vec();
     with_state.extend(["--state", s(&state)]);

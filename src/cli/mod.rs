@@ -132,10 +132,12 @@ pub struct RunArgs {
     #[arg(long, value_name = "N", default_value_t = crate::telegraf::processor::DEFAULT_MAX_INSTANCES,
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
     pub max_instances: usize,
-    /// With --instance-by, on stdin: spread the instances over this many threads (default 1;
-    /// always 1 with --state and in UDP mode). Each instance's outputs keep their order and the output set is the same
-    /// as with one thread, but lines of different instances read together may come in another
-    /// order (pass-through included), and --max-instances bounds each thread's instances.
+    /// With --instance-by, on stdin: spread the instances over this many threads (default: the
+    /// machine's cores; always 1 with --state, whose file holds one processor's instances, and in
+    /// UDP mode, which answers datagram by datagram). Each instance's outputs keep their order and
+    /// the output set is the same as with one thread; lines of different instances read together
+    /// may come in another order (pass-through included). --max-instances stays the total, split
+    /// evenly among the threads.
     #[arg(long, value_name = "N",
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..=1024))]
     pub threads: Option<usize>,

@@ -113,10 +113,12 @@ pub fn run(args: RunArgs) -> i32 {
             .state_interval
             .map(|d| (d, &mut save_now as &mut dyn FnMut(&Processor))),
     };
-    // Threads spread instances; the state file holds one processor's instances, so one thread.
-    let threads = match (&args.state, args.threads) {
-        (None, Some(n)) => n,
-        _ => 1,
+    // Threads spread instances (default: the machine's cores). The state file holds one
+    // processor's instances and UDP mode reads datagrams one at a time, so both keep one thread.
+    let threads = match (&args.state, &args.udp_listen, args.threads) {
+        (Some(_), _, _) | (_, Some(_), _) => 1,
+        (None, None, Some(n)) => n,
+        (None, None, None) => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
     let rt = match tokio::runtime::Builder::new_current_thread()
         .enable_all()

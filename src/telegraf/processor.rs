@@ -106,6 +106,8 @@ struct Emitter {
     events: Vec<(i64, usize, Value)>,
     /// Scratch: one timestamp's events.
     step: Vec<(usize, Value)>,
+    /// Scratch: the encoder's buffers.
+    encode: encode::Scratch,
 }
 
 pub struct Processor {
@@ -113,6 +115,8 @@ pub struct Processor {
     bindings: Vec<InputBinding>,
     emitter: Emitter,
     opts: Options,
+    /// Most instances kept here: `--max-instances`, or this thread's share of it.
+    keep: usize,
     pub counters: Counters,
     instances: Table<Instance>,
     /// Stands in for "now" when no idle limit needs the clock.
@@ -154,7 +158,9 @@ impl Processor {
                 measurement: opts.measurement.clone(),
                 events: Vec::new(),
                 step: Vec::new(),
+                encode: encode::Scratch::default(),
             },
+            keep: opts.max_instances.max(1),
             opts,
             counters: Counters::default(),
             instances: Table::default(),
@@ -168,6 +174,16 @@ impl Processor {
     /// A processor with this one's program and options and no instances (a `--threads` worker).
     pub fn sibling(&self) -> Result<Processor, String> {
         Processor::new(self.program.clone(), self.opts.clone())
+    }
+
+    /// `--max-instances`: the most instances kept over all threads.
+    pub fn max_instances(&self) -> usize {
+        self.opts.max_instances
+    }
+
+    /// Keep at most `n` instances here (at least 1): a `--threads` shard's share of the total.
+    pub fn keep_instances(&mut self, n: usize) {
+        self.keep = n.max(1);
     }
 
     /// The tags that select an instance (`--instance-by`).
@@ -248,7 +264,8 @@ impl Processor {
 
     /// Evict instances past `--max-instances` or idle too long, writing their pending outputs.
     fn evict(&mut self, now: Instant, out: &mut Vec<u8>) {
-        let max = self.opts.max_instances.max(1);
+        let max = self.keep;
+        let total = self.opts.max_instances;
         while let Some(i) = self.instances.evictable(max, self.opts.instance_idle, now) {
             let full = self.instances.len() > max;
             let Some((key, mut inst)) = self.instances.remove(i) else {
@@ -259,12 +276,17 @@ impl Processor {
             let by = &self.opts.instance_by;
             log::warn_limited("instance evicted", || {
                 let why = if full {
-                    format!("least recently used, --max-instances {max}")
+                    format!("least recently used, --max-instances {total}")
                 } else {
                     "idle longer than --instance-idle".to_string()
                 };
+                let share = if full && max != total {
+                    format!(" (the threads share the total: this one keeps {max})")
+                } else {
+                    String::new()
+                };
                 format!(
-                    "monitor instance {} evicted ({why}); its state starts afresh with its next record",
+                    "monitor instance {} evicted ({why}); its state starts afresh with its next record{share}",
                     describe(by, &key)
                 )
             });
@@ -513,6 +535,7 @@ impl Processor {
             inst.monitor = carry(&inst.monitor);
         }
         self.emitter.encodings = encode::encodings(&program);
+        self.emitter.encode = encode::Scratch::default();
         self.wiring = super::wiring::WiringCheck::new(&bindings);
         self.bindings = bindings;
         self.program = program;
@@ -560,8 +583,15 @@ impl Emitter {
                 step.push((o, v));
             }
             counters.outputs += step.len() as u64;
-            let dropped =
-                encode::encode_step(ts, &step, &self.encodings, &self.measurement, tags, out);
+            let dropped = encode::encode_step_with(
+                &mut self.encode,
+                ts,
+                &step,
+                &self.encodings,
+                &self.measurement,
+                tags,
+                out,
+            );
             for d in dropped {
                 counters.dropped_values += 1;
                 log::warn_limited("output value", || {

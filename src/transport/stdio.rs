@@ -77,12 +77,17 @@ struct Shards {
 }
 
 impl Shards {
-    fn new(proc: &Processor, threads: usize) -> Result<Shards, String> {
+    /// `--max-instances` stays the total: each shard keeps its even part of it (so never more
+    /// threads than that total).
+    fn new(proc: &mut Processor, threads: usize) -> Result<Shards, String> {
+        let total = proc.max_instances().max(1);
         let threads = if proc.instance_by().is_empty() {
             1
         } else {
-            threads.max(1)
+            threads.clamp(1, total)
         };
+        let share = |shard: usize| total / threads + usize::from(shard < total % threads);
+        proc.keep_instances(share(0));
         let (done_tx, done) = mpsc::channel::<Done>();
         let mut workers = Vec::new();
         for shard in 1..threads {
@@ -105,9 +110,11 @@ impl Shards {
                     }
                 })
                 .map_err(|e| format!("cannot start a worker thread: {e}"))?;
+            let mut sibling = proc.sibling()?;
+            sibling.keep_instances(share(shard));
             workers.push(Worker {
                 tx: Some(tx),
-                proc: Some(Box::new(proc.sibling()?)),
+                proc: Some(Box::new(sibling)),
                 handle: Some(handle),
             });
         }

@@ -97,6 +97,17 @@ pub fn write_field_value(out: &mut String, value: &FieldValue) -> Result<(), Not
     write_value(out, value)
 }
 
+/// Append a timestamp (decimal nanoseconds).
+pub fn write_timestamp(out: &mut String, ts: i64) {
+    out.push_str(itoa::Buffer::new().format(ts));
+}
+
+/// Whether `name` can be written as a tag key, tag value or field key: not empty once trailing
+/// backslashes are dropped ([`LineWriter`] skips such tags and fields).
+pub fn name_is_writable(name: &str) -> bool {
+    writable_name(name)
+}
+
 fn writable_name(s: &str) -> bool {
     !s.trim_end_matches('\\').is_empty()
 }
@@ -116,7 +127,13 @@ impl LineWriter {
     pub fn new(measurement: &str) -> LineWriter {
         // Room for a typical verdict metric (measurement, a few tags, several fields, timestamp)
         // without growing.
-        let mut line = String::with_capacity(256);
+        LineWriter::with_buffer(measurement, String::with_capacity(256))
+    }
+
+    /// Like [`LineWriter::new`], building the line in `line` (cleared first): with
+    /// [`LineWriter::finish_into`] one buffer serves every line, no allocation per line.
+    pub fn with_buffer(measurement: &str, mut line: String) -> LineWriter {
+        line.clear();
         escape_name(&mut line, measurement, false);
         LineWriter {
             line,
@@ -170,6 +187,32 @@ impl LineWriter {
         self.line.push('\n');
         (Some(self.line), self.skipped)
     }
+
+    /// Like [`LineWriter::finish`], appending the line (if any) to `out`; gives the buffer back
+    /// for the next [`LineWriter::with_buffer`].
+    pub fn finish_into(self, timestamp: Option<i64>, out: &mut Vec<u8>) -> (String, usize) {
+        let mut line = String::new();
+        let skipped = self.skipped;
+        let (written, _) = self.finish_with(timestamp, &mut line);
+        if written {
+            out.extend_from_slice(line.as_bytes());
+        }
+        line.clear();
+        (line, skipped)
+    }
+
+    fn finish_with(mut self, timestamp: Option<i64>, into: &mut String) -> (bool, usize) {
+        let ok = self.fields > 0 && self.measurement_ok;
+        if ok {
+            if let Some(ts) = timestamp {
+                self.line.push(' ');
+                self.line.push_str(itoa::Buffer::new().format(ts));
+            }
+            self.line.push('\n');
+        }
+        *into = std::mem::take(&mut self.line);
+        (ok, self.skipped)
+    }
 }
 
 /// Append a field value in line-protocol form.
@@ -204,17 +247,18 @@ pub fn write_value(out: &mut String, value: &FieldValue) -> Result<(), NotFinite
 /// back to the same value (the closest such when there are several), no exponent, no `.0`
 /// (`87`, `-0`, `0.0000001`, `1000000000000000000000`).
 ///
-/// The digits come from the `ryu` crate (same shortest-and-closest rule as `Display`, faster:
+/// The digits come from the `zmij` crate (dtolnay's successor to `ryu`, already in the tree
+/// through serde_json; same shortest-and-closest rule as `Display`, faster:
 /// `cargo bench -p lineproto --bench codec -- format_f64`; float formatting was the largest
 /// single item of a P2 record's profile); only its exponent form is rewritten here. The two differ where the value lies exactly halfway
-/// between two shortest candidates (ryu rounds such a tie to even, `Display` up: exactly
-/// 1658206780088562.25 is `...562.2` for ryu, `...562.3` for `Display`); [`is_tie`] finds those
+/// between two shortest candidates (zmij, like ryu, rounds such a tie to even, `Display` up:
+/// exactly 1658206780088562.25 is `...562.2` for zmij, `...562.3` for `Display`); [`is_tie`] finds those
 /// values exactly and they are written by `Display` itself. A test compares both on millions of
 /// values.
 pub fn write_float(out: &mut String, f: f64) {
-    let mut buf = ryu::Buffer::new();
+    let mut buf = zmij::Buffer::new();
     let s = buf.format_finite(f);
-    // Usual case: ryu wrote plain decimal form `-?\d+\.\d+` (at most 17 significant digits).
+    // Usual case: zmij wrote plain decimal form `-?\d+\.\d+` (at most 17 significant digits).
     let body = s.strip_prefix('-').unwrap_or(s);
     if !body.bytes().any(|b| b == b'e')
         && let Some(dot) = body.find('.')
@@ -244,7 +288,7 @@ pub fn write_float(out: &mut String, f: f64) {
     };
     let (int, frac) = mantissa.split_once('.').unwrap_or((mantissa, ""));
     // The significant digits `int ++ frac` without leading and trailing zeros, and where the
-    // decimal point goes relative to their start (ryu writes at most 17 digits and a few zeros).
+    // decimal point goes relative to their start (zmij writes at most 17 digits and a few zeros).
     let digits_all = int.len() + frac.len();
     let mut digits = [0u8; 40];
     let mut n = 0;
