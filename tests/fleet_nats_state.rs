@@ -109,7 +109,9 @@ fn state_in_a_bucket_continues_across_processes_and_rejects_bad_entries() {
     };
     let url = format!("nats://{}/robots?replicas=3", cluster.hosts());
     let ids = ["fleet/a.1", "fleet/b 2"];
-    let (whole, _, code) = run(&[], &fleet(&ids, 0..300));
+    // The reference runs take one thread, as every `--state` run does: with more, lines of
+    // different robots may come in another order (README, `--threads`).
+    let (whole, _, code) = run(&["--threads", "1"], &fleet(&ids, 0..300));
     assert_eq!(code, 0);
 
     // Two processes one after the other: the second continues the first's monitors.
@@ -149,7 +151,7 @@ fn state_in_a_bucket_continues_across_processes_and_rejects_bad_entries() {
         "i.vfleet_2fb_202",
         serde_json::to_vec(&foreign).unwrap(),
     );
-    let (fresh, _, _) = run(&[], &fleet(&ids, 120..300));
+    let (fresh, _, _) = run(&["--threads", "1"], &fleet(&ids, 120..300));
     let (out, err, code) = run(&["--state", &url], &fleet(&ids, 120..300));
     assert_eq!(code, 0, "{err}");
     assert_eq!(out, fresh, "a rejected entry must not be used");
