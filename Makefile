@@ -68,7 +68,7 @@ fixtures:
 
 # Rewrite the conformance pass list after an improvement (the list may only grow).
 conformance:
-	UPDATE_CONFORMANCE=1 $(CARGO) test --test conformance -- --nocapture
+	UPDATE_CONFORMANCE=1 $(CARGO) test -p tessla-trace --test conformance -- --nocapture
 	cat target/conformance-summary.txt
 
 # Rewrite the standard-library, user-spec and pending broken-spec pass lists (tests/stdlib.rs)

@@ -65,7 +65,7 @@ def find_rtlola(install):
 
 def rtlola_cmd(exe, verbosity):
     """rtlola-cli 0.1.x: offline monitoring of the CSV trace on stdin (column `time`, seconds
-    relative to the start, as in research/anchors.md §1.2). `outputs` writes every output's new
+    relative to the start: rtlola-cli's `--offline relative`). `outputs` writes every output's new
     value (the work comparable to our verdict lines); `silent` only evaluates."""
     return [exe, "monitor", "--offline", "relative", "--stdin", "--verbosity", verbosity, str(P2_LOLA)]
 

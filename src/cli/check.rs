@@ -2,13 +2,8 @@
 //! and annotations, then its parameters (the top-level constants `--set` can change, with the
 //! comment above each); exit 0, or 2 with diagnostics (also for a spec without outputs).
 
-use super::{CheckArgs, EXIT_IO, EXIT_OK, EXIT_SPEC};
+use super::{CheckArgs, CliError, CliResult};
 use std::io::Write;
-
-/// Write to stderr; a closed stderr is not worth a panic (the exit code still tells).
-fn report(text: &str) {
-    let _ = std::io::stderr().lock().write_all(text.as_bytes());
-}
 
 /// A spec without outputs checks nothing and writes nothing: a spec error for `check` and `run`.
 pub fn require_outputs(program: &tessla_engine::Program, spec: &str) -> Result<(), String> {
@@ -22,37 +17,22 @@ pub fn require_outputs(program: &tessla_engine::Program, spec: &str) -> Result<(
     }
 }
 
-pub fn run(args: CheckArgs) -> i32 {
-    let options = match super::load_options(&args.spec_options) {
-        Ok(o) => o,
-        Err(e) => {
-            report(&format!("error: {e}\n"));
-            return EXIT_SPEC;
-        }
-    };
-    let loaded = match tessla_engine::load_file(&args.spec, &options) {
-        Ok(l) => l,
-        Err(e) => {
-            report(&e.render());
-            return EXIT_SPEC;
-        }
-    };
+pub fn run(args: CheckArgs) -> CliResult {
+    let options = super::load_options(&args.spec_options)
+        .map_err(|e| CliError::spec(format!("error: {e}")))?;
+    let loaded =
+        tessla_engine::load_file(&args.spec, &options).map_err(|e| CliError::spec(e.render()))?;
     if !loaded.warnings.is_empty() {
-        report(&tessla_syntax::diag::render(
-            &loaded.warnings,
-            &loaded.sources,
-            false,
-        ));
+        // A closed stderr is not worth a panic.
+        let _ = std::io::stderr().lock().write_all(
+            tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false).as_bytes(),
+        );
     }
     // The Telegraf binding reads the annotations: check them as `run` does.
-    if let Err(e) = crate::telegraf::binding::bindings(&loaded.program) {
-        report(&format!("error: {e}\n"));
-        return EXIT_SPEC;
-    }
-    if let Err(e) = require_outputs(&loaded.program, &args.spec.display().to_string()) {
-        report(&format!("error: {e}\n"));
-        return EXIT_SPEC;
-    }
+    crate::telegraf::binding::bindings(&loaded.program)
+        .map_err(|e| CliError::spec(format!("error: {e}")))?;
+    require_outputs(&loaded.program, &args.spec.display().to_string())
+        .map_err(|e| CliError::spec(format!("error: {e}")))?;
     let p = &loaded.program;
     let ann = |a: &[tessla_engine::Annotation]| {
         a.iter()
@@ -108,16 +88,10 @@ pub fn run(args: CheckArgs) -> i32 {
         out.push_str(&p.ir().to_string());
     }
     let mut stdout = std::io::stdout().lock();
-    match stdout
+    stdout
         .write_all(out.as_bytes())
         .and_then(|()| stdout.flush())
-    {
-        Ok(()) => EXIT_OK,
-        Err(e) => {
-            report(&format!("error: writing the result: {e}\n"));
-            EXIT_IO
-        }
-    }
+        .map_err(|e| CliError::io(format!("error: writing the result: {e}")))
 }
 
 /// The spec's parameters: top-level definitions without parameters whose body is a literal

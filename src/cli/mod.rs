@@ -1,4 +1,5 @@
-//! Command line: argument definitions (clap) and dispatch to one module per subcommand.
+//! Command line: argument definitions (clap), dispatch to one module per subcommand, and the one
+//! error type every subcommand returns ([`CliError`]: the exit code and the message for stderr).
 //!
 //! Exit codes (documented in the README):
 //! - 0: success (also: stdin EOF, SIGTERM/SIGINT after flushing, stdout closed by the reader)
@@ -19,12 +20,70 @@ pub mod replay;
 pub mod report;
 #[cfg(feature = "tools")]
 pub mod simulate;
+use std::fmt;
+use std::io::Write;
 use std::path::PathBuf;
+use std::process::ExitCode;
 
-pub const EXIT_OK: i32 = 0;
-pub const EXIT_RUNTIME: i32 = 1;
-pub const EXIT_SPEC: i32 = 2;
-pub const EXIT_IO: i32 = 3;
+/// Why a subcommand failed, as its exit code says (README "Exit codes"); success is 0.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Code {
+    /// 1: a runtime error in `trace` mode.
+    Runtime = 1,
+    /// 2: a spec error or a bad command line.
+    Spec = 2,
+    /// 3: an I/O error that stops the run.
+    Io = 3,
+}
+
+/// A subcommand's failure: the exit code and what to tell the user (written to stderr by
+/// [`main`], in the subcommand's style: `E! ` lines or plain text).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CliError {
+    pub code: Code,
+    pub message: String,
+}
+
+impl CliError {
+    pub fn new(code: Code, message: impl Into<String>) -> Self {
+        CliError {
+            code,
+            message: message.into(),
+        }
+    }
+
+    pub fn spec(message: impl Into<String>) -> Self {
+        Self::new(Code::Spec, message)
+    }
+
+    pub fn io(message: impl Into<String>) -> Self {
+        Self::new(Code::Io, message)
+    }
+
+    pub fn runtime(message: impl Into<String>) -> Self {
+        Self::new(Code::Runtime, message)
+    }
+}
+
+impl fmt::Display for CliError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for CliError {}
+
+/// What every subcommand returns.
+pub type CliResult = Result<(), CliError>;
+
+/// How a subcommand writes its error to stderr.
+#[derive(Clone, Copy)]
+enum Style {
+    /// Telegraf's `E! ` prefix on every line (`run` and the tools).
+    Log,
+    /// The text as it is (`check` and `trace`, read by people and TeSSLa's tools).
+    Plain,
+}
 
 #[derive(Debug, Parser)]
 #[command(
@@ -156,32 +215,38 @@ pub struct RunArgs {
     pub state_interval: Option<std::time::Duration>,
 }
 
-pub fn main() -> i32 {
+/// Parse the command line, run the subcommand, report its error (if any) and return the exit code.
+pub fn main() -> ExitCode {
     let cli = Cli::parse();
-    match cli.command {
-        None => run(cli.run),
-        Some(Command::Run(a)) => run(a),
-        Some(Command::Check(a)) => check(a),
-        Some(Command::Trace(a)) => trace(a),
+    let (result, style) = match cli.command {
+        None => (run::run(cli.run), Style::Log),
+        Some(Command::Run(a)) => (run::run(a), Style::Log),
+        Some(Command::Check(a)) => (check::run(a), Style::Plain),
+        Some(Command::Trace(a)) => (trace::run(a), Style::Plain),
         #[cfg(feature = "tools")]
-        Some(Command::Replay(a)) => replay::run(a),
+        Some(Command::Replay(a)) => (replay::run(a), Style::Log),
         #[cfg(feature = "tools")]
-        Some(Command::Report(a)) => report::run(a),
+        Some(Command::Report(a)) => (report::run(a), Style::Log),
         #[cfg(feature = "tools")]
-        Some(Command::Simulate(a)) => simulate::run(a),
+        Some(Command::Simulate(a)) => (simulate::run(a), Style::Log),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            match style {
+                Style::Log => crate::log::log(crate::log::Level::Error, &e.message),
+                Style::Plain => {
+                    let mut text = e.message;
+                    if !text.ends_with('\n') {
+                        text.push('\n');
+                    }
+                    // A closed stderr is not worth a panic: the exit code still tells.
+                    let _ = std::io::stderr().lock().write_all(text.as_bytes());
+                }
+            }
+            ExitCode::from(e.code as u8)
+        }
     }
-}
-
-fn run(args: RunArgs) -> i32 {
-    run::run(args)
-}
-
-fn check(args: CheckArgs) -> i32 {
-    check::run(args)
-}
-
-fn trace(args: TraceArgs) -> i32 {
-    trace::run(args)
 }
 
 /// The engine's load options from the command line (`--base-time`, `--set NAME=VALUE`).

@@ -4,7 +4,7 @@
 //! (an unreachable broker is an error naming it, exit 3), then publishes each message when it is
 //! due, with a progress bar on a terminal, and prints one summary line.
 
-use crate::cli::{EXIT_IO, EXIT_OK, EXIT_SPEC};
+use crate::cli::{CliError, CliResult};
 use crate::replay::message::{MessageOptions, to_json};
 use crate::replay::mqtt::{Broker, Publisher, parse_qos};
 use crate::replay::{Recording, pacing, read_csv, read_lp};
@@ -66,32 +66,24 @@ pub struct ReplayArgs {
     pub client_id: Option<String>,
 }
 
-/// Run the subcommand; returns the exit code.
-pub fn run(args: ReplayArgs) -> i32 {
-    match replay(&args) {
-        Ok(()) => EXIT_OK,
-        Err((code, message)) => {
-            eprintln!("E! replay: {message}");
-            code
-        }
-    }
+/// Run the subcommand; every error message starts with `replay: `.
+pub fn run(args: ReplayArgs) -> CliResult {
+    replay(&args).map_err(|e| CliError::new(e.code, format!("replay: {}", e.message)))
 }
 
-type Failure = (i32, String);
-
-fn replay(args: &ReplayArgs) -> Result<(), Failure> {
-    let speed = pacing::check_speed(args.speed).map_err(|e| (EXIT_SPEC, e))?;
-    let qos = parse_qos(args.qos).map_err(|e| (EXIT_SPEC, e))?;
-    let broker: Broker = args.broker.parse().map_err(|e| (EXIT_SPEC, e))?;
+fn replay(args: &ReplayArgs) -> CliResult {
+    let speed = pacing::check_speed(args.speed).map_err(CliError::spec)?;
+    let qos = parse_qos(args.qos).map_err(CliError::spec)?;
+    let broker: Broker = args.broker.parse().map_err(CliError::spec)?;
     let recording = read_recording(&args.file, args.format, args.measurement.as_deref())?;
     for skipped in &recording.skipped {
         eprintln!("W! replay: {}: skipped {skipped}", args.file.display());
     }
     if recording.samples.is_empty() {
-        return Err((
-            EXIT_IO,
-            format!("{}: no records to replay", args.file.display()),
-        ));
+        return Err(CliError::io(format!(
+            "{}: no records to replay",
+            args.file.display()
+        )));
     }
     let options = MessageOptions {
         string_fields: args.string_fields.clone(),
@@ -105,7 +97,7 @@ fn replay(args: &ReplayArgs) -> Result<(), Failure> {
         .clone()
         .unwrap_or_else(|| format!("tessla-replay-{}", std::process::id()));
     let mut publisher = Publisher::connect(&broker, &client_id, qos, Duration::from_secs(10))
-        .map_err(|e| (EXIT_IO, e))?;
+        .map_err(CliError::io)?;
 
     let bar = progress_bar(recording.samples.len());
     let start = Instant::now();
@@ -117,12 +109,12 @@ fn replay(args: &ReplayArgs) -> Result<(), Failure> {
         let payload = to_json(sample, &options).to_string().into_bytes();
         publisher
             .publish(&args.topic, payload)
-            .map_err(|e| (EXIT_IO, e))?;
+            .map_err(CliError::io)?;
         bar.inc(1);
     }
     let published = publisher
         .finish(Duration::from_secs(30))
-        .map_err(|e| (EXIT_IO, e))?;
+        .map_err(CliError::io)?;
     bar.finish_and_clear();
     eprintln!(
         "I! replay: published {published} messages from {} to {broker} topic {:?} in {:.1} s ({} skipped)",
@@ -138,9 +130,9 @@ fn read_recording(
     path: &Path,
     format: InputFormat,
     measurement: Option<&str>,
-) -> Result<Recording, Failure> {
+) -> Result<Recording, CliError> {
     let text = std::fs::read_to_string(path)
-        .map_err(|e| (EXIT_IO, format!("cannot read {}: {e}", path.display())))?;
+        .map_err(|e| CliError::io(format!("cannot read {}: {e}", path.display())))?;
     let is_csv = match format {
         InputFormat::Csv => true,
         InputFormat::Lp => false,
@@ -149,7 +141,7 @@ fn read_recording(
             .is_some_and(|e| e.eq_ignore_ascii_case("csv")),
     };
     if is_csv {
-        read_csv::read(&text).map_err(|e| (EXIT_IO, format!("{}: {e}", path.display())))
+        read_csv::read(&text).map_err(|e| CliError::io(format!("{}: {e}", path.display())))
     } else {
         Ok(read_lp::read(&text, measurement))
     }

@@ -1,7 +1,7 @@
 //! `tessla-telegraf report`: render a run's line protocol (our output with pass-through) as an
 //! HTML page with SVG plots, an MSE table and violation counts.
 
-use crate::cli::{EXIT_IO, EXIT_OK};
+use crate::cli::{CliError, CliResult};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -24,52 +24,41 @@ pub struct ReportArgs {
     pub summary: bool,
 }
 
-/// Run the subcommand; returns the exit code.
-pub fn run(args: ReportArgs) -> i32 {
+/// Run the subcommand.
+pub fn run(args: ReportArgs) -> CliResult {
     let (text, name) = if args.file.as_os_str() == "-" {
         let mut text = String::new();
-        if let Err(e) = std::io::Read::read_to_string(&mut std::io::stdin(), &mut text) {
-            eprintln!("E! report: cannot read stdin: {e}");
-            return EXIT_IO;
-        }
+        std::io::Read::read_to_string(&mut std::io::stdin(), &mut text)
+            .map_err(|e| CliError::io(format!("report: cannot read stdin: {e}")))?;
         (text, "stdin".to_string())
     } else {
-        match std::fs::read_to_string(&args.file) {
-            Ok(text) => (text, args.file.display().to_string()),
-            Err(e) => {
-                eprintln!("E! report: cannot read {}: {e}", args.file.display());
-                return EXIT_IO;
-            }
-        }
+        let text = std::fs::read_to_string(&args.file).map_err(|e| {
+            CliError::io(format!("report: cannot read {}: {e}", args.file.display()))
+        })?;
+        (text, args.file.display().to_string())
     };
     let Some(output) = &args.output else {
         let s = crate::report::summarize(&text);
         print!("{}", s.text(&name));
-        return EXIT_OK;
+        return Ok(());
     };
-    match crate::report::write_report(&text, &name, output) {
-        Ok(written) => {
-            let s = &written.summary;
-            if args.summary {
-                print!("{}", s.text(&name));
-            }
-            println!("{}", written.html.display());
-            for svg in &written.svgs {
-                println!("{}", svg.display());
-            }
-            let mse = s
-                .mse
-                .map_or_else(|| "no data".to_string(), |v| format!("{v:.6e}"));
-            eprintln!(
-                "I! report: {} records; MSE expected/actual speed {mse}; P1 violated {} unknown {}; \
-                 P2 violated {}; P3 spikes {} dropouts {}",
-                s.records, s.p1_violated, s.p1_unknown, s.p2_violations, s.p3_spikes, s.p3_dropouts
-            );
-            EXIT_OK
-        }
-        Err(e) => {
-            eprintln!("E! report: {e}");
-            EXIT_IO
-        }
+    let written = crate::report::write_report(&text, &name, output)
+        .map_err(|e| CliError::io(format!("report: {e}")))?;
+    let s = &written.summary;
+    if args.summary {
+        print!("{}", s.text(&name));
     }
+    println!("{}", written.html.display());
+    for svg in &written.svgs {
+        println!("{}", svg.display());
+    }
+    let mse = s
+        .mse
+        .map_or_else(|| "no data".to_string(), |v| format!("{v:.6e}"));
+    eprintln!(
+        "I! report: {} records; MSE expected/actual speed {mse}; P1 violated {} unknown {}; \
+         P2 violated {}; P3 spikes {} dropouts {}",
+        s.records, s.p1_violated, s.p1_unknown, s.p2_violations, s.p3_spikes, s.p3_dropouts
+    );
+    Ok(())
 }

@@ -2,7 +2,7 @@
 //! protocol from stdin (Telegraf's execd) or UDP (the connector's wiring) until EOF or a signal.
 //! With `--state`, instances are restored at start and saved at every ending; SIGHUP reloads.
 
-use super::{EXIT_IO, EXIT_OK, EXIT_SPEC, RunArgs};
+use super::{CliError, CliResult, RunArgs};
 use crate::log::{self, Level};
 use crate::telegraf::binding::parse_tags;
 use crate::telegraf::processor::{Options, Processor};
@@ -10,26 +10,14 @@ use crate::telegraf::reload::{self, SpecSource};
 use crate::telegraf::state;
 use crate::transport::{self, Ending};
 
-pub fn run(args: RunArgs) -> i32 {
+pub fn run(args: RunArgs) -> CliResult {
     log::set_level(args.log_level);
-    let options = match super::load_options(&args.spec_options) {
-        Ok(o) => o,
-        Err(msg) => {
-            log::log(Level::Error, &msg);
-            return EXIT_SPEC;
-        }
-    };
+    let options = super::load_options(&args.spec_options).map_err(CliError::spec)?;
     let source = SpecSource {
         path: args.spec.clone(),
         options,
     };
-    let loaded = match source.load() {
-        Ok(l) => l,
-        Err(e) => {
-            log::log(Level::Error, &e.render());
-            return EXIT_SPEC;
-        }
-    };
+    let loaded = source.load().map_err(|e| CliError::spec(e.render()))?;
     if !loaded.warnings.is_empty() {
         log::log(
             Level::Warn,
@@ -40,22 +28,15 @@ pub fn run(args: RunArgs) -> i32 {
         || format!("<bundled>/{}", crate::bundled::DEFAULT),
         |p| p.display().to_string(),
     );
-    if let Err(e) = super::check::require_outputs(&loaded.program, &spec_name) {
-        log::log(Level::Error, &e);
-        return EXIT_SPEC;
-    }
-    let tags = match args
+    super::check::require_outputs(&loaded.program, &spec_name).map_err(CliError::spec)?;
+    let tags = args
         .tags
         .iter()
-        .map(|t| parse_tags(t).map_err(|e| format!("--tag {t}: {e}")))
-        .collect::<Result<Vec<_>, _>>()
-    {
-        Ok(t) => t.into_iter().flatten().collect(),
-        Err(e) => {
-            log::log(Level::Error, &e);
-            return EXIT_SPEC;
-        }
-    };
+        .map(|t| parse_tags(t).map_err(|e| CliError::spec(format!("--tag {t}: {e}"))))
+        .collect::<Result<Vec<_>, _>>()?
+        .into_iter()
+        .flatten()
+        .collect();
     let state_ctx = state::Context {
         set: args.spec_options.set.clone(),
         base_time: args.spec_options.base_time.clone(),
@@ -82,13 +63,8 @@ pub fn run(args: RunArgs) -> i32 {
         ..state_ctx
     };
     let fleet_opts = opts.clone();
-    let mut proc = match Processor::new(loaded.program, opts) {
-        Ok(p) => p,
-        Err(e) => {
-            log::log(Level::Error, &format!("spec: {e}"));
-            return EXIT_SPEC;
-        }
-    };
+    let mut proc =
+        Processor::new(loaded.program, opts).map_err(|e| CliError::spec(format!("spec: {e}")))?;
     if let Some(state::Target::Nats(url)) = &args.state {
         return super::run_fleet::run(&args, url, proc, fleet_opts, &source, &state_ctx);
     }
@@ -120,16 +96,10 @@ pub fn run(args: RunArgs) -> i32 {
         (None, None, Some(n)) => n,
         (None, None, None) => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
-    let rt = match tokio::runtime::Builder::new_current_thread()
+    let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
-    {
-        Ok(rt) => rt,
-        Err(e) => {
-            log::log(Level::Error, &format!("cannot start the runtime: {e}"));
-            return EXIT_IO;
-        }
-    };
+        .map_err(|e| CliError::io(format!("cannot start the runtime: {e}")))?;
     let result = rt.block_on(async {
         match &args.udp_listen {
             Some(listen) => {
@@ -150,23 +120,15 @@ pub fn run(args: RunArgs) -> i32 {
     if let Some(path) = &state_file {
         save_state(path, &proc, &state_ctx, Level::Info);
     }
-    match result {
-        Ok(ending) => {
-            if ending == Ending::OutputClosed {
-                log::log(Level::Info, "stdout was closed by its reader; stopping");
-            }
-            log::log(Level::Info, &proc.summary());
-            // The blocking stdin reader thread may still wait for input: leave without joining it.
-            rt.shutdown_background();
-            EXIT_OK
-        }
-        Err(e) => {
-            log::log(Level::Error, &format!("I/O error: {e}"));
-            log::log(Level::Info, &proc.summary());
-            rt.shutdown_background();
-            EXIT_IO
-        }
+    if result.as_ref().is_ok_and(|e| *e == Ending::OutputClosed) {
+        log::log(Level::Info, "stdout was closed by its reader; stopping");
     }
+    log::log(Level::Info, &proc.summary());
+    // The blocking stdin reader thread may still wait for input: leave without joining it.
+    rt.shutdown_background();
+    result
+        .map(|_| ())
+        .map_err(|e| CliError::io(format!("I/O error: {e}")))
 }
 
 /// Save the state, logging success at `level` and failure as an error (never fatal).

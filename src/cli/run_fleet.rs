@@ -1,7 +1,7 @@
 //! `tessla-telegraf run --state nats://...`: the run with a shared state bucket (and, with
 //! `?lease=NAME`, a partition lease), driving [`crate::telegraf::fleet`] on stdin/stdout.
 
-use super::{EXIT_IO, EXIT_OK, RunArgs};
+use super::{CliError, CliResult, RunArgs};
 use crate::log::{self, Level};
 use crate::telegraf::fleet::{self, Fleet};
 use crate::telegraf::processor::{Options, Processor};
@@ -18,21 +18,14 @@ pub fn run(
     opts: Options,
     source: &SpecSource,
     ctx: &state::Context,
-) -> i32 {
+) -> CliResult {
     if args.udp_listen.is_some() {
-        log::log(
-            Level::Error,
+        return Err(CliError::spec(
             "--state nats://... runs on stdin/stdout (Telegraf's execd); --udp-listen is not supported with it",
-        );
-        return super::EXIT_SPEC;
+        ));
     }
-    let mut backend = match NatsBackend::connect(url, &proc, ctx) {
-        Ok(b) => b,
-        Err(e) => {
-            log::log(Level::Error, &format!("state: {e}"));
-            return EXIT_IO;
-        }
-    };
+    let mut backend =
+        NatsBackend::connect(url, &proc, ctx).map_err(|e| CliError::io(format!("state: {e}")))?;
     let lease = backend.lease();
     let program = proc.program().clone();
     let fresh = move || Processor::new(program.clone(), opts.clone()).ok();
@@ -42,16 +35,10 @@ pub fn run(
     // A standby must keep at least what the holder may not have saved: two save intervals
     // (one minute without --state-interval) and two lease TTLs.
     let window = args.state_interval.unwrap_or(Duration::from_secs(30)) * 2 + url.ttl * 2;
-    let rt = match tokio::runtime::Builder::new_current_thread()
+    let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
-    {
-        Ok(rt) => rt,
-        Err(e) => {
-            log::log(Level::Error, &format!("cannot start the runtime: {e}"));
-            return EXIT_IO;
-        }
-    };
+        .map_err(|e| CliError::io(format!("cannot start the runtime: {e}")))?;
     let result = rt.block_on(fleet::run(
         &mut proc,
         Fleet {
@@ -64,19 +51,12 @@ pub fn run(
             on_hangup: &mut on_hangup,
         },
     ));
-    let code = match result {
-        Ok(ending) => {
-            if ending == Ending::OutputClosed {
-                log::log(Level::Info, "stdout was closed by its reader; stopping");
-            }
-            EXIT_OK
-        }
-        Err(e) => {
-            log::log(Level::Error, &format!("I/O error: {e}"));
-            EXIT_IO
-        }
-    };
+    if result.as_ref().is_ok_and(|e| *e == Ending::OutputClosed) {
+        log::log(Level::Info, "stdout was closed by its reader; stopping");
+    }
     log::log(Level::Info, &proc.summary());
     rt.shutdown_background();
-    code
+    result
+        .map(|_| ())
+        .map_err(|e| CliError::io(format!("I/O error: {e}")))
 }

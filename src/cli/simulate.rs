@@ -4,7 +4,7 @@
 //! robot) and on (the augmented robot), and the summary compares them; the output file holds
 //! the run `--monitor` chooses. With `--broker` the one chosen run drives the real pipeline.
 
-use super::{EXIT_IO, EXIT_OK, EXIT_SPEC, SpecOptions};
+use super::{CliError, CliResult, SpecOptions};
 use crate::log::{self, Level};
 use crate::replay::mqtt::Broker;
 use crate::simulate::closed_loop::{self, Outcome, Scenario};
@@ -88,9 +88,8 @@ pub struct SimulateArgs {
     pub log_level: crate::log::Level,
 }
 
-fn bad(msg: &str) -> i32 {
-    log::log(Level::Error, &format!("simulate: {msg}"));
-    EXIT_SPEC
+fn bad(msg: &str) -> CliError {
+    CliError::spec(format!("simulate: {msg}"))
 }
 
 fn positive(name: &str, v: f64) -> Result<f64, String> {
@@ -109,25 +108,26 @@ fn probability(name: &str, v: f64) -> Result<f64, String> {
     }
 }
 
-/// The scenario from the command line; `Err((exit code, message))`.
-fn scenario_of(args: &SimulateArgs) -> Result<Scenario, (i32, String)> {
+/// The scenario from the command line; error messages start with `simulate: `.
+fn scenario_of(args: &SimulateArgs) -> Result<Scenario, CliError> {
     let read = |what: &str, path: &str| {
-        std::fs::read_to_string(path).map_err(|e| (EXIT_IO, format!("--{what} {path}: {e}")))
+        std::fs::read_to_string(path)
+            .map_err(|e| CliError::io(format!("simulate: --{what} {path}: {e}")))
     };
     let terrain = match args.terrain.as_str() {
         "yoga-mat" => TerrainChoice::YogaMat,
         "random" => TerrainChoice::Random,
         path => TerrainChoice::Custom(
             Terrain::parse(&read("terrain", path)?)
-                .map_err(|e| (EXIT_SPEC, format!("--terrain {path}: {e}")))?,
+                .map_err(|e| bad(&format!("--terrain {path}: {e}")))?,
         ),
     };
     let program = match args.program.as_str() {
         "paper" => Program::paper_steps(),
         path => Program::parse(&read("program", path)?)
-            .map_err(|e| (EXIT_SPEC, format!("--program {path}: {e}")))?,
+            .map_err(|e| bad(&format!("--program {path}: {e}")))?,
     };
-    let spec = |e: String| (EXIT_SPEC, e);
+    let spec = |e: String| bad(&e);
     let mut s = scenario::build(terrain, program, args.seed);
     s.period = positive("period", args.period).map_err(spec)?;
     if s.period > 60.0 {
@@ -165,23 +165,17 @@ fn load(args: &SimulateArgs) -> Result<Arc<tessla_engine::Program>, String> {
     Ok(loaded.program)
 }
 
-pub fn run(args: SimulateArgs) -> i32 {
+pub fn run(args: SimulateArgs) -> CliResult {
     log::set_level(args.log_level);
-    let scenario = match scenario_of(&args) {
-        Ok(s) => s,
-        Err((code, msg)) => {
-            log::log(Level::Error, &format!("simulate: {msg}"));
-            return code;
-        }
-    };
+    let scenario = scenario_of(&args)?;
     let broker = match args.broker.as_deref().map(str::parse::<Broker>) {
         None => None,
         Some(Ok(b)) => Some(b),
-        Some(Err(e)) => return bad(&e),
+        Some(Err(e)) => return Err(bad(&e)),
     };
     let timeout = match positive("action-timeout", args.action_timeout) {
         Ok(t) => Duration::from_secs_f64(t),
-        Err(e) => return bad(&e),
+        Err(e) => return Err(bad(&e)),
     };
     let program = match broker {
         Some(_) => {
@@ -194,23 +188,16 @@ pub fn run(args: SimulateArgs) -> i32 {
             }
             None
         }
-        None => match load(&args) {
-            Ok(p) => Some(p),
-            Err(e) => {
-                log::log(Level::Error, &e);
-                return EXIT_SPEC;
-            }
-        },
+        None => Some(load(&args).map_err(CliError::spec)?),
     };
     let mut file: Box<dyn Write> = match &args.output {
         Some(path) => match std::fs::File::create(path) {
             Ok(f) => Box::new(std::io::BufWriter::new(f)),
             Err(e) => {
-                log::log(
-                    Level::Error,
-                    &format!("simulate: cannot create {}: {e}", path.display()),
-                );
-                return EXIT_IO;
+                return Err(CliError::io(format!(
+                    "simulate: cannot create {}: {e}",
+                    path.display()
+                )));
             }
         },
         None => Box::new(std::io::sink()),
@@ -234,13 +221,7 @@ pub fn run(args: SimulateArgs) -> i32 {
                 timeout,
                 args.time_key.clone(),
             );
-            let mut twin = match twin {
-                Ok(t) => t,
-                Err(e) => {
-                    log::log(Level::Error, &format!("simulate: {e}"));
-                    return EXIT_IO;
-                }
-            };
+            let mut twin = twin.map_err(|e| CliError::io(format!("simulate: {e}")))?;
             let outcome = closed_loop::run(&scenario, chosen_on, &mut twin, &mut file);
             if twin.unanswered > 0 {
                 log::log(
@@ -257,20 +238,9 @@ pub fn run(args: SimulateArgs) -> i32 {
         (None, Some(program)) => in_process(&scenario, &program, chosen_on, &mut file),
         (None, None) => Err("no monitors loaded".to_string()),
     };
-    let outcomes = match result {
-        Ok(o) => o,
-        Err(e) => {
-            log::log(Level::Error, &format!("simulate: {e}"));
-            return EXIT_IO;
-        }
-    };
-    if let Err(e) = file.flush() {
-        log::log(
-            Level::Error,
-            &format!("simulate: cannot write the output: {e}"),
-        );
-        return EXIT_IO;
-    }
+    let outcomes = result.map_err(|e| CliError::io(format!("simulate: {e}")))?;
+    file.flush()
+        .map_err(|e| CliError::io(format!("simulate: cannot write the output: {e}")))?;
     for (on, o) in outcomes {
         if on {
             summary.augmented = Some(o);
@@ -284,14 +254,10 @@ pub fn run(args: SimulateArgs) -> i32 {
         summary.to_table()
     };
     let mut stdout = std::io::stdout();
-    if stdout
+    stdout
         .write_all(text.as_bytes())
         .and_then(|_| stdout.flush())
-        .is_err()
-    {
-        return EXIT_IO;
-    }
-    EXIT_OK
+        .map_err(|e| CliError::io(format!("simulate: cannot write the summary: {e}")))
 }
 
 /// Both runs in-process: the chosen one writes to `file`, the other only counts.

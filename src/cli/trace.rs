@@ -3,7 +3,7 @@
 //! runtime or trace error (outputs before it are printed, the error goes to stderr), 2 on a
 //! spec error, 3 when the trace cannot be read; 0 also when stdout is closed by the reader.
 
-use super::{EXIT_IO, EXIT_OK, EXIT_RUNTIME, EXIT_SPEC, TraceArgs};
+use super::{CliError, CliResult, TraceArgs};
 use crate::trace::{ErrorKind, run_stream};
 use std::cell::RefCell;
 use std::io::{BufReader, BufWriter, IsTerminal, Read, StdoutLock, Write};
@@ -39,21 +39,11 @@ impl Read for FlushBeforeRead {
     }
 }
 
-pub fn run(args: TraceArgs) -> i32 {
-    let options = match super::load_options(&args.spec_options) {
-        Ok(o) => o,
-        Err(e) => {
-            eprintln!("error: {e}");
-            return EXIT_SPEC;
-        }
-    };
-    let loaded = match tessla_engine::load_file(&args.spec, &options) {
-        Ok(l) => l,
-        Err(e) => {
-            eprint!("{}", e.render());
-            return EXIT_SPEC;
-        }
-    };
+pub fn run(args: TraceArgs) -> CliResult {
+    let options = super::load_options(&args.spec_options)
+        .map_err(|e| CliError::spec(format!("error: {e}")))?;
+    let loaded =
+        tessla_engine::load_file(&args.spec, &options).map_err(|e| CliError::spec(e.render()))?;
     if !loaded.warnings.is_empty() {
         let color = std::io::stderr().is_terminal();
         eprint!(
@@ -61,11 +51,8 @@ pub fn run(args: TraceArgs) -> i32 {
             tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, color)
         );
     }
-    if let Err(e) = super::check::require_outputs(&loaded.program, &args.spec.display().to_string())
-    {
-        eprintln!("error: {e}");
-        return EXIT_SPEC;
-    }
+    super::check::require_outputs(&loaded.program, &args.spec.display().to_string())
+        .map_err(|e| CliError::spec(format!("error: {e}")))?;
     let stdout = std::io::stdout();
     let result = match &args.trace {
         // A trace file is read as fast as possible: outputs are block-buffered.
@@ -77,8 +64,10 @@ pub fn run(args: TraceArgs) -> i32 {
                 &mut BufWriter::new(stdout.lock()),
             ),
             Err(e) => {
-                eprintln!("error: cannot read {}: {e}", p.display());
-                return EXIT_IO;
+                return Err(CliError::io(format!(
+                    "error: cannot read {}: {e}",
+                    p.display()
+                )));
             }
         },
         // A trace on stdin may arrive slowly (a live feed): outputs are block-buffered but
@@ -93,15 +82,9 @@ pub fn run(args: TraceArgs) -> i32 {
         }
     };
     match result {
-        Ok(()) => EXIT_OK,
-        Err(e) if e.kind == ErrorKind::OutputClosed => EXIT_OK,
-        Err(e) if e.kind == ErrorKind::Io => {
-            eprintln!("{e}");
-            EXIT_IO
-        }
-        Err(e) => {
-            eprintln!("{e}");
-            EXIT_RUNTIME
-        }
+        Ok(()) => Ok(()),
+        Err(e) if e.kind == ErrorKind::OutputClosed => Ok(()),
+        Err(e) if e.kind == ErrorKind::Io => Err(CliError::io(e.to_string())),
+        Err(e) => Err(CliError::runtime(e.to_string())),
     }
 }

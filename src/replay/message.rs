@@ -1,10 +1,12 @@
 //! The robot's JSON message built from a recorded [`Sample`].
 //!
-//! The inverse of what Telegraf's `mqtt_consumer` JSON parser does (research notes
-//! telegraf.md §3.1): fields `lidar_<i>` are gathered into one array `lidar` (a missing beam or a
-//! NaN becomes `null`, which the parser skips, so the beam arrives missing as it was recorded);
-//! every other field keeps its name. Numbers stay numbers unless the field is listed as a string
-//! field (the paper's robot sends `actualSpeed` as a string). Non-finite numbers become `null`.
+//! The inverse of what Telegraf's `mqtt_consumer` JSON parser does (influxdata/telegraf,
+//! `plugins/parsers/json/json_flattener.go`: an array `lidar` becomes fields `lidar_0`, `lidar_1`,
+//! ..., a `null` is skipped): fields `lidar_<i>` are gathered into one array `lidar` (a missing
+//! beam or a NaN becomes `null`, which the parser skips, so the beam arrives missing as it was
+//! recorded); every other field keeps its name. Numbers stay numbers unless the field is listed as
+//! a string field (the paper's robot sends `actualSpeed` as a string). Non-finite numbers become
+//! `null`.
 
 use super::{FieldValue, Sample, lidar_index};
 use serde_json::{Map, Number, Value};

@@ -4,8 +4,9 @@
 //! ray casting from the robot's position, and the sensor's faults ([`LidarParams`]): Gaussian
 //! range noise, dust spikes (a beam reads a short range, as from a particle in front of the
 //! sensor) and dropouts (no return), each at a given rate per beam. Conventions follow the
-//! LDS-01 driver (research anchors §4.1): beam i at i·360°/N counter-clockwise from straight
-//! ahead, ranges rounded to the millimetre, valid 0.12..3.5 m, no return reported as `0.0`.
+//! LDS-01 driver (ROBOTIS-GIT/hls_lfcd_lds_driver, `src/hlds_laser_publisher.cpp`): beam i at
+//! i·360°/N counter-clockwise from straight ahead, ranges in whole millimetres, valid
+//! 0.12..3.5 m, no return reported as `0.0`.
 
 use rand::Rng;
 use rand_distr::{Distribution, Normal};

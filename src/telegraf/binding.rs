@@ -76,7 +76,7 @@ pub fn bindings(program: &Program) -> Result<Vec<InputBinding>, String> {
         if matches!(field, FieldPattern::Indexed(_)) && info.ty != Type::List(Box::new(Type::Float))
         {
             return Err(format!(
-                "input `{}`: a `_*` field pattern needs type Events[List[Float]], found {:?}",
+                "input `{}`: a `_*` field pattern needs type Events[List[Float]], found Events[{}]",
                 info.name, info.ty
             ));
         }
@@ -232,7 +232,8 @@ impl InputBinding {
         };
         r.ok_or_else(|| {
             bad(format!(
-                "{v:?} does not convert to {:?} without loss",
+                "{} does not convert to {} without loss",
+                show_field(v),
                 self.ty
             ))
         })
@@ -289,6 +290,17 @@ fn gather(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Result<Vec<Va
 
 fn whole(f: f64) -> Option<i64> {
     (f.fract() == 0.0 && f.abs() < 9.2e18).then_some(f as i64)
+}
+
+/// A field value as line protocol writes it.
+pub fn show_field(v: &FieldValue) -> String {
+    match v {
+        FieldValue::Str(s) => format!("{s:?}"),
+        FieldValue::Float(f) => f.to_string(),
+        FieldValue::Int(i) => format!("{i}i"),
+        FieldValue::UInt(u) => format!("{u}u"),
+        FieldValue::Bool(b) => b.to_string(),
+    }
 }
 
 #[cfg(test)]

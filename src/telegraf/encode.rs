@@ -77,10 +77,10 @@ fn field_value(v: &Value) -> Result<Option<FieldValue>, String> {
         Value::Str(s) => FieldValue::Str(s.to_string()),
         Value::Some(x) => return field_value(x),
         Value::None => return Ok(None),
-        Value::Error(e) => return Err(format!("runtime error {e:?}")),
+        Value::Error(e) => return Err(format!("runtime error: {e}")),
         other => {
             return Err(format!(
-                "a compound value has no line-protocol form: {other:?}"
+                "a compound value has no line-protocol form: {other}"
             ));
         }
     }))

@@ -473,7 +473,12 @@ impl Processor {
                                 InputError::Multiple { .. } => {
                                     "a second event on this input in the same step".to_string()
                                 }
-                                other => format!("{other:?}"),
+                                InputError::Decreasing { last, got } => format!(
+                                    "timestamp {got} is before the last evaluated one ({last})"
+                                ),
+                                InputError::UnknownInput(i) => {
+                                    format!("the spec has no input number {i}")
+                                }
                             };
                             log::warn_limited("input event", || {
                                 format!("line {line}: input `{}`: {why}; value skipped", b.name)

@@ -139,6 +139,16 @@ pub fn encode_entry(
     (serde_json::to_vec(&entry).unwrap_or_default(), unsaved)
 }
 
+/// An instance key for a message: its tag values in `--instance-by` order, an absent tag as
+/// `(absent)`.
+fn show_key(key: &Key) -> String {
+    let values: Vec<&str> = key
+        .iter()
+        .map(|v| v.as_deref().unwrap_or("(absent)"))
+        .collect();
+    format!("[{}]", values.join(", "))
+}
+
 /// Check an entry's bytes (magic, version, fingerprint, that it is `key`'s) and restore its
 /// monitor; `Err` says why it is not usable.
 pub fn check_entry(
@@ -171,8 +181,9 @@ pub fn check_entry(
         serde_json::from_slice(bytes).map_err(|e| format!("corrupt state entry: {e}"))?;
     if &entry.key != key {
         return Err(format!(
-            "the entry holds instance {:?}, not {key:?}",
-            entry.key
+            "the entry holds instance {}, not {}",
+            show_key(&entry.key),
+            show_key(key)
         ));
     }
     let keys = snapshot::node_keys(program);

@@ -160,7 +160,9 @@ impl Conn {
             .name("nats".into())
             .spawn(move || {
                 rt.block_on(async {
-                    let _ = stopped.await;
+                    // Drives the runtime until `Conn` is dropped (the sender's drop is the
+                    // stop signal, so the receiver's error is the expected ending).
+                    stopped.await.ok();
                 });
             })?;
         Ok(Conn {

@@ -13,7 +13,7 @@
 //! After the window it costs one branch per record. The processor calls [`WiringCheck::observe`]
 //! for each record and [`WiringCheck::finish`] when the input ends.
 
-use super::binding::{FieldPattern, InputBinding};
+use super::binding::{FieldPattern, InputBinding, show_field};
 use crate::log::{self, Level};
 use lineproto::{FieldValue, Metric};
 use std::collections::{BTreeMap, BTreeSet};
@@ -301,7 +301,7 @@ fn not_converting(b: &InputBinding, seen: &InputSeen, within: &str) -> String {
     let example = seen
         .failed_example
         .as_ref()
-        .map_or_else(String::new, |v| format!(" (e.g. {})", show(v)));
+        .map_or_else(String::new, |v| format!(" (e.g. {})", show_field(v)));
     let fix = match (&b.ty, seen.failed_example.as_ref()) {
         (Type::Float | Type::Int, Some(FieldValue::Str(_))) => format!(
             "send a number (a numeric string such as \"0.05\" converts), or declare `in {}: Events[String]`",
@@ -330,17 +330,6 @@ fn not_converting(b: &InputBinding, seen: &InputSeen, within: &str) -> String {
         seen.present,
         b.ty
     )
-}
-
-/// A field value as line protocol writes it.
-fn show(v: &FieldValue) -> String {
-    match v {
-        FieldValue::Str(s) => format!("{s:?}"),
-        FieldValue::Float(f) => f.to_string(),
-        FieldValue::Int(i) => format!("{i}i"),
-        FieldValue::UInt(u) => format!("{u}u"),
-        FieldValue::Bool(b) => b.to_string(),
-    }
 }
 
 /// The binding as the spec wrote it.

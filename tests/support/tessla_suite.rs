@@ -1,19 +1,33 @@
 //! TeSSLa's conformance cases as the tests read them: where the suite is (`$TESSLA_SUITE` or
-//! `../shared/tessla-suite`, and whether its absence skips or fails: `REQUIRE_TESSLA_SUITE=1`
-//! fails), every case descriptor with a spec, and the load options a descriptor asks for.
+//! `../shared/tessla-suite` beside the workspace, and whether its absence skips or fails:
+//! `REQUIRE_TESSLA_SUITE=1` fails), every case descriptor with a spec, and the load options a
+//! descriptor asks for.
 //!
-//! Include with `#[path = "support/tessla_suite.rs"] mod tessla_suite;`.
+//! Include with `#[path = "support/tessla_suite.rs"] mod tessla_suite;` (from a member crate's
+//! tests: `#[path = "../../../tests/support/tessla_suite.rs"]`); it needs `serde_json` and
+//! `tessla-engine`.
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
 use tessla_engine::LoadOptions;
+
+/// The workspace's root folder (the nearest folder above the including crate with a
+/// `Cargo.lock`), whichever member crate includes this file.
+pub fn workspace_root() -> PathBuf {
+    let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
+    manifest
+        .ancestors()
+        .find(|d| d.join("Cargo.lock").is_file())
+        .unwrap_or(manifest)
+        .to_path_buf()
+}
 
 /// The suite's folder; `None` (with a note on stderr) when it is missing and may be skipped.
 /// Panics when it is missing and `REQUIRE_TESSLA_SUITE` is set.
 pub fn suite_or_skip(test: &str) -> Option<PathBuf> {
     let dir = std::env::var_os("TESSLA_SUITE")
         .map(PathBuf::from)
-        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/tessla-suite"));
+        .unwrap_or_else(|| workspace_root().join("../shared/tessla-suite"));
     if dir.is_dir() {
         return Some(dir);
     }

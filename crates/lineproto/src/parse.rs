@@ -1,9 +1,10 @@
 //! Parsing one line-protocol record into a [`Metric`].
 //!
 //! Owns: the conversion from the `influxdb-line-protocol` crate's parse result to owned metrics,
-//! and the places where Telegraf's parser differs from the crate (research note §2.2, §5): a
-//! trailing `\r` is accepted, `#` comment lines and blank lines are "no metric", the grammar
-//! differences handled in [`crate::telegraf_rules`] (tabs, `.5`, leading zeros, `\\`, ...),
+//! and the places where Telegraf's parser (influxdata/telegraf
+//! `plugins/parsers/influx/machine.go.rl`) differs from the crate (`influxdb-line-protocol`
+//! 2.0.0): a trailing `\r` is accepted, `#` comment lines and blank lines are "no metric", the
+//! grammar differences handled in [`crate::telegraf_rules`] (tabs, `.5`, leading zeros, `\\`, ...),
 //! out-of-range floats (`1e400`, which the crate reads as infinity) are rejected as Telegraf does,
 //! and a repeated tag or field key keeps the last value (Telegraf overwrites).
 //!

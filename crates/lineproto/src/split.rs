@@ -2,11 +2,11 @@
 //!
 //! Owns: [`RecordSplitter`], which receives bytes as they arrive and yields complete records. A
 //! newline ends a record unless it is inside a quoted string field value (Telegraf's serializer
-//! writes newlines in string fields raw, research note §2.1). A quote opens a string only where
-//! a field value starts (right after `=` in the field set), so quotes in names, tags, comments or
-//! timestamps never swallow the following lines. Outside strings every newline ends the record,
-//! even after a backslash: Telegraf's serializer never writes a raw newline there, and ending the
-//! record keeps a bad line from costing the next one.
+//! writes newlines in string fields raw: influxdata/telegraf `plugins/serializers/influx`). A quote
+//! opens a string only where a field value starts (right after `=` in the field set), so quotes in
+//! names, tags, comments or timestamps never swallow the following lines. Outside strings every
+//! newline ends the record, even after a backslash: Telegraf's serializer never writes a raw
+//! newline there, and ending the record keeps a bad line from costing the next one.
 //!
 //! Hand-written rather than the crate's `split_lines`: that needs the whole input as one `&str`,
 //! while we stream bytes (possibly invalid UTF-8), track line numbers, and bound memory per record.

@@ -2,7 +2,9 @@
 //!
 //! Owns: one scan over a record (without its line ending) that rejects what Telegraf's parser
 //! rejects but the crate accepts, and rewrites what Telegraf accepts but the crate rejects or
-//! reads differently, so that the crate then yields Telegraf's metric (research note §2.2, §5.3):
+//! reads differently, so that the crate then yields Telegraf's metric (Telegraf's grammar:
+//! influxdata/telegraf `plugins/parsers/influx/machine.go.rl`; the crate's readings as tried
+//! against `influxdb-line-protocol` 2.0.0):
 //! - separators may be tab, VT or FF as well as space (crate: space only) -> rewritten to space;
 //! - floats `.5`, `-.5`, `5.`, `5.e3` (crate rejects) -> `0.5`, `-0.5`, `5.0`, `5.0e3`;
 //! - integers with leading zeros `007i` (crate reads 7) -> rejected;

@@ -1,13 +1,14 @@
 //! Writing line protocol that Telegraf's parser reads back unchanged.
 //!
 //! Owns: escaping of measurements, tag keys/values and field keys (Telegraf's serializer rules,
-//! research note §2.1/§2.4: tab/LF/FF/CR as `\t` `\n` `\f` `\r`, comma and space (and `=`
-//! outside measurements) backslash-escaped, backslashes themselves not escaped, trailing
-//! backslashes dropped), string field values (`"` and `\` escaped), value formatting (Float in
-//! shortest round-trip form with no exponent, Int `5i`, UInt `5u`), and [`LineWriter`] for whole
-//! lines. Hand-written instead of the crate's builder, which writes NaN/inf, empty tag values and
-//! raw newlines in tags that Telegraf rejects, and doubles backslashes Telegraf keeps doubled
-//! (research note §5.3).
+//! influxdata/telegraf `plugins/serializers/influx`, and what its parser reads back unchanged:
+//! tab/LF/FF/CR as `\t` `\n` `\f` `\r`, comma and space (and `=` outside measurements)
+//! backslash-escaped, backslashes themselves not escaped, trailing backslashes dropped), string
+//! field values (`"` and `\` escaped), value formatting (Float in shortest round-trip form with no
+//! exponent, Int `5i`, UInt `5u`), and [`LineWriter`] for whole lines. Hand-written instead of the
+//! crate's builder, which writes NaN/inf, empty tag values and raw newlines in tags that Telegraf
+//! rejects, and doubles backslashes Telegraf keeps doubled (`influxdb-line-protocol` 2.0.0's
+//! builder, tried).
 //!
 //! Where a name cannot be represented exactly the writer stays valid rather than exact: other
 //! control characters become `\xNN` text, and a backslash run of odd length right before a

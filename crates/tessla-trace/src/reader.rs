@@ -373,13 +373,27 @@ fn op_error(e: OpError, undefined: impl FnOnce() -> String) -> String {
     }
 }
 
+/// A unary operator as written in a trace.
+fn unary_symbol(op: UnaryOp) -> &'static str {
+    match op {
+        UnaryOp::Not => "!",
+        UnaryOp::BitNot => "~",
+        UnaryOp::Neg => "-",
+        UnaryOp::FNeg => "-.",
+    }
+}
+
 fn unary(op: UnaryOp, v: Value) -> Result<Value, String> {
     match (op, v) {
         // A negative float literal: `-1.5` (TeSSLa's trace lexer reads it as one literal).
         (UnaryOp::Neg, Value::Float(f)) => Ok(Value::Float(-f)),
         (op, v) => ops::unary(op, &v).map_err(|e| {
             op_error(e, || {
-                format!("operator {op:?} does not apply to {}", show(&v))
+                format!(
+                    "operator `{}` does not apply to {}",
+                    unary_symbol(op),
+                    show(&v)
+                )
             })
         }),
     }

@@ -1,17 +1,20 @@
-//! TeSSLa's own conformance cases (`$TESSLA_SUITE` or `../shared/tessla-suite`), run through the
-//! same code path as `tessla-telegraf trace` (`tessla_telegraf::trace::run_named`).
+//! TeSSLa's own conformance cases (`$TESSLA_SUITE` or `../shared/tessla-suite` beside the
+//! workspace), run through the same code path as `tessla-telegraf trace`
+//! ([`tessla_trace::run_named`]).
 //!
 //! Outputs are compared as sets of lines (`ts: name = value`) with floats compared by value.
 //! Cases expecting errors pass when we report an error of that kind: a compile error (a syntax
 //! error when TeSSLa reports "Invalid syntax") or a runtime error, with the outputs before it.
 //! A case is "unsupported" when we stop on a feature the engine names as not supported.
-//! Prints per-folder `N passed, N failed, N unsupported`, writes `target/conformance-summary.txt`
-//! and the reason for every case that does not pass to `target/conformance-details.txt`.
-//! Fails when a case in `tests/conformance-pass.txt` stops passing (`UPDATE_CONFORMANCE=1`
-//! rewrites that list). Each case runs on its own thread with a time limit. Without the suite
-//! it skips, unless `REQUIRE_TESSLA_SUITE=1`.
+//! Prints per-folder `N passed, N failed, N unsupported`, writes the workspace's
+//! `target/conformance-summary.txt` and the reason for every case that does not pass to
+//! `target/conformance-details.txt`. Fails when a case in this crate's
+//! `tests/conformance-pass.txt` stops passing (`UPDATE_CONFORMANCE=1` rewrites that list). Each
+//! case runs on its own thread with a time limit. Without the suite it skips, unless
+//! `REQUIRE_TESSLA_SUITE=1`.
 
-#[path = "support/tessla_suite.rs"]
+// Shared with the workspace root's snapshot test (tests/state_suite.rs).
+#[path = "../../../tests/support/tessla_suite.rs"]
 mod tessla_suite;
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -20,7 +23,7 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::Duration;
 use tessla_syntax::diag::Category;
-use tessla_telegraf::trace::ErrorKind;
+use tessla_trace::ErrorKind;
 
 /// How long one case may run.
 const CASE_LIMIT: Duration = Duration::from_secs(10);
@@ -113,7 +116,7 @@ fn run_case(dir: &Path, desc: &serde_json::Value) -> Outcome {
     }
     let input_name = get("input").map_or_else(|| "input".to_string(), |p| p.display().to_string());
     let input = read("input").unwrap_or_default();
-    let run = tessla_telegraf::trace::run_named(&loaded.program, &input_name, &input);
+    let run = tessla_trace::run_named(&loaded.program, &input_name, &input);
     let expected = lines(&read("expectedOutput").unwrap_or_default());
     let ours = lines(&run.output);
     let expected_runtime = read("expectedRuntimeErrors");
@@ -206,7 +209,7 @@ fn tessla_suite_conformance() {
     }
     summary.push_str(&total.line("total"));
     eprintln!("{summary}");
-    let target = Path::new(env!("CARGO_MANIFEST_DIR")).join("target");
+    let target = tessla_suite::workspace_root().join("target");
     let _ = std::fs::create_dir_all(&target);
     let _ = std::fs::write(target.join("conformance-summary.txt"), &summary);
     let _ = std::fs::write(target.join("conformance-details.txt"), &details);
