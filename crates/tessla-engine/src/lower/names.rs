@@ -156,6 +156,7 @@ impl Compiler<'_> {
                 self.def_term(&e, span)
             }
             None => {
+                let name = crate::prelude::builtin_alias(name).unwrap_or(name);
                 if name == "true" {
                     return Ok(Term::Const(Value::Bool(true)));
                 }
