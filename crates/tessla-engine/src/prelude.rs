@@ -35,6 +35,36 @@ const FILES: &[&str] = &[
     include_str!("../prelude/Tessla.tessla"),
 ];
 
+/// The prelude's modules (a dotted name with another head is never a prelude name).
+const MODULES: &[&str] = &[
+    "Types",
+    "PrimitiveFunctions",
+    "Operators",
+    "Option",
+    "StreamFunctions",
+    "OptionUtils",
+    "List",
+    "Set",
+    "Map",
+    "String",
+    "LTL",
+    "MITL",
+    "CTF",
+    "Tessla",
+];
+
+/// Whether `name` may be a prelude name the builtins table lacks; answers without building the
+/// catalog, so a spec of builtins only never parses the prelude.
+fn candidate(name: &str) -> bool {
+    if usable_builtin(name) {
+        return false;
+    }
+    match name.split_once('.') {
+        Some((head, _)) => MODULES.contains(&head),
+        None => true,
+    }
+}
+
 /// The modules TeSSLa imports unqualified.
 pub const IMPORTED: &[&str] = &["StreamFunctions", "Option", "PrimitiveFunctions", "Types"];
 
@@ -44,6 +74,7 @@ const SPECIAL: &[&str] = &["true", "false", "None"];
 /// One prelude definition.
 struct Entry {
     module: String,
+    name: String,
     /// The text to emit inside `module M { }`; `None`: a builtin serves every use.
     text: Option<String>,
     /// Other entries its text refers to.
@@ -72,6 +103,9 @@ fn usable_builtin(name: &str) -> bool {
 /// The builtin a library name stands for when the name itself is not in the builtins table
 /// (`Option.None` -> `None`, `StreamFunctions.fold` -> `fold`, `merge2` -> `merge`).
 pub fn builtin_alias(name: &str) -> Option<&'static str> {
+    if !candidate(name) {
+        return None;
+    }
     let c = catalog();
     let i = if name.contains('.') {
         *c.by_key.get(name)?
@@ -179,12 +213,26 @@ fn build() -> Catalog {
         };
         entries.push(Entry {
             module: r.module.clone(),
+            name: r.def.name.name.clone(),
             text,
             deps,
             alias: alias[i].clone(),
         });
     }
     Catalog { entries, by_key }
+}
+
+/// Every library name, qualified (`List.find`) and, for the imported modules, short (`sample`),
+/// for "did you mean" listings.
+pub fn names() -> Vec<String> {
+    let c = catalog();
+    let mut out: Vec<String> = c.by_key.keys().cloned().collect();
+    for e in &c.entries {
+        if IMPORTED.contains(&e.module.as_str()) {
+            out.push(e.name.clone());
+        }
+    }
+    out
 }
 
 /// The entry a reference from outside its module means (`M.name`, or an imported `name`).
@@ -208,13 +256,13 @@ pub fn needed(files: &[ast::File]) -> Option<String> {
     for f in files {
         statement_refs(&f.statements, "", &mut refs, &mut own);
     }
+    refs.retain(|(n, _)| !own.contains(n) && candidate(n));
     if refs.is_empty() {
         return None;
     }
     let c = catalog();
     let mut todo: Vec<usize> = refs
         .iter()
-        .filter(|(n, _)| !own.contains(n))
         .filter_map(|(n, _)| resolve_in(&c.by_key, n))
         .collect();
     let mut seen = vec![false; c.entries.len()];
