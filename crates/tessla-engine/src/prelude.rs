@@ -461,6 +461,18 @@ mod tests {
     }
 
     #[test]
+    fn library_names_of_builtins_resolve_to_the_builtin() {
+        assert_eq!(builtin_alias("Option.None"), Some("None"));
+        assert_eq!(builtin_alias("StreamFunctions.fold"), Some("fold"));
+        assert_eq!(builtin_alias("StreamFunctions.merge2"), Some("merge"));
+        assert_eq!(builtin_alias("List.size"), None);
+        assert_eq!(builtin_alias("count"), None);
+        assert_eq!(builtin_alias("boolFilter"), None);
+        assert!(names().iter().any(|n| n == "MITL.since0"));
+        assert!(names().iter().any(|n| n == "sample"));
+    }
+
+    #[test]
     fn own_definitions_win() {
         assert_eq!(
             needs("in b: Events[Bool]\ndef boolFilter(x: Events[Bool]) = x\nout boolFilter(b)"),
