@@ -14,6 +14,7 @@ pub mod lower;
 pub mod monitor;
 pub mod natives;
 pub mod ops;
+pub mod prelude;
 pub mod schedule;
 pub mod snapshot;
 pub mod typeck;

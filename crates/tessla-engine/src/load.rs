@@ -84,7 +84,19 @@ pub fn load_with(
             });
         }
     };
-    let asts: Vec<_> = files.into_iter().map(|(_, f)| f).collect();
+    let mut asts: Vec<_> = files.into_iter().map(|(_, f)| f).collect();
+    // The bundled prelude's definitions the spec refers to (none for a spec of builtins only).
+    if let Some(text) = crate::prelude::needed(&asts) {
+        let id = sources.add("<prelude>", None, text.clone());
+        let (file, diagnostics) = tessla_syntax::parser::parse(&text, id);
+        if !diagnostics.is_empty() {
+            return Err(LoadError {
+                sources,
+                diagnostics,
+            });
+        }
+        asts.push(file);
+    }
     let (type_errors, types) = crate::typeck::check_typed(&asts);
     if !type_errors.is_empty() {
         return Err(LoadError {

@@ -1171,6 +1171,7 @@ impl<'a> Checker<'a> {
     fn builtin(&mut self, name: &str) -> Option<Ty> {
         // Two variables per use, `A`/`K` and `B`/`V`, whether the signature uses them or not.
         let vars = [self.fresh(), self.fresh()];
+        let name = crate::prelude::builtin_alias(name).unwrap_or(name);
         let template = template(builtins::get(name)?.name)?;
         Some(with_vars(template, &vars))
     }

@@ -156,6 +156,7 @@ impl Compiler<'_> {
                 self.def_term(&e, span)
             }
             None => {
+                let name = crate::prelude::builtin_alias(name).unwrap_or(name);
                 if name == "true" {
                     return Ok(Term::Const(Value::Bool(true)));
                 }
@@ -189,6 +190,7 @@ impl Compiler<'_> {
                 let mut known = Vec::new();
                 env.all_names(&mut known);
                 known.extend(builtins::names().map(str::to_string));
+                known.extend(crate::prelude::names());
                 let near = nearest(name, known.iter().map(String::as_str));
                 let mut d =
                     Diagnostic::error(Category::Name, Some(span), format!("unknown name `{name}`"));
