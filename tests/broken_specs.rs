@@ -30,6 +30,14 @@ const PLACED: &[(&str, &str)] = &[
     ("nul_byte", "nul_byte.tessla:2:10"),
     ("recursion_self", "recursion_self.tessla:3:28"),
     (
+        "recursion_macro_mutual",
+        "recursion_macro_mutual.tessla:5:55",
+    ),
+    (
+        "unknown_name_in_mutual_recursion",
+        "unknown_name_in_mutual_recursion.tessla:6:46",
+    ),
+    (
         "recursion_without_last",
         "recursion_without_last.tessla:4:9",
     ),

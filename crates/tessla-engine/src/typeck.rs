@@ -794,7 +794,14 @@ impl<'a> Checker<'a> {
         }
     }
 
+    /// The type of an expression. Definitions are inferred where they are first used, so a
+    /// long chain of definitions recurses deeply: the stack grows on the heap instead of
+    /// overflowing.
     fn infer(&mut self, e: &'a Expr, scope: &Rc<Scope<'a>>) -> Ty {
+        stacker::maybe_grow(128 * 1024, 4 * 1024 * 1024, || self.infer_here(e, scope))
+    }
+
+    fn infer_here(&mut self, e: &'a Expr, scope: &Rc<Scope<'a>>) -> Ty {
         match &e.kind {
             ExprKind::Var(id) => match id.name.as_str() {
                 n @ ("true" | "false" | "None" | "unit" | "nil")

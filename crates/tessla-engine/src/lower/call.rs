@@ -139,15 +139,28 @@ impl Compiler<'_> {
                 let stream_params = def.params.as_ref().is_some_and(|ps| ps.iter().any(|p| matches!(&p.ty, Some(ast::Type::App { name, .. }) if name.name == "Events")));
                 // `liftable` functions on streams are signal-lifted, not expanded.
                 let lift = def.liftable && has_stream && !has_func && !stream_params;
-                let mut expand = !lift && (has_func || has_stream || stream_params);
+                let mut expand = !lift
+                    && (has_func
+                        || has_stream
+                        || stream_params
+                        || self.not_value_fns.contains(&def.span));
                 if !expand {
                     let saved = self.diags.len();
                     match self.call_compiled(def, denv, args.clone(), span) {
                         Ok(t) => return Ok(t),
                         // A body that makes streams from its parameters (`static if`, `const`
                         // ...) cannot be a value function: expand it like a macro instead.
-                        Err(Fail) if !lift => {
+                        // An unknown name is wrong in either form: expanding would only
+                        // find it again, once per call site of every enclosing expansion
+                        // (exponential in mutually recursive nested functions).
+                        Err(Fail)
+                            if !lift
+                                && !self.diags[saved..]
+                                    .iter()
+                                    .any(|d| d.category == Category::Name) =>
+                        {
                             self.diags.truncate(saved);
+                            self.not_value_fns.insert(def.span);
                             expand = true;
                         }
                         Err(Fail) => return Err(Fail),

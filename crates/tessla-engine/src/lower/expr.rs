@@ -28,7 +28,14 @@ impl Compiler<'_> {
         self.node(Node::SLift { args, f })
     }
 
+    /// Lower one expression. Specs nest expressions and expand calls to any depth (a recursive
+    /// macro is stopped only after 200 expansions), so the stack grows on the heap instead of
+    /// overflowing (a stack overflow aborts the process).
     pub(super) fn expr(&mut self, e: &Expr, env: &Env) -> R<Term> {
+        stacker::maybe_grow(128 * 1024, 4 * 1024 * 1024, || self.expr_here(e, env))
+    }
+
+    fn expr_here(&mut self, e: &Expr, env: &Env) -> R<Term> {
         match &e.kind {
             ExprKind::Var(id) => self.lookup(&id.name, id.span, env),
             ExprKind::RootMember(id) => self.lookup(&id.name, id.span, env),

@@ -39,7 +39,7 @@ use crate::natives;
 use crate::ops::{self, scalar_op};
 use crate::value::{Callable, RuntimeError, Value};
 use std::cell::RefCell;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
 use std::sync::{Arc, OnceLock};
 use tessla_syntax::ast::{self, BinOp, Body, Def, Expr, ExprKind, Statement, StrPart, UnaryOp};
@@ -142,6 +142,10 @@ pub struct Compiler<'a> {
     input_nodes: Vec<NodeId>,
     annotation_params: HashMap<String, Vec<String>>,
     compiled_fns: HashMap<*const Def, Arc<OnceLock<Func>>>,
+    /// Definitions (by their span: a local def is cloned afresh each time its scope is
+    /// lowered) whose body failed to compile as a value function, so calls expand them at once
+    /// instead of trying again (mutually recursive nested functions made that exponential).
+    not_value_fns: HashSet<Span>,
     /// The cells of functions that call themselves (they go to `Program::functions`).
     recursive_cells: Vec<Arc<OnceLock<Func>>>,
     unit_node: Option<NodeId>,
@@ -198,6 +202,7 @@ impl<'a> Compiler<'a> {
             input_nodes: Vec::new(),
             annotation_params: HashMap::new(),
             compiled_fns: HashMap::new(),
+            not_value_fns: HashSet::new(),
             recursive_cells: Vec::new(),
             unit_node: None,
             base_unit: None,
