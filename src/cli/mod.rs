@@ -103,7 +103,7 @@ pub struct Cli {
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Read line protocol (stdin, or UDP), check it against the spec, write verdicts (default).
-    Run(RunArgs),
+    Run(Box<RunArgs>),
     /// Parse and check a spec; print its inputs and outputs with types and annotations.
     Check(CheckArgs),
     /// Run a spec over a TeSSLa input trace and print TeSSLa's output trace format.
@@ -220,7 +220,7 @@ pub fn main() -> ExitCode {
     let cli = Cli::parse();
     let (result, style) = match cli.command {
         None => (run::run(cli.run), Style::Log),
-        Some(Command::Run(a)) => (run::run(a), Style::Log),
+        Some(Command::Run(a)) => (run::run(*a), Style::Log),
         Some(Command::Check(a)) => (check::run(a), Style::Plain),
         Some(Command::Trace(a)) => (trace::run(a), Style::Plain),
         #[cfg(feature = "tools")]
