@@ -3,6 +3,9 @@
 //! arrives before the next record is written; EOF and SIGTERM flush and exit 0; the shipped
 //! telegraf.conf's command runs as Telegraf would run it; UDP mode round-trips.
 
+#[path = "support/child.rs"]
+mod child;
+
 use std::io::{BufRead, BufReader, Read, Write};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -31,19 +34,7 @@ fn fixture_lines(n: usize) -> Vec<String> {
 }
 
 fn run_all(args: &[&str], input: &str) -> (String, String, i32) {
-    let mut child = spawn(args);
-    let mut stdin = child.stdin.take().unwrap();
-    let input = input.to_string();
-    let w = std::thread::spawn(move || {
-        let _ = stdin.write_all(input.as_bytes());
-    });
-    let out = child.wait_with_output().unwrap();
-    w.join().unwrap();
-    (
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-        out.status.code().unwrap_or(-1),
-    )
+    child::run_text(args, input)
 }
 
 #[test]

@@ -3,6 +3,9 @@
 //! lines carry the instance tags, a fleet split across two processes gives the union of what one
 //! process gives (partition invariance), and eviction is counted.
 
+#[path = "support/child.rs"]
+mod child;
+
 use std::io::Write;
 use std::process::{Command, Stdio};
 
@@ -11,25 +14,7 @@ const ROBOTS: usize = 3;
 const PER_ROBOT: usize = 40;
 
 fn run(args: &[&str], input: &str) -> (String, String, i32) {
-    let mut child = Command::new(BIN)
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
-    let input = input.to_string();
-    let w = std::thread::spawn(move || {
-        let _ = stdin.write_all(input.as_bytes());
-    });
-    let out = child.wait_with_output().unwrap();
-    w.join().unwrap();
-    (
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-        out.status.code().unwrap_or(-1),
-    )
+    child::run_text(args, input)
 }
 
 /// The recorded run's records as robot `k` sends them: its own MQTT topic, and its clock

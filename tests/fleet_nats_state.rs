@@ -4,6 +4,9 @@
 //! warning, never trusted; a holder whose lease another process takes stops stepping and stands
 //! by. Also: an unreachable server is a clear error (exit 3).
 
+#[path = "support/child.rs"]
+mod child;
+
 #[path = "support/nats_cluster.rs"]
 mod nats_cluster;
 #[path = "support/servers.rs"]
@@ -35,25 +38,11 @@ fn fleet(ids: &[&str], range: std::ops::Range<usize>) -> String {
 }
 
 fn run(args: &[&str], input: &str) -> (String, String, i32) {
-    let mut child = Command::new(BIN)
-        .arg("run")
-        .args(["--no-passthrough", "--instance-by", "topic"])
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
-    let input = input.to_string();
-    let writer = std::thread::spawn(move || stdin.write_all(input.as_bytes()).unwrap());
-    let out = child.wait_with_output().unwrap();
-    writer.join().unwrap();
-    (
-        String::from_utf8(out.stdout).unwrap(),
-        String::from_utf8(out.stderr).unwrap(),
-        out.status.code().unwrap_or(-1),
-    )
+    let args: Vec<&str> = ["run", "--no-passthrough", "--instance-by", "topic"]
+        .into_iter()
+        .chain(args.iter().copied())
+        .collect();
+    child::run_text(&args, input)
 }
 
 /// The bucket `name`: (key, value) of every live entry.

@@ -3,10 +3,11 @@
 //! truth: P2 flags exactly the stuck phases, P3 exactly the injected spikes and every dropout, P1
 //! says `violated` when the obstacle enters the braking distance and `unknown` when blinded.
 
+#[path = "support/child.rs"]
+mod child;
+
 use lineproto::{FieldValue, parse_record};
 use std::collections::HashMap;
-use std::io::Write;
-use std::process::{Command, Stdio};
 
 fn fixture(name: &str) -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -16,23 +17,8 @@ fn fixture(name: &str) -> std::path::PathBuf {
 
 /// Run the binary with `args` on `input`; returns stdout and stderr.
 fn run(args: &[&str], input: &[u8]) -> (Vec<u8>, String, i32) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_tessla-telegraf"))
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
-    let input = input.to_vec();
-    let writer = std::thread::spawn(move || stdin.write_all(&input));
-    let out = child.wait_with_output().unwrap();
-    writer.join().unwrap().unwrap();
-    (
-        out.stdout,
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-        out.status.code().unwrap_or(-1),
-    )
+    let f = child::run_bytes(args, input.to_vec(), child::DEADLINE);
+    (f.stdout, f.stderr, f.code.unwrap_or(-1))
 }
 
 #[test]

@@ -104,6 +104,16 @@ pub fn run_bytes(args: &[&str], input: Vec<u8>, deadline: Duration) -> Finished 
     })
 }
 
+/// How long [`run_text`] lets the binary run before failing the test.
+pub const DEADLINE: Duration = Duration::from_secs(120);
+
+/// Run the binary with `args` over `input` (stdin closed at its end) within [`DEADLINE`]:
+/// stdout, stderr, exit code (-1 when killed by a signal).
+pub fn run_text(args: &[&str], input: &str) -> (String, String, i32) {
+    let f = run_bytes(args, input.as_bytes().to_vec(), DEADLINE);
+    (f.stdout_text(), f.stderr, f.code.unwrap_or(-1))
+}
+
 /// VmHWM of process `pid` in KiB (None once it has exited or on non-Linux systems).
 pub fn vm_hwm_kib(pid: u32) -> Option<u64> {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;

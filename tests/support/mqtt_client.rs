@@ -86,6 +86,28 @@ pub fn collect(
     out
 }
 
+/// A client connected with `opts`, its connection driven by a background thread; returns once
+/// the broker has acknowledged the connection (panics after 10 s without).
+pub fn connect_with(opts: MqttOptions) -> Client {
+    let (client, mut connection) = Client::new(opts, 1024);
+    let (ready_tx, ready_rx) = channel();
+    std::thread::spawn(move || {
+        for event in connection.iter() {
+            match event {
+                Ok(Event::Incoming(Packet::ConnAck(_))) => {
+                    let _ = ready_tx.send(());
+                }
+                Ok(_) => {}
+                Err(_) => return,
+            }
+        }
+    });
+    ready_rx
+        .recv_timeout(Duration::from_secs(10))
+        .expect("no CONNACK from mosquitto");
+    client
+}
+
 /// A connected publisher whose connection is driven by a background thread.
 pub struct Publisher {
     client: Client,
@@ -93,23 +115,9 @@ pub struct Publisher {
 
 impl Publisher {
     pub fn connect(port: u16, id: &str) -> Publisher {
-        let (client, mut connection) = Client::new(options(id, port), 1024);
-        let (ready_tx, ready_rx) = channel();
-        std::thread::spawn(move || {
-            for event in connection.iter() {
-                match event {
-                    Ok(Event::Incoming(Packet::ConnAck(_))) => {
-                        let _ = ready_tx.send(());
-                    }
-                    Ok(_) => {}
-                    Err(_) => return,
-                }
-            }
-        });
-        ready_rx
-            .recv_timeout(Duration::from_secs(10))
-            .expect("no CONNACK from mosquitto");
-        Publisher { client }
+        Publisher {
+            client: connect_with(options(id, port)),
+        }
     }
 
     pub fn publish(&self, topic: &str, payload: Vec<u8>) {

@@ -1218,23 +1218,8 @@ fn start_outputs(
                 unit_ns,
                 ..
             } => {
-                let (client, mut connection) =
-                    Client::new(mqtt_options(&random_id(), env.mqtt_port), 1024);
-                let (ready_tx, ready_rx) = channel();
-                std::thread::spawn(move || {
-                    for event in connection.iter() {
-                        match event {
-                            Ok(Event::Incoming(Packet::ConnAck(_))) => {
-                                let _ = ready_tx.send(());
-                            }
-                            Ok(_) => {}
-                            Err(_) => return,
-                        }
-                    }
-                });
-                ready_rx
-                    .recv_timeout(Duration::from_secs(10))
-                    .expect("outputs.mqtt connected");
+                let client =
+                    crate::mqtt_client::connect_with(mqtt_options(&random_id(), env.mqtt_port));
                 Live::Mqtt(client, topic.clone(), *qos, *unit_ns)
             }
             Output::Influx { url, database, .. } => {
