@@ -96,10 +96,7 @@ pub fn run(args: RunArgs) -> CliResult {
         (None, None, Some(n)) => n,
         (None, None, None) => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .map_err(|e| CliError::io(format!("cannot start the runtime: {e}")))?;
+    let rt = runtime()?;
     let result = rt.block_on(async {
         match &args.udp_listen {
             Some(listen) => {
@@ -120,6 +117,23 @@ pub fn run(args: RunArgs) -> CliResult {
     if let Some(path) = &state_file {
         save_state(path, &proc, &state_ctx, Level::Info);
     }
+    finish(rt, result, &proc)
+}
+
+/// The single-threaded runtime the transports run on.
+pub(super) fn runtime() -> Result<tokio::runtime::Runtime, CliError> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| CliError::io(format!("cannot start the runtime: {e}")))
+}
+
+/// The end of a run: say why it stopped, log the summary, leave the runtime.
+pub(super) fn finish(
+    rt: tokio::runtime::Runtime,
+    result: std::io::Result<Ending>,
+    proc: &Processor,
+) -> CliResult {
     if result.as_ref().is_ok_and(|e| *e == Ending::OutputClosed) {
         log::log(Level::Info, "stdout was closed by its reader; stopping");
     }

@@ -2,13 +2,11 @@
 //! `?lease=NAME`, a partition lease), driving [`crate::telegraf::fleet`] on stdin/stdout.
 
 use super::{CliError, CliResult, RunArgs};
-use crate::log::{self, Level};
 use crate::telegraf::fleet::{self, Fleet};
 use crate::telegraf::processor::{Options, Processor};
 use crate::telegraf::reload::{self, SpecSource};
 use crate::telegraf::state::{self, Backend};
 use crate::telegraf::state_nats::{NatsBackend, Url};
-use crate::transport::Ending;
 use std::time::Duration;
 
 pub fn run(
@@ -35,10 +33,7 @@ pub fn run(
     // A standby must keep at least what the holder may not have saved: two save intervals
     // (one minute without --state-interval) and two lease TTLs.
     let window = args.state_interval.unwrap_or(Duration::from_secs(30)) * 2 + url.ttl * 2;
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .map_err(|e| CliError::io(format!("cannot start the runtime: {e}")))?;
+    let rt = super::run::runtime()?;
     let result = rt.block_on(fleet::run(
         &mut proc,
         Fleet {
@@ -51,12 +46,5 @@ pub fn run(
             on_hangup: &mut on_hangup,
         },
     ));
-    if result.as_ref().is_ok_and(|e| *e == Ending::OutputClosed) {
-        log::log(Level::Info, "stdout was closed by its reader; stopping");
-    }
-    log::log(Level::Info, &proc.summary());
-    rt.shutdown_background();
-    result
-        .map(|_| ())
-        .map_err(|e| CliError::io(format!("I/O error: {e}")))
+    super::run::finish(rt, result, &proc)
 }
