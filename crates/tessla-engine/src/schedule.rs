@@ -2,13 +2,29 @@
 //! nodes' values must be kept across steps.
 //!
 //! Owns: [`order`] (strict dependencies first; only what an output reads; a cycle not through
-//! a lazy argument is an error) and [`last_slots`] (the slots a monitor instance keeps).
+//! a lazy argument is an error, [`Cycle`]) and [`last_slots`] (the slots a monitor instance keeps).
 
 use crate::ir::{NO_SLOT, Node, NodeId, SArg, stream_args};
 use tessla_syntax::diag::{Category, Diagnostic};
 
+/// A cycle of strict dependencies (no `last`/`delay` in between): its nodes, in order.
+#[derive(Debug)]
+pub struct Cycle(pub Vec<NodeId>);
+
+impl Cycle {
+    /// The diagnostic when no node of the cycle has a place in the source.
+    pub fn diagnostic(&self) -> Diagnostic {
+        Diagnostic::error(
+            Category::Recursion,
+            None,
+            "a stream depends on itself without `last` or `delay` in between",
+        )
+        .with_help("recursion is allowed only through the first argument of `last` or `delay`")
+    }
+}
+
 /// Evaluation order: strict dependencies first; a cycle not through `last`/`delay` is an error.
-pub fn order(nodes: &[Node], roots: &[NodeId]) -> Result<Vec<NodeId>, Diagnostic> {
+pub fn order(nodes: &[Node], roots: &[NodeId]) -> Result<Vec<NodeId>, Cycle> {
     let n = nodes.len();
     let mut state = vec![0u8; n];
     let mut order = Vec::with_capacity(n);
@@ -38,8 +54,8 @@ pub fn order(nodes: &[Node], roots: &[NodeId]) -> Result<Vec<NodeId>, Diagnostic
                         stack.push((d, 0));
                     }
                     Some(1) => {
-                        return Err(Diagnostic::error(Category::Recursion, None, "a stream depends on itself without `last` or `delay` in between")
-                                .with_help("recursion is allowed only through the first argument of `last` or `delay`"));
+                        let from = stack.iter().position(|(x, _)| *x == d).unwrap_or(0);
+                        return Err(Cycle(stack[from..].iter().map(|(x, _)| *x).collect()));
                     }
                     _ => {}
                 }

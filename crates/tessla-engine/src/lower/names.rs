@@ -25,27 +25,29 @@ impl Compiler<'_> {
                 *e.state.borrow_mut() = DefState::Failed;
                 Err(Fail)
             }
-            DefState::InProgress { alias } => {
-                if self.lazy_depth == 0 {
-                    *e.state.borrow_mut() = DefState::InProgress { alias };
-                    self.diags.push(
-                        Diagnostic::error(Category::Recursion, Some(span), format!("`{}` is defined in terms of itself", e.def.name.name))
-                            .with_help("recursion is allowed only through the first argument of `last` or `delay`"),
-                    );
-                    return Err(Fail);
-                }
+            DefState::InProgress { alias, lazy_at } => {
                 let a = match alias {
                     Some(a) => a,
                     None => self.node(Node::Alias(usize::MAX)),
                 };
-                *e.state.borrow_mut() = DefState::InProgress { alias: Some(a) };
+                if self.lazy_depth <= lazy_at {
+                    // Not (yet) through `last`/`delay`: the scheduler decides on the whole graph.
+                    self.back_refs
+                        .entry(a)
+                        .or_insert_with(|| (e.def.name.name.clone(), span));
+                }
+                *e.state.borrow_mut() = DefState::InProgress {
+                    alias: Some(a),
+                    lazy_at,
+                };
                 Ok(Term::Stream(a))
             }
             DefState::Todo => {
-                *e.state.borrow_mut() = DefState::InProgress { alias: None };
+                *e.state.borrow_mut() = DefState::InProgress {
+                    alias: None,
+                    lazy_at: self.lazy_depth,
+                };
                 let env = e.env_cell.borrow().clone().unwrap_or_default();
-                let saved = self.lazy_depth;
-                self.lazy_depth = 0;
                 let saved_origin = self.origin;
                 self.origin = crate::snapshot::text_hash(self.sources.text(e.def.span));
                 let r = self.body(&e.def, &env);
@@ -60,9 +62,8 @@ impl Compiler<'_> {
                     }
                     (r, _) => r,
                 };
-                self.lazy_depth = saved;
                 let alias = match &*e.state.borrow() {
-                    DefState::InProgress { alias } => *alias,
+                    DefState::InProgress { alias, .. } => *alias,
                     _ => None,
                 };
                 match r {
@@ -73,6 +74,10 @@ impl Compiler<'_> {
                                 Term::Const(v) => self.nodes[a] = Node::Const(v.clone()),
                                 _ => {
                                     *e.state.borrow_mut() = DefState::Todo;
+                                    if let Some((name, at)) = self.back_refs.get(&a).cloned() {
+                                        self.diags.push(recursion_error(&name, at));
+                                        return Err(Fail);
+                                    }
                                     return self.error(
                                         Category::Recursion,
                                         span,
