@@ -72,6 +72,11 @@ fn field_value(v: &Value) -> Result<Option<FieldValue>, String> {
         Value::Unit => FieldValue::Bool(true),
         Value::Bool(b) => FieldValue::Bool(*b),
         Value::Int(i) => FieldValue::Int(*i),
+        Value::BigInt(i) => {
+            return Err(format!(
+                "{i} does not fit a line-protocol integer (64 bits)"
+            ));
+        }
         Value::Float(f) if f.is_finite() => FieldValue::Float(*f),
         Value::Float(f) => return Err(format!("{f} is not valid line protocol")),
         Value::Str(s) => FieldValue::Str(s.to_string()),

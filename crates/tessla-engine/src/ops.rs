@@ -36,12 +36,44 @@ pub fn binary(op: BinOp, a: &Value, b: &Value) -> Result<Value, OpError> {
     use Value::*;
     let ovf = OpError::Overflow;
     Ok(match (op, a, b) {
-        (BinOp::Add, Int(x), Int(y)) => Int(x.checked_add(*y).ok_or(ovf)?),
-        (BinOp::Sub, Int(x), Int(y)) => Int(x.checked_sub(*y).ok_or(ovf)?),
-        (BinOp::Mul, Int(x), Int(y)) => Int(x.checked_mul(*y).ok_or(ovf)?),
+        // 64 bits first; a result outside them is computed again unbounded (`big`).
+        (BinOp::Add, Int(x), Int(y)) => x.checked_add(*y).map_or_else(|| big(op, a, b), Int),
+        (BinOp::Sub, Int(x), Int(y)) => x.checked_sub(*y).map_or_else(|| big(op, a, b), Int),
+        (BinOp::Mul, Int(x), Int(y)) => x.checked_mul(*y).map_or_else(|| big(op, a, b), Int),
         (BinOp::Div | BinOp::Mod, Int(_), Int(0)) => return Err(OpError::DivisionByZero),
-        (BinOp::Div, Int(x), Int(y)) => Int(x.checked_div(*y).ok_or(ovf)?),
-        (BinOp::Mod, Int(x), Int(y)) => Int(x.checked_rem(*y).ok_or(ovf)?),
+        (BinOp::Div, Int(x), Int(y)) => x.checked_div(*y).map_or_else(|| big(op, a, b), Int),
+        (BinOp::Mod, Int(x), Int(y)) => x.checked_rem(*y).map_or_else(|| big(op, a, b), Int),
+        (
+            BinOp::Add
+            | BinOp::Sub
+            | BinOp::Mul
+            | BinOp::Div
+            | BinOp::Mod
+            | BinOp::Lt
+            | BinOp::Gt
+            | BinOp::Le
+            | BinOp::Ge,
+            Int(_) | BigInt(_),
+            BigInt(_),
+        )
+        | (
+            BinOp::Add
+            | BinOp::Sub
+            | BinOp::Mul
+            | BinOp::Div
+            | BinOp::Mod
+            | BinOp::Lt
+            | BinOp::Gt
+            | BinOp::Le
+            | BinOp::Ge,
+            BigInt(_),
+            Int(_),
+        ) => {
+            if matches!(op, BinOp::Div | BinOp::Mod) && matches!(b, Int(0)) {
+                return Err(OpError::DivisionByZero);
+            }
+            big(op, a, b)
+        }
         (BinOp::Add, Str(x), Str(y)) => Str(format!("{x}{y}").into()),
         (BinOp::FAdd, Float(x), Float(y)) => Float(x + y),
         (BinOp::FSub, Float(x), Float(y)) => Float(x - y),
@@ -62,9 +94,9 @@ pub fn binary(op: BinOp, a: &Value, b: &Value) -> Result<Value, OpError> {
         (BinOp::BitAnd, Int(x), Int(y)) => Int(x & y),
         (BinOp::BitOr, Int(x), Int(y)) => Int(x | y),
         (BinOp::BitXor, Int(x), Int(y)) => Int(x ^ y),
-        (BinOp::Shl, Int(x), Int(y)) => Int(shift_left(*x, *y).ok_or(ovf)?),
+        (BinOp::Shl, Int(x), Int(y)) => shift_big(*x, *y).ok_or(ovf)?,
         (BinOp::Shr, Int(x), Int(y)) => match y.checked_neg() {
-            Option::Some(n) => Int(shift_left(*x, n).ok_or(ovf)?),
+            Option::Some(n) => shift_big(*x, n).ok_or(ovf)?,
             // A shift right by more than 63 places: only the sign is left.
             Option::None => Int(if *x < 0 { -1 } else { 0 }),
         },
@@ -77,16 +109,51 @@ pub fn unary(op: UnaryOp, a: &Value) -> Result<Value, OpError> {
     Ok(match (op, a) {
         (UnaryOp::Not, Value::Bool(b)) => Value::Bool(!b),
         (UnaryOp::BitNot, Value::Int(i)) => Value::Int(!i),
-        (UnaryOp::Neg, Value::Int(i)) => Value::Int(i.checked_neg().ok_or(OpError::Overflow)?),
+        (UnaryOp::Neg, Value::Int(i)) => match i.checked_neg() {
+            Some(n) => Value::Int(n),
+            None => Value::from_big(-num_bigint::BigInt::from(*i)),
+        },
+        (UnaryOp::Neg, Value::BigInt(i)) => Value::from_big(-(**i).clone()),
         (UnaryOp::FNeg, Value::Float(f)) => Value::Float(-f),
         _ => return Err(OpError::Undefined),
     })
 }
 
+/// `a op b` on integers of any size (TeSSLa's `Int` is unbounded): arithmetic and comparisons.
+/// The divisor is not zero (checked by the caller); division truncates towards zero and the
+/// remainder takes the dividend's sign, as for 64 bits.
+fn big(op: BinOp, a: &Value, b: &Value) -> Value {
+    let (Some(x), Some(y)) = (a.as_big(), b.as_big()) else {
+        return Value::Error(RuntimeError::Other("not an integer".into()));
+    };
+    match op {
+        BinOp::Add => Value::from_big(x + y),
+        BinOp::Sub => Value::from_big(x - y),
+        BinOp::Mul => Value::from_big(x * y),
+        BinOp::Div => Value::from_big(x / y),
+        BinOp::Mod => Value::from_big(x % y),
+        BinOp::Lt => Value::Bool(x < y),
+        BinOp::Gt => Value::Bool(x > y),
+        BinOp::Le => Value::Bool(x <= y),
+        BinOp::Ge => Value::Bool(x >= y),
+        _ => Value::Error(RuntimeError::Other(
+            format!(
+                "`{}` is not defined for integers beyond 64 bits",
+                op.symbol()
+            )
+            .into(),
+        )),
+    }
+}
+
 /// `a op b` as a value: an error operand is the result, a missing result is an error value.
+/// `&&` and `||` are lazy in their right operand, as in TeSSLa: `false && e` is `false` and
+/// `true || e` is `true` even when `e` is an error (`Map.contains(m, k) && Map.get(m, k) > 0`).
 pub fn binary_value(op: BinOp, a: &Value, b: &Value) -> Value {
-    if let Value::Error(_) = a {
-        return a.clone();
+    match (op, a) {
+        (BinOp::And, Value::Bool(false)) | (BinOp::Or, Value::Bool(true)) => return a.clone(),
+        (_, Value::Error(_)) => return a.clone(),
+        _ => {}
     }
     if let Value::Error(_) = b {
         return b.clone();
@@ -172,6 +239,18 @@ pub fn shift_left(x: i64, s: i64) -> Option<i64> {
     (shifted >> r == x).then_some(shifted)
 }
 
+/// `x << s` with an unbounded result (TeSSLa's `Int`); `None` only for a shift so far left
+/// that the number would not fit in memory we are willing to spend (more than 65,536 bits).
+fn shift_big(x: i64, s: i64) -> Option<Value> {
+    match shift_left(x, s) {
+        Some(v) => Some(Value::Int(v)),
+        None => {
+            let s = usize::try_from(s).ok().filter(|s| *s <= 65_536)?;
+            Some(Value::from_big(num_bigint::BigInt::from(x) << s))
+        }
+    }
+}
+
 /// The operators with an inline scalar fast path, and the operator each one stands for.
 pub fn scalar_op(op: BinOp) -> Option<ScalarOp> {
     Some(match op {
@@ -227,6 +306,49 @@ impl ScalarOp {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn integers_are_unbounded_and_come_back_to_64_bits() {
+        let max = Value::Int(i64::MAX);
+        let two_max = binary(BinOp::Add, &max, &max).unwrap();
+        assert_eq!(two_max.to_string(), "18446744073709551614");
+        assert!(matches!(two_max, Value::BigInt(_)));
+        // Back inside 64 bits: the plain form again, equal to any other 64-bit value.
+        let back = binary(BinOp::Sub, &two_max, &max).unwrap();
+        assert_eq!(back, max);
+        assert!(matches!(back, Value::Int(_)));
+        assert_eq!(
+            binary(BinOp::Lt, &two_max, &Value::Int(5)).unwrap(),
+            Value::Bool(false)
+        );
+        assert_eq!(
+            binary(BinOp::Mul, &max, &Value::Int(-2))
+                .unwrap()
+                .to_string(),
+            "-18446744073709551614"
+        );
+        assert_eq!(
+            binary(BinOp::Div, &two_max, &Value::Int(0)),
+            Err(OpError::DivisionByZero)
+        );
+        assert_eq!(
+            unary(UnaryOp::Neg, &Value::Int(i64::MIN))
+                .unwrap()
+                .to_string(),
+            "9223372036854775808"
+        );
+    }
+
+    #[test]
+    fn and_or_ignore_an_error_they_do_not_need() {
+        let e = Value::Error(RuntimeError::IndexOutOfBounds);
+        let f = Value::Bool(false);
+        let t = Value::Bool(true);
+        assert_eq!(binary_value(BinOp::And, &f, &e), f);
+        assert_eq!(binary_value(BinOp::Or, &t, &e), t);
+        assert_eq!(binary_value(BinOp::And, &t, &e), e);
+        assert_eq!(binary_value(BinOp::Or, &e, &t), e);
+    }
 
     const ALL: [BinOp; 26] = [
         BinOp::Mul,
@@ -303,9 +425,14 @@ mod tests {
         assert_eq!(binary(BinOp::Shr, &i(-8), &i(1)), Ok(i(-4)));
         assert_eq!(binary(BinOp::Shr, &i(5), &i(i64::MIN)), Ok(i(0)));
         assert_eq!(
-            binary(BinOp::Shl, &i(1), &i(63)),
+            binary(BinOp::Shl, &i(1), &i(63)).map(|v| v.to_string()),
+            Ok("9223372036854775808".to_string()),
+            "2^63 is beyond 64 bits, and TeSSLa's Int is unbounded"
+        );
+        assert_eq!(
+            binary(BinOp::Shl, &i(1), &i(1 << 40)),
             Err(OpError::Overflow),
-            "2^63 does not fit"
+            "too large to hold"
         );
         assert_eq!(binary(BinOp::Shl, &i(0), &i(1000)), Ok(i(0)));
     }
@@ -318,8 +445,8 @@ mod tests {
             Err(OpError::DivisionByZero)
         );
         assert_eq!(
-            binary(BinOp::Div, &i(i64::MIN), &i(-1)),
-            Err(OpError::Overflow)
+            binary(BinOp::Div, &i(i64::MIN), &i(-1)).map(|v| v.to_string()),
+            Ok("9223372036854775808".to_string())
         );
         assert_eq!(
             binary(BinOp::Add, &i(1), &Value::Float(1.0)),

@@ -62,6 +62,9 @@ pub enum SValue {
     Str(String),
     None,
     Some(Box<SValue>),
+    /// An `Int` outside 64 bits, in decimal (added after the first format: older snapshots
+    /// never hold one, so they still read).
+    BigInt(String),
     List(Vec<SValue>),
     Tuple(Vec<SValue>),
     Record(Vec<(String, SValue)>),
@@ -92,6 +95,7 @@ impl SValue {
             Value::Unit => SValue::Unit,
             Value::Bool(b) => SValue::Bool(*b),
             Value::Int(i) => SValue::Int(*i),
+            Value::BigInt(i) => SValue::BigInt(i.to_string()),
             Value::Float(f) => SValue::Float(*f),
             Value::Str(s) => SValue::Str(s.to_string()),
             Value::None => SValue::None,
@@ -139,6 +143,12 @@ impl SValue {
             SValue::Unit => Value::Unit,
             SValue::Bool(b) => Value::Bool(*b),
             SValue::Int(i) => Value::Int(*i),
+            SValue::BigInt(i) => match i.parse::<num_bigint::BigInt>() {
+                Ok(b) => Value::from_big(b),
+                Err(_) => Value::Error(RuntimeError::Other(
+                    format!("saved state holds a malformed integer `{i}`").into(),
+                )),
+            },
             SValue::Float(f) => Value::Float(*f),
             SValue::Str(s) => Value::Str(Arc::from(s.as_str())),
             SValue::None => Value::None,

@@ -3,6 +3,11 @@
 //! Owns: [`Value`] (what an event carries), [`RuntimeError`] (errors as values), and the
 //! TeSSLa output format of a value (`Display`: `()`, `Some(3)`, `List(1, 2)`, strings unquoted).
 //! Scalars are inline (no heap allocation); compound values share their payload with `Arc`.
+//!
+//! `Int` is unbounded, as in TeSSLa's interpreter (Scala's `BigInt`): a result that does not
+//! fit 64 bits becomes [`Value::BigInt`], and one that fits again becomes [`Value::Int`]
+//! ([`Value::from_big`]), so each integer has exactly one form and the 64-bit path stays the
+//! fast one. Specs rely on this: `pseudoInfty + resetTime < time(e)` with both at `i64::MAX`.
 
 use std::fmt;
 use std::sync::Arc;
@@ -12,6 +17,8 @@ pub enum Value {
     Unit,
     Bool(bool),
     Int(i64),
+    /// An `Int` outside 64 bits (never one that fits: see [`Value::from_big`]).
+    BigInt(Arc<num_bigint::BigInt>),
     Float(f64),
     Str(Arc<str>),
     None,
@@ -36,6 +43,7 @@ impl PartialEq for Value {
             (Unit, Unit) | (None, None) => true,
             (Bool(a), Bool(b)) => a == b,
             (Int(a), Int(b)) => a == b,
+            (BigInt(a), BigInt(b)) => a == b,
             (Float(a), Float(b)) => a == b,
             (Str(a), Str(b)) => a == b,
             (Some(a), Some(b)) => a == b,
@@ -47,6 +55,25 @@ impl PartialEq for Value {
             (Closure(a), Closure(b)) => Arc::ptr_eq(a, b),
             (Error(a), Error(b)) => a == b,
             _ => false,
+        }
+    }
+}
+
+impl Value {
+    /// The value of an integer of any size: `Int` when it fits 64 bits, else `BigInt`.
+    pub fn from_big(b: num_bigint::BigInt) -> Value {
+        match i64::try_from(&b) {
+            Ok(i) => Value::Int(i),
+            Err(_) => Value::BigInt(Arc::new(b)),
+        }
+    }
+
+    /// An integer value of either form as a big integer.
+    pub fn as_big(&self) -> Option<num_bigint::BigInt> {
+        match self {
+            Value::Int(i) => Some((*i).into()),
+            Value::BigInt(b) => Some((**b).clone()),
+            _ => None,
         }
     }
 }
@@ -125,6 +152,7 @@ impl fmt::Display for Value {
             Value::Unit => f.write_str("()"),
             Value::Bool(b) => write!(f, "{b}"),
             Value::Int(i) => write!(f, "{i}"),
+            Value::BigInt(i) => write!(f, "{i}"),
             Value::Float(x) => f.write_str(&java_float(*x)),
             Value::Str(s) => f.write_str(s),
             Value::None => f.write_str("None"),

@@ -8,7 +8,7 @@
 //! of the trace grammar) and evaluated here, then checked against the input's declared type (a
 //! record `{_1 = a, _2 = b}` is a tuple, as TeSSLa treats tuples as records). `Set(...)` and
 //! `Map(k -> v, ...)` build set and map values (`->` only occurs in maps, so it is read as a
-//! comma and the arguments are paired). Integers beyond 64 bits are reported as unsupported.
+//! comma and the arguments are paired). Integers are unbounded, as TeSSLa's `Int`.
 //! Operators mean what they mean in a spec: their semantics are `tessla_engine::ops` (so a
 //! negative shift shifts the other way, as TeSSLa's unbounded integers do).
 
@@ -150,8 +150,13 @@ fn read_value(text: &str, line: usize) -> Result<Value, ReadError> {
     let (expr, diags) = tessla_syntax::parse_expr(&arrows_as_commas(text), FileId(0));
     let expr = match (expr, diags.first()) {
         (Some(e), None) => e,
+        // An integer beyond the parser's range: TeSSLa's `Int` is unbounded.
         (_, Some(d)) if d.message.contains("integer literal too large") => {
-            return Err(unsupported("Int values beyond 64 bits"));
+            return text
+                .trim()
+                .parse::<num_bigint::BigInt>()
+                .map(Value::from_big)
+                .map_err(|_| unsupported("Int expressions beyond 128 bits"));
         }
         (_, Some(d)) => {
             return Err(ReadError::malformed(
@@ -167,7 +172,6 @@ fn read_value(text: &str, line: usize) -> Result<Value, ReadError> {
         }
     };
     eval(&expr).map_err(|e| match e {
-        EvalError::BigInt => unsupported("Int values beyond 64 bits"),
         EvalError::Bad(m) => ReadError::malformed(line, format!("in the value `{text}`: {m}")),
     })
 }
@@ -217,8 +221,6 @@ fn check_escapes(text: &str) -> Result<(), String> {
 
 /// Why a trace value cannot be evaluated.
 enum EvalError {
-    /// An integer that does not fit 64 bits (TeSSLa's Int is unbounded).
-    BigInt,
     Bad(String),
 }
 
@@ -237,9 +239,7 @@ impl From<&str> for EvalError {
 /// Evaluate a constant trace expression.
 fn eval(e: &Expr) -> Result<Value, EvalError> {
     match &e.kind {
-        ExprKind::Int { value, unit: None } => i64::try_from(*value)
-            .map(Value::Int)
-            .map_err(|_| EvalError::BigInt),
+        ExprKind::Int { value, unit: None } => Ok(Value::from_big((*value).into())),
         ExprKind::Int { unit: Some(u), .. } => {
             Err(format!("time units (`{}`) are not allowed in traces", u.name).into())
         }
@@ -451,7 +451,7 @@ fn coerce(v: Value, t: &Type) -> Result<Value, String> {
         (v, Type::Unknown) => Ok(v),
         (v @ Value::Unit, Type::Unit)
         | (v @ Value::Bool(_), Type::Bool)
-        | (v @ Value::Int(_), Type::Int)
+        | (v @ (Value::Int(_) | Value::BigInt(_)), Type::Int)
         | (v @ Value::Float(_), Type::Float)
         | (v @ Value::Str(_), Type::String)
         | (v @ Value::None, Type::Option(_)) => Ok(v),
@@ -549,10 +549,13 @@ mod tests {
     fn operators_mean_what_they_mean_in_a_spec() {
         let spec = "in x: Events[Int]\nout x";
         // A negative shift shifts the other way (TeSSLa's unbounded integers), in a trace as in
-        // a spec; a result beyond 64 bits is an overflow, not a wrapped value.
+        // a spec; a result beyond 64 bits is a larger integer, not a wrapped value.
         assert_eq!(read(spec, "1: x = 8 << -3").unwrap(), Value::Int(1));
         assert_eq!(read(spec, "1: x = 1 >> -3").unwrap(), Value::Int(8));
-        assert!(read(spec, "1: x = 1 << 63").is_err());
+        assert_eq!(
+            read(spec, "1: x = 1 << 63").unwrap().to_string(),
+            "9223372036854775808"
+        );
         assert!(read(spec, "1: x = 1 / 0").is_err());
     }
 
@@ -639,8 +642,12 @@ mod tests {
         assert!(e.message.contains("cannot read the value"), "{}", e.message);
         let e = read(spec, "1: x = 1 / 0").unwrap_err();
         assert!(e.message.contains("Division by zero"), "{}", e.message);
-        let e = read(spec, "1: x = 99999999999999999999999").unwrap_err();
-        assert_eq!(e.kind, ReadErrorKind::Unsupported);
+        assert_eq!(
+            read(spec, "1: x = 99999999999999999999999999999999999999999")
+                .unwrap()
+                .to_string(),
+            "99999999999999999999999999999999999999999"
+        );
         let s = "in s: Events[String]\nout s";
         let e = read(s, r#"1: s = "\d""#).unwrap_err();
         assert_eq!(e.message, "Invalid escape sequence '\\d' in string");

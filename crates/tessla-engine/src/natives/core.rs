@@ -20,6 +20,9 @@ fn type_err(name: &str, args: &[Value]) -> Value {
 pub fn int_to_float(a: &[Value]) -> Value {
     match a {
         [Value::Int(i)] => Value::Float(*i as f64),
+        [Value::BigInt(i)] => {
+            Value::Float(num_traits::ToPrimitive::to_f64(&**i).unwrap_or(f64::NAN))
+        }
         _ => type_err("intToFloat", a),
     }
 }
@@ -27,9 +30,40 @@ pub fn int_to_float(a: &[Value]) -> Value {
 pub fn float_to_int(a: &[Value]) -> Value {
     match a {
         [Value::Float(f)] if f.is_finite() && f.abs() < 9.2e18 => Value::Int(f.trunc() as i64),
+        // TeSSLa's `Int` is unbounded, and a large float converts through its shortest
+        // decimal form, as Java's `BigDecimal.valueOf` does: `4.2E24` is
+        // 4200000000000000000000000 (not the double's binary value, ...251658240).
+        [Value::Float(f)] if f.is_finite() => {
+            decimal_trunc(*f).map_or(err(RuntimeError::Overflow), Value::from_big)
+        }
         [Value::Float(_)] => err(RuntimeError::Overflow),
         _ => type_err("floatToInt", a),
     }
+}
+
+/// The integer part of `f`'s shortest round-trip decimal form.
+fn decimal_trunc(f: f64) -> Option<num_bigint::BigInt> {
+    let text = format!("{f:e}");
+    let (mantissa, exp) = text.split_once('e')?;
+    let exp: i64 = exp.parse().ok()?;
+    let negative = mantissa.starts_with('-');
+    let mantissa = mantissa.trim_start_matches('-');
+    let (int, frac) = mantissa.split_once('.').unwrap_or((mantissa, ""));
+    let digits = format!("{int}{frac}");
+    // The value is 0.digits × 10^(len(int) + exp): keep the digits before the point.
+    let point = i64::try_from(int.len()).ok()? + exp;
+    let kept: String = if point <= 0 {
+        "0".into()
+    } else {
+        let point = usize::try_from(point).ok()?;
+        if point >= digits.len() {
+            format!("{digits}{}", "0".repeat(point - digits.len()))
+        } else {
+            digits[..point].to_string()
+        }
+    };
+    let b: num_bigint::BigInt = kept.parse().ok()?;
+    Some(if negative { -b } else { b })
 }
 
 fn float1(name: &str, a: &[Value], f: fn(f64) -> f64) -> Value {
@@ -72,9 +106,11 @@ pub fn log(a: &[Value]) -> Value {
 
 pub fn abs(a: &[Value]) -> Value {
     match a {
-        [Value::Int(i)] => i
-            .checked_abs()
-            .map_or(err(RuntimeError::Overflow), Value::Int),
+        [Value::Int(i)] => i.checked_abs().map_or_else(
+            || Value::from_big(num_bigint::BigInt::from(*i).magnitude().clone().into()),
+            Value::Int,
+        ),
+        [Value::BigInt(i)] => Value::from_big(i.magnitude().clone().into()),
         [Value::Float(f)] => Value::Float(f.abs()),
         _ => type_err("abs", a),
     }
@@ -83,6 +119,16 @@ pub fn abs(a: &[Value]) -> Value {
 pub fn max(a: &[Value]) -> Value {
     match a {
         [Value::Int(x), Value::Int(y)] => Value::Int(*x.max(y)),
+        [
+            x @ (Value::Int(_) | Value::BigInt(_)),
+            y @ (Value::Int(_) | Value::BigInt(_)),
+        ] => {
+            if x.as_big() >= y.as_big() {
+                x.clone()
+            } else {
+                y.clone()
+            }
+        }
         [Value::Float(x), Value::Float(y)] => Value::Float(x.max(*y)),
         _ => type_err("max", a),
     }
@@ -91,6 +137,16 @@ pub fn max(a: &[Value]) -> Value {
 pub fn min(a: &[Value]) -> Value {
     match a {
         [Value::Int(x), Value::Int(y)] => Value::Int(*x.min(y)),
+        [
+            x @ (Value::Int(_) | Value::BigInt(_)),
+            y @ (Value::Int(_) | Value::BigInt(_)),
+        ] => {
+            if x.as_big() <= y.as_big() {
+                x.clone()
+            } else {
+                y.clone()
+            }
+        }
         [Value::Float(x), Value::Float(y)] => Value::Float(x.min(*y)),
         _ => type_err("min", a),
     }
@@ -332,15 +388,33 @@ mod tests {
             float_to_int(&[Value::Float(f64::NAN)]),
             err(RuntimeError::Overflow)
         );
+        // TeSSLa's Int is unbounded: large floats convert through their decimal form.
         assert_eq!(
-            float_to_int(&[Value::Float(1e300)]),
-            err(RuntimeError::Overflow)
+            float_to_int(&[Value::Float(1e30)]).to_string(),
+            "1000000000000000000000000000000"
         );
+        assert_eq!(
+            float_to_int(&[Value::Float(4.2e24)]).to_string(),
+            "4200000000000000000000000"
+        );
+        assert_eq!(
+            float_to_int(&[Value::Float(-1.5e19)]).to_string(),
+            "-15000000000000000000"
+        );
+        assert_eq!(
+            decimal_trunc(12.5).map(|b| b.to_string()),
+            Some("12".into())
+        );
+        assert_eq!(decimal_trunc(-0.5).map(|b| b.to_string()), Some("0".into()));
         assert_eq!(int_to_float(&[int(3)]), Value::Float(3.0));
+        assert_eq!(
+            int_to_float(&[float_to_int(&[Value::Float(1e63)])]),
+            Value::Float(1e63)
+        );
     }
 
     #[test]
-    fn math_functions_follow_f64_and_overflow_is_an_error() {
+    fn math_functions_follow_f64_and_integers_are_unbounded() {
         assert_eq!(
             pow(&[Value::Float(2.0), Value::Float(10.0)]),
             Value::Float(1024.0)
@@ -349,7 +423,7 @@ mod tests {
             log(&[Value::Float(8.0), Value::Float(2.0)]),
             Value::Float(3.0)
         );
-        assert_eq!(abs(&[int(i64::MIN)]), err(RuntimeError::Overflow));
+        assert_eq!(abs(&[int(i64::MIN)]).to_string(), "9223372036854775808");
         assert_eq!(abs(&[int(-4)]), int(4));
         assert_eq!(max(&[int(3), int(7)]), int(7));
         assert_eq!(
