@@ -402,6 +402,33 @@ fn a_spec_without_outputs_is_a_spec_error() {
 }
 
 #[test]
+fn a_library_of_definitions_checks_with_library() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("lib.tessla");
+    std::fs::write(
+        &path,
+        "module Checks {\n  def above(x: Events[Int], limit: Int): Events[Bool] = x > limit\n}\n\
+         def twice(x: Int): Int = 2 * x\n",
+    )
+    .unwrap();
+    let p = path.to_str().unwrap();
+    // Without the flag the hint names it.
+    let (_, err, code) = run_all(&["check", p], "");
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("check --library"), "{err}");
+    let (out, err, code) = run_all(&["check", "--library", p], "");
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("library: 2 definitions in 1 modules checked"),
+        "{out}"
+    );
+    // A library is still checked: a wrong definition is an error.
+    std::fs::write(&path, "def twice(x: Int): Int = 2 * x + true\n").unwrap();
+    let (_, err, code) = run_all(&["check", "--library", p], "");
+    assert_eq!(code, 2, "{err}");
+}
+
+#[test]
 fn check_lists_only_parameters_under_set() {
     let (out, err, code) = run_all(&["check", &spec("robot.tessla"), "--set", "delta=0.03"], "");
     assert_eq!(code, 0, "{err}");

@@ -1,6 +1,7 @@
 //! `tessla-telegraf check SPEC`: parse and check a spec, print its inputs and outputs with types
 //! and annotations, then its parameters (the top-level constants `--set` can change, with the
-//! comment above each); exit 0, or 2 with diagnostics (also for a spec without outputs).
+//! comment above each); exit 0, or 2 with diagnostics (also for a spec without outputs, unless
+//! `--library`: a file of definitions other specs include).
 
 use super::{CheckArgs, CliError, CliResult};
 use std::io::Write;
@@ -10,7 +11,8 @@ pub fn require_outputs(program: &tessla_engine::Program, spec: &str) -> Result<(
     if program.outputs.is_empty() {
         Err(format!(
             "{spec}: the spec has no outputs, so it would check nothing and write nothing; \
-             add `out NAME` for each stream to report (or `out *`)"
+             add `out NAME` for each stream to report (or `out *`); for a library of \
+             definitions that other specs include, use `check --library`"
         ))
     } else {
         Ok(())
@@ -31,8 +33,10 @@ pub fn run(args: CheckArgs) -> CliResult {
     // The Telegraf binding reads the annotations: check them as `run` does.
     crate::telegraf::binding::bindings(&loaded.program)
         .map_err(|e| CliError::spec(format!("error: {e}")))?;
-    require_outputs(&loaded.program, &args.spec.display().to_string())
-        .map_err(|e| CliError::spec(format!("error: {e}")))?;
+    if !args.library {
+        require_outputs(&loaded.program, &args.spec.display().to_string())
+            .map_err(|e| CliError::spec(format!("error: {e}")))?;
+    }
     let p = &loaded.program;
     let ann = |a: &[tessla_engine::Annotation]| {
         a.iter()
@@ -78,6 +82,12 @@ pub fn run(args: CheckArgs) -> CliResult {
             }
         }
     }
+    if args.library {
+        let (defs, modules) = count_defs(&args.spec);
+        out.push_str(&format!(
+            "library: {defs} definitions in {modules} modules checked\n"
+        ));
+    }
     out.push_str(&format!(
         "{} inputs, {} outputs, {} stream nodes\n",
         p.inputs.len(),
@@ -92,6 +102,35 @@ pub fn run(args: CheckArgs) -> CliResult {
         .write_all(out.as_bytes())
         .and_then(|()| stdout.flush())
         .map_err(|e| CliError::io(format!("error: writing the result: {e}")))
+}
+
+/// How many definitions and modules the spec's files (includes too) hold, nested ones counted.
+fn count_defs(spec: &std::path::Path) -> (usize, usize) {
+    use tessla_syntax::ast::Statement;
+    fn walk(statements: &[Statement], n: &mut (usize, usize)) {
+        for st in statements {
+            match st {
+                Statement::Def(_) => n.0 += 1,
+                Statement::Module { statements, .. } => {
+                    n.1 += 1;
+                    walk(statements, n);
+                }
+                _ => {}
+            }
+        }
+    }
+    let mut sources = tessla_syntax::source::SourceMap::new();
+    let mut n = (0, 0);
+    if let Ok(files) = tessla_syntax::include::load_spec(
+        &spec.display().to_string(),
+        &tessla_syntax::include::FsResolver,
+        &mut sources,
+    ) {
+        for (_, file) in &files {
+            walk(&file.statements, &mut n);
+        }
+    }
+    n
 }
 
 /// The spec's parameters: top-level definitions without parameters whose body is a literal

@@ -137,6 +137,10 @@ pub struct CheckArgs {
     /// Also print the lowered program: its nodes in evaluation order, and the outputs' nodes.
     #[arg(long)]
     pub ir: bool,
+    /// Check a library of definitions meant to be included by other specs: no outputs needed
+    /// (without this flag a spec without outputs is an error, since it would check nothing).
+    #[arg(long)]
+    pub library: bool,
     #[command(flatten)]
     pub spec_options: SpecOptions,
 }
