@@ -43,32 +43,9 @@ pub fn binary(op: BinOp, a: &Value, b: &Value) -> Result<Value, OpError> {
         (BinOp::Div | BinOp::Mod, Int(_), Int(0)) => return Err(OpError::DivisionByZero),
         (BinOp::Div, Int(x), Int(y)) => x.checked_div(*y).map_or_else(|| big(op, a, b), Int),
         (BinOp::Mod, Int(x), Int(y)) => x.checked_rem(*y).map_or_else(|| big(op, a, b), Int),
-        (
-            BinOp::Add
-            | BinOp::Sub
-            | BinOp::Mul
-            | BinOp::Div
-            | BinOp::Mod
-            | BinOp::Lt
-            | BinOp::Gt
-            | BinOp::Le
-            | BinOp::Ge,
-            Int(_) | BigInt(_),
-            BigInt(_),
-        )
-        | (
-            BinOp::Add
-            | BinOp::Sub
-            | BinOp::Mul
-            | BinOp::Div
-            | BinOp::Mod
-            | BinOp::Lt
-            | BinOp::Gt
-            | BinOp::Le
-            | BinOp::Ge,
-            BigInt(_),
-            Int(_),
-        ) => {
+        (_, Int(_) | BigInt(_), Int(_) | BigInt(_))
+            if integer_op(op) && (matches!(a, BigInt(_)) || matches!(b, BigInt(_))) =>
+        {
             if matches!(op, BinOp::Div | BinOp::Mod) && matches!(b, Int(0)) {
                 return Err(OpError::DivisionByZero);
             }
@@ -117,6 +94,22 @@ pub fn unary(op: UnaryOp, a: &Value) -> Result<Value, OpError> {
         (UnaryOp::FNeg, Value::Float(f)) => Value::Float(-f),
         _ => return Err(OpError::Undefined),
     })
+}
+
+/// The operators defined on integers of any size: arithmetic and comparisons.
+pub fn integer_op(op: BinOp) -> bool {
+    matches!(
+        op,
+        BinOp::Add
+            | BinOp::Sub
+            | BinOp::Mul
+            | BinOp::Div
+            | BinOp::Mod
+            | BinOp::Lt
+            | BinOp::Gt
+            | BinOp::Le
+            | BinOp::Ge
+    )
 }
 
 /// `a op b` on integers of any size (TeSSLa's `Int` is unbounded): arithmetic and comparisons.
