@@ -175,7 +175,7 @@ fn well_typed_specs_load() {
         "in a: Events[Int]\ndef x: Events[Int] := last(z, a)\ndef z := default(x, 0) + a\nout z\n",
         // Tuples are records `_1`, `_2`; fold with a lambda; Options; lists.
         "in a: Events[Int]\ndef p = (a, 1)\nout p._1 + p._2\n\
-         out fold(a, 0, (acc, v) => acc + v)\n\
+         out fold(a, 0, (acc: Int, v: Int) => acc + v)\n\
          out getSomeOrElse(Some(a), 0)\nout List.size(List.append(List.empty[Int], a))\n",
         // A parameterless function is called when output.
         "def foo() = 42\nout foo\n",
