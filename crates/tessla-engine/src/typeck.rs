@@ -390,6 +390,8 @@ struct Checker<'a> {
     /// (`None`: a barrier, an unused local def checked for its own sake). See
     /// [`Checker::check_recursion`].
     inferring: Vec<Option<(usize, bool)>>,
+    /// Members of literals being inferred through [`Checker::literal_member`].
+    literal_members: Vec<(usize, String)>,
 }
 
 impl<'a> Checker<'a> {
@@ -1254,6 +1256,9 @@ impl<'a> Checker<'a> {
                         };
                     }
                 }
+                if let Some(t) = self.literal_member(object, field, scope) {
+                    return t;
+                }
                 let o = self.infer(object, scope);
                 let base = self.resolve(&self.strip(&o));
                 let r = match &base {
@@ -1385,6 +1390,52 @@ impl<'a> Checker<'a> {
                 self.call(f, function, args, e.span, scope)
             }
         }
+    }
+
+    /// `x._1` or `x.a` inside the definition of `x` itself, where `x` is a tuple or record
+    /// literal without a written type: as in TeSSLa, the access is the member's own expression
+    /// (`def x = (v, x._1)` is not a recursion of `x`). `None`: not such an access.
+    fn literal_member(
+        &mut self,
+        object: &'a Expr,
+        field: &ast::Ident,
+        scope: &Rc<Scope<'a>>,
+    ) -> Option<Ty> {
+        let ExprKind::Var(id) = &object.kind else {
+            return None;
+        };
+        let Some(Found::Def(d)) = self.find(&id.name, scope) else {
+            return None;
+        };
+        if d.def.params.is_some() || !matches!(*d.state.borrow(), State::InProgress(_)) {
+            return None;
+        }
+        let Body::Expr { expr, where_defs } = &d.def.body else {
+            return None;
+        };
+        if !where_defs.is_empty() {
+            return None;
+        }
+        let member = match &expr.kind {
+            ExprKind::Tuple(es) => field
+                .name
+                .strip_prefix('_')
+                .and_then(|k| k.parse::<usize>().ok())
+                .and_then(|k| es.get(k.checked_sub(1)?)),
+            ExprKind::Record(ms) => ms
+                .iter()
+                .find(|(n, _)| n.name == field.name)
+                .map(|(_, e)| e),
+            _ => None,
+        }?;
+        let key = (Rc::as_ptr(&d) as usize, field.name.clone());
+        if self.literal_members.contains(&key) {
+            return None;
+        }
+        self.literal_members.push(key);
+        let t = self.infer(member, &d.scope);
+        self.literal_members.pop();
+        Some(t)
     }
 
     /// TeSSLa's rules for the type arguments of a call of a user function: as many as it has

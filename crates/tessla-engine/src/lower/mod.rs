@@ -83,6 +83,11 @@ enum DefState {
     Todo,
     InProgress {
         alias: Option<NodeId>,
+        /// Where it was first used outside the lazy argument of `last`/`delay` while being
+        /// compiled (checked for a strict cycle when it is done; see `lower/names.rs`).
+        eager: Option<Span>,
+        /// A member of its tuple or record literal is being compiled (`def x = (v, x._1)`).
+        in_member: bool,
     },
     Done(Term),
     /// Compiling it failed (already reported): uses fail silently.
