@@ -72,14 +72,14 @@ conformance:
 	UPDATE_CONFORMANCE=1 $(CARGO) test -p tessla-trace --test conformance -- --nocapture
 	cat target/conformance-summary.txt
 
-# Rewrite the standard-library, user-spec and pending broken-spec pass lists (tests/stdlib.rs)
+# Rewrite the standard-library and user-spec pass lists (tests/stdlib.rs)
 # and the prelude's (tests/prelude.rs)
 # after an improvement; the lists may only grow.
 .PHONY: stdlib
 stdlib:
 	UPDATE_STDLIB=1 $(CARGO) test --test stdlib -- --nocapture
 	UPDATE_STDLIB=1 $(CARGO) test --test prelude -- --nocapture
-	grep -h 'pass$$' target/stdlib-summary.txt target/broken-specs-pending-summary.txt target/prelude-summary.txt
+	grep -h 'pass$$' target/stdlib-summary.txt target/prelude-summary.txt
 
 # The README's example image, from the recorded-run fixture.
 report-example: build

@@ -39,7 +39,7 @@ const PLACED: &[(&str, &str)] = &[
     ),
     (
         "recursion_without_last",
-        "recursion_without_last.tessla:4:9",
+        "recursion_without_last.tessla:5:9",
     ),
     ("syntax_bad_character", "syntax_bad_character.tessla:3:11"),
     (
@@ -62,6 +62,79 @@ const PLACED: &[(&str, &str)] = &[
     ("type_wrong_arity", "type_wrong_arity.tessla:3:9"),
     ("unknown_function", "unknown_function.tessla:3:9"),
     ("unknown_stream", "unknown_stream.tessla:3:5"),
+    // TeSSLa's rules for definitions nothing uses, type applications, annotations, named
+    // arguments, type arguments and written types (each case's first line names its place).
+    (
+        "annotation_argument_type",
+        "annotation_argument_type.tessla:4:8",
+    ),
+    ("annotation_arity", "annotation_arity.tessla:4:1"),
+    (
+        "annotation_defined_twice",
+        "annotation_defined_twice.tessla:4:6",
+    ),
+    (
+        "annotation_global_arity",
+        "annotation_global_arity.tessla:4:1",
+    ),
+    (
+        "annotation_global_used_locally",
+        "annotation_global_used_locally.tessla:5:2",
+    ),
+    ("annotation_in_module", "annotation_in_module.tessla:4:3"),
+    (
+        "annotation_local_used_globally",
+        "annotation_local_used_globally.tessla:4:3",
+    ),
+    (
+        "annotation_not_constant",
+        "annotation_not_constant.tessla:5:8",
+    ),
+    (
+        "missing_lambda_parameter_type",
+        "missing_lambda_parameter_type.tessla:4:20",
+    ),
+    (
+        "missing_parameter_type",
+        "missing_parameter_type.tessla:4:11",
+    ),
+    (
+        "missing_recursive_type",
+        "missing_recursive_type.tessla:4:5",
+    ),
+    (
+        "named_after_positional",
+        "named_after_positional.tessla:5:19",
+    ),
+    (
+        "named_unknown_parameter",
+        "named_unknown_parameter.tessla:5:14",
+    ),
+    (
+        "type_argument_not_inferable",
+        "type_argument_not_inferable.tessla:5:9",
+    ),
+    (
+        "type_arity_on_plain_type",
+        "type_arity_on_plain_type.tessla:4:30",
+    ),
+    ("type_arity_too_few", "type_arity_too_few.tessla:4:8"),
+    ("type_arity_too_many", "type_arity_too_many.tessla:3:7"),
+    (
+        "undefined_type_application",
+        "undefined_type_application.tessla:4:13",
+    ),
+    ("undefined_type_nested", "undefined_type_nested.tessla:4:29"),
+    (
+        "unused_function_unknown_name",
+        "unused_function_unknown_name.tessla:5:36",
+    ),
+    ("unused_type_error", "unused_type_error.tessla:5:28"),
+    ("unused_unknown_name", "unused_unknown_name.tessla:5:13"),
+    (
+        "annotation_wrong_arguments",
+        "annotation_wrong_arguments.tessla:3:13",
+    ),
 ];
 
 /// Bad Telegraf annotations, found by the binding: exit 2 and a message naming the input (the
@@ -73,11 +146,6 @@ const BINDING: &[(&str, &str)] = &[
         "input `lidar`: a `_*` field pattern",
     ),
 ];
-
-/// Specs the checker accepts today although TeSSLa rejects them (type errors the engine only
-/// meets at run time, if at all). Known gaps, listed in RELIABILITY.md: the test checks they do
-/// not panic, and fails once one is rejected, so that it moves to `PLACED`.
-const KNOWN_GAPS: &[&str] = &["annotation_wrong_arguments"];
 
 fn dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/broken-specs")
@@ -106,12 +174,7 @@ fn both(name: &str) -> Vec<(&'static str, Option<i32>, String)> {
 
 #[test]
 fn every_broken_spec_is_listed() {
-    let mut listed: Vec<&str> = PLACED
-        .iter()
-        .chain(BINDING)
-        .map(|(n, _)| *n)
-        .chain(KNOWN_GAPS.iter().copied())
-        .collect();
+    let mut listed: Vec<&str> = PLACED.iter().chain(BINDING).map(|(n, _)| *n).collect();
     listed.sort_unstable();
     let mut found: Vec<String> = std::fs::read_dir(dir())
         .unwrap()
@@ -144,19 +207,6 @@ fn bad_telegraf_annotations_exit_2_naming_the_input() {
         for (what, code, text) in both(name) {
             assert_eq!(code, Some(2), "{what} {name}: {text}");
             assert!(text.contains(message), "{what} {name}: {text}");
-        }
-    }
-}
-
-#[test]
-fn known_gaps_do_not_panic_and_are_still_gaps() {
-    for name in KNOWN_GAPS {
-        for (what, code, text) in both(name) {
-            assert_eq!(
-                code,
-                Some(0),
-                "{what} {name} is now rejected: move it to PLACED with its place\n{text}"
-            );
         }
     }
 }

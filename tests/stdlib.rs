@@ -1,5 +1,5 @@
-//! The standard-library corpus, the user-style specs and the pending broken specs, each run
-//! through the real binary as a child process.
+//! The standard-library corpus and the user-style specs, each run through the real binary as a
+//! child process.
 //!
 //! - `tests/fixtures/stdlib/<Module>/<case>.tessla` (one or more cases per library name, listed in
 //!   `tests/fixtures/stdlib/NAMES.txt`) and `tests/fixtures/userspecs/<case>.tessla`: each runs as
@@ -7,16 +7,11 @@
 //!   lines equal `<case>.expected` (compared as a multiset: the order of simultaneous outputs is
 //!   free, floats compare by value). A `<case>.error` file instead asks for a failing run whose
 //!   stderr contains its first line (the outputs before the error are still compared).
-//! - `tests/fixtures/broken-specs-pending/<case>.tessla`: specs TeSSLa rejects that we accept
-//!   today. Each names the place of its error in a first-line comment
-//!   `-- error at: <file>.tessla:LINE:COL`; it passes when `tessla-telegraf check` exits 2 naming
-//!   that place.
 //!
 //! Every name of NAMES.txt must have a case, and every stdlib case must belong to a listed name.
 //! Prints `N of M pass` and the first error line of each failure, and writes the same to
-//! `target/stdlib-summary.txt` (and `target/broken-specs-pending-summary.txt`). Fails when a
-//! case listed in `tests/stdlib-pass.txt` (or `tests/broken-specs-pending-pass.txt`) stops
-//! passing; `UPDATE_STDLIB=1` (`make stdlib`) rewrites both lists from the current results (they
+//! `target/stdlib-summary.txt`. Fails when a case listed in `tests/stdlib-pass.txt` stops
+//! passing; `UPDATE_STDLIB=1` (`make stdlib`) rewrites the list from the current results (it
 //! may only grow: a shrinking list is a regression to explain in the commit).
 
 #[path = "support/child.rs"]
@@ -25,48 +20,9 @@ mod child;
 mod stdlib_cases;
 
 use std::collections::BTreeSet;
-use std::path::{Path, PathBuf};
 use stdlib_cases::{
-    CASE_LIMIT, first_line, fixtures, library_and_user_cases, names, report, run_all,
-    run_trace_case, specs_in, stem,
+    fixtures, library_and_user_cases, names, report, run_all, run_trace_case, specs_in, stem,
 };
-
-/// The place a pending broken spec names in its first comment (`-- error at: f.tessla:3:9`).
-fn expected_place(spec: &Path) -> Option<String> {
-    let text = std::fs::read_to_string(spec).ok()?;
-    text.lines().find_map(|l| {
-        l.trim()
-            .strip_prefix("--")
-            .and_then(|r| r.trim().strip_prefix("error at:"))
-            .map(|p| p.trim().to_string())
-    })
-}
-
-/// Run one pending broken spec through `check`; `Ok(())` when it exits 2 naming its place.
-fn run_broken_case(spec: &Path) -> Result<(), String> {
-    let place = expected_place(spec)
-        .ok_or_else(|| "no `-- error at: FILE:LINE:COL` comment".to_string())?;
-    let spec_s = spec.display().to_string();
-    let f = child::run_bytes(&["check", spec_s.as_str()], Vec::new(), CASE_LIMIT);
-    let text = format!("{}{}", f.stderr, f.stdout_text());
-    if text.contains("panicked") {
-        return Err(format!("panicked: {}", first_line(&f.stderr)));
-    }
-    if f.code != Some(2) {
-        return Err(format!(
-            "check exits {:?} (want 2): {}",
-            f.code,
-            first_line(&text)
-        ));
-    }
-    if !text.contains(&format!("/{place}")) && !text.contains(&format!(" {place}")) {
-        return Err(format!(
-            "rejected, but not at {place}: {}",
-            first_line(&text)
-        ));
-    }
-    Ok(())
-}
 
 #[test]
 fn every_library_name_has_a_case() {
@@ -131,21 +87,5 @@ fn library_and_user_specs() {
         &results,
         "tests/stdlib-pass.txt",
         "stdlib-summary.txt",
-    );
-}
-
-#[test]
-fn pending_broken_specs() {
-    let cases: Vec<(String, PathBuf)> = specs_in(&fixtures().join("broken-specs-pending"))
-        .into_iter()
-        .map(|p| (stem(&p), p))
-        .collect();
-    assert!(!cases.is_empty(), "no pending broken specs found");
-    let results = run_all(cases, run_broken_case);
-    report(
-        "pending broken specs",
-        &results,
-        "tests/broken-specs-pending-pass.txt",
-        "broken-specs-pending-summary.txt",
     );
 }

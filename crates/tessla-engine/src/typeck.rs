@@ -10,16 +10,23 @@
 //! get arguments of their signature, user functions get arguments of their declared parameter
 //! types, a def's declared type matches its body, and an output is not a function.
 //!
+//! TeSSLa's own rules, checked here for every definition whether an output uses it or not:
+//! names resolve (unknown names are reported here), types are applied to as many type arguments
+//! as they take, parameters (of defs and lambdas) have types, a recursive definition has its
+//! type written somewhere on its cycle (a function: its return type), a type argument no
+//! parameter type determines is given at the call, named arguments follow TeSSLa's order rule,
+//! and annotations are used as declared (kind, arity, argument types, constants; defined once,
+//! at the top level).
+//!
 //! Soundness rule: the checker never rejects a spec TeSSLa accepts. Whatever it does not model
 //! (type aliases and extern types, named arguments of builtins, record fields of a value of still
-//! unknown type, unknown names, which the compiler reports) gets a fresh type variable, which
-//! fits everything. Definitions are generalised (let-polymorphism) when they are done, so generic
+//! unknown type) gets a fresh type variable, which fits everything. Definitions are generalised (let-polymorphism) when they are done, so generic
 //! functions and constants may be used at several types.
 
 use crate::builtins::{self, Sig};
 use crate::ir::Type;
 use std::cell::RefCell;
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 use std::rc::Rc;
 use std::sync::OnceLock;
 use tessla_syntax::ast::{self, BinOp, Body, Def, Expr, ExprKind, Statement, StrPart, UnaryOp};
@@ -163,6 +170,7 @@ pub fn check_typed(files: &[ast::File]) -> (Vec<Diagnostic>, Types) {
     for f in files {
         collect_type_names(&f.statements, &mut c.declared_types);
     }
+    let mut annotation_defs: HashMap<(String, bool), &ast::Statement> = HashMap::new();
     let mut statements: Vec<(String, &Statement)> = Vec::new();
     for f in files {
         for s in &f.statements {
@@ -204,11 +212,57 @@ pub fn check_typed(files: &[ast::File]) -> (Vec<Diagnostic>, Types) {
                 let t = c.ast_type(ty, &HashMap::new());
                 c.inputs.insert(name.name.clone(), t);
             }
+            Statement::AnnotationDef {
+                name, global, span, ..
+            } => {
+                if !prefix.is_empty() {
+                    c.report(
+                        Diagnostic::error(
+                            Category::Name,
+                            Some(*span),
+                            format!(
+                                "annotation `{}` is defined inside a module",
+                                at(name, *global)
+                            ),
+                        )
+                        .with_label("inside a module")
+                        .with_help("define annotations at the top level of the spec"),
+                    );
+                } else if let Some(Statement::AnnotationDef { span: first, .. }) =
+                    annotation_defs.get(&(name.name.clone(), *global))
+                {
+                    c.report(
+                        Diagnostic::error(
+                            Category::Name,
+                            Some(name.span),
+                            format!("annotation `{}` is defined twice", at(name, *global)),
+                        )
+                        .with_label("defined again here")
+                        .with_note_at(*first, "first defined here")
+                        .with_help("remove one of the definitions"),
+                    );
+                } else {
+                    annotation_defs.insert((name.name.clone(), *global), s);
+                }
+            }
             _ => {}
         }
     }
     for g in in_order {
         c.def_scheme(&g);
+    }
+    for (_, s) in &statements {
+        let (anns, global): (&[ast::Annotation], bool) = match s {
+            Statement::In { annotations, .. } | Statement::OutAll { annotations, .. } => {
+                (annotations, false)
+            }
+            Statement::Out(o) => (&o.annotations, false),
+            Statement::GlobalAnnotation(a) => (std::slice::from_ref(a), true),
+            _ => continue,
+        };
+        for a in anns {
+            c.annotation(a, global, &annotation_defs);
+        }
     }
     for (_, s) in &statements {
         if let Statement::Out(o) = s {
@@ -250,6 +304,11 @@ pub fn check_typed(files: &[ast::File]) -> (Vec<Diagnostic>, Types) {
     (std::mem::take(&mut c.diags), types)
 }
 
+/// An annotation's name as written at its use: `@Name` or `@@Name`.
+fn at(name: &ast::Ident, global: bool) -> String {
+    format!("{}{}", if global { "@@" } else { "@" }, name.name)
+}
+
 /// The element type of a stream (`T` of `Events[T]`; a constant is its own) as an IR type.
 fn element_type(t: &Ty) -> Type {
     match t {
@@ -287,12 +346,15 @@ fn ir_type_of(t: &Ty) -> Type {
     }
 }
 
-/// The names of every `type` declaration in `statements` and the modules inside them.
-fn collect_type_names(statements: &[Statement], out: &mut HashSet<String>) {
+/// The names of every `type` declaration in `statements` and the modules inside them, with
+/// their number of type parameters.
+fn collect_type_names(statements: &[Statement], out: &mut HashMap<String, usize>) {
     for s in statements {
         match s {
-            Statement::TypeDef { name, .. } => {
-                out.insert(name.name.clone());
+            Statement::TypeDef {
+                name, type_params, ..
+            } => {
+                out.insert(name.name.clone(), type_params.len());
             }
             Statement::Module { statements, .. } => collect_type_names(statements, out),
             _ => {}
@@ -319,14 +381,160 @@ struct Checker<'a> {
     local_scopes: Vec<Rc<Scope<'a>>>,
     /// Names declared with `type` anywhere (modules included): the type names besides the
     /// builtins that a spec may use.
-    declared_types: HashSet<String>,
+    declared_types: HashMap<String, usize>,
     /// Type parameters of the defs being inferred, innermost last: a lambda or nested def may
     /// name its enclosing def's type parameters. Used only to decide whether a type name is
     /// known (the types themselves stay as before).
     enclosing_tparams: Vec<String>,
+    /// The defs being inferred, innermost last, each with whether its type is written
+    /// (`None`: a barrier, an unused local def checked for its own sake). See
+    /// [`Checker::check_recursion`].
+    inferring: Vec<Option<(usize, bool)>>,
+    /// Members of literals being inferred through [`Checker::literal_member`].
+    literal_members: Vec<(usize, String)>,
 }
 
 impl<'a> Checker<'a> {
+    /// Check one use of an annotation against its definition: declared with the same kind
+    /// (`@` on an `in`/`out`, `@@` on its own), arity, argument types, constant arguments. An
+    /// annotation declared nowhere is left to the compiler (a warning there).
+    fn annotation(
+        &mut self,
+        a: &'a ast::Annotation,
+        global: bool,
+        defs: &HashMap<(String, bool), &'a Statement>,
+    ) {
+        let Some(Statement::AnnotationDef { params, .. }) =
+            defs.get(&(a.name.name.clone(), global))
+        else {
+            if defs.contains_key(&(a.name.name.clone(), !global)) {
+                let (msg, help) = if global {
+                    (
+                        format!(
+                            "`@{0}` annotates an `in` or `out`; it cannot be used as a global `@@{0}` annotation",
+                            a.name.name
+                        ),
+                        format!(
+                            "write `@{0}(...)` before an `in` or `out`, or define `def @@{0}` for a global one",
+                            a.name.name
+                        ),
+                    )
+                } else {
+                    (
+                        format!(
+                            "`@@{0}` is a global annotation; it cannot annotate an `in` or `out`",
+                            a.name.name
+                        ),
+                        format!(
+                            "write `@@{0}(...)` on a line of its own, or define `def @{0}` to annotate streams",
+                            a.name.name
+                        ),
+                    )
+                };
+                self.report(
+                    Diagnostic::error(Category::Name, Some(a.name.span), msg)
+                        .with_label("the other kind of annotation")
+                        .with_help(help),
+                );
+            }
+            return;
+        };
+        let name = at(&a.name, global);
+        let names: Vec<&str> = params.iter().map(|p| p.name.name.as_str()).collect();
+        let Some(positions) = self.order_named(&a.args, &names, &name) else {
+            return;
+        };
+        if a.args.len() != params.len() {
+            self.report(
+                Diagnostic::error(
+                    Category::Type,
+                    Some(a.span),
+                    match params.len() {
+                        0 => format!("`{name}` takes no arguments, {} given", a.args.len()),
+                        1 => format!("`{name}` takes 1 argument, {} given", a.args.len()),
+                        n => format!("`{name}` takes {n} arguments, {} given", a.args.len()),
+                    },
+                )
+                .with_help(format!("its parameters are ({})", names.join(", "))),
+            );
+            return;
+        }
+        let root = self.module_scope("");
+        for (arg, pos) in a.args.iter().zip(positions) {
+            let Some(p) = params.get(pos) else { continue };
+            let t = self.infer(&arg.value, &root);
+            if self.is_stream(&t) {
+                self.report(
+                    Diagnostic::error(
+                        Category::Type,
+                        Some(arg.value.span),
+                        "annotation arguments must be constants",
+                    )
+                    .with_label("this is a stream")
+                    .with_help("write a literal or a constant definition"),
+                );
+                continue;
+            }
+            let want = match &p.ty {
+                Some(ty) => self.ast_type(ty, &HashMap::new()),
+                None => self.fresh(),
+            };
+            self.expect(
+                &want,
+                &t,
+                arg.value.span,
+                &format!("argument `{}` of `{name}`", p.name.name),
+            );
+        }
+    }
+
+    /// TeSSLa's rules for named arguments: every name is a parameter, and once a named
+    /// argument stands elsewhere than at its parameter's position, no positional argument
+    /// follows. Returns the parameter position of each argument, or `None` after reporting.
+    fn order_named(
+        &mut self,
+        args: &[ast::Arg],
+        params: &[&str],
+        callee: &str,
+    ) -> Option<Vec<usize>> {
+        let mut out = Vec::with_capacity(args.len());
+        let mut positional_ok = true;
+        for (i, a) in args.iter().enumerate() {
+            match &a.name {
+                Some(n) => {
+                    let Some(pos) = params.iter().position(|p| *p == n.name) else {
+                        self.report(
+                            Diagnostic::error(
+                                Category::Name,
+                                Some(n.span),
+                                format!("`{}` is no parameter of `{callee}`", n.name),
+                            )
+                            .with_label("no such parameter")
+                            .with_help(format!("its parameters are ({})", params.join(", "))),
+                        );
+                        return None;
+                    };
+                    positional_ok &= pos == i;
+                    out.push(pos);
+                }
+                None if !positional_ok => {
+                    self.report(
+                        Diagnostic::error(
+                            Category::Type,
+                            Some(a.value.span),
+                            "a positional argument after a named one",
+                        )
+                        .with_label("positional")
+                        .with_help("name this argument too, or put the positional arguments first"),
+                    );
+                    return None;
+                }
+                None => out.push(i),
+            }
+        }
+        Some(out)
+    }
+
     /// A new local scope under `parent`, registered for [`Checker::break_cycles`].
     fn child_of(&mut self, parent: &Rc<Scope<'a>>) -> Rc<Scope<'a>> {
         let s = parent.child();
@@ -530,6 +738,7 @@ impl<'a> Checker<'a> {
             }
             State::InProgress(t) => {
                 *d.state.borrow_mut() = State::InProgress(t.clone());
+                self.check_recursion(d);
                 Scheme {
                     vars: Vec::new(),
                     ty: t,
@@ -538,7 +747,11 @@ impl<'a> Checker<'a> {
             State::Todo => {
                 let me = self.fresh();
                 *d.state.borrow_mut() = State::InProgress(me.clone());
+                let typed =
+                    d.def.result_type.is_some() || matches!(d.def.body, Body::Extern { .. });
+                self.inferring.push(Some((Rc::as_ptr(d) as usize, typed)));
                 let t = self.infer_def(d.def, &d.scope);
+                self.inferring.pop();
                 self.unify(&me, &t).ok();
                 let s = self.generalize(&t);
                 *d.state.borrow_mut() = State::Done(s.clone());
@@ -569,7 +782,7 @@ impl<'a> Checker<'a> {
             for p in ps {
                 let t = match &p.ty {
                     Some(t) => self.ast_type(t, &tparams),
-                    None => self.fresh(),
+                    None => self.missing_parameter_type(p, Some(&d.name.name)),
                 };
                 inner
                     .names
@@ -588,6 +801,7 @@ impl<'a> Checker<'a> {
                     self.local_defs(where_defs, &inner)
                 };
                 let t = self.infer(expr, &scope);
+                self.check_unused(where_defs, &scope);
                 if let Some(dt) = &declared {
                     self.expect(
                         dt,
@@ -607,6 +821,75 @@ impl<'a> Checker<'a> {
             func(ptys, ret)
         } else {
             ret
+        }
+    }
+
+    /// TeSSLa's rule: a parameter has a type, in a `def` as in a lambda. Reports and returns a
+    /// fresh type so that checking goes on.
+    fn missing_parameter_type(&mut self, p: &ast::Param, function: Option<&str>) -> Ty {
+        let n = &p.name.name;
+        let msg = match function {
+            Some(f) => format!("parameter `{n}` of `{f}` has no type"),
+            None => format!("the lambda's parameter `{n}` has no type"),
+        };
+        self.report(
+            Diagnostic::error(Category::Type, Some(p.name.span), msg)
+                .with_label("type missing")
+                .with_help(format!(
+                    "TeSSLa needs the type of every parameter: write `{n}: Int` (or `{n}: Events[Int]` for a stream)"
+                )),
+        );
+        self.fresh()
+    }
+
+    /// A def met again while its own type is inferred: TeSSLa infers types in dependency
+    /// order and needs a written type somewhere on every cycle. The cycle is the defs being
+    /// inferred from `d` up; one with a type (return type for a function) breaks it, and so
+    /// does a def checked although unused (a barrier: nothing on the cycle refers to it).
+    fn check_recursion(&mut self, d: &Rc<DefInfo<'a>>) {
+        let me = Rc::as_ptr(d) as usize;
+        for entry in self.inferring.iter().rev() {
+            match entry {
+                // Checked although unused, or a def with a type: no cycle without types.
+                None | Some((_, true)) => return,
+                Some((ptr, false)) if *ptr == me => break,
+                Some(_) => {}
+            }
+        }
+        if !self.inferring.contains(&Some((me, false))) {
+            return;
+        }
+        let n = &d.def.name.name;
+        let help = if d.def.params.is_some() {
+            format!(
+                "write the return type of `{n}`: `def {n}(...): Events[Int] = ...` (its real type)"
+            )
+        } else {
+            format!("write the type of `{n}`: `def {n}: Events[Int] = ...` (its real type)")
+        };
+        self.report(
+            Diagnostic::error(
+                Category::Recursion,
+                Some(d.def.name.span),
+                format!("`{n}` is defined recursively and needs a type"),
+            )
+            .with_label("recursive definition without a type")
+            .with_help(help),
+        );
+    }
+
+    /// Type-check the local defs that nothing used (TeSSLa checks every definition).
+    fn check_unused(&mut self, defs: &'a [Def], scope: &Rc<Scope<'a>>) {
+        for d in defs {
+            let info = match scope.names.borrow().get(&d.name.name) {
+                Some(Local::Def(info)) if matches!(*info.state.borrow(), State::Todo) => {
+                    info.clone()
+                }
+                _ => continue,
+            };
+            self.inferring.push(None);
+            self.def_scheme(&info);
+            self.inferring.pop();
         }
     }
 
@@ -669,12 +952,52 @@ impl<'a> Checker<'a> {
         None
     }
 
-    fn lookup(&mut self, name: &str, scope: &Rc<Scope<'a>>) -> Ty {
+    fn lookup(&mut self, id: &ast::Ident, scope: &Rc<Scope<'a>>) -> Ty {
+        let name = id.name.as_str();
         match self.find(name, scope) {
             Some(Found::Mono(t)) => t,
             Some(Found::Def(d)) => self.def_type(&d),
+            None if !is_builtin_name(name) => {
+                self.unknown_name(id, scope);
+                self.fresh()
+            }
             None => self.builtin(name).unwrap_or_else(|| self.fresh()),
         }
+    }
+
+    /// Report a name that is neither in scope, nor a builtin, nor in the prelude.
+    fn unknown_name(&mut self, id: &ast::Ident, scope: &Rc<Scope<'a>>) {
+        let mut known: Vec<String> = Vec::new();
+        let mut s = Some(scope.clone());
+        while let Some(sc) = s {
+            known.extend(sc.names.borrow().keys().cloned());
+            s = sc.parent.clone();
+        }
+        known.extend(
+            self.globals
+                .keys()
+                .filter_map(|k| k.strip_prefix(scope.prefix.as_str()))
+                .map(str::to_string),
+        );
+        known.extend(self.inputs.keys().cloned());
+        known.extend(builtins::names().map(str::to_string));
+        known.extend(crate::prelude::names());
+        let near = tessla_syntax::diag::nearest(&id.name, known.iter().map(String::as_str));
+        let mut d = Diagnostic::error(
+            Category::Name,
+            Some(id.span),
+            format!("unknown name `{}`", id.name),
+        );
+        if !near.is_empty() {
+            d = d.with_help(format!(
+                "did you mean {}?",
+                near.iter()
+                    .map(|n| format!("`{n}`"))
+                    .collect::<Vec<_>>()
+                    .join(" or ")
+            ));
+        }
+        self.report(d);
     }
 
     /// Report a type name that is neither built in, a type parameter in scope, nor declared
@@ -685,14 +1008,14 @@ impl<'a> Checker<'a> {
             || BUILTIN_TYPES.contains(&n)
             || tparams.contains_key(n)
             || self.enclosing_tparams.iter().any(|tp| tp == n)
-            || self.declared_types.contains(n)
+            || self.declared_types.contains_key(n)
         {
             return;
         }
         let known: Vec<&str> = BUILTIN_TYPES
             .iter()
             .copied()
-            .chain(self.declared_types.iter().map(String::as_str))
+            .chain(self.declared_types.keys().map(String::as_str))
             .chain(tparams.keys().map(String::as_str))
             .collect();
         let mut near = tessla_syntax::diag::nearest(n, known.iter().copied());
@@ -723,7 +1046,62 @@ impl<'a> Checker<'a> {
         self.report(d);
     }
 
+    /// The number of type arguments the type named `n` takes (`None`: not known here, e.g. a
+    /// dotted name or an unknown type, which [`Checker::check_type_name`] reports).
+    fn type_arity(&self, n: &str, tparams: &HashMap<String, Ty>) -> Option<usize> {
+        if tparams.contains_key(n) || self.enclosing_tparams.iter().any(|tp| tp == n) {
+            return Some(0);
+        }
+        match n {
+            "Int" | "Float" | "Bool" | "String" | "Unit" => Some(0),
+            "Events" | "Option" | "List" | "Set" => Some(1),
+            "Map" => Some(2),
+            _ => self.declared_types.get(n).copied(),
+        }
+    }
+
+    /// Report a type applied to the wrong number of type arguments (TeSSLa: `Map[String]`,
+    /// `Int[Bool]`, `Events[Int, Int]`, a bare `Events`); true when it is reported.
+    fn check_type_arity(
+        &mut self,
+        id: &ast::Ident,
+        given: usize,
+        tparams: &HashMap<String, Ty>,
+    ) -> bool {
+        let Some(want) = self.type_arity(&id.name, tparams) else {
+            return false;
+        };
+        if want == given {
+            return false;
+        }
+        let n = &id.name;
+        let msg = match (want, given) {
+            (0, _) => format!("`{n}` takes no type arguments, {given} given"),
+            (1, 0) => format!("`{n}` takes a type argument: `{n}[T]`"),
+            _ => format!(
+                "`{n}` takes {want} type argument{}, {given} given",
+                if want == 1 { "" } else { "s" }
+            ),
+        };
+        let help = match n.as_str() {
+            "Map" => "write `Map[K, V]`, the type of the keys and of the values".to_string(),
+            _ if want == 0 => format!("write `{n}` alone"),
+            _ => format!("write `{n}[{}]`", vec!["T"; want].join(", ")),
+        };
+        self.report(
+            Diagnostic::error(Category::Type, Some(id.span), msg)
+                .with_label("wrong number of type arguments")
+                .with_help(help),
+        );
+        true
+    }
+
     fn ast_type(&mut self, t: &ast::Type, tparams: &HashMap<String, Ty>) -> Ty {
+        if let ast::Type::Name(id) = t
+            && self.check_type_arity(id, 0, tparams)
+        {
+            return self.fresh();
+        }
         match t {
             ast::Type::Name(id) => match id.name.as_str() {
                 "Int" => int(),
@@ -741,6 +1119,9 @@ impl<'a> Checker<'a> {
             },
             ast::Type::App { name, args, .. } => {
                 let mut a: Vec<Ty> = args.iter().map(|x| self.ast_type(x, tparams)).collect();
+                if self.check_type_arity(name, a.len(), tparams) {
+                    return self.fresh();
+                }
                 match (name.name.as_str(), a.len()) {
                     ("Events", 1) => ev(a.remove(0)),
                     ("Option", 1) => opt(a.remove(0)),
@@ -820,7 +1201,7 @@ impl<'a> Checker<'a> {
                         _ => boolean(),
                     }
                 }
-                n => self.lookup(n, scope),
+                _ => self.lookup(id, scope),
             },
             ExprKind::RootMember(id) => match self.find_global(&id.name, "") {
                 Some(Found::Mono(t)) => t,
@@ -859,7 +1240,9 @@ impl<'a> Checker<'a> {
             }
             ExprKind::Block { defs, result } => {
                 let s = self.local_defs(defs, scope);
-                self.infer(result, &s)
+                let t = self.infer(result, &s);
+                self.check_unused(defs, &s);
+                t
             }
             ExprKind::Member { object, field } => {
                 if let Some(path) = dotted(object) {
@@ -872,6 +1255,9 @@ impl<'a> Checker<'a> {
                             None => self.builtin(&q).unwrap_or_else(|| self.fresh()),
                         };
                     }
+                }
+                if let Some(t) = self.literal_member(object, field, scope) {
+                    return t;
                 }
                 let o = self.infer(object, scope);
                 let base = self.resolve(&self.strip(&o));
@@ -892,6 +1278,18 @@ impl<'a> Checker<'a> {
                             self.fresh()
                         }
                     },
+                    other @ (Ty::Con(..) | Ty::Fn(..)) => {
+                        self.report(
+                            Diagnostic::error(
+                                Category::Type,
+                                Some(field.span),
+                                format!("{} has no field `{}`", show(other), field.name),
+                            )
+                            .with_label("no such field")
+                            .with_help("only records and tuples have fields"),
+                        );
+                        self.fresh()
+                    }
                     _ => self.fresh(),
                 };
                 self.lifted(&[o], r)
@@ -961,7 +1359,7 @@ impl<'a> Checker<'a> {
                 for p in params {
                     let t = match &p.ty {
                         Some(t) => self.ast_type(t, &HashMap::new()),
-                        None => self.fresh(),
+                        None => self.missing_parameter_type(p, None),
                     };
                     inner
                         .names
@@ -972,12 +1370,139 @@ impl<'a> Checker<'a> {
                 let r = self.infer(body, &inner);
                 func(ps, r)
             }
-            ExprKind::Call { function, args, .. } => {
+            ExprKind::Call {
+                function,
+                args,
+                type_args,
+            } => {
+                for t in type_args {
+                    self.ast_type(t, &HashMap::new());
+                }
+                if let ExprKind::Var(id) = &function.kind
+                    && let Some(Found::Def(d)) = self.find(&id.name, scope)
+                {
+                    self.type_arguments(d.def, type_args, args.is_some(), function.span, e.span);
+                }
                 let f = self.infer(function, scope);
                 let Some(args) = args else {
                     return f;
                 };
                 self.call(f, function, args, e.span, scope)
+            }
+        }
+    }
+
+    /// `x._1` or `x.a` inside the definition of `x` itself, where `x` is a tuple or record
+    /// literal without a written type: as in TeSSLa, the access is the member's own expression
+    /// (`def x = (v, x._1)` is not a recursion of `x`). `None`: not such an access.
+    fn literal_member(
+        &mut self,
+        object: &'a Expr,
+        field: &ast::Ident,
+        scope: &Rc<Scope<'a>>,
+    ) -> Option<Ty> {
+        let ExprKind::Var(id) = &object.kind else {
+            return None;
+        };
+        let Some(Found::Def(d)) = self.find(&id.name, scope) else {
+            return None;
+        };
+        if d.def.params.is_some() || !matches!(*d.state.borrow(), State::InProgress(_)) {
+            return None;
+        }
+        let Body::Expr { expr, where_defs } = &d.def.body else {
+            return None;
+        };
+        if !where_defs.is_empty() {
+            return None;
+        }
+        let member = match &expr.kind {
+            ExprKind::Tuple(es) => field
+                .name
+                .strip_prefix('_')
+                .and_then(|k| k.parse::<usize>().ok())
+                .and_then(|k| es.get(k.checked_sub(1)?)),
+            ExprKind::Record(ms) => ms
+                .iter()
+                .find(|(n, _)| n.name == field.name)
+                .map(|(_, e)| e),
+            _ => None,
+        }?;
+        let key = (Rc::as_ptr(&d) as usize, field.name.clone());
+        if self.literal_members.contains(&key) {
+            return None;
+        }
+        self.literal_members.push(key);
+        let t = self.infer(member, &d.scope);
+        self.literal_members.pop();
+        Some(t)
+    }
+
+    /// TeSSLa's rules for the type arguments of a call of a user function: as many as it has
+    /// type parameters when given, and when none are given, each type parameter must occur in
+    /// a parameter type so that the arguments determine it.
+    fn type_arguments(
+        &mut self,
+        d: &Def,
+        given: &[ast::Type],
+        called: bool,
+        name_span: Span,
+        span: Span,
+    ) {
+        let n = &d.name.name;
+        if !given.is_empty() && given.len() != d.type_params.len() {
+            self.report(
+                Diagnostic::error(
+                    Category::Type,
+                    Some(span),
+                    format!(
+                        "`{n}` takes {} type argument{}, {} given",
+                        d.type_params.len(),
+                        if d.type_params.len() == 1 { "" } else { "s" },
+                        given.len()
+                    ),
+                )
+                .with_help(format!(
+                    "its type parameters are [{}]",
+                    d.type_params
+                        .iter()
+                        .map(|t| t.name.as_str())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                )),
+            );
+            return;
+        }
+        let Some(params) = &d.params else { return };
+        if !given.is_empty() || !called {
+            return;
+        }
+        for tp in &d.type_params {
+            let inferable = params
+                .iter()
+                .any(|p| p.ty.as_ref().is_some_and(|t| mentions(t, &tp.name)));
+            if !inferable {
+                self.report(
+                    Diagnostic::error(
+                        Category::Type,
+                        Some(name_span),
+                        format!(
+                            "the type argument `{}` of `{n}` cannot be inferred",
+                            tp.name
+                        ),
+                    )
+                    .with_label("type arguments needed")
+                    .with_help(format!(
+                        "`{}` occurs in no parameter type; give the type arguments: `{n}[{}](...)`",
+                        tp.name,
+                        d.type_params
+                            .iter()
+                            .map(|t| t.name.as_str())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    )),
+                );
+                return;
             }
         }
     }
@@ -1076,13 +1601,14 @@ impl<'a> Checker<'a> {
             let Some(params) = params else {
                 return self.fresh();
             };
+            let names: Vec<&str> = params.iter().map(|p| p.name.name.as_str()).collect();
+            let callee = dotted(function).unwrap_or_else(|| "the function".into());
+            let Some(positions) = self.order_named(args, &names, &callee) else {
+                return self.fresh();
+            };
             let mut ordered: Vec<Option<Ty>> = vec![None; params.len()];
-            for (k, (a, t)) in args.iter().zip(ts.iter()).enumerate() {
-                let pos = match &a.name {
-                    Some(n) => params.iter().position(|p| p.name.name == n.name),
-                    None => Some(k),
-                };
-                match pos.and_then(|p| ordered.get_mut(p)) {
+            for (pos, t) in positions.into_iter().zip(ts.iter()) {
+                match ordered.get_mut(pos) {
                     Some(slot) => *slot = Some(t.clone()),
                     None => return self.fresh(),
                 }
@@ -1182,6 +1708,13 @@ impl<'a> Checker<'a> {
         let template = template(builtins::get(name)?.name)?;
         Some(with_vars(template, &vars))
     }
+}
+
+/// Is `name` a builtin a spec may name (directly or by its prelude alias)? `extern`-only
+/// natives are not.
+fn is_builtin_name(name: &str) -> bool {
+    let name = crate::prelude::builtin_alias(name).unwrap_or(name);
+    builtins::get(name).is_some_and(|b| !matches!(b.kind, builtins::Kind::Extern(_)))
 }
 
 /// Stand-ins for `A`/`K` and `B`/`V` in a parsed signature (never a checker variable: those
@@ -1366,6 +1899,21 @@ fn show(t: &Ty) -> String {
                 .collect::<Vec<_>>()
                 .join(", ")
         ),
+    }
+}
+
+/// Does the syntax type `t` name the type `name` anywhere?
+fn mentions(t: &ast::Type, name: &str) -> bool {
+    match t {
+        ast::Type::Name(id) => id.name == name,
+        ast::Type::App { name: n, args, .. } => {
+            n.name == name || args.iter().any(|a| mentions(a, name))
+        }
+        ast::Type::Function { params, result, .. } => {
+            params.iter().any(|(_, p)| mentions(p, name)) || mentions(result, name)
+        }
+        ast::Type::Record { fields, .. } => fields.iter().any(|(_, f)| mentions(f, name)),
+        ast::Type::Tuple { elems, .. } => elems.iter().any(|e| mentions(e, name)),
     }
 }
 

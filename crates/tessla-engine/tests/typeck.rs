@@ -175,7 +175,7 @@ fn well_typed_specs_load() {
         "in a: Events[Int]\ndef x: Events[Int] := last(z, a)\ndef z := default(x, 0) + a\nout z\n",
         // Tuples are records `_1`, `_2`; fold with a lambda; Options; lists.
         "in a: Events[Int]\ndef p = (a, 1)\nout p._1 + p._2\n\
-         out fold(a, 0, (acc, v) => acc + v)\n\
+         out fold(a, 0, (acc: Int, v: Int) => acc + v)\n\
          out getSomeOrElse(Some(a), 0)\nout List.size(List.append(List.empty[Int], a))\n",
         // A parameterless function is called when output.
         "def foo() = 42\nout foo\n",
@@ -187,4 +187,99 @@ fn well_typed_specs_load() {
             panic!("rejected a well-typed spec:\n{spec}\n{text}");
         }
     }
+}
+
+/// `spec` is rejected with an error of category `cat` whose rendering contains every string of
+/// `wanted`.
+#[track_caller]
+fn rejects_as(spec: &str, cat: Category, wanted: &[&str]) {
+    match load(spec) {
+        Ok(()) => panic!("accepted a spec TeSSLa rejects:\n{spec}"),
+        Err((cats, text)) => {
+            assert!(cats.contains(&cat), "{cats:?}: {text}");
+            for w in wanted {
+                assert!(text.contains(w), "missing {w:?} in:\n{text}");
+            }
+        }
+    }
+}
+
+#[test]
+fn every_expression_is_checked_in_nested_and_unused_definitions() {
+    // A field of an Int parameter, inside a function nested in a function.
+    rejects(
+        "in s: Events[Int]\ndef f(x: Int) = {\n  def g(a: Int): Int = a + x.foo\n  g(1)\n}\n\
+         out slift1(s, (v: Int) => f(v)) as y\n",
+        &["Int has no field `foo`", "3:30"],
+    );
+    // A local definition nothing uses, in a block and in a `where` clause.
+    rejects(
+        "in x: Events[Int]\ndef y = {\n  def unused: Events[Float] = x -. 1.0\n  x\n}\nout y\n",
+        &["operand of `-.`"],
+    );
+    rejects(
+        "in x: Events[Int]\ndef y := x where {\n  def unused := x && true\n}\nout y\n",
+        &["operand of `&&`"],
+    );
+    rejects_as(
+        "in x: Events[Int]\ndef y = {\n  def unused = x + nope\n  x\n}\nout y\n",
+        Category::Name,
+        &["unknown name `nope`"],
+    );
+}
+
+#[test]
+fn recursion_needs_a_written_type_somewhere_on_its_cycle() {
+    // No type on the cycle: TeSSLa cannot order the inference.
+    rejects_as(
+        "in x: Events[Int]\ndef c = default(last(c, x) + 1, 0)\nout c\n",
+        Category::Recursion,
+        &["`c` is defined recursively and needs a type", "2:5"],
+    );
+    rejects_as(
+        "def fact(n: Int) = if n < 2 then 1 else n * fact(n - 1)\nout fact(5) as f\n",
+        Category::Recursion,
+        &["`fact` is defined recursively", "return type"],
+    );
+    // One written type on the cycle is enough, wherever the inference starts.
+    let ok = [
+        "in x: Events[Int]\ndef a = default(last(b, x), 0) + x\ndef b: Events[Int] = a + 1\nout a\n",
+        "in x: Events[Int]\ndef b: Events[Int] = a + 1\ndef a = default(last(b, x), 0) + x\nout b\n",
+        "def fact(n: Int): Int = if n < 2 then 1 else n * fact(n - 1)\nout fact(5) as f\n",
+        // A member of a tuple literal read inside the tuple itself is no recursion.
+        "in v: Events[Int]\ndef p = (v, p._1 + 1)\nout p._2 as q\n",
+    ];
+    for spec in ok {
+        if let Err((_, text)) = load(spec) {
+            panic!("rejected a spec TeSSLa accepts:\n{spec}\n{text}");
+        }
+    }
+}
+
+#[test]
+fn recursion_through_last_inside_function_bodies_loads() {
+    let ok = [
+        // The stream handed to `last` as a parameter of a helper.
+        "in a: Events[Int]\ndef prev(s: Events[Int], t: Events[Int]): Events[Int] = last(s, t)\n\
+         def st: Events[Int] = default(slift3(prev(st, a), a, a, (s: Int, p: Int, q: Int) => s + p - q), 0)\n\
+         out st\n",
+        // A nested helper in a monitor function, the step lifted with `slift3`.
+        "in a: Events[Int]\ndef step(s: Int, p: Int, q: Int): Int = s + p + q\n\
+         def mon(x: Events[Int]): Events[Int] = {\n\
+           def before(v: Events[Int]): Events[Int] = last(v, x)\n\
+           def n: Events[Int] = default(slift3(before(n), x, x, step), 0)\n\
+           n\n}\nout mon(a) as m\n",
+    ];
+    for spec in ok {
+        if let Err((_, text)) = load(spec) {
+            panic!("rejected a spec TeSSLa accepts:\n{spec}\n{text}");
+        }
+    }
+    // Through a helper that does not `last`: still a recursion without `last`.
+    rejects_as(
+        "in a: Events[Int]\ndef id(s: Events[Int]): Events[Int] = s\n\
+         def st: Events[Int] = merge(id(st) + 1, a)\nout st\n",
+        Category::Recursion,
+        &["`st` is defined in terms of itself"],
+    );
 }

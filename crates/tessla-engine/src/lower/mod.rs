@@ -83,10 +83,11 @@ enum DefState {
     Todo,
     InProgress {
         alias: Option<NodeId>,
-        /// `lazy_depth` when compiling the definition began: a use of it from inside is a
-        /// legal recursion exactly when a lazy argument (`last`/`delay`) was entered since,
-        /// however many other definitions lie between (TeSSLa allows such mutual recursion).
-        lazy_at: usize,
+        /// Where it was first used outside the lazy argument of `last`/`delay` while being
+        /// compiled (checked for a strict cycle when it is done; see `lower/names.rs`).
+        eager: Option<Span>,
+        /// A member of its tuple or record literal is being compiled (`def x = (v, x._1)`).
+        in_member: bool,
     },
     Done(Term),
     /// Compiling it failed (already reported): uses fail silently.
@@ -150,12 +151,6 @@ pub struct Compiler<'a> {
     /// lowered) whose body failed to compile as a value function, so calls expand them at once
     /// instead of trying again (mutually recursive nested functions made that exponential).
     not_value_fns: HashSet<Span>,
-    /// Uses of a definition from inside its own definition outside any `last`/`delay`: each
-    /// became an alias node (name and place of the use). Whether the recursion really passes
-    /// through a lazy argument is known only on the whole graph (the lazy argument may be inside
-    /// a function expanded later, as in `safeDelay(f(x), r)` over `delay`), so
-    /// [`schedule::order`] decides, and a cycle it finds is reported at such a use.
-    back_refs: HashMap<NodeId, (String, Span)>,
     /// The cells of functions that call themselves (they go to `Program::functions`).
     recursive_cells: Vec<Arc<OnceLock<Func>>>,
     unit_node: Option<NodeId>,
@@ -177,16 +172,6 @@ pub struct Compiler<'a> {
     states: Vec<Rc<RefCell<DefState>>>,
     /// The checker's types of outputs and top-level defs (see [`crate::typeck::Types`]).
     types: crate::typeck::Types,
-}
-
-/// "`name` is defined in terms of itself", at the use `span`.
-fn recursion_error(name: &str, span: Span) -> Diagnostic {
-    Diagnostic::error(
-        Category::Recursion,
-        Some(span),
-        format!("`{name}` is defined in terms of itself"),
-    )
-    .with_help("recursion is allowed only through the first argument of `last` or `delay`")
 }
 
 /// The native of an `extern` no builtin provides: an error when evaluated.
@@ -223,7 +208,6 @@ impl<'a> Compiler<'a> {
             annotation_params: HashMap::new(),
             compiled_fns: HashMap::new(),
             not_value_fns: HashSet::new(),
-            back_refs: HashMap::new(),
             recursive_cells: Vec::new(),
             unit_node: None,
             base_unit: None,
@@ -532,13 +516,7 @@ impl<'a> Compiler<'a> {
         let order = match schedule::order(&self.nodes, &output_nodes) {
             Ok(o) => o,
             Err(cycle) => {
-                // Name the first use of a definition from inside itself that closed the cycle.
-                let d = cycle
-                    .0
-                    .iter()
-                    .find_map(|n| self.back_refs.get(n))
-                    .map(|(name, span)| recursion_error(name, *span))
-                    .unwrap_or_else(|| cycle.diagnostic());
+                let d = cycle.diagnostic();
                 self.diags.push(d);
                 return Err(self.diags);
             }

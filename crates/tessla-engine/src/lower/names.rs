@@ -25,29 +25,39 @@ impl Compiler<'_> {
                 *e.state.borrow_mut() = DefState::Failed;
                 Err(Fail)
             }
-            DefState::InProgress { alias, lazy_at } => {
+            DefState::InProgress {
+                alias,
+                eager,
+                in_member,
+            } => {
+                // A use while the def is compiled: a stream alias filled in when it is done.
+                // Whether the recursion goes through `last`/`delay` is decided then, on the
+                // lowered graph, so a recursion through `last` inside a function body (a
+                // parameter given to `last`, a lifted call) is allowed as in TeSSLa.
                 let a = match alias {
                     Some(a) => a,
                     None => self.node(Node::Alias(usize::MAX)),
                 };
-                if self.lazy_depth <= lazy_at {
-                    // Not (yet) through `last`/`delay`: the scheduler decides on the whole graph.
-                    self.back_refs
-                        .entry(a)
-                        .or_insert_with(|| (e.def.name.name.clone(), span));
-                }
+                let eager = match eager {
+                    None if self.lazy_depth == 0 => Some(span),
+                    e => e,
+                };
                 *e.state.borrow_mut() = DefState::InProgress {
                     alias: Some(a),
-                    lazy_at,
+                    eager,
+                    in_member,
                 };
                 Ok(Term::Stream(a))
             }
             DefState::Todo => {
                 *e.state.borrow_mut() = DefState::InProgress {
                     alias: None,
-                    lazy_at: self.lazy_depth,
+                    eager: None,
+                    in_member: false,
                 };
                 let env = e.env_cell.borrow().clone().unwrap_or_default();
+                let saved = self.lazy_depth;
+                self.lazy_depth = 0;
                 let saved_origin = self.origin;
                 self.origin = crate::snapshot::text_hash(self.sources.text(e.def.span));
                 let r = self.body(&e.def, &env);
@@ -62,22 +72,39 @@ impl Compiler<'_> {
                     }
                     (r, _) => r,
                 };
-                let alias = match &*e.state.borrow() {
-                    DefState::InProgress { alias, .. } => *alias,
-                    _ => None,
+                self.lazy_depth = saved;
+                let (alias, eager) = match &*e.state.borrow() {
+                    DefState::InProgress { alias, eager, .. } => (*alias, *eager),
+                    _ => (None, None),
                 };
                 match r {
                     Ok(t) => {
                         if let Some(a) = alias {
                             match &t {
-                                Term::Stream(n) => self.nodes[a] = Node::Alias(*n),
+                                Term::Stream(n) => {
+                                    self.nodes[a] = Node::Alias(*n);
+                                    if let Some(at) = eager
+                                        && self.strictly_reaches(*n, a)
+                                    {
+                                        self.nodes[a] = Node::Nil;
+                                        *e.state.borrow_mut() = DefState::Failed;
+                                        self.diags.push(
+                                            Diagnostic::error(
+                                                Category::Recursion,
+                                                Some(at),
+                                                format!(
+                                                    "`{}` is defined in terms of itself",
+                                                    e.def.name.name
+                                                ),
+                                            )
+                                            .with_help("recursion is allowed only through the first argument of `last` or `delay`"),
+                                        );
+                                        return Err(Fail);
+                                    }
+                                }
                                 Term::Const(v) => self.nodes[a] = Node::Const(v.clone()),
                                 _ => {
                                     *e.state.borrow_mut() = DefState::Todo;
-                                    if let Some((name, at)) = self.back_refs.get(&a).cloned() {
-                                        self.diags.push(recursion_error(&name, at));
-                                        return Err(Fail);
-                                    }
                                     return self.error(
                                         Category::Recursion,
                                         span,
@@ -99,6 +126,89 @@ impl Compiler<'_> {
                 }
             }
         }
+    }
+
+    /// `x._1` or `x.a` inside the definition of `x` itself, where `x` is a tuple or record
+    /// literal: as in TeSSLa, the member's own expression (`def x = (v, x._1)` is no recursion
+    /// of `x`). `None`: not such an access.
+    pub(super) fn literal_member(
+        &mut self,
+        object: &Expr,
+        field: &ast::Ident,
+        env: &Env,
+    ) -> Option<R<Term>> {
+        let ExprKind::Var(id) = &object.kind else {
+            return None;
+        };
+        let Some(Binding::Def(e)) = env.lookup(&id.name) else {
+            return None;
+        };
+        if e.def.params.is_some() {
+            return None;
+        }
+        let Body::Expr { expr, where_defs } = &e.def.body else {
+            return None;
+        };
+        let member = match &expr.kind {
+            _ if !where_defs.is_empty() => None,
+            ExprKind::Tuple(es) => field
+                .name
+                .strip_prefix('_')
+                .and_then(|k| k.parse::<usize>().ok())
+                .and_then(|k| es.get(k.checked_sub(1)?)),
+            ExprKind::Record(ms) => ms
+                .iter()
+                .find(|(n, _)| n.name == field.name)
+                .map(|(_, e)| e),
+            _ => None,
+        }?;
+        // Only while `x` itself is compiled, and not again inside the same member.
+        let (alias, eager) = match &*e.state.borrow() {
+            DefState::InProgress {
+                alias,
+                eager,
+                in_member: false,
+            } => (*alias, *eager),
+            _ => return None,
+        };
+        *e.state.borrow_mut() = DefState::InProgress {
+            alias,
+            eager,
+            in_member: true,
+        };
+        let def_env = e.env_cell.borrow().clone().unwrap_or_default();
+        let r = self.expr(member, &def_env);
+        let now = match &*e.state.borrow() {
+            DefState::InProgress { alias, eager, .. } => Some((*alias, *eager)),
+            _ => None,
+        };
+        if let Some((alias, eager)) = now {
+            *e.state.borrow_mut() = DefState::InProgress {
+                alias,
+                eager,
+                in_member: false,
+            };
+        }
+        Some(r)
+    }
+
+    /// Does node `from` depend on node `to` through strict dependencies only (not through the
+    /// lazy argument of `last`/`delay`)?
+    fn strictly_reaches(&self, from: NodeId, to: NodeId) -> bool {
+        let mut seen = HashSet::new();
+        let mut todo = vec![from];
+        while let Some(x) = todo.pop() {
+            if x == to {
+                return true;
+            }
+            if !seen.insert(x) {
+                continue;
+            }
+            if let Some(node) = self.nodes.get(x) {
+                todo.extend(node.strict_deps());
+            }
+        }
+        false
     }
 
     pub(super) fn body(&mut self, d: &Def, env: &Env) -> R<Term> {
