@@ -296,6 +296,11 @@ pub static BUILTINS: &[Builtin] = &[
     value("min", core::min, "(A, A) => A"),
     value("toString", core::to_string, "(A) => String"),
     value("String.concat", core::concat, "(String, String) => String"),
+    value(
+        "String.format",
+        core::string_format,
+        "(String, A) => String",
+    ),
     value("Some", core::some, "(A) => Option[A]"),
     value("isNone", core::is_none, "(Option[A]) => Bool"),
     value("isSome", core::is_some, "(Option[A]) => Bool"),
@@ -450,6 +455,8 @@ pub static BUILTINS: &[Builtin] = &[
     operator("Operators.fnegate", ops::natives::fneg),
     operator("Operators.bitflip", ops::natives::bitflip),
     // Natives reached only through `extern("name")` (declared in the bundled specs).
+    external("CTF.getInt", core::ctf_get),
+    external("CTF.getString", core::ctf_get),
     external("List_size", core::list_size),
     external("List_get", core::list_get),
     external("List_fold", core::list_fold),

@@ -81,6 +81,8 @@ struct Entry {
     deps: Vec<usize>,
     /// The builtin serving every use, when there is one (`List.size`, `merge` for `merge2`).
     alias: Option<String>,
+    /// Its parameter names (for named arguments to the builtin).
+    params: Vec<String>,
 }
 
 struct Catalog {
@@ -115,6 +117,17 @@ pub fn builtin_alias(name: &str) -> Option<&'static str> {
             .find_map(|m| c.by_key.get(&format!("{m}.{name}")).copied())?
     };
     c.entries[i].alias.as_deref().filter(|a| *a != name)
+}
+
+/// The parameter names TeSSLa gives the library function a builtin serves (`resetCount` ->
+/// `events`, `reset`), for named arguments; `None` when the prelude declares no such function.
+pub fn param_names(builtin: &str) -> Option<Vec<String>> {
+    let c = catalog();
+    let e = c
+        .entries
+        .iter()
+        .find(|e| e.alias.as_deref() == Some(builtin))?;
+    Some(e.params.clone()).filter(|p| !p.is_empty())
 }
 
 fn catalog() -> &'static Catalog {
@@ -217,6 +230,13 @@ fn build() -> Catalog {
             text,
             deps,
             alias: alias[i].clone(),
+            params: r
+                .def
+                .params
+                .iter()
+                .flatten()
+                .map(|p| p.name.name.clone())
+                .collect(),
         });
     }
     Catalog { entries, by_key }
@@ -257,7 +277,15 @@ pub fn needed(files: &[ast::File]) -> Option<String> {
         statement_refs(&f.statements, "", &mut refs, &mut own);
     }
     refs.retain(|(n, _)| !own.contains(n) && candidate(n));
-    if refs.is_empty() {
+    // TeSSLa's built-in type `CTF` (declared next to its module, as in TeSSLa): emitted when the
+    // spec names it and declares no type of that name itself.
+    let mut types = HashSet::new();
+    for f in files {
+        statement_types(&f.statements, &mut types);
+    }
+    let own_ctf = files.iter().any(|f| declares_type(&f.statements, CTF_TYPE));
+    let mut ctf_type = !own_ctf && types.contains(CTF_TYPE);
+    if refs.is_empty() && !ctf_type {
         return None;
     }
     let c = catalog();
@@ -282,10 +310,14 @@ pub fn needed(files: &[ast::File]) -> Option<String> {
             None => modules.push((&e.module, vec![t])),
         }
     }
-    if modules.is_empty() {
+    ctf_type |= !own_ctf && modules.iter().any(|(m, _)| *m == "CTF");
+    if modules.is_empty() && !ctf_type {
         return None;
     }
     let mut out = String::new();
+    if ctf_type {
+        out.push_str("type CTF = extern(\"CTF\")\n");
+    }
     for (m, defs) in &modules {
         out.push_str(&format!("module {m} {{\n"));
         for d in defs {
@@ -299,6 +331,62 @@ pub fn needed(files: &[ast::File]) -> Option<String> {
         }
     }
     Some(out)
+}
+
+/// The name of TeSSLa's opaque Common Trace Format event type.
+const CTF_TYPE: &str = "CTF";
+
+/// Whether `statements` (or a module in them) declare a type `name`.
+fn declares_type(statements: &[Statement], name: &str) -> bool {
+    statements.iter().any(|s| match s {
+        Statement::TypeDef { name: n, .. } => n.name == name,
+        Statement::Module { statements, .. } => declares_type(statements, name),
+        _ => false,
+    })
+}
+
+/// Type names used by the inputs and by the signatures of the definitions in `statements`.
+fn statement_types(statements: &[Statement], out: &mut HashSet<String>) {
+    for s in statements {
+        match s {
+            Statement::In { ty, .. } => type_names(ty, out),
+            Statement::Def(d) => def_types(d, out),
+            Statement::Module { statements, .. } => statement_types(statements, out),
+            _ => {}
+        }
+    }
+}
+
+fn def_types(d: &Def, out: &mut HashSet<String>) {
+    for p in d.params.iter().flatten() {
+        if let Some(t) = &p.ty {
+            type_names(t, out);
+        }
+    }
+    if let Some(t) = &d.result_type {
+        type_names(t, out);
+    }
+    if let ast::Body::Expr { where_defs, .. } = &d.body {
+        where_defs.iter().for_each(|w| def_types(w, out));
+    }
+}
+
+fn type_names(t: &ast::Type, out: &mut HashSet<String>) {
+    match t {
+        ast::Type::Name(id) => {
+            out.insert(id.name.clone());
+        }
+        ast::Type::App { name, args, .. } => {
+            out.insert(name.name.clone());
+            args.iter().for_each(|a| type_names(a, out));
+        }
+        ast::Type::Function { params, result, .. } => {
+            params.iter().for_each(|(_, p)| type_names(p, out));
+            type_names(result, out);
+        }
+        ast::Type::Record { fields, .. } => fields.iter().for_each(|(_, f)| type_names(f, out)),
+        ast::Type::Tuple { elems, .. } => elems.iter().for_each(|e| type_names(e, out)),
+    }
 }
 
 /// References of a spec's statements; `own` collects the (dotted) names it defines.

@@ -335,6 +335,22 @@ impl<'a> Compiler<'a> {
                     if let Some(m) = modules.get_mut(&prefix) {
                         m.1.insert(d.name.name.clone(), Binding::Def(entry.clone()));
                     }
+                    // Enclosing modules see it by its relative path (`Limits.maxSpeed` in
+                    // `Robot`), so `import Robot` brings `Limits.maxSpeed` too, as in TeSSLa.
+                    let mut outer = prefix.trim_end_matches('.');
+                    while let Some(k) = outer.rfind('.') {
+                        let p = format!("{}.", &outer[..k]);
+                        let rel = format!("{}{}", &prefix[p.len()..], d.name.name);
+                        if !modules.contains_key(&p) {
+                            let c = self.new_scope();
+                            modules.insert(p.clone(), (c, HashMap::new()));
+                        }
+                        if let Some(m) = modules.get_mut(&p) {
+                            m.1.entry(rel)
+                                .or_insert_with(|| Binding::Def(entry.clone()));
+                        }
+                        outer = &outer[..k];
+                    }
                     names.insert(name, Binding::Def(entry));
                 }
                 Statement::Import { path, .. } => {

@@ -175,9 +175,14 @@ impl Compiler<'_> {
                     init: Value::Int(0),
                     f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &Value::Int(1))),
                 });
-                Node::SLift {
+                let first = self.node(Node::SLift {
                     args: vec![SArg::Stream(s), SArg::Stream(cnt)],
                     f: Arc::new(|v: &[Value]| Value::Bool(v[1] == Value::Int(1))),
+                });
+                // TeSSLa merges in a constant `false`: `false` at 0 when `x` has no event there.
+                Node::Default {
+                    stream: first,
+                    value: Value::Bool(false),
                 }
             }
             StreamOp::FirstEvent => {
