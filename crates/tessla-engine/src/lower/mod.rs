@@ -26,6 +26,7 @@ mod call;
 mod closure;
 mod expr;
 mod names;
+mod objects;
 mod overrides;
 mod stream;
 pub mod time;
@@ -473,6 +474,30 @@ impl<'a> Compiler<'a> {
                 .as_ref()
                 .map_or_else(|| o.source_text.clone(), |a| a.name.clone());
             self.origin = crate::snapshot::text_hash(&o.source_text);
+            // An object (a record with stream members): one output per member, as TeSSLa.
+            match self.object_output(&o.expr, &env) {
+                Some(Ok(members)) => {
+                    for (path, t) in members {
+                        let ty = match &t {
+                            Term::Const(v) => value_type(v),
+                            Term::Stream(n) => self.stream_type(*n),
+                            _ => Type::Unknown,
+                        };
+                        if let Ok(n) = self.stream_of(t, o.expr.span) {
+                            outputs.push(OutputInfo {
+                                name: format!("{name}.{path}"),
+                                ty,
+                                annotations: annotations.clone(),
+                                raw,
+                            });
+                            output_nodes.push(n);
+                        }
+                    }
+                    continue;
+                }
+                Some(Err(Fail)) => continue,
+                None => {}
+            }
             if let Ok(t) = self.expr(&o.expr, &env) {
                 let ty = match &t {
                     Term::Const(v) => value_type(v),
