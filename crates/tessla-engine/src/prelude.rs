@@ -35,6 +35,60 @@ const FILES: &[&str] = &[
     include_str!("../prelude/Tessla.tessla"),
 ];
 
+/// The library's annotation declarations (top-level `def @Name(...)`, as in TeSSLa): emitted
+/// into a spec that uses one and does not declare it itself.
+const ANNOTATION_FILES: &[&str] = &[
+    include_str!("../prelude/InstrumentationAnnotations.tessla"),
+    include_str!("../prelude/VisualizationAnnotations.tessla"),
+];
+
+/// Each library annotation's name and declaration text.
+fn annotation_decls() -> &'static HashMap<String, String> {
+    static DECLS: OnceLock<HashMap<String, String>> = OnceLock::new();
+    DECLS.get_or_init(|| {
+        let mut out = HashMap::new();
+        for text in ANNOTATION_FILES {
+            let (file, _) = tessla_syntax::parser::parse(text, FileId(0));
+            for s in file.statements {
+                if let Statement::AnnotationDef { name, span, .. } = s {
+                    let decl = text
+                        .get(span.start as usize..span.end as usize)
+                        .unwrap_or_default();
+                    out.insert(name.name.clone(), decl.to_string());
+                }
+            }
+        }
+        out
+    })
+}
+
+/// Annotation names `statements` use (on inputs, outputs and globally) and declare.
+fn annotation_uses(
+    statements: &[Statement],
+    used: &mut Vec<String>,
+    declared: &mut HashSet<String>,
+) {
+    for s in statements {
+        let anns: &[ast::Annotation] = match s {
+            Statement::In { annotations, .. } | Statement::OutAll { annotations, .. } => {
+                annotations
+            }
+            Statement::Out(o) => &o.annotations,
+            Statement::GlobalAnnotation(a) => std::slice::from_ref(a),
+            Statement::AnnotationDef { name, .. } => {
+                declared.insert(name.name.clone());
+                &[]
+            }
+            Statement::Module { statements, .. } => {
+                annotation_uses(statements, used, declared);
+                &[]
+            }
+            _ => &[],
+        };
+        used.extend(anns.iter().map(|a| a.name.name.clone()));
+    }
+}
+
 /// The prelude's modules (a dotted name with another head is never a prelude name).
 const MODULES: &[&str] = &[
     "Types",
@@ -285,7 +339,23 @@ pub fn needed(files: &[ast::File]) -> Option<String> {
     }
     let own_ctf = files.iter().any(|f| declares_type(&f.statements, CTF_TYPE));
     let mut ctf_type = !own_ctf && types.contains(CTF_TYPE);
-    if refs.is_empty() && !ctf_type {
+    // Library annotations the spec uses without declaring them.
+    let (mut used, mut declared) = (Vec::new(), HashSet::new());
+    for f in files {
+        annotation_uses(&f.statements, &mut used, &mut declared);
+    }
+    used.retain(|a| !declared.contains(a));
+    used.sort();
+    used.dedup();
+    let decls: Vec<&str> = if used.is_empty() {
+        Vec::new()
+    } else {
+        let all = annotation_decls();
+        used.iter()
+            .filter_map(|a| all.get(a).map(String::as_str))
+            .collect()
+    };
+    if refs.is_empty() && !ctf_type && decls.is_empty() {
         return None;
     }
     let c = catalog();
@@ -311,10 +381,14 @@ pub fn needed(files: &[ast::File]) -> Option<String> {
         }
     }
     ctf_type |= !own_ctf && modules.iter().any(|(m, _)| *m == "CTF");
-    if modules.is_empty() && !ctf_type {
+    if modules.is_empty() && !ctf_type && decls.is_empty() {
         return None;
     }
     let mut out = String::new();
+    for d in decls {
+        out.push_str(d);
+        out.push('\n');
+    }
     if ctf_type {
         out.push_str("type CTF = extern(\"CTF\")\n");
     }
@@ -535,6 +609,23 @@ mod tests {
             needs("in x: Events[Int]\nout count(x)\nout List.size(List.empty[Int])"),
             None
         );
+    }
+
+    #[test]
+    fn library_annotations_and_the_ctf_type_are_declared_on_use() {
+        let t = needs("@InstFunctionCall(\"main\")\nin c: Events[Unit]\n@VisBubbles\nout c")
+            .unwrap_or_default();
+        assert!(t.contains("def @InstFunctionCall(name: String)"), "{t}");
+        assert!(t.contains("def @VisBubbles"), "{t}");
+        assert!(!t.contains("@VisPlot"), "{t}");
+        // A spec's own declaration wins.
+        assert_eq!(
+            needs("def @VisBubbles\nin c: Events[Unit]\n@VisBubbles\nout c"),
+            None
+        );
+        let t = needs("in e: Events[CTF]\nin x: Events[Int]\nout x").unwrap_or_default();
+        assert!(t.contains("type CTF = extern(\"CTF\")"), "{t}");
+        assert_eq!(needs("type CTF = Int\nin e: Events[CTF]\nout e"), None);
     }
 
     #[test]
