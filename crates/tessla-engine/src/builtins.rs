@@ -55,9 +55,6 @@ pub enum StreamOp {
     Rising,
     Falling,
     Period,
-    ResetCount,
-    SetCollect,
-    SetCollectWithRemove,
     /// Named by TeSSLa's standard library but not implemented: a use is an "unsupported" error.
     Unsupported,
 }
@@ -254,11 +251,6 @@ pub static BUILTINS: &[Builtin] = &[
     stream("rising", S::Rising, "(Events[Bool]) => Events[B]"),
     stream("falling", S::Falling, "(Events[Bool]) => Events[B]"),
     stream(
-        "resetCount",
-        S::ResetCount,
-        "(Events[A], Events[B]) => Events[Int]",
-    ),
-    stream(
         "noEvent",
         S::Unsupported,
         "(Events[A], Events[B]) => Events[Bool]",
@@ -268,16 +260,6 @@ pub static BUILTINS: &[Builtin] = &[
     stream_any("maximum", S::Maximum, Sig::Any),
     stream_any("minimum", S::Minimum, Sig::Any),
     stream_any("average", S::Unsupported, Sig::Any),
-    stream(
-        "Set.collect",
-        S::SetCollect,
-        "(Events[A]) => Events[Set[A]]",
-    ),
-    stream(
-        "Set.collectWithRemove",
-        S::SetCollectWithRemove,
-        "(Events[A], Events[A]) => Events[Set[A]]",
-    ),
     // Value functions.
     value("intToFloat", core::int_to_float, "(Int) => Float"),
     value("floatToInt", core::float_to_int, "(Float) => Int"),

@@ -612,6 +612,18 @@ mod tests {
     }
 
     #[test]
+    fn every_prelude_file_parses() {
+        for text in FILES.iter().chain(ANNOTATION_FILES) {
+            let (_, d) = tessla_syntax::parser::parse(text, FileId(0));
+            assert!(
+                d.is_empty(),
+                "{d:?}\n{}",
+                text.lines().next().unwrap_or_default()
+            );
+        }
+    }
+
+    #[test]
     fn library_annotations_and_the_ctf_type_are_declared_on_use() {
         let t = needs("@InstFunctionCall(\"main\")\nin c: Events[Unit]\n@VisBubbles\nout c")
             .unwrap_or_default();

@@ -32,7 +32,6 @@ mod stream;
 pub mod time;
 mod types;
 
-use crate::collections;
 use crate::ir::{
     Annotation, Func, InputInfo, LiftFunc, Node, NodeId, OutputInfo, Program, SArg, Scalar, Type,
 };
