@@ -143,3 +143,24 @@ fn outputs_of_a_live_feed_appear_before_the_feed_ends() {
     assert_eq!(rest, ["2: x = 8"]);
     assert_eq!(status.code(), Some(0));
 }
+
+#[test]
+fn time_units_need_a_base_time_as_in_tessla() {
+    // TeSSLa's interpreter rejects a time literal when the trace has no base time; `run` keeps
+    // Telegraf's 1 ns.
+    let spec = temp(
+        "units.tessla",
+        "in x: Events[Int]\ndef d := delay(const(2 s, x), x)\nout d\n",
+    );
+    let s = spec.to_str().unwrap();
+    let out = trace(s, &[], "1: x = 1\n5: x = 2\n");
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains("no base time is set"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = trace(s, &["--base-time", "1 s"], "1: x = 1\n5: x = 2\n");
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert_eq!(text(&out.stdout), "3: d = ()\n");
+}

@@ -122,9 +122,11 @@ pub enum Command {
 /// Options shared by every subcommand that loads a spec.
 #[derive(Debug, Args, Clone, Default)]
 pub struct SpecOptions {
-    /// Base time unit of time literals, in TeSSLa's form (`1 ns`, `1 ms`, `33333 µs`).
-    #[arg(long, value_name = "UNIT", default_value = "1 ns")]
-    pub base_time: String,
+    /// Base time unit of time literals, in TeSSLa's form (`1 ns`, `1 ms`, `33333 µs`); `run`
+    /// and `check` default to `1 ns` (Telegraf's unit); `trace` without it rejects time literals,
+    /// as TeSSLa's interpreter does.
+    #[arg(long, value_name = "UNIT")]
+    pub base_time: Option<String>,
     /// Override a top-level constant of the spec: `--set delta=0.05` (repeatable).
     #[arg(long = "set", value_name = "NAME=VALUE")]
     pub set: Vec<String>,
@@ -253,6 +255,13 @@ pub fn main() -> ExitCode {
     }
 }
 
+impl SpecOptions {
+    /// `--base-time`, or `1 ns` (Telegraf's unit) when not given.
+    pub fn base_time_or_default(&self) -> String {
+        self.base_time.clone().unwrap_or_else(|| "1 ns".to_string())
+    }
+}
+
 /// The engine's load options from the command line (`--base-time`, `--set NAME=VALUE`).
 pub fn load_options(o: &SpecOptions) -> Result<tessla_engine::LoadOptions, String> {
     let overrides = o
@@ -265,7 +274,7 @@ pub fn load_options(o: &SpecOptions) -> Result<tessla_engine::LoadOptions, Strin
         })
         .collect::<Result<Vec<_>, _>>()?;
     Ok(tessla_engine::LoadOptions {
-        base_time: Some(o.base_time.clone()),
+        base_time: Some(o.base_time_or_default()),
         overrides,
         time_units_need_base: false,
     })

@@ -39,7 +39,7 @@ pub fn run(args: RunArgs) -> CliResult {
         .collect();
     let state_ctx = state::Context {
         set: args.spec_options.set.clone(),
-        base_time: args.spec_options.base_time.clone(),
+        base_time: args.spec_options.base_time_or_default(),
         instance_by: Vec::new(),
     };
     let opts = Options {

@@ -40,8 +40,13 @@ impl Read for FlushBeforeRead {
 }
 
 pub fn run(args: TraceArgs) -> CliResult {
-    let options = super::load_options(&args.spec_options)
+    let mut options = super::load_options(&args.spec_options)
         .map_err(|e| CliError::spec(format!("error: {e}")))?;
+    // As TeSSLa's interpreter: without a base time, a time literal (`2 s`) is an error.
+    if args.spec_options.base_time.is_none() {
+        options.base_time = None;
+        options.time_units_need_base = true;
+    }
     let loaded =
         tessla_engine::load_file(&args.spec, &options).map_err(|e| CliError::spec(e.render()))?;
     if !loaded.warnings.is_empty() {

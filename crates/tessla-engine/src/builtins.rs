@@ -55,9 +55,6 @@ pub enum StreamOp {
     Rising,
     Falling,
     Period,
-    ResetCount,
-    SetCollect,
-    SetCollectWithRemove,
     /// Named by TeSSLa's standard library but not implemented: a use is an "unsupported" error.
     Unsupported,
 }
@@ -254,11 +251,6 @@ pub static BUILTINS: &[Builtin] = &[
     stream("rising", S::Rising, "(Events[Bool]) => Events[B]"),
     stream("falling", S::Falling, "(Events[Bool]) => Events[B]"),
     stream(
-        "resetCount",
-        S::ResetCount,
-        "(Events[A], Events[B]) => Events[Int]",
-    ),
-    stream(
         "noEvent",
         S::Unsupported,
         "(Events[A], Events[B]) => Events[Bool]",
@@ -268,16 +260,6 @@ pub static BUILTINS: &[Builtin] = &[
     stream_any("maximum", S::Maximum, Sig::Any),
     stream_any("minimum", S::Minimum, Sig::Any),
     stream_any("average", S::Unsupported, Sig::Any),
-    stream(
-        "Set.collect",
-        S::SetCollect,
-        "(Events[A]) => Events[Set[A]]",
-    ),
-    stream(
-        "Set.collectWithRemove",
-        S::SetCollectWithRemove,
-        "(Events[A], Events[A]) => Events[Set[A]]",
-    ),
     // Value functions.
     value("intToFloat", core::int_to_float, "(Int) => Float"),
     value("floatToInt", core::float_to_int, "(Float) => Int"),
@@ -296,6 +278,11 @@ pub static BUILTINS: &[Builtin] = &[
     value("min", core::min, "(A, A) => A"),
     value("toString", core::to_string, "(A) => String"),
     value("String.concat", core::concat, "(String, String) => String"),
+    value(
+        "String.format",
+        core::string_format,
+        "(String, A) => String",
+    ),
     value("Some", core::some, "(A) => Option[A]"),
     value("isNone", core::is_none, "(Option[A]) => Bool"),
     value("isSome", core::is_some, "(Option[A]) => Bool"),
@@ -450,6 +437,8 @@ pub static BUILTINS: &[Builtin] = &[
     operator("Operators.fnegate", ops::natives::fneg),
     operator("Operators.bitflip", ops::natives::bitflip),
     // Natives reached only through `extern("name")` (declared in the bundled specs).
+    external("CTF.getInt", core::ctf_get),
+    external("CTF.getString", core::ctf_get),
     external("List_size", core::list_size),
     external("List_get", core::list_get),
     external("List_fold", core::list_fold),

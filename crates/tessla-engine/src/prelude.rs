@@ -35,6 +35,60 @@ const FILES: &[&str] = &[
     include_str!("../prelude/Tessla.tessla"),
 ];
 
+/// The library's annotation declarations (top-level `def @Name(...)`, as in TeSSLa): emitted
+/// into a spec that uses one and does not declare it itself.
+const ANNOTATION_FILES: &[&str] = &[
+    include_str!("../prelude/InstrumentationAnnotations.tessla"),
+    include_str!("../prelude/VisualizationAnnotations.tessla"),
+];
+
+/// Each library annotation's name and declaration text.
+fn annotation_decls() -> &'static HashMap<String, String> {
+    static DECLS: OnceLock<HashMap<String, String>> = OnceLock::new();
+    DECLS.get_or_init(|| {
+        let mut out = HashMap::new();
+        for text in ANNOTATION_FILES {
+            let (file, _) = tessla_syntax::parser::parse(text, FileId(0));
+            for s in file.statements {
+                if let Statement::AnnotationDef { name, span, .. } = s {
+                    let decl = text
+                        .get(span.start as usize..span.end as usize)
+                        .unwrap_or_default();
+                    out.insert(name.name.clone(), decl.to_string());
+                }
+            }
+        }
+        out
+    })
+}
+
+/// Annotation names `statements` use (on inputs, outputs and globally) and declare.
+fn annotation_uses(
+    statements: &[Statement],
+    used: &mut Vec<String>,
+    declared: &mut HashSet<String>,
+) {
+    for s in statements {
+        let anns: &[ast::Annotation] = match s {
+            Statement::In { annotations, .. } | Statement::OutAll { annotations, .. } => {
+                annotations
+            }
+            Statement::Out(o) => &o.annotations,
+            Statement::GlobalAnnotation(a) => std::slice::from_ref(a),
+            Statement::AnnotationDef { name, .. } => {
+                declared.insert(name.name.clone());
+                &[]
+            }
+            Statement::Module { statements, .. } => {
+                annotation_uses(statements, used, declared);
+                &[]
+            }
+            _ => &[],
+        };
+        used.extend(anns.iter().map(|a| a.name.name.clone()));
+    }
+}
+
 /// The prelude's modules (a dotted name with another head is never a prelude name).
 const MODULES: &[&str] = &[
     "Types",
@@ -81,6 +135,8 @@ struct Entry {
     deps: Vec<usize>,
     /// The builtin serving every use, when there is one (`List.size`, `merge` for `merge2`).
     alias: Option<String>,
+    /// Its parameter names (for named arguments to the builtin).
+    params: Vec<String>,
 }
 
 struct Catalog {
@@ -115,6 +171,17 @@ pub fn builtin_alias(name: &str) -> Option<&'static str> {
             .find_map(|m| c.by_key.get(&format!("{m}.{name}")).copied())?
     };
     c.entries[i].alias.as_deref().filter(|a| *a != name)
+}
+
+/// The parameter names TeSSLa gives the library function a builtin serves (`resetCount` ->
+/// `events`, `reset`), for named arguments; `None` when the prelude declares no such function.
+pub fn param_names(builtin: &str) -> Option<Vec<String>> {
+    let c = catalog();
+    let e = c
+        .entries
+        .iter()
+        .find(|e| e.alias.as_deref() == Some(builtin))?;
+    Some(e.params.clone()).filter(|p| !p.is_empty())
 }
 
 fn catalog() -> &'static Catalog {
@@ -217,6 +284,13 @@ fn build() -> Catalog {
             text,
             deps,
             alias: alias[i].clone(),
+            params: r
+                .def
+                .params
+                .iter()
+                .flatten()
+                .map(|p| p.name.name.clone())
+                .collect(),
         });
     }
     Catalog { entries, by_key }
@@ -257,7 +331,31 @@ pub fn needed(files: &[ast::File]) -> Option<String> {
         statement_refs(&f.statements, "", &mut refs, &mut own);
     }
     refs.retain(|(n, _)| !own.contains(n) && candidate(n));
-    if refs.is_empty() {
+    // TeSSLa's built-in type `CTF` (declared next to its module, as in TeSSLa): emitted when the
+    // spec names it and declares no type of that name itself.
+    let mut types = HashSet::new();
+    for f in files {
+        statement_types(&f.statements, &mut types);
+    }
+    let own_ctf = files.iter().any(|f| declares_type(&f.statements, CTF_TYPE));
+    let mut ctf_type = !own_ctf && types.contains(CTF_TYPE);
+    // Library annotations the spec uses without declaring them.
+    let (mut used, mut declared) = (Vec::new(), HashSet::new());
+    for f in files {
+        annotation_uses(&f.statements, &mut used, &mut declared);
+    }
+    used.retain(|a| !declared.contains(a));
+    used.sort();
+    used.dedup();
+    let decls: Vec<&str> = if used.is_empty() {
+        Vec::new()
+    } else {
+        let all = annotation_decls();
+        used.iter()
+            .filter_map(|a| all.get(a).map(String::as_str))
+            .collect()
+    };
+    if refs.is_empty() && !ctf_type && decls.is_empty() {
         return None;
     }
     let c = catalog();
@@ -282,10 +380,18 @@ pub fn needed(files: &[ast::File]) -> Option<String> {
             None => modules.push((&e.module, vec![t])),
         }
     }
-    if modules.is_empty() {
+    ctf_type |= !own_ctf && modules.iter().any(|(m, _)| *m == "CTF");
+    if modules.is_empty() && !ctf_type && decls.is_empty() {
         return None;
     }
     let mut out = String::new();
+    for d in decls {
+        out.push_str(d);
+        out.push('\n');
+    }
+    if ctf_type {
+        out.push_str("type CTF = extern(\"CTF\")\n");
+    }
     for (m, defs) in &modules {
         out.push_str(&format!("module {m} {{\n"));
         for d in defs {
@@ -299,6 +405,62 @@ pub fn needed(files: &[ast::File]) -> Option<String> {
         }
     }
     Some(out)
+}
+
+/// The name of TeSSLa's opaque Common Trace Format event type.
+const CTF_TYPE: &str = "CTF";
+
+/// Whether `statements` (or a module in them) declare a type `name`.
+fn declares_type(statements: &[Statement], name: &str) -> bool {
+    statements.iter().any(|s| match s {
+        Statement::TypeDef { name: n, .. } => n.name == name,
+        Statement::Module { statements, .. } => declares_type(statements, name),
+        _ => false,
+    })
+}
+
+/// Type names used by the inputs and by the signatures of the definitions in `statements`.
+fn statement_types(statements: &[Statement], out: &mut HashSet<String>) {
+    for s in statements {
+        match s {
+            Statement::In { ty, .. } => type_names(ty, out),
+            Statement::Def(d) => def_types(d, out),
+            Statement::Module { statements, .. } => statement_types(statements, out),
+            _ => {}
+        }
+    }
+}
+
+fn def_types(d: &Def, out: &mut HashSet<String>) {
+    for p in d.params.iter().flatten() {
+        if let Some(t) = &p.ty {
+            type_names(t, out);
+        }
+    }
+    if let Some(t) = &d.result_type {
+        type_names(t, out);
+    }
+    if let ast::Body::Expr { where_defs, .. } = &d.body {
+        where_defs.iter().for_each(|w| def_types(w, out));
+    }
+}
+
+fn type_names(t: &ast::Type, out: &mut HashSet<String>) {
+    match t {
+        ast::Type::Name(id) => {
+            out.insert(id.name.clone());
+        }
+        ast::Type::App { name, args, .. } => {
+            out.insert(name.name.clone());
+            args.iter().for_each(|a| type_names(a, out));
+        }
+        ast::Type::Function { params, result, .. } => {
+            params.iter().for_each(|(_, p)| type_names(p, out));
+            type_names(result, out);
+        }
+        ast::Type::Record { fields, .. } => fields.iter().for_each(|(_, f)| type_names(f, out)),
+        ast::Type::Tuple { elems, .. } => elems.iter().for_each(|e| type_names(e, out)),
+    }
 }
 
 /// References of a spec's statements; `own` collects the (dotted) names it defines.
@@ -447,6 +609,35 @@ mod tests {
             needs("in x: Events[Int]\nout count(x)\nout List.size(List.empty[Int])"),
             None
         );
+    }
+
+    #[test]
+    fn every_prelude_file_parses() {
+        for text in FILES.iter().chain(ANNOTATION_FILES) {
+            let (_, d) = tessla_syntax::parser::parse(text, FileId(0));
+            assert!(
+                d.is_empty(),
+                "{d:?}\n{}",
+                text.lines().next().unwrap_or_default()
+            );
+        }
+    }
+
+    #[test]
+    fn library_annotations_and_the_ctf_type_are_declared_on_use() {
+        let t = needs("@InstFunctionCall(\"main\")\nin c: Events[Unit]\n@VisBubbles\nout c")
+            .unwrap_or_default();
+        assert!(t.contains("def @InstFunctionCall(name: String)"), "{t}");
+        assert!(t.contains("def @VisBubbles"), "{t}");
+        assert!(!t.contains("@VisPlot"), "{t}");
+        // A spec's own declaration wins.
+        assert_eq!(
+            needs("def @VisBubbles\nin c: Events[Unit]\n@VisBubbles\nout c"),
+            None
+        );
+        let t = needs("in e: Events[CTF]\nin x: Events[Int]\nout x").unwrap_or_default();
+        assert!(t.contains("type CTF = extern(\"CTF\")"), "{t}");
+        assert_eq!(needs("type CTF = Int\nin e: Events[CTF]\nout e"), None);
     }
 
     #[test]

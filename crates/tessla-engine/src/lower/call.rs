@@ -30,6 +30,10 @@ impl Compiler<'_> {
                 FuncTerm::Lambda { params, .. } => {
                     params.iter().map(|p| p.name.name.clone()).collect()
                 }
+                // A builtin takes TeSSLa's parameter names, as the prelude declares them.
+                FuncTerm::Builtin(b, _) if crate::prelude::param_names(b.name).is_some() => {
+                    crate::prelude::param_names(b.name).unwrap_or_default()
+                }
                 _ => {
                     return self.error(
                         Category::Unsupported,

@@ -172,8 +172,8 @@ impl Compiler<'_> {
                     let q = format!("{path}.{}", field.name);
                     return self.lookup(&q, e.span, env);
                 }
-                if let Some(t) = self.literal_member(object, field, env) {
-                    return t;
+                if let Some(r) = self.literal_member(object, &field.name, env) {
+                    return r;
                 }
                 let obj = self.expr(object, env)?;
                 let fname: Arc<str> = field.name.as_str().into();

@@ -26,12 +26,12 @@ mod call;
 mod closure;
 mod expr;
 mod names;
+mod objects;
 mod overrides;
 mod stream;
 pub mod time;
 mod types;
 
-use crate::collections;
 use crate::ir::{
     Annotation, Func, InputInfo, LiftFunc, Node, NodeId, OutputInfo, Program, SArg, Scalar, Type,
 };
@@ -86,8 +86,6 @@ enum DefState {
         /// Where it was first used outside the lazy argument of `last`/`delay` while being
         /// compiled (checked for a strict cycle when it is done; see `lower/names.rs`).
         eager: Option<Span>,
-        /// A member of its tuple or record literal is being compiled (`def x = (v, x._1)`).
-        in_member: bool,
     },
     Done(Term),
     /// Compiling it failed (already reported): uses fail silently.
@@ -340,6 +338,22 @@ impl<'a> Compiler<'a> {
                     if let Some(m) = modules.get_mut(&prefix) {
                         m.1.insert(d.name.name.clone(), Binding::Def(entry.clone()));
                     }
+                    // Enclosing modules see it by its relative path (`Limits.maxSpeed` in
+                    // `Robot`), so `import Robot` brings `Limits.maxSpeed` too, as in TeSSLa.
+                    let mut outer = prefix.trim_end_matches('.');
+                    while let Some(k) = outer.rfind('.') {
+                        let p = format!("{}.", &outer[..k]);
+                        let rel = format!("{}{}", &prefix[p.len()..], d.name.name);
+                        if !modules.contains_key(&p) {
+                            let c = self.new_scope();
+                            modules.insert(p.clone(), (c, HashMap::new()));
+                        }
+                        if let Some(m) = modules.get_mut(&p) {
+                            m.1.entry(rel)
+                                .or_insert_with(|| Binding::Def(entry.clone()));
+                        }
+                        outer = &outer[..k];
+                    }
                     names.insert(name, Binding::Def(entry));
                 }
                 Statement::Import { path, .. } => {
@@ -462,6 +476,30 @@ impl<'a> Compiler<'a> {
                 .as_ref()
                 .map_or_else(|| o.source_text.clone(), |a| a.name.clone());
             self.origin = crate::snapshot::text_hash(&o.source_text);
+            // An object (a record with stream members): one output per member, as TeSSLa.
+            match self.object_output(&o.expr, &env) {
+                Some(Ok(members)) => {
+                    for (path, t) in members {
+                        let ty = match &t {
+                            Term::Const(v) => value_type(v),
+                            Term::Stream(n) => self.stream_type(*n),
+                            _ => Type::Unknown,
+                        };
+                        if let Ok(n) = self.stream_of(t, o.expr.span) {
+                            outputs.push(OutputInfo {
+                                name: format!("{name}.{path}"),
+                                ty,
+                                annotations: annotations.clone(),
+                                raw,
+                            });
+                            output_nodes.push(n);
+                        }
+                    }
+                    continue;
+                }
+                Some(Err(Fail)) => continue,
+                None => {}
+            }
             if let Ok(t) = self.expr(&o.expr, &env) {
                 let ty = match &t {
                     Term::Const(v) => value_type(v),

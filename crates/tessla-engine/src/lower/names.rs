@@ -25,11 +25,7 @@ impl Compiler<'_> {
                 *e.state.borrow_mut() = DefState::Failed;
                 Err(Fail)
             }
-            DefState::InProgress {
-                alias,
-                eager,
-                in_member,
-            } => {
+            DefState::InProgress { alias, eager } => {
                 // A use while the def is compiled: a stream alias filled in when it is done.
                 // Whether the recursion goes through `last`/`delay` is decided then, on the
                 // lowered graph, so a recursion through `last` inside a function body (a
@@ -45,7 +41,6 @@ impl Compiler<'_> {
                 *e.state.borrow_mut() = DefState::InProgress {
                     alias: Some(a),
                     eager,
-                    in_member,
                 };
                 Ok(Term::Stream(a))
             }
@@ -53,7 +48,6 @@ impl Compiler<'_> {
                 *e.state.borrow_mut() = DefState::InProgress {
                     alias: None,
                     eager: None,
-                    in_member: false,
                 };
                 let env = e.env_cell.borrow().clone().unwrap_or_default();
                 let saved = self.lazy_depth;
@@ -126,70 +120,6 @@ impl Compiler<'_> {
                 }
             }
         }
-    }
-
-    /// `x._1` or `x.a` inside the definition of `x` itself, where `x` is a tuple or record
-    /// literal: as in TeSSLa, the member's own expression (`def x = (v, x._1)` is no recursion
-    /// of `x`). `None`: not such an access.
-    pub(super) fn literal_member(
-        &mut self,
-        object: &Expr,
-        field: &ast::Ident,
-        env: &Env,
-    ) -> Option<R<Term>> {
-        let ExprKind::Var(id) = &object.kind else {
-            return None;
-        };
-        let Some(Binding::Def(e)) = env.lookup(&id.name) else {
-            return None;
-        };
-        if e.def.params.is_some() {
-            return None;
-        }
-        let Body::Expr { expr, where_defs } = &e.def.body else {
-            return None;
-        };
-        let member = match &expr.kind {
-            _ if !where_defs.is_empty() => None,
-            ExprKind::Tuple(es) => field
-                .name
-                .strip_prefix('_')
-                .and_then(|k| k.parse::<usize>().ok())
-                .and_then(|k| es.get(k.checked_sub(1)?)),
-            ExprKind::Record(ms) => ms
-                .iter()
-                .find(|(n, _)| n.name == field.name)
-                .map(|(_, e)| e),
-            _ => None,
-        }?;
-        // Only while `x` itself is compiled, and not again inside the same member.
-        let (alias, eager) = match &*e.state.borrow() {
-            DefState::InProgress {
-                alias,
-                eager,
-                in_member: false,
-            } => (*alias, *eager),
-            _ => return None,
-        };
-        *e.state.borrow_mut() = DefState::InProgress {
-            alias,
-            eager,
-            in_member: true,
-        };
-        let def_env = e.env_cell.borrow().clone().unwrap_or_default();
-        let r = self.expr(member, &def_env);
-        let now = match &*e.state.borrow() {
-            DefState::InProgress { alias, eager, .. } => Some((*alias, *eager)),
-            _ => None,
-        };
-        if let Some((alias, eager)) = now {
-            *e.state.borrow_mut() = DefState::InProgress {
-                alias,
-                eager,
-                in_member: false,
-            };
-        }
-        Some(r)
     }
 
     /// Does node `from` depend on node `to` through strict dependencies only (not through the

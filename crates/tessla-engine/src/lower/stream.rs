@@ -175,9 +175,14 @@ impl Compiler<'_> {
                     init: Value::Int(0),
                     f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &Value::Int(1))),
                 });
-                Node::SLift {
+                let first = self.node(Node::SLift {
                     args: vec![SArg::Stream(s), SArg::Stream(cnt)],
                     f: Arc::new(|v: &[Value]| Value::Bool(v[1] == Value::Int(1))),
+                });
+                // TeSSLa merges in a constant `false`: `false` at 0 when `x` has no event there.
+                Node::Default {
+                    stream: first,
+                    value: Value::Bool(false),
                 }
             }
             StreamOp::FirstEvent => {
@@ -261,66 +266,6 @@ impl Compiler<'_> {
                 self.nodes[alias] = Node::Alias(delay);
                 // The periodic events: the delay's firings, plus the start at t = 0.
                 Node::Merge(vec![u, delay])
-            }
-            StreamOp::ResetCount => {
-                // Events of `x` since the last `reset` (a reset with an event counts it).
-                let x = self.stream_arg(&args, 0, span)?;
-                let reset = self.stream_arg(&args, 1, span)?;
-                let tag = self.node(Node::Lift {
-                    args: vec![x, reset],
-                    f: Arc::new(|a: &[Option<Value>]| match a {
-                        [Some(_), Some(_)] => Some(Value::Int(1)),
-                        [None, Some(_)] => Some(Value::Int(0)),
-                        [Some(_), None] => Some(Value::Int(-1)),
-                        _ => None,
-                    }),
-                });
-                Node::Fold {
-                    stream: tag,
-                    init: Value::Int(0),
-                    f: Arc::new(|a: &[Value]| match a {
-                        [acc, Value::Int(-1)] => binop(BinOp::Add, acc, &Value::Int(1)),
-                        [_, tag] => tag.clone(),
-                        _ => Value::Unit,
-                    }),
-                }
-            }
-            StreamOp::SetCollect => Node::Fold {
-                stream: self.stream_arg(&args, 0, span)?,
-                init: Value::Set(Arc::new(Vec::new())),
-                f: Arc::new(collections::set_add),
-            },
-            StreamOp::SetCollectWithRemove => {
-                // Add this step's `add` value, then remove this step's `remove` value.
-                let add = self.stream_arg(&args, 0, span)?;
-                let remove = self.stream_arg(&args, 1, span)?;
-                let step = self.node(Node::Lift {
-                    args: vec![add, remove],
-                    f: Arc::new(|a: &[Option<Value>]| {
-                        let opt = |o: &Option<Value>| match o {
-                            Some(v) => Value::Some(Arc::new(v.clone())),
-                            None => Value::None,
-                        };
-                        Some(Value::Tuple(a.iter().map(opt).collect::<Vec<_>>().into()))
-                    }),
-                });
-                Node::Fold {
-                    stream: step,
-                    init: Value::Set(Arc::new(Vec::new())),
-                    f: Arc::new(|a: &[Value]| match a {
-                        [set, Value::Tuple(t)] => {
-                            let mut s = set.clone();
-                            if let Some(Value::Some(x)) = t.first() {
-                                s = collections::set_add(&[s, (**x).clone()]);
-                            }
-                            if let Some(Value::Some(x)) = t.get(1) {
-                                s = collections::set_remove(&[s, (**x).clone()]);
-                            }
-                            s
-                        }
-                        _ => Value::Unit,
-                    }),
-                }
             }
             StreamOp::Unsupported | StreamOp::Nil | StreamOp::Unit => {
                 return self.error(

@@ -166,6 +166,30 @@ pub fn concat(a: &[Value]) -> Value {
     }
 }
 
+/// `String.format(formatString, value)`: Java's `String.format` of one value (`crate::format`);
+/// a format Java rejects (a missing argument, `%d` of a Float, ...) is a run-time error.
+pub fn string_format(a: &[Value]) -> Value {
+    match a {
+        [Value::Str(f), v] => match crate::format::java_format(f, v) {
+            Ok(s) => Value::Str(s.into()),
+            Err(e) => err(RuntimeError::Other(
+                format!("String.format(\"{f}\", {v}): {e}").into(),
+            )),
+        },
+        _ => type_err("String.format", a),
+    }
+}
+
+/// `CTF.getInt`/`CTF.getString`: CTF event objects only come from Common Trace Format traces,
+/// which this engine does not read, so no value of type `CTF` exists and a call never happens
+/// with one; any other argument is a type error.
+pub fn ctf_get(a: &[Value]) -> Value {
+    err(RuntimeError::Other(
+        format!("CTF.get*: no CTF event object in {a:?} (CTF traces are not read by this engine)")
+            .into(),
+    ))
+}
+
 pub fn some(a: &[Value]) -> Value {
     match a {
         [v] => Value::Some(Arc::new(v.clone())),
