@@ -33,7 +33,7 @@ bench: bench-criterion bench-process
 
 bench-criterion:
 	$(CARGO) bench -p lineproto --bench codec -- $(CRITERION_ARGS)
-	$(CARGO) bench --bench engine --bench binding --bench encode --bench record_path -- $(CRITERION_ARGS)
+	$(CARGO) bench --bench engine --bench binding --bench encode --bench record_path --bench library -- $(CRITERION_ARGS)
 
 bench-process:
 	python3 bench/run.py --reps $(BENCH_REPS)
