@@ -8,6 +8,9 @@
 //!   (default `tessla`), one field per output, named by the output.
 //!
 //! Values: Int `5i`, Float, Bool, String, Unit as `true`, `Some(x)` as `x`, `None` as no field.
+//! A record or tuple (a record of verdicts) is one field per member, named by its path as TeSSLa
+//! names object outputs: `check.value=true,check.final=false` (`_1`, `_2` for tuples; nested
+//! members `o.a.b`; a connector metric uses the paths alone: `name value=..,final=..`).
 //! Values with no line-protocol form (lists, errors, NaN) drop that field with a counted warning.
 
 use lineproto::FieldValue;
@@ -67,6 +70,31 @@ pub struct Dropped {
     pub reason: String,
 }
 
+/// The leaves of a record or tuple value with their member paths (`a.b`, `_1`), in field order;
+/// any other value is its own leaf with the empty path.
+fn members<'v>(v: &'v Value, path: String, out: &mut Vec<(String, &'v Value)>) {
+    let join = |name: &str| {
+        if path.is_empty() {
+            name.to_string()
+        } else {
+            format!("{path}.{name}")
+        }
+    };
+    match v {
+        Value::Record(fs) if !fs.is_empty() => {
+            for (k, x) in fs.iter() {
+                members(x, join(k), out);
+            }
+        }
+        Value::Tuple(xs) if !xs.is_empty() => {
+            for (i, x) in xs.iter().enumerate() {
+                members(x, join(&format!("_{}", i + 1)), out);
+            }
+        }
+        _ => out.push((path, v)),
+    }
+}
+
 fn field_value(v: &Value) -> Result<Option<FieldValue>, String> {
     Ok(Some(match v {
         Value::Unit => FieldValue::Bool(true),
@@ -102,8 +130,9 @@ pub struct Scratch {
     /// Metrics in first-appearance order: (the encoding index that opened it, is a connector
     /// metric).
     groups: Vec<(usize, bool)>,
-    /// Every written field: (its metric's position in `groups`, its encoding index, its value).
-    fields: Vec<(usize, usize, FieldValue)>,
+    /// Every written field: (its metric's position in `groups`, its encoding index, its value,
+    /// the member path when it is a member of a record or tuple output).
+    fields: Vec<(usize, usize, FieldValue, Option<String>)>,
     line: String,
 }
 
@@ -184,28 +213,47 @@ pub fn encode_step_with(
             continue;
         };
         let (measurement, field, connector) = target(enc, default_measurement);
-        match field_value(v) {
-            Ok(None) => {}
-            Ok(Some(fv)) => {
-                let found = if connector {
-                    None
-                } else {
-                    groups.iter().position(|&(g, c)| {
-                        !c && encodings
-                            .get(g)
-                            .is_some_and(|e| target(e, default_measurement).0 == measurement)
-                    })
-                };
-                let g = found.unwrap_or_else(|| {
-                    groups.push((*idx, connector));
-                    groups.len() - 1
-                });
-                fields.push((g, *idx, fv));
+        // Records and tuples (rare) are split into members; other values are one leaf, without
+        // allocating on the hot path.
+        let mut compound = Vec::new();
+        if matches!(v, Value::Record(_) | Value::Tuple(_)) {
+            members(v, String::new(), &mut compound);
+        }
+        let single = [(String::new(), v)];
+        let leaves: &[(String, &Value)] = if compound.is_empty() {
+            &single
+        } else {
+            &compound
+        };
+        for (path, v) in leaves {
+            match field_value(v) {
+                Ok(None) => {}
+                Ok(Some(fv)) => {
+                    let found = if connector {
+                        // One metric per output and step: a record's members share it.
+                        groups.iter().position(|&(g, c)| c && g == *idx)
+                    } else {
+                        groups.iter().position(|&(g, c)| {
+                            !c && encodings
+                                .get(g)
+                                .is_some_and(|e| target(e, default_measurement).0 == measurement)
+                        })
+                    };
+                    let g = found.unwrap_or_else(|| {
+                        groups.push((*idx, connector));
+                        groups.len() - 1
+                    });
+                    fields.push((g, *idx, fv, (!path.is_empty()).then(|| path.clone())));
+                }
+                Err(reason) => dropped.push(Dropped {
+                    output: format!(
+                        "{}{}{path}",
+                        if connector { measurement } else { field },
+                        if path.is_empty() { "" } else { "." }
+                    ),
+                    reason,
+                }),
             }
-            Err(reason) => dropped.push(Dropped {
-                output: if connector { measurement } else { field }.to_string(),
-                reason,
-            }),
         }
     }
     for (g, &(first, _)) in groups.iter().enumerate() {
@@ -223,15 +271,35 @@ pub fn encode_step_with(
             }
         }
         let mut sep = ' ';
-        for (_, i, v) in fields.iter().filter(|f| f.0 == g) {
+        for (_, i, v, path) in fields.iter().filter(|f| f.0 == g) {
             if let Some((_, Some(key))) = prepared.get(*i) {
+                let start = line.len();
                 // Values are finite here (field_value refuses the others).
                 line.push(sep);
-                line.push_str(key);
+                match path {
+                    None => line.push_str(key),
+                    Some(path) => {
+                        let (_, field, connector) = match encodings.get(*i) {
+                            Some(e) => target(e, default_measurement),
+                            None => continue,
+                        };
+                        let name = if connector {
+                            path.clone()
+                        } else {
+                            format!("{field}.{path}")
+                        };
+                        if !lineproto::name_is_writable(&name) {
+                            line.truncate(start);
+                            continue;
+                        }
+                        lineproto::write_field_key(line, &name);
+                        line.push('=');
+                    }
+                }
                 if lineproto::write_value(line, v).is_ok() {
                     sep = ',';
                 } else {
-                    line.truncate(line.len() - key.len() - 1);
+                    line.truncate(start);
                 }
             }
         }
@@ -249,6 +317,46 @@ pub fn encode_step_with(
 mod tests {
     use super::*;
     use std::sync::Arc;
+
+    /// A record of verdicts is one field per member, named by its path; a tuple's members are
+    /// `_1`, `_2`; a connector metric uses the paths alone; a member without a line-protocol
+    /// form is dropped by its path.
+    #[test]
+    fn records_and_tuples_are_one_field_per_member() {
+        let verdict = Value::Record(Arc::from(vec![
+            (Arc::from("final"), Value::Bool(false)),
+            (
+                Arc::from("inner"),
+                Value::Tuple(Arc::from(vec![Value::Int(1), Value::Float(0.5)])),
+            ),
+            (Arc::from("value"), Value::Bool(true)),
+        ]));
+        let encodings = vec![
+            Encoding::Default("check".into()),
+            Encoding::Connector("verdict".into()),
+        ];
+        let mut out = Vec::new();
+        let dropped = encode_step(
+            7,
+            &[(0, verdict.clone()), (1, verdict)],
+            &encodings,
+            "tessla",
+            &[],
+            &mut out,
+        );
+        assert!(dropped.is_empty(), "{dropped:?}");
+        assert_eq!(
+            String::from_utf8(out).unwrap(),
+            "tessla check.final=false,check.inner._1=1i,check.inner._2=0.5,check.value=true 7\n\
+             verdict final=false,inner._1=1i,inner._2=0.5,value=true 7\n"
+        );
+        let bad = Value::Record(Arc::from(vec![(Arc::from("x"), Value::Float(f64::NAN))]));
+        let mut out = Vec::new();
+        let dropped = encode_step(1, &[(0, bad)], &encodings, "tessla", &[], &mut out);
+        assert!(out.is_empty());
+        assert_eq!(dropped.len(), 1);
+        assert_eq!(dropped[0].output, "check.x");
+    }
 
     /// The reused-scratch path writes what [`lineproto::LineWriter`] writes, escapes and unwritable names
     /// included, step after step.
