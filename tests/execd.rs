@@ -397,3 +397,39 @@ fn garbage_never_makes_it_panic() {
         assert!(echoed.contains(&g.as_str()), "lost: {g}");
     }
 }
+
+#[test]
+/// A record or tuple output, literal (TeSSLa's object: one output per member) or a stream of
+/// record values (split when written), is one field per member named by its path.
+fn a_record_of_verdicts_is_one_field_per_member() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = dir.path().join("verdicts.tessla");
+    std::fs::write(
+        &spec,
+        "in speed: Events[Float]\n\
+         def check = {value = speed <=. 0.22, final = speed >. 1.0}\n\
+         def bounds = (speed -. 0.1, speed +. 0.1)\n\
+         def verdict = if speed >. 1.0 then {value = false, final = true} else {value = true, final = false}\n\
+         out check\nout bounds\nout verdict\n",
+    )
+    .unwrap();
+    let (out, err, code) = run_all(
+        &["--spec", spec.to_str().unwrap(), "--no-passthrough"],
+        "m speed=0.5 10\nm speed=2 20\n",
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("0 dropped values"),
+        "nothing is dropped: {err}"
+    );
+    let lines: Vec<&str> = out.lines().collect();
+    assert_eq!(
+        lines,
+        [
+            "tessla check.value=false,check.final=false,bounds._1=0.4,bounds._2=0.6,\
+             verdict.final=false,verdict.value=true 10",
+            "tessla check.value=false,check.final=true,bounds._1=1.9,bounds._2=2.1,\
+             verdict.final=true,verdict.value=false 20",
+        ]
+    );
+}
