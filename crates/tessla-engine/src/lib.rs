@@ -7,6 +7,7 @@
 
 pub mod builtins;
 pub mod collections;
+pub mod exec;
 pub mod format;
 pub mod ir;
 pub mod load;
