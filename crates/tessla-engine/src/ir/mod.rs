@@ -10,7 +10,7 @@ use crate::value::Value;
 use std::sync::{Arc, OnceLock};
 
 pub mod code;
-mod print;
+pub(crate) mod print;
 pub use code::{Callee, Code, FnId, Function, LiftFn, Prim};
 pub use print::IrListing;
 
@@ -309,8 +309,9 @@ pub struct Program {
     pub inputs: Vec<InputInfo>,
     pub outputs: Vec<OutputInfo>,
     pub nodes: Vec<Node>,
-    /// Per node: a hash of the source text that defined it (see [`crate::snapshot`]).
-    pub node_origins: Vec<u64>,
+    /// Per node: its owner, a hash of the name of the definition or output whose lowering made
+    /// it (see [`crate::snapshot`]).
+    pub node_owners: Vec<u64>,
     /// Evaluation order of the nodes within a step (strict dependencies first).
     pub order: Vec<NodeId>,
     /// The node of each output.

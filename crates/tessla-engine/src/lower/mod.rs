@@ -159,11 +159,11 @@ pub struct Compiler<'a> {
     base_unit: Option<i128>,
     /// Time literals are allowed (a base time is set, or 1 ns is assumed).
     time_units: bool,
-    /// Stable origin of the nodes created now (see [`crate::snapshot`]): a hash of the text of
-    /// the def being compiled and of every def it looked up so far.
-    origin: u64,
-    /// The origin of each node (`Program::node_origins`).
-    origins: Vec<u64>,
+    /// The owner of the nodes created now (see [`crate::snapshot::owner_key`]): the name of
+    /// the definition or output being lowered.
+    owner: u64,
+    /// The owner of each node (`Program::node_owners`).
+    owners: Vec<u64>,
     /// Every scope cell and def state created: scopes and defs refer to each other through
     /// `Rc`s, so they are cleared when compiling ends ([`Compiler::break_cycles`]) or each
     /// compile leaked the whole name table (found by cargo fuzz's leak checker).
@@ -199,8 +199,8 @@ impl<'a> Compiler<'a> {
             base_unit: None,
             time_units: true,
             node_types: HashMap::new(),
-            origin: 0,
-            origins: Vec::new(),
+            owner: 0,
+            owners: Vec::new(),
             scopes: Vec::new(),
             states: Vec::new(),
             types: crate::typeck::Types::default(),
@@ -260,7 +260,7 @@ impl<'a> Compiler<'a> {
 
     fn node(&mut self, n: Node) -> NodeId {
         self.nodes.push(n);
-        self.origins.push(self.origin);
+        self.owners.push(self.owner);
         self.nodes.len() - 1
     }
 
@@ -447,7 +447,7 @@ impl<'a> Compiler<'a> {
                 .alias
                 .as_ref()
                 .map_or_else(|| o.source_text.clone(), |a| a.name.clone());
-            self.origin = crate::snapshot::text_hash(&o.source_text);
+            self.owner = crate::snapshot::owner_key(&name);
             if let Ok(t) = self.expr(&o.expr, &env) {
                 let ty = match &t {
                     Term::Const(v) => value_type(v),
@@ -521,7 +521,7 @@ impl<'a> Compiler<'a> {
                     .filter(|i| matches!(self.nodes.get(*i), Some(Node::Delay { .. })))
                     .collect(),
                 nodes: self.nodes,
-                node_origins: self.origins,
+                node_owners: self.owners,
                 order,
                 output_nodes,
             },
