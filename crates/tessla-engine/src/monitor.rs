@@ -1,9 +1,12 @@
 //! Monitor instances: runs a compiled specification ([`Program`]) over timestamped input events.
 //!
 //! Owns: monitor state and the step semantics (synchronous steps per timestamp, the implicit step
-//! at the origin, `last`/`delay` timing, error values). Data flows one way: the front end
-//! (`crate::check`) lowers a checked spec into a [`Program`]; callers (the trace runner, the Telegraf binding) create one [`Monitor`] per instance, push input events and receive output
-//! events through a sink callback. This module never parses text and never does I/O.
+//! at the origin, `last`/`delay` timing, error values). Data flows one way: `crate::lower`
+//! lowers a checked spec into a [`Program`]; callers (the trace runner, the Telegraf binding)
+//! create one [`Monitor`] per instance, push input events and receive output events through a
+//! sink callback. The nodes' value code runs as closures compiled by `crate::exec` when the
+//! program's first monitor is created ([`Program::exec`], shared by every instance). This
+//! module never parses text and never does I/O.
 //!
 //! API contract (used by the trace runner and the Telegraf binding):
 //! - [`Monitor::new`] starts at TeSSLa time 0; [`Monitor::starting_at`] puts the implicit first
