@@ -389,8 +389,13 @@ pub fn lift(cx: &Ctx, f: &LiftFn, code: Option<&Exec>, a: &[Option<Value>]) -> O
     }
 }
 
-/// Compile code into a closure over a frame.
+/// Compile code into a closure over a frame. Macro expansion can nest code deeper than a
+/// thread's stack allows recursion: the stack grows on the heap as in lowering.
 pub fn compile(code: &Code) -> Exec {
+    stacker::maybe_grow(64 * 1024, 1024 * 1024, || compile_here(code))
+}
+
+fn compile_here(code: &Code) -> Exec {
     match code {
         Code::Const(v) => {
             let v = v.clone();

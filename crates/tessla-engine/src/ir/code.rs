@@ -18,21 +18,22 @@ use tessla_syntax::ast::{BinOp, UnaryOp};
 pub type FnId = usize;
 
 /// Value code over a frame: the arguments of a node's function, or a function's captured slots
-/// followed by its parameters.
+/// followed by its parameters. Sub-expressions are shared (`Arc`), so cloning code is cheap
+/// however deep macro expansion made it.
 #[derive(Clone, Debug)]
 pub enum Code {
     Const(Value),
     /// The frame's value at this index (`()` when the frame is shorter).
     Slot(usize),
     /// Evaluate every argument, then apply the callee to the values.
-    Apply(Callee, Vec<Code>),
+    Apply(Callee, Arc<[Code]>),
     /// `if c then a else b`: only the chosen branch is evaluated; a condition that is not a
     /// Bool (an error) is the result.
-    If(Box<[Code; 3]>),
+    If(Arc<[Code; 3]>),
     /// `a && b` (`and`) or `a || b`: `b` is evaluated only when `a` does not decide.
     Logic {
         and: bool,
-        args: Box<[Code; 2]>,
+        args: Arc<[Code; 2]>,
     },
     /// A function value: function `fun` with the frame's first `captured` slots in front of
     /// its arguments.
@@ -118,36 +119,49 @@ pub struct Function {
 }
 
 impl Code {
+    /// `callee(args)`.
+    pub fn apply(callee: Callee, args: Vec<Code>) -> Code {
+        Code::Apply(callee, args.into())
+    }
+
     /// Slots `0..n`, for applying a callee to a node's arguments as they come.
     pub fn slots(n: usize) -> Vec<Code> {
         (0..n).map(Code::Slot).collect()
     }
 
-    /// Whether the code reads no frame slot (it can be evaluated without a frame).
-    pub fn is_closed(&self) -> bool {
+    /// The direct sub-expressions.
+    pub fn children(&self) -> &[Code] {
         match self {
-            Code::Const(_) => true,
-            Code::Slot(_) => false,
-            Code::Closure { captured, .. } => *captured == 0,
-            Code::Apply(_, args) => args.iter().all(Code::is_closed),
-            Code::If(a) => a.iter().all(Code::is_closed),
-            Code::Logic { args, .. } => args.iter().all(Code::is_closed),
+            Code::Const(_) | Code::Slot(_) | Code::Closure { .. } => &[],
+            Code::Apply(_, args) => args,
+            Code::If(a) => &a[..],
+            Code::Logic { args, .. } => &args[..],
         }
     }
 
-    /// The program functions this code refers to directly (calls and closures), in order.
-    pub fn functions(&self, out: &mut Vec<FnId>) {
-        match self {
-            Code::Const(_) | Code::Slot(_) => {}
-            Code::Closure { fun, .. } => out.push(*fun),
-            Code::Apply(c, args) => {
-                if let Callee::Fn(f) = c {
-                    out.push(*f);
-                }
-                args.iter().for_each(|a| a.functions(out));
+    /// Whether the code reads no frame slot (it can be evaluated without a frame). Walks with
+    /// its own stack: code can be deeper than the thread's stack allows recursion.
+    pub fn is_closed(&self) -> bool {
+        let mut todo = vec![self];
+        while let Some(c) = todo.pop() {
+            match c {
+                Code::Slot(_) => return false,
+                Code::Closure { captured, .. } if *captured > 0 => return false,
+                _ => todo.extend(c.children()),
             }
-            Code::If(a) => a.iter().for_each(|a| a.functions(out)),
-            Code::Logic { args, .. } => args.iter().for_each(|a| a.functions(out)),
+        }
+        true
+    }
+
+    /// The program functions this code refers to (calls and closures).
+    pub fn functions(&self, out: &mut Vec<FnId>) {
+        let mut todo = vec![self];
+        while let Some(c) = todo.pop() {
+            match c {
+                Code::Closure { fun, .. } | Code::Apply(Callee::Fn(fun), _) => out.push(*fun),
+                _ => {}
+            }
+            todo.extend(c.children());
         }
     }
 

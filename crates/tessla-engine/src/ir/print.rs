@@ -46,8 +46,12 @@ fn args(r: &Render<'_>, args: &[Code]) -> String {
         .join(", ")
 }
 
-/// The text of value code.
+/// The text of value code (deep code grows the stack on the heap, as lowering does).
 pub fn code(r: &Render<'_>, c: &Code) -> String {
+    stacker::maybe_grow(64 * 1024, 1024 * 1024, || code_here(r, c))
+}
+
+fn code_here(r: &Render<'_>, c: &Code) -> String {
     match c {
         Code::Const(v) => (r.value)(v),
         Code::Slot(i) => format!("${i}"),
@@ -86,7 +90,7 @@ pub fn code(r: &Render<'_>, c: &Code) -> String {
             (Callee::Prim(Prim::Record(names)), _) => {
                 let fields: Vec<String> = names
                     .iter()
-                    .zip(a)
+                    .zip(a.iter())
                     .map(|(n, x)| format!("{n} = {}", code(r, x)))
                     .collect();
                 format!("{{{}}}", fields.join(", "))

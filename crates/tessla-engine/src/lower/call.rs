@@ -227,7 +227,7 @@ impl Compiler<'_> {
         if !ready && all.iter().all(|a| matches!(a, Term::Const(_))) {
             // A recursive call with constant arguments: evaluated at run time.
             let vals = all.into_iter().map(|a| self.as_code(a)).collect();
-            return Ok(Term::Code(Code::Apply(Callee::Fn(f), vals)));
+            return Ok(Term::Code(Code::apply(Callee::Fn(f), vals)));
         }
         let r = self.apply_value_fn(Callee::Fn(f), all, span)?;
         Ok(self.typed_as_declared(r, def))
@@ -260,7 +260,7 @@ impl Compiler<'_> {
         match args.get(i) {
             Some(Term::Func(ft)) if matches!(&**ft, FuncTerm::Native(_)) => match &**ft {
                 FuncTerm::Native(n) => {
-                    Ok(Code::Apply(closure::native_callee(*n), Code::slots(arity)))
+                    Ok(Code::apply(closure::native_callee(*n), Code::slots(arity)))
                 }
                 _ => self.error(Category::Type, span, "not a native"),
             },
@@ -268,10 +268,10 @@ impl Compiler<'_> {
                 Term::Const(Value::Closure(c)) => {
                     let mut all = vec![Code::Const(Value::Closure(c))];
                     all.extend(Code::slots(arity));
-                    Ok(Code::Apply(Callee::Value, all))
+                    Ok(Code::apply(Callee::Value, all))
                 }
                 Term::Code(Code::Closure { fun, captured: 0 }) => {
-                    Ok(Code::Apply(Callee::Fn(fun), Code::slots(arity)))
+                    Ok(Code::apply(Callee::Fn(fun), Code::slots(arity)))
                 }
                 _ => self.error(
                     Category::Unsupported,
@@ -282,7 +282,7 @@ impl Compiler<'_> {
             Some(Term::Const(Value::Closure(c))) => {
                 let mut all = vec![Code::Const(Value::Closure(c.clone()))];
                 all.extend(Code::slots(arity));
-                Ok(Code::Apply(Callee::Value, all))
+                Ok(Code::apply(Callee::Value, all))
             }
             _ => self.error(
                 Category::Type,

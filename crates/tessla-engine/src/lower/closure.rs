@@ -39,12 +39,12 @@ impl Compiler<'_> {
             Term::Code(c) => c.is_closed() && self.functions_done(c),
             _ => false,
         });
-        let callee_done = match &f {
-            Callee::Fn(id) => self.functions_done(&Code::Apply(Callee::Fn(*id), Vec::new())),
+        let callee_done = || match &f {
+            Callee::Fn(id) => self.functions_done(&Code::apply(Callee::Fn(*id), Vec::new())),
             _ => true,
         };
-        if known && callee_done {
-            let code = Code::Apply(f, args.into_iter().map(|a| self.as_code(a)).collect());
+        if known && callee_done() {
+            let code = Code::apply(f, args.into_iter().map(|a| self.as_code(a)).collect());
             return Ok(Term::Const(self.fold(&code)));
         }
         let has_stream = args.iter().any(|a| matches!(a, Term::Stream(_)));
@@ -67,7 +67,7 @@ impl Compiler<'_> {
                     other => codes.push(self.as_code(other)),
                 }
             }
-            return Ok(Term::Stream(self.slift_node(sargs, Code::Apply(f, codes))));
+            return Ok(Term::Stream(self.slift_node(sargs, Code::apply(f, codes))));
         }
         if has_stream {
             return self.error(
@@ -77,7 +77,7 @@ impl Compiler<'_> {
             );
         }
         let codes = args.into_iter().map(|a| self.as_code(a)).collect();
-        Ok(Term::Code(Code::Apply(f, codes)))
+        Ok(Term::Code(Code::apply(f, codes)))
     }
 
     /// Whether every program function `code` can reach has its body (so it can run now).
@@ -211,7 +211,7 @@ impl Compiler<'_> {
             Term::Const(v) => Code::Const(v),
             Term::Func(ft) => match &*ft {
                 FuncTerm::Native(n) if matches!(def.body, Body::Extern { .. }) => {
-                    Code::Apply(native_callee(*n), Code::slots(frame))
+                    Code::apply(native_callee(*n), Code::slots(frame))
                 }
                 // A function returning a function: the result is a function value.
                 _ => match self.func_value(&ft, span)? {

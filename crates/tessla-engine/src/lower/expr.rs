@@ -204,7 +204,7 @@ impl Compiler<'_> {
                         let (fa, fb) = (self.as_code(a), self.as_code(b));
                         return Ok(Term::Code(Code::Logic {
                             and: op == BinOp::And,
-                            args: Box::new([fa, fb]),
+                            args: Arc::new([fa, fb]),
                         }));
                     }
                 }
@@ -264,7 +264,7 @@ impl Compiler<'_> {
                     && !matches!(f, Term::Stream(_) | Term::Func(_))
                 {
                     let (fc, ft, ff) = (self.as_code(c), self.as_code(t), self.as_code(f));
-                    return Ok(Term::Code(Code::If(Box::new([fc, ft, ff]))));
+                    return Ok(Term::Code(Code::If(Arc::new([fc, ft, ff]))));
                 }
                 let ite = Callee::Prim(Prim::Ite);
                 let ty = match (&t, &f) {

@@ -100,11 +100,11 @@ impl Compiler<'_> {
             },
             StreamOp::Maximum => Node::Reduce {
                 stream: self.stream_arg(&args, 0, span)?,
-                f: Code::Apply(closure::native_callee(natives::core::max), Code::slots(2)),
+                f: Code::apply(closure::native_callee(natives::core::max), Code::slots(2)),
             },
             StreamOp::Minimum => Node::Reduce {
                 stream: self.stream_arg(&args, 0, span)?,
-                f: Code::Apply(closure::native_callee(natives::core::min), Code::slots(2)),
+                f: Code::apply(closure::native_callee(natives::core::min), Code::slots(2)),
             },
             StreamOp::Lift | StreamOp::SLift => {
                 let Some(ft) = args.last().cloned() else {
@@ -159,7 +159,7 @@ impl Compiler<'_> {
                 });
                 Node::SLift {
                     args: vec![SArg::Stream(s), SArg::Stream(cnt)],
-                    f: Code::Apply(Callee::Prim(Prim::IsOne), Code::slots(2)),
+                    f: Code::apply(Callee::Prim(Prim::IsOne), Code::slots(2)),
                 }
             }
             StreamOp::FirstEvent => {
@@ -245,13 +245,13 @@ impl Compiler<'_> {
                 Node::Fold {
                     stream: tag,
                     init: Value::Int(0),
-                    f: Code::Apply(Callee::Prim(Prim::ResetCount), Code::slots(2)),
+                    f: Code::apply(Callee::Prim(Prim::ResetCount), Code::slots(2)),
                 }
             }
             StreamOp::SetCollect => Node::Fold {
                 stream: self.stream_arg(&args, 0, span)?,
                 init: Value::Set(Arc::new(Vec::new())),
-                f: Code::Apply(Callee::Prim(Prim::SetAdd), Code::slots(2)),
+                f: Code::apply(Callee::Prim(Prim::SetAdd), Code::slots(2)),
             },
             StreamOp::SetCollectWithRemove => {
                 // Add this step's `add` value, then remove this step's `remove` value.
@@ -264,7 +264,7 @@ impl Compiler<'_> {
                 Node::Fold {
                     stream: step,
                     init: Value::Set(Arc::new(Vec::new())),
-                    f: Code::Apply(Callee::Prim(Prim::SetAddRemove), Code::slots(2)),
+                    f: Code::apply(Callee::Prim(Prim::SetAddRemove), Code::slots(2)),
                 }
             }
             StreamOp::Unsupported | StreamOp::Nil | StreamOp::Unit => {
@@ -281,7 +281,7 @@ impl Compiler<'_> {
 
 /// `a + b` (as the `+` operator).
 fn add(a: Code, b: Code) -> Code {
-    Code::Apply(Callee::Prim(Prim::Binary(BinOp::Add)), vec![a, b])
+    Code::apply(Callee::Prim(Prim::Binary(BinOp::Add)), vec![a, b])
 }
 
 /// The number of parameters of a lambda or user function term, when known at compile time.
