@@ -152,7 +152,7 @@ fn the_state_file_is_json_with_a_versioned_header() {
     assert_eq!(code, 0, "{err}");
     let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&state).unwrap()).unwrap();
     assert_eq!(v["magic"], "tessla-telegraf-state");
-    assert_eq!(v["version"], 1);
+    assert_eq!(v["version"], 2);
     assert_eq!(v["instances"].as_array().unwrap().len(), 2);
     // No temporary file is left next to it.
     let names: Vec<String> = std::fs::read_dir(dir.path())

@@ -120,7 +120,7 @@ fn state_in_a_bucket_continues_across_processes_and_rejects_bad_entries() {
     assert_eq!(keys, ["i.vfleet_2fa_2e1", "i.vfleet_2fb_202"]);
     let entry: serde_json::Value = serde_json::from_slice(&saved[0].1).unwrap();
     assert_eq!(entry["magic"], "tessla-telegraf-state");
-    assert_eq!(entry["version"], 1);
+    assert_eq!(entry["version"], 2);
     assert_eq!(entry["key"], serde_json::json!(["fleet/a.1"]));
 
     // A corrupt entry and a foreign one (another fingerprint): put aside, the robot starts fresh.

@@ -26,8 +26,9 @@ use tessla_engine::Program;
 use tessla_engine::snapshot::{self, Snapshot};
 
 pub const MAGIC: &str = "tessla-telegraf-state";
-/// Format version; bumped on any incompatible change of the layout below or of node keys.
-pub const VERSION: u32 = 1;
+/// Format version; bumped on any incompatible change of the layout below or of node keys
+/// (2: structural node keys, see `tessla_engine::snapshot`).
+pub const VERSION: u32 = 2;
 
 /// Where `--state` keeps the state.
 #[derive(Debug, Clone, PartialEq)]

@@ -1,9 +1,12 @@
 //! Monitor instances: runs a compiled specification ([`Program`]) over timestamped input events.
 //!
 //! Owns: monitor state and the step semantics (synchronous steps per timestamp, the implicit step
-//! at the origin, `last`/`delay` timing, error values). Data flows one way: the front end
-//! (`crate::check`) lowers a checked spec into a [`Program`]; callers (the trace runner, the Telegraf binding) create one [`Monitor`] per instance, push input events and receive output
-//! events through a sink callback. This module never parses text and never does I/O.
+//! at the origin, `last`/`delay` timing, error values). Data flows one way: `crate::lower`
+//! lowers a checked spec into a [`Program`]; callers (the trace runner, the Telegraf binding)
+//! create one [`Monitor`] per instance, push input events and receive output events through a
+//! sink callback. The nodes' value code runs as closures compiled by `crate::exec` when the
+//! program's first monitor is created ([`Program::exec`], shared by every instance). This
+//! module never parses text and never does I/O.
 //!
 //! API contract (used by the trace runner and the Telegraf binding):
 //! - [`Monitor::new`] starts at TeSSLa time 0; [`Monitor::starting_at`] puts the implicit first
@@ -21,6 +24,7 @@
 //! - Runtime errors (division by zero, overflow, `getSome(None)`) are values: an output whose value
 //!   is [`Value::Error`] reaches the sink like any other event; the caller reports it.
 
+use crate::exec::{Ctx, Exec};
 use crate::ir::{NO_SLOT, Node, NodeId, Program, SArg, Scalar};
 use crate::value::{RuntimeError, Value};
 
@@ -95,6 +99,8 @@ impl Monitor {
     }
 
     pub fn starting_at(program: Arc<Program>, t0: i64) -> Monitor {
+        // The program's code is compiled into closures by its first monitor.
+        program.exec();
         Monitor {
             inputs: vec![None; program.inputs.len()].into_boxed_slice(),
             last: vec![None; program.n_last_slots].into_boxed_slice(),
@@ -208,6 +214,7 @@ impl Monitor {
 
     fn eval<S: FnMut(OutputEvent<'_>)>(&mut self, ts: i64, sc: &mut Scratch, sink: &mut S) {
         let program = &*self.program;
+        let cx: &Ctx = program.exec();
         let slots = &program.last_slot[..];
         let first = self.last_evaluated.is_none();
         let cur = &mut sc.cur;
@@ -266,13 +273,15 @@ impl Monitor {
                     if args.iter().any(|a| cur[*a].is_some()) {
                         let vals: Vec<Option<Value>> =
                             args.iter().map(|a| cur[*a].clone()).collect();
-                        f(&vals)
+                        crate::exec::lift(cx, f, cx.node(i), &vals)
                     } else {
                         None
                     }
                 }
-                Node::SLift { args, f } => slift(cur, last, slots, &mut sc.args, args, f),
-                Node::Bin { op, a, b, f } => {
+                Node::SLift { args, .. } => {
+                    slift(cur, last, slots, &mut sc.args, args, cx, cx.node(i))
+                }
+                Node::Bin { op, a, b, .. } => {
                     if !has_event(cur, a) && !has_event(cur, b) {
                         continue;
                     }
@@ -289,7 +298,7 @@ impl Monitor {
                         }
                         continue;
                     }
-                    Some(f(&[x.clone(), y.clone()]))
+                    Some(call(cx, cx.node(i), &[x.clone(), y.clone()]))
                 }
                 Node::Ite { cond, then, other } => {
                     if !has_event(cur, cond) && !has_event(cur, then) && !has_event(cur, other) {
@@ -328,22 +337,23 @@ impl Monitor {
                     }
                     None => None,
                 },
-                Node::Fold { stream, init, f } => {
+                Node::Fold { stream, init, .. } => {
+                    let f = cx.node(i);
                     if first {
                         // The initial value, folded with an event at t = 0 if there is one.
                         Some(match &cur[*stream] {
-                            Some(x) => strict2(f, init, x),
+                            Some(x) => strict2(cx, f, init, x),
                             None => init.clone(),
                         })
                     } else {
                         match (&cur[*stream], last_of(last, slots, i)) {
-                            (Some(x), Some(acc)) => Some(strict2(f, acc, x)),
+                            (Some(x), Some(acc)) => Some(strict2(cx, f, acc, x)),
                             _ => None,
                         }
                     }
                 }
-                Node::Reduce { stream, f } => match (&cur[*stream], last_of(last, slots, i)) {
-                    (Some(x), Some(acc)) => Some(strict2(f, acc, x)),
+                Node::Reduce { stream, .. } => match (&cur[*stream], last_of(last, slots, i)) {
+                    (Some(x), Some(acc)) => Some(strict2(cx, cx.node(i), acc, x)),
                     (Some(x), None) => Some(x.clone()),
                     _ => None,
                 },
@@ -440,7 +450,8 @@ fn slift(
     slots: &[u32],
     buf: &mut Vec<Value>,
     args: &[SArg],
-    f: &crate::ir::Func,
+    cx: &Ctx,
+    f: Option<&Exec>,
 ) -> Option<Value> {
     let has_event = args
         .iter()
@@ -453,16 +464,16 @@ fn slift(
         SArg::Stream(n) => cur[*n].as_ref().or(last_of(last, slots, *n)).cloned(),
     };
     match args {
-        [a] => return Some(f(&[get(a)?])),
-        [a, b] => return Some(f(&[get(a)?, get(b)?])),
-        [a, b, c] => return Some(f(&[get(a)?, get(b)?, get(c)?])),
+        [a] => return Some(call(cx, f, &[get(a)?])),
+        [a, b] => return Some(call(cx, f, &[get(a)?, get(b)?])),
+        [a, b, c] => return Some(call(cx, f, &[get(a)?, get(b)?, get(c)?])),
         _ => {}
     }
     buf.clear();
     for a in args {
         buf.push(get(a)?);
     }
-    let r = f(buf);
+    let r = call(cx, f, buf);
     buf.clear();
     Some(r)
 }
@@ -526,9 +537,18 @@ impl Monitor {
     }
 }
 
-fn strict2(f: &crate::ir::Func, a: &Value, b: &Value) -> Value {
+fn strict2(cx: &Ctx, f: Option<&Exec>, a: &Value, b: &Value) -> Value {
     if let Value::Error(e) = a {
         return Value::Error(e.clone());
     }
-    f(&[a.clone(), b.clone()])
+    call(cx, f, &[a.clone(), b.clone()])
+}
+
+/// Call a node's compiled function (every node that has code has one).
+#[inline]
+fn call(cx: &Ctx, f: Option<&Exec>, args: &[Value]) -> Value {
+    match f {
+        Some(f) => f(cx, args),
+        None => Value::Error(RuntimeError::Other("function not compiled".into())),
+    }
 }

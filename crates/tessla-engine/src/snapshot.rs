@@ -7,16 +7,27 @@
 //! streams whose key is unchanged keep their state and every other stream starts afresh
 //! ([`changed_nodes`] lists those).
 //!
-//! A node's key is a hash of what it computes, independent of node numbering: its operator and
-//! constants, the source text it came from (the def being compiled plus every def it looked
-//! up, recorded by the compiler in `Program::node_origins`, so `x + y` and `x * y` differ) and
-//! the keys of the nodes it reads. Lazy edges (`last`'s and `delay`'s first argument, which may
-//! close a cycle) contribute the key computed over strict edges only. Hashes are FNV-1a 64 over
-//! explicit little-endian bytes (stable across runs and platforms, unlike std's `RandomState`).
+//! A node's key is a hash of its structure, independent of node and function numbering: its
+//! operator, constants and value code (the IR's text form, `crate::ir::print`, with program
+//! functions named by their [`function_keys`]: a function's name, frame and body, mixed with the
+//! keys of every function it reaches, so changing a called function changes its callers), its
+//! owner (the name of the definition or output whose lowering made it, `Program::node_owners`,
+//! so `def n = count(x)` added next to an equal `def c = count(x)` is a new stream that starts
+//! afresh) and the keys of the nodes it reads. Lazy edges (`last`'s and `delay`'s first
+//! argument, which may close a cycle) contribute the key computed over strict edges only. A
+//! function value folded into a constant enters as `<fn>`. Hashes are FNV-1a 64 over explicit
+//! little-endian bytes (stable across runs and platforms, unlike std's `RandomState`).
+//!
+//! Compatibility: keys are part of the saved state format. Any change to how they are computed
+//! must bump the state format version (`VERSION` of the Telegraf binding's state module), so a
+//! state written by an older build is refused with a warning naming both versions and its
+//! instances start afresh, never restored under keys that mean something else. Version 2:
+//! structural keys (value code and owners) replaced hashes of source text.
 //!
 //! What is not saved: function values (closures) held as stream values; such a stream starts
 //! afresh after a restore ([`Snapshot::unsaved`] counts them).
 
+use crate::ir::print::{Render, code, lift_fn};
 use crate::ir::{Node, NodeId, Program, SArg};
 use crate::monitor::Monitor;
 use crate::value::{RuntimeError, Value};
@@ -35,11 +46,16 @@ pub(crate) struct RawState {
     pub targets: Vec<Option<i64>>,
 }
 
-/// FNV-1a 64 of `s` (stable; used for source texts).
+/// FNV-1a 64 of `s` (stable).
 pub fn text_hash(s: &str) -> u64 {
     let mut h = fnv::FnvHasher::default();
     h.write(s.as_bytes());
     h.finish()
+}
+
+/// The owner key of the nodes made while lowering the definition or output `name`.
+pub fn owner_key(name: &str) -> u64 {
+    mix(text_hash("owner"), text_hash(name))
 }
 
 /// Combine two hashes (order matters).
@@ -275,8 +291,13 @@ fn with_args<'a>(mut head: String, args: impl IntoIterator<Item = &'a SArg>) -> 
     head
 }
 
-fn shape(program: &Program, node: &Node) -> String {
+fn shape(program: &Program, fkeys: &[u64], node: &Node) -> String {
     let c = const_text;
+    let function = |f: usize| format!("fn#{:016x}", fkeys.get(f).copied().unwrap_or(0));
+    let r = Render {
+        value: &const_text,
+        function: &function,
+    };
     match node {
         Node::Input(k) => match program.inputs.get(*k) {
             Some(i) => format!("in {}: {}", i.name, i.ty),
@@ -290,14 +311,14 @@ fn shape(program: &Program, node: &Node) -> String {
         Node::Delay { .. } => "delay".into(),
         Node::Default { value, .. } => format!("default {}", c(value)),
         Node::DefaultFrom { .. } => "defaultFrom".into(),
-        Node::Lift { args, .. } => format!("lift/{}", args.len()),
-        Node::SLift { args, .. } => with_args("slift".to_string(), args),
+        Node::Lift { args, f } => format!("lift/{} {}", args.len(), lift_fn(&r, f)),
+        Node::SLift { args, f } => with_args(format!("slift {{ {} }}", code(&r, f)), args),
         Node::Bin { op, a, b, .. } => with_args(format!("bin {op:?}"), [a, b]),
         Node::Ite { cond, then, other } => with_args("ite".to_string(), [cond, then, other]),
         Node::Merge(a) => format!("merge/{}", a.len()),
         Node::Filter { .. } => "filter".into(),
-        Node::Fold { init, .. } => format!("fold {}", c(init)),
-        Node::Reduce { .. } => "reduce".into(),
+        Node::Fold { init, f, .. } => format!("fold {} {{ {} }}", c(init), code(&r, f)),
+        Node::Reduce { f, .. } => format!("reduce {{ {} }}", code(&r, f)),
     }
 }
 
@@ -310,16 +331,64 @@ fn lazy_deps(node: &Node) -> Vec<NodeId> {
     }
 }
 
+/// The structural key of every function of the program's table: its name, frame and body
+/// (calls and closures naming functions by name), mixed with the same hashes of every function
+/// it reaches (in sorted order, so numbering does not matter).
+pub fn function_keys(program: &Program) -> Vec<u64> {
+    let fns = &program.functions;
+    let name = |f: usize| {
+        fns.get(f)
+            .map_or_else(|| "fn ?".to_string(), |x| format!("fn {}", x.name))
+    };
+    let r = Render {
+        value: &const_text,
+        function: &name,
+    };
+    let own: Vec<u64> = fns
+        .iter()
+        .map(|f| {
+            let body = f.body.as_ref().map_or_else(String::new, |b| code(&r, b));
+            text_hash(&format!("{}/{} = {body}", f.name, f.frame))
+        })
+        .collect();
+    (0..fns.len())
+        .map(|i| {
+            let mut seen = HashSet::from([i]);
+            let mut todo = Vec::new();
+            if let Some(b) = fns.get(i).and_then(|f| f.body.as_ref()) {
+                b.functions(&mut todo);
+            }
+            while let Some(g) = todo.pop() {
+                if seen.insert(g)
+                    && let Some(b) = fns.get(g).and_then(|f| f.body.as_ref())
+                {
+                    b.functions(&mut todo);
+                }
+            }
+            let mut reached: Vec<u64> = seen
+                .into_iter()
+                .filter(|&g| g != i)
+                .filter_map(|g| own.get(g).copied())
+                .collect();
+            reached.sort_unstable();
+            reached
+                .into_iter()
+                .fold(own.get(i).copied().unwrap_or(0), mix)
+        })
+        .collect()
+}
+
 /// The stable key of every node (0 for nodes never evaluated: not in `Program::order`).
 pub fn node_keys(program: &Program) -> Vec<u64> {
     let n = program.nodes.len();
+    let fkeys = function_keys(program);
     let base: Vec<u64> = program
         .nodes
         .iter()
         .enumerate()
         .map(|(i, node)| {
-            let origin = program.node_origins.get(i).copied().unwrap_or(0);
-            mix(text_hash(&shape(program, node)), origin)
+            let owner = program.node_owners.get(i).copied().unwrap_or(0);
+            mix(text_hash(&shape(program, &fkeys, node)), owner)
         })
         .collect();
     // Strict dependencies come earlier in `order`, so one pass in that order sees them done.

@@ -5,8 +5,9 @@
 //! grow the live heap.
 //!
 //! Recursive functions (and two that call each other) free all they allocated when the program
-//! is dropped: recursive calls refer to the function's body weakly and the program holds the
-//! bodies (`Program::functions`), so no reference cycle outlives a load.
+//! is dropped: a recursive call is a call by index into the program's function table
+//! (`Program::functions`), and the compiled closures (`exec`) reach each other only through the
+//! context passed to each call, so no reference cycle outlives a load.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::Mutex;

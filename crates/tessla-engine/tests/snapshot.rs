@@ -145,3 +145,30 @@ fn floats_errors_and_collections_survive_json() {
         }
     }
 }
+
+/// The output node of `name` in `p`.
+fn out_node(p: &Program, name: &str) -> usize {
+    p.output_nodes[p.outputs.iter().position(|o| o.name == name).unwrap()]
+}
+
+#[test]
+fn node_keys_see_the_code_of_the_functions_they_call() {
+    let spec = |f_body: &str, first: &str, second: &str| {
+        load(&format!(
+            "in x: Events[Int]\ndef f(a: Int): Int = {f_body}\ndef g(a: Int): Int = a * 2\n\
+             def h(a: Int): Int = f(a) * 3\n\
+             def y = slift1(x, f)\ndef z = slift1(x, g)\ndef w = slift1(x, h)\n\
+             out {first}\nout {second}\nout w\n"
+        ))
+    };
+    let a = spec("a + 1", "y", "z");
+    // The functions are lowered in another order (other indices): the same streams.
+    let b = spec("a + 1", "z", "y");
+    assert!(snapshot::changed_nodes(&a, &b).is_empty());
+    // `f` changes: `y` and `w` (through `h`) are new streams, `z` is not.
+    let c = spec("a + 2", "y", "z");
+    let changed = snapshot::changed_nodes(&a, &c);
+    assert!(changed.contains(&out_node(&c, "y")), "{changed:?}");
+    assert!(changed.contains(&out_node(&c, "w")), "{changed:?}");
+    assert!(!changed.contains(&out_node(&c, "z")), "{changed:?}");
+}

@@ -2,12 +2,16 @@
 //!
 //! Owns: [`Program`] (what the front end produces and the evaluator runs), the metadata the
 //! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s; its
-//! listing (`print`, `tessla-telegraf check --ir`).
+//! listing (`print`, `tessla-telegraf check --ir`). The value code inside nodes and the
+//! function table are data too (`code`); `crate::exec` compiles them into closures when the
+//! first monitor of a program is created.
 
 use crate::value::Value;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
-mod print;
+pub mod code;
+pub(crate) mod print;
+pub use code::{Callee, Code, FnId, Function, LiftFn, Prim};
 pub use print::IrListing;
 
 /// A value type, as reported by `check` and used by bindings to convert inputs.
@@ -95,12 +99,6 @@ pub struct OutputInfo {
 
 /// Index of a stream node in [`Program::nodes`].
 pub type NodeId = usize;
-
-/// A compiled value-level function: arguments (or a frame of variables) in, a value out.
-pub type Func = Arc<dyn Fn(&[Value]) -> Value + Send + Sync>;
-
-/// The function of a `lift`: `None` for arguments without an event; `None` out = no event.
-pub type LiftFunc = Arc<dyn Fn(&[Option<Value>]) -> Option<Value> + Send + Sync>;
 
 /// An argument of a signal lift: a stream, or a constant (always defined, never an event).
 #[derive(Clone, Debug)]
@@ -190,22 +188,24 @@ pub enum Node {
         stream: NodeId,
         from: NodeId,
     },
+    /// Fires when an argument has an event; `f` sees which have one.
     Lift {
         args: Vec<NodeId>,
-        f: LiftFunc,
+        f: LiftFn,
     },
-    /// Signal lift: fires when an argument stream has an event and all have had one.
+    /// Signal lift: fires when an argument stream has an event and all have had one; `f` is
+    /// code over the arguments' values (slot `i` = argument `i`).
     SLift {
         args: Vec<SArg>,
-        f: Func,
+        f: Code,
     },
     /// A signal lift of a scalar operator, run inline on `Float`/`Int`/`Bool` operands; other
-    /// operands (errors, strings) go through `f`, the operator's general closure.
+    /// operands (errors, strings) go through `f`, the operator's general code.
     Bin {
         op: ScalarOp,
         a: SArg,
         b: SArg,
-        f: Func,
+        f: Code,
     },
     /// A signal lift of `if cond then then else other`.
     Ite {
@@ -219,16 +219,16 @@ pub enum Node {
         stream: NodeId,
         cond: NodeId,
     },
-    /// `init` at t = 0, then `f(acc, x)` at each event of `stream`.
+    /// `init` at t = 0, then `f(acc, x)` at each event of `stream` (`f` over slots 0, 1).
     Fold {
         stream: NodeId,
         init: Value,
-        f: Func,
+        f: Code,
     },
     /// The first event, then `f(acc, x)`.
     Reduce {
         stream: NodeId,
-        f: Func,
+        f: Code,
     },
 }
 
@@ -303,25 +303,15 @@ pub(crate) fn stream_args(args: &[&SArg]) -> Vec<NodeId> {
         .collect()
 }
 
-/// The compiled bodies of recursive functions. Their recursive calls refer to them weakly (no
-/// reference cycle, so nothing outlives the program); the program holds them.
-#[derive(Default)]
-pub struct Functions(pub(crate) Vec<Arc<std::sync::OnceLock<Func>>>);
-
-impl std::fmt::Debug for Functions {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{} recursive functions", self.0.len())
-    }
-}
-
 /// A compiled specification, shared (in an `Arc`) by every monitor instance.
 #[derive(Debug)]
 pub struct Program {
     pub inputs: Vec<InputInfo>,
     pub outputs: Vec<OutputInfo>,
     pub nodes: Vec<Node>,
-    /// Per node: a hash of the source text that defined it (see [`crate::snapshot`]).
-    pub node_origins: Vec<u64>,
+    /// Per node: its owner, a hash of the name of the definition or output whose lowering made
+    /// it (see [`crate::snapshot`]).
+    pub node_owners: Vec<u64>,
     /// Evaluation order of the nodes within a step (strict dependencies first).
     pub order: Vec<NodeId>,
     /// The node of each output.
@@ -333,14 +323,23 @@ pub struct Program {
     pub last_slot: Vec<u32>,
     /// Number of slots in use in `last_slot`.
     pub n_last_slots: usize,
-    /// Keeps the bodies of recursive functions alive as long as the program.
-    pub functions: Functions,
+    /// The function table: named functions and lambdas that value code calls by index
+    /// ([`Callee::Fn`], [`Code::Closure`]).
+    pub functions: Vec<Function>,
+    /// The compiled code, made when the first monitor is created (see [`Program::exec`]).
+    pub(crate) exec: OnceLock<Arc<crate::exec::Ctx>>,
 }
 
 /// `last_slot` of a node whose earlier values nobody reads.
 pub const NO_SLOT: u32 = u32::MAX;
 
 impl Program {
+    /// The program's code compiled into closures: built once, by the first monitor created,
+    /// and shared by every monitor of the program.
+    pub fn exec(&self) -> &Arc<crate::exec::Ctx> {
+        self.exec.get_or_init(|| crate::exec::compile_program(self))
+    }
+
     pub fn input_index(&self, name: &str) -> Option<usize> {
         self.inputs.iter().position(|i| i.name == name)
     }

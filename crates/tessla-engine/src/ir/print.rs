@@ -1,11 +1,19 @@
-//! A readable listing of a [`Program`] (`tessla-telegraf check --ir SPEC`): inputs, the nodes
-//! in evaluation order with their arguments, outputs, and the slots kept across steps.
+//! A readable listing of a [`Program`] (`tessla-telegraf check --ir SPEC`): inputs, the
+//! function table, the nodes in evaluation order with their arguments and value code, outputs,
+//! and the slots kept across steps.
 //!
-//! Owns: [`Program::ir`]. Functions inside nodes are closures and print as `<fn>`; lazy
-//! arguments (read from earlier steps) are marked `lazy`.
+//! Owns: [`Program::ir`] and the text form of value code ([`Render`], [`code`], [`lift_fn`]),
+//! which `crate::snapshot` also hashes (with functions named by their structural key instead
+//! of their index). In code, `$i` is slot `i` of the frame (a node's argument `i`, or a
+//! function's captured slots then parameters), `fK` is function `K` of the table, natives are
+//! named as the builtins table names them; lazy arguments (read from earlier steps) are marked
+//! `lazy`. A function value folded into a constant prints as `<function>`.
 
+use super::code::{Callee, Code, FnId, LiftFn, Prim};
 use super::{NO_SLOT, Node, NodeId, Program, SArg};
+use crate::value::Value;
 use std::fmt;
+use tessla_syntax::ast::UnaryOp;
 
 /// The listing of a program, see [`Program::ir`].
 pub struct IrListing<'a>(&'a Program);
@@ -14,6 +22,122 @@ impl Program {
     /// A readable listing of the program (implements `Display`).
     pub fn ir(&self) -> IrListing<'_> {
         IrListing(self)
+    }
+}
+
+/// How constants and function references are written.
+pub struct Render<'a> {
+    pub value: &'a dyn Fn(&Value) -> String,
+    pub function: &'a dyn Fn(FnId) -> String,
+}
+
+/// The listing's way: values as `Debug` shows them, functions as `fK`.
+fn listing_render<'a>() -> Render<'a> {
+    Render {
+        value: &|v| format!("{v:?}"),
+        function: &|f| format!("f{f}"),
+    }
+}
+
+fn args(r: &Render<'_>, args: &[Code]) -> String {
+    args.iter()
+        .map(|a| code(r, a))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The text of value code (deep code grows the stack on the heap, as lowering does).
+pub fn code(r: &Render<'_>, c: &Code) -> String {
+    stacker::maybe_grow(64 * 1024, 1024 * 1024, || code_here(r, c))
+}
+
+fn code_here(r: &Render<'_>, c: &Code) -> String {
+    match c {
+        Code::Const(v) => (r.value)(v),
+        Code::Slot(i) => format!("${i}"),
+        Code::If(parts) => {
+            let [c, t, e] = &**parts;
+            format!(
+                "(if {} then {} else {})",
+                code(r, c),
+                code(r, t),
+                code(r, e)
+            )
+        }
+        Code::Logic { and, args } => {
+            let [a, b] = &**args;
+            let op = if *and { "&&" } else { "||" };
+            format!("({} {op} {})", code(r, a), code(r, b))
+        }
+        Code::Closure { fun, captured: 0 } => format!("fn {}", (r.function)(*fun)),
+        Code::Closure { fun, captured } => {
+            format!("fn {}[$0..${}]", (r.function)(*fun), captured - 1)
+        }
+        Code::Apply(callee, a) => match (callee, &a[..]) {
+            (Callee::Prim(Prim::Binary(op)), [x, y]) => {
+                format!("({} {} {})", code(r, x), op.symbol(), code(r, y))
+            }
+            (Callee::Prim(Prim::Unary(op)), [x]) => {
+                let sym = match op {
+                    UnaryOp::Not => "!",
+                    UnaryOp::BitNot => "~",
+                    UnaryOp::Neg => "-",
+                    UnaryOp::FNeg => "-.",
+                };
+                format!("{sym}{}", code(r, x))
+            }
+            (Callee::Prim(Prim::Tuple), _) => format!("({})", args(r, a)),
+            (Callee::Prim(Prim::Record(names)), _) => {
+                let fields: Vec<String> = names
+                    .iter()
+                    .zip(a.iter())
+                    .map(|(n, x)| format!("{n} = {}", code(r, x)))
+                    .collect();
+                format!("{{{}}}", fields.join(", "))
+            }
+            (Callee::Prim(Prim::Member(name)), [x]) => format!("{}.{name}", code(r, x)),
+            (Callee::Prim(Prim::Format(Some(spec))), _) => {
+                format!("format({spec:?}, {})", args(r, a))
+            }
+            (Callee::Prim(Prim::Format(None)), _) => format!("toString({})", args(r, a)),
+            (Callee::Prim(p), _) => format!("{}({})", prim_name(p), args(r, a)),
+            (Callee::Native { name, .. }, _) => format!("{name}({})", args(r, a)),
+            (Callee::Fn(f), _) => format!("{}({})", (r.function)(*f), args(r, a)),
+            (Callee::Value, [f, rest @ ..]) => format!("{}({})", code(r, f), args(r, rest)),
+            (Callee::Value, []) => "call()".into(),
+        },
+    }
+}
+
+fn prim_name(p: &Prim) -> &'static str {
+    match p {
+        Prim::Binary(_) => "binary",
+        Prim::Unary(_) => "unary",
+        Prim::Tuple => "tuple",
+        Prim::Record(_) => "record",
+        Prim::Member(_) => "member",
+        Prim::Format(_) => "format",
+        Prim::Concat => "concat",
+        Prim::Ite => "ite",
+        Prim::IsOne => "isOne",
+        Prim::ResetCount => "resetCountStep",
+        Prim::SetAdd => "setAdd",
+        Prim::SetAddRemove => "setAddRemove",
+    }
+}
+
+/// The text of a `lift` node's function.
+pub fn lift_fn(r: &Render<'_>, f: &LiftFn) -> String {
+    match f {
+        LiftFn::Options(c) => format!("options {{ {} }}", code(r, c)),
+        LiftFn::First => "first".into(),
+        LiftFn::On => "on".into(),
+        LiftFn::Distinct => "distinct".into(),
+        LiftFn::FirstOnly => "firstOnly".into(),
+        LiftFn::Edge(true) => "rising".into(),
+        LiftFn::Edge(false) => "falling".into(),
+        LiftFn::ResetTag => "resetTag".into(),
+        LiftFn::AddRemove => "addRemove".into(),
     }
 }
 
@@ -31,8 +155,9 @@ fn list(ns: &[NodeId]) -> String {
         .join(", ")
 }
 
-/// One node as `kind(arguments)`.
+/// One node as `kind(arguments)`, its value code in braces.
 fn node(p: &Program, n: &Node) -> String {
+    let r = listing_render();
     match n {
         Node::Input(i) => format!(
             "input {}",
@@ -46,10 +171,11 @@ fn node(p: &Program, n: &Node) -> String {
         Node::Delay { delay, reset } => format!("delay(n{delay} lazy, n{reset})"),
         Node::Default { stream, value } => format!("default(n{stream}, {value:?})"),
         Node::DefaultFrom { stream, from } => format!("defaultFrom(n{stream}, n{from})"),
-        Node::Lift { args, .. } => format!("lift({}, <fn>)", list(args)),
-        Node::SLift { args, .. } => format!(
-            "slift({}, <fn>)",
-            args.iter().map(sarg).collect::<Vec<_>>().join(", ")
+        Node::Lift { args, f } => format!("lift({}) {}", list(args), lift_fn(&r, f)),
+        Node::SLift { args, f } => format!(
+            "slift({}) {{ {} }}",
+            args.iter().map(sarg).collect::<Vec<_>>().join(", "),
+            code(&r, f)
         ),
         Node::Bin { op, a, b, .. } => format!("{op:?}({}, {})", sarg(a), sarg(b)),
         Node::Ite { cond, then, other } => {
@@ -57,8 +183,10 @@ fn node(p: &Program, n: &Node) -> String {
         }
         Node::Merge(args) => format!("merge({})", list(args)),
         Node::Filter { stream, cond } => format!("filter(n{stream}, n{cond})"),
-        Node::Fold { stream, init, .. } => format!("fold(n{stream}, {init:?}, <fn>)"),
-        Node::Reduce { stream, .. } => format!("reduce(n{stream}, <fn>)"),
+        Node::Fold { stream, init, f } => {
+            format!("fold(n{stream}, {init:?}) {{ {} }}", code(&r, f))
+        }
+        Node::Reduce { stream, f } => format!("reduce(n{stream}) {{ {} }}", code(&r, f)),
     }
 }
 
@@ -67,6 +195,17 @@ impl fmt::Display for IrListing<'_> {
         let p = self.0;
         for i in &p.inputs {
             writeln!(f, "in  {}: Events[{}]", i.name, i.ty)?;
+        }
+        if !p.functions.is_empty() {
+            writeln!(f, "-- {} functions:", p.functions.len())?;
+            let r = listing_render();
+            for (k, fun) in p.functions.iter().enumerate() {
+                let body = fun
+                    .body
+                    .as_ref()
+                    .map_or_else(|| "<not lowered>".to_string(), |b| code(&r, b));
+                writeln!(f, "f{k} {}/{} = {body}", fun.name, fun.frame)?;
+            }
         }
         writeln!(
             f,
@@ -93,9 +232,7 @@ impl fmt::Display for IrListing<'_> {
 
 #[cfg(test)]
 mod tests {
-    #[test]
-    fn a_program_lists_its_nodes_in_order() {
-        let spec = "in x: Events[Int]\ndef c = x + 1\ndef l = last(c, x)\nout c\nout l";
+    fn listing(spec: &str) -> String {
         let loaded = crate::load_with(
             "spec.tessla",
             &tessla_syntax::include::MemResolver {
@@ -106,10 +243,37 @@ mod tests {
         let Ok(loaded) = loaded else {
             panic!("spec does not load");
         };
-        let text = loaded.program.ir().to_string();
+        loaded.program.ir().to_string()
+    }
+
+    #[test]
+    fn a_program_lists_its_nodes_in_order() {
+        let text = listing("in x: Events[Int]\ndef c = x + 1\ndef l = last(c, x)\nout c\nout l");
         assert!(text.starts_with("in  x: Events[Int]\n"), "{text}");
         assert!(text.contains("= input x"), "{text}");
         assert!(text.contains("last(n"), "{text}");
         assert!(text.contains("out c: Events[Int] = n"), "{text}");
+    }
+
+    #[test]
+    fn value_code_and_the_function_table_are_listed() {
+        let text = listing(
+            "in x: Events[Int]\ndef f(a: Int): Int = if a > 0 then f(a - 1) + 2 else 0\n\
+             def y = slift1(x, f)\ndef s = fold(x, 0, (acc: Int, v: Int) => acc + v * 2)\nout y\nout s",
+        );
+        // The recursive function calls itself by index; the lambda is a function too.
+        assert!(
+            text.contains(
+                "f0 f/1 = (if ($0 > Int(0)) then (f0(($0 - Int(1))) + Int(2)) else Int(0))"
+            ),
+            "{text}"
+        );
+        assert!(
+            text.contains("f1 lambda/2 = ($0 + ($1 * Int(2)))"),
+            "{text}"
+        );
+        assert!(text.contains("slift(n0) { f0($0) }"), "{text}");
+        assert!(text.contains("fold(n0, Int(0)) { f1($0, $1) }"), "{text}");
+        assert!(!text.contains("<fn>"), "{text}");
     }
 }

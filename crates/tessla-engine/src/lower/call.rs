@@ -97,26 +97,17 @@ impl Compiler<'_> {
 
     pub(super) fn call(&mut self, f: Term, args: Vec<Term>, span: Span, env: &Env) -> R<Term> {
         let Term::Func(ft) = f else {
-            // Calling a closure value at runtime.
-            if let Term::Dyn(_) | Term::Const(Value::Closure(_)) = f {
+            // Calling a function value at runtime.
+            if let Term::Code(_) | Term::Const(Value::Closure(_)) = f {
                 let mut all = vec![f];
                 all.extend(args);
-                let call: Func = Arc::new(|a: &[Value]| match &a[0] {
-                    Value::Closure(c) => c.call(&a[1..]),
-                    other => Value::Error(RuntimeError::Other(
-                        format!("{other:?} is not a function").into(),
-                    )),
-                });
-                return self.apply_value_fn(call, all, span);
+                return self.apply_value_fn(Callee::Value, all, span);
             }
             return self.error(Category::Type, span, "this is not a function");
         };
         match &*ft {
             FuncTerm::Builtin(b, op) => self.stream_builtin(b.name, *op, args, span),
-            FuncTerm::Native(n) => {
-                let n = *n;
-                self.apply_value_fn(Arc::new(move |a: &[Value]| call_native(n, a)), args, span)
-            }
+            FuncTerm::Native(n) => self.apply_value_fn(closure::native_callee(*n), args, span),
             FuncTerm::User { def, env: denv } => {
                 let params = def.params.clone().unwrap_or_default();
                 if let Body::Extern { .. } = def.body {
@@ -234,25 +225,15 @@ impl Compiler<'_> {
         let (f, ready) = self.compile_fn(def, denv, span)?;
         // A function defined inside a function body also gets the enclosing frame.
         let mut all: Vec<Term> = (0..denv.frame)
-            .map(|slot| {
-                let d: Dyn =
-                    Arc::new(move |fr: &[Value]| fr.get(slot).cloned().unwrap_or(Value::Unit));
-                Term::Dyn(d)
-            })
+            .map(|slot| Term::Code(Code::Slot(slot)))
             .collect();
         all.extend(args);
         if !ready && all.iter().all(|a| matches!(a, Term::Const(_))) {
             // A recursive call with constant arguments: evaluated at run time.
-            let vals: Vec<Value> = all
-                .into_iter()
-                .filter_map(|a| match a {
-                    Term::Const(v) => Some(v),
-                    _ => None,
-                })
-                .collect();
-            return Ok(Term::Dyn(Arc::new(move |_: &[Value]| f(&vals))));
+            let vals = all.into_iter().map(|a| self.as_code(a)).collect();
+            return Ok(Term::Code(Code::apply(Callee::Fn(f), vals)));
         }
-        let r = self.apply_value_fn(f, all, span)?;
+        let r = self.apply_value_fn(Callee::Fn(f), all, span)?;
         Ok(self.typed_as_declared(r, def))
     }
 
@@ -272,10 +253,30 @@ impl Compiler<'_> {
         }
     }
 
-    pub(super) fn value_fn_arg(&mut self, args: &[Term], i: usize, span: Span) -> R<Func> {
+    /// Argument `i`, a function, as code applying it to `arity` arguments (slots `0..arity`).
+    pub(super) fn value_fn_arg(
+        &mut self,
+        args: &[Term],
+        i: usize,
+        arity: usize,
+        span: Span,
+    ) -> R<Code> {
         match args.get(i) {
+            Some(Term::Func(ft)) if matches!(&**ft, FuncTerm::Native(_)) => match &**ft {
+                FuncTerm::Native(n) => {
+                    Ok(Code::apply(closure::native_callee(*n), Code::slots(arity)))
+                }
+                _ => self.error(Category::Type, span, "not a native"),
+            },
             Some(Term::Func(ft)) => match self.func_value(ft, span)? {
-                Term::Const(Value::Closure(c)) => Ok(Arc::new(move |a: &[Value]| c.call(a))),
+                Term::Const(Value::Closure(c)) => {
+                    let mut all = vec![Code::Const(Value::Closure(c))];
+                    all.extend(Code::slots(arity));
+                    Ok(Code::apply(Callee::Value, all))
+                }
+                Term::Code(Code::Closure { fun, captured: 0 }) => {
+                    Ok(Code::apply(Callee::Fn(fun), Code::slots(arity)))
+                }
                 _ => self.error(
                     Category::Unsupported,
                     span,
@@ -283,8 +284,9 @@ impl Compiler<'_> {
                 ),
             },
             Some(Term::Const(Value::Closure(c))) => {
-                let c = c.clone();
-                Ok(Arc::new(move |a: &[Value]| c.call(a)))
+                let mut all = vec![Code::Const(Value::Closure(c.clone()))];
+                all.extend(Code::slots(arity));
+                Ok(Code::apply(Callee::Value, all))
             }
             _ => self.error(
                 Category::Type,

@@ -1,40 +1,30 @@
-//! Value-level code: named functions and lambdas compiled once into closures over a frame of
-//! variables, function values, and applying a value function to terms (constant folding when
-//! every argument is a constant, a signal lift when one is a stream).
+//! Value-level code: named functions and lambdas lowered once into the program's function
+//! table, function values, and applying a value function to terms (constant folding when every
+//! argument is known now, a signal lift when one is a stream, code over the frame inside
+//! function bodies).
 //!
-//! Owns: [`RtClosure`] and [`FnValue`] (functions as runtime values), `Compiler::compile_fn`
-//! (a named function, cached, recursion through a cell), `func_value`, `apply_value_fn`,
-//! `as_dyn`, `param_frame`.
+//! Owns: `Compiler::compile_fn` (a named function, once per definition; a recursive call refers
+//! to the function by its index, so nothing is closed through a cell), `func_value`,
+//! `apply_value_fn`, `as_code`, `param_frame`, constant folding (`fold`, through
+//! `crate::exec`) and the name of a native callee.
 
 use super::*;
 
 impl Compiler<'_> {
-    /// Turn a constant or frame code into frame code.
-    pub(super) fn as_dyn(&self, t: Term) -> Dyn {
+    /// Turn a constant or code into code.
+    pub(super) fn as_code(&self, t: Term) -> Code {
         match t {
-            Term::Dyn(d) => d,
-            Term::Const(v) => Arc::new(move |_: &[Value]| v.clone()),
-            _ => Arc::new(|_: &[Value]| Value::Error(RuntimeError::Other("not a value".into()))),
+            Term::Code(c) => c,
+            Term::Const(v) => Code::Const(v),
+            _ => Code::Const(Value::Error(RuntimeError::Other("not a value".into()))),
         }
     }
 
-    /// Apply a strict value function to terms: fold constants, lift over streams, or build frame
-    /// code inside function bodies.
-    pub(super) fn apply_value_fn(&mut self, f: Func, args: Vec<Term>, span: Span) -> R<Term> {
-        if args.iter().all(|a| matches!(a, Term::Const(_))) {
-            let vals: Vec<Value> = args
-                .into_iter()
-                .map(|a| match a {
-                    Term::Const(v) => v,
-                    _ => Value::Unit,
-                })
-                .collect();
-            return Ok(Term::Const(f(&vals)));
-        }
-        let has_stream = args.iter().any(|a| matches!(a, Term::Stream(_)));
-        let has_dyn = args.iter().any(|a| matches!(a, Term::Dyn(_)));
+    /// Apply a strict value function to terms: fold what is known now, lift over streams, or
+    /// build code over the frame inside function bodies.
+    pub(super) fn apply_value_fn(&mut self, f: Callee, args: Vec<Term>, span: Span) -> R<Term> {
         if args.iter().any(|a| matches!(a, Term::Func(_))) {
-            // Functions as arguments of value functions become closures.
+            // Functions as arguments of value functions become function values.
             let mut conv = Vec::new();
             for a in args {
                 conv.push(match a {
@@ -44,16 +34,40 @@ impl Compiler<'_> {
             }
             return self.apply_value_fn(f, conv, span);
         }
-        if has_stream && !has_dyn {
-            let sargs = args
-                .into_iter()
-                .map(|a| match a {
-                    Term::Stream(n) => SArg::Stream(n),
-                    Term::Const(v) => SArg::Const(v),
-                    _ => SArg::Const(Value::Unit),
-                })
-                .collect();
-            return Ok(Term::Stream(self.slift_node(sargs, f)));
+        let known = args.iter().all(|a| match a {
+            Term::Const(_) => true,
+            Term::Code(c) => c.is_closed() && self.functions_done(c),
+            _ => false,
+        });
+        let callee_done = || match &f {
+            Callee::Fn(id) => self.functions_done(&Code::apply(Callee::Fn(*id), Vec::new())),
+            _ => true,
+        };
+        if known && callee_done() {
+            let code = Code::apply(f, args.into_iter().map(|a| self.as_code(a)).collect());
+            return Ok(Term::Const(self.fold(&code)));
+        }
+        let has_stream = args.iter().any(|a| matches!(a, Term::Stream(_)));
+        let has_frame = args
+            .iter()
+            .any(|a| matches!(a, Term::Code(c) if !c.is_closed()));
+        if has_stream && !has_frame {
+            let mut sargs = Vec::new();
+            let mut codes = Vec::new();
+            for a in args {
+                match a {
+                    Term::Stream(n) => {
+                        codes.push(Code::Slot(sargs.len()));
+                        sargs.push(SArg::Stream(n));
+                    }
+                    Term::Const(v) => {
+                        codes.push(Code::Slot(sargs.len()));
+                        sargs.push(SArg::Const(v));
+                    }
+                    other => codes.push(self.as_code(other)),
+                }
+            }
+            return Ok(Term::Stream(self.slift_node(sargs, Code::apply(f, codes))));
         }
         if has_stream {
             return self.error(
@@ -62,54 +76,89 @@ impl Compiler<'_> {
                 "mixing streams and function parameters in one expression is not supported",
             );
         }
-        let ds: Vec<Dyn> = args.into_iter().map(|a| self.as_dyn(a)).collect();
-        Ok(Term::Dyn(Arc::new(move |fr: &[Value]| {
-            let vals: Vec<Value> = ds.iter().map(|d| d(fr)).collect();
-            f(&vals)
-        })))
+        let codes = args.into_iter().map(|a| self.as_code(a)).collect();
+        Ok(Term::Code(Code::apply(f, codes)))
     }
 
-    /// A function term as a runtime value (`Value::Closure`), constant or frame code.
+    /// Whether every program function `code` can reach has its body (so it can run now).
+    pub(super) fn functions_done(&self, code: &Code) -> bool {
+        let mut todo = Vec::new();
+        code.functions(&mut todo);
+        let mut seen = HashSet::new();
+        while let Some(f) = todo.pop() {
+            if !seen.insert(f) {
+                continue;
+            }
+            match self.functions.get(f).and_then(|x| x.body.as_ref()) {
+                Some(b) => b.functions(&mut todo),
+                None => return false,
+            }
+        }
+        true
+    }
+
+    /// Evaluate closed code now (constant folding), with the functions finished so far.
+    pub(super) fn fold(&mut self, code: &Code) -> Value {
+        let ctx = match &self.fold_ctx {
+            Some(c) => c.clone(),
+            None => {
+                self.fold_fns.resize(self.functions.len(), None);
+                for (i, f) in self.functions.iter().enumerate() {
+                    if let (Some(slot @ None), Some(body)) = (self.fold_fns.get_mut(i), &f.body) {
+                        *slot = Some(crate::exec::compile(body));
+                    }
+                }
+                let c = crate::exec::context(self.fold_fns.clone(), Vec::new(), true);
+                self.fold_ctx = Some(c.clone());
+                c
+            }
+        };
+        crate::exec::eval(&ctx, code)
+    }
+
+    /// A new entry of the function table, its body still to come.
+    fn new_function(&mut self, name: &str, frame: usize) -> FnId {
+        self.functions.push(Function {
+            name: name.to_string(),
+            frame,
+            body: None,
+        });
+        self.functions.len() - 1
+    }
+
+    /// Give a function its body.
+    fn finish_function(&mut self, id: FnId, body: Code) {
+        if let Some(f) = self.functions.get_mut(id) {
+            f.body = Some(body);
+        }
+        self.fold_ctx = None;
+    }
+
+    /// A function term as a runtime value: a constant (natives) or closure code.
     pub(super) fn func_value(&mut self, ft: &Rc<FuncTerm>, span: Span) -> R<Term> {
         match &**ft {
-            FuncTerm::Native(n) => {
-                let n = *n;
-                let f: Func = Arc::new(move |a: &[Value]| call_native(n, a));
-                Ok(Term::Const(Value::Closure(Arc::new(FnValue(f)))))
-            }
+            FuncTerm::Native(n) => Ok(Term::Const(Value::Closure(Arc::new(
+                crate::exec::NativeClosure(*n),
+            )))),
             FuncTerm::User { def, env } => {
-                let (f, _) = self.compile_fn(def, env, span)?;
-                let outer = env.frame;
-                if outer == 0 {
-                    return Ok(Term::Const(Value::Closure(Arc::new(FnValue(f)))));
-                }
+                let (fun, _) = self.compile_fn(def, env, span)?;
                 // Defined inside a function body: the closure captures the enclosing frame.
-                Ok(Term::Dyn(Arc::new(move |fr: &[Value]| {
-                    Value::Closure(Arc::new(RtClosure {
-                        captured: fr[..outer.min(fr.len())].to_vec(),
-                        body: f.clone(),
-                    }))
-                })))
+                Ok(Term::Code(Code::Closure {
+                    fun,
+                    captured: env.frame,
+                }))
             }
             FuncTerm::Lambda { params, body, env } => {
                 let (names, frame) = self.param_frame(params, env.frame);
                 let inner = env.child(names, frame);
+                let fun = self.new_function("lambda", frame);
                 let code = self.expr(body, &inner)?;
-                let code = self.as_dyn(code);
-                let outer = env.frame;
-                if outer == 0 {
-                    Ok(Term::Const(Value::Closure(Arc::new(RtClosure {
-                        captured: Vec::new(),
-                        body: code,
-                    }))))
-                } else {
-                    Ok(Term::Dyn(Arc::new(move |fr: &[Value]| {
-                        Value::Closure(Arc::new(RtClosure {
-                            captured: fr[..outer.min(fr.len())].to_vec(),
-                            body: code.clone(),
-                        }))
-                    })))
-                }
+                let code = self.as_code(code);
+                self.finish_function(fun, code);
+                Ok(Term::Code(Code::Closure {
+                    fun,
+                    captured: env.frame,
+                }))
             }
             FuncTerm::Builtin(b, _) => self.error(
                 Category::Unsupported,
@@ -126,43 +175,28 @@ impl Compiler<'_> {
     ) -> (HashMap<String, Binding>, usize) {
         let mut names = HashMap::new();
         for (i, p) in params.iter().enumerate() {
-            let slot = base + i;
-            let d: Dyn = Arc::new(move |fr: &[Value]| fr.get(slot).cloned().unwrap_or(Value::Unit));
-            names.insert(p.name.name.clone(), Binding::Term(Term::Dyn(d)));
+            names.insert(
+                p.name.name.clone(),
+                Binding::Term(Term::Code(Code::Slot(base + i))),
+            );
         }
         (names, base + params.len())
     }
 
-    /// Compile a named value function once into a closure (recursion through a cell). The
-    /// closure takes the enclosing function's frame (`env.frame` values, none at top level)
-    /// followed by the arguments. The flag is false while the function is still being compiled
-    /// (a recursive call), so such calls must not be folded at compile time.
-    pub(super) fn compile_fn(&mut self, def: &Rc<Def>, env: &Env, span: Span) -> R<(Func, bool)> {
+    /// Lower a named value function once into the function table. Its frame is the enclosing
+    /// function's frame (`env.frame` values, none at top level) followed by the arguments. The
+    /// flag is false while the function is still being lowered (a recursive call), so such
+    /// calls must not be folded now.
+    pub(super) fn compile_fn(&mut self, def: &Rc<Def>, env: &Env, span: Span) -> R<(FnId, bool)> {
         let key = Rc::as_ptr(def);
-        if let Some(cell) = self.compiled_fns.get(&key) {
-            if let Some(f) = cell.get() {
-                return Ok((f.clone(), true));
-            }
-            // A recursive call inside the body being compiled refers to its cell weakly (the
-            // body is in the cell: a strong reference would be a cycle that outlives the
-            // program); the program holds the cell (`Program::functions`).
-            self.recursive_cells.push(cell.clone());
-            let cell = Arc::downgrade(cell);
-            return Ok((
-                Arc::new(move |a: &[Value]| match cell.upgrade() {
-                    Some(c) => match c.get() {
-                        Some(f) => f(a),
-                        None => not_compiled(),
-                    },
-                    None => not_compiled(),
-                }),
-                false,
-            ));
+        if let Some(&id) = self.compiled_fns.get(&key) {
+            let done = self.functions.get(id).is_some_and(|f| f.body.is_some());
+            return Ok((id, done));
         }
-        let cell: Arc<OnceLock<Func>> = Arc::new(OnceLock::new());
-        self.compiled_fns.insert(key, cell.clone());
         let params = def.params.clone().unwrap_or_default();
         let (names, frame) = self.param_frame(&params, env.frame);
+        let id = self.new_function(&def.name.name, frame);
+        self.compiled_fns.insert(key, id);
         let inner = Env {
             names: Rc::new(names),
             parent: Some(Rc::new(env.clone())),
@@ -172,18 +206,17 @@ impl Compiler<'_> {
             self.compiled_fns.remove(&key);
             return Err(Fail);
         };
-        let f: Func = match body {
-            Term::Dyn(d) => Arc::new(move |a: &[Value]| d(a)),
-            Term::Const(v) => Arc::new(move |_: &[Value]| v.clone()),
+        let code = match body {
+            Term::Code(c) => c,
+            Term::Const(v) => Code::Const(v),
             Term::Func(ft) => match &*ft {
                 FuncTerm::Native(n) if matches!(def.body, Body::Extern { .. }) => {
-                    let n = *n;
-                    Arc::new(move |a: &[Value]| call_native(n, a))
+                    Code::apply(native_callee(*n), Code::slots(frame))
                 }
-                // A function returning a function: the result is a closure value.
+                // A function returning a function: the result is a function value.
                 _ => match self.func_value(&ft, span)? {
-                    Term::Const(v) => Arc::new(move |_: &[Value]| v.clone()),
-                    Term::Dyn(d) => Arc::new(move |a: &[Value]| d(a)),
+                    Term::Const(v) => Code::Const(v),
+                    Term::Code(c) => c,
                     _ => {
                         return self.error(
                             Category::Unsupported,
@@ -204,46 +237,25 @@ impl Compiler<'_> {
                 );
             }
         };
-        let _ = cell.set(f.clone());
-        Ok((f, true))
+        self.finish_function(id, code);
+        Ok((id, true))
     }
 }
 
-/// A runtime function value (closure over a captured frame).
-pub(super) struct RtClosure {
-    captured: Vec<Value>,
-    body: Dyn,
-}
-
-impl std::fmt::Debug for RtClosure {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("<function>")
-    }
-}
-
-impl Callable for RtClosure {
-    fn call(&self, args: &[Value]) -> Value {
-        let mut frame = self.captured.clone();
-        frame.extend_from_slice(args);
-        (self.body)(&frame)
-    }
-}
-
-/// A compiled named function called as a value.
-pub(super) struct FnValue(Func);
-
-impl std::fmt::Debug for FnValue {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("<function>")
-    }
-}
-
-impl Callable for FnValue {
-    fn call(&self, args: &[Value]) -> Value {
-        (self.0)(args)
-    }
-}
-
-fn not_compiled() -> Value {
-    Value::Error(RuntimeError::Other("function not compiled".into()))
+/// A native as a callee, named as the builtins table names it (for listings and identities).
+pub(super) fn native_callee(f: natives::NativeFn) -> Callee {
+    static NAMES: std::sync::OnceLock<HashMap<usize, &'static str>> = std::sync::OnceLock::new();
+    let names = NAMES.get_or_init(|| {
+        let mut m = HashMap::new();
+        for b in builtins::BUILTINS {
+            if let Kind::Value(g) | Kind::Operator(g) | Kind::Extern(g) = b.kind {
+                m.entry(g as usize).or_insert(b.name);
+            }
+        }
+        m.entry(unknown_extern as natives::NativeFn as usize)
+            .or_insert("unknown extern");
+        m
+    });
+    let name = names.get(&(f as usize)).copied().unwrap_or("native");
+    Callee::Native { name, f }
 }

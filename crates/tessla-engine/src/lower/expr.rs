@@ -2,8 +2,8 @@
 //! operators with their inline scalar nodes, `if`, records, tuples, member access, lambdas,
 //! blocks).
 //!
-//! Owns: `Compiler::expr`, the operator closures (`binop_fn`, semantics in `crate::ops`) and the
-//! inline nodes of operators (`inline_op`, `slift_node`).
+//! Owns: `Compiler::expr` and the inline nodes of operators (`inline_op`, `slift_node`). Value
+//! operations become [`Prim`]itive applications (semantics in `crate::exec` and `crate::ops`).
 
 use super::*;
 
@@ -13,7 +13,7 @@ impl Compiler<'_> {
     pub(super) fn inline_op(
         &mut self,
         t: &Term,
-        make: impl FnOnce(&[SArg], &Func) -> Option<Node>,
+        make: impl FnOnce(&[SArg], &Code) -> Option<Node>,
     ) {
         if let Term::Stream(n) = t
             && let Some(Node::SLift { args, f }) = self.nodes.get(*n)
@@ -24,7 +24,7 @@ impl Compiler<'_> {
         }
     }
 
-    pub(super) fn slift_node(&mut self, args: Vec<SArg>, f: Func) -> NodeId {
+    pub(super) fn slift_node(&mut self, args: Vec<SArg>, f: Code) -> NodeId {
         self.node(Node::SLift { args, f })
     }
 
@@ -101,12 +101,7 @@ impl Compiler<'_> {
                         StrPart::Text(t) => terms.push(Term::Const(Value::Str(t.as_str().into()))),
                         StrPart::Interp { expr, format } => {
                             let t = self.expr(expr, env)?;
-                            let fmt = format.clone();
-                            let f: Func = Arc::new(move |a: &[Value]| match (&fmt, a.first()) {
-                                (Some(spec), Some(v)) => Value::Str(format_value(spec, v).into()),
-                                (None, Some(v)) => Value::Str(v.to_string().into()),
-                                _ => Value::Unit,
-                            });
+                            let f = Callee::Prim(Prim::Format(format.clone()));
                             terms.push(self.apply_value_fn(f, vec![t], e.span)?);
                         }
                     }
@@ -114,17 +109,7 @@ impl Compiler<'_> {
                 if terms.len() == 1 {
                     return Ok(terms.remove(0));
                 }
-                let concat: Func = Arc::new(|a: &[Value]| {
-                    if let Some(err) = a.iter().find_map(is_err) {
-                        return err;
-                    }
-                    let mut s = String::new();
-                    for v in a {
-                        s.push_str(&v.to_string());
-                    }
-                    Value::Str(s.into())
-                });
-                self.apply_value_fn(concat, terms, e.span)
+                self.apply_value_fn(Callee::Prim(Prim::Concat), terms, e.span)
             }
             ExprKind::Tuple(es) if es.is_empty() => Ok(Term::Const(Value::Unit)),
             ExprKind::Tuple(es) => {
@@ -132,8 +117,7 @@ impl Compiler<'_> {
                     .iter()
                     .map(|x| self.expr(x, env))
                     .collect::<R<Vec<_>>>()?;
-                let f: Func = Arc::new(|a: &[Value]| Value::Tuple(a.to_vec().into()));
-                self.apply_value_fn(f, terms, e.span)
+                self.apply_value_fn(Callee::Prim(Prim::Tuple), terms, e.span)
             }
             ExprKind::Record(members) => {
                 let mut sorted: Vec<_> = members.iter().collect();
@@ -146,16 +130,7 @@ impl Compiler<'_> {
                     .iter()
                     .map(|(_, x)| self.expr(x, env))
                     .collect::<R<Vec<_>>>()?;
-                let f: Func = Arc::new(move |a: &[Value]| {
-                    Value::Record(
-                        names
-                            .iter()
-                            .cloned()
-                            .zip(a.iter().cloned())
-                            .collect::<Vec<_>>()
-                            .into(),
-                    )
-                });
+                let f = Callee::Prim(Prim::Record(names.into()));
                 self.apply_value_fn(f, terms, e.span)
             }
             ExprKind::Block { defs, result } => {
@@ -176,28 +151,7 @@ impl Compiler<'_> {
                     return r;
                 }
                 let obj = self.expr(object, env)?;
-                let fname: Arc<str> = field.name.as_str().into();
-                let f: Func = Arc::new(move |a: &[Value]| match a.first() {
-                    Some(Value::Record(r)) => r
-                        .iter()
-                        .find(|(k, _)| *k == fname)
-                        .map(|(_, v)| v.clone())
-                        .unwrap_or_else(|| {
-                            Value::Error(RuntimeError::Other(format!("no field {fname}").into()))
-                        }),
-                    Some(Value::Tuple(t)) => fname
-                        .strip_prefix('_')
-                        .and_then(|i| i.parse::<usize>().ok())
-                        .and_then(|i| t.get(i.wrapping_sub(1)))
-                        .cloned()
-                        .unwrap_or_else(|| {
-                            Value::Error(RuntimeError::Other(format!("no member {fname}").into()))
-                        }),
-                    Some(err @ Value::Error(_)) => err.clone(),
-                    other => Value::Error(RuntimeError::Other(
-                        format!("no member {fname} in {other:?}").into(),
-                    )),
-                });
+                let f = Callee::Prim(Prim::Member(field.name.as_str().into()));
                 self.apply_value_fn(f, vec![obj], e.span)
             }
             ExprKind::Unary { op, operand } => {
@@ -208,8 +162,7 @@ impl Compiler<'_> {
                     UnaryOp::FNeg => Type::Float,
                     UnaryOp::Neg | UnaryOp::BitNot => Type::Int,
                 };
-                let f: Func = Arc::new(move |a: &[Value]| unop(op, &a[0]));
-                let r = self.apply_value_fn(f, vec![t], e.span)?;
+                let r = self.apply_value_fn(Callee::Prim(Prim::Unary(op)), vec![t], e.span)?;
                 Ok(self.typed(r, ty))
             }
             ExprKind::Binary { op, lhs, rhs } => {
@@ -247,17 +200,15 @@ impl Compiler<'_> {
                 }
                 if matches!(op, BinOp::And | BinOp::Or) {
                     // Lazy: the right side is not evaluated when the left decides.
-                    if let Term::Dyn(_) | Term::Const(_) = a
-                        && let Term::Dyn(_) | Term::Const(_) = b
+                    if let Term::Code(_) | Term::Const(_) = a
+                        && let Term::Code(_) | Term::Const(_) = b
                         && !matches!((&a, &b), (Term::Const(_), Term::Const(_)))
                     {
-                        let (fa, fb) = (self.as_dyn(a), self.as_dyn(b));
-                        let is_and = op == BinOp::And;
-                        return Ok(Term::Dyn(Arc::new(move |fr: &[Value]| match fa(fr) {
-                            Value::Bool(x) if x != is_and => Value::Bool(x),
-                            Value::Bool(_) => fb(fr),
-                            other => other,
-                        })));
+                        let (fa, fb) = (self.as_code(a), self.as_code(b));
+                        return Ok(Term::Code(Code::Logic {
+                            and: op == BinOp::And,
+                            args: Arc::new([fa, fb]),
+                        }));
                     }
                 }
                 let ty = match op {
@@ -277,7 +228,7 @@ impl Compiler<'_> {
                     | BinOp::BitXor => Type::Int,
                     _ => Type::Bool,
                 };
-                let r = self.apply_value_fn(binop_fn(op), vec![a, b], e.span)?;
+                let r = self.apply_value_fn(Callee::Prim(Prim::Binary(op)), vec![a, b], e.span)?;
                 if let Some(sop) = scalar_op(op) {
                     self.inline_op(&r, |args, f| match args {
                         [a, b] => Some(Node::Bin {
@@ -311,22 +262,14 @@ impl Compiler<'_> {
                 }
                 let t = self.expr(then_branch, env)?;
                 let f = self.expr(else_branch, env)?;
-                if let Term::Dyn(_) = c
+                if let Term::Code(_) = c
                     && !matches!(t, Term::Stream(_) | Term::Func(_))
                     && !matches!(f, Term::Stream(_) | Term::Func(_))
                 {
-                    let (fc, ft, ff) = (self.as_dyn(c), self.as_dyn(t), self.as_dyn(f));
-                    return Ok(Term::Dyn(Arc::new(move |fr: &[Value]| match fc(fr) {
-                        Value::Bool(true) => ft(fr),
-                        Value::Bool(false) => ff(fr),
-                        other => other,
-                    })));
+                    let (fc, ft, ff) = (self.as_code(c), self.as_code(t), self.as_code(f));
+                    return Ok(Term::Code(Code::If(Arc::new([fc, ft, ff]))));
                 }
-                let ite: Func = Arc::new(|v: &[Value]| match &v[0] {
-                    Value::Bool(true) => v[1].clone(),
-                    Value::Bool(false) => v[2].clone(),
-                    other => other.clone(),
-                });
+                let ite = Callee::Prim(Prim::Ite);
                 let ty = match (&t, &f) {
                     (Term::Stream(n), _) | (_, Term::Stream(n)) => self.stream_type(*n),
                     (Term::Const(v), _) => value_type(v),
@@ -371,36 +314,6 @@ impl Compiler<'_> {
             }
         }
     }
-}
-
-pub(super) fn binop(op: BinOp, a: &Value, b: &Value) -> Value {
-    ops::binary_value(op, a, b)
-}
-
-/// The closure of a binary operator, with the inline scalar path for its usual operand types
-/// ([`ScalarOp::eval`], as the evaluator's `Bin` nodes use it) before the general one.
-pub(super) fn binop_fn(op: BinOp) -> Func {
-    let two = || Value::Error(RuntimeError::Other("an operator needs two operands".into()));
-    match scalar_op(op) {
-        Some(sop) => Arc::new(move |v: &[Value]| match v {
-            [a, b] => match (Scalar::of(a), Scalar::of(b)) {
-                (Some(x), Some(y)) => match sop.eval(x, y) {
-                    Some(r) => r.value(),
-                    None => binop(op, a, b),
-                },
-                _ => binop(op, a, b),
-            },
-            _ => two(),
-        }),
-        None => Arc::new(move |v: &[Value]| match v {
-            [a, b] => binop(op, a, b),
-            _ => two(),
-        }),
-    }
-}
-
-pub(super) fn unop(op: UnaryOp, a: &Value) -> Value {
-    ops::unary_value(op, a)
 }
 
 /// `a.b.c` as the string "a.b.c" when the expression is only names and member accesses.

@@ -1,24 +1,24 @@
 //! Lowering: from the checked syntax of a spec to a [`Program`] (the IR the monitor runs).
 //!
-//! Every expression becomes a [`Term`]: a constant, a stream node, runtime value code (a closure
-//! over a frame of variables, used inside function bodies and lambdas), or a function. Functions
+//! Every expression becomes a [`Term`]: a constant, a stream node, value code over a frame of
+//! variables ([`Code`], data: used inside function bodies and lambdas), or a function. Functions
 //! applied to stream arguments are expanded in place (TeSSLa's macros); operators and liftable
-//! functions on streams become signal lifts; value-level functions are compiled once into
-//! closures, so evaluation never walks the AST. Recursion is allowed only through the lazy
-//! arguments of the builtins table (`last`, `delay`).
+//! functions on streams become signal lifts; value-level functions are lowered once into the
+//! program's function table ([`Program::functions`]) and called by index. Nothing here builds a
+//! closure: `crate::exec` compiles the code when a monitor is created (and, here, to fold
+//! constants). Recursion is allowed only through the lazy arguments of the builtins table
+//! (`last`, `delay`).
 //!
 //! Owns: the [`Compiler`] and `program` (statements, modules and imports, inputs, outputs and
 //! their annotations) here. By concern: `names` (scopes, definitions on first use, externs),
 //! `expr` (each expression form, operators), `call` (calls and arguments), `closure`
-//! (value-level functions as closures), `stream` (the stream operators), `types` (element types
+//! (value-level functions into the function table, function values, constant folding), `stream` (the stream operators), `types` (element types
 //! of nodes), `time` (base time and time units), `overrides` (`--set`). Names and signatures of
 //! builtins are `crate::builtins`, operator semantics `crate::ops`, format strings
 //! `crate::format`, evaluation order and cross-step slots `crate::schedule`.
 
 use crate::builtins::{self, Builtin, Kind, StreamOp};
-use crate::format::format_value;
 use crate::schedule;
-use expr::binop;
 use time::unit_factor;
 use types::{const_type_of, ir_type, value_type};
 
@@ -32,28 +32,28 @@ mod stream;
 pub mod time;
 mod types;
 
+use crate::exec::Exec;
 use crate::ir::{
-    Annotation, Func, InputInfo, LiftFunc, Node, NodeId, OutputInfo, Program, SArg, Scalar, Type,
+    Annotation, Callee, Code, FnId, Function, InputInfo, LiftFn, Node, NodeId, OutputInfo, Prim,
+    Program, SArg, Type,
 };
 use crate::natives;
-use crate::ops::{self, scalar_op};
-use crate::value::{Callable, RuntimeError, Value};
+use crate::ops::scalar_op;
+use crate::value::{RuntimeError, Value};
 use std::cell::RefCell;
 use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 use tessla_syntax::ast::{self, BinOp, Body, Def, Expr, ExprKind, Statement, StrPart, UnaryOp};
 use tessla_syntax::diag::{Category, Diagnostic, nearest};
 use tessla_syntax::source::{SourceMap, Span};
-
-/// Frame code: runtime value code reading variables from a frame.
-type Dyn = Arc<dyn Fn(&[Value]) -> Value + Send + Sync>;
 
 #[derive(Clone)]
 enum Term {
     Const(Value),
     Stream(NodeId),
-    Dyn(Dyn),
+    /// Value code reading the current frame (or closed code that cannot be folded yet).
+    Code(Code),
     Func(Rc<FuncTerm>),
 }
 
@@ -144,13 +144,18 @@ pub struct Compiler<'a> {
     inputs: Vec<InputInfo>,
     input_nodes: Vec<NodeId>,
     annotation_params: HashMap<String, Vec<String>>,
-    compiled_fns: HashMap<*const Def, Arc<OnceLock<Func>>>,
+    /// The function table entry of each named function lowered so far.
+    compiled_fns: HashMap<*const Def, FnId>,
     /// Definitions (by their span: a local def is cloned afresh each time its scope is
     /// lowered) whose body failed to compile as a value function, so calls expand them at once
     /// instead of trying again (mutually recursive nested functions made that exponential).
     not_value_fns: HashSet<Span>,
-    /// The cells of functions that call themselves (they go to `Program::functions`).
-    recursive_cells: Vec<Arc<OnceLock<Func>>>,
+    /// The function table (`Program::functions`).
+    functions: Vec<Function>,
+    /// Functions compiled for constant folding, and the context folding uses (rebuilt when a
+    /// function is finished).
+    fold_fns: Vec<Option<Exec>>,
+    fold_ctx: Option<Arc<crate::exec::Ctx>>,
     unit_node: Option<NodeId>,
     /// Element types of stream nodes known from operators and declarations.
     node_types: HashMap<NodeId, Type>,
@@ -158,11 +163,11 @@ pub struct Compiler<'a> {
     base_unit: Option<i128>,
     /// Time literals are allowed (a base time is set, or 1 ns is assumed).
     time_units: bool,
-    /// Stable origin of the nodes created now (see [`crate::snapshot`]): a hash of the text of
-    /// the def being compiled and of every def it looked up so far.
-    origin: u64,
-    /// The origin of each node (`Program::node_origins`).
-    origins: Vec<u64>,
+    /// The owner of the nodes created now (see [`crate::snapshot::owner_key`]): the name of
+    /// the definition or output being lowered.
+    owner: u64,
+    /// The owner of each node (`Program::node_owners`).
+    owners: Vec<u64>,
     /// Every scope cell and def state created: scopes and defs refer to each other through
     /// `Rc`s, so they are cleared when compiling ends ([`Compiler::break_cycles`]) or each
     /// compile leaked the whole name table (found by cargo fuzz's leak checker).
@@ -175,21 +180,6 @@ pub struct Compiler<'a> {
 /// The native of an `extern` no builtin provides: an error when evaluated.
 fn unknown_extern(_: &[Value]) -> Value {
     Value::Error(RuntimeError::Other("call of an unknown extern".into()))
-}
-
-fn is_err(v: &Value) -> Option<Value> {
-    match v {
-        Value::Error(_) => Some(v.clone()),
-        _ => None,
-    }
-}
-
-/// Call a native strictly: the first error argument is the result.
-fn call_native(f: natives::NativeFn, args: &[Value]) -> Value {
-    if let Some(e) = args.iter().find_map(is_err) {
-        return e;
-    }
-    f(args)
 }
 
 impl<'a> Compiler<'a> {
@@ -206,13 +196,15 @@ impl<'a> Compiler<'a> {
             annotation_params: HashMap::new(),
             compiled_fns: HashMap::new(),
             not_value_fns: HashSet::new(),
-            recursive_cells: Vec::new(),
+            functions: Vec::new(),
+            fold_fns: Vec::new(),
+            fold_ctx: None,
             unit_node: None,
             base_unit: None,
             time_units: true,
             node_types: HashMap::new(),
-            origin: 0,
-            origins: Vec::new(),
+            owner: 0,
+            owners: Vec::new(),
             scopes: Vec::new(),
             states: Vec::new(),
             types: crate::typeck::Types::default(),
@@ -272,7 +264,7 @@ impl<'a> Compiler<'a> {
 
     fn node(&mut self, n: Node) -> NodeId {
         self.nodes.push(n);
-        self.origins.push(self.origin);
+        self.owners.push(self.owner);
         self.nodes.len() - 1
     }
 
@@ -475,7 +467,7 @@ impl<'a> Compiler<'a> {
                 .alias
                 .as_ref()
                 .map_or_else(|| o.source_text.clone(), |a| a.name.clone());
-            self.origin = crate::snapshot::text_hash(&o.source_text);
+            self.owner = crate::snapshot::owner_key(&name);
             // An object (a record with stream members): one output per member, as TeSSLa.
             match self.object_output(&o.expr, &env) {
                 Some(Ok(members)) => {
@@ -562,7 +554,8 @@ impl<'a> Compiler<'a> {
         let (last_slot, n_last_slots) = schedule::last_slots(&self.nodes, &order);
         Ok((
             Program {
-                functions: crate::ir::Functions(std::mem::take(&mut self.recursive_cells)),
+                functions: std::mem::take(&mut self.functions),
+                exec: std::sync::OnceLock::new(),
                 last_slot,
                 n_last_slots,
                 inputs: self.inputs,
@@ -573,7 +566,7 @@ impl<'a> Compiler<'a> {
                     .filter(|i| matches!(self.nodes.get(*i), Some(Node::Delay { .. })))
                     .collect(),
                 nodes: self.nodes,
-                node_origins: self.origins,
+                node_owners: self.owners,
                 order,
                 output_nodes,
             },
@@ -634,7 +627,7 @@ impl<'a> Compiler<'a> {
         match t {
             Term::Stream(n) => Ok(n),
             Term::Const(v) => Ok(self.node(Node::Const(v))),
-            Term::Dyn(_) => self.error(
+            Term::Code(_) => self.error(
                 Category::Type,
                 span,
                 "a value depending on a function parameter is used where a stream is needed",

@@ -52,10 +52,10 @@ impl Compiler<'_> {
                 let env = e.env_cell.borrow().clone().unwrap_or_default();
                 let saved = self.lazy_depth;
                 self.lazy_depth = 0;
-                let saved_origin = self.origin;
-                self.origin = crate::snapshot::text_hash(self.sources.text(e.def.span));
+                let saved_owner = self.owner;
+                self.owner = crate::snapshot::owner_key(self.sources.text(e.def.name.span));
                 let r = self.body(&e.def, &env);
-                self.origin = saved_origin;
+                self.owner = saved_owner;
                 let r = match (r, &e.def.result_type) {
                     (Ok(t), Some(declared)) => {
                         let ty = match ir_type(declared) {
@@ -195,11 +195,7 @@ impl Compiler<'_> {
     pub(super) fn lookup(&mut self, name: &str, span: Span, env: &Env) -> R<Term> {
         match env.lookup(name) {
             Some(Binding::Term(t)) => Ok(t),
-            Some(Binding::Def(e)) => {
-                let text = crate::snapshot::text_hash(self.sources.text(e.def.span));
-                self.origin = crate::snapshot::mix(self.origin, text);
-                self.def_term(&e, span)
-            }
+            Some(Binding::Def(e)) => self.def_term(&e, span),
             None => {
                 let name = crate::prelude::builtin_alias(name).unwrap_or(name);
                 if name == "true" {

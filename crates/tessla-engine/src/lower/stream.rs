@@ -54,7 +54,7 @@ impl Compiler<'_> {
                 let s = self.stream_arg(&args, 1, span)?;
                 Node::SLift {
                     args: vec![SArg::Stream(s)],
-                    f: Arc::new(move |_: &[Value]| v.clone()),
+                    f: Code::Const(v),
                 }
             }
             StreamOp::First => {
@@ -62,7 +62,7 @@ impl Compiler<'_> {
                 let b = self.stream_arg(&args, 1, span)?;
                 Node::SLift {
                     args: vec![SArg::Stream(a), SArg::Stream(b)],
-                    f: Arc::new(|v: &[Value]| v[0].clone()),
+                    f: Code::Slot(0),
                 }
             }
             StreamOp::On => {
@@ -76,39 +76,35 @@ impl Compiler<'_> {
                 });
                 Node::Lift {
                     args: vec![t, s, before],
-                    f: Arc::new(|a: &[Option<Value>]| match a {
-                        [Some(_), Some(now), _] => Some(now.clone()),
-                        [Some(_), None, Some(prev)] => Some(prev.clone()),
-                        _ => None,
-                    }),
+                    f: LiftFn::On,
                 }
             }
             StreamOp::Count => Node::Fold {
                 stream: self.stream_arg(&args, 0, span)?,
                 init: Value::Int(0),
-                f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &Value::Int(1))),
+                f: add(Code::Slot(0), Code::Const(Value::Int(1))),
             },
             StreamOp::Sum => Node::Fold {
                 stream: self.stream_arg(&args, 0, span)?,
                 init: Value::Int(0),
-                f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &a[1])),
+                f: add(Code::Slot(0), Code::Slot(1)),
             },
             StreamOp::Fold => Node::Fold {
                 stream: self.stream_arg(&args, 0, span)?,
                 init: self.const_arg(&args, 1, span)?,
-                f: self.value_fn_arg(&args, 2, span)?,
+                f: self.value_fn_arg(&args, 2, 2, span)?,
             },
             StreamOp::Reduce => Node::Reduce {
                 stream: self.stream_arg(&args, 0, span)?,
-                f: self.value_fn_arg(&args, 1, span)?,
+                f: self.value_fn_arg(&args, 1, 2, span)?,
             },
             StreamOp::Maximum => Node::Reduce {
                 stream: self.stream_arg(&args, 0, span)?,
-                f: Arc::new(|a: &[Value]| call_native(natives::core::max, a)),
+                f: Code::apply(closure::native_callee(natives::core::max), Code::slots(2)),
             },
             StreamOp::Minimum => Node::Reduce {
                 stream: self.stream_arg(&args, 0, span)?,
-                f: Arc::new(|a: &[Value]| call_native(natives::core::min, a)),
+                f: Code::apply(closure::native_callee(natives::core::min), Code::slots(2)),
             },
             StreamOp::Lift | StreamOp::SLift => {
                 let Some(ft) = args.last().cloned() else {
@@ -130,7 +126,7 @@ impl Compiler<'_> {
                         ),
                     );
                 }
-                let f = self.value_fn_arg(&[ft], 0, span)?;
+                let f = self.value_fn_arg(&[ft], 0, n - 1, span)?;
                 let streams = (0..n - 1)
                     .map(|i| self.stream_arg(&args, i, span))
                     .collect::<R<Vec<_>>>()?;
@@ -140,23 +136,9 @@ impl Compiler<'_> {
                         f,
                     }
                 } else {
-                    let lf: LiftFunc = Arc::new(move |a: &[Option<Value>]| {
-                        let opts: Vec<Value> = a
-                            .iter()
-                            .map(|o| match o {
-                                Some(v) => Value::Some(Arc::new(v.clone())),
-                                None => Value::None,
-                            })
-                            .collect();
-                        match f(&opts) {
-                            Value::Some(v) => Some((*v).clone()),
-                            Value::None => None,
-                            other => Some(other),
-                        }
-                    });
                     Node::Lift {
                         args: streams,
-                        f: lf,
+                        f: LiftFn::Options(f),
                     }
                 }
             }
@@ -164,7 +146,7 @@ impl Compiler<'_> {
                 let s = self.stream_arg(&args, 0, span)?;
                 Node::Lift {
                     args: vec![s, self.node(Node::Nil)],
-                    f: Arc::new(|a: &[Option<Value>]| a[0].clone()),
+                    f: LiftFn::First,
                 }
                 .pipe_pure(self, s)
             }
@@ -173,11 +155,11 @@ impl Compiler<'_> {
                 let cnt = self.node(Node::Fold {
                     stream: s,
                     init: Value::Int(0),
-                    f: Arc::new(|a: &[Value]| binop(BinOp::Add, &a[0], &Value::Int(1))),
+                    f: add(Code::Slot(0), Code::Const(Value::Int(1))),
                 });
                 let first = self.node(Node::SLift {
                     args: vec![SArg::Stream(s), SArg::Stream(cnt)],
-                    f: Arc::new(|v: &[Value]| Value::Bool(v[1] == Value::Int(1))),
+                    f: Code::apply(Callee::Prim(Prim::IsOne), Code::slots(2)),
                 });
                 // TeSSLa merges in a constant `false`: `false` at 0 when `x` has no event there.
                 Node::Default {
@@ -189,7 +171,7 @@ impl Compiler<'_> {
                 let s = self.stream_arg(&args, 0, span)?;
                 Node::Lift {
                     args: vec![s],
-                    f: Arc::new(|a: &[Option<Value>]| a[0].clone()),
+                    f: LiftFn::First,
                 }
                 .first_only(self)
             }
@@ -197,7 +179,7 @@ impl Compiler<'_> {
                 let s = self.stream_arg(&args, 0, span)?;
                 let t = self.node(Node::SLift {
                     args: vec![SArg::Stream(s)],
-                    f: Arc::new(|_: &[Value]| Value::Bool(true)),
+                    f: Code::Const(Value::Bool(true)),
                 });
                 Node::Default {
                     stream: t,
@@ -209,7 +191,7 @@ impl Compiler<'_> {
                 let c = self.stream_arg(&args, 1, span)?;
                 let k = self.node(Node::SLift {
                     args: vec![SArg::Stream(c)],
-                    f: Arc::new(move |_: &[Value]| v.clone()),
+                    f: Code::Const(v),
                 });
                 Node::Filter { stream: k, cond: c }
             }
@@ -217,7 +199,7 @@ impl Compiler<'_> {
                 let c = self.stream_arg(&args, 0, span)?;
                 let k = self.node(Node::SLift {
                     args: vec![SArg::Stream(c)],
-                    f: Arc::new(|_: &[Value]| Value::Unit),
+                    f: Code::Const(Value::Unit),
                 });
                 Node::Filter { stream: k, cond: c }
             }
@@ -227,22 +209,13 @@ impl Compiler<'_> {
                     value: c,
                     trigger: c,
                 });
-                let want = op == StreamOp::Rising;
                 let edge = self.node(Node::Lift {
                     args: vec![c, prev],
-                    f: Arc::new(move |a: &[Option<Value>]| match (&a[0], &a[1]) {
-                        (Some(Value::Bool(now)), Some(Value::Bool(before)))
-                            if *now == want && *before != want =>
-                        {
-                            Some(Value::Bool(true))
-                        }
-                        (Some(_), _) => Some(Value::Bool(false)),
-                        _ => None,
-                    }),
+                    f: LiftFn::Edge(op == StreamOp::Rising),
                 });
                 let k = self.node(Node::SLift {
                     args: vec![SArg::Stream(edge)],
-                    f: Arc::new(|_: &[Value]| Value::Unit),
+                    f: Code::Const(Value::Unit),
                 });
                 Node::Filter {
                     stream: k,
@@ -254,10 +227,9 @@ impl Compiler<'_> {
                 let u = self.unit();
                 let alias = self.node(Node::Alias(usize::MAX));
                 let m = self.node(Node::Merge(vec![u, alias]));
-                let dd = d.clone();
                 let dnode = self.node(Node::SLift {
                     args: vec![SArg::Stream(m)],
-                    f: Arc::new(move |_: &[Value]| dd.clone()),
+                    f: Code::Const(d.clone()),
                 });
                 let delay = self.node(Node::Delay {
                     delay: dnode,
@@ -277,6 +249,11 @@ impl Compiler<'_> {
         };
         Ok(Term::Stream(self.node(node)))
     }
+}
+
+/// `a + b` (as the `+` operator).
+fn add(a: Code, b: Code) -> Code {
+    Code::apply(Callee::Prim(Prim::Binary(BinOp::Add)), vec![a, b])
 }
 
 /// The number of parameters of a lambda or user function term, when known at compile time.
@@ -307,10 +284,7 @@ impl NodeExt for Node {
         });
         Node::Lift {
             args: vec![s, prev],
-            f: Arc::new(|a: &[Option<Value>]| match (&a[0], &a[1]) {
-                (Some(x), Some(p)) if x == p => None,
-                (x, _) => x.clone(),
-            }),
+            f: LiftFn::Distinct,
         }
     }
 
@@ -326,10 +300,7 @@ impl NodeExt for Node {
         });
         Node::Lift {
             args: vec![s, seen],
-            f: Arc::new(|a: &[Option<Value>]| match (&a[0], &a[1]) {
-                (Some(x), None) => Some(x.clone()),
-                _ => None,
-            }),
+            f: LiftFn::FirstOnly,
         }
     }
 }

@@ -1,0 +1,489 @@
+//! The closure compiler: value code ([`Code`], data in the IR) compiled into Rust closures, once
+//! per program, when its first monitor is created (and, during lowering, to fold constants).
+//!
+//! Owns: [`Exec`] (compiled code: a context and a frame in, a value out), [`Ctx`] (the compiled
+//! function table and node functions of one program), [`compile`], [`compile_program`], the
+//! semantics of [`Prim`]itives and [`LiftFn`]s, and function values ([`FnClosure`]).
+//!
+//! Calls between program functions go through the context passed to every closure (an index
+//! into [`Ctx`]'s table), so compiled functions never refer to each other and recursion makes
+//! no reference cycle. A function value holds its context: strongly when made at run time with
+//! captured slots, weakly for the one shared value of a function without captures (kept in the
+//! context itself; a strong reference there would be a cycle). Code applying a callee to a
+//! node's arguments as they come (`f(slot 0, slot 1)`) passes the argument slice through
+//! without copying, so a step costs what a hand-written closure would.
+
+use crate::collections;
+use crate::ir::code::{Callee, Code, FnId, LiftFn, Prim};
+use crate::ir::{Node, Program, Scalar};
+use crate::natives::NativeFn;
+use crate::ops::{self, scalar_op};
+use crate::value::{Callable, RuntimeError, Value};
+use std::sync::{Arc, OnceLock, Weak};
+use tessla_syntax::ast::BinOp;
+
+/// Compiled code: evaluates over a frame, calling program functions through the context.
+pub type Exec = Arc<dyn Fn(&Ctx, &[Value]) -> Value + Send + Sync>;
+
+/// The compiled code of one program (or, during lowering, of the functions finished so far).
+pub struct Ctx {
+    /// Per function: its compiled body (a stub error for a function never finished).
+    fns: Vec<Exec>,
+    /// Per function: its value without captures, made on first use.
+    values: Vec<OnceLock<Value>>,
+    /// Per node: its compiled function (`slift`, `fold`, `reduce`, operator, `lift` nodes).
+    nodes: Vec<Option<Exec>>,
+    me: Weak<Ctx>,
+    /// Function values hold this context strongly (the lowering's contexts, which nothing
+    /// else keeps alive) instead of weakly.
+    strong: bool,
+}
+
+impl std::fmt::Debug for Ctx {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} compiled functions", self.fns.len())
+    }
+}
+
+impl Ctx {
+    /// The compiled function of node `n`, if it has one.
+    #[inline]
+    pub fn node(&self, n: usize) -> Option<&Exec> {
+        self.nodes.get(n).and_then(Option::as_ref)
+    }
+
+    /// Call function `id` with `frame`.
+    #[inline]
+    pub fn call(&self, id: FnId, frame: &[Value]) -> Value {
+        match self.fns.get(id) {
+            Some(f) => f(self, frame),
+            None => not_compiled(),
+        }
+    }
+
+    /// A function value of `fun` over `captured`.
+    fn closure(&self, fun: FnId, captured: &[Value]) -> Value {
+        if captured.is_empty()
+            && !self.strong
+            && let Some(slot) = self.values.get(fun)
+        {
+            return slot
+                .get_or_init(|| {
+                    Value::Closure(Arc::new(FnClosure {
+                        ctx: CtxRef::Weak(self.me.clone()),
+                        fun,
+                        captured: Vec::new(),
+                    }))
+                })
+                .clone();
+        }
+        let ctx = match self.me.upgrade() {
+            Some(c) if self.strong || !captured.is_empty() => CtxRef::Strong(c),
+            _ => CtxRef::Weak(self.me.clone()),
+        };
+        Value::Closure(Arc::new(FnClosure {
+            ctx,
+            fun,
+            captured: captured.to_vec(),
+        }))
+    }
+}
+
+/// A context built from compiled functions (`None`: not finished, an error when called).
+pub fn context(fns: Vec<Option<Exec>>, nodes: Vec<Option<Exec>>, strong: bool) -> Arc<Ctx> {
+    let n = fns.len();
+    Arc::new_cyclic(|me| Ctx {
+        fns: fns
+            .into_iter()
+            .map(|f| f.unwrap_or_else(|| Arc::new(|_: &Ctx, _: &[Value]| not_compiled())))
+            .collect(),
+        values: (0..n).map(|_| OnceLock::new()).collect(),
+        nodes,
+        me: me.clone(),
+        strong,
+    })
+}
+
+/// Compile a program's function table and node functions.
+pub fn compile_program(p: &Program) -> Arc<Ctx> {
+    let fns = p
+        .functions
+        .iter()
+        .map(|f| f.body.as_ref().map(compile))
+        .collect();
+    let nodes = p
+        .nodes
+        .iter()
+        .map(|n| match n {
+            Node::SLift { f, .. }
+            | Node::Bin { f, .. }
+            | Node::Fold { f, .. }
+            | Node::Reduce { f, .. } => Some(compile(f)),
+            Node::Lift { f, .. } => f.code().map(compile),
+            _ => None,
+        })
+        .collect();
+    context(fns, nodes, false)
+}
+
+enum CtxRef {
+    Strong(Arc<Ctx>),
+    Weak(Weak<Ctx>),
+}
+
+/// A program function as a value, with the captured slots of its enclosing frame.
+pub struct FnClosure {
+    ctx: CtxRef,
+    fun: FnId,
+    captured: Vec<Value>,
+}
+
+impl std::fmt::Debug for FnClosure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("<function>")
+    }
+}
+
+impl Callable for FnClosure {
+    fn call(&self, args: &[Value]) -> Value {
+        let ctx = match &self.ctx {
+            CtxRef::Strong(c) => c.clone(),
+            CtxRef::Weak(w) => match w.upgrade() {
+                Some(c) => c,
+                None => return not_compiled(),
+            },
+        };
+        if self.captured.is_empty() {
+            return ctx.call(self.fun, args);
+        }
+        let mut frame = self.captured.clone();
+        frame.extend_from_slice(args);
+        ctx.call(self.fun, &frame)
+    }
+}
+
+/// A native as a value.
+pub struct NativeClosure(pub NativeFn);
+
+impl std::fmt::Debug for NativeClosure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("<function>")
+    }
+}
+
+impl Callable for NativeClosure {
+    fn call(&self, args: &[Value]) -> Value {
+        call_native(self.0, args)
+    }
+}
+
+fn not_compiled() -> Value {
+    Value::Error(RuntimeError::Other("function not compiled".into()))
+}
+
+fn is_err(v: &Value) -> Option<Value> {
+    match v {
+        Value::Error(_) => Some(v.clone()),
+        _ => None,
+    }
+}
+
+/// Call a native strictly: the first error argument is the result.
+pub fn call_native(f: NativeFn, args: &[Value]) -> Value {
+    if let Some(e) = args.iter().find_map(is_err) {
+        return e;
+    }
+    f(args)
+}
+
+/// Apply a callee to argument values.
+pub fn apply(cx: &Ctx, callee: &Callee, a: &[Value]) -> Value {
+    match callee {
+        Callee::Prim(p) => prim(p, a),
+        Callee::Native { f, .. } => call_native(*f, a),
+        Callee::Fn(id) => cx.call(*id, a),
+        Callee::Value => match a.first() {
+            Some(Value::Closure(c)) => c.call(&a[1..]),
+            other => Value::Error(RuntimeError::Other(
+                format!("{:?} is not a function", other.unwrap_or(&Value::Unit)).into(),
+            )),
+        },
+    }
+}
+
+/// Evaluate closed code (no frame) now: constant folding during lowering.
+pub fn eval(cx: &Ctx, code: &Code) -> Value {
+    match code {
+        Code::Const(v) => v.clone(),
+        Code::Apply(c, args) if args.iter().all(|a| matches!(a, Code::Const(_))) => {
+            let vals: Vec<Value> = args
+                .iter()
+                .map(|a| match a {
+                    Code::Const(v) => v.clone(),
+                    _ => Value::Unit,
+                })
+                .collect();
+            apply(cx, c, &vals)
+        }
+        _ => compile(code)(cx, &[]),
+    }
+}
+
+/// A binary operator on two values: the inline scalar path first (as the evaluator's operator
+/// nodes do), then the general one.
+#[inline]
+pub fn binary(op: BinOp, a: &Value, b: &Value) -> Value {
+    if let Some(sop) = scalar_op(op)
+        && let (Some(x), Some(y)) = (Scalar::of(a), Scalar::of(b))
+        && let Some(r) = sop.eval(x, y)
+    {
+        return r.value();
+    }
+    ops::binary_value(op, a, b)
+}
+
+/// The semantics of a primitive on argument values.
+pub fn prim(p: &Prim, a: &[Value]) -> Value {
+    match p {
+        Prim::Binary(op) => match a {
+            [x, y] => binary(*op, x, y),
+            _ => Value::Error(RuntimeError::Other("an operator needs two operands".into())),
+        },
+        Prim::Unary(op) => ops::unary_value(*op, a.first().unwrap_or(&Value::Unit)),
+        Prim::Tuple => Value::Tuple(a.to_vec().into()),
+        Prim::Record(names) => Value::Record(
+            names
+                .iter()
+                .cloned()
+                .zip(a.iter().cloned())
+                .collect::<Vec<_>>()
+                .into(),
+        ),
+        Prim::Member(fname) => member(fname, a.first()),
+        Prim::Format(spec) => match (spec, a.first()) {
+            (Some(spec), Some(v)) => Value::Str(crate::format::format_value(spec, v).into()),
+            (None, Some(v)) => Value::Str(v.to_string().into()),
+            _ => Value::Unit,
+        },
+        Prim::Concat => {
+            if let Some(err) = a.iter().find_map(is_err) {
+                return err;
+            }
+            let mut s = String::new();
+            for v in a {
+                s.push_str(&v.to_string());
+            }
+            Value::Str(s.into())
+        }
+        Prim::Ite => match a {
+            [Value::Bool(true), t, _] => t.clone(),
+            [Value::Bool(false), _, e] => e.clone(),
+            [other, ..] => other.clone(),
+            [] => Value::Unit,
+        },
+        Prim::IsOne => Value::Bool(a.get(1) == Some(&Value::Int(1))),
+        Prim::ResetCount => match a {
+            [acc, Value::Int(-1)] => ops::binary_value(BinOp::Add, acc, &Value::Int(1)),
+            [_, tag] => tag.clone(),
+            _ => Value::Unit,
+        },
+        Prim::SetAdd => collections::set_add(a),
+        Prim::SetAddRemove => match a {
+            [set, Value::Tuple(t)] => {
+                let mut s = set.clone();
+                if let Some(Value::Some(x)) = t.first() {
+                    s = collections::set_add(&[s, (**x).clone()]);
+                }
+                if let Some(Value::Some(x)) = t.get(1) {
+                    s = collections::set_remove(&[s, (**x).clone()]);
+                }
+                s
+            }
+            _ => Value::Unit,
+        },
+    }
+}
+
+fn member(fname: &Arc<str>, v: Option<&Value>) -> Value {
+    match v {
+        Some(Value::Record(r)) => r
+            .iter()
+            .find(|(k, _)| k == fname)
+            .map(|(_, v)| v.clone())
+            .unwrap_or_else(|| {
+                Value::Error(RuntimeError::Other(format!("no field {fname}").into()))
+            }),
+        Some(Value::Tuple(t)) => fname
+            .strip_prefix('_')
+            .and_then(|i| i.parse::<usize>().ok())
+            .and_then(|i| t.get(i.wrapping_sub(1)))
+            .cloned()
+            .unwrap_or_else(|| {
+                Value::Error(RuntimeError::Other(format!("no member {fname}").into()))
+            }),
+        Some(err @ Value::Error(_)) => err.clone(),
+        other => Value::Error(RuntimeError::Other(
+            format!("no member {fname} in {other:?}").into(),
+        )),
+    }
+}
+
+/// A `lift` node's function on its arguments' events this step.
+pub fn lift(cx: &Ctx, f: &LiftFn, code: Option<&Exec>, a: &[Option<Value>]) -> Option<Value> {
+    match f {
+        LiftFn::Options(_) => {
+            let opts: Vec<Value> = a
+                .iter()
+                .map(|o| match o {
+                    Some(v) => Value::Some(Arc::new(v.clone())),
+                    None => Value::None,
+                })
+                .collect();
+            let r = match code {
+                Some(c) => c(cx, &opts),
+                None => not_compiled(),
+            };
+            match r {
+                Value::Some(v) => Some((*v).clone()),
+                Value::None => None,
+                other => Some(other),
+            }
+        }
+        LiftFn::First => a.first().cloned().flatten(),
+        LiftFn::On => match a {
+            [Some(_), Some(now), _] => Some(now.clone()),
+            [Some(_), None, Some(prev)] => Some(prev.clone()),
+            _ => None,
+        },
+        LiftFn::Distinct => match a {
+            [Some(x), Some(p)] if x == p => None,
+            [x, ..] => x.clone(),
+            [] => None,
+        },
+        LiftFn::FirstOnly => match a {
+            [Some(x), None] => Some(x.clone()),
+            _ => None,
+        },
+        LiftFn::Edge(want) => match a {
+            [Some(Value::Bool(now)), Some(Value::Bool(before))]
+                if *now == *want && *before != *want =>
+            {
+                Some(Value::Bool(true))
+            }
+            [Some(_), _] => Some(Value::Bool(false)),
+            _ => None,
+        },
+        LiftFn::ResetTag => match a {
+            [Some(_), Some(_)] => Some(Value::Int(1)),
+            [None, Some(_)] => Some(Value::Int(0)),
+            [Some(_), None] => Some(Value::Int(-1)),
+            _ => None,
+        },
+        LiftFn::AddRemove => {
+            let opt = |o: &Option<Value>| match o {
+                Some(v) => Value::Some(Arc::new(v.clone())),
+                None => Value::None,
+            };
+            Some(Value::Tuple(a.iter().map(opt).collect::<Vec<_>>().into()))
+        }
+    }
+}
+
+/// Compile code into a closure over a frame. Macro expansion can nest code deeper than a
+/// thread's stack allows recursion: the stack grows on the heap as in lowering.
+pub fn compile(code: &Code) -> Exec {
+    stacker::maybe_grow(64 * 1024, 1024 * 1024, || compile_here(code))
+}
+
+fn compile_here(code: &Code) -> Exec {
+    match code {
+        Code::Const(v) => {
+            let v = v.clone();
+            Arc::new(move |_: &Ctx, _: &[Value]| v.clone())
+        }
+        Code::Slot(i) => {
+            let i = *i;
+            Arc::new(move |_: &Ctx, fr: &[Value]| fr.get(i).cloned().unwrap_or(Value::Unit))
+        }
+        Code::If(parts) => {
+            let [c, t, e] = &**parts;
+            let (c, t, e) = (compile(c), compile(t), compile(e));
+            Arc::new(move |cx: &Ctx, fr: &[Value]| match c(cx, fr) {
+                Value::Bool(true) => t(cx, fr),
+                Value::Bool(false) => e(cx, fr),
+                other => other,
+            })
+        }
+        Code::Logic { and, args } => {
+            let [a, b] = &**args;
+            let (a, b, and) = (compile(a), compile(b), *and);
+            Arc::new(move |cx: &Ctx, fr: &[Value]| match a(cx, fr) {
+                Value::Bool(x) if x != and => Value::Bool(x),
+                Value::Bool(_) => b(cx, fr),
+                other => other,
+            })
+        }
+        Code::Closure { fun, captured } => {
+            let (fun, captured) = (*fun, *captured);
+            Arc::new(move |cx: &Ctx, fr: &[Value]| cx.closure(fun, &fr[..captured.min(fr.len())]))
+        }
+        Code::Apply(callee, args) => compile_apply(callee, args),
+    }
+}
+
+fn compile_apply(callee: &Callee, args: &[Code]) -> Exec {
+    let n = args.len();
+    if Code::applies_to_slots(args) {
+        // The frame is the arguments: pass it through.
+        let callee = callee.clone();
+        return match callee {
+            Callee::Prim(Prim::Binary(op)) if n == 2 => {
+                Arc::new(move |_: &Ctx, fr: &[Value]| match fr {
+                    [a, b, ..] => binary(op, a, b),
+                    _ => with_args(fr, n, |a| prim(&Prim::Binary(op), a)),
+                })
+            }
+            Callee::Native { f, .. } => {
+                Arc::new(move |_: &Ctx, fr: &[Value]| with_args(fr, n, |a| call_native(f, a)))
+            }
+            Callee::Fn(id) => {
+                Arc::new(move |cx: &Ctx, fr: &[Value]| with_args(fr, n, |a| cx.call(id, a)))
+            }
+            other => {
+                Arc::new(move |cx: &Ctx, fr: &[Value]| with_args(fr, n, |a| apply(cx, &other, a)))
+            }
+        };
+    }
+    if let (Callee::Value, [Code::Const(Value::Closure(c)), rest @ ..]) = (callee, args)
+        && Code::applies_to_slots(rest)
+    {
+        // A constant function value applied to the frame (`fold(x, 0, f)` with `f` a value).
+        let (c, n) = (c.clone(), rest.len());
+        return Arc::new(move |_: &Ctx, fr: &[Value]| with_args(fr, n, |a| c.call(a)));
+    }
+    let args: Vec<Exec> = args.iter().map(compile).collect();
+    let callee = callee.clone();
+    match (callee, &args[..]) {
+        (Callee::Prim(Prim::Binary(op)), [a, b]) => {
+            let (a, b) = (a.clone(), b.clone());
+            Arc::new(move |cx: &Ctx, fr: &[Value]| binary(op, &a(cx, fr), &b(cx, fr)))
+        }
+        (callee, _) => Arc::new(move |cx: &Ctx, fr: &[Value]| {
+            let vals: Vec<Value> = args.iter().map(|a| a(cx, fr)).collect();
+            apply(cx, &callee, &vals)
+        }),
+    }
+}
+
+/// The first `n` values of the frame (padded with `()` when it is shorter).
+#[inline]
+fn with_args(fr: &[Value], n: usize, f: impl FnOnce(&[Value]) -> Value) -> Value {
+    match fr.get(..n) {
+        Some(a) => f(a),
+        None => {
+            let mut vals = fr.to_vec();
+            vals.resize(n, Value::Unit);
+            f(&vals)
+        }
+    }
+}
