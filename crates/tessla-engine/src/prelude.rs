@@ -184,6 +184,17 @@ pub fn param_names(builtin: &str) -> Option<Vec<String>> {
     Some(e.params.clone()).filter(|p| !p.is_empty())
 }
 
+/// The parameter names of the value function a native implements (`String.format` ->
+/// `formatString`, `value`), found through the builtins table.
+pub fn native_param_names(f: crate::natives::NativeFn) -> Option<Vec<String>> {
+    builtins::BUILTINS
+        .iter()
+        .filter(
+            |b| matches!(b.kind, Kind::Value(g) | Kind::Operator(g) if g as usize == f as usize),
+        )
+        .find_map(|b| param_names(b.name))
+}
+
 fn catalog() -> &'static Catalog {
     static CATALOG: OnceLock<Catalog> = OnceLock::new();
     CATALOG.get_or_init(build)
