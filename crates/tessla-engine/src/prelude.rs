@@ -3,7 +3,9 @@
 //!
 //! Owns: the catalog of prelude definitions (parsed once per process), the references a spec
 //! makes, and the text of the definitions a spec needs (transitively), which `load` parses as one
-//! extra file `<prelude>`. Names the builtins table has keep their builtin; a spec that uses no
+//! extra file `<prelude>`; with it, the declarations of the library annotations a spec uses
+//! (`@InstFunctionCall`, `@VisBubbles`, ...) and the `CTF` type when the spec names it; and the
+//! parameter names of builtins, for named arguments. Names the builtins table has keep their builtin; a spec that uses no
 //! prelude name gets no extra file at all. The prelude's folder README is the contract.
 //!
 //! Rules: each prelude file holds one `module M { ... }`; `M.name` reaches its definitions, and
