@@ -1,13 +1,122 @@
 //! TeSSLa's immutable `Set[T]` and `Map[K, V]` value functions (`Set.add`, `Map.get`, ...)
 //! and the few `List` functions the core natives lack (`List.isEmpty`, `List.zip`, ...).
 //!
-//! Owns: these pure functions (listed by name in `builtins`) over [`Value::Set`] / [`Value::Map`]. Elements are kept in
-//! insertion order (values have no total order or hash: floats and closures), so membership is a
-//! linear scan; sets in monitors are small. Errors in arguments are handled by the caller (the
-//! compiler never passes an error value into a value function).
+//! Owns: these pure functions (listed by name in `builtins`) over [`Value::Set`] / [`Value::Map`],
+//! and the order TeSSLa prints and folds them in (Scala 2.13's: insertion order up to four
+//! elements; from the fifth, hashed, iterated in the order of Scala's hash trie over Scala's
+//! hash of each element, `##`, and hashed for good). The hash is known for Int, Float, Bool,
+//! String and Unit elements; a hashed collection holding other values keeps insertion order.
+//! Membership is a linear scan (values have no total order); sets in monitors are small. Errors
+//! in arguments are handled by the caller (the compiler never passes an error value into a
+//! value function).
 
-use crate::value::{RuntimeError, Value};
+use crate::value::{Coll, RuntimeError, Value};
+use std::collections::BTreeMap;
 use std::sync::Arc;
+
+/// Scala's `##` of a value, where we know it: an `Int` is a `BigInt` (its `Int` or `Long`
+/// hash), a `Float` a `Double` (`Statics.doubleHash`), a `String` Java's `hashCode`.
+fn scala_hash(v: &Value) -> Option<i32> {
+    fn long_hash(l: i64) -> i32 {
+        if l == i64::from(l as i32) {
+            l as i32
+        } else {
+            (l ^ (l >> 32)) as i32 // Java's Long.hashCode (the high half xor the low)
+        }
+    }
+    Some(match v {
+        Value::Int(i) => long_hash(*i),
+        Value::Float(d) => {
+            let d = *d;
+            if d == f64::from(d as i32) {
+                d as i32
+            } else if d == (d as i64) as f64 && d.abs() < 9.2e18 {
+                long_hash(d as i64)
+            } else if d == f64::from(d as f32) {
+                (d as f32).to_bits() as i32
+            } else {
+                let b = if d.is_nan() {
+                    0x7ff8_0000_0000_0000u64
+                } else {
+                    d.to_bits()
+                };
+                (b ^ (b >> 32)) as i32
+            }
+        }
+        Value::Bool(true) => 1231,
+        Value::Bool(false) => 1237,
+        Value::Unit => 0,
+        Value::Str(s) => s
+            .encode_utf16()
+            .fold(0i32, |h, c| h.wrapping_mul(31).wrapping_add(i32::from(c))),
+        _ => return None,
+    })
+}
+
+/// Scala's spreading of a hash over the trie's levels (`Hashing.improve`).
+fn improve(h: i32) -> u32 {
+    let mut h = h.wrapping_add(!(h << 9));
+    h ^= ((h as u32) >> 14) as i32;
+    h = h.wrapping_add(h << 4);
+    (h ^ ((h as u32) >> 10) as i32) as u32
+}
+
+/// The order of a hash trie's elements (by index into the improved hashes): at each level,
+/// first the elements alone in their 5-bit slot, by slot, then the shared slots' sub-tries.
+fn trie_order(hashes: &[(u32, usize)], shift: u32, out: &mut Vec<usize>) {
+    if hashes.len() <= 1 || shift >= 32 {
+        out.extend(hashes.iter().map(|(_, i)| *i));
+        return;
+    }
+    let mut slots: BTreeMap<u32, Vec<(u32, usize)>> = BTreeMap::new();
+    for &(h, i) in hashes {
+        slots.entry((h >> shift) & 31).or_default().push((h, i));
+    }
+    for group in slots.values().filter(|g| g.len() == 1) {
+        out.push(group[0].1);
+    }
+    for group in slots.values().filter(|g| g.len() > 1) {
+        trie_order(group, shift + 5, out);
+    }
+}
+
+/// `items` in hash-trie order by `key`; unchanged when a key's hash is unknown.
+fn hash_ordered<T: Clone>(items: &[T], key: impl Fn(&T) -> &Value) -> Vec<T> {
+    let hashes: Option<Vec<(u32, usize)>> = items
+        .iter()
+        .enumerate()
+        .map(|(i, x)| scala_hash(key(x)).map(|h| (improve(h), i)))
+        .collect();
+    match hashes {
+        Some(h) => {
+            let mut order = Vec::with_capacity(items.len());
+            trie_order(&h, 0, &mut order);
+            order.into_iter().map(|i| items[i].clone()).collect()
+        }
+        None => items.to_vec(),
+    }
+}
+
+/// The set of `items` (duplicates dropped) as Scala builds it by adding them one by one.
+pub fn set_of(items: Vec<Value>) -> Value {
+    let mut s = Arc::new(Coll::default());
+    for x in &items {
+        s = with(&s, x);
+    }
+    Value::Set(s)
+}
+
+/// The map of `entries` (a repeated key keeps its place and takes the later value) as Scala
+/// builds it by adding them one by one.
+pub fn map_of(entries: Vec<(Value, Value)>) -> Value {
+    let mut m = Value::Map(Arc::new(Coll::default()));
+    for (k, v) in &entries {
+        if let Value::Map(cur) = &m {
+            m = map_with(cur, k, v);
+        }
+    }
+    m
+}
 
 fn bad(name: &str, a: &[Value]) -> Value {
     Value::Error(RuntimeError::Other(
@@ -30,20 +139,32 @@ pub fn empty_list() -> Value {
 }
 
 pub fn empty_set() -> Value {
-    Value::Set(Arc::new(Vec::new()))
+    Value::Set(Arc::new(Coll::default()))
 }
 
 pub fn empty_map() -> Value {
-    Value::Map(Arc::new(Vec::new()))
+    Value::Map(Arc::new(Coll::default()))
 }
 
-fn with(s: &Arc<Vec<Value>>, x: &Value) -> Arc<Vec<Value>> {
+/// `s` with `x` (Scala's `incl`): appended while the set stays at four elements or fewer,
+/// otherwise hashed.
+fn with(s: &Arc<Coll<Value>>, x: &Value) -> Arc<Coll<Value>> {
     if s.contains(x) {
         return s.clone();
     }
-    let mut v = (**s).clone();
+    let mut v: Vec<Value> = s.to_vec();
     v.push(x.clone());
-    Arc::new(v)
+    if s.hashed || v.len() > 4 {
+        Arc::new(Coll::new(hash_ordered(&v, |x| x), true))
+    } else {
+        Arc::new(Coll::new(v, false))
+    }
+}
+
+/// The elements of `s` that `keep` (order and representation kept, as Scala's `filter`).
+fn filtered(s: &Coll<Value>, keep: impl Fn(&Value) -> bool) -> Value {
+    let items: Vec<Value> = s.iter().filter(|e| keep(e)).cloned().collect();
+    Value::Set(Arc::new(Coll::new(items, s.hashed)))
 }
 
 pub fn set_add(a: &[Value]) -> Value {
@@ -62,7 +183,8 @@ pub fn set_contains(a: &[Value]) -> Value {
 
 pub fn set_remove(a: &[Value]) -> Value {
     match a {
-        [Value::Set(s), x] => Value::Set(Arc::new(s.iter().filter(|e| *e != x).cloned().collect())),
+        [Value::Set(s), x] if !s.contains(x) => Value::Set(s.clone()),
+        [Value::Set(s), x] => filtered(s, |e| e != x),
         _ => bad("Set.remove", a),
     }
 }
@@ -85,18 +207,14 @@ pub fn set_union(a: &[Value]) -> Value {
 
 pub fn set_intersection(a: &[Value]) -> Value {
     match a {
-        [Value::Set(x), Value::Set(y)] => Value::Set(Arc::new(
-            x.iter().filter(|e| y.contains(e)).cloned().collect(),
-        )),
+        [Value::Set(x), Value::Set(y)] => filtered(x, |e| y.contains(e)),
         _ => bad("Set.intersection", a),
     }
 }
 
 pub fn set_minus(a: &[Value]) -> Value {
     match a {
-        [Value::Set(x), Value::Set(y)] => Value::Set(Arc::new(
-            x.iter().filter(|e| !y.contains(e)).cloned().collect(),
-        )),
+        [Value::Set(x), Value::Set(y)] => filtered(x, |e| !y.contains(e)),
         _ => bad("Set.minus", a),
     }
 }
@@ -120,7 +238,7 @@ pub fn set_fold(a: &[Value]) -> Value {
 pub fn set_map(a: &[Value]) -> Value {
     match a {
         [Value::Set(s), f] => {
-            let mut out = Arc::new(Vec::new());
+            let mut out = Arc::new(Coll::default());
             for x in s.iter() {
                 let y = call(f, std::slice::from_ref(x));
                 if matches!(y, Value::Error(_)) {
@@ -134,13 +252,22 @@ pub fn set_map(a: &[Value]) -> Value {
     }
 }
 
-fn map_with(m: &[(Value, Value)], k: &Value, v: &Value) -> Value {
+/// `m` with `k` bound to `v` (Scala's `updated`): an existing key keeps its place; a new one
+/// is appended while the map stays at four entries or fewer, otherwise the map is hashed.
+fn map_with(m: &Coll<(Value, Value)>, k: &Value, v: &Value) -> Value {
     let mut out: Vec<(Value, Value)> = m.to_vec();
     match out.iter_mut().find(|(key, _)| key == k) {
-        Some(entry) => entry.1 = v.clone(),
+        Some(entry) => {
+            entry.1 = v.clone();
+            return Value::Map(Arc::new(Coll::new(out, m.hashed)));
+        }
         None => out.push((k.clone(), v.clone())),
     }
-    Value::Map(Arc::new(out))
+    if m.hashed || out.len() > 4 {
+        Value::Map(Arc::new(Coll::new(hash_ordered(&out, |(k, _)| k), true)))
+    } else {
+        Value::Map(Arc::new(Coll::new(out, false)))
+    }
 }
 
 pub fn map_add(a: &[Value]) -> Value {
@@ -182,9 +309,10 @@ pub fn map_get_or_else(a: &[Value]) -> Value {
 
 pub fn map_remove(a: &[Value]) -> Value {
     match a {
-        [Value::Map(m), k] => Value::Map(Arc::new(
+        [Value::Map(m), k] => Value::Map(Arc::new(Coll::new(
             m.iter().filter(|(key, _)| key != k).cloned().collect(),
-        )),
+            m.hashed,
+        ))),
         _ => bad("Map.remove", a),
     }
 }
@@ -223,7 +351,7 @@ pub fn map_fold(a: &[Value]) -> Value {
 pub fn map_map(a: &[Value]) -> Value {
     match a {
         [Value::Map(m), f] => {
-            let mut out = Value::Map(Arc::new(Vec::new()));
+            let mut out = empty_map();
             for (k, v) in m.iter() {
                 match call(f, &[k.clone(), v.clone()]) {
                     Value::Tuple(t) if t.len() == 2 => {
@@ -281,7 +409,27 @@ mod tests {
     use super::*;
 
     fn set(xs: &[i64]) -> Value {
-        Value::Set(Arc::new(xs.iter().map(|x| Value::Int(*x)).collect()))
+        set_of(xs.iter().map(|x| Value::Int(*x)).collect())
+    }
+
+    #[test]
+    fn scala_orders_and_names_sets_as_tessla_prints_them() {
+        // Set1..Set4 keep insertion order; the fifth element makes a HashSet in hash-trie
+        // order, which stays a HashSet when it shrinks.
+        let s = set(&[1, 2, 3, 4]);
+        assert_eq!(s.to_string(), "Set(1, 2, 3, 4)");
+        let s = set_add(&[s, Value::Int(5)]);
+        assert_eq!(s.to_string(), "HashSet(5, 1, 2, 3, 4)");
+        let s = set_remove(&[s, Value::Int(2)]);
+        assert_eq!(s.to_string(), "HashSet(5, 1, 3, 4)");
+        let s = set_remove(&[set_remove(&[s, Value::Int(3)]), Value::Int(4)]);
+        assert_eq!(s.to_string(), "HashSet(5, 1)");
+        assert_eq!(set_add(&[s, Value::Int(3)]).to_string(), "HashSet(5, 1, 3)");
+        // Java's String.hashCode and Scala's Double hash.
+        assert_eq!(scala_hash(&Value::Str("ab".into())), Some(3105));
+        assert_eq!(scala_hash(&Value::Float(2.0)), Some(2));
+        assert_eq!(scala_hash(&Value::Float(0.5)), Some(0x3f00_0000));
+        assert_eq!(scala_hash(&Value::Int(1 << 40)), Some(256));
     }
 
     #[test]

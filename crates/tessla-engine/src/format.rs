@@ -11,6 +11,9 @@
 
 use crate::value::Value;
 
+/// The largest width or precision formatted (a larger one is an error, not a huge string).
+const MAX_FIELD: usize = 10_000;
+
 /// The flags of one conversion.
 #[derive(Debug, Default, Clone, Copy)]
 struct Flags {
@@ -87,6 +90,11 @@ fn parse_spec(body: &str) -> Result<Spec, String> {
         .ok_or("a `%` conversion lacks its conversion character")?;
     if let Some(rest) = chars.next() {
         return Err(format!("unexpected `{rest}` after the conversion `{conv}`"));
+    }
+    if width.max(prec).is_some_and(|n| n > MAX_FIELD) {
+        return Err(format!(
+            "a width or precision above {MAX_FIELD} in `%{body}` is not supported"
+        ));
     }
     let spec = Spec {
         flags,
@@ -497,6 +505,31 @@ mod tests {
             let _ = java_format(spec, &Value::Int(i64::MIN));
             let _ = java_format(spec, &Value::Float(f64::MIN_POSITIVE / 4.0));
         }
+        // Every flag, width, precision and conversion over awkward values.
+        let values = [
+            Value::Int(0),
+            Value::Int(i64::MIN),
+            Value::Int(i64::MAX),
+            Value::Float(0.0),
+            Value::Float(-0.0),
+            Value::Float(f64::MAX),
+            Value::Float(f64::MIN_POSITIVE / 3.0),
+            Value::Float(f64::NAN),
+            Value::Float(f64::NEG_INFINITY),
+            Value::Float(9.5e-5),
+            Value::Str("é".into()),
+            Value::Bool(true),
+            Value::Unit,
+        ];
+        for flags in ["", "-", "+", " ", "#", "0", ",", "(", "-#", "+0,", "(0"] {
+            for field in ["", "1", "12", ".0", ".3", "8.15", "30.20"] {
+                for conv in "bBsSdoxXeEfgGaAcnh%".chars() {
+                    for v in &values {
+                        let _ = java_format(&format!("%{flags}{field}{conv}"), v);
+                    }
+                }
+            }
+        }
         assert_eq!(format_value("%5.2f", &Value::Float(1.23456)), " 1.23");
         assert_eq!(format_value("%04d", &Value::Int(42)), "0042");
     }
@@ -563,6 +596,8 @@ mod tests {
             ("%c", Value::Int(65)),
             ("%", Value::Int(1)),
             ("%<d", Value::Int(1)),
+            ("%2000000000d", Value::Int(1)),
+            ("%.2000000000f", Value::Float(1.0)),
         ] {
             assert!(java_format(fmt, &v).is_err(), "{fmt}");
         }

@@ -3,7 +3,9 @@
 //!
 //! Owns: the catalog of prelude definitions (parsed once per process), the references a spec
 //! makes, and the text of the definitions a spec needs (transitively), which `load` parses as one
-//! extra file `<prelude>`. Names the builtins table has keep their builtin; a spec that uses no
+//! extra file `<prelude>`; with it, the declarations of the library annotations a spec uses
+//! (`@InstFunctionCall`, `@VisBubbles`, ...) and the `CTF` type when the spec names it; and the
+//! parameter names of builtins, for named arguments. Names the builtins table has keep their builtin; a spec that uses no
 //! prelude name gets no extra file at all. The prelude's folder README is the contract.
 //!
 //! Rules: each prelude file holds one `module M { ... }`; `M.name` reaches its definitions, and
@@ -182,6 +184,17 @@ pub fn param_names(builtin: &str) -> Option<Vec<String>> {
         .iter()
         .find(|e| e.alias.as_deref() == Some(builtin))?;
     Some(e.params.clone()).filter(|p| !p.is_empty())
+}
+
+/// The parameter names of the value function a native implements (`String.format` ->
+/// `formatString`, `value`), found through the builtins table.
+pub fn native_param_names(f: crate::natives::NativeFn) -> Option<Vec<String>> {
+    builtins::BUILTINS
+        .iter()
+        .filter(
+            |b| matches!(b.kind, Kind::Value(g) | Kind::Operator(g) if g as usize == f as usize),
+        )
+        .find_map(|b| param_names(b.name))
 }
 
 fn catalog() -> &'static Catalog {

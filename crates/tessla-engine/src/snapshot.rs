@@ -30,7 +30,7 @@
 use crate::ir::print::{Render, code, lift_fn};
 use crate::ir::{Node, NodeId, Program, SArg};
 use crate::monitor::Monitor;
-use crate::value::{RuntimeError, Value};
+use crate::value::{Coll, RuntimeError, Value};
 use serde::{Deserialize, Serialize};
 use std::collections::{HashMap, HashSet};
 use std::hash::Hasher;
@@ -87,6 +87,9 @@ pub enum SValue {
     Set(Vec<SValue>),
     Map(Vec<(SValue, SValue)>),
     Error(SError),
+    /// A set or map in Scala's hashed representation (`HashSet(...)`), elements in its order.
+    HashSet(Vec<SValue>),
+    HashMap(Vec<(SValue, SValue)>),
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -130,17 +133,24 @@ impl SValue {
             }
             Value::List(xs) => SValue::List(list(xs)?),
             Value::Tuple(xs) => SValue::Tuple(list(xs)?),
+            Value::Set(xs) if xs.hashed => SValue::HashSet(list(xs)?),
             Value::Set(xs) => SValue::Set(list(xs)?),
             Value::Record(fs) => SValue::Record(
                 fs.iter()
                     .map(|(k, v)| Some((k.to_string(), SValue::from_value(v)?)))
                     .collect::<Option<_>>()?,
             ),
-            Value::Map(kvs) => SValue::Map(
-                kvs.iter()
+            Value::Map(kvs) => {
+                let entries = kvs
+                    .iter()
                     .map(|(k, v)| Some((SValue::from_value(k)?, SValue::from_value(v)?)))
-                    .collect::<Option<_>>()?,
-            ),
+                    .collect::<Option<_>>()?;
+                if kvs.hashed {
+                    SValue::HashMap(entries)
+                } else {
+                    SValue::Map(entries)
+                }
+            }
             Value::Closure(_) => return None,
             Value::Error(e) => SValue::Error(match e {
                 RuntimeError::DivisionByZero => SError::DivisionByZero,
@@ -174,17 +184,19 @@ impl SValue {
                 Value::List(Arc::new(xs.iter().map(|f| Value::Float(f.0)).collect()))
             }
             SValue::Tuple(xs) => Value::Tuple(Arc::from(list(xs))),
-            SValue::Set(xs) => Value::Set(Arc::new(list(xs))),
+            SValue::Set(xs) => Value::Set(Arc::new(Coll::new(list(xs), false))),
+            SValue::HashSet(xs) => Value::Set(Arc::new(Coll::new(list(xs), true))),
             SValue::Record(fs) => Value::Record(
                 fs.iter()
                     .map(|(k, v)| (Arc::from(k.as_str()), v.to_value()))
                     .collect(),
             ),
-            SValue::Map(kvs) => Value::Map(Arc::new(
+            SValue::Map(kvs) | SValue::HashMap(kvs) => Value::Map(Arc::new(Coll::new(
                 kvs.iter()
                     .map(|(k, v)| (k.to_value(), v.to_value()))
                     .collect(),
-            )),
+                matches!(self, SValue::HashMap(_)),
+            ))),
             SValue::Error(e) => Value::Error(match e {
                 SError::DivisionByZero => RuntimeError::DivisionByZero,
                 SError::Overflow => RuntimeError::Overflow,

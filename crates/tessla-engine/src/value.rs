@@ -27,10 +27,10 @@ pub enum Value {
     Tuple(Arc<[Value]>),
     /// Fields sorted by name.
     Record(Arc<[(Arc<str>, Value)]>),
-    /// A set: distinct elements in insertion order (equality ignores the order).
-    Set(Arc<Vec<Value>>),
-    /// A map: distinct keys in insertion order (equality ignores the order).
-    Map(Arc<Vec<(Value, Value)>>),
+    /// A set: distinct elements in TeSSLa's order (see [`Coll`]; equality ignores the order).
+    Set(Arc<Coll<Value>>),
+    /// A map: distinct keys in TeSSLa's order (see [`Coll`]; equality ignores the order).
+    Map(Arc<Coll<(Value, Value)>>),
     /// A function value (a lambda or a named function passed to `lift`, `fold`, ...).
     Closure(Arc<dyn Callable>),
     Error(RuntimeError),
@@ -131,6 +131,59 @@ pub fn java_float(f: f64) -> String {
     }
 }
 
+/// The elements of a set or the entries of a map, in the order TeSSLa prints and folds them:
+/// Scala 2.13's immutable collections keep insertion order up to four elements; a fifth makes
+/// them hashed (`HashSet`, `HashMap`), iterated in the order of their hash trie, and they stay
+/// hashed when they shrink again. `crate::collections` keeps the order; this type only holds
+/// it. Dereferences to the elements.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Coll<T> {
+    items: Vec<T>,
+    /// Grown past four elements once (Scala's hashed representation).
+    pub hashed: bool,
+}
+
+impl<T> Coll<T> {
+    /// `items`, already in their order, hashed or not.
+    pub fn new(items: Vec<T>, hashed: bool) -> Self {
+        Coll { items, hashed }
+    }
+
+    pub fn into_items(self) -> Vec<T> {
+        self.items
+    }
+}
+
+impl<T> Default for Coll<T> {
+    fn default() -> Self {
+        Coll {
+            items: Vec::new(),
+            hashed: false,
+        }
+    }
+}
+
+impl<T> std::ops::Deref for Coll<T> {
+    type Target = Vec<T>;
+    fn deref(&self) -> &Vec<T> {
+        &self.items
+    }
+}
+
+/// Elements already in order; more than four make a hashed collection.
+impl<T> From<Vec<T>> for Coll<T> {
+    fn from(items: Vec<T>) -> Self {
+        let hashed = items.len() > 4;
+        Coll { items, hashed }
+    }
+}
+
+impl<T> FromIterator<T> for Coll<T> {
+    fn from_iter<I: IntoIterator<Item = T>>(iter: I) -> Self {
+        iter.into_iter().collect::<Vec<T>>().into()
+    }
+}
+
 impl fmt::Display for Value {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         fn list(
@@ -170,14 +223,10 @@ impl fmt::Display for Value {
                 f.write_str("}")
             }
             // Scala's names: small collections keep insertion order, larger ones are hashed.
-            Value::Set(items) if items.len() <= 4 => list(f, "Set(", items, ")"),
-            Value::Set(items) => list(f, "HashSet(", items, ")"),
+            Value::Set(items) if items.hashed => list(f, "HashSet(", items, ")"),
+            Value::Set(items) => list(f, "Set(", items, ")"),
             Value::Map(entries) => {
-                f.write_str(if entries.len() <= 4 {
-                    "Map("
-                } else {
-                    "HashMap("
-                })?;
+                f.write_str(if entries.hashed { "HashMap(" } else { "Map(" })?;
                 for (i, (k, v)) in entries.iter().enumerate() {
                     if i > 0 {
                         f.write_str(", ")?;

@@ -302,26 +302,15 @@ fn eval(e: &Expr) -> Result<Value, EvalError> {
                     vals.into_iter().next().unwrap_or(Value::Unit),
                 ))),
                 ("List", _) => Ok(Value::List(Arc::new(vals))),
-                ("Set", _) => {
-                    let mut set: Vec<Value> = Vec::with_capacity(vals.len());
-                    for v in vals {
-                        if !set.contains(&v) {
-                            set.push(v);
-                        }
-                    }
-                    Ok(Value::Set(Arc::new(set)))
-                }
+                ("Set", _) => Ok(tessla_engine::collections::set_of(vals)),
                 ("Map", n) if n % 2 == 0 => {
                     let mut map: Vec<(Value, Value)> = Vec::with_capacity(n / 2);
                     let mut it = vals.into_iter();
                     while let (Some(k), Some(v)) = (it.next(), it.next()) {
-                        // A repeated key keeps the last value, as Scala's `toMap` does.
-                        match map.iter_mut().find(|(mk, _)| *mk == k) {
-                            Some(entry) => entry.1 = v,
-                            None => map.push((k, v)),
-                        }
+                        map.push((k, v));
                     }
-                    Ok(Value::Map(Arc::new(map)))
+                    // A repeated key keeps the last value, as Scala's `toMap` does.
+                    Ok(tessla_engine::collections::map_of(map))
                 }
                 (other, n) => {
                     Err(format!("`{other}` with {n} arguments is not a trace value").into())
@@ -613,18 +602,21 @@ mod tests {
         let spec = "in s: Events[Set[Int]]\nin m: Events[Map[Int, String]]\nout s\nout m";
         assert_eq!(
             read(spec, "1: s = Set(1, 2, 1)").unwrap(),
-            Value::Set(Arc::new(vec![Value::Int(1), Value::Int(2)]))
+            tessla_engine::collections::set_of(vec![Value::Int(1), Value::Int(2)])
         );
         assert_eq!(
             read(spec, r#"1: m = Map(1 -> "a->b", 2 -> "c", 1 -> "d")"#).unwrap(),
-            Value::Map(Arc::new(vec![
-                (Value::Int(1), Value::Str("d".into())),
-                (Value::Int(2), Value::Str("c".into()))
-            ]))
+            Value::Map(Arc::new(
+                vec![
+                    (Value::Int(1), Value::Str("d".into())),
+                    (Value::Int(2), Value::Str("c".into()))
+                ]
+                .into()
+            ))
         );
         assert_eq!(
             read(spec, "1: m = Map()").unwrap(),
-            Value::Map(Arc::new(vec![]))
+            Value::Map(Arc::new(Vec::new().into()))
         );
     }
 

@@ -34,6 +34,9 @@ impl Compiler<'_> {
                 FuncTerm::Builtin(b, _) if crate::prelude::param_names(b.name).is_some() => {
                     crate::prelude::param_names(b.name).unwrap_or_default()
                 }
+                FuncTerm::Native(f) if crate::prelude::native_param_names(*f).is_some() => {
+                    crate::prelude::native_param_names(*f).unwrap_or_default()
+                }
                 _ => {
                     return self.error(
                         Category::Unsupported,

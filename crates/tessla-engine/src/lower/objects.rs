@@ -105,6 +105,12 @@ fn record_literal(e: &Expr, env: &Env, depth: usize) -> Option<(Vec<(String, Exp
                 .collect(),
             env.clone(),
         )),
+        // A member of a literal that is itself a literal (`o.a` with `o = {a = {b = x}}`).
+        ExprKind::Member { object, field } => {
+            let (members, menv) = record_literal(object, env, depth + 1)?;
+            let (_, x) = members.into_iter().find(|(n, _)| *n == field.name)?;
+            record_literal(&x, &menv, depth + 1)
+        }
         ExprKind::Var(id) => match env.lookup(&id.name) {
             Some(Binding::Def(entry)) if entry.def.params.is_none() => match &entry.def.body {
                 Body::Expr { expr, where_defs } if where_defs.is_empty() => {

@@ -184,9 +184,12 @@ pub fn string_format(a: &[Value]) -> Value {
 /// which this engine does not read, so no value of type `CTF` exists and a call never happens
 /// with one; any other argument is a type error.
 pub fn ctf_get(a: &[Value]) -> Value {
+    let what = a.first().map_or_else(String::new, |v| format!("`{v}` "));
     err(RuntimeError::Other(
-        format!("CTF.get*: no CTF event object in {a:?} (CTF traces are not read by this engine)")
-            .into(),
+        format!(
+            "CTF.getInt/getString: {what}is not a CTF event object (those come only from Common Trace Format traces, which this engine does not read)"
+        )
+        .into(),
     ))
 }
 
