@@ -1,6 +1,7 @@
 //! tessla-engine: checks a parsed TeSSLa spec, lowers it to a flat core IR and evaluates it.
 //!
-//! A spec flows text -> syntax (`tessla_syntax`) -> checked (`typeck`, reading `builtins`) ->
+//! A spec flows text -> syntax (`tessla_syntax`) -> resolved (`resolve`) -> checked (`typeck`,
+//! reading `builtins`) ->
 //! IR (`lower`, then `schedule`; the IR is `ir`) -> monitor (`monitor`, with `snapshot`).
 //! `load` runs the whole pipeline. Semantics used on the way: `ops` (operators), `natives` and
 //! `collections` (value functions), `format` (format strings), `value` (what events carry).
@@ -15,6 +16,7 @@ pub mod monitor;
 pub mod natives;
 pub mod ops;
 pub mod prelude;
+pub mod resolve;
 pub mod schedule;
 pub mod snapshot;
 pub mod typeck;
