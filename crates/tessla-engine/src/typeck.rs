@@ -253,9 +253,10 @@ fn element_type(t: &Ty) -> Type {
 }
 
 /// A resolved checker type as an IR type; what the IR cannot name (`Set`, `Map`, functions,
-/// open variables) is [`Type::Unknown`].
+/// open variables) is [`Type::Unknown`]. A stream inside a value type (`List[Events[Int]]`) is
+/// an artifact of unifying modulo `Events` (values never hold streams): its element type.
 fn ir_type_of(t: &Ty) -> Type {
-    let inner = |args: &[Ty]| Box::new(args.first().map_or(Type::Unknown, ir_type_of));
+    let inner = |args: &[Ty]| Box::new(args.first().map_or(Type::Unknown, element_type));
     match t {
         Ty::Con("Unit", _) => Type::Unit,
         Ty::Con("Bool", _) => Type::Bool,
@@ -272,11 +273,13 @@ fn ir_type_of(t: &Ty) -> Type {
                     .enumerate()
                     .all(|(i, (n, _))| n.strip_prefix('_') == Some(&(i + 1).to_string())) =>
         {
-            Type::Tuple(fs.iter().map(|(_, t)| ir_type_of(t)).collect())
+            Type::Tuple(fs.iter().map(|(_, t)| element_type(t)).collect())
         }
-        Ty::Record(fs) if !fs.is_empty() => {
-            Type::Record(fs.iter().map(|(n, t)| (n.clone(), ir_type_of(t))).collect())
-        }
+        Ty::Record(fs) if !fs.is_empty() => Type::Record(
+            fs.iter()
+                .map(|(n, t)| (n.clone(), element_type(t)))
+                .collect(),
+        ),
         _ => Type::Unknown,
     }
 }
