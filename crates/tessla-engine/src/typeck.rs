@@ -311,6 +311,8 @@ struct Checker<'a> {
     /// (`None`: a barrier, an unused local def checked for its own sake). See
     /// [`Checker::check_recursion`].
     inferring: Vec<Option<(usize, bool)>>,
+    /// Defs found on a recursion without a written type, reported when they are inferred.
+    untyped_recursive: Vec<usize>,
     /// Members of literals being inferred through [`Checker::literal_member`].
     literal_members: Vec<(usize, String)>,
 }
@@ -670,6 +672,7 @@ impl<'a> Checker<'a> {
                 let t = self.infer_def(d.def, &d.scope);
                 self.inferring.pop();
                 self.unify(&me, &t).ok();
+                self.report_untyped_recursion(d, &t);
                 let s = self.generalize(&t);
                 *d.state.borrow_mut() = State::Done(s.clone());
                 s
@@ -776,13 +779,41 @@ impl<'a> Checker<'a> {
         if !self.inferring.contains(&Some((me, false))) {
             return;
         }
+        if !self.untyped_recursive.contains(&me) {
+            self.untyped_recursive.push(me);
+        }
+    }
+
+    /// Report a def found by [`Checker::check_recursion`], once its type is inferred, with
+    /// that type in the fix.
+    fn report_untyped_recursion(&mut self, d: &Rc<DefInfo<'a>>, t: &Ty) {
+        let me = Rc::as_ptr(d) as usize;
+        let Some(k) = self.untyped_recursive.iter().position(|p| *p == me) else {
+            return;
+        };
+        self.untyped_recursive.swap_remove(k);
         let n = &d.def.name.name;
-        let help = if d.def.params.is_some() {
-            format!(
-                "write the return type of `{n}`: `def {n}(...): Events[Int] = ...` (its real type)"
-            )
-        } else {
-            format!("write the type of `{n}`: `def {n}: Events[Int] = ...` (its real type)")
+        let written = |t: &Ty| {
+            let mut vars = Vec::new();
+            collect_vars(t, &mut vars);
+            if vars.is_empty() {
+                show(t)
+            } else {
+                "T".to_string()
+            }
+        };
+        let help = match (&d.def.params, self.resolve(t)) {
+            (Some(_), Ty::Fn(_, r)) => format!(
+                "TeSSLa needs a written type on every recursion: `def {n}(...): {} = ...`",
+                written(&r)
+            ),
+            (Some(_), _) => {
+                format!("TeSSLa needs a written type on every recursion: `def {n}(...): T = ...`")
+            }
+            (None, t) => format!(
+                "TeSSLa needs a written type on every recursion: `def {n}: {} = ...`",
+                written(&t)
+            ),
         };
         self.report(
             Diagnostic::error(
