@@ -42,6 +42,8 @@ pub struct Resolved<'a> {
     /// compiler reports the second).
     pub defs: Vec<GlobalDef<'a>>,
     by_name: HashMap<String, DefId>,
+    /// Every module by its full prefix (`A.`, `A.B.`).
+    modules: std::collections::HashSet<String>,
     /// `in NAME: TYPE`, in order.
     pub inputs: Vec<(&'a Ident, &'a ast::Type)>,
     /// Input by name (a later input of the same name wins).
@@ -91,6 +93,7 @@ impl<'a> Resolved<'a> {
                     ..
                 } => {
                     let inner_prefix = format!("{prefix}{}.", name.name);
+                    r.modules.insert(inner_prefix.clone());
                     r.statements
                         .extend(inner.iter().map(|st| (inner_prefix.clone(), st)));
                 }
@@ -190,6 +193,29 @@ impl<'a> Resolved<'a> {
         None
     }
 
+    /// Does `head` name a module as seen from module `prefix` (own and enclosing modules, the
+    /// top level, imported modules)?
+    pub fn is_module(&self, head: &str, prefix: &str) -> bool {
+        let mut p = prefix.to_string();
+        loop {
+            if self.modules.contains(&format!("{p}{head}.")) {
+                return true;
+            }
+            if p.is_empty() {
+                break;
+            }
+            let trimmed = p.trim_end_matches('.');
+            p = trimmed
+                .rfind('.')
+                .map_or_else(String::new, |k| format!("{}.", &trimmed[..k]));
+        }
+        self.imports.iter().any(|(at, target)| {
+            prefix.starts_with(at.as_str())
+                && (self.modules.contains(&format!("{at}{target}{head}."))
+                    || self.modules.contains(&format!("{target}{head}.")))
+        })
+    }
+
     /// Every global name visible from module `prefix` by its short name (for "did you mean").
     pub fn visible_names(&self, prefix: &str) -> impl Iterator<Item = &str> {
         self.by_name
@@ -252,6 +278,8 @@ mod tests {
         assert_eq!(r.outputs.len(), 1);
         assert!(r.out_all);
         assert_eq!(r.declared_types.get("T"), Some(&1));
+        assert!(r.is_module("A", "") && r.is_module("B", "A.") && r.is_module("A", "C."));
+        assert!(!r.is_module("B", "") && !r.is_module("a", ""));
     }
 
     #[test]

@@ -1203,6 +1203,18 @@ impl<'a> Checker<'a> {
                                 }
                                 self.def_type(&d)
                             }
+                            None if !is_builtin_name(&q)
+                                && self
+                                    .resolved
+                                    .is_some_and(|r| r.is_module(head, &scope.prefix)) =>
+                            {
+                                let id = ast::Ident {
+                                    name: q,
+                                    span: e.span,
+                                };
+                                self.unknown_name(&id, scope);
+                                self.fresh()
+                            }
                             None => self.builtin(&q).unwrap_or_else(|| self.fresh()),
                         };
                     }
