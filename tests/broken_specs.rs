@@ -130,6 +130,10 @@ const PLACED: &[(&str, &str)] = &[
         "unused_function_unknown_name.tessla:5:36",
     ),
     ("unused_type_error", "unused_type_error.tessla:5:28"),
+    (
+        "unused_unknown_module_member",
+        "unused_unknown_module_member.tessla:7:17",
+    ),
     ("unused_unknown_name", "unused_unknown_name.tessla:5:13"),
     (
         "annotation_wrong_arguments",

@@ -1,4 +1,5 @@
-//! Loading a spec: read files (through an include resolver), parse, check, lower to a [`Program`].
+//! Loading a spec: read files (through an include resolver), parse, resolve, check, lower to a
+//! [`Program`].
 //!
 //! Owns: the single entry point every command uses (`check`, `trace`, `run`, the bundled robot
 //! monitors), the options that affect compilation (base time, `--set` overrides) and the error
@@ -97,7 +98,9 @@ pub fn load_with(
         }
         asts.push(file);
     }
-    let (type_errors, types) = crate::typeck::check_typed(&asts);
+    let resolved = crate::resolve::Resolved::new(&asts);
+    let (type_errors, types) = crate::typeck::check_resolved(&resolved);
+    drop(resolved);
     if !type_errors.is_empty() {
         return Err(LoadError {
             sources,

@@ -1,4 +1,5 @@
-//! The type checker: Hindley–Milner style inference over the parsed spec, run before compilation,
+//! The type checker: Hindley–Milner style inference over the resolved spec (`resolve.rs`: the
+//! flattened statements, global definitions by id, imports), run before compilation,
 //! so ill-typed specs are compile errors (file, line, column, caret, fix) and not runtime values.
 //!
 //! Owns: the type rules of TeSSLa 1.2 as far as the engine needs them. Types are unified *modulo
@@ -25,6 +26,7 @@
 
 use crate::builtins::{self, Sig};
 use crate::ir::Type;
+use crate::resolve::{DefId, Global, Resolved, at};
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::rc::Rc;
@@ -109,6 +111,8 @@ enum State {
 
 struct DefInfo<'a> {
     def: &'a Def,
+    /// Its id when it is a global definition.
+    global: Option<DefId>,
     /// The scope the def's body sees.
     scope: Rc<Scope<'a>>,
     state: RefCell<State>,
@@ -156,6 +160,9 @@ enum Found<'a> {
 pub struct Types {
     pub outputs: HashMap<Span, Type>,
     pub defs: HashMap<String, Type>,
+    /// Qualified references (`Limits.maxSpeed` after `import Robot`) by their span: the full
+    /// dotted name of the definition they resolve to, where it differs from the text.
+    pub qualified: HashMap<Span, String>,
 }
 
 /// Check the statements of all files (includes first); returns the type errors found.
@@ -165,93 +172,39 @@ pub fn check(files: &[ast::File]) -> Vec<Diagnostic> {
 
 /// Check the statements of all files; returns the type errors found and the [`Types`] table.
 pub fn check_typed(files: &[ast::File]) -> (Vec<Diagnostic>, Types) {
+    let resolved = Resolved::new(files);
+    check_resolved(&resolved)
+}
+
+/// Check a resolved spec; returns the type errors found (the resolver's first) and the
+/// [`Types`] table.
+pub fn check_resolved(resolved: &Resolved<'_>) -> (Vec<Diagnostic>, Types) {
     let mut types = Types::default();
-    let mut c = Checker::default();
-    for f in files {
-        collect_type_names(&f.statements, &mut c.declared_types);
+    let mut c = Checker {
+        resolved: Some(resolved),
+        ..Checker::default()
+    };
+    for d in &resolved.diagnostics {
+        c.report(d.clone());
     }
-    let mut annotation_defs: HashMap<(String, bool), &ast::Statement> = HashMap::new();
-    let mut statements: Vec<(String, &Statement)> = Vec::new();
-    for f in files {
-        for s in &f.statements {
-            statements.push((String::new(), s));
-        }
+    for (_, ty) in &resolved.inputs {
+        let t = c.ast_type(ty, &HashMap::new());
+        c.inputs.push(t);
     }
-    let mut in_order: Vec<Rc<DefInfo<'_>>> = Vec::new();
-    let mut i = 0;
-    while let Some((prefix, s)) = statements.get(i).cloned() {
-        i += 1;
-        match s {
-            Statement::Def(d) => {
-                let scope = c.module_scope(&prefix);
-                let name = format!("{prefix}{}", d.name.name);
-                if let std::collections::hash_map::Entry::Vacant(slot) = c.globals.entry(name) {
-                    let info = Rc::new(DefInfo {
-                        def: d,
-                        scope,
-                        state: RefCell::new(State::Todo),
-                    });
-                    in_order.push(info.clone());
-                    slot.insert(info);
-                }
-            }
-            Statement::Module {
-                name,
-                statements: inner,
-                ..
-            } => {
-                for st in inner {
-                    statements.push((format!("{prefix}{}.", name.name), st));
-                }
-            }
-            Statement::Import { path, .. } => {
-                let target: String = path.iter().map(|p| format!("{}.", p.name)).collect();
-                c.imports.push((prefix.clone(), target));
-            }
-            Statement::In { name, ty, .. } => {
-                let t = c.ast_type(ty, &HashMap::new());
-                c.inputs.insert(name.name.clone(), t);
-            }
-            Statement::AnnotationDef {
-                name, global, span, ..
-            } => {
-                if !prefix.is_empty() {
-                    c.report(
-                        Diagnostic::error(
-                            Category::Name,
-                            Some(*span),
-                            format!(
-                                "annotation `{}` is defined inside a module",
-                                at(name, *global)
-                            ),
-                        )
-                        .with_label("inside a module")
-                        .with_help("define annotations at the top level of the spec"),
-                    );
-                } else if let Some(Statement::AnnotationDef { span: first, .. }) =
-                    annotation_defs.get(&(name.name.clone(), *global))
-                {
-                    c.report(
-                        Diagnostic::error(
-                            Category::Name,
-                            Some(name.span),
-                            format!("annotation `{}` is defined twice", at(name, *global)),
-                        )
-                        .with_label("defined again here")
-                        .with_note_at(*first, "first defined here")
-                        .with_help("remove one of the definitions"),
-                    );
-                } else {
-                    annotation_defs.insert((name.name.clone(), *global), s);
-                }
-            }
-            _ => {}
-        }
+    for g in &resolved.defs {
+        let scope = c.module_scope(&g.prefix);
+        let id = c.globals.len();
+        c.globals.push(Rc::new(DefInfo {
+            def: g.def,
+            global: Some(id),
+            scope,
+            state: RefCell::new(State::Todo),
+        }));
     }
-    for g in in_order {
+    for g in c.globals.clone() {
         c.def_scheme(&g);
     }
-    for (_, s) in &statements {
+    for (_, s) in &resolved.statements {
         let (anns, global): (&[ast::Annotation], bool) = match s {
             Statement::In { annotations, .. } | Statement::OutAll { annotations, .. } => {
                 (annotations, false)
@@ -261,52 +214,42 @@ pub fn check_typed(files: &[ast::File]) -> (Vec<Diagnostic>, Types) {
             _ => continue,
         };
         for a in anns {
-            c.annotation(a, global, &annotation_defs);
+            c.annotation(a, global);
         }
     }
-    for (_, s) in &statements {
-        if let Statement::Out(o) = s {
-            let scope = c.module_scope("");
-            let t = c.infer(&o.expr, &scope);
-            types
-                .outputs
-                .insert(o.expr.span, element_type(&c.resolve(&t)));
-            // A parameterless function (`def foo() = 42`) is called.
-            if let Ty::Fn(ps, _) = c.resolve(&t)
-                && !ps.is_empty()
-            {
-                c.report(
-                    Diagnostic::error(
-                        Category::Type,
-                        Some(o.expr.span),
-                        "a function cannot be an output",
-                    )
-                    .with_label("this is a function")
-                    .with_help("output a stream or a value, e.g. the function applied to a stream"),
-                );
-            }
+    for o in &resolved.outputs {
+        let scope = c.module_scope("");
+        let t = c.infer(&o.expr, &scope);
+        types
+            .outputs
+            .insert(o.expr.span, element_type(&c.resolve(&t)));
+        // A parameterless function (`def foo() = 42`) is called.
+        if let Ty::Fn(ps, _) = c.resolve(&t)
+            && !ps.is_empty()
+        {
+            c.report(
+                Diagnostic::error(
+                    Category::Type,
+                    Some(o.expr.span),
+                    "a function cannot be an output",
+                )
+                .with_label("this is a function")
+                .with_help("output a stream or a value, e.g. the function applied to a stream"),
+            );
         }
     }
     // Def types only serve `out *`.
-    let out_all = statements
-        .iter()
-        .any(|(_, s)| matches!(s, Statement::OutAll { .. }));
-    for (name, d) in c.globals.iter().filter(|_| out_all) {
+    for (id, d) in c.globals.iter().enumerate().filter(|_| resolved.out_all) {
         if d.def.params.is_none()
             && let State::Done(s) = &*d.state.borrow()
+            && let Some(name) = resolved.name(id)
         {
-            types
-                .defs
-                .insert(name.clone(), element_type(&c.resolve(&s.ty)));
+            types.defs.insert(name, element_type(&c.resolve(&s.ty)));
         }
     }
+    types.qualified = std::mem::take(&mut c.qualified);
     c.break_cycles();
     (std::mem::take(&mut c.diags), types)
-}
-
-/// An annotation's name as written at its use: `@Name` or `@@Name`.
-fn at(name: &ast::Ident, global: bool) -> String {
-    format!("{}{}", if global { "@@" } else { "@" }, name.name)
 }
 
 /// The element type of a stream (`T` of `Events[T]`; a constant is its own) as an IR type.
@@ -318,9 +261,10 @@ fn element_type(t: &Ty) -> Type {
 }
 
 /// A resolved checker type as an IR type; what the IR cannot name (`Set`, `Map`, functions,
-/// open variables) is [`Type::Unknown`].
+/// open variables) is [`Type::Unknown`]. A stream inside a value type (`List[Events[Int]]`) is
+/// an artifact of unifying modulo `Events` (values never hold streams): its element type.
 fn ir_type_of(t: &Ty) -> Type {
-    let inner = |args: &[Ty]| Box::new(args.first().map_or(Type::Unknown, ir_type_of));
+    let inner = |args: &[Ty]| Box::new(args.first().map_or(Type::Unknown, element_type));
     match t {
         Ty::Con("Unit", _) => Type::Unit,
         Ty::Con("Bool", _) => Type::Bool,
@@ -337,28 +281,14 @@ fn ir_type_of(t: &Ty) -> Type {
                     .enumerate()
                     .all(|(i, (n, _))| n.strip_prefix('_') == Some(&(i + 1).to_string())) =>
         {
-            Type::Tuple(fs.iter().map(|(_, t)| ir_type_of(t)).collect())
+            Type::Tuple(fs.iter().map(|(_, t)| element_type(t)).collect())
         }
-        Ty::Record(fs) if !fs.is_empty() => {
-            Type::Record(fs.iter().map(|(n, t)| (n.clone(), ir_type_of(t))).collect())
-        }
+        Ty::Record(fs) if !fs.is_empty() => Type::Record(
+            fs.iter()
+                .map(|(n, t)| (n.clone(), element_type(t)))
+                .collect(),
+        ),
         _ => Type::Unknown,
-    }
-}
-
-/// The names of every `type` declaration in `statements` and the modules inside them, with
-/// their number of type parameters.
-fn collect_type_names(statements: &[Statement], out: &mut HashMap<String, usize>) {
-    for s in statements {
-        match s {
-            Statement::TypeDef {
-                name, type_params, ..
-            } => {
-                out.insert(name.name.clone(), type_params.len());
-            }
-            Statement::Module { statements, .. } => collect_type_names(statements, out),
-            _ => {}
-        }
     }
 }
 
@@ -371,17 +301,16 @@ const BUILTIN_TYPES: [&str; 10] = [
 struct Checker<'a> {
     subst: Vec<Option<Ty>>,
     diags: Vec<Diagnostic>,
-    globals: HashMap<String, Rc<DefInfo<'a>>>,
-    inputs: HashMap<String, Ty>,
-    /// (importing module prefix, imported module prefix).
-    imports: Vec<(String, String)>,
+    /// The resolved spec: statements, global definitions, imports, inputs, declared types.
+    resolved: Option<&'a Resolved<'a>>,
+    /// The global definitions, by [`DefId`](crate::resolve::DefId).
+    globals: Vec<Rc<DefInfo<'a>>>,
+    /// The types of the inputs, by their index in [`Resolved::inputs`].
+    inputs: Vec<Ty>,
     module_scopes: HashMap<String, Rc<Scope<'a>>>,
     /// Every local scope made: a scope names defs whose `scope` is that scope (or a child), so
     /// [`Checker::break_cycles`] empties them when checking ends, or each check leaks them.
     local_scopes: Vec<Rc<Scope<'a>>>,
-    /// Names declared with `type` anywhere (modules included): the type names besides the
-    /// builtins that a spec may use.
-    declared_types: HashMap<String, usize>,
     /// Type parameters of the defs being inferred, innermost last: a lambda or nested def may
     /// name its enclosing def's type parameters. Used only to decide whether a type name is
     /// known (the types themselves stay as before).
@@ -390,6 +319,11 @@ struct Checker<'a> {
     /// (`None`: a barrier, an unused local def checked for its own sake). See
     /// [`Checker::check_recursion`].
     inferring: Vec<Option<(usize, bool)>>,
+    /// Qualified names that resolve through an import, by the span of the reference: the
+    /// definition's full dotted name (see [`Types::qualified`]).
+    qualified: HashMap<Span, String>,
+    /// Defs found on a recursion without a written type, reported when they are inferred.
+    untyped_recursive: Vec<usize>,
     /// Members of literals being inferred through [`Checker::literal_member`].
     literal_members: Vec<(usize, String)>,
 }
@@ -398,15 +332,11 @@ impl<'a> Checker<'a> {
     /// Check one use of an annotation against its definition: declared with the same kind
     /// (`@` on an `in`/`out`, `@@` on its own), arity, argument types, constant arguments. An
     /// annotation declared nowhere is left to the compiler (a warning there).
-    fn annotation(
-        &mut self,
-        a: &'a ast::Annotation,
-        global: bool,
-        defs: &HashMap<(String, bool), &'a Statement>,
-    ) {
-        let Some(Statement::AnnotationDef { params, .. }) =
-            defs.get(&(a.name.name.clone(), global))
-        else {
+    fn annotation(&mut self, a: &'a ast::Annotation, global: bool) {
+        let Some(defs) = self.resolved.map(|r| &r.annotations) else {
+            return;
+        };
+        let Some(params) = defs.get(&(a.name.name.clone(), global)).copied() else {
             if defs.contains_key(&(a.name.name.clone(), !global)) {
                 let (msg, help) = if global {
                     (
@@ -753,6 +683,7 @@ impl<'a> Checker<'a> {
                 let t = self.infer_def(d.def, &d.scope);
                 self.inferring.pop();
                 self.unify(&me, &t).ok();
+                self.report_untyped_recursion(d, &t);
                 let s = self.generalize(&t);
                 *d.state.borrow_mut() = State::Done(s.clone());
                 s
@@ -859,13 +790,41 @@ impl<'a> Checker<'a> {
         if !self.inferring.contains(&Some((me, false))) {
             return;
         }
+        if !self.untyped_recursive.contains(&me) {
+            self.untyped_recursive.push(me);
+        }
+    }
+
+    /// Report a def found by [`Checker::check_recursion`], once its type is inferred, with
+    /// that type in the fix.
+    fn report_untyped_recursion(&mut self, d: &Rc<DefInfo<'a>>, t: &Ty) {
+        let me = Rc::as_ptr(d) as usize;
+        let Some(k) = self.untyped_recursive.iter().position(|p| *p == me) else {
+            return;
+        };
+        self.untyped_recursive.swap_remove(k);
         let n = &d.def.name.name;
-        let help = if d.def.params.is_some() {
-            format!(
-                "write the return type of `{n}`: `def {n}(...): Events[Int] = ...` (its real type)"
-            )
-        } else {
-            format!("write the type of `{n}`: `def {n}: Events[Int] = ...` (its real type)")
+        let written = |t: &Ty| {
+            let mut vars = Vec::new();
+            collect_vars(t, &mut vars);
+            if vars.is_empty() {
+                show(t)
+            } else {
+                "T".to_string()
+            }
+        };
+        let help = match (&d.def.params, self.resolve(t)) {
+            (Some(_), Ty::Fn(_, r)) => format!(
+                "TeSSLa needs a written type on every recursion: `def {n}(...): {} = ...`",
+                written(&r)
+            ),
+            (Some(_), _) => {
+                format!("TeSSLa needs a written type on every recursion: `def {n}(...): T = ...`")
+            }
+            (None, t) => format!(
+                "TeSSLa needs a written type on every recursion: `def {n}: {} = ...`",
+                written(&t)
+            ),
         };
         self.report(
             Diagnostic::error(
@@ -900,6 +859,7 @@ impl<'a> Checker<'a> {
                 d.name.name.clone(),
                 Local::Def(Rc::new(DefInfo {
                     def: d,
+                    global: None,
                     scope: s.clone(),
                     state: RefCell::new(State::Todo),
                 })),
@@ -921,35 +881,12 @@ impl<'a> Checker<'a> {
         self.find_global(name, &scope.prefix)
     }
 
-    /// A global by name as seen from module `prefix`: own module and enclosing modules first,
-    /// then the top level and inputs, then imported modules.
+    /// A global by name as seen from module `prefix` ([`Resolved::global`]'s rule).
     fn find_global(&self, name: &str, prefix: &str) -> Option<Found<'a>> {
-        let mut p = prefix.to_string();
-        loop {
-            if let Some(d) = self.globals.get(&format!("{p}{name}")) {
-                return Some(Found::Def(d.clone()));
-            }
-            if p.is_empty() {
-                break;
-            }
-            let trimmed = p.trim_end_matches('.');
-            p = trimmed
-                .rfind('.')
-                .map_or_else(String::new, |k| format!("{}.", &trimmed[..k]));
+        match self.resolved?.global(name, prefix)? {
+            Global::Def(id) => self.globals.get(id).map(|d| Found::Def(d.clone())),
+            Global::Input(i) => self.inputs.get(i).map(|t| Found::Mono(t.clone())),
         }
-        if let Some(t) = self.inputs.get(name) {
-            return Some(Found::Mono(t.clone()));
-        }
-        for (at, target) in &self.imports {
-            if prefix.starts_with(at.as_str()) {
-                for full in [format!("{at}{target}{name}"), format!("{target}{name}")] {
-                    if let Some(d) = self.globals.get(&full) {
-                        return Some(Found::Def(d.clone()));
-                    }
-                }
-            }
-        }
-        None
     }
 
     fn lookup(&mut self, id: &ast::Ident, scope: &Rc<Scope<'a>>) -> Ty {
@@ -973,13 +910,9 @@ impl<'a> Checker<'a> {
             known.extend(sc.names.borrow().keys().cloned());
             s = sc.parent.clone();
         }
-        known.extend(
-            self.globals
-                .keys()
-                .filter_map(|k| k.strip_prefix(scope.prefix.as_str()))
-                .map(str::to_string),
-        );
-        known.extend(self.inputs.keys().cloned());
+        if let Some(r) = self.resolved {
+            known.extend(r.visible_names(&scope.prefix).map(str::to_string));
+        }
         known.extend(builtins::names().map(str::to_string));
         known.extend(crate::prelude::names());
         let near = tessla_syntax::diag::nearest(&id.name, known.iter().map(String::as_str));
@@ -1008,14 +941,18 @@ impl<'a> Checker<'a> {
             || BUILTIN_TYPES.contains(&n)
             || tparams.contains_key(n)
             || self.enclosing_tparams.iter().any(|tp| tp == n)
-            || self.declared_types.contains_key(n)
+            || self.declared_type(n).is_some()
         {
             return;
         }
         let known: Vec<&str> = BUILTIN_TYPES
             .iter()
             .copied()
-            .chain(self.declared_types.keys().map(String::as_str))
+            .chain(
+                self.resolved
+                    .iter()
+                    .flat_map(|r| r.declared_types.keys().map(String::as_str)),
+            )
             .chain(tparams.keys().map(String::as_str))
             .collect();
         let mut near = tessla_syntax::diag::nearest(n, known.iter().copied());
@@ -1046,6 +983,11 @@ impl<'a> Checker<'a> {
         self.report(d);
     }
 
+    /// The number of type parameters of the type `n` declared with `type`.
+    fn declared_type(&self, n: &str) -> Option<usize> {
+        self.resolved?.declared_types.get(n).copied()
+    }
+
     /// The number of type arguments the type named `n` takes (`None`: not known here, e.g. a
     /// dotted name or an unknown type, which [`Checker::check_type_name`] reports).
     fn type_arity(&self, n: &str, tparams: &HashMap<String, Ty>) -> Option<usize> {
@@ -1056,7 +998,7 @@ impl<'a> Checker<'a> {
             "Int" | "Float" | "Bool" | "String" | "Unit" => Some(0),
             "Events" | "Option" | "List" | "Set" => Some(1),
             "Map" => Some(2),
-            _ => self.declared_types.get(n).copied(),
+            _ => self.declared_type(n),
         }
     }
 
@@ -1251,7 +1193,28 @@ impl<'a> Checker<'a> {
                         let q = format!("{path}.{}", field.name);
                         return match self.find(&q, scope) {
                             Some(Found::Mono(t)) => t,
-                            Some(Found::Def(d)) => self.def_type(&d),
+                            Some(Found::Def(d)) => {
+                                if let Some(full) = d
+                                    .global
+                                    .and_then(|id| self.resolved?.name(id))
+                                    .filter(|full| *full != q)
+                                {
+                                    self.qualified.insert(e.span, full);
+                                }
+                                self.def_type(&d)
+                            }
+                            None if !is_builtin_name(&q)
+                                && self
+                                    .resolved
+                                    .is_some_and(|r| r.is_module(head, &scope.prefix)) =>
+                            {
+                                let id = ast::Ident {
+                                    name: q,
+                                    span: e.span,
+                                };
+                                self.unknown_name(&id, scope);
+                                self.fresh()
+                            }
                             None => self.builtin(&q).unwrap_or_else(|| self.fresh()),
                         };
                     }

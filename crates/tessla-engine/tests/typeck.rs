@@ -234,12 +234,16 @@ fn recursion_needs_a_written_type_somewhere_on_its_cycle() {
     rejects_as(
         "in x: Events[Int]\ndef c = default(last(c, x) + 1, 0)\nout c\n",
         Category::Recursion,
-        &["`c` is defined recursively and needs a type", "2:5"],
+        &[
+            "`c` is defined recursively and needs a type",
+            "2:5",
+            "def c: Events[Int] = ...",
+        ],
     );
     rejects_as(
         "def fact(n: Int) = if n < 2 then 1 else n * fact(n - 1)\nout fact(5) as f\n",
         Category::Recursion,
-        &["`fact` is defined recursively", "return type"],
+        &["`fact` is defined recursively", "def fact(...): Int = ..."],
     );
     // One written type on the cycle is enough, wherever the inference starts.
     let ok = [

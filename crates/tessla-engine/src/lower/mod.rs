@@ -650,10 +650,11 @@ impl<'a> Compiler<'a> {
     }
 }
 
-/// `lowered` when it is fully known, else the checker's type when that is, else `lowered`.
+/// The checker's type when it is fully known (the type table is where types come from), else
+/// what lowering found for the node (`lower/types.rs`).
 fn known_or(lowered: Type, checked: Option<&Type>) -> Type {
     match checked {
-        Some(c) if !lowered.is_known() && c.is_known() => c.clone(),
+        Some(c) if c.is_known() => c.clone(),
         _ => lowered,
     }
 }

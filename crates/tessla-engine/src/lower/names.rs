@@ -1,8 +1,12 @@
-//! Names during lowering: scopes, definitions compiled on first use (recursion through the lazy
-//! arguments of `last`/`delay`), `extern` bodies, and the unknown-name diagnostic.
+//! Names during lowering: scopes, definitions compiled on first use, `extern` bodies, and the
+//! unknown-name diagnostic. A stream definition used while it is compiled becomes an alias
+//! filled in when it is done; a use outside the lazy argument of `last`/`delay` is then checked
+//! for a strict cycle on the lowered graph, so recursion is allowed wherever TeSSLa allows it
+//! (through `last`/`delay` inside function bodies, helpers and lifted calls too). Qualified
+//! names the type checker resolved through an import come from its table.
 //!
-//! Owns: [`Env`] lookups, `Compiler::lookup`, `def_term`, `body`, `local_defs`,
-//! `unknown_name`.
+//! Owns: [`Env`] lookups, `Compiler::lookup`, `def_term`, `literal_member`, `body`,
+//! `local_defs`, `unknown_name`.
 
 use super::*;
 
@@ -196,6 +200,16 @@ impl Compiler<'_> {
         match env.lookup(name) {
             Some(Binding::Term(t)) => Ok(t),
             Some(Binding::Def(e)) => self.def_term(&e, span),
+            // A qualified name the resolver found through an import (`Limits.maxSpeed` after
+            // `import Robot`): its definition by full name.
+            None if let Some(Binding::Def(e)) = self
+                .types
+                .qualified
+                .get(&span)
+                .and_then(|full| env.lookup(full)) =>
+            {
+                self.def_term(&e, span)
+            }
             None => {
                 let name = crate::prelude::builtin_alias(name).unwrap_or(name);
                 if name == "true" {

@@ -1,5 +1,7 @@
 //! Element types of stream nodes as far as lowering knows them (declarations, literals,
-//! operators), for `check`'s listing and the bindings' conversions.
+//! operators), for the operators' choices during lowering and as the fallback of `check`'s
+//! listing and the bindings' conversions where the type checker's table leaves a type open
+//! (outputs and `out *` take the table's type first).
 //!
 //! Owns: `Compiler::typed`, `stream_type`, [`ir_type`] (a syntax type as an IR type),
 //! `value_type`, `const_type_of`.

@@ -1,0 +1,301 @@
+//! Name resolution, the first pass after parsing: the statements of every file (includes first,
+//! the prelude last) flattened into one program with module prefixes, its global definitions in
+//! one arena with ids, imports, inputs, outputs, declared types and annotation definitions, and
+//! the rule by which a global name is found from inside a module.
+//!
+//! Owns: [`Resolved`] (built once per spec by [`Resolved::new`]), [`DefId`], the global lookup
+//! rule ([`Resolved::global`]) and the diagnostics of names at the statement level (annotation
+//! definitions twice or inside a module). Local names (parameters, blocks, `where`) and the
+//! types of definitions are the type checker's (`typeck.rs`).
+
+use std::collections::HashMap;
+use tessla_syntax::ast::{self, Def, Ident, Out, Statement};
+use tessla_syntax::diag::{Category, Diagnostic};
+
+/// The index of a global definition in [`Resolved::defs`].
+pub type DefId = usize;
+
+/// A global definition: a top-level `def` or one inside a module.
+#[derive(Debug)]
+pub struct GlobalDef<'a> {
+    pub def: &'a Def,
+    /// The module prefix it is defined in (`""` at the top level, `A.B.` in `module B` inside
+    /// `module A`); names in its body are looked up from there.
+    pub prefix: String,
+}
+
+/// What a global name refers to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Global {
+    Def(DefId),
+    /// The index of an input in [`Resolved::inputs`].
+    Input(usize),
+}
+
+/// A spec's statements, flattened and resolved at the statement level.
+#[derive(Debug, Default)]
+pub struct Resolved<'a> {
+    /// Every statement with the module prefix it stands in, in the order TeSSLa reads them
+    /// (each module's statements after the statements of the level around it).
+    pub statements: Vec<(String, &'a Statement)>,
+    /// Global definitions in that order; the first of two with one dotted name wins (the
+    /// compiler reports the second).
+    pub defs: Vec<GlobalDef<'a>>,
+    by_name: HashMap<String, DefId>,
+    /// Every module by its full prefix (`A.`, `A.B.`).
+    modules: std::collections::HashSet<String>,
+    /// `in NAME: TYPE`, in order.
+    pub inputs: Vec<(&'a Ident, &'a ast::Type)>,
+    /// Input by name (a later input of the same name wins).
+    input_by_name: HashMap<String, usize>,
+    /// (importing module prefix, imported module prefix).
+    pub imports: Vec<(String, String)>,
+    /// `out EXPR`, in order.
+    pub outputs: Vec<&'a Out>,
+    /// Whether the spec has `out *`.
+    pub out_all: bool,
+    /// Names declared with `type` anywhere (modules included) with their number of type
+    /// parameters.
+    pub declared_types: HashMap<String, usize>,
+    /// `def @Name(..)` (false) and `def @@Name(..)` (true) by (name, global): the parameters.
+    pub annotations: HashMap<(String, bool), &'a [ast::Param]>,
+    /// Annotation definitions twice or inside a module.
+    pub diagnostics: Vec<Diagnostic>,
+}
+
+impl<'a> Resolved<'a> {
+    /// Flatten and resolve the statements of `files`.
+    pub fn new(files: &'a [ast::File]) -> Self {
+        let mut r = Resolved::default();
+        for f in files {
+            collect_type_names(&f.statements, &mut r.declared_types);
+        }
+        for f in files {
+            r.statements
+                .extend(f.statements.iter().map(|s| (String::new(), s)));
+        }
+        let mut first_annotation: HashMap<(String, bool), tessla_syntax::source::Span> =
+            HashMap::new();
+        let mut i = 0;
+        while let Some((prefix, s)) = r.statements.get(i).cloned() {
+            i += 1;
+            match s {
+                Statement::Def(d) => {
+                    let name = format!("{prefix}{}", d.name.name);
+                    if let std::collections::hash_map::Entry::Vacant(slot) = r.by_name.entry(name) {
+                        slot.insert(r.defs.len());
+                        r.defs.push(GlobalDef { def: d, prefix });
+                    }
+                }
+                Statement::Module {
+                    name,
+                    statements: inner,
+                    ..
+                } => {
+                    let inner_prefix = format!("{prefix}{}.", name.name);
+                    r.modules.insert(inner_prefix.clone());
+                    r.statements
+                        .extend(inner.iter().map(|st| (inner_prefix.clone(), st)));
+                }
+                Statement::Import { path, .. } => {
+                    let target: String = path.iter().map(|p| format!("{}.", p.name)).collect();
+                    r.imports.push((prefix, target));
+                }
+                Statement::In { name, ty, .. } => {
+                    r.input_by_name.insert(name.name.clone(), r.inputs.len());
+                    r.inputs.push((name, ty));
+                }
+                Statement::Out(o) => r.outputs.push(o),
+                Statement::OutAll { .. } => r.out_all = true,
+                Statement::AnnotationDef {
+                    name,
+                    params,
+                    global,
+                    span,
+                } => {
+                    let key = (name.name.clone(), *global);
+                    if !prefix.is_empty() {
+                        r.diagnostics.push(
+                            Diagnostic::error(
+                                Category::Name,
+                                Some(*span),
+                                format!(
+                                    "annotation `{}` is defined inside a module",
+                                    at(name, *global)
+                                ),
+                            )
+                            .with_label("inside a module")
+                            .with_help("define annotations at the top level of the spec"),
+                        );
+                    } else if let Some(first) = first_annotation.get(&key) {
+                        r.diagnostics.push(
+                            Diagnostic::error(
+                                Category::Name,
+                                Some(name.span),
+                                format!("annotation `{}` is defined twice", at(name, *global)),
+                            )
+                            .with_label("defined again here")
+                            .with_note_at(*first, "first defined here")
+                            .with_help("remove one of the definitions"),
+                        );
+                    } else {
+                        first_annotation.insert(key.clone(), *span);
+                        r.annotations.insert(key, params);
+                    }
+                }
+                Statement::TypeDef { .. } | Statement::GlobalAnnotation(_) => {}
+            }
+        }
+        r
+    }
+
+    /// The global definition with the dotted name `name` (`A.B.x`).
+    pub fn def_id(&self, name: &str) -> Option<DefId> {
+        self.by_name.get(name).copied()
+    }
+
+    /// The dotted name of a global definition.
+    pub fn name(&self, id: DefId) -> Option<String> {
+        self.defs
+            .get(id)
+            .map(|g| format!("{}{}", g.prefix, g.def.name.name))
+    }
+
+    /// A global by name as seen from module `prefix`: own module and enclosing modules first,
+    /// then the top level and inputs, then imported modules (an import inside a module counts
+    /// from there inwards).
+    pub fn global(&self, name: &str, prefix: &str) -> Option<Global> {
+        let mut p = prefix.to_string();
+        loop {
+            if let Some(d) = self.def_id(&format!("{p}{name}")) {
+                return Some(Global::Def(d));
+            }
+            if p.is_empty() {
+                break;
+            }
+            let trimmed = p.trim_end_matches('.');
+            p = trimmed
+                .rfind('.')
+                .map_or_else(String::new, |k| format!("{}.", &trimmed[..k]));
+        }
+        if let Some(i) = self.input_by_name.get(name) {
+            return Some(Global::Input(*i));
+        }
+        for (at, target) in &self.imports {
+            if prefix.starts_with(at.as_str()) {
+                for full in [format!("{at}{target}{name}"), format!("{target}{name}")] {
+                    if let Some(d) = self.def_id(&full) {
+                        return Some(Global::Def(d));
+                    }
+                }
+            }
+        }
+        None
+    }
+
+    /// Does `head` name a module as seen from module `prefix` (own and enclosing modules, the
+    /// top level, imported modules)?
+    pub fn is_module(&self, head: &str, prefix: &str) -> bool {
+        let mut p = prefix.to_string();
+        loop {
+            if self.modules.contains(&format!("{p}{head}.")) {
+                return true;
+            }
+            if p.is_empty() {
+                break;
+            }
+            let trimmed = p.trim_end_matches('.');
+            p = trimmed
+                .rfind('.')
+                .map_or_else(String::new, |k| format!("{}.", &trimmed[..k]));
+        }
+        self.imports.iter().any(|(at, target)| {
+            prefix.starts_with(at.as_str())
+                && (self.modules.contains(&format!("{at}{target}{head}."))
+                    || self.modules.contains(&format!("{target}{head}.")))
+        })
+    }
+
+    /// Every global name visible from module `prefix` by its short name (for "did you mean").
+    pub fn visible_names(&self, prefix: &str) -> impl Iterator<Item = &str> {
+        self.by_name
+            .keys()
+            .filter_map(move |k| k.strip_prefix(prefix))
+            .chain(self.input_by_name.keys().map(String::as_str))
+    }
+}
+
+/// An annotation's name as written at its use: `@Name` or `@@Name`.
+pub fn at(name: &Ident, global: bool) -> String {
+    format!("{}{}", if global { "@@" } else { "@" }, name.name)
+}
+
+/// The names of every `type` declaration in `statements` and the modules inside them, with
+/// their number of type parameters.
+fn collect_type_names(statements: &[Statement], out: &mut HashMap<String, usize>) {
+    for s in statements {
+        match s {
+            Statement::TypeDef {
+                name, type_params, ..
+            } => {
+                out.insert(name.name.clone(), type_params.len());
+            }
+            Statement::Module { statements, .. } => collect_type_names(statements, out),
+            _ => {}
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(spec: &str) -> ast::File {
+        let (file, diags) = tessla_syntax::parse(spec, tessla_syntax::source::FileId::default());
+        assert!(diags.is_empty(), "{diags:?}");
+        file
+    }
+
+    #[test]
+    fn modules_imports_and_inputs_resolve_from_where_they_are_used() {
+        let files = [parse(
+            "in x: Events[Int]\n\
+             module A {\n  def a = 1\n  module B {\n    def b = a\n  }\n}\n\
+             module C {\n  import A.B\n  def c = b\n}\n\
+             def a = 2\ntype T[U] = Option[U]\nout x\nout *\n",
+        )];
+        let r = Resolved::new(&files);
+        let id = |n: &str| r.def_id(n).map(Global::Def);
+        // Own module first, then enclosing modules, then the top level.
+        assert_eq!(r.global("a", "A.B."), id("A.a"));
+        assert_eq!(r.global("a", ""), id("a"));
+        // Imports count inside the importing module only.
+        assert_eq!(r.global("b", "C."), id("A.B.b"));
+        assert_eq!(r.global("b", ""), None);
+        assert_eq!(r.global("x", "C."), Some(Global::Input(0)));
+        assert_eq!(r.defs.len(), 4);
+        assert_eq!(r.name(0).as_deref(), Some("a"));
+        assert_eq!(r.outputs.len(), 1);
+        assert!(r.out_all);
+        assert_eq!(r.declared_types.get("T"), Some(&1));
+        assert!(r.is_module("A", "") && r.is_module("B", "A.") && r.is_module("A", "C."));
+        assert!(!r.is_module("B", "") && !r.is_module("a", ""));
+    }
+
+    #[test]
+    fn annotation_definitions_are_single_and_at_the_top_level() {
+        let files = [parse(
+            "def @A(x: Int)\ndef @@A\ndef @A(y: Int)\nmodule M {\n  def @B\n}\nin x: Events[Int]\nout x\n",
+        )];
+        let r = Resolved::new(&files);
+        assert_eq!(r.annotations.len(), 2);
+        let msgs: Vec<&str> = r.diagnostics.iter().map(|d| d.message.as_str()).collect();
+        assert_eq!(
+            msgs,
+            [
+                "annotation `@A` is defined twice",
+                "annotation `@B` is defined inside a module"
+            ]
+        );
+    }
+}
