@@ -915,22 +915,11 @@ impl<'a> Checker<'a> {
         }
         known.extend(builtins::names().map(str::to_string));
         known.extend(crate::prelude::names());
-        let near = tessla_syntax::diag::nearest(&id.name, known.iter().map(String::as_str));
-        let mut d = Diagnostic::error(
-            Category::Name,
-            Some(id.span),
-            format!("unknown name `{}`", id.name),
-        );
-        if !near.is_empty() {
-            d = d.with_help(format!(
-                "did you mean {}?",
-                near.iter()
-                    .map(|n| format!("`{n}`"))
-                    .collect::<Vec<_>>()
-                    .join(" or ")
-            ));
-        }
-        self.report(d);
+        self.report(tessla_syntax::diag::unknown_name(
+            &id.name,
+            id.span,
+            known.iter().map(String::as_str),
+        ));
     }
 
     /// Report a type name that is neither built in, a type parameter in scope, nor declared

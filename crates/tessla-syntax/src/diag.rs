@@ -213,6 +213,26 @@ pub fn edit_distance(a: &str, b: &str) -> usize {
     prev[b.len()]
 }
 
+/// "unknown name `name`" at `span`, with the nearest of `known` as "did you mean" help.
+pub fn unknown_name<'a>(
+    name: &str,
+    span: Span,
+    known: impl IntoIterator<Item = &'a str>,
+) -> Diagnostic {
+    let near = nearest(name, known);
+    let d = Diagnostic::error(Category::Name, Some(span), format!("unknown name `{name}`"));
+    if near.is_empty() {
+        return d;
+    }
+    d.with_help(format!(
+        "did you mean {}?",
+        near.iter()
+            .map(|n| format!("`{n}`"))
+            .collect::<Vec<_>>()
+            .join(" or ")
+    ))
+}
+
 /// Up to three known names closest to `name`, for "did you mean" help.
 pub fn nearest<'a>(name: &str, known: impl IntoIterator<Item = &'a str>) -> Vec<&'a str> {
     let limit = (name.chars().count() / 3).max(1) + 1;

@@ -169,18 +169,7 @@ impl Compiler<'_> {
                 let a = self.expr(lhs, env)?;
                 let b = self.expr(rhs, env)?;
                 let op = *op;
-                let int_op = matches!(
-                    op,
-                    BinOp::Add
-                        | BinOp::Sub
-                        | BinOp::Mul
-                        | BinOp::Div
-                        | BinOp::Mod
-                        | BinOp::Lt
-                        | BinOp::Gt
-                        | BinOp::Le
-                        | BinOp::Ge
-                );
+                let int_op = crate::ops::integer_op(op);
                 let is_float = |c: &Compiler<'_>, t: &Term| match t {
                     Term::Const(Value::Float(_)) => true,
                     Term::Stream(n) => c.stream_type(*n) == Type::Float,

@@ -246,19 +246,11 @@ impl Compiler<'_> {
                 env.all_names(&mut known);
                 known.extend(builtins::names().map(str::to_string));
                 known.extend(crate::prelude::names());
-                let near = nearest(name, known.iter().map(String::as_str));
-                let mut d =
-                    Diagnostic::error(Category::Name, Some(span), format!("unknown name `{name}`"));
-                if !near.is_empty() {
-                    d = d.with_help(format!(
-                        "did you mean {}?",
-                        near.iter()
-                            .map(|n| format!("`{n}`"))
-                            .collect::<Vec<_>>()
-                            .join(" or ")
-                    ));
-                }
-                self.diags.push(d);
+                self.diags.push(tessla_syntax::diag::unknown_name(
+                    name,
+                    span,
+                    known.iter().map(String::as_str),
+                ));
                 Err(Fail)
             }
         }
