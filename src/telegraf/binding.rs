@@ -262,7 +262,7 @@ fn gather(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Result<Vec<Va
     let mut list: Vec<Value> = Vec::new();
     let mut found = false;
     for (k, v) in fields {
-        let Some(idx) = k.strip_prefix(prefix).and_then(|s| s.parse::<usize>().ok()) else {
+        let Some(idx) = k.strip_prefix(prefix).and_then(list_index) else {
             continue;
         };
         if idx >= MAX_INDEX {
@@ -288,6 +288,19 @@ fn gather(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Result<Vec<Va
     found.then_some(Ok(list))
 }
 
+/// The index in a list field's key (`lidar_123` -> 123): what `str::parse::<usize>` accepts,
+/// read by hand for the usual short all-digit keys (360 of them in every lidar record).
+fn list_index(s: &str) -> Option<usize> {
+    let b = s.as_bytes();
+    if (1..=9).contains(&b.len()) && b.iter().all(u8::is_ascii_digit) {
+        return Some(
+            b.iter()
+                .fold(0usize, |v, &d| v * 10 + usize::from(d - b'0')),
+        );
+    }
+    s.parse::<usize>().ok()
+}
+
 fn whole(f: f64) -> Option<i64> {
     (f.fract() == 0.0 && f.abs() < 9.2e18).then_some(f as i64)
 }
@@ -306,6 +319,25 @@ pub fn show_field(v: &FieldValue) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn list_indices_read_as_str_parse_reads_them() {
+        for k in [
+            "0",
+            "7",
+            "007",
+            "359",
+            "123456789",
+            "1234567890",
+            "+5",
+            "-1",
+            "",
+            "1a",
+            " 1",
+        ] {
+            assert_eq!(list_index(k), k.parse::<usize>().ok(), "{k:?}");
+        }
+    }
 
     fn b(ty: Type, field: FieldPattern) -> InputBinding {
         InputBinding {

@@ -281,9 +281,18 @@ async fn run_shards(
         if n == 0 {
             break Ending::Eof;
         }
-        splitter.push(&buf[..n]);
-        let records = std::iter::from_fn(|| splitter.next_record());
-        shards.process(proc, records, n < BUF, &mut out)?;
+        let bytes = buf.get(..n).unwrap_or_default();
+        if shards.workers.is_empty() {
+            // One thread: each record straight from the read buffer (no copy per record).
+            splitter.push_with(bytes, |rec| proc.record_ref(rec, &mut out));
+            if n < BUF {
+                proc.flush(&mut out);
+            }
+        } else {
+            splitter.push(bytes);
+            let records = std::iter::from_fn(|| splitter.next_record());
+            shards.process(proc, records, n < BUF, &mut out)?;
+        }
         if write_out(&mut out).is_err() {
             return Ok(Ending::OutputClosed);
         }
