@@ -259,7 +259,9 @@ const MAX_INDEX: usize = 1_000_000;
 /// field overwrites), missing indices are NaN. `None` when no field matches; `Err(largest
 /// index)` when an index is beyond [`MAX_INDEX`].
 fn gather(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Result<Vec<Value>, usize>> {
-    let mut list: Vec<Value> = Vec::new();
+    // The beams as plain floats first (a missing index is NaN), then one pass into values:
+    // overwriting a placeholder `Value` in place dropped it first, a call per beam.
+    let mut beams: Vec<f64> = Vec::new();
     let mut found = false;
     for (k, v) in fields {
         let Some(idx) = k.strip_prefix(prefix).and_then(list_index) else {
@@ -273,19 +275,19 @@ fn gather(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Result<Vec<Va
                 .unwrap_or(idx);
             return Some(Err(max));
         }
-        if list.capacity() == 0 {
+        if beams.capacity() == 0 {
             // Sized for every field: one allocation for a whole scan.
-            list.reserve(fields.len().max(idx + 1));
+            beams.reserve(fields.len().max(idx + 1));
         }
-        if idx >= list.len() {
-            list.resize(idx + 1, Value::Float(f64::NAN));
+        if idx >= beams.len() {
+            beams.resize(idx + 1, f64::NAN);
         }
-        if let Some(slot) = list.get_mut(idx) {
-            *slot = Value::Float(beam(v));
+        if let Some(slot) = beams.get_mut(idx) {
+            *slot = beam(v);
         }
         found = true;
     }
-    found.then_some(Ok(list))
+    found.then(|| Ok(beams.into_iter().map(Value::Float).collect()))
 }
 
 /// The index in a list field's key (`lidar_123` -> 123): what `str::parse::<usize>` accepts,
