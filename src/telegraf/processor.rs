@@ -311,13 +311,13 @@ impl Processor {
         }
         // Parse into the scratch metric: plain records then allocate nothing.
         let mut metric = std::mem::take(&mut self.scratch);
-        match parse_record_into(&rec.bytes, &mut metric) {
+        match parse_record_into(rec.bytes, &mut metric) {
             Ok(true) => {
                 self.record_metric(&rec, &metric, out);
                 self.scratch = metric;
             }
             Ok(false) => self.counters.records -= 1,
-            Err(_) if Self::spans_lines(&rec.bytes) => {
+            Err(_) if Self::spans_lines(rec.bytes) => {
                 // A record spanning several physical lines that does not parse is most likely an
                 // unbalanced quote that swallowed the lines after it: take each line alone, so
                 // one bad line costs only itself.
@@ -408,7 +408,7 @@ impl Processor {
             self.emitter.emit(&inst.tags, &mut self.counters, out);
         }
         if self.opts.passthrough {
-            out.extend_from_slice(&rec.bytes);
+            out.extend_from_slice(rec.bytes);
             if rec.bytes.last() != Some(&b'\n') {
                 out.push(b'\n');
             }
