@@ -259,10 +259,12 @@ const MAX_INDEX: usize = 1_000_000;
 /// field overwrites), missing indices are NaN. `None` when no field matches; `Err(largest
 /// index)` when an index is beyond [`MAX_INDEX`].
 fn gather(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Result<Vec<Value>, usize>> {
-    let mut list: Vec<Value> = Vec::new();
+    // The beams as plain floats first (a missing index is NaN), then one pass into values:
+    // overwriting a placeholder `Value` in place dropped it first, a call per beam.
+    let mut beams: Vec<f64> = Vec::new();
     let mut found = false;
     for (k, v) in fields {
-        let Some(idx) = k.strip_prefix(prefix).and_then(|s| s.parse::<usize>().ok()) else {
+        let Some(idx) = k.strip_prefix(prefix).and_then(list_index) else {
             continue;
         };
         if idx >= MAX_INDEX {
@@ -273,19 +275,32 @@ fn gather(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Result<Vec<Va
                 .unwrap_or(idx);
             return Some(Err(max));
         }
-        if list.capacity() == 0 {
+        if beams.capacity() == 0 {
             // Sized for every field: one allocation for a whole scan.
-            list.reserve(fields.len().max(idx + 1));
+            beams.reserve(fields.len().max(idx + 1));
         }
-        if idx >= list.len() {
-            list.resize(idx + 1, Value::Float(f64::NAN));
+        if idx >= beams.len() {
+            beams.resize(idx + 1, f64::NAN);
         }
-        if let Some(slot) = list.get_mut(idx) {
-            *slot = Value::Float(beam(v));
+        if let Some(slot) = beams.get_mut(idx) {
+            *slot = beam(v);
         }
         found = true;
     }
-    found.then_some(Ok(list))
+    found.then(|| Ok(beams.into_iter().map(Value::Float).collect()))
+}
+
+/// The index in a list field's key (`lidar_123` -> 123): what `str::parse::<usize>` accepts,
+/// read by hand for the usual short all-digit keys (360 of them in every lidar record).
+fn list_index(s: &str) -> Option<usize> {
+    let b = s.as_bytes();
+    if (1..=9).contains(&b.len()) && b.iter().all(u8::is_ascii_digit) {
+        return Some(
+            b.iter()
+                .fold(0usize, |v, &d| v * 10 + usize::from(d - b'0')),
+        );
+    }
+    s.parse::<usize>().ok()
 }
 
 fn whole(f: f64) -> Option<i64> {
@@ -306,6 +321,25 @@ pub fn show_field(v: &FieldValue) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn list_indices_read_as_str_parse_reads_them() {
+        for k in [
+            "0",
+            "7",
+            "007",
+            "359",
+            "123456789",
+            "1234567890",
+            "+5",
+            "-1",
+            "",
+            "1a",
+            " 1",
+        ] {
+            assert_eq!(list_index(k), k.parse::<usize>().ok(), "{k:?}");
+        }
+    }
 
     fn b(ty: Type, field: FieldPattern) -> InputBinding {
         InputBinding {

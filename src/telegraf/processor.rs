@@ -14,7 +14,7 @@ use super::binding::{self, InputBinding};
 use super::encode::{self, Encoding};
 use super::instances::{Key, Table};
 use crate::log;
-use lineproto::{Metric, Record, parse_record_into};
+use lineproto::{Metric, Record, RecordRef, parse_record_into};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tessla_engine::{InputError, Monitor, OutputEvent, Program, Value};
@@ -295,6 +295,12 @@ impl Processor {
 
     /// Handle one record, appending pass-through and completed steps' outputs to `out`.
     pub fn record(&mut self, rec: &Record, out: &mut Vec<u8>) {
+        self.record_ref(rec.view(), out);
+    }
+
+    /// [`Processor::record`] on a borrowed record (the stdio loop's records point into its read
+    /// buffer; pass-through copies them from there).
+    pub fn record_ref(&mut self, rec: RecordRef<'_>, out: &mut Vec<u8>) {
         self.counters.records += 1;
         if rec.oversized {
             self.counters.parse_errors += 1;
@@ -305,24 +311,24 @@ impl Processor {
         }
         // Parse into the scratch metric: plain records then allocate nothing.
         let mut metric = std::mem::take(&mut self.scratch);
-        match parse_record_into(&rec.bytes, &mut metric) {
+        match parse_record_into(rec.bytes, &mut metric) {
             Ok(true) => {
-                self.record_metric(rec, &metric, out);
+                self.record_metric(&rec, &metric, out);
                 self.scratch = metric;
             }
             Ok(false) => self.counters.records -= 1,
-            Err(_) if Self::spans_lines(&rec.bytes) => {
+            Err(_) if Self::spans_lines(rec.bytes) => {
                 // A record spanning several physical lines that does not parse is most likely an
                 // unbalanced quote that swallowed the lines after it: take each line alone, so
                 // one bad line costs only itself.
                 self.counters.records -= 1;
                 for (line, part) in (rec.line..).zip(rec.bytes.split_inclusive(|&b| b == b'\n')) {
-                    let sub = Record {
-                        bytes: part.to_vec(),
+                    let sub = RecordRef {
+                        bytes: part,
                         line,
                         oversized: false,
                     };
-                    self.record(&sub, out);
+                    self.record_ref(sub, out);
                 }
             }
             Err(e) => {
@@ -338,7 +344,7 @@ impl Processor {
     }
 
     /// Route one parsed record to its instance: pass-through, completed steps, its events.
-    fn record_metric(&mut self, rec: &Record, metric: &Metric, out: &mut Vec<u8>) {
+    fn record_metric(&mut self, rec: &RecordRef<'_>, metric: &Metric, out: &mut Vec<u8>) {
         if metric.overwritten > 0 {
             log::warn_limited("repeated field", || {
                 format!(
@@ -402,7 +408,7 @@ impl Processor {
             self.emitter.emit(&inst.tags, &mut self.counters, out);
         }
         if self.opts.passthrough {
-            out.extend_from_slice(&rec.bytes);
+            out.extend_from_slice(rec.bytes);
             if rec.bytes.last() != Some(&b'\n') {
                 out.push(b'\n');
             }

@@ -9,7 +9,11 @@
 //! read's records are routed by instance key (one instance always to the same thread), every
 //! thread steps its records, and the read's outputs are written once all threads are done, so a
 //! record is still answered before the next read. Each instance's outputs keep their order; the
-//! order between instances within one read follows the threads.
+//! order between instances within one read follows the threads. The records are handed over
+//! in one reused byte buffer per thread (no allocation per record).
+//!
+//! On one thread the records are stepped straight from the read buffer as the splitter finds
+//! them (pass-through copies them from there).
 //!
 //! A pipe on stdin (Telegraf's execd, `cat file |`) is read in non-blocking mode by the runtime
 //! thread itself when the pipe is readable; anything else (a file, a terminal) through tokio's
@@ -19,7 +23,7 @@
 use super::{Ending, Hooks};
 use crate::telegraf::instances::shard_of;
 use crate::telegraf::processor::Processor;
-use lineproto::{Record, RecordSplitter};
+use lineproto::{RecordRef, RecordSplitter};
 use std::io::Write;
 use std::sync::mpsc;
 use tokio::io::AsyncReadExt;
@@ -55,10 +59,48 @@ impl Input {
     }
 }
 
-/// One step of a worker thread: its processor, its records, whether to flush afterwards.
-type Job = (Box<Processor>, Vec<Record>, bool);
-/// A worker's answer: its shard, its processor back, the emptied batch (reused), its output.
-type Done = (usize, Box<Processor>, Vec<Record>, Vec<u8>);
+/// One shard's records of a read, their bytes back to back. Kept from read to read, so the
+/// hand-over allocates nothing per record (each record was its own allocation, freed on the
+/// other thread).
+#[derive(Default)]
+struct Batch {
+    bytes: Vec<u8>,
+    /// Each record: its byte range in `bytes`, first line, oversized.
+    recs: Vec<(usize, usize, u64, bool)>,
+}
+
+impl Batch {
+    fn push(&mut self, rec: RecordRef<'_>) {
+        let start = self.bytes.len();
+        self.bytes.extend_from_slice(rec.bytes);
+        self.recs
+            .push((start, self.bytes.len(), rec.line, rec.oversized));
+    }
+
+    /// Step every record on `p`, then empty the batch (keeping its capacity).
+    fn step(&mut self, p: &mut Processor, out: &mut Vec<u8>) {
+        for &(start, end, line, oversized) in &self.recs {
+            let rec = RecordRef {
+                bytes: self.bytes.get(start..end).unwrap_or_default(),
+                line,
+                oversized,
+            };
+            p.record_ref(rec, out);
+        }
+        // A batch that held a very long record does not keep its memory.
+        if self.bytes.capacity() > 16 * BUF {
+            self.bytes = Vec::new();
+        }
+        self.bytes.clear();
+        self.recs.clear();
+    }
+}
+
+/// One step of a worker thread: its processor, its records, its output buffer, whether to flush
+/// afterwards.
+type Job = (Box<Processor>, Batch, Vec<u8>, bool);
+/// A worker's answer: its shard, its processor back, the emptied batch, its output.
+type Done = (usize, Box<Processor>, Batch, Vec<u8>);
 
 struct Worker {
     tx: Option<mpsc::Sender<Job>>,
@@ -71,7 +113,7 @@ struct Worker {
 struct Shards {
     instance_by: Vec<String>,
     workers: Vec<Worker>,
-    batches: Vec<Vec<Record>>,
+    batches: Vec<Batch>,
     outs: Vec<Vec<u8>>,
     done: mpsc::Receiver<Done>,
 }
@@ -96,15 +138,12 @@ impl Shards {
             let handle = std::thread::Builder::new()
                 .name(format!("shard-{shard}"))
                 .spawn(move || {
-                    while let Ok((mut p, mut recs, flush)) = rx.recv() {
-                        let mut out = Vec::new();
-                        for r in recs.drain(..) {
-                            p.record(&r, &mut out);
-                        }
+                    while let Ok((mut p, mut batch, mut out, flush)) = rx.recv() {
+                        batch.step(&mut p, &mut out);
                         if flush {
                             p.flush(&mut out);
                         }
-                        if done_tx.send((shard, p, recs, out)).is_err() {
+                        if done_tx.send((shard, p, batch, out)).is_err() {
                             break;
                         }
                     }
@@ -121,7 +160,7 @@ impl Shards {
         Ok(Shards {
             instance_by: proc.instance_by().to_vec(),
             workers,
-            batches: (0..threads).map(|_| Vec::new()).collect(),
+            batches: (0..threads).map(|_| Batch::default()).collect(),
             outs: (0..threads).map(|_| Vec::new()).collect(),
             done,
         })
@@ -129,16 +168,16 @@ impl Shards {
 
     /// Put `rec` into its shard's batch. A record spanning several lines that does not parse
     /// is routed line by line, as the processor would take it apart.
-    fn route(&mut self, rec: Record) {
+    fn route(&mut self, rec: RecordRef<'_>) {
         let n = self.batches.len();
         let spans = rec
             .bytes
             .split_last()
             .is_some_and(|(_, head)| head.contains(&b'\n'));
-        if spans && !rec.oversized && lineproto::parse_record(&rec.bytes).is_err() {
+        if spans && !rec.oversized && lineproto::parse_record(rec.bytes).is_err() {
             for (line, part) in (rec.line..).zip(rec.bytes.split_inclusive(|&b| b == b'\n')) {
-                self.route(Record {
-                    bytes: part.to_vec(),
+                self.route(RecordRef {
+                    bytes: part,
                     line,
                     oversized: false,
                 });
@@ -148,46 +187,33 @@ impl Shards {
         let s = if rec.oversized {
             0
         } else {
-            shard_of(&rec.bytes, &self.instance_by, n)
+            shard_of(rec.bytes, &self.instance_by, n)
         };
         if let Some(b) = self.batches.get_mut(s) {
             b.push(rec);
         }
     }
 
-    /// Step `records` (then flush every shard when `flush`), appending the outputs to `out`.
+    /// Step the routed records (then flush every shard when `flush`), appending the outputs to
+    /// `out`.
     fn process(
         &mut self,
         proc: &mut Processor,
-        records: impl Iterator<Item = Record>,
         flush: bool,
         out: &mut Vec<u8>,
     ) -> std::io::Result<()> {
-        if self.workers.is_empty() {
-            for rec in records {
-                proc.record(&rec, out);
-            }
-            if flush {
-                proc.flush(out);
-            }
-            return Ok(());
-        }
-        for rec in records {
-            self.route(rec);
-        }
         let lost = || std::io::Error::other("a worker thread stopped");
         for (i, w) in self.workers.iter_mut().enumerate() {
             let batch = std::mem::take(self.batches.get_mut(i + 1).ok_or_else(lost)?);
+            let o = std::mem::take(self.outs.get_mut(i + 1).ok_or_else(lost)?);
             let p = w.proc.take().ok_or_else(lost)?;
             w.tx.as_ref()
                 .ok_or_else(lost)?
-                .send((p, batch, flush))
+                .send((p, batch, o, flush))
                 .map_err(|_| lost())?;
         }
         if let Some(b) = self.batches.first_mut() {
-            for rec in b.drain(..) {
-                proc.record(&rec, out);
-            }
+            b.step(proc, out);
         }
         if flush {
             proc.flush(out);
@@ -199,7 +225,8 @@ impl Shards {
             *self.outs.get_mut(shard).ok_or_else(lost)? = o;
         }
         for o in self.outs.iter_mut().skip(1) {
-            out.append(o);
+            out.extend_from_slice(o);
+            o.clear();
         }
         Ok(())
     }
@@ -281,15 +308,25 @@ async fn run_shards(
         if n == 0 {
             break Ending::Eof;
         }
-        splitter.push(&buf[..n]);
-        let records = std::iter::from_fn(|| splitter.next_record());
-        shards.process(proc, records, n < BUF, &mut out)?;
+        let bytes = buf.get(..n).unwrap_or_default();
+        if shards.workers.is_empty() {
+            // One thread: each record straight from the read buffer (no copy per record).
+            splitter.push_with(bytes, |rec| proc.record_ref(rec, &mut out));
+            if n < BUF {
+                proc.flush(&mut out);
+            }
+        } else {
+            splitter.push_with(bytes, |rec| shards.route(rec));
+            shards.process(proc, n < BUF, &mut out)?;
+        }
         if write_out(&mut out).is_err() {
             return Ok(Ending::OutputClosed);
         }
     };
-    let records = std::iter::from_fn(|| splitter.finish());
-    shards.process(proc, records, true, &mut out)?;
+    while let Some(rec) = splitter.finish() {
+        shards.route(rec.view());
+    }
+    shards.process(proc, true, &mut out)?;
     if write_out(&mut out).is_err() {
         return Ok(Ending::OutputClosed);
     }

@@ -93,6 +93,17 @@ fn bench_split(c: &mut Criterion, name: &str, line: &str) {
                 black_box(n)
             })
         });
+        // What the step loop does on one thread: records borrowed from the chunk.
+        g.bench_function(format!("{label}_borrowed"), |b| {
+            b.iter(|| {
+                let mut s = RecordSplitter::default();
+                let mut n = 0;
+                for chunk in input.as_bytes().chunks(size) {
+                    s.push_with(chunk, |r| n += r.bytes.len());
+                }
+                black_box(n)
+            })
+        });
     }
     g.finish();
 }

@@ -12,7 +12,7 @@ mod telegraf_rules;
 pub mod write;
 
 pub use parse::{FieldValue, Metric, ParseError, parse_record, parse_record_into};
-pub use split::{DEFAULT_MAX_RECORD, OVERSIZED_HEAD, Record, RecordSplitter};
+pub use split::{DEFAULT_MAX_RECORD, OVERSIZED_HEAD, Record, RecordRef, RecordSplitter};
 pub use write::{
     LineWriter, NotFinite, measurement_is_writable, name_is_writable, write_field_key,
     write_field_value, write_float, write_measurement, write_tag_key, write_tag_value,

@@ -25,6 +25,41 @@ pub struct Record {
     pub oversized: bool,
 }
 
+impl Record {
+    /// This record borrowed.
+    pub fn view(&self) -> RecordRef<'_> {
+        RecordRef {
+            bytes: &self.bytes,
+            line: self.line,
+            oversized: self.oversized,
+        }
+    }
+}
+
+/// One record borrowed from the bytes handed to [`RecordSplitter::push_with`] (or from the
+/// splitter's buffer, for a record that spans reads): the same fields as [`Record`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RecordRef<'a> {
+    pub bytes: &'a [u8],
+    pub line: u64,
+    pub oversized: bool,
+}
+
+impl RecordRef<'_> {
+    /// An owned copy.
+    pub fn to_record(&self) -> Record {
+        Record {
+            bytes: self.bytes.to_vec(),
+            line: self.line,
+            oversized: self.oversized,
+        }
+    }
+}
+
+/// A buffer kept between records larger than this is given back after its record (an oversized
+/// or very long record does not pin its memory).
+const KEEP_BUF: usize = 1 << 20;
+
 /// How many bytes of an oversized record are kept for the error message.
 pub const OVERSIZED_HEAD: usize = 256;
 
@@ -221,6 +256,19 @@ impl RecordSplitter {
     /// Add bytes read from the input; complete records become available from
     /// [`RecordSplitter::next_record`].
     pub fn push(&mut self, bytes: &[u8]) {
+        let mut ready = std::mem::take(&mut self.ready);
+        self.push_with(bytes, |r| ready.push_back(r.to_record()));
+        self.ready = ready;
+    }
+
+    /// Add bytes read from the input and hand each complete record to `each` at once, borrowed:
+    /// a record that lies inside `bytes` is not copied (the step loop passes it through straight
+    /// from the read buffer), one that spans reads comes from the splitter's buffer, which keeps
+    /// its capacity. Records still waiting from [`RecordSplitter::push`] are handed out first.
+    pub fn push_with(&mut self, bytes: &[u8], mut each: impl FnMut(RecordRef<'_>)) {
+        while let Some(r) = self.ready.pop_front() {
+            each(r.view());
+        }
         let mut start = 0;
         let mut i = 0;
         while i < bytes.len() {
@@ -233,6 +281,7 @@ impl RecordSplitter {
             let seg = bytes.get(i..lim).unwrap_or_default();
             let mut state = self.state;
             let mut end = quick_end(state, seg).map(|nl| i + nl);
+            let quick = end.is_some();
             if end.is_none() {
                 for (j, &b) in seg.iter().enumerate() {
                     state = step(state, b);
@@ -243,9 +292,16 @@ impl RecordSplitter {
                 }
             }
             match end {
+                // `quick_end` found the first newline of `seg`: the only one up to `e`.
+                Some(e) if quick => {
+                    self.line += 1;
+                    self.end_record(bytes.get(start..=e).unwrap_or_default(), &mut each);
+                    start = e + 1;
+                    i = e + 1;
+                }
                 Some(e) => {
                     self.line += newlines(bytes.get(i..=e).unwrap_or_default());
-                    self.end_record(bytes.get(start..=e).unwrap_or_default());
+                    self.end_record(bytes.get(start..=e).unwrap_or_default(), &mut each);
                     start = e + 1;
                     i = e + 1;
                 }
@@ -258,12 +314,12 @@ impl RecordSplitter {
                         self.line += u64::from(b == b'\n');
                         let next = step(state, b);
                         if next == st::END {
-                            self.end_record(bytes.get(start..=lim).unwrap_or_default());
+                            self.end_record(bytes.get(start..=lim).unwrap_or_default(), &mut each);
                         } else {
                             self.state = next;
                             self.buf
                                 .extend_from_slice(bytes.get(start..=lim).unwrap_or_default());
-                            self.cut_oversized();
+                            self.cut_oversized(&mut each);
                         }
                         start = lim + 1;
                         i = lim + 1;
@@ -278,31 +334,45 @@ impl RecordSplitter {
     }
 
     /// The record ends with `tail` (the last bytes of this push, newline included).
-    fn end_record(&mut self, tail: &[u8]) {
+    fn end_record(&mut self, tail: &[u8], each: &mut impl FnMut(RecordRef<'_>)) {
         if self.discarding {
             self.discarding = false;
-        } else {
-            self.buf.extend_from_slice(tail);
-            let bytes = std::mem::take(&mut self.buf);
-            self.ready.push_back(Record {
-                bytes,
+        } else if self.buf.is_empty() {
+            each(RecordRef {
+                bytes: tail,
                 line: self.record_line,
                 oversized: false,
             });
+        } else {
+            self.buf.extend_from_slice(tail);
+            each(RecordRef {
+                bytes: &self.buf,
+                line: self.record_line,
+                oversized: false,
+            });
+            self.clear_buf();
         }
         self.reset_record();
     }
 
     /// The buffered record passed the limit: report its head, drop the rest as it arrives.
-    fn cut_oversized(&mut self) {
-        let mut head = std::mem::take(&mut self.buf);
-        head.truncate(OVERSIZED_HEAD);
-        self.ready.push_back(Record {
-            bytes: head,
+    fn cut_oversized(&mut self, each: &mut impl FnMut(RecordRef<'_>)) {
+        each(RecordRef {
+            bytes: self.buf.get(..OVERSIZED_HEAD).unwrap_or(&self.buf),
             line: self.record_line,
             oversized: true,
         });
+        self.clear_buf();
         self.discarding = true;
+    }
+
+    /// Empty the record buffer, keeping its capacity unless it grew large.
+    fn clear_buf(&mut self) {
+        if self.buf.capacity() > KEEP_BUF {
+            self.buf = Vec::new();
+        } else {
+            self.buf.clear();
+        }
     }
 
     fn reset_record(&mut self) {
@@ -359,6 +429,20 @@ mod tests {
             while let Some(r) = s.next_record() {
                 out.push(r);
             }
+        }
+        while let Some(r) = s.finish() {
+            out.push(r);
+        }
+        out
+    }
+
+    /// [`all`] through [`RecordSplitter::push_with`] (borrowed records, copied here).
+    fn all_with(input: &[u8], chunk: usize, max: usize) -> Vec<Record> {
+        let mut s = RecordSplitter::new(max);
+        let mut out = Vec::new();
+        for c in input.chunks(chunk) {
+            s.push_with(c, |r| out.push(r.to_record()));
+            assert!(s.buffered() <= max, "memory stays bounded");
         }
         while let Some(r) = s.finish() {
             out.push(r);
@@ -476,7 +560,30 @@ mod tests {
             assert_eq!(rs[1].line, 2);
             assert_eq!(rs[2].bytes, b"m a=3 3\n");
             assert_eq!(rs[2].line, 4);
+            assert_eq!(
+                all_with(&input, chunk, 1024),
+                rs,
+                "push_with, chunk {chunk}"
+            );
         }
+    }
+
+    /// Records handed out borrowed equal the owned ones, line numbers and cuts included, and
+    /// records still waiting from `push` come first.
+    #[test]
+    fn push_with_hands_out_what_push_queues() {
+        let input = b"m a=1 1\nm s=\"x\ny\",b=2 2\nm,t=a\\ b c=\"q\\\"\n\" 3\nlast a=1\n\n# c\n";
+        for chunk in [1, 2, 5, 100] {
+            assert_eq!(all_with(input, chunk, 1024), all(input, chunk, 1024));
+        }
+        let mut s = RecordSplitter::default();
+        s.push(b"m a=1 1\n");
+        let mut got = Vec::new();
+        s.push_with(b"m a=2 2\n", |r| got.push((r.bytes.to_vec(), r.line)));
+        assert_eq!(
+            got,
+            [(b"m a=1 1\n".to_vec(), 1), (b"m a=2 2\n".to_vec(), 2)]
+        );
     }
 
     /// The shortcut of [`quick_end`] and the limit handling give exactly the records of a plain
@@ -510,6 +617,11 @@ mod tests {
             }
             let want = reference(&input);
             for chunk in [1, 3, 64] {
+                let with: Vec<Vec<u8>> = all_with(&input, chunk, 1 << 20)
+                    .into_iter()
+                    .map(|r| r.bytes)
+                    .collect();
+                assert_eq!(with, want, "push_with, chunk {chunk}");
                 let got: Vec<Vec<u8>> = all(&input, chunk, 1 << 20)
                     .into_iter()
                     .map(|r| r.bytes)
