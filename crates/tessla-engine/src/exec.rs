@@ -115,11 +115,15 @@ pub fn compile_program(p: &Program) -> Arc<Ctx> {
         .nodes
         .iter()
         .map(|n| match n {
-            Node::SLift { f, .. }
-            | Node::Bin { f, .. }
-            | Node::Fold { f, .. }
-            | Node::Reduce { f, .. } => Some(compile(f)),
+            Node::SLift { f, .. } | Node::Fold { f, .. } | Node::Reduce { f, .. } => {
+                Some(compile(f))
+            }
             Node::Lift { f, .. } => f.code().map(compile),
+            Node::Bin { bop, .. } => {
+                let op = *bop;
+                let f: Exec = Arc::new(move |_: &Ctx, a: &[Value]| prim(&Prim::Binary(op), a));
+                Some(f)
+            }
             _ => None,
         })
         .collect();
