@@ -31,7 +31,7 @@ pub struct Ctx {
     fns: Vec<Exec>,
     /// Per function: its value without captures, made on first use.
     values: Vec<OnceLock<Value>>,
-    /// Per node: its compiled function (`slift`, `fold`, `reduce`, operator, `lift` nodes).
+    /// Per node: its compiled function (`slift`, `fold`, `reduce` and `lift` nodes).
     nodes: Vec<Option<Exec>>,
     me: Weak<Ctx>,
     /// Function values hold this context strongly (the lowering's contexts, which nothing
@@ -119,11 +119,6 @@ pub fn compile_program(p: &Program) -> Arc<Ctx> {
                 Some(compile(f))
             }
             Node::Lift { f, .. } => f.code().map(compile),
-            Node::Bin { bop, .. } => {
-                let op = *bop;
-                let f: Exec = Arc::new(move |_: &Ctx, a: &[Value]| prim(&Prim::Binary(op), a));
-                Some(f)
-            }
             _ => None,
         })
         .collect();
