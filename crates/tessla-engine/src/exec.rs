@@ -31,7 +31,7 @@ pub struct Ctx {
     fns: Vec<Exec>,
     /// Per function: its value without captures, made on first use.
     values: Vec<OnceLock<Value>>,
-    /// Per node: its compiled function (`slift`, `fold`, `reduce`, operator, `lift` nodes).
+    /// Per node: its compiled function (`slift`, `fold`, `reduce` and `lift` nodes).
     nodes: Vec<Option<Exec>>,
     me: Weak<Ctx>,
     /// Function values hold this context strongly (the lowering's contexts, which nothing
@@ -115,10 +115,9 @@ pub fn compile_program(p: &Program) -> Arc<Ctx> {
         .nodes
         .iter()
         .map(|n| match n {
-            Node::SLift { f, .. }
-            | Node::Bin { f, .. }
-            | Node::Fold { f, .. }
-            | Node::Reduce { f, .. } => Some(compile(f)),
+            Node::SLift { f, .. } | Node::Fold { f, .. } | Node::Reduce { f, .. } => {
+                Some(compile(f))
+            }
             Node::Lift { f, .. } => f.code().map(compile),
             _ => None,
         })

@@ -214,7 +214,6 @@ impl Monitor {
 
     fn eval<S: FnMut(OutputEvent<'_>)>(&mut self, ts: i64, sc: &mut Scratch, sink: &mut S) {
         let program = &*self.program;
-        let cx: &Ctx = program.exec();
         let slots = &program.last_slot[..];
         let first = self.last_evaluated.is_none();
         let cur = &mut sc.cur;
@@ -273,15 +272,16 @@ impl Monitor {
                     if args.iter().any(|a| cur[*a].is_some()) {
                         let vals: Vec<Option<Value>> =
                             args.iter().map(|a| cur[*a].clone()).collect();
+                        let cx = program.exec();
                         crate::exec::lift(cx, f, cx.node(i), &vals)
                     } else {
                         None
                     }
                 }
                 Node::SLift { args, .. } => {
-                    slift(cur, last, slots, &mut sc.args, args, cx, cx.node(i))
+                    slift(cur, last, slots, &mut sc.args, args, program.exec(), i)
                 }
-                Node::Bin { op, a, b, .. } => {
+                Node::Bin { op, a, b, bop } => {
                     if !has_event(cur, a) && !has_event(cur, b) {
                         continue;
                     }
@@ -298,7 +298,7 @@ impl Monitor {
                         }
                         continue;
                     }
-                    Some(call(cx, cx.node(i), &[x.clone(), y.clone()]))
+                    Some(crate::exec::binary(*bop, x, y))
                 }
                 Node::Ite { cond, then, other } => {
                     if !has_event(cur, cond) && !has_event(cur, then) && !has_event(cur, other) {
@@ -338,6 +338,7 @@ impl Monitor {
                     None => None,
                 },
                 Node::Fold { stream, init, .. } => {
+                    let cx = program.exec();
                     let f = cx.node(i);
                     if first {
                         // The initial value, folded with an event at t = 0 if there is one.
@@ -353,7 +354,10 @@ impl Monitor {
                     }
                 }
                 Node::Reduce { stream, .. } => match (&cur[*stream], last_of(last, slots, i)) {
-                    (Some(x), Some(acc)) => Some(strict2(cx, cx.node(i), acc, x)),
+                    (Some(x), Some(acc)) => {
+                        let cx = program.exec();
+                        Some(strict2(cx, cx.node(i), acc, x))
+                    }
                     (Some(x), None) => Some(x.clone()),
                     _ => None,
                 },
@@ -451,7 +455,7 @@ fn slift(
     buf: &mut Vec<Value>,
     args: &[SArg],
     cx: &Ctx,
-    f: Option<&Exec>,
+    node: NodeId,
 ) -> Option<Value> {
     let has_event = args
         .iter()
@@ -459,6 +463,7 @@ fn slift(
     if !has_event {
         return None;
     }
+    let f = cx.node(node);
     let get = |a: &SArg| match a {
         SArg::Const(v) => Some(v.clone()),
         SArg::Stream(n) => cur[*n].as_ref().or(last_of(last, slots, *n)).cloned(),

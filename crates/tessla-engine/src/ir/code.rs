@@ -26,7 +26,7 @@ pub enum Code {
     /// The frame's value at this index (`()` when the frame is shorter).
     Slot(usize),
     /// Evaluate every argument, then apply the callee to the values.
-    Apply(Callee, Arc<[Code]>),
+    Apply(Arc<Callee>, Arc<[Code]>),
     /// `if c then a else b`: only the chosen branch is evaluated; a condition that is not a
     /// Bool (an error) is the result.
     If(Arc<[Code; 3]>),
@@ -121,7 +121,7 @@ pub struct Function {
 impl Code {
     /// `callee(args)`.
     pub fn apply(callee: Callee, args: Vec<Code>) -> Code {
-        Code::Apply(callee, args.into())
+        Code::Apply(Arc::new(callee), args.into())
     }
 
     /// Slots `0..n`, for applying a callee to a node's arguments as they come.
@@ -158,7 +158,12 @@ impl Code {
         let mut todo = vec![self];
         while let Some(c) = todo.pop() {
             match c {
-                Code::Closure { fun, .. } | Code::Apply(Callee::Fn(fun), _) => out.push(*fun),
+                Code::Closure { fun, .. } => out.push(*fun),
+                Code::Apply(c, _) => {
+                    if let Callee::Fn(fun) = **c {
+                        out.push(fun);
+                    }
+                }
                 _ => {}
             }
             todo.extend(c.children());

@@ -200,12 +200,13 @@ pub enum Node {
         f: Code,
     },
     /// A signal lift of a scalar operator, run inline on `Float`/`Int`/`Bool` operands; other
-    /// operands (errors, strings) go through `f`, the operator's general code.
+    /// operands (errors, strings) go through the general semantics of `bop`, the operator in
+    /// the spec.
     Bin {
         op: ScalarOp,
         a: SArg,
         b: SArg,
-        f: Code,
+        bop: tessla_syntax::ast::BinOp,
     },
     /// A signal lift of `if cond then then else other`.
     Ite {

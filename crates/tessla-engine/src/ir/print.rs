@@ -73,7 +73,7 @@ fn code_here(r: &Render<'_>, c: &Code) -> String {
         Code::Closure { fun, captured } => {
             format!("fn {}[$0..${}]", (r.function)(*fun), captured - 1)
         }
-        Code::Apply(callee, a) => match (callee, &a[..]) {
+        Code::Apply(callee, a) => match (&**callee, &a[..]) {
             (Callee::Prim(Prim::Binary(op)), [x, y]) => {
                 format!("({} {} {})", code(r, x), op.symbol(), code(r, y))
             }

@@ -219,12 +219,12 @@ impl Compiler<'_> {
                 };
                 let r = self.apply_value_fn(Callee::Prim(Prim::Binary(op)), vec![a, b], e.span)?;
                 if let Some(sop) = scalar_op(op) {
-                    self.inline_op(&r, |args, f| match args {
+                    self.inline_op(&r, |args, _| match args {
                         [a, b] => Some(Node::Bin {
                             op: sop,
                             a: a.clone(),
                             b: b.clone(),
-                            f: f.clone(),
+                            bop: op,
                         }),
                         _ => None,
                     });
