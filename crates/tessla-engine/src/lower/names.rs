@@ -9,6 +9,7 @@
 //! `local_defs`, `unknown_name`.
 
 use super::*;
+use crate::resolve::{DefId, Global};
 
 impl Compiler<'_> {
     pub(super) fn def_term(&mut self, e: &Entry, span: Span) -> R<Term> {
@@ -196,20 +197,41 @@ impl Compiler<'_> {
         child
     }
 
+    /// The lowering state of global definition `id`, made on first use.
+    pub(super) fn global_entry(&mut self, id: DefId) -> Option<Entry> {
+        if let Some(Some(e)) = self.globals.get(id) {
+            return Some(e.clone());
+        }
+        let g = self.resolved.defs.get(id)?;
+        let e = Entry {
+            def: Rc::new(g.def.clone()),
+            // A global's body sees no local names: its scope cannot be part of a cycle.
+            env_cell: Rc::new(RefCell::new(Some(Env::module(&g.prefix)))),
+            state: self.new_state(),
+        };
+        *self.globals.get_mut(id)? = Some(e.clone());
+        Some(e)
+    }
+
+    /// What `name` means in `env`: a local name, else a global as the resolve pass finds it
+    /// from `env`'s module (a definition or an input).
+    pub(super) fn binding(&mut self, name: &str, env: &Env) -> Option<Binding> {
+        if let Some(b) = env.local(name) {
+            return Some(b);
+        }
+        match self.resolved.global(name, &env.prefix)? {
+            Global::Def(id) => self.global_entry(id).map(Binding::Def),
+            Global::Input(i) => self
+                .input_nodes
+                .get(i)
+                .map(|n| Binding::Term(Term::Stream(*n))),
+        }
+    }
+
     pub(super) fn lookup(&mut self, name: &str, span: Span, env: &Env) -> R<Term> {
-        match env.lookup(name) {
+        match self.binding(name, env) {
             Some(Binding::Term(t)) => Ok(t),
             Some(Binding::Def(e)) => self.def_term(&e, span),
-            // A qualified name the resolver found through an import (`Limits.maxSpeed` after
-            // `import Robot`): its definition by full name.
-            None if let Some(Binding::Def(e)) = self
-                .types
-                .qualified
-                .get(&span)
-                .and_then(|full| env.lookup(full)) =>
-            {
-                self.def_term(&e, span)
-            }
             None => {
                 let name = crate::prelude::builtin_alias(name).unwrap_or(name);
                 if name == "true" {
@@ -244,6 +266,7 @@ impl Compiler<'_> {
             {
                 let mut known = Vec::new();
                 env.all_names(&mut known);
+                known.extend(self.resolved.visible_names(&env.prefix).map(str::to_string));
                 known.extend(builtins::names().map(str::to_string));
                 known.extend(crate::prelude::names());
                 self.diags.push(tessla_syntax::diag::unknown_name(
