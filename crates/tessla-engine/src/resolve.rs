@@ -5,8 +5,9 @@
 //!
 //! Owns: [`Resolved`] (built once per spec by [`Resolved::new`]), [`DefId`], the global lookup
 //! rule ([`Resolved::global`]) and the diagnostics of names at the statement level (annotation
-//! definitions twice or inside a module). Local names (parameters, blocks, `where`) and the
-//! types of definitions are the type checker's (`typeck.rs`).
+//! definitions twice or inside a module). Both later passes look global names up only here:
+//! the type checker (`typeck.rs`) and the lowering (`lower/`); local names (parameters, blocks,
+//! `where`, macro arguments) are each pass's own, and the types of definitions the checker's.
 
 use std::collections::HashMap;
 use tessla_syntax::ast::{self, Def, Ident, Out, Statement};
@@ -39,7 +40,7 @@ pub struct Resolved<'a> {
     /// (each module's statements after the statements of the level around it).
     pub statements: Vec<(String, &'a Statement)>,
     /// Global definitions in that order; the first of two with one dotted name wins (the
-    /// compiler reports the second).
+    /// lowering reports a second top-level one).
     pub defs: Vec<GlobalDef<'a>>,
     by_name: HashMap<String, DefId>,
     /// Every module by its full prefix (`A.`, `A.B.`).

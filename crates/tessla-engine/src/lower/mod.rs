@@ -9,8 +9,11 @@
 //! constants). Recursion is allowed only through the lazy arguments of the builtins table
 //! (`last`, `delay`).
 //!
-//! Owns: the [`Compiler`] and `program` (statements, modules and imports, inputs, outputs and
-//! their annotations) here. By concern: `names` (scopes, definitions on first use, externs),
+//! Owns: the [`Compiler`] and `program` (inputs, outputs, `out *` and their annotations) here.
+//! It reads the resolved spec (`crate::resolve`): which definition, input or imported member a
+//! global name means is decided there once, for the checker and the lowering; lowering keeps
+//! only its local scopes (parameters, blocks and `where`, macro arguments). By concern: `names`
+//! (local scopes over the resolved globals, definitions on first use, externs),
 //! `expr` (each expression form, operators), `call` (calls and arguments), `closure`
 //! (value-level functions into the function table, function values, constant folding), `stream` (the stream operators), `types` (element types
 //! of nodes), `time` (base time and time units), `overrides` (`--set`). Names and signatures of

@@ -1,11 +1,13 @@
-//! Names during lowering: scopes, definitions compiled on first use, `extern` bodies, and the
-//! unknown-name diagnostic. A stream definition used while it is compiled becomes an alias
+//! Names during lowering: a name is a local (a parameter, a block or `where` definition, a macro
+//! argument: lowering's own scopes, [`Env`]) or else a global that `Resolved::global` finds from
+//! the module the code stands in (a definition, by its `DefId`, or an input). Each global
+//! definition has one lowering state, made on first use; definitions are compiled on first use;
+//! also `extern` bodies and the unknown-name diagnostic. A stream definition used while it is compiled becomes an alias
 //! filled in when it is done; a use outside the lazy argument of `last`/`delay` is then checked
 //! for a strict cycle on the lowered graph, so recursion is allowed wherever TeSSLa allows it
-//! (through `last`/`delay` inside function bodies, helpers and lifted calls too). Qualified
-//! names the type checker resolved through an import come from its table.
+//! (through `last`/`delay` inside function bodies, helpers and lifted calls too).
 //!
-//! Owns: [`Env`] lookups, `Compiler::lookup`, `def_term`, `literal_member`, `body`,
+//! Owns: `Compiler::binding` (local, else global), `global_entry`, `lookup`, `def_term`, `body`,
 //! `local_defs`, `unknown_name`.
 
 use super::*;
