@@ -100,18 +100,17 @@ pub fn load_with(
     }
     let resolved = crate::resolve::Resolved::new(&asts);
     let (type_errors, types) = crate::typeck::check_resolved(&resolved);
-    drop(resolved);
     if !type_errors.is_empty() {
         return Err(LoadError {
             sources,
             diagnostics: type_errors,
         });
     }
-    let result = lower::Compiler::new(&sources, base)
+    let result = lower::Compiler::new(&sources, &resolved, base)
         .with_base_unit(base_unit)
         .with_types(types)
         .with_time_units(!(options.time_units_need_base && options.base_time.is_none()))
-        .program(&asts, &options.overrides);
+        .program(&options.overrides);
     match result {
         Ok((program, warnings)) => Ok(Loaded {
             program: Arc::new(program),

@@ -5,8 +5,9 @@
 //!
 //! Owns: [`Resolved`] (built once per spec by [`Resolved::new`]), [`DefId`], the global lookup
 //! rule ([`Resolved::global`]) and the diagnostics of names at the statement level (annotation
-//! definitions twice or inside a module). Local names (parameters, blocks, `where`) and the
-//! types of definitions are the type checker's (`typeck.rs`).
+//! definitions twice or inside a module). Both later passes look global names up only here:
+//! the type checker (`typeck.rs`) and the lowering (`lower/`); local names (parameters, blocks,
+//! `where`, macro arguments) are each pass's own, and the types of definitions the checker's.
 
 use std::collections::HashMap;
 use tessla_syntax::ast::{self, Def, Ident, Out, Statement};
@@ -39,7 +40,7 @@ pub struct Resolved<'a> {
     /// (each module's statements after the statements of the level around it).
     pub statements: Vec<(String, &'a Statement)>,
     /// Global definitions in that order; the first of two with one dotted name wins (the
-    /// compiler reports the second).
+    /// lowering reports a second top-level one).
     pub defs: Vec<GlobalDef<'a>>,
     by_name: HashMap<String, DefId>,
     /// Every module by its full prefix (`A.`, `A.B.`).
@@ -161,36 +162,47 @@ impl<'a> Resolved<'a> {
             .map(|g| format!("{}{}", g.prefix, g.def.name.name))
     }
 
-    /// A global by name as seen from module `prefix`: own module and enclosing modules first,
-    /// then the top level and inputs, then imported modules (an import inside a module counts
-    /// from there inwards).
+    /// A global by name as seen from module `prefix`, level by level from the module outwards
+    /// (`A.B.`, `A.`, the top level): at each level its own definitions (a nested module's by
+    /// their relative path, `Limits.maxSpeed` in `Robot`), at the top level then the inputs,
+    /// then the members of the modules imported at that level, in import order. So a module's
+    /// own definitions win over what it imports, and what it imports wins over the levels
+    /// around it (TeSSLa's `misc/imports` case). An imported path is taken relative to the
+    /// importing module when such a module exists, else from the top level.
     pub fn global(&self, name: &str, prefix: &str) -> Option<Global> {
-        let mut p = prefix.to_string();
+        let mut p = prefix;
+        let mut key = String::with_capacity(prefix.len() + name.len() + 32);
         loop {
-            if let Some(d) = self.def_id(&format!("{p}{name}")) {
-                return Some(Global::Def(d));
+            key.clear();
+            key.push_str(p);
+            key.push_str(name);
+            if let Some(d) = self.by_name.get(&key) {
+                return Some(Global::Def(*d));
             }
-            if p.is_empty() {
-                break;
+            if p.is_empty()
+                && let Some(i) = self.input_by_name.get(name)
+            {
+                return Some(Global::Input(*i));
             }
-            let trimmed = p.trim_end_matches('.');
-            p = trimmed
-                .rfind('.')
-                .map_or_else(String::new, |k| format!("{}.", &trimmed[..k]));
-        }
-        if let Some(i) = self.input_by_name.get(name) {
-            return Some(Global::Input(*i));
-        }
-        for (at, target) in &self.imports {
-            if prefix.starts_with(at.as_str()) {
-                for full in [format!("{at}{target}{name}"), format!("{target}{name}")] {
-                    if let Some(d) = self.def_id(&full) {
-                        return Some(Global::Def(d));
-                    }
+            for (_, target) in self.imports.iter().filter(|(at, _)| at == p) {
+                key.clear();
+                key.push_str(p);
+                key.push_str(target);
+                if !self.modules.contains(&key) {
+                    key.clear();
+                    key.push_str(target);
+                }
+                key.push_str(name);
+                if let Some(d) = self.by_name.get(&key) {
+                    return Some(Global::Def(*d));
                 }
             }
+            if p.is_empty() {
+                return None;
+            }
+            let trimmed = p.strip_suffix('.').unwrap_or(p);
+            p = trimmed.rfind('.').map_or("", |k| &p[..=k]);
         }
-        None
     }
 
     /// Does `head` name a module as seen from module `prefix` (own and enclosing modules, the
@@ -271,6 +283,8 @@ mod tests {
         assert_eq!(r.global("a", ""), id("a"));
         // Imports count inside the importing module only.
         assert_eq!(r.global("b", "C."), id("A.B.b"));
+        assert_eq!(r.global("B.b", ""), None);
+        assert_eq!(r.global("B.b", "A."), id("A.B.b"));
         assert_eq!(r.global("b", ""), None);
         assert_eq!(r.global("x", "C."), Some(Global::Input(0)));
         assert_eq!(r.defs.len(), 4);
@@ -280,6 +294,22 @@ mod tests {
         assert_eq!(r.declared_types.get("T"), Some(&1));
         assert!(r.is_module("A", "") && r.is_module("B", "A.") && r.is_module("A", "C."));
         assert!(!r.is_module("B", "") && !r.is_module("a", ""));
+    }
+
+    #[test]
+    fn a_modules_imports_come_before_the_levels_around_it() {
+        let files = [parse(
+            "module X {\n  def v = 1\n}\ndef v = 2\n\
+             module Y {\n  import X\n  def w = v\n}\n\
+             module Q {\n  import X\n  def v = 3\n}\n\
+             module Z {\n  def u = v\n}\n",
+        )];
+        let r = Resolved::new(&files);
+        let id = |n: &str| r.def_id(n).map(Global::Def);
+        assert_eq!(r.global("v", "Y."), id("X.v"));
+        assert_eq!(r.global("v", "Q."), id("Q.v"));
+        assert_eq!(r.global("v", "Z."), id("v"));
+        assert_eq!(r.global("v", ""), id("v"));
     }
 
     #[test]

@@ -26,7 +26,7 @@
 
 use crate::builtins::{self, Sig};
 use crate::ir::Type;
-use crate::resolve::{DefId, Global, Resolved, at};
+use crate::resolve::{Global, Resolved, at};
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::rc::Rc;
@@ -111,8 +111,6 @@ enum State {
 
 struct DefInfo<'a> {
     def: &'a Def,
-    /// Its id when it is a global definition.
-    global: Option<DefId>,
     /// The scope the def's body sees.
     scope: Rc<Scope<'a>>,
     state: RefCell<State>,
@@ -160,9 +158,6 @@ enum Found<'a> {
 pub struct Types {
     pub outputs: HashMap<Span, Type>,
     pub defs: HashMap<String, Type>,
-    /// Qualified references (`Limits.maxSpeed` after `import Robot`) by their span: the full
-    /// dotted name of the definition they resolve to, where it differs from the text.
-    pub qualified: HashMap<Span, String>,
 }
 
 /// Check the statements of all files (includes first); returns the type errors found.
@@ -193,10 +188,8 @@ pub fn check_resolved(resolved: &Resolved<'_>) -> (Vec<Diagnostic>, Types) {
     }
     for g in &resolved.defs {
         let scope = c.module_scope(&g.prefix);
-        let id = c.globals.len();
         c.globals.push(Rc::new(DefInfo {
             def: g.def,
-            global: Some(id),
             scope,
             state: RefCell::new(State::Todo),
         }));
@@ -247,7 +240,6 @@ pub fn check_resolved(resolved: &Resolved<'_>) -> (Vec<Diagnostic>, Types) {
             types.defs.insert(name, element_type(&c.resolve(&s.ty)));
         }
     }
-    types.qualified = std::mem::take(&mut c.qualified);
     c.break_cycles();
     (std::mem::take(&mut c.diags), types)
 }
@@ -319,9 +311,6 @@ struct Checker<'a> {
     /// (`None`: a barrier, an unused local def checked for its own sake). See
     /// [`Checker::check_recursion`].
     inferring: Vec<Option<(usize, bool)>>,
-    /// Qualified names that resolve through an import, by the span of the reference: the
-    /// definition's full dotted name (see [`Types::qualified`]).
-    qualified: HashMap<Span, String>,
     /// Defs found on a recursion without a written type, reported when they are inferred.
     untyped_recursive: Vec<usize>,
     /// Members of literals being inferred through [`Checker::literal_member`].
@@ -859,7 +848,6 @@ impl<'a> Checker<'a> {
                 d.name.name.clone(),
                 Local::Def(Rc::new(DefInfo {
                     def: d,
-                    global: None,
                     scope: s.clone(),
                     state: RefCell::new(State::Todo),
                 })),
@@ -1182,16 +1170,7 @@ impl<'a> Checker<'a> {
                         let q = format!("{path}.{}", field.name);
                         return match self.find(&q, scope) {
                             Some(Found::Mono(t)) => t,
-                            Some(Found::Def(d)) => {
-                                if let Some(full) = d
-                                    .global
-                                    .and_then(|id| self.resolved?.name(id))
-                                    .filter(|full| *full != q)
-                                {
-                                    self.qualified.insert(e.span, full);
-                                }
-                                self.def_type(&d)
-                            }
+                            Some(Found::Def(d)) => self.def_type(&d),
                             None if !is_builtin_name(&q)
                                 && self
                                     .resolved

@@ -197,11 +197,7 @@ impl Compiler<'_> {
         let (names, frame) = self.param_frame(&params, env.frame);
         let id = self.new_function(&def.name.name, frame);
         self.compiled_fns.insert(key, id);
-        let inner = Env {
-            names: Rc::new(names),
-            parent: Some(Rc::new(env.clone())),
-            frame,
-        };
+        let inner = env.child(names, frame);
         let Ok(body) = self.body(def, &inner) else {
             self.compiled_fns.remove(&key);
             return Err(Fail);

@@ -140,8 +140,8 @@ impl Compiler<'_> {
             ExprKind::Member { object, field } => {
                 // `Foo.Bar.x` where `Foo` is not a value in scope: a module member.
                 if let Some(path) = dotted_path(object)
-                    && env
-                        .lookup(path.split('.').next().unwrap_or_default())
+                    && self
+                        .binding(path.split('.').next().unwrap_or_default(), env)
                         .is_none()
                 {
                     let q = format!("{path}.{}", field.name);

@@ -9,8 +9,11 @@
 //! constants). Recursion is allowed only through the lazy arguments of the builtins table
 //! (`last`, `delay`).
 //!
-//! Owns: the [`Compiler`] and `program` (statements, modules and imports, inputs, outputs and
-//! their annotations) here. By concern: `names` (scopes, definitions on first use, externs),
+//! Owns: the [`Compiler`] and `program` (inputs, outputs, `out *` and their annotations) here.
+//! It reads the resolved spec (`crate::resolve`): which definition, input or imported member a
+//! global name means is decided there once, for the checker and the lowering; lowering keeps
+//! only its local scopes (parameters, blocks and `where`, macro arguments). By concern: `names`
+//! (local scopes over the resolved globals, definitions on first use, externs),
 //! `expr` (each expression form, operators), `call` (calls and arguments), `closure`
 //! (value-level functions into the function table, function values, constant folding), `stream` (the stream operators), `types` (element types
 //! of nodes), `time` (base time and time units), `overrides` (`--set`). Names and signatures of
@@ -18,6 +21,7 @@
 //! `crate::format`, evaluation order and cross-step slots `crate::schedule`.
 
 use crate::builtins::{self, Builtin, Kind, StreamOp};
+use crate::resolve::Resolved;
 use crate::schedule;
 use time::unit_factor;
 use types::{const_type_of, ir_type, value_type};
@@ -98,20 +102,33 @@ enum Binding {
     Def(Entry),
 }
 
-/// Names in scope, innermost last. `frame` = number of runtime variables of the current frame.
+/// Local names in scope (parameters, block and `where` definitions, macro arguments),
+/// innermost last, over the globals of module `prefix` (found by [`Resolved::global`]).
+/// `frame` = number of runtime variables of the current frame.
 #[derive(Clone, Default)]
 struct Env {
     names: Rc<HashMap<String, Binding>>,
     parent: Option<Rc<Env>>,
     frame: usize,
+    /// The module prefix (`A.B.`, `""` at the top level) global names are looked up from.
+    prefix: Rc<str>,
 }
 
 impl Env {
-    fn lookup(&self, name: &str) -> Option<Binding> {
+    /// The scope of a global definition's body: no local names, the globals of `prefix`.
+    fn module(prefix: &str) -> Env {
+        Env {
+            prefix: prefix.into(),
+            ..Env::default()
+        }
+    }
+
+    /// A local name (`None`: not local; it may be a global, see [`Compiler::binding`]).
+    fn local(&self, name: &str) -> Option<Binding> {
         self.names
             .get(name)
             .cloned()
-            .or_else(|| self.parent.as_ref().and_then(|p| p.lookup(name)))
+            .or_else(|| self.parent.as_ref().and_then(|p| p.local(name)))
     }
 
     fn child(&self, names: HashMap<String, Binding>, frame: usize) -> Env {
@@ -119,6 +136,7 @@ impl Env {
             names: Rc::new(names),
             parent: Some(Rc::new(self.clone())),
             frame,
+            prefix: self.prefix.clone(),
         }
     }
 
@@ -135,6 +153,11 @@ type R<T> = Result<T, Fail>;
 
 pub struct Compiler<'a> {
     sources: &'a SourceMap,
+    /// The resolve pass's result: what every global name means (`crate::resolve`).
+    resolved: &'a Resolved<'a>,
+    /// The lowering state of each global definition, by [`DefId`](crate::resolve::DefId),
+    /// made on first use (or by a `--set` override).
+    globals: Vec<Option<Entry>>,
     pub diags: Vec<Diagnostic>,
     nodes: Vec<Node>,
     /// Node ids whose definition is pending (reserved aliases), for error checks.
@@ -143,7 +166,6 @@ pub struct Compiler<'a> {
     base_ns: i128,
     inputs: Vec<InputInfo>,
     input_nodes: Vec<NodeId>,
-    annotation_params: HashMap<String, Vec<String>>,
     /// The function table entry of each named function lowered so far.
     compiled_fns: HashMap<*const Def, FnId>,
     /// Definitions (by their span: a local def is cloned afresh each time its scope is
@@ -183,9 +205,15 @@ fn unknown_extern(_: &[Value]) -> Value {
 }
 
 impl<'a> Compiler<'a> {
-    pub fn new(sources: &'a SourceMap, base_ns_fs: i128) -> Compiler<'a> {
+    pub fn new(
+        sources: &'a SourceMap,
+        resolved: &'a Resolved<'a>,
+        base_ns_fs: i128,
+    ) -> Compiler<'a> {
         Compiler {
             sources,
+            resolved,
+            globals: vec![None; resolved.defs.len()],
             diags: Vec::new(),
             nodes: Vec::new(),
             lazy_depth: 0,
@@ -193,7 +221,6 @@ impl<'a> Compiler<'a> {
             base_ns: base_ns_fs,
             inputs: Vec::new(),
             input_nodes: Vec::new(),
-            annotation_params: HashMap::new(),
             compiled_fns: HashMap::new(),
             not_value_fns: HashSet::new(),
             functions: Vec::new(),
@@ -268,104 +295,31 @@ impl<'a> Compiler<'a> {
         self.nodes.len() - 1
     }
 
-    /// Compile the statements of all files (includes first) into a program.
+    /// Lower the resolved spec (inputs, outputs, `out *`, the definitions they use) into a
+    /// program.
     pub fn program(
         mut self,
-        files: &[ast::File],
         overrides: &[(String, String)],
     ) -> Result<(Program, Vec<Diagnostic>), Vec<Diagnostic>> {
-        let mut names: HashMap<String, Binding> = HashMap::new();
-        let mut outs: Vec<&ast::Out> = Vec::new();
-        let mut out_all = false;
-        let mut defs_in_order: Vec<String> = Vec::new();
-        let env_cell: Rc<RefCell<Option<Env>>> = self.new_scope();
-        let mut statements: Vec<(String, &Statement)> = Vec::new();
-        for f in files {
-            for s in &f.statements {
-                statements.push((String::new(), s));
-            }
-        }
-        // Module prefix (`Foo.Bar.`) -> (its scope cell, its members by short name).
-        type ModuleScope = (Rc<RefCell<Option<Env>>>, HashMap<String, Binding>);
-        let mut modules: HashMap<String, ModuleScope> = HashMap::new();
-        // (importing module prefix, imported module prefix).
-        let mut imports: Vec<(String, String)> = Vec::new();
-        let mut i = 0;
-        while i < statements.len() {
-            let (prefix, s) = statements[i].clone();
-            i += 1;
+        let resolved = self.resolved;
+        for (prefix, s) in &resolved.statements {
             match s {
-                Statement::Def(d) => {
-                    let name = format!("{prefix}{}", d.name.name);
-                    if let Some(Binding::Def(prev)) = names.get(&name)
-                        && prefix.is_empty()
+                // The resolver keeps the first of two top-level defs of one name.
+                Statement::Def(d) if prefix.is_empty() => {
+                    if let Some(first) = resolved
+                        .def_id(&d.name.name)
+                        .and_then(|id| resolved.defs.get(id))
+                        && !std::ptr::eq(first.def, d)
                     {
-                        let sp = prev.def.name.span;
                         self.diags.push(
                             Diagnostic::error(
                                 Category::Other,
                                 Some(d.name.span),
-                                format!("`{name}` is defined twice"),
+                                format!("`{}` is defined twice", d.name.name),
                             )
-                            .with_note_at(sp, "first defined here"),
+                            .with_note_at(first.def.name.span, "first defined here"),
                         );
-                        continue;
                     }
-                    defs_in_order.push(name.clone());
-                    // A def in a module sees the module's other members by their short names.
-                    let cell = if prefix.is_empty() {
-                        env_cell.clone()
-                    } else if let Some(m) = modules.get(&prefix) {
-                        m.0.clone()
-                    } else {
-                        let c = self.new_scope();
-                        modules.insert(prefix.clone(), (c.clone(), HashMap::new()));
-                        c
-                    };
-                    let entry = Entry {
-                        def: Rc::new(d.clone()),
-                        env_cell: cell,
-                        state: self.new_state(),
-                    };
-                    if let Some(m) = modules.get_mut(&prefix) {
-                        m.1.insert(d.name.name.clone(), Binding::Def(entry.clone()));
-                    }
-                    // Enclosing modules see it by its relative path (`Limits.maxSpeed` in
-                    // `Robot`), so `import Robot` brings `Limits.maxSpeed` too, as in TeSSLa.
-                    let mut outer = prefix.trim_end_matches('.');
-                    while let Some(k) = outer.rfind('.') {
-                        let p = format!("{}.", &outer[..k]);
-                        let rel = format!("{}{}", &prefix[p.len()..], d.name.name);
-                        if !modules.contains_key(&p) {
-                            let c = self.new_scope();
-                            modules.insert(p.clone(), (c, HashMap::new()));
-                        }
-                        if let Some(m) = modules.get_mut(&p) {
-                            m.1.entry(rel)
-                                .or_insert_with(|| Binding::Def(entry.clone()));
-                        }
-                        outer = &outer[..k];
-                    }
-                    names.insert(name, Binding::Def(entry));
-                }
-                Statement::Import { path, .. } => {
-                    let target: String = path.iter().map(|p| format!("{}.", p.name)).collect();
-                    imports.push((prefix.clone(), target));
-                }
-                Statement::Module {
-                    name,
-                    statements: inner,
-                    ..
-                } => {
-                    for st in inner {
-                        statements.push((format!("{prefix}{}.", name.name), st));
-                    }
-                }
-                Statement::AnnotationDef { name, params, .. } => {
-                    self.annotation_params.insert(
-                        name.name.clone(),
-                        params.iter().map(|p| p.name.name.clone()).collect(),
-                    );
                 }
                 Statement::In { name, ty, .. } => {
                     let elem = match ir_type(ty) {
@@ -393,63 +347,17 @@ impl<'a> Compiler<'a> {
                         ty: elem,
                         annotations: Vec::new(),
                     });
-                    names.insert(name.name.clone(), Binding::Term(Term::Stream(n)));
                 }
-                Statement::Out(o) => outs.push(o),
-                Statement::OutAll { .. } => out_all = true,
-                Statement::TypeDef { .. } | Statement::GlobalAnnotation(_) => {}
+                _ => {}
             }
         }
         // --set overrides replace the body of a top-level constant.
-        self.apply_overrides(&mut names, overrides);
-        // `import M`: M's members become visible by short name (own members win). `M` is
-        // looked up relative to the importing module first, then from the top.
-        for (at, target) in &imports {
-            let full = [format!("{at}{target}"), target.clone()]
-                .into_iter()
-                .find(|t| modules.contains_key(t));
-            let Some(members) = full.and_then(|t| modules.get(&t)).map(|m| m.1.clone()) else {
-                continue;
-            };
-            let scope = if at.is_empty() {
-                &mut names
-            } else {
-                match modules.get_mut(at) {
-                    Some(m) => &mut m.1,
-                    None => continue,
-                }
-            };
-            for (k, b) in members {
-                scope.entry(k).or_insert(b);
-            }
-        }
-        let env = Env {
-            names: Rc::new(names),
-            parent: None,
-            frame: 0,
-        };
-        *env_cell.borrow_mut() = Some(env.clone());
-        // Module scopes nest: `Foo.Bar.` sees `Foo.`'s members, which see the top level.
-        let mut prefixes: Vec<&String> = modules.keys().collect();
-        prefixes.sort_by_key(|p| p.len());
-        let mut module_envs: HashMap<String, Env> = HashMap::new();
-        for p in prefixes {
-            let trimmed = p.trim_end_matches('.');
-            let parent = trimmed
-                .rfind('.')
-                .map(|k| format!("{}.", &trimmed[..k]))
-                .and_then(|pp| module_envs.get(&pp).cloned())
-                .unwrap_or_else(|| env.clone());
-            if let Some((cell, members)) = modules.get(p) {
-                let menv = parent.child(members.clone(), 0);
-                *cell.borrow_mut() = Some(menv.clone());
-                module_envs.insert(p.clone(), menv);
-            }
-        }
+        self.apply_overrides(overrides);
+        let env = Env::default();
 
         // Annotations of inputs.
         let mut input_i = 0;
-        for (_, s) in &statements {
+        for (_, s) in &resolved.statements {
             if let Statement::In { annotations, .. } = s {
                 let anns = self.annotations(annotations, &env);
                 if let Some(info) = self.inputs.get_mut(input_i) {
@@ -460,7 +368,7 @@ impl<'a> Compiler<'a> {
         }
         let mut outputs = Vec::new();
         let mut output_nodes = Vec::new();
-        for o in outs {
+        for o in &resolved.outputs {
             let annotations = self.annotations(&o.annotations, &env);
             let raw = annotations.iter().any(|a| a.name == "raw");
             let name = o
@@ -510,7 +418,7 @@ impl<'a> Compiler<'a> {
                 }
             }
         }
-        if out_all {
+        if resolved.out_all {
             for (i, info) in self.inputs.clone().iter().enumerate() {
                 outputs.push(OutputInfo {
                     name: info.name.clone(),
@@ -520,15 +428,16 @@ impl<'a> Compiler<'a> {
                 });
                 output_nodes.push(self.input_nodes[i]);
             }
-            for name in &defs_in_order {
-                if let Some(Binding::Def(e)) = env.lookup(name)
-                    && e.def.params.is_none()
-                    && let Ok(t) = self.def_term(&e, e.def.name.span)
+            for (id, g) in resolved.defs.iter().enumerate() {
+                if g.def.params.is_none()
+                    && let Some(e) = self.global_entry(id)
+                    && let Ok(t) = self.def_term(&e, g.def.name.span)
                     && let Term::Stream(n) = t
+                    && let Some(name) = resolved.name(id)
                 {
-                    let ty = known_or(self.stream_type(n), self.types.defs.get(name));
+                    let ty = known_or(self.stream_type(n), self.types.defs.get(&name));
                     outputs.push(OutputInfo {
-                        name: name.clone(),
+                        name,
                         ty,
                         annotations: Vec::new(),
                         raw: false,
@@ -538,7 +447,6 @@ impl<'a> Compiler<'a> {
             }
         }
         drop(env);
-        drop(module_envs);
         self.break_cycles();
         if self.diags.iter().any(|d| d.is_error()) {
             return Err(self.diags);
@@ -577,7 +485,14 @@ impl<'a> Compiler<'a> {
     fn annotations(&mut self, anns: &[ast::Annotation], env: &Env) -> Vec<Annotation> {
         let mut out = Vec::new();
         for a in anns {
-            let params = self.annotation_params.get(&a.name.name).cloned();
+            let params: Option<Vec<String>> = [false, true]
+                .into_iter()
+                .find_map(|global| {
+                    self.resolved
+                        .annotations
+                        .get(&(a.name.name.clone(), global))
+                })
+                .map(|ps| ps.iter().map(|p| p.name.name.clone()).collect());
             if params.is_none() && a.name.name != "raw" {
                 self.diags.push(
                     Diagnostic::warning(

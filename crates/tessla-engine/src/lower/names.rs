@@ -1,14 +1,17 @@
-//! Names during lowering: scopes, definitions compiled on first use, `extern` bodies, and the
-//! unknown-name diagnostic. A stream definition used while it is compiled becomes an alias
+//! Names during lowering: a name is a local (a parameter, a block or `where` definition, a macro
+//! argument: lowering's own scopes, [`Env`]) or else a global that `Resolved::global` finds from
+//! the module the code stands in (a definition, by its `DefId`, or an input). Each global
+//! definition has one lowering state, made on first use; definitions are compiled on first use;
+//! also `extern` bodies and the unknown-name diagnostic. A stream definition used while it is compiled becomes an alias
 //! filled in when it is done; a use outside the lazy argument of `last`/`delay` is then checked
 //! for a strict cycle on the lowered graph, so recursion is allowed wherever TeSSLa allows it
-//! (through `last`/`delay` inside function bodies, helpers and lifted calls too). Qualified
-//! names the type checker resolved through an import come from its table.
+//! (through `last`/`delay` inside function bodies, helpers and lifted calls too).
 //!
-//! Owns: [`Env`] lookups, `Compiler::lookup`, `def_term`, `literal_member`, `body`,
+//! Owns: `Compiler::binding` (local, else global), `global_entry`, `lookup`, `def_term`, `body`,
 //! `local_defs`, `unknown_name`.
 
 use super::*;
+use crate::resolve::{DefId, Global};
 
 impl Compiler<'_> {
     pub(super) fn def_term(&mut self, e: &Entry, span: Span) -> R<Term> {
@@ -196,20 +199,41 @@ impl Compiler<'_> {
         child
     }
 
+    /// The lowering state of global definition `id`, made on first use.
+    pub(super) fn global_entry(&mut self, id: DefId) -> Option<Entry> {
+        if let Some(Some(e)) = self.globals.get(id) {
+            return Some(e.clone());
+        }
+        let g = self.resolved.defs.get(id)?;
+        let e = Entry {
+            def: Rc::new(g.def.clone()),
+            // A global's body sees no local names: its scope cannot be part of a cycle.
+            env_cell: Rc::new(RefCell::new(Some(Env::module(&g.prefix)))),
+            state: self.new_state(),
+        };
+        *self.globals.get_mut(id)? = Some(e.clone());
+        Some(e)
+    }
+
+    /// What `name` means in `env`: a local name, else a global as the resolve pass finds it
+    /// from `env`'s module (a definition or an input).
+    pub(super) fn binding(&mut self, name: &str, env: &Env) -> Option<Binding> {
+        if let Some(b) = env.local(name) {
+            return Some(b);
+        }
+        match self.resolved.global(name, &env.prefix)? {
+            Global::Def(id) => self.global_entry(id).map(Binding::Def),
+            Global::Input(i) => self
+                .input_nodes
+                .get(i)
+                .map(|n| Binding::Term(Term::Stream(*n))),
+        }
+    }
+
     pub(super) fn lookup(&mut self, name: &str, span: Span, env: &Env) -> R<Term> {
-        match env.lookup(name) {
+        match self.binding(name, env) {
             Some(Binding::Term(t)) => Ok(t),
             Some(Binding::Def(e)) => self.def_term(&e, span),
-            // A qualified name the resolver found through an import (`Limits.maxSpeed` after
-            // `import Robot`): its definition by full name.
-            None if let Some(Binding::Def(e)) = self
-                .types
-                .qualified
-                .get(&span)
-                .and_then(|full| env.lookup(full)) =>
-            {
-                self.def_term(&e, span)
-            }
             None => {
                 let name = crate::prelude::builtin_alias(name).unwrap_or(name);
                 if name == "true" {
@@ -244,6 +268,7 @@ impl Compiler<'_> {
             {
                 let mut known = Vec::new();
                 env.all_names(&mut known);
+                known.extend(self.resolved.visible_names(&env.prefix).map(str::to_string));
                 known.extend(builtins::names().map(str::to_string));
                 known.extend(crate::prelude::names());
                 self.diags.push(tessla_syntax::diag::unknown_name(

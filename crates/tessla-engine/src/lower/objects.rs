@@ -22,7 +22,7 @@ impl Compiler<'_> {
     /// (not a record literal, or one of constants only); `Some(Err)` when lowering a member
     /// failed (reported).
     pub(super) fn object_output(&mut self, e: &Expr, env: &Env) -> Option<R<Vec<(String, Term)>>> {
-        let (members, menv) = record_literal(e, env, 0)?;
+        let (members, menv) = self.record_literal(e, env, 0)?;
         match self.object_parts((e, env), &members, &menv, 0) {
             Ok(Part::Fields(fs)) => Some(Ok(fs)),
             Ok(Part::One(_)) => None,
@@ -41,7 +41,7 @@ impl Compiler<'_> {
         let mut parts: Vec<(String, Term)> = Vec::new();
         let mut object = false;
         for (name, x) in members {
-            let part = match record_literal(x, env, 0).filter(|_| depth < MAX_DEPTH) {
+            let part = match self.record_literal(x, env, 0).filter(|_| depth < MAX_DEPTH) {
                 Some((inner, ienv)) => self.object_parts((x, env), &inner, &ienv, depth + 1)?,
                 None => Part::One(self.expr(x, env)?),
             };
@@ -84,44 +84,51 @@ impl Compiler<'_> {
     }
 }
 
-/// The members of the record literal `e` is, directly or as the body of a definition without
-/// parameters, with the scope they are read in.
-fn record_literal(e: &Expr, env: &Env, depth: usize) -> Option<(Vec<(String, Expr)>, Env)> {
-    if depth > MAX_DEPTH {
-        return None;
-    }
-    match &e.kind {
-        ExprKind::Record(ms) => Some((
-            ms.iter()
-                .map(|(n, x)| (n.name.clone(), x.clone()))
-                .collect(),
-            env.clone(),
-        )),
-        // A tuple is the record of its members `_1`, `_2`, ...
-        ExprKind::Tuple(xs) if xs.len() > 1 => Some((
-            xs.iter()
-                .enumerate()
-                .map(|(i, x)| (format!("_{}", i + 1), x.clone()))
-                .collect(),
-            env.clone(),
-        )),
-        // A member of a literal that is itself a literal (`o.a` with `o = {a = {b = x}}`).
-        ExprKind::Member { object, field } => {
-            let (members, menv) = record_literal(object, env, depth + 1)?;
-            let (_, x) = members.into_iter().find(|(n, _)| *n == field.name)?;
-            record_literal(&x, &menv, depth + 1)
+impl Compiler<'_> {
+    /// The members of the record literal `e` is, directly or as the body of a definition without
+    /// parameters, with the scope they are read in.
+    fn record_literal(
+        &mut self,
+        e: &Expr,
+        env: &Env,
+        depth: usize,
+    ) -> Option<(Vec<(String, Expr)>, Env)> {
+        if depth > MAX_DEPTH {
+            return None;
         }
-        ExprKind::Var(id) => match env.lookup(&id.name) {
-            Some(Binding::Def(entry)) if entry.def.params.is_none() => match &entry.def.body {
-                Body::Expr { expr, where_defs } if where_defs.is_empty() => {
-                    let denv = entry.env_cell.borrow().clone()?;
-                    record_literal(expr, &denv, depth + 1)
-                }
+        match &e.kind {
+            ExprKind::Record(ms) => Some((
+                ms.iter()
+                    .map(|(n, x)| (n.name.clone(), x.clone()))
+                    .collect(),
+                env.clone(),
+            )),
+            // A tuple is the record of its members `_1`, `_2`, ...
+            ExprKind::Tuple(xs) if xs.len() > 1 => Some((
+                xs.iter()
+                    .enumerate()
+                    .map(|(i, x)| (format!("_{}", i + 1), x.clone()))
+                    .collect(),
+                env.clone(),
+            )),
+            // A member of a literal that is itself a literal (`o.a` with `o = {a = {b = x}}`).
+            ExprKind::Member { object, field } => {
+                let (members, menv) = self.record_literal(object, env, depth + 1)?;
+                let (_, x) = members.into_iter().find(|(n, _)| *n == field.name)?;
+                self.record_literal(&x, &menv, depth + 1)
+            }
+            ExprKind::Var(id) => match self.binding(&id.name, env) {
+                Some(Binding::Def(entry)) if entry.def.params.is_none() => match &entry.def.body {
+                    Body::Expr { expr, where_defs } if where_defs.is_empty() => {
+                        let denv = entry.env_cell.borrow().clone()?;
+                        self.record_literal(expr, &denv, depth + 1)
+                    }
+                    _ => None,
+                },
                 _ => None,
             },
             _ => None,
-        },
-        _ => None,
+        }
     }
 }
 
@@ -141,7 +148,7 @@ impl Compiler<'_> {
         field: &str,
         env: &Env,
     ) -> Option<R<Term>> {
-        let (members, menv) = record_literal(object, env, 0)?;
+        let (members, menv) = self.record_literal(object, env, 0)?;
         let (_, x) = members.into_iter().find(|(n, _)| n == field)?;
         let depth = PROJECTING.with(|p| p.get());
         if depth >= MAX_DEPTH {

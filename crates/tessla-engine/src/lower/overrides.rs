@@ -1,4 +1,5 @@
-//! `--set NAME=VALUE`: replace the body of a top-level constant before lowering.
+//! `--set NAME=VALUE`: replace the body of a top-level constant (a global definition of the
+//! resolve pass) before lowering.
 //!
 //! Owns: `Compiler::apply_overrides`. Only top-level defs whose value is a literal constant can
 //! be set; the new value must be a literal of the same type (`--set delta=-0.5` is the Float
@@ -7,28 +8,23 @@
 use super::*;
 
 impl Compiler<'_> {
-    /// Apply `overrides` to the top-level `names`; errors go to the diagnostics.
-    pub(super) fn apply_overrides(
-        &mut self,
-        names: &mut HashMap<String, Binding>,
-        overrides: &[(String, String)],
-    ) {
+    /// Apply `overrides` to the top-level definitions; errors go to the diagnostics.
+    pub(super) fn apply_overrides(&mut self, overrides: &[(String, String)]) {
+        let resolved = self.resolved;
         for (name, value) in overrides {
             // Parameters: top-level defs whose value is a constant literal.
-            let known: Vec<String> = names
+            let known: Vec<String> = resolved
+                .defs
                 .iter()
-                .filter_map(|(n, b)| match b {
-                    Binding::Def(e)
-                        if e.def.params.is_none()
-                            && !n.contains('.')
-                            && const_type_of(&e.def).is_some() =>
-                    {
-                        Some(n.clone())
-                    }
-                    _ => None,
+                .filter(|g| {
+                    g.prefix.is_empty() && g.def.params.is_none() && const_type_of(g.def).is_some()
                 })
+                .map(|g| g.def.name.name.clone())
                 .collect();
-            let Some(Binding::Def(entry)) = names.get(name).cloned() else {
+            let Some((id, entry)) = resolved
+                .def_id(name)
+                .and_then(|id| Some((id, self.global_entry(id)?)))
+            else {
                 let mut k = known.clone();
                 k.sort();
                 self.diags.push(
@@ -83,14 +79,14 @@ impl Compiler<'_> {
             }
             let mut d = (*entry.def).clone();
             d.body = new_def.body;
-            names.insert(
-                name.clone(),
-                Binding::Def(Entry {
+            let state = self.new_state();
+            if let Some(slot) = self.globals.get_mut(id) {
+                *slot = Some(Entry {
                     def: Rc::new(d),
                     env_cell: entry.env_cell.clone(),
-                    state: self.new_state(),
-                }),
-            );
+                    state,
+                });
+            }
         }
     }
 }

@@ -1,7 +1,22 @@
 //! Element types of stream nodes as far as lowering knows them (declarations, literals,
-//! operators), for the operators' choices during lowering and as the fallback of `check`'s
-//! listing and the bindings' conversions where the type checker's table leaves a type open
-//! (outputs and `out *` take the table's type first).
+//! operators): what remains of type guessing in lowering, and why it remains.
+//!
+//! The type checker's table ([`crate::typeck::Types`]) holds one type per output expression and
+//! per top-level parameterless definition (for `out *`); outputs and `out *` take the table's
+//! type first (`known_or` in `lower/mod.rs`). Lowering still needs a type per *node* in two
+//! places the table cannot answer: the table is keyed by source span, and one span lowers to
+//! many nodes of different types (a function body is expanded once per call, at each call's
+//! types), and it is [`Type::Unknown`] wherever the checker leaves a type open (open variables
+//! of the builtins it does not check — `sum`, `maximum`, `minimum`, `average`, `runtime`,
+//! `Operators.*` — extern types, and `Set`, `Map` and function types, which the IR cannot
+//! name). The two uses:
+//! - the Int-operator-on-Float error (`lower/expr.rs`) for operands whose type only the lowered
+//!   node shows (the checker's rule covers the rest, and runs first);
+//! - an output's element type when the table's is open (`check`'s listing and the bindings'
+//!   conversions read it; `Events[?]` when neither knows).
+//!
+//! Making these go needs a per-node type from the checker (types of expressions per
+//! instantiation), which the table does not carry.
 //!
 //! Owns: `Compiler::typed`, `stream_type`, [`ir_type`] (a syntax type as an IR type),
 //! `value_type`, `const_type_of`.
