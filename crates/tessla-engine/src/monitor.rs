@@ -339,25 +339,21 @@ impl Monitor {
                 },
                 Node::Fold { stream, init, .. } => {
                     let cx = program.exec();
-                    let f = cx.node(i);
                     if first {
                         // The initial value, folded with an event at t = 0 if there is one.
                         Some(match &cur[*stream] {
-                            Some(x) => strict2(cx, f, init, x),
+                            Some(x) => strict2(cx, i, init, x),
                             None => init.clone(),
                         })
                     } else {
                         match (&cur[*stream], last_of(last, slots, i)) {
-                            (Some(x), Some(acc)) => Some(strict2(cx, f, acc, x)),
+                            (Some(x), Some(acc)) => Some(strict2(cx, i, acc, x)),
                             _ => None,
                         }
                     }
                 }
                 Node::Reduce { stream, .. } => match (&cur[*stream], last_of(last, slots, i)) {
-                    (Some(x), Some(acc)) => {
-                        let cx = program.exec();
-                        Some(strict2(cx, cx.node(i), acc, x))
-                    }
+                    (Some(x), Some(acc)) => Some(strict2(program.exec(), i, acc, x)),
                     (Some(x), None) => Some(x.clone()),
                     _ => None,
                 },
@@ -463,6 +459,19 @@ fn slift(
     if !has_event {
         return None;
     }
+    if let Some(fast) = cx.fast(node) {
+        // By reference: no frame of cloned values, no closure call.
+        let arg = |a| arg(cur, last, slots, a);
+        let r = match args {
+            [a] => fast.run(&[arg(a)?]),
+            [a, b] => fast.run(&[arg(a)?, arg(b)?]),
+            [a, b, c] => fast.run(&[arg(a)?, arg(b)?, arg(c)?]),
+            _ => None,
+        };
+        if r.is_some() {
+            return r;
+        }
+    }
     let f = cx.node(node);
     let get = |a: &SArg| match a {
         SArg::Const(v) => Some(v.clone()),
@@ -542,11 +551,15 @@ impl Monitor {
     }
 }
 
-fn strict2(cx: &Ctx, f: Option<&Exec>, a: &Value, b: &Value) -> Value {
+/// `f(acc, x)` of a `fold` or `reduce` node, strict in the accumulator.
+fn strict2(cx: &Ctx, node: NodeId, a: &Value, b: &Value) -> Value {
     if let Value::Error(e) = a {
         return Value::Error(e.clone());
     }
-    call(cx, f, &[a.clone(), b.clone()])
+    if let Some(r) = cx.fast(node).and_then(|f| f.run(&[a, b])) {
+        return r;
+    }
+    call(cx, cx.node(node), &[a.clone(), b.clone()])
 }
 
 /// Call a node's compiled function (every node that has code has one).
