@@ -223,6 +223,7 @@ impl Monitor {
             cur.resize(program.nodes.len(), None);
         }
         let last = &mut self.last[..];
+        let cx = &**program.exec();
         for &i in &program.order {
             let Some(node) = program.nodes.get(i) else {
                 continue;
@@ -272,15 +273,12 @@ impl Monitor {
                     if args.iter().any(|a| cur[*a].is_some()) {
                         let vals: Vec<Option<Value>> =
                             args.iter().map(|a| cur[*a].clone()).collect();
-                        let cx = program.exec();
                         crate::exec::lift(cx, f, cx.node(i), &vals)
                     } else {
                         None
                     }
                 }
-                Node::SLift { args, .. } => {
-                    slift(cur, last, slots, &mut sc.args, args, program.exec(), i)
-                }
+                Node::SLift { args, .. } => slift(cur, last, slots, &mut sc.args, args, cx, i),
                 Node::Bin { op, a, b, bop } => {
                     if !has_event(cur, a) && !has_event(cur, b) {
                         continue;
@@ -294,7 +292,7 @@ impl Monitor {
                         && let Some(r) = op.eval(sx, sy)
                     {
                         if let Some(c) = cur.get_mut(i) {
-                            *c = Some(r.value());
+                            put(c, r.value());
                         }
                         continue;
                     }
@@ -319,7 +317,7 @@ impl Monitor {
                     };
                     if let Some(s) = Scalar::of(chosen) {
                         if let Some(slot) = cur.get_mut(i) {
-                            *slot = Some(s.value());
+                            put(slot, s.value());
                         }
                         continue;
                     }
@@ -338,7 +336,6 @@ impl Monitor {
                     None => None,
                 },
                 Node::Fold { stream, init, .. } => {
-                    let cx = program.exec();
                     if first {
                         // The initial value, folded with an event at t = 0 if there is one.
                         Some(match &cur[*stream] {
@@ -353,18 +350,15 @@ impl Monitor {
                     }
                 }
                 Node::Reduce { stream, .. } => match (&cur[*stream], last_of(last, slots, i)) {
-                    (Some(x), Some(acc)) => Some(strict2(program.exec(), i, acc, x)),
+                    (Some(x), Some(acc)) => Some(strict2(cx, i, acc, x)),
                     (Some(x), None) => Some(x.clone()),
                     _ => None,
                 },
             };
-            if v.is_some()
+            if let Some(v) = v
                 && let Some(c) = cur.get_mut(i)
             {
-                // A swap, not an assignment: moves the 24-byte value without a round trip
-                // through the stack (which stalls store forwarding on x86).
-                let mut v = v;
-                std::mem::swap(c, &mut v);
+                put(c, v);
             }
         }
         // Arm delays after the whole step: their delay argument is lazy and may come later.
@@ -405,17 +399,36 @@ impl Monitor {
                 if s != NO_SLOT
                     && let Some(l) = last.get_mut(s as usize)
                 {
-                    // Swap in place (see above), then drop the previous value.
+                    // Swap in place, then drop the previous value.
                     std::mem::swap(c, l);
                 }
-                *c = None;
+                release(c.take());
             }
         }
         for i in self.inputs.iter_mut() {
-            *i = None;
+            release(i.take());
         }
         self.last_evaluated = Some(ts);
     }
+}
+
+/// Drop a value, without a call into its drop glue for the scalars that make up most events
+/// (nothing to free).
+#[inline(always)]
+fn release(v: Option<Value>) {
+    match v {
+        None | Some(Value::Unit | Value::Bool(_) | Value::Int(_) | Value::Float(_)) => {
+            std::mem::forget(v)
+        }
+        v => drop(v),
+    }
+}
+
+/// Put this step's event of a node in its slot (empty between steps, so nothing is dropped
+/// but by [`release`]).
+#[inline(always)]
+fn put(slot: &mut Option<Value>, v: Value) {
+    release(slot.replace(v));
 }
 
 /// Whether a signal-lift argument has an event in this step.
