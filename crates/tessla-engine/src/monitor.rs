@@ -287,12 +287,10 @@ impl Monitor {
                     else {
                         continue;
                     };
-                    // Fast path: compute on copied scalars, write the result in place.
-                    if let (Some(sx), Some(sy)) = (Scalar::of(x), Scalar::of(y))
-                        && let Some(r) = op.eval(sx, sy)
-                    {
+                    // Fast path: compute on scalar operands, write the result in place.
+                    if let Some(r) = op.eval_values(x, y) {
                         if let Some(c) = cur.get_mut(i) {
-                            put(c, r.value());
+                            put(c, r);
                         }
                         continue;
                     }
