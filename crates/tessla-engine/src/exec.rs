@@ -15,7 +15,7 @@
 
 use crate::collections;
 use crate::ir::code::{Callee, Code, FnId, LiftFn, Prim};
-use crate::ir::{Node, Program, Scalar};
+use crate::ir::{Node, Program};
 use crate::natives::NativeFn;
 use crate::ops::{self, scalar_op};
 use crate::value::{Callable, RuntimeError, Value};
@@ -355,10 +355,9 @@ pub fn eval(cx: &Ctx, code: &Code) -> Value {
 #[inline]
 pub fn binary(op: BinOp, a: &Value, b: &Value) -> Value {
     if let Some(sop) = scalar_op(op)
-        && let (Some(x), Some(y)) = (Scalar::of(a), Scalar::of(b))
-        && let Some(r) = sop.eval(x, y)
+        && let Some(r) = sop.eval_values(a, b)
     {
-        return r.value();
+        return r;
     }
     ops::binary_value(op, a, b)
 }

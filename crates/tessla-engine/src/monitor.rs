@@ -25,7 +25,7 @@
 //!   is [`Value::Error`] reaches the sink like any other event; the caller reports it.
 
 use crate::exec::{Ctx, Exec};
-use crate::ir::{NO_SLOT, Node, NodeId, Program, SArg, Scalar};
+use crate::ir::{NO_SLOT, Node, NodeId, Program, SArg};
 use crate::value::{RuntimeError, Value};
 
 use std::cell::RefCell;
@@ -238,11 +238,11 @@ impl Monitor {
                 }
                 Node::Nil => None,
                 Node::Const(v) => first.then(|| v.clone()),
-                Node::Alias(n) => cur[*n].clone(),
+                Node::Alias(n) => cur[*n].as_ref().map(clone_value),
                 Node::Time(n) => cur[*n].as_ref().map(|_| Value::Int(ts)),
                 Node::Last { value, trigger } => {
                     if cur[*trigger].is_some() {
-                        last_of(last, slots, *value).cloned()
+                        last_of(last, slots, *value).map(clone_value)
                     } else {
                         None
                     }
@@ -313,20 +313,14 @@ impl Monitor {
                         // An error condition propagates.
                         _ => c,
                     };
-                    if let Some(s) = Scalar::of(chosen) {
-                        if let Some(slot) = cur.get_mut(i) {
-                            put(slot, s.value());
-                        }
-                        continue;
-                    }
-                    Some(chosen.clone())
+                    Some(clone_value(chosen))
                 }
-                Node::Merge(args) => args.iter().find_map(|a| cur[*a].clone()),
+                Node::Merge(args) => args.iter().find_map(|a| cur[*a].as_ref().map(clone_value)),
                 Node::Filter { stream, cond } => match &cur[*stream] {
                     Some(v) => {
                         let c = cur[*cond].as_ref().or(last_of(last, slots, *cond));
                         match c {
-                            Some(Value::Bool(true)) => Some(v.clone()),
+                            Some(Value::Bool(true)) => Some(clone_value(v)),
                             Some(Value::Error(e)) => Some(Value::Error(e.clone())),
                             _ => None,
                         }
@@ -419,6 +413,18 @@ fn release(v: Option<Value>) {
             std::mem::forget(v)
         }
         v => drop(v),
+    }
+}
+
+/// A copy of a value: scalars inline, without a call into `Value::clone`.
+#[inline(always)]
+fn clone_value(v: &Value) -> Value {
+    match v {
+        Value::Float(x) => Value::Float(*x),
+        Value::Int(x) => Value::Int(*x),
+        Value::Bool(x) => Value::Bool(*x),
+        Value::Unit => Value::Unit,
+        v => v.clone(),
     }
 }
 
