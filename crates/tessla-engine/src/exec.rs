@@ -3,7 +3,9 @@
 //!
 //! Owns: [`Exec`] (compiled code: a context and a frame in, a value out), [`Ctx`] (the compiled
 //! function table and node functions of one program), [`compile`], [`compile_program`], the
-//! semantics of [`Prim`]itives and [`LiftFn`]s, and function values ([`FnClosure`]).
+//! semantics of [`Prim`]itives and [`LiftFn`]s, function values ([`FnClosure`]), and the
+//! [`Fast`] forms of node functions that are one operator or native on the node's arguments
+//! (run by the monitor on its arguments by reference).
 //!
 //! Calls between program functions go through the context passed to every closure (an index
 //! into [`Ctx`]'s table), so compiled functions never refer to each other and recursion makes

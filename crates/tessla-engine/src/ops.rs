@@ -4,7 +4,8 @@
 //! Owns: [`binary`] and [`unary`] (the result of an operator on two or one non-error values, or
 //! why there is none), their forms on values ([`binary_value`], [`unary_value`]: an error
 //! operand is the result, no result is an error value), `Operators.add` and friends as natives
-//! ([`natives`]), the inline scalar fast path [`ScalarOp::eval`] (which must agree with
+//! ([`natives`]), the inline scalar fast path [`ScalarOp::eval`] and its form on values
+//! [`ScalarOp::eval_values`] (which must agree with
 //! [`binary`]; a test checks it) and [`shift_left`]. The lowering (operators in specs,
 //! `Operators.add` and friends, the stream builtins that add) and the trace reader (operators in
 //! trace values) both call these, so an operator cannot mean one thing in a spec and another in a
