@@ -3,7 +3,9 @@
 //!
 //! Owns: [`Exec`] (compiled code: a context and a frame in, a value out), [`Ctx`] (the compiled
 //! function table and node functions of one program), [`compile`], [`compile_program`], the
-//! semantics of [`Prim`]itives and [`LiftFn`]s, and function values ([`FnClosure`]).
+//! semantics of [`Prim`]itives and [`LiftFn`]s, function values ([`FnClosure`]), and the
+//! [`Fast`] forms of node functions that are one operator or native on the node's arguments
+//! (run by the monitor on its arguments by reference).
 //!
 //! Calls between program functions go through the context passed to every closure (an index
 //! into [`Ctx`]'s table), so compiled functions never refer to each other and recursion makes
@@ -15,12 +17,12 @@
 
 use crate::collections;
 use crate::ir::code::{Callee, Code, FnId, LiftFn, Prim};
-use crate::ir::{Node, Program, Scalar};
+use crate::ir::{Node, Program};
 use crate::natives::NativeFn;
 use crate::ops::{self, scalar_op};
 use crate::value::{Callable, RuntimeError, Value};
 use std::sync::{Arc, OnceLock, Weak};
-use tessla_syntax::ast::BinOp;
+use tessla_syntax::ast::{BinOp, UnaryOp};
 
 /// Compiled code: evaluates over a frame, calling program functions through the context.
 pub type Exec = Arc<dyn Fn(&Ctx, &[Value]) -> Value + Send + Sync>;
@@ -33,6 +35,8 @@ pub struct Ctx {
     values: Vec<OnceLock<Value>>,
     /// Per node: its compiled function (`slift`, `fold`, `reduce` and `lift` nodes).
     nodes: Vec<Option<Exec>>,
+    /// Per node: its function as a [`Fast`] form, when it has one.
+    fast: Vec<Option<Fast>>,
     me: Weak<Ctx>,
     /// Function values hold this context strongly (the lowering's contexts, which nothing
     /// else keeps alive) instead of weakly.
@@ -50,6 +54,12 @@ impl Ctx {
     #[inline]
     pub fn node(&self, n: usize) -> Option<&Exec> {
         self.nodes.get(n).and_then(Option::as_ref)
+    }
+
+    /// The [`Fast`] form of node `n`'s function, if it has one.
+    #[inline]
+    pub fn fast(&self, n: usize) -> Option<&Fast> {
+        self.fast.get(n).and_then(Option::as_ref)
     }
 
     /// Call function `id` with `frame`.
@@ -91,6 +101,15 @@ impl Ctx {
 
 /// A context built from compiled functions (`None`: not finished, an error when called).
 pub fn context(fns: Vec<Option<Exec>>, nodes: Vec<Option<Exec>>, strong: bool) -> Arc<Ctx> {
+    context_with(fns, nodes, Vec::new(), strong)
+}
+
+fn context_with(
+    fns: Vec<Option<Exec>>,
+    nodes: Vec<Option<Exec>>,
+    fast: Vec<Option<Fast>>,
+    strong: bool,
+) -> Arc<Ctx> {
     let n = fns.len();
     Arc::new_cyclic(|me| Ctx {
         fns: fns
@@ -98,6 +117,7 @@ pub fn context(fns: Vec<Option<Exec>>, nodes: Vec<Option<Exec>>, strong: bool) -
             .map(|f| f.unwrap_or_else(|| Arc::new(|_: &Ctx, _: &[Value]| not_compiled())))
             .collect(),
         values: (0..n).map(|_| OnceLock::new()).collect(),
+        fast,
         nodes,
         me: me.clone(),
         strong,
@@ -122,7 +142,111 @@ pub fn compile_program(p: &Program) -> Arc<Ctx> {
             _ => None,
         })
         .collect();
-    context(fns, nodes, false)
+    let fast = p
+        .nodes
+        .iter()
+        .map(|n| match n {
+            Node::SLift { f, args } => Fast::of(f, args.len(), &p.functions),
+            Node::Fold { f, .. } | Node::Reduce { f, .. } => Fast::of(f, 2, &p.functions),
+            _ => None,
+        })
+        .collect();
+    context_with(fns, nodes, fast, false)
+}
+
+/// A node function that is one operator or native applied to the node's arguments and
+/// constants (`$0 +. $1`, `$0 + 1`, `!$0`, `intToFloat($0)`, or a program function whose body
+/// is one of these). The monitor runs it on its arguments by reference: no frame of cloned
+/// values, no closure call. It computes exactly what the compiled closure does.
+#[derive(Debug, Clone)]
+pub enum Fast {
+    Binary(BinOp, Operand, Operand),
+    Unary(UnaryOp, Operand),
+    Native1(NativeFn, Operand),
+    Native2(NativeFn, Operand, Operand),
+}
+
+/// An operand of a [`Fast`] form: argument `i` of the node, or a constant.
+#[derive(Debug, Clone)]
+pub enum Operand {
+    Arg(usize),
+    Const(Value),
+}
+
+impl Operand {
+    /// The operand's value given the node's arguments.
+    #[inline]
+    pub fn get<'a>(&'a self, args: &[&'a Value]) -> Option<&'a Value> {
+        match self {
+            Operand::Arg(i) => args.get(*i).copied(),
+            Operand::Const(v) => Some(v),
+        }
+    }
+}
+
+impl Fast {
+    /// The fast form of `code` over a frame of `arity` arguments, if it has one.
+    pub fn of(code: &Code, arity: usize, functions: &[crate::ir::Function]) -> Option<Fast> {
+        Fast::within(code, arity, functions, 4)
+    }
+
+    fn within(
+        code: &Code,
+        arity: usize,
+        functions: &[crate::ir::Function],
+        depth: u8,
+    ) -> Option<Fast> {
+        let Code::Apply(callee, args) = code else {
+            return None;
+        };
+        let operand = |c: &Code| match c {
+            Code::Slot(i) if *i < arity => Some(Operand::Arg(*i)),
+            Code::Const(v) => Some(Operand::Const(v.clone())),
+            _ => None,
+        };
+        match (&**callee, &args[..]) {
+            (Callee::Prim(Prim::Binary(op)), [a, b]) => {
+                Some(Fast::Binary(*op, operand(a)?, operand(b)?))
+            }
+            (Callee::Prim(Prim::Unary(op)), [a]) => Some(Fast::Unary(*op, operand(a)?)),
+            (Callee::Native { f, .. }, [a]) => Some(Fast::Native1(*f, operand(a)?)),
+            (Callee::Native { f, .. }, [a, b]) => Some(Fast::Native2(*f, operand(a)?, operand(b)?)),
+            (Callee::Fn(id), _) if depth > 0 => {
+                // The callee's frame is exactly the argument values: substitute them.
+                let fun = functions.get(*id)?;
+                if fun.frame != args.len() {
+                    return None;
+                }
+                let inner = Fast::within(fun.body.as_ref()?, args.len(), functions, depth - 1)?;
+                let ops: Vec<Operand> = args.iter().map(operand).collect::<Option<_>>()?;
+                let sub = |o: Operand| match o {
+                    Operand::Arg(j) => ops.get(j).cloned(),
+                    c @ Operand::Const(_) => Some(c),
+                };
+                Some(match inner {
+                    Fast::Binary(op, a, b) => Fast::Binary(op, sub(a)?, sub(b)?),
+                    Fast::Unary(op, a) => Fast::Unary(op, sub(a)?),
+                    Fast::Native1(f, a) => Fast::Native1(f, sub(a)?),
+                    Fast::Native2(f, a, b) => Fast::Native2(f, sub(a)?, sub(b)?),
+                })
+            }
+            _ => None,
+        }
+    }
+
+    /// Run on the node's argument values (`None`: an operand out of range, never for a form
+    /// made by [`Fast::of`] with the node's arity).
+    #[inline]
+    pub fn run(&self, args: &[&Value]) -> Option<Value> {
+        Some(match self {
+            Fast::Binary(op, a, b) => binary(*op, a.get(args)?, b.get(args)?),
+            Fast::Unary(op, a) => ops::unary_value(*op, a.get(args)?),
+            Fast::Native1(f, a) => call_native(*f, &[a.get(args)?.clone()]),
+            Fast::Native2(f, a, b) => {
+                call_native(*f, &[a.get(args)?.clone(), b.get(args)?.clone()])
+            }
+        })
+    }
 }
 
 enum CtxRef {
@@ -233,10 +357,9 @@ pub fn eval(cx: &Ctx, code: &Code) -> Value {
 #[inline]
 pub fn binary(op: BinOp, a: &Value, b: &Value) -> Value {
     if let Some(sop) = scalar_op(op)
-        && let (Some(x), Some(y)) = (Scalar::of(a), Scalar::of(b))
-        && let Some(r) = sop.eval(x, y)
+        && let Some(r) = sop.eval_values(a, b)
     {
-        return r.value();
+        return r;
     }
     ops::binary_value(op, a, b)
 }
@@ -484,5 +607,81 @@ fn with_args(fr: &[Value], n: usize, f: impl FnOnce(&[Value]) -> Value) -> Value
             vals.resize(n, Value::Unit);
             f(&vals)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ir::Function;
+    use crate::value::RuntimeError;
+
+    /// Every fast form computes what the compiled closure of its code does, errors and
+    /// overflow included.
+    #[test]
+    fn fast_forms_agree_with_the_compiled_code() {
+        let bin = |op, a, b| Code::apply(Callee::Prim(Prim::Binary(op)), vec![a, b]);
+        let add = Function {
+            name: "lambda".into(),
+            frame: 2,
+            body: Some(bin(BinOp::FAdd, Code::Slot(0), Code::Slot(1))),
+        };
+        let functions = vec![add];
+        let cx = context(
+            functions
+                .iter()
+                .map(|f| f.body.as_ref().map(compile))
+                .collect(),
+            Vec::new(),
+            true,
+        );
+        let codes = [
+            bin(BinOp::FAdd, Code::Slot(0), Code::Slot(1)),
+            bin(BinOp::Add, Code::Slot(0), Code::Const(Value::Int(1))),
+            bin(BinOp::Ne, Code::Slot(1), Code::Slot(0)),
+            bin(BinOp::FDiv, Code::Const(Value::Float(1.0)), Code::Slot(0)),
+            Code::apply(Callee::Prim(Prim::Unary(UnaryOp::Not)), vec![Code::Slot(0)]),
+            Code::apply(Callee::Fn(0), vec![Code::Slot(1), Code::Slot(0)]),
+            Code::apply(
+                Callee::Native {
+                    name: "intToFloat",
+                    f: crate::natives::core::int_to_float,
+                },
+                vec![Code::Slot(0)],
+            ),
+        ];
+        let values = [
+            Value::Float(1.5),
+            Value::Float(-0.25),
+            Value::Int(i64::MAX),
+            Value::Int(3),
+            Value::Bool(true),
+            Value::Str("x".into()),
+            Value::Error(RuntimeError::DivisionByZero),
+        ];
+        for code in &codes {
+            let fast = Fast::of(code, 2, &functions);
+            let Some(fast) = fast else {
+                panic!("no fast form for {code:?}");
+            };
+            let exec = compile(code);
+            for a in &values {
+                for b in &values {
+                    let want = exec(&cx, &[a.clone(), b.clone()]);
+                    let got = fast.run(&[a, b]);
+                    assert_eq!(got.as_ref(), Some(&want), "{code:?} on {a:?}, {b:?}");
+                }
+            }
+        }
+        // Slots outside the node's arguments, and other code, have none.
+        assert!(
+            Fast::of(
+                &bin(BinOp::Add, Code::Slot(2), Code::Slot(0)),
+                2,
+                &functions
+            )
+            .is_none()
+        );
+        assert!(Fast::of(&Code::Slot(0), 2, &functions).is_none());
     }
 }

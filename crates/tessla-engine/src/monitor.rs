@@ -25,7 +25,7 @@
 //!   is [`Value::Error`] reaches the sink like any other event; the caller reports it.
 
 use crate::exec::{Ctx, Exec};
-use crate::ir::{NO_SLOT, Node, NodeId, Program, SArg, Scalar};
+use crate::ir::{NO_SLOT, Node, NodeId, Program, SArg};
 use crate::value::{RuntimeError, Value};
 
 use std::cell::RefCell;
@@ -223,6 +223,7 @@ impl Monitor {
             cur.resize(program.nodes.len(), None);
         }
         let last = &mut self.last[..];
+        let cx = &**program.exec();
         for &i in &program.order {
             let Some(node) = program.nodes.get(i) else {
                 continue;
@@ -237,11 +238,11 @@ impl Monitor {
                 }
                 Node::Nil => None,
                 Node::Const(v) => first.then(|| v.clone()),
-                Node::Alias(n) => cur[*n].clone(),
+                Node::Alias(n) => cur[*n].as_ref().map(clone_value),
                 Node::Time(n) => cur[*n].as_ref().map(|_| Value::Int(ts)),
                 Node::Last { value, trigger } => {
                     if cur[*trigger].is_some() {
-                        last_of(last, slots, *value).cloned()
+                        last_of(last, slots, *value).map(clone_value)
                     } else {
                         None
                     }
@@ -272,15 +273,12 @@ impl Monitor {
                     if args.iter().any(|a| cur[*a].is_some()) {
                         let vals: Vec<Option<Value>> =
                             args.iter().map(|a| cur[*a].clone()).collect();
-                        let cx = program.exec();
                         crate::exec::lift(cx, f, cx.node(i), &vals)
                     } else {
                         None
                     }
                 }
-                Node::SLift { args, .. } => {
-                    slift(cur, last, slots, &mut sc.args, args, program.exec(), i)
-                }
+                Node::SLift { args, .. } => slift(cur, last, slots, &mut sc.args, args, cx, i),
                 Node::Bin { op, a, b, bop } => {
                     if !has_event(cur, a) && !has_event(cur, b) {
                         continue;
@@ -289,12 +287,10 @@ impl Monitor {
                     else {
                         continue;
                     };
-                    // Fast path: compute on copied scalars, write the result in place.
-                    if let (Some(sx), Some(sy)) = (Scalar::of(x), Scalar::of(y))
-                        && let Some(r) = op.eval(sx, sy)
-                    {
+                    // Fast path: compute on scalar operands, write the result in place.
+                    if let Some(r) = op.eval_values(x, y) {
                         if let Some(c) = cur.get_mut(i) {
-                            *c = Some(r.value());
+                            put(c, r);
                         }
                         continue;
                     }
@@ -317,20 +313,14 @@ impl Monitor {
                         // An error condition propagates.
                         _ => c,
                     };
-                    if let Some(s) = Scalar::of(chosen) {
-                        if let Some(slot) = cur.get_mut(i) {
-                            *slot = Some(s.value());
-                        }
-                        continue;
-                    }
-                    Some(chosen.clone())
+                    Some(clone_value(chosen))
                 }
-                Node::Merge(args) => args.iter().find_map(|a| cur[*a].clone()),
+                Node::Merge(args) => args.iter().find_map(|a| cur[*a].as_ref().map(clone_value)),
                 Node::Filter { stream, cond } => match &cur[*stream] {
                     Some(v) => {
                         let c = cur[*cond].as_ref().or(last_of(last, slots, *cond));
                         match c {
-                            Some(Value::Bool(true)) => Some(v.clone()),
+                            Some(Value::Bool(true)) => Some(clone_value(v)),
                             Some(Value::Error(e)) => Some(Value::Error(e.clone())),
                             _ => None,
                         }
@@ -338,37 +328,29 @@ impl Monitor {
                     None => None,
                 },
                 Node::Fold { stream, init, .. } => {
-                    let cx = program.exec();
-                    let f = cx.node(i);
                     if first {
                         // The initial value, folded with an event at t = 0 if there is one.
                         Some(match &cur[*stream] {
-                            Some(x) => strict2(cx, f, init, x),
+                            Some(x) => strict2(cx, i, init, x),
                             None => init.clone(),
                         })
                     } else {
                         match (&cur[*stream], last_of(last, slots, i)) {
-                            (Some(x), Some(acc)) => Some(strict2(cx, f, acc, x)),
+                            (Some(x), Some(acc)) => Some(strict2(cx, i, acc, x)),
                             _ => None,
                         }
                     }
                 }
                 Node::Reduce { stream, .. } => match (&cur[*stream], last_of(last, slots, i)) {
-                    (Some(x), Some(acc)) => {
-                        let cx = program.exec();
-                        Some(strict2(cx, cx.node(i), acc, x))
-                    }
+                    (Some(x), Some(acc)) => Some(strict2(cx, i, acc, x)),
                     (Some(x), None) => Some(x.clone()),
                     _ => None,
                 },
             };
-            if v.is_some()
+            if let Some(v) = v
                 && let Some(c) = cur.get_mut(i)
             {
-                // A swap, not an assignment: moves the 24-byte value without a round trip
-                // through the stack (which stalls store forwarding on x86).
-                let mut v = v;
-                std::mem::swap(c, &mut v);
+                put(c, v);
             }
         }
         // Arm delays after the whole step: their delay argument is lazy and may come later.
@@ -409,7 +391,7 @@ impl Monitor {
                 if s != NO_SLOT
                     && let Some(l) = last.get_mut(s as usize)
                 {
-                    // Swap in place (see above), then drop the previous value.
+                    // Swap in place, then drop the previous value.
                     std::mem::swap(c, l);
                 }
                 *c = None;
@@ -420,6 +402,41 @@ impl Monitor {
         }
         self.last_evaluated = Some(ts);
     }
+}
+
+/// Drop a value, without a call into its drop glue for the scalars that make up most events
+/// (nothing to free).
+#[inline(always)]
+fn release(v: Option<Value>) {
+    match v {
+        None | Some(Value::Unit | Value::Bool(_) | Value::Int(_) | Value::Float(_)) => {
+            std::mem::forget(v)
+        }
+        v => drop(v),
+    }
+}
+
+/// A copy of a value: scalars inline, without a call into `Value::clone`.
+#[inline(always)]
+fn clone_value(v: &Value) -> Value {
+    match v {
+        Value::Float(x) => Value::Float(*x),
+        Value::Int(x) => Value::Int(*x),
+        Value::Bool(x) => Value::Bool(*x),
+        Value::Unit => Value::Unit,
+        v => v.clone(),
+    }
+}
+
+/// Put this step's event of a node in its slot (empty between steps, so nothing is dropped
+/// but by [`release`]).
+#[inline(always)]
+fn put(slot: &mut Option<Value>, v: Value) {
+    // A swap, not an assignment: moves the 24-byte value without a round trip through the
+    // stack (which stalls store forwarding on x86).
+    let mut v = Some(v);
+    std::mem::swap(slot, &mut v);
+    release(v);
 }
 
 /// Whether a signal-lift argument has an event in this step.
@@ -462,6 +479,19 @@ fn slift(
         .any(|a| matches!(a, SArg::Stream(n) if cur[*n].is_some()));
     if !has_event {
         return None;
+    }
+    if let Some(fast) = cx.fast(node) {
+        // By reference: no frame of cloned values, no closure call.
+        let arg = |a| arg(cur, last, slots, a);
+        let r = match args {
+            [a] => fast.run(&[arg(a)?]),
+            [a, b] => fast.run(&[arg(a)?, arg(b)?]),
+            [a, b, c] => fast.run(&[arg(a)?, arg(b)?, arg(c)?]),
+            _ => None,
+        };
+        if r.is_some() {
+            return r;
+        }
     }
     let f = cx.node(node);
     let get = |a: &SArg| match a {
@@ -542,11 +572,15 @@ impl Monitor {
     }
 }
 
-fn strict2(cx: &Ctx, f: Option<&Exec>, a: &Value, b: &Value) -> Value {
+/// `f(acc, x)` of a `fold` or `reduce` node, strict in the accumulator.
+fn strict2(cx: &Ctx, node: NodeId, a: &Value, b: &Value) -> Value {
     if let Value::Error(e) = a {
         return Value::Error(e.clone());
     }
-    call(cx, f, &[a.clone(), b.clone()])
+    if let Some(r) = cx.fast(node).and_then(|f| f.run(&[a, b])) {
+        return r;
+    }
+    call(cx, cx.node(node), &[a.clone(), b.clone()])
 }
 
 /// Call a node's compiled function (every node that has code has one).

@@ -4,7 +4,8 @@
 //! Owns: [`binary`] and [`unary`] (the result of an operator on two or one non-error values, or
 //! why there is none), their forms on values ([`binary_value`], [`unary_value`]: an error
 //! operand is the result, no result is an error value), `Operators.add` and friends as natives
-//! ([`natives`]), the inline scalar fast path [`ScalarOp::eval`] (which must agree with
+//! ([`natives`]), the inline scalar fast path [`ScalarOp::eval`] and its form on values
+//! [`ScalarOp::eval_values`] (which must agree with
 //! [`binary`]; a test checks it) and [`shift_left`]. The lowering (operators in specs,
 //! `Operators.add` and friends, the stream builtins that add) and the trace reader (operators in
 //! trace values) both call these, so an operator cannot mean one thing in a spec and another in a
@@ -294,6 +295,41 @@ impl ScalarOp {
             _ => return None,
         })
     }
+
+    /// [`ScalarOp::eval`] on values: the same result, without copying the operands out and the
+    /// result back (what the evaluator's operator nodes run).
+    #[inline(always)]
+    pub fn eval_values(self, a: &Value, b: &Value) -> Option<Value> {
+        use ScalarOp::*;
+        Some(match (a, b) {
+            (Value::Float(x), Value::Float(y)) => match self {
+                FAdd => Value::Float(x + y),
+                FSub => Value::Float(x - y),
+                FMul => Value::Float(x * y),
+                FDiv => Value::Float(x / y),
+                FLt => Value::Bool(x < y),
+                FGt => Value::Bool(x > y),
+                FLe => Value::Bool(x <= y),
+                FGe => Value::Bool(x >= y),
+                _ => return None,
+            },
+            (Value::Int(x), Value::Int(y)) => match self {
+                IAdd => Value::Int(x.checked_add(*y)?),
+                ISub => Value::Int(x.checked_sub(*y)?),
+                ILt => Value::Bool(x < y),
+                IGt => Value::Bool(x > y),
+                ILe => Value::Bool(x <= y),
+                IGe => Value::Bool(x >= y),
+                _ => return None,
+            },
+            (Value::Bool(x), Value::Bool(y)) => match self {
+                And => Value::Bool(*x && *y),
+                Or => Value::Bool(*x || *y),
+                _ => return None,
+            },
+            _ => return None,
+        })
+    }
 }
 
 #[cfg(test)]
@@ -392,9 +428,17 @@ mod tests {
             let Some(sop) = scalar_op(op) else { continue };
             for a in samples() {
                 for b in samples() {
+                    // On values: what `eval` gives, and nothing for other operand types.
+                    let on_values = sop.eval_values(&a, &b);
                     let (Some(x), Some(y)) = (Scalar::of(&a), Scalar::of(&b)) else {
+                        assert!(on_values.is_none(), "{op:?} on {a:?}, {b:?}");
                         continue;
                     };
+                    assert_eq!(
+                        format!("{on_values:?}"),
+                        format!("{:?}", sop.eval(x, y).map(Scalar::value)),
+                        "{op:?} on {a:?}, {b:?}"
+                    );
                     if let Some(fast) = sop.eval(x, y) {
                         let slow = binary(op, &a, &b);
                         assert_eq!(
