@@ -1381,6 +1381,13 @@ impl<'a> Checker<'a> {
         span: Span,
     ) {
         let n = &d.name.name;
+        let type_params = || {
+            d.type_params
+                .iter()
+                .map(|t| t.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
         if !given.is_empty() && given.len() != d.type_params.len() {
             self.report(
                 Diagnostic::error(
@@ -1393,14 +1400,7 @@ impl<'a> Checker<'a> {
                         given.len()
                     ),
                 )
-                .with_help(format!(
-                    "its type parameters are [{}]",
-                    d.type_params
-                        .iter()
-                        .map(|t| t.name.as_str())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                )),
+                .with_help(format!("its type parameters are [{}]", type_params())),
             );
             return;
         }
@@ -1426,11 +1426,7 @@ impl<'a> Checker<'a> {
                     .with_help(format!(
                         "`{}` occurs in no parameter type; give the type arguments: `{n}[{}](...)`",
                         tp.name,
-                        d.type_params
-                            .iter()
-                            .map(|t| t.name.as_str())
-                            .collect::<Vec<_>>()
-                            .join(", ")
+                        type_params()
                     )),
                 );
                 return;
