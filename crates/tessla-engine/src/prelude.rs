@@ -567,7 +567,7 @@ fn expr_refs(e: &Expr, bound: &mut Vec<String>, refs: &mut Vec<(String, Span)>) 
             }
         }
         ExprKind::Member { object, field } => {
-            if let Some(path) = dotted(object)
+            if let Some(path) = object.dotted_path()
                 && !bound.contains(&path.split('.').next().unwrap_or_default().to_string())
             {
                 refs.push((format!("{path}.{}", field.name), e.span));
@@ -595,14 +595,6 @@ fn expr_refs(e: &Expr, bound: &mut Vec<String>, refs: &mut Vec<(String, Span)>) 
             expr_refs(body, bound, refs);
             bound.truncate(n);
         }
-    }
-}
-
-fn dotted(e: &Expr) -> Option<String> {
-    match &e.kind {
-        ExprKind::Var(id) => Some(id.name.clone()),
-        ExprKind::Member { object, field } => Some(format!("{}.{}", dotted(object)?, field.name)),
-        _ => None,
     }
 }
 

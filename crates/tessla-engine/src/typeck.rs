@@ -1164,7 +1164,7 @@ impl<'a> Checker<'a> {
                 t
             }
             ExprKind::Member { object, field } => {
-                if let Some(path) = dotted(object) {
+                if let Some(path) = object.dotted_path() {
                     let head = path.split('.').next().unwrap_or_default();
                     if self.find(head, scope).is_none() {
                         let q = format!("{path}.{}", field.name);
@@ -1529,7 +1529,9 @@ impl<'a> Checker<'a> {
                 return self.fresh();
             };
             let names: Vec<&str> = params.iter().map(|p| p.name.name.as_str()).collect();
-            let callee = dotted(function).unwrap_or_else(|| "the function".into());
+            let callee = function
+                .dotted_path()
+                .unwrap_or_else(|| "the function".into());
             let Some(positions) = self.order_named(args, &names, &callee) else {
                 return self.fresh();
             };
@@ -1841,15 +1843,6 @@ fn mentions(t: &ast::Type, name: &str) -> bool {
         }
         ast::Type::Record { fields, .. } => fields.iter().any(|(_, f)| mentions(f, name)),
         ast::Type::Tuple { elems, .. } => elems.iter().any(|e| mentions(e, name)),
-    }
-}
-
-/// `A.B.c` as a string, for module paths.
-fn dotted(e: &Expr) -> Option<String> {
-    match &e.kind {
-        ExprKind::Var(id) => Some(id.name.clone()),
-        ExprKind::Member { object, field } => Some(format!("{}.{}", dotted(object)?, field.name)),
-        _ => None,
     }
 }
 

@@ -190,6 +190,20 @@ pub struct Expr {
     pub span: Span,
 }
 
+impl Expr {
+    /// `a.b.c` as the string "a.b.c" when the expression is only names and member accesses
+    /// (a module path or a qualified name).
+    pub fn dotted_path(&self) -> Option<String> {
+        match &self.kind {
+            ExprKind::Var(id) => Some(id.name.clone()),
+            ExprKind::Member { object, field } => {
+                Some(format!("{}.{}", object.dotted_path()?, field.name))
+            }
+            _ => None,
+        }
+    }
+}
+
 #[derive(Debug, Clone, PartialEq)]
 pub enum ExprKind {
     Var(Ident),

@@ -139,7 +139,7 @@ impl Compiler<'_> {
             }
             ExprKind::Member { object, field } => {
                 // `Foo.Bar.x` where `Foo` is not a value in scope: a module member.
-                if let Some(path) = dotted_path(object)
+                if let Some(path) = object.dotted_path()
                     && self
                         .binding(path.split('.').next().unwrap_or_default(), env)
                         .is_none()
@@ -302,16 +302,5 @@ impl Compiler<'_> {
                 self.call(f, terms, e.span, env)
             }
         }
-    }
-}
-
-/// `a.b.c` as the string "a.b.c" when the expression is only names and member accesses.
-pub(super) fn dotted_path(e: &Expr) -> Option<String> {
-    match &e.kind {
-        ExprKind::Var(id) => Some(id.name.clone()),
-        ExprKind::Member { object, field } => {
-            dotted_path(object).map(|p| format!("{p}.{}", field.name))
-        }
-        _ => None,
     }
 }
