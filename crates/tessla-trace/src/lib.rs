@@ -167,11 +167,12 @@ pub fn run_stream(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use tessla_syntax::include::MemResolver;
 
-    fn program(spec: &str) -> Arc<Program> {
+    /// The spec text loaded as a program (the tests' specs are valid).
+    pub(crate) fn program(spec: &str) -> Arc<Program> {
         let mut r = MemResolver::default();
         r.files.insert("main".into(), spec.into());
         match tessla_engine::load_with("main", &r, &Default::default()) {

@@ -500,16 +500,7 @@ fn coerce(v: Value, t: &Type) -> Result<Value, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tessla_syntax::include::MemResolver;
-
-    fn program(spec: &str) -> Arc<Program> {
-        let mut r = MemResolver::default();
-        r.files.insert("main".into(), spec.into());
-        match tessla_engine::load_with("main", &r, &Default::default()) {
-            Ok(l) => l.program,
-            Err(e) => panic!("{}", e.render()),
-        }
-    }
+    use crate::tests::program;
 
     fn read(spec: &str, line: &str) -> Result<Value, ReadError> {
         let p = program(spec);
