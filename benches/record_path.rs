@@ -5,41 +5,16 @@
 //! advances every iteration, as in a real run.
 //! Run with `make bench` (or `cargo bench --bench record_path`).
 
+#[path = "../crates/lineproto/benches/support/workload.rs"]
+mod workload;
+use workload::{P2_LINE, lidar_line, unordered};
+
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use lineproto::Record;
 use std::hint::black_box;
 use std::path::Path;
 use tessla_engine::LoadOptions;
 use tessla_telegraf::telegraf::processor::{Options, Processor};
-
-const P2_LINE: &str = "mqtt_consumer,host=turtlebot3,topic=tessla actualSpeed=\"0.0188\",expectedSpeed=0.015 1719231000123456789\n";
-
-fn lidar_line() -> String {
-    let mut s = String::from(
-        "mqtt_consumer,host=turtlebot3,topic=tessla actualAngular=0.0002,actualSpeed=\"0.0188\",expectedAngular=0,expectedSpeed=0.015",
-    );
-    for i in 0..360 {
-        let r = 0.12 + f64::from((i * 7919) % 3380) / 1000.0;
-        s.push_str(&format!(",lidar_{i}={r}"));
-    }
-    s.push_str(" 1719231000123456789\n");
-    s
-}
-
-/// `line` with its fields in a fixed pseudo-random order, as Telegraf writes them (Go map order).
-fn unordered(line: &str) -> String {
-    let (head, rest) = line.split_once(' ').unwrap();
-    let (fields, ts) = rest.rsplit_once(' ').unwrap();
-    let mut fields: Vec<&str> = fields.split(',').collect();
-    let mut seed = 0x2545_f491_4f6c_dd1du64;
-    for i in (1..fields.len()).rev() {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        fields.swap(i, (seed % (i as u64 + 1)) as usize);
-    }
-    format!("{head} {} {ts}", fields.join(","))
-}
 
 /// Overwrite the record's 19-digit timestamp (just before its newline) with `ts`.
 fn set_ts(bytes: &mut [u8], ts: u64) {

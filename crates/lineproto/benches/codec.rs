@@ -3,44 +3,15 @@
 //! makes them (fields sorted, and in the random order Telegraf writes them: `*_unordered`), and
 //! float formatting (`Display` vs. [`lineproto::write_float`]).
 
+#[path = "support/workload.rs"]
+mod workload;
+use workload::{P2_LINE, lidar_line, unordered};
+
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use lineproto::{
     FieldValue, LineWriter, Metric, RecordSplitter, parse_record, parse_record_into, write_float,
 };
 use std::hint::black_box;
-
-fn p2_line() -> String {
-    "mqtt_consumer,host=turtlebot3,topic=tessla actualSpeed=\"0.0188\",expectedSpeed=0.015 1719231000123456789\n".into()
-}
-
-fn lidar_line() -> String {
-    let mut s = String::from(
-        "mqtt_consumer,host=turtlebot3,topic=tessla actualAngular=0.0002,actualSpeed=\"0.0188\",expectedAngular=0,expectedSpeed=0.015",
-    );
-    for i in 0..360 {
-        // deterministic, varied ranges like a real scan: 0.12 .. 3.5 m
-        let r = 0.12 + f64::from((i * 7919) % 3380) / 1000.0;
-        s.push_str(&format!(",lidar_{i}={r}"));
-    }
-    s.push_str(" 1719231000123456789\n");
-    s
-}
-
-/// The lidar line with its fields in a fixed pseudo-random order (Telegraf's Go map order).
-fn lidar_line_unordered() -> String {
-    let line = lidar_line();
-    let (head, rest) = line.split_once(' ').unwrap_or_default();
-    let (fields, ts) = rest.rsplit_once(' ').unwrap_or_default();
-    let mut fields: Vec<&str> = fields.split(',').collect();
-    let mut seed = 0x2545_f491_4f6c_dd1du64;
-    for i in (1..fields.len()).rev() {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        fields.swap(i, (seed % (i as u64 + 1)) as usize);
-    }
-    format!("{head} {} {ts}", fields.join(","))
-}
 
 fn bench_parse(c: &mut Criterion, name: &str, line: &str) {
     let mut g = c.benchmark_group(format!("parse_{name}"));
@@ -164,13 +135,13 @@ fn bench_format(c: &mut Criterion) {
 }
 
 fn benches(c: &mut Criterion) {
-    let p2 = p2_line();
+    let p2 = P2_LINE.to_string();
     let lidar = lidar_line();
     bench_parse(c, "p2", &p2);
     bench_parse(c, "lidar360", &lidar);
     bench_split(c, "p2", &p2);
     bench_split(c, "lidar360", &lidar);
-    let unordered = lidar_line_unordered();
+    let unordered = unordered(&lidar_line());
     bench_parse(c, "lidar360_unordered", &unordered);
     bench_split(c, "lidar360_unordered", &unordered);
     bench_write(c);
