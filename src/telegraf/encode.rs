@@ -273,26 +273,32 @@ pub fn encode_step_with(
         let mut sep = ' ';
         for (_, i, v, path) in fields.iter().filter(|f| f.0 == g) {
             if let Some((_, Some(key))) = prepared.get(*i) {
-                let start = line.len();
-                // Values are finite here (field_value refuses the others).
-                line.push(sep);
-                match path {
-                    None => line.push_str(key),
+                // A record member's key: the output's field and the member's path.
+                let member = match path {
+                    None => None,
                     Some(path) => {
-                        let (_, field, connector) = match encodings.get(*i) {
-                            Some(e) => target(e, default_measurement),
-                            None => continue,
+                        let Some(enc) = encodings.get(*i) else {
+                            continue;
                         };
+                        let (_, field, connector) = target(enc, default_measurement);
                         let name = if connector {
                             path.clone()
                         } else {
                             format!("{field}.{path}")
                         };
                         if !lineproto::name_is_writable(&name) {
-                            line.truncate(start);
                             continue;
                         }
-                        lineproto::write_field_key(line, &name);
+                        Some(name)
+                    }
+                };
+                let start = line.len();
+                // Values are finite here (field_value refuses the others).
+                line.push(sep);
+                match &member {
+                    None => line.push_str(key),
+                    Some(name) => {
+                        lineproto::write_field_key(line, name);
                         line.push('=');
                     }
                 }
