@@ -259,12 +259,10 @@ const MAX_INDEX: usize = 1_000_000;
 /// field overwrites), missing indices are NaN. `None` when no field matches; `Err(largest
 /// index)` when an index is beyond [`MAX_INDEX`].
 fn gather(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Result<Vec<Value>, usize>> {
-    // The beams as plain floats first (a missing index is NaN), then one pass into values:
-    // overwriting a placeholder `Value` in place dropped it first, a call per beam.
-    let mut beams: Vec<f64> = Vec::new();
-    let mut found = false;
+    let p = Prefix::new(prefix.as_bytes());
+    let mut beams: Vec<Value> = Vec::new();
     for (k, v) in fields {
-        let Some(idx) = k.strip_prefix(prefix).and_then(list_index) else {
+        let Some(idx) = p.rest(k.as_bytes()).and_then(list_index) else {
             continue;
         };
         if idx >= MAX_INDEX {
@@ -280,27 +278,69 @@ fn gather(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Result<Vec<Va
             beams.reserve(fields.len().max(idx + 1));
         }
         if idx >= beams.len() {
-            beams.resize(idx + 1, f64::NAN);
+            beams.resize_with(idx + 1, || Value::Float(f64::NAN));
         }
-        if let Some(slot) = beams.get_mut(idx) {
-            *slot = beam(v);
+        match beams.get_mut(idx) {
+            // The float written into the placeholder: nothing to drop.
+            Some(Value::Float(slot)) => *slot = beam(v),
+            Some(other) => *other = Value::Float(beam(v)),
+            None => {}
         }
-        found = true;
     }
-    found.then(|| Ok(beams.into_iter().map(Value::Float).collect()))
+    (!beams.is_empty()).then_some(Ok(beams))
+}
+
+/// A list pattern's prefix (`lidar_`), compared with a key a word at a time when both allow
+/// (every key of a 360-beam scan is compared, and a call to `memcmp` per key cost more than
+/// the rest of the gathering).
+struct Prefix<'a> {
+    bytes: &'a [u8],
+    /// The prefix's bytes as a little-endian word and the mask of its length (prefixes of at
+    /// most 8 bytes).
+    word: Option<(u64, u64)>,
+}
+
+impl<'a> Prefix<'a> {
+    fn new(bytes: &'a [u8]) -> Self {
+        let word = (bytes.len() <= 8).then(|| {
+            let mut w = [0u8; 8];
+            w[..bytes.len()].copy_from_slice(bytes);
+            let mask = u64::MAX
+                .checked_shr(64 - 8 * bytes.len() as u32)
+                .unwrap_or(0);
+            (u64::from_le_bytes(w), mask)
+        });
+        Prefix { bytes, word }
+    }
+
+    /// What follows the prefix in `key`, when `key` starts with it.
+    #[inline]
+    fn rest<'k>(&self, key: &'k [u8]) -> Option<&'k [u8]> {
+        if let (Some((word, mask)), Some(head)) = (self.word, key.first_chunk::<8>()) {
+            if u64::from_le_bytes(*head) & mask != word {
+                return None;
+            }
+            return key.get(self.bytes.len()..);
+        }
+        key.strip_prefix(self.bytes)
+    }
 }
 
 /// The index in a list field's key (`lidar_123` -> 123): what `str::parse::<usize>` accepts,
 /// read by hand for the usual short all-digit keys (360 of them in every lidar record).
-fn list_index(s: &str) -> Option<usize> {
-    let b = s.as_bytes();
-    if (1..=9).contains(&b.len()) && b.iter().all(u8::is_ascii_digit) {
-        return Some(
-            b.iter()
-                .fold(0usize, |v, &d| v * 10 + usize::from(d - b'0')),
-        );
+fn list_index(s: &[u8]) -> Option<usize> {
+    if (1..=9).contains(&s.len()) {
+        let mut v = 0usize;
+        for &d in s {
+            let x = d.wrapping_sub(b'0');
+            if x > 9 {
+                return std::str::from_utf8(s).ok()?.parse::<usize>().ok();
+            }
+            v = v * 10 + usize::from(x);
+        }
+        return Some(v);
     }
-    s.parse::<usize>().ok()
+    std::str::from_utf8(s).ok()?.parse::<usize>().ok()
 }
 
 fn whole(f: f64) -> Option<i64> {
@@ -337,7 +377,45 @@ mod tests {
             "1a",
             " 1",
         ] {
-            assert_eq!(list_index(k), k.parse::<usize>().ok(), "{k:?}");
+            assert_eq!(list_index(k.as_bytes()), k.parse::<usize>().ok(), "{k:?}");
+        }
+    }
+
+    #[test]
+    fn prefixes_match_as_strip_prefix_does() {
+        let keys = [
+            "",
+            "l",
+            "lidar",
+            "lidar_",
+            "lidar_5",
+            "lidar_12",
+            "lidar_359",
+            "lidar_1234567",
+            "lidaR_12",
+            "xlidar_12",
+            "lidar_abcdefgh",
+            "ranges_10",
+            "ranges__1",
+            "ü_12345678",
+        ];
+        for prefix in [
+            "",
+            "l",
+            "lidar_",
+            "ranges_",
+            "12345678",
+            "lidar_12",
+            "a_longer_prefix_",
+        ] {
+            let p = Prefix::new(prefix.as_bytes());
+            for k in keys {
+                assert_eq!(
+                    p.rest(k.as_bytes()),
+                    k.as_bytes().strip_prefix(prefix.as_bytes()),
+                    "{prefix:?} {k:?}"
+                );
+            }
         }
     }
 
