@@ -83,12 +83,20 @@ impl Scan<'_> {
         });
         let r = self.at(beams.start);
         let (mut a, mut a_ok, mut r, mut r_ok) = (a, self.ok(a), r, self.ok(r));
-        for i in beams {
-            let b = self.at(if i + 1 == n { 0 } else { i + 1 });
+        // The beams after the range's first as a slice (no index arithmetic or bounds check per
+        // beam), then the range's last beam with its cyclic successor.
+        let rest = self
+            .beams
+            .get(beams.start + 1..beams.end)
+            .unwrap_or_default();
+        for v in rest {
+            let b = beam(v);
             let b_ok = self.ok(b);
             f(r, r_ok, a_ok & r_ok & b_ok & self.steep(a, r, b));
             (a, a_ok, r, r_ok) = (r, r_ok, b, b_ok);
         }
+        let b = self.at(if beams.end == n { 0 } else { beams.end });
+        f(r, r_ok, a_ok & r_ok & self.ok(b) & self.steep(a, r, b));
     }
 
     /// Beam indices whose angle `i·360/N` lies in the sector `from..to` degrees
