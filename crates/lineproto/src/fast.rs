@@ -183,8 +183,25 @@ fn timestamp(digits: &str, neg: bool) -> Option<i64> {
 }
 
 /// One field value at the cursor, consumed, written into `out` (a string slot keeps its buffer).
+/// The usual value, a short decimal float (360 in a lidar record), is tried first and written
+/// over the slot's float in place; anything else is read by [`other_value`].
 #[inline]
 fn value(c: &mut Cursor<'_>, out: &mut FieldValue) -> Option<()> {
+    let Some((f, end)) = short_float(c.s.as_bytes(), c.i) else {
+        return other_value(c, out);
+    };
+    match out {
+        // The slot held a float: overwritten in place, nothing to drop.
+        FieldValue::Float(x) => *x = f,
+        other => *other = FieldValue::Float(f),
+    }
+    c.i = end;
+    Some(())
+}
+
+/// [`value`] for a string, a boolean, an integer or a float that is not short.
+#[inline(never)]
+fn other_value(c: &mut Cursor<'_>, out: &mut FieldValue) -> Option<()> {
     let b = c.s.as_bytes();
     let start = c.i;
     if c.eat(b'"') {
@@ -204,11 +221,6 @@ fn value(c: &mut Cursor<'_>, out: &mut FieldValue) -> Option<()> {
             FieldValue::Str(dst) => set(dst, s),
             other => *other = FieldValue::Str(s.to_string()),
         }
-        return Some(());
-    }
-    if let Some((f, end)) = short_float(b, start) {
-        *out = FieldValue::Float(f);
-        c.i = end;
         return Some(());
     }
     while b.get(c.i).is_some_and(|&x| x != b',' && x != b' ') {
