@@ -8,6 +8,7 @@
 //! values to [`Value`]s of the input's type.
 
 use lineproto::{FieldValue, Metric};
+use std::cell::Cell;
 use std::sync::Arc;
 use tessla_engine::{Program, Type, Value};
 
@@ -155,13 +156,27 @@ impl InputBinding {
     pub fn extract(&self, m: &Metric) -> Option<Result<Value, ConvertError>> {
         match &self.field {
             FieldPattern::Exact(f) => m.field(f).map(|v| self.convert(v)),
-            FieldPattern::Indexed(prefix) => match gather(prefix, &m.fields)? {
-                Ok(list) => Some(Ok(Value::List(Arc::new(self.to_length(list))))),
-                Err(max) => Some(Err(ConvertError {
-                    input: self.name.clone(),
-                    reason: format!("index {max} in `{prefix}*` is beyond {MAX_INDEX}"),
-                })),
-            },
+            FieldPattern::Indexed(prefix) => {
+                let mut list = spare_list();
+                let out = match Arc::get_mut(&mut list).map(|l| (gather(prefix, &m.fields, l), l)) {
+                    Some((None, _)) => None,
+                    Some((Some(Ok(())), l)) => {
+                        self.to_length(l);
+                        Some(Ok(Value::List(list.clone())))
+                    }
+                    Some((Some(Err(max)), _)) => Some(Err(ConvertError {
+                        input: self.name.clone(),
+                        reason: format!("index {max} in `{prefix}*` is beyond {MAX_INDEX}"),
+                    })),
+                    // Not reachable: `spare_list` gives a list nothing else holds.
+                    None => Some(Err(ConvertError {
+                        input: self.name.clone(),
+                        reason: "internal: the list to fill is shared".to_string(),
+                    })),
+                };
+                SPARE_LIST.set(Some(list));
+                out
+            }
         }
     }
 
@@ -170,13 +185,13 @@ impl InputBinding {
     /// quarter of the length is filled), kept as it came with a warning when longer or much
     /// shorter (then the length looks wrong, e.g. another lidar, and the list's own length places
     /// the beams).
-    fn to_length(&self, mut list: Vec<Value>) -> Vec<Value> {
+    fn to_length(&self, list: &mut Vec<Value>) {
         let Some(n) = self.length else {
-            return list;
+            return;
         };
         let len = list.len();
         if len < n && len.saturating_mul(4) >= n.saturating_mul(3) {
-            list.resize(n, Value::Float(f64::NAN));
+            list.resize_with(n, || Value::Float(f64::NAN));
         } else if len != n {
             crate::log::warn_limited("list length", || {
                 let than = if len > n { "more" } else { "far fewer" };
@@ -189,7 +204,6 @@ impl InputBinding {
                 )
             });
         }
-        list
     }
 
     /// The prefix of an indexed pattern (`lidar_`), or the exact field name.
@@ -254,13 +268,43 @@ fn beam(v: &FieldValue) -> f64 {
 /// Largest index an indexed pattern accepts: an absurd index must not allocate gigabytes.
 const MAX_INDEX: usize = 1_000_000;
 
+thread_local! {
+    /// The list value of the last scan gathered on this thread, kept to be filled again: once the
+    /// engine has dropped its event (at the end of its step, unless the spec keeps the scan), the
+    /// list is this thread's alone again and the next scan is written over it, with no
+    /// allocation and no drop of its 360 elements per record.
+    static SPARE_LIST: Cell<Option<Arc<Vec<Value>>>> = const { Cell::new(None) };
+}
+
+/// A list value no one else holds: the spare one when it is free again, else a new one.
+fn spare_list() -> Arc<Vec<Value>> {
+    if let Some(mut l) = SPARE_LIST.take()
+        && Arc::get_mut(&mut l).is_some()
+    {
+        return l;
+    }
+    Arc::new(Vec::new())
+}
+
 /// The list of an indexed pattern in one pass over the fields, in whatever order they come
-/// (Telegraf writes a metric's fields in random order): `prefixN` sets element N (a later
-/// field overwrites), missing indices are NaN. `None` when no field matches; `Err(largest
-/// index)` when an index is beyond [`MAX_INDEX`].
-fn gather(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Result<Vec<Value>, usize>> {
+/// (Telegraf writes a metric's fields in random order), written over `beams` (a list of an
+/// earlier scan, reused): `prefixN` sets element N (a later field overwrites), missing indices
+/// are NaN. `None` when no field matches; `Err(largest index)` when an index is beyond
+/// [`MAX_INDEX`]; `beams` holds garbage then.
+fn gather(
+    prefix: &str,
+    fields: &[(String, FieldValue)],
+    beams: &mut Vec<Value>,
+) -> Option<Result<(), usize>> {
+    // Every element the earlier scan left becomes a missing beam (a float written in place).
+    for b in beams.iter_mut() {
+        match b {
+            Value::Float(f) => *f = f64::NAN,
+            other => *other = Value::Float(f64::NAN),
+        }
+    }
     let p = Prefix::new(prefix.as_bytes());
-    let mut beams: Vec<Value> = Vec::new();
+    let mut len = 0;
     for (k, v) in fields {
         let Some(idx) = p.rest(k.as_bytes()).and_then(list_index) else {
             continue;
@@ -273,11 +317,9 @@ fn gather(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Result<Vec<Va
                 .unwrap_or(idx);
             return Some(Err(max));
         }
-        if beams.capacity() == 0 {
-            // Sized for every field: one allocation for a whole scan.
-            beams.reserve(fields.len().max(idx + 1));
-        }
         if idx >= beams.len() {
+            // Sized for every field: one allocation for a whole scan.
+            beams.reserve(fields.len().max(idx + 1).saturating_sub(beams.len()));
             beams.resize_with(idx + 1, || Value::Float(f64::NAN));
         }
         match beams.get_mut(idx) {
@@ -286,8 +328,11 @@ fn gather(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Result<Vec<Va
             Some(other) => *other = Value::Float(beam(v)),
             None => {}
         }
+        len = len.max(idx + 1);
     }
-    (!beams.is_empty()).then_some(Ok(beams))
+    // The earlier scan's elements past this one's end (a longer scan came before).
+    beams.truncate(len);
+    (len > 0).then_some(Ok(()))
 }
 
 /// A list pattern's prefix (`lidar_`), compared with a key a word at a time when both allow
@@ -502,6 +547,33 @@ mod tests {
                 Value::Float(2.0)
             ]))))
         );
+    }
+
+    #[test]
+    fn a_reused_list_holds_exactly_the_new_scan() {
+        let l = b(
+            Type::List(Box::new(Type::Float)),
+            FieldPattern::Indexed("lidar_".into()),
+        );
+        let lines = [
+            "m lidar_0=1,lidar_1=2,lidar_2=3,lidar_3=4 1",
+            "m lidar_1=5 1",
+            "m lidar_2=\"x\",lidar_0=7i 1",
+            "m other=1 1",
+            "m lidar_5=1,lidar_0=2 1",
+        ];
+        let fresh: Vec<_> = lines
+            .iter()
+            .map(|line| {
+                // Each held while the next is gathered: never the same list.
+                l.extract(&metric(line))
+            })
+            .collect();
+        for (line, want) in lines.iter().zip(&fresh) {
+            // Each dropped before the next: the same list filled again.
+            let got = l.extract(&metric(line));
+            assert_eq!(format!("{got:?}"), format!("{want:?}"), "{line}");
+        }
     }
 
     #[test]
