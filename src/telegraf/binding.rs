@@ -8,6 +8,7 @@
 //! values to [`Value`]s of the input's type.
 
 use lineproto::{FieldValue, Metric};
+use std::cell::Cell;
 use std::sync::Arc;
 use tessla_engine::{Program, Type, Value};
 
@@ -155,13 +156,27 @@ impl InputBinding {
     pub fn extract(&self, m: &Metric) -> Option<Result<Value, ConvertError>> {
         match &self.field {
             FieldPattern::Exact(f) => m.field(f).map(|v| self.convert(v)),
-            FieldPattern::Indexed(prefix) => match gather(prefix, &m.fields)? {
-                Ok(list) => Some(Ok(Value::List(Arc::new(self.to_length(list))))),
-                Err(max) => Some(Err(ConvertError {
-                    input: self.name.clone(),
-                    reason: format!("index {max} in `{prefix}*` is beyond {MAX_INDEX}"),
-                })),
-            },
+            FieldPattern::Indexed(prefix) => {
+                let mut list = spare_list();
+                let out = match Arc::get_mut(&mut list).map(|l| (gather(prefix, &m.fields, l), l)) {
+                    Some((None, _)) => None,
+                    Some((Some(Ok(())), l)) => {
+                        self.to_length(l);
+                        Some(Ok(Value::List(list.clone())))
+                    }
+                    Some((Some(Err(max)), _)) => Some(Err(ConvertError {
+                        input: self.name.clone(),
+                        reason: format!("index {max} in `{prefix}*` is beyond {MAX_INDEX}"),
+                    })),
+                    // Not reachable: `spare_list` gives a list nothing else holds.
+                    None => Some(Err(ConvertError {
+                        input: self.name.clone(),
+                        reason: "internal: the list to fill is shared".to_string(),
+                    })),
+                };
+                SPARE_LIST.set(Some(list));
+                out
+            }
         }
     }
 
@@ -170,13 +185,13 @@ impl InputBinding {
     /// quarter of the length is filled), kept as it came with a warning when longer or much
     /// shorter (then the length looks wrong, e.g. another lidar, and the list's own length places
     /// the beams).
-    fn to_length(&self, mut list: Vec<Value>) -> Vec<Value> {
+    fn to_length(&self, list: &mut Vec<Value>) {
         let Some(n) = self.length else {
-            return list;
+            return;
         };
         let len = list.len();
         if len < n && len.saturating_mul(4) >= n.saturating_mul(3) {
-            list.resize(n, Value::Float(f64::NAN));
+            list.resize_with(n, || Value::Float(f64::NAN));
         } else if len != n {
             crate::log::warn_limited("list length", || {
                 let than = if len > n { "more" } else { "far fewer" };
@@ -189,7 +204,6 @@ impl InputBinding {
                 )
             });
         }
-        list
     }
 
     /// The prefix of an indexed pattern (`lidar_`), or the exact field name.
@@ -254,17 +268,45 @@ fn beam(v: &FieldValue) -> f64 {
 /// Largest index an indexed pattern accepts: an absurd index must not allocate gigabytes.
 const MAX_INDEX: usize = 1_000_000;
 
+thread_local! {
+    /// The list value of the last scan gathered on this thread, kept to be filled again: once the
+    /// engine has dropped its event (at the end of its step, unless the spec keeps the scan), the
+    /// list is this thread's alone again and the next scan is written over it, with no
+    /// allocation and no drop of its 360 elements per record.
+    static SPARE_LIST: Cell<Option<Arc<Vec<Value>>>> = const { Cell::new(None) };
+}
+
+/// A list value no one else holds: the spare one when it is free again, else a new one.
+fn spare_list() -> Arc<Vec<Value>> {
+    if let Some(mut l) = SPARE_LIST.take()
+        && Arc::get_mut(&mut l).is_some()
+    {
+        return l;
+    }
+    Arc::new(Vec::new())
+}
+
 /// The list of an indexed pattern in one pass over the fields, in whatever order they come
-/// (Telegraf writes a metric's fields in random order): `prefixN` sets element N (a later
-/// field overwrites), missing indices are NaN. `None` when no field matches; `Err(largest
-/// index)` when an index is beyond [`MAX_INDEX`].
-fn gather(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Result<Vec<Value>, usize>> {
-    // The beams as plain floats first (a missing index is NaN), then one pass into values:
-    // overwriting a placeholder `Value` in place dropped it first, a call per beam.
-    let mut beams: Vec<f64> = Vec::new();
-    let mut found = false;
+/// (Telegraf writes a metric's fields in random order), written over `beams` (a list of an
+/// earlier scan, reused): `prefixN` sets element N (a later field overwrites), missing indices
+/// are NaN. `None` when no field matches; `Err(largest index)` when an index is beyond
+/// [`MAX_INDEX`]; `beams` holds garbage then.
+fn gather(
+    prefix: &str,
+    fields: &[(String, FieldValue)],
+    beams: &mut Vec<Value>,
+) -> Option<Result<(), usize>> {
+    // Every element the earlier scan left becomes a missing beam (a float written in place).
+    for b in beams.iter_mut() {
+        match b {
+            Value::Float(f) => *f = f64::NAN,
+            other => *other = Value::Float(f64::NAN),
+        }
+    }
+    let p = Prefix::new(prefix.as_bytes());
+    let mut len = 0;
     for (k, v) in fields {
-        let Some(idx) = k.strip_prefix(prefix).and_then(list_index) else {
+        let Some(idx) = p.rest(k.as_bytes()).and_then(list_index) else {
             continue;
         };
         if idx >= MAX_INDEX {
@@ -275,32 +317,75 @@ fn gather(prefix: &str, fields: &[(String, FieldValue)]) -> Option<Result<Vec<Va
                 .unwrap_or(idx);
             return Some(Err(max));
         }
-        if beams.capacity() == 0 {
-            // Sized for every field: one allocation for a whole scan.
-            beams.reserve(fields.len().max(idx + 1));
-        }
         if idx >= beams.len() {
-            beams.resize(idx + 1, f64::NAN);
+            // Sized for every field: one allocation for a whole scan.
+            beams.reserve(fields.len().max(idx + 1).saturating_sub(beams.len()));
+            beams.resize_with(idx + 1, || Value::Float(f64::NAN));
         }
-        if let Some(slot) = beams.get_mut(idx) {
-            *slot = beam(v);
+        match beams.get_mut(idx) {
+            // The float written into the placeholder: nothing to drop.
+            Some(Value::Float(slot)) => *slot = beam(v),
+            Some(other) => *other = Value::Float(beam(v)),
+            None => {}
         }
-        found = true;
+        len = len.max(idx + 1);
     }
-    found.then(|| Ok(beams.into_iter().map(Value::Float).collect()))
+    // The earlier scan's elements past this one's end (a longer scan came before).
+    beams.truncate(len);
+    (len > 0).then_some(Ok(()))
+}
+
+/// A list pattern's prefix (`lidar_`), compared with a key a word at a time when both allow
+/// (every key of a 360-beam scan is compared, and a call to `memcmp` per key cost more than
+/// the rest of the gathering).
+struct Prefix<'a> {
+    bytes: &'a [u8],
+    /// The prefix's bytes as a little-endian word and the mask of its length (prefixes of at
+    /// most 8 bytes).
+    word: Option<(u64, u64)>,
+}
+
+impl<'a> Prefix<'a> {
+    fn new(bytes: &'a [u8]) -> Self {
+        let word = (bytes.len() <= 8).then(|| {
+            let mut w = [0u8; 8];
+            w[..bytes.len()].copy_from_slice(bytes);
+            let mask = u64::MAX
+                .checked_shr(64 - 8 * bytes.len() as u32)
+                .unwrap_or(0);
+            (u64::from_le_bytes(w), mask)
+        });
+        Prefix { bytes, word }
+    }
+
+    /// What follows the prefix in `key`, when `key` starts with it.
+    #[inline]
+    fn rest<'k>(&self, key: &'k [u8]) -> Option<&'k [u8]> {
+        if let (Some((word, mask)), Some(head)) = (self.word, key.first_chunk::<8>()) {
+            if u64::from_le_bytes(*head) & mask != word {
+                return None;
+            }
+            return key.get(self.bytes.len()..);
+        }
+        key.strip_prefix(self.bytes)
+    }
 }
 
 /// The index in a list field's key (`lidar_123` -> 123): what `str::parse::<usize>` accepts,
 /// read by hand for the usual short all-digit keys (360 of them in every lidar record).
-fn list_index(s: &str) -> Option<usize> {
-    let b = s.as_bytes();
-    if (1..=9).contains(&b.len()) && b.iter().all(u8::is_ascii_digit) {
-        return Some(
-            b.iter()
-                .fold(0usize, |v, &d| v * 10 + usize::from(d - b'0')),
-        );
+fn list_index(s: &[u8]) -> Option<usize> {
+    if (1..=9).contains(&s.len()) {
+        let mut v = 0usize;
+        for &d in s {
+            let x = d.wrapping_sub(b'0');
+            if x > 9 {
+                return std::str::from_utf8(s).ok()?.parse::<usize>().ok();
+            }
+            v = v * 10 + usize::from(x);
+        }
+        return Some(v);
     }
-    s.parse::<usize>().ok()
+    std::str::from_utf8(s).ok()?.parse::<usize>().ok()
 }
 
 fn whole(f: f64) -> Option<i64> {
@@ -337,7 +422,45 @@ mod tests {
             "1a",
             " 1",
         ] {
-            assert_eq!(list_index(k), k.parse::<usize>().ok(), "{k:?}");
+            assert_eq!(list_index(k.as_bytes()), k.parse::<usize>().ok(), "{k:?}");
+        }
+    }
+
+    #[test]
+    fn prefixes_match_as_strip_prefix_does() {
+        let keys = [
+            "",
+            "l",
+            "lidar",
+            "lidar_",
+            "lidar_5",
+            "lidar_12",
+            "lidar_359",
+            "lidar_1234567",
+            "lidaR_12",
+            "xlidar_12",
+            "lidar_abcdefgh",
+            "ranges_10",
+            "ranges__1",
+            "ü_12345678",
+        ];
+        for prefix in [
+            "",
+            "l",
+            "lidar_",
+            "ranges_",
+            "12345678",
+            "lidar_12",
+            "a_longer_prefix_",
+        ] {
+            let p = Prefix::new(prefix.as_bytes());
+            for k in keys {
+                assert_eq!(
+                    p.rest(k.as_bytes()),
+                    k.as_bytes().strip_prefix(prefix.as_bytes()),
+                    "{prefix:?} {k:?}"
+                );
+            }
         }
     }
 
@@ -424,6 +547,33 @@ mod tests {
                 Value::Float(2.0)
             ]))))
         );
+    }
+
+    #[test]
+    fn a_reused_list_holds_exactly_the_new_scan() {
+        let l = b(
+            Type::List(Box::new(Type::Float)),
+            FieldPattern::Indexed("lidar_".into()),
+        );
+        let lines = [
+            "m lidar_0=1,lidar_1=2,lidar_2=3,lidar_3=4 1",
+            "m lidar_1=5 1",
+            "m lidar_2=\"x\",lidar_0=7i 1",
+            "m other=1 1",
+            "m lidar_5=1,lidar_0=2 1",
+        ];
+        let fresh: Vec<_> = lines
+            .iter()
+            .map(|line| {
+                // Each held while the next is gathered: never the same list.
+                l.extract(&metric(line))
+            })
+            .collect();
+        for (line, want) in lines.iter().zip(&fresh) {
+            // Each dropped before the next: the same list filled again.
+            let got = l.extract(&metric(line));
+            assert_eq!(format!("{got:?}"), format!("{want:?}"), "{line}");
+        }
     }
 
     #[test]

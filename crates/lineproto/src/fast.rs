@@ -13,6 +13,7 @@
 //! `parse_p2` and `parse_lidar360`, figures in BENCHMARKS.md).
 
 use crate::parse::{FieldValue, Metric};
+use std::cell::Cell;
 
 /// A byte allowed in a plain name or tag value: printable, not a line-protocol delimiter.
 /// Bytes >= 0x80 belong to UTF-8 characters (the record was validated as UTF-8 before).
@@ -182,8 +183,25 @@ fn timestamp(digits: &str, neg: bool) -> Option<i64> {
 }
 
 /// One field value at the cursor, consumed, written into `out` (a string slot keeps its buffer).
+/// The usual value, a short decimal float (360 in a lidar record), is tried first and written
+/// over the slot's float in place; anything else is read by [`other_value`].
 #[inline]
 fn value(c: &mut Cursor<'_>, out: &mut FieldValue) -> Option<()> {
+    let Some((f, end)) = short_float(c.s.as_bytes(), c.i) else {
+        return other_value(c, out);
+    };
+    match out {
+        // The slot held a float: overwritten in place, nothing to drop.
+        FieldValue::Float(x) => *x = f,
+        other => *other = FieldValue::Float(f),
+    }
+    c.i = end;
+    Some(())
+}
+
+/// [`value`] for a string, a boolean, an integer or a float that is not short.
+#[inline(never)]
+fn other_value(c: &mut Cursor<'_>, out: &mut FieldValue) -> Option<()> {
     let b = c.s.as_bytes();
     let start = c.i;
     if c.eat(b'"') {
@@ -203,11 +221,6 @@ fn value(c: &mut Cursor<'_>, out: &mut FieldValue) -> Option<()> {
             FieldValue::Str(dst) => set(dst, s),
             other => *other = FieldValue::Str(s.to_string()),
         }
-        return Some(());
-    }
-    if let Some((f, end)) = short_float(b, start) {
-        *out = FieldValue::Float(f);
-        c.i = end;
         return Some(());
     }
     while b.get(c.i).is_some_and(|&x| x != b',' && x != b' ') {
@@ -326,8 +339,9 @@ fn finite(f: f64) -> Option<FieldValue> {
 }
 
 /// Whether two fields share a key: quadratic for the usual handful of fields; for long records
-/// (the 360-beam lidar line) a 16384-bit filter of key hashes, with an exact look-back only on a
-/// filter hit (sorting the keys instead cost a quarter of a lidar record's parse time).
+/// (the 360-beam lidar line) an open-addressing table of the keys seen so far, each slot holding
+/// a field's index and 21 more bits of its key's hash, so that only a key whose slot and hash
+/// bits both match is compared with the earlier key (almost never, unless it is a repeat).
 fn has_duplicate_keys(fields: &[(String, FieldValue)]) -> bool {
     if fields.len() <= 16 {
         return fields
@@ -335,29 +349,84 @@ fn has_duplicate_keys(fields: &[(String, FieldValue)]) -> bool {
             .enumerate()
             .any(|(i, (k, _))| fields.iter().skip(i + 1).any(|(o, _)| o == k));
     }
-    if fields.len() > 1024 {
-        // The filter below saturates on records this wide (hostile input: 100k fields), and
-        // each hit would scan every earlier key: an exact set keeps it linear.
+    if fields.len() > MAX_TABLE_FIELDS {
+        // Records this wide are hostile input (100k fields): an exact set keeps it linear.
         let mut keys = std::collections::HashSet::with_capacity(fields.len());
         return !fields.iter().all(|(k, _)| keys.insert(k.as_str()));
     }
-    let mut seen = [0u64; 256];
-    for (i, (k, _)) in fields.iter().enumerate() {
-        // FNV-1a
-        let h = k.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
-            (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
-        });
-        let h = (h ^ (h >> 32)) as usize & 16383;
-        let bit = 1u64 << (h & 63);
-        let Some(word) = seen.get_mut(h >> 6) else {
-            return true;
-        };
-        if *word & bit != 0 && fields.iter().take(i).any(|(o, _)| o == k) {
-            return true;
+    KEY_TABLE.with(|cell| {
+        let (mut table, generation) = cell.take();
+        let generation = generation.wrapping_add(1);
+        if generation == 0 || table.len() < TABLE_SLOTS {
+            // New, or every stamp used once: start again from an empty table.
+            table.clear();
+            table.resize(TABLE_SLOTS, 0);
         }
-        *word |= bit;
+        let generation = generation.max(1);
+        let found = table_has_duplicate_keys(fields, &mut table, u64::from(generation) << 32);
+        cell.set((table, generation));
+        found
+    })
+}
+
+/// [`has_duplicate_keys`] with the table: a slot is taken when it carries `stamp` (this record's
+/// generation in the high 32 bits), so the table is never cleared between records. At most half
+/// of the slots used are full, so a probe ends after a slot or two.
+fn table_has_duplicate_keys(
+    fields: &[(String, FieldValue)],
+    table: &mut [u64],
+    stamp: u64,
+) -> bool {
+    let mask = (fields.len() * 2).next_power_of_two() - 1;
+    for (i, (k, _)) in fields.iter().enumerate() {
+        let h = key_hash(k.as_bytes());
+        // The stamp, 21 bits of the hash, the field's index + 1.
+        let entry = stamp | (h >> 32 & TAG_BITS) | (i as u64 + 1);
+        let mut s = h as usize & mask;
+        loop {
+            let Some(slot) = table.get_mut(s) else {
+                return true;
+            };
+            if *slot & STAMP_BITS != stamp {
+                *slot = entry;
+                break;
+            }
+            if *slot & !INDEX_BITS == entry & !INDEX_BITS {
+                let earlier = (*slot & INDEX_BITS) as usize;
+                if fields
+                    .get(earlier.wrapping_sub(1))
+                    .is_some_and(|(o, _)| o == k)
+                {
+                    return true;
+                }
+            }
+            s = (s + 1) & mask;
+        }
     }
     false
+}
+
+thread_local! {
+    /// The table of [`has_duplicate_keys`] and the generation of its last record.
+    static KEY_TABLE: Cell<(Vec<u64>, u32)> = const { Cell::new((Vec::new(), 0)) };
+}
+
+/// The widest record [`has_duplicate_keys`] checks with its table (index + 1 fits the low bits).
+const MAX_TABLE_FIELDS: usize = 1024;
+/// Slots for the widest record: twice its fields.
+const TABLE_SLOTS: usize = 2 * MAX_TABLE_FIELDS;
+/// The bits of a slot holding the field's index + 1, the hash bits, the generation stamp.
+const INDEX_BITS: u64 = 0x7ff;
+const TAG_BITS: u64 = 0xffff_f800;
+const STAMP_BITS: u64 = 0xffff_ffff_0000_0000;
+
+/// A key's hash (rustc-hash's, as the record digest uses: a few instructions for a short key).
+#[inline]
+fn key_hash(key: &[u8]) -> u64 {
+    use std::hash::Hasher;
+    let mut h = rustc_hash::FxHasher::default();
+    h.write(key);
+    h.finish()
 }
 
 #[cfg(test)]
@@ -534,6 +603,50 @@ mod tests {
             assert!(parse_plain_into(line, &mut m));
             assert_eq!(Some(&m), parse_plain(line).as_ref(), "{line}");
             assert_eq!(Ok(Some(m.clone())), parse_record_full(line.as_bytes()));
+        }
+    }
+
+    /// The table finds exactly the repeated keys a set finds, at every width it serves and past it.
+    #[test]
+    fn duplicate_keys_found_as_a_set_finds_them() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for round in 0..3000 {
+            let n = match round % 6 {
+                0 => (next() % 20) as usize,
+                1 => 360 + (next() % 8) as usize,
+                2 => 1000 + (next() % 40) as usize,
+                _ => (next() % 400) as usize,
+            };
+            let mut fields: Vec<(String, FieldValue)> = (0..n)
+                .map(|i| {
+                    let k = match round % 3 {
+                        0 => format!("lidar_{i}"),
+                        1 => format!("k{}", next() % 100_000),
+                        _ => format!("{:x}", next() % (1 << (next() % 40 + 1))),
+                    };
+                    (k, FieldValue::Bool(true))
+                })
+                .collect();
+            if n > 1 && round % 4 == 0 {
+                // Repeat one key somewhere later.
+                let a = (next() % n as u64) as usize;
+                let b = (next() % n as u64) as usize;
+                let k = fields[a.min(b)].0.clone();
+                fields[a.max(b)].0 = k;
+            }
+            let mut set = std::collections::HashSet::new();
+            let want = !fields.iter().all(|(k, _)| set.insert(k.clone()));
+            assert_eq!(
+                has_duplicate_keys(&fields),
+                want,
+                "round {round}, {n} fields"
+            );
         }
     }
 

@@ -7,16 +7,19 @@
 //! from each by more than gamma in the same direction. Sector functions use valid, non-spike beams.
 
 use crate::value::{RuntimeError, Value};
+use std::ops::Range;
 
+/// One scan and its parameters, the beams borrowed from the list value: four natives read every
+/// scan (P1's two sector functions, P3's spikes and dropouts), so each reads only the beams it
+/// needs, once, instead of copying the scan into a vector of its own.
 struct Scan<'a> {
-    beams: Vec<f64>,
+    beams: &'a [Value],
     rmin: f64,
     rmax: f64,
     gamma: f64,
-    _p: std::marker::PhantomData<&'a ()>,
 }
 
-fn scan(args: &[Value], with_gamma: bool) -> Option<Scan<'static>> {
+fn scan(args: &[Value], with_gamma: bool) -> Option<Scan<'_>> {
     let Value::List(l) = args.first()? else {
         return None;
     };
@@ -24,55 +27,121 @@ fn scan(args: &[Value], with_gamma: bool) -> Option<Scan<'static>> {
         Some(Value::Float(f)) => Some(*f),
         _ => None,
     };
-    let beams = l
-        .iter()
-        .map(|v| match v {
-            Value::Float(f) => *f,
-            _ => f64::NAN,
-        })
-        .collect();
     Some(Scan {
-        beams,
+        beams: l.as_slice(),
         rmin: num(1)?,
         rmax: num(2)?,
         gamma: if with_gamma { num(3)? } else { 0.0 },
-        _p: std::marker::PhantomData,
     })
 }
 
 impl Scan<'_> {
-    fn valid(&self, i: usize) -> bool {
-        let r = self.beams[i];
-        r.is_finite() && r >= self.rmin && r <= self.rmax
+    fn len(&self) -> usize {
+        self.beams.len()
     }
 
-    fn spike(&self, i: usize) -> bool {
-        let n = self.beams.len();
-        if n < 3 || !self.valid(i) {
-            return false;
-        }
-        let (p, q) = ((i + n - 1) % n, (i + 1) % n);
-        if !self.valid(p) || !self.valid(q) {
-            return false;
-        }
-        let (r, a, b) = (self.beams[i], self.beams[p], self.beams[q]);
-        (r - a > self.gamma && r - b > self.gamma) || (a - r > self.gamma && b - r > self.gamma)
+    /// Beam `i`'s range (NaN for an element that is not a float).
+    #[inline]
+    fn at(&self, i: usize) -> f64 {
+        self.beams.get(i).map_or(f64::NAN, beam)
     }
 
-    /// Beam indices whose angle lies in the sector `from..to` degrees (counter-clockwise, wrapping).
-    fn sector(&self, from: f64, to: f64) -> impl Iterator<Item = usize> + '_ {
-        let n = self.beams.len();
+    /// Whether a range is a valid reading (`&`, not `&&`: no branch per beam).
+    #[inline]
+    fn ok(&self, r: f64) -> bool {
+        r.is_finite() & (r >= self.rmin) & (r <= self.rmax)
+    }
+
+    /// Whether `r` differs from both neighbours `a` and `b` by more than gamma in the same
+    /// direction (a spike when all three are valid).
+    #[inline]
+    fn steep(&self, a: f64, r: f64, b: f64) -> bool {
+        let g = self.gamma;
+        ((r - a > g) & (r - b > g)) | ((a - r > g) & (b - r > g))
+    }
+
+    /// `f(range, valid, spike)` for each beam of `beams`, ascending, reading each beam once:
+    /// a window of the beam and its cyclic neighbours moves along the range. A spike needs two
+    /// valid neighbours besides itself (none in a scan of fewer than 3 beams).
+    #[inline]
+    fn walk(&self, beams: Range<usize>, mut f: impl FnMut(f64, bool, bool)) {
+        let n = self.len();
+        if beams.is_empty() {
+            return;
+        }
+        if n < 3 {
+            for i in beams {
+                let r = self.at(i);
+                f(r, self.ok(r), false);
+            }
+            return;
+        }
+        let a = self.at(if beams.start == 0 {
+            n - 1
+        } else {
+            beams.start - 1
+        });
+        let r = self.at(beams.start);
+        let (mut a, mut a_ok, mut r, mut r_ok) = (a, self.ok(a), r, self.ok(r));
+        // The beams after the range's first as a slice (no index arithmetic or bounds check per
+        // beam), then the range's last beam with its cyclic successor.
+        let rest = self
+            .beams
+            .get(beams.start + 1..beams.end)
+            .unwrap_or_default();
+        for v in rest {
+            let b = beam(v);
+            let b_ok = self.ok(b);
+            f(r, r_ok, a_ok & r_ok & b_ok & self.steep(a, r, b));
+            (a, a_ok, r, r_ok) = (r, r_ok, b, b_ok);
+        }
+        let b = self.at(if beams.end == n { 0 } else { beams.end });
+        f(r, r_ok, a_ok & r_ok & self.ok(b) & self.steep(a, r, b));
+    }
+
+    /// Beam indices whose angle `i·360/N` lies in the sector `from..to` degrees
+    /// (counter-clockwise, wrapping), ascending, as at most two ranges. The angle grows with `i`
+    /// (exact products, one rounded division), so each bound cuts `0..N` once: found by bisection
+    /// on the same angle expression, the ranges hold exactly the beams a test of every beam finds.
+    fn sector(&self, from: f64, to: f64) -> [Range<usize>; 2] {
+        let n = self.len();
         let from = from.rem_euclid(360.0);
         let to = to.rem_euclid(360.0);
-        (0..n).filter(move |i| {
-            let a = *i as f64 * 360.0 / n as f64;
-            if from <= to {
-                a >= from && a <= to
-            } else {
-                a >= from || a <= to
-            }
-        })
+        let angle = |i: usize| i as f64 * 360.0 / n as f64;
+        // The first beam at or past `from` and the first past `to` (none for a NaN bound).
+        let lo = first(n, |i| angle(i) >= from);
+        let hi = first(n, |i| to.is_nan() || angle(i) > to);
+        if from <= to {
+            [lo..hi.max(lo), 0..0]
+        } else {
+            // No beam is both past `from` and up to `to` here, so hi <= lo.
+            [0..hi.min(lo), lo..n]
+        }
     }
+}
+
+/// A beam's range: NaN for an element that is not a float.
+#[inline]
+fn beam(v: &Value) -> f64 {
+    match v {
+        Value::Float(f) => *f,
+        _ => f64::NAN,
+    }
+}
+
+/// The first `i` in `0..n` where `holds` (n when none), for a `holds` false up to some point and
+/// true from there on.
+fn first(n: usize, holds: impl Fn(usize) -> bool) -> usize {
+    let (mut lo, mut hi) = (0, n);
+    while lo < hi {
+        let mid = lo + (hi - lo) / 2;
+        if holds(mid) {
+            hi = mid;
+        } else {
+            lo = mid + 1;
+        }
+    }
+    lo
 }
 
 fn bad(name: &str) -> Value {
@@ -84,7 +153,12 @@ fn bad(name: &str) -> Value {
 /// `lidar_dropouts(scan, range_min, range_max): Int`.
 pub fn dropouts(a: &[Value]) -> Value {
     match scan(a, false) {
-        Some(s) => Value::Int((0..s.beams.len()).filter(|i| !s.valid(*i)).count() as i64),
+        Some(s) => Value::Int(
+            s.beams
+                .iter()
+                .map(|v| usize::from(!s.ok(beam(v))))
+                .sum::<usize>() as i64,
+        ),
         None => bad("lidar_dropouts"),
     }
 }
@@ -92,7 +166,11 @@ pub fn dropouts(a: &[Value]) -> Value {
 /// `lidar_spikes(scan, range_min, range_max, gamma): Int`.
 pub fn spikes(a: &[Value]) -> Value {
     match scan(a, true) {
-        Some(s) => Value::Int((0..s.beams.len()).filter(|i| s.spike(*i)).count() as i64),
+        Some(s) => {
+            let mut count = 0usize;
+            s.walk(0..s.len(), |_, _, spike| count += usize::from(spike));
+            Value::Int(count as i64)
+        }
         None => bad("lidar_spikes"),
     }
 }
@@ -105,11 +183,14 @@ pub fn sector_min(a: &[Value]) -> Value {
     else {
         return bad("lidar_sector_min");
     };
-    let m = s
-        .sector(*from, *to)
-        .filter(|i| s.valid(*i) && !s.spike(*i))
-        .map(|i| s.beams[i])
-        .fold(f64::INFINITY, f64::min);
+    let mut m = f64::INFINITY;
+    for beams in s.sector(*from, *to) {
+        s.walk(beams, |r, ok, spike| {
+            if ok & !spike {
+                m = m.min(r);
+            }
+        });
+    }
     Value::Float(if m.is_finite() { m } else { s.rmax })
 }
 
@@ -121,12 +202,16 @@ pub fn sector_valid_fraction(a: &[Value]) -> Value {
     else {
         return bad("lidar_sector_valid_fraction");
     };
-    let all: Vec<usize> = s.sector(*from, *to).collect();
-    if all.is_empty() {
+    let sector = s.sector(*from, *to);
+    let all: usize = sector.iter().map(ExactSizeIterator::len).sum();
+    if all == 0 {
         return Value::Float(0.0);
     }
-    let ok = all.iter().filter(|i| s.valid(**i) && !s.spike(**i)).count();
-    Value::Float(ok as f64 / all.len() as f64)
+    let mut ok = 0usize;
+    for beams in sector {
+        s.walk(beams, |_, valid, spike| ok += usize::from(valid & !spike));
+    }
+    Value::Float(ok as f64 / all as f64)
 }
 
 #[cfg(test)]
@@ -136,6 +221,191 @@ mod tests {
 
     fn list(v: &[f64]) -> Value {
         Value::List(Arc::new(v.iter().map(|x| Value::Float(*x)).collect()))
+    }
+
+    /// The definitions above written the plain way (every beam tested, a neighbour found by
+    /// `%`, the sector by the angle of each beam): the natives must give exactly these values.
+    mod reference {
+        pub struct Scan {
+            pub beams: Vec<f64>,
+            pub rmin: f64,
+            pub rmax: f64,
+            pub gamma: f64,
+        }
+
+        impl Scan {
+            pub fn valid(&self, i: usize) -> bool {
+                let r = self.beams[i];
+                r.is_finite() && r >= self.rmin && r <= self.rmax
+            }
+
+            pub fn spike(&self, i: usize) -> bool {
+                let n = self.beams.len();
+                if n < 3 || !self.valid(i) {
+                    return false;
+                }
+                let (p, q) = ((i + n - 1) % n, (i + 1) % n);
+                if !self.valid(p) || !self.valid(q) {
+                    return false;
+                }
+                let (r, a, b) = (self.beams[i], self.beams[p], self.beams[q]);
+                let g = self.gamma;
+                (r - a > g && r - b > g) || (a - r > g && b - r > g)
+            }
+
+            pub fn sector(&self, from: f64, to: f64) -> Vec<usize> {
+                let n = self.beams.len();
+                let from = from.rem_euclid(360.0);
+                let to = to.rem_euclid(360.0);
+                (0..n)
+                    .filter(|i| {
+                        let a = *i as f64 * 360.0 / n as f64;
+                        if from <= to {
+                            a >= from && a <= to
+                        } else {
+                            a >= from || a <= to
+                        }
+                    })
+                    .collect()
+            }
+
+            pub fn sector_min(&self, from: f64, to: f64) -> f64 {
+                let m = self
+                    .sector(from, to)
+                    .into_iter()
+                    .filter(|i| self.valid(*i) && !self.spike(*i))
+                    .map(|i| self.beams[i])
+                    .fold(f64::INFINITY, f64::min);
+                if m.is_finite() { m } else { self.rmax }
+            }
+
+            pub fn sector_valid_fraction(&self, from: f64, to: f64) -> f64 {
+                let all = self.sector(from, to);
+                if all.is_empty() {
+                    return 0.0;
+                }
+                let ok = all
+                    .iter()
+                    .filter(|i| self.valid(**i) && !self.spike(**i))
+                    .count();
+                ok as f64 / all.len() as f64
+            }
+        }
+    }
+
+    #[test]
+    fn the_natives_equal_the_plain_definitions() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        let bounds = [
+            0.0,
+            1.0,
+            29.5,
+            30.0,
+            45.0,
+            90.0,
+            179.0,
+            180.0,
+            300.0,
+            330.0,
+            359.0,
+            359.9,
+            360.0,
+            -30.0,
+            390.0,
+            720.5,
+            -0.0,
+            f64::NAN,
+            f64::INFINITY,
+        ];
+        for round in 0..4000 {
+            let n = match round % 8 {
+                0 => (next() % 4) as usize,
+                1 => 360,
+                2 => 7,
+                _ => (next() % 50) as usize,
+            };
+            let beams: Vec<f64> = (0..n)
+                .map(|_| match next() % 12 {
+                    0 => 0.0,
+                    1 => f64::NAN,
+                    2 => 5.0,
+                    3 => 0.05,
+                    4 => 3.5,
+                    5 => 0.12,
+                    _ => (next() % 3400) as f64 / 1000.0 + 0.1,
+                })
+                .collect();
+            let r = reference::Scan {
+                beams: beams.clone(),
+                rmin: 0.12,
+                rmax: 3.5,
+                gamma: [0.3, 0.0, 1.0][round % 3],
+            };
+            let mut l = list(&beams);
+            if round % 5 == 0 && n > 0 {
+                // An element that is not a float reads as NaN.
+                let Value::List(items) = &mut l else {
+                    unreachable!()
+                };
+                let i = (next() % n as u64) as usize;
+                Arc::make_mut(items)[i] = Value::Int(1);
+                let mut b = beams.clone();
+                b[i] = f64::NAN;
+                check_against(&l, &reference::Scan { beams: b, ..r }, &bounds, &mut next);
+            } else {
+                check_against(&l, &r, &bounds, &mut next);
+            }
+        }
+    }
+
+    fn check_against(
+        l: &Value,
+        r: &reference::Scan,
+        bounds: &[f64],
+        next: &mut impl FnMut() -> u64,
+    ) {
+        let (rmin, rmax, g) = (
+            Value::Float(r.rmin),
+            Value::Float(r.rmax),
+            Value::Float(r.gamma),
+        );
+        let n = r.beams.len();
+        let want_drop = (0..n).filter(|i| !r.valid(*i)).count() as i64;
+        assert_eq!(
+            dropouts(&[l.clone(), rmin.clone(), rmax.clone()]),
+            Value::Int(want_drop)
+        );
+        let want_spikes = (0..n).filter(|i| r.spike(*i)).count() as i64;
+        let base = [l.clone(), rmin, rmax, g];
+        assert_eq!(spikes(&base), Value::Int(want_spikes), "{:?}", r.beams);
+        for _ in 0..6 {
+            let from = bounds[(next() % bounds.len() as u64) as usize];
+            let to = bounds[(next() % bounds.len() as u64) as usize];
+            let mut a = base.to_vec();
+            a.extend([Value::Float(from), Value::Float(to)]);
+            let (Value::Float(m), Value::Float(f)) = (sector_min(&a), sector_valid_fraction(&a))
+            else {
+                panic!("not floats")
+            };
+            assert_eq!(
+                m.to_bits(),
+                r.sector_min(from, to).to_bits(),
+                "{from}..{to} {:?}",
+                r.beams
+            );
+            assert_eq!(
+                f.to_bits(),
+                r.sector_valid_fraction(from, to).to_bits(),
+                "{from}..{to} {:?}",
+                r.beams
+            );
+        }
     }
 
     #[test]
