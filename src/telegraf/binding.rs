@@ -174,7 +174,11 @@ impl InputBinding {
                         reason: "internal: the list to fill is shared".to_string(),
                     })),
                 };
-                SPARE_LIST.set(Some(list));
+                // An absurdly long scan (up to MAX_INDEX beams) is not kept: the spare would hold
+                // its memory for the rest of the run.
+                if list.capacity() <= SPARE_MAX {
+                    SPARE_LIST.set(Some(list));
+                }
                 out
             }
         }
@@ -267,6 +271,9 @@ fn beam(v: &FieldValue) -> f64 {
 
 /// Largest index an indexed pattern accepts: an absurd index must not allocate gigabytes.
 const MAX_INDEX: usize = 1_000_000;
+
+/// Longest list kept as a thread's spare (a 360-beam scan is far below; an absurd index is not).
+const SPARE_MAX: usize = 4096;
 
 thread_local! {
     /// The list value of the last scan gathered on this thread, kept to be filled again: once the
