@@ -260,22 +260,29 @@ pub fn write_float(out: &mut String, f: f64) {
     let mut buf = zmij::Buffer::new();
     let s = buf.format_finite(f);
     // Usual case: zmij wrote plain decimal form `-?\d+\.\d+` (at most 17 significant digits).
+    // Its exponent form ends in `e` and at most four more bytes (`1e21`, `1.5e-308`), so only
+    // the tail is searched for it; the point is looked for (a short loop, not `str::find`'s
+    // searcher) only where a tie is possible.
     let body = s.strip_prefix('-').unwrap_or(s);
-    if !body.bytes().any(|b| b == b'e')
-        && let Some(dot) = body.find('.')
-    {
-        let frac_len = body.len() - dot - 1;
-        if body.ends_with(".0") {
+    let bytes = body.as_bytes();
+    if !bytes.iter().rev().take(5).any(|&b| b == b'e') {
+        if bytes.ends_with(b".0") {
             // A whole number: below 2^53 exact, above it even, never halfway at this digit.
             if body.len() < 18 {
                 out.push_str(s.get(..s.len() - 2).unwrap_or(s));
                 return;
             }
-        } else if body.len() < 17 || !is_tie(f, body.bytes(), -(frac_len as i32) - 1) {
+        } else if body.len() < 17 {
+            // Too few digits for a tie (see below).
             out.push_str(s);
             return;
-        } else {
-            let _ = write!(out, "{f}");
+        } else if let Some(dot) = bytes.iter().position(|&b| b == b'.') {
+            let frac_len = body.len() - dot - 1;
+            if !is_tie(f, body.bytes(), -(frac_len as i32) - 1) {
+                out.push_str(s);
+            } else {
+                let _ = write!(out, "{f}");
+            }
             return;
         }
     }
