@@ -127,8 +127,11 @@ pub struct Scratch {
     /// Per encoding: its measurement escaped (`None`: not writable) and `key=` escaped
     /// (`None`: not writable).
     prepared: Vec<(Option<String>, Option<String>)>,
+    /// Per encoding: the metric its fields go to, as the first encoding index of that metric
+    /// (a connector output is its own metric; the others share one per measurement).
+    metric: Vec<usize>,
     /// Metrics in first-appearance order: (the encoding index that opened it, is a connector
-    /// metric).
+    /// metric); for a step of plain values, (its `metric` index, unused).
     groups: Vec<(usize, bool)>,
     /// Every written field: (its metric's position in `groups`, its encoding index, its value,
     /// the member path when it is a member of a record or tuple output).
@@ -161,6 +164,35 @@ fn prepare(enc: &Encoding, default_measurement: &str) -> (Option<String>, Option
     (m, k)
 }
 
+/// One output event of a step: the output's index and its value (`(output, value)`, or the
+/// processor's `(ts, output, value)`).
+pub trait StepEvent {
+    fn output(&self) -> usize;
+    fn value(&self) -> &Value;
+}
+
+impl StepEvent for (usize, Value) {
+    #[inline]
+    fn output(&self) -> usize {
+        self.0
+    }
+    #[inline]
+    fn value(&self) -> &Value {
+        &self.1
+    }
+}
+
+impl StepEvent for (i64, usize, Value) {
+    #[inline]
+    fn output(&self) -> usize {
+        self.1
+    }
+    #[inline]
+    fn value(&self) -> &Value {
+        &self.2
+    }
+}
+
 /// Encode the events of one step (all at `ts`) into `out`; returns the dropped values.
 pub fn encode_step(
     ts: i64,
@@ -184,31 +216,194 @@ pub fn encode_step(
 
 /// [`encode_step`] with buffers and escaped names kept in `scratch` between steps. The line is
 /// the one [`lineproto::LineWriter`] writes (a test compares them).
-pub fn encode_step_with(
+pub fn encode_step_with<E: StepEvent>(
     scratch: &mut Scratch,
     ts: i64,
-    events: &[(usize, Value)],
+    events: &[E],
+    encodings: &[Encoding],
+    default_measurement: &str,
+    tags: &[(String, String)],
+    out: &mut Vec<u8>,
+) -> Vec<Dropped> {
+    if scratch.prepared.len() != encodings.len() {
+        scratch.prepared = encodings
+            .iter()
+            .map(|e| prepare(e, default_measurement))
+            .collect();
+        scratch.metric = metrics(encodings, default_measurement);
+    }
+    if events
+        .iter()
+        .any(|e| matches!(e.value(), Value::Record(_) | Value::Tuple(_)))
+    {
+        encode_members(
+            scratch,
+            ts,
+            events,
+            encodings,
+            default_measurement,
+            tags,
+            out,
+        )
+    } else {
+        encode_leaves(
+            scratch,
+            ts,
+            events,
+            encodings,
+            default_measurement,
+            tags,
+            out,
+        )
+    }
+}
+
+/// Per encoding, the first encoding index of the metric its fields go to.
+fn metrics(encodings: &[Encoding], default_measurement: &str) -> Vec<usize> {
+    encodings
+        .iter()
+        .enumerate()
+        .map(|(i, e)| {
+            let (m, _, connector) = target(e, default_measurement);
+            if connector {
+                return i;
+            }
+            encodings
+                .iter()
+                .position(|o| {
+                    let (om, _, oc) = target(o, default_measurement);
+                    !oc && om == m
+                })
+                .unwrap_or(i)
+        })
+        .collect()
+}
+
+/// The scalar a value is written as (`Some(x)` as `x`), if it has a line-protocol form.
+#[inline]
+fn writable_leaf(v: &Value) -> Option<&Value> {
+    match v {
+        Value::Unit | Value::Bool(_) | Value::Int(_) | Value::Str(_) => Some(v),
+        Value::Float(f) if f.is_finite() => Some(v),
+        Value::Some(x) => writable_leaf(x),
+        _ => None,
+    }
+}
+
+/// Append a scalar from [`writable_leaf`] in line-protocol form (what [`field_value`] and
+/// [`lineproto::write_value`] write, without the intermediate [`FieldValue`]).
+#[inline]
+fn write_leaf(line: &mut String, v: &Value) {
+    match v {
+        Value::Unit => line.push_str("true"),
+        Value::Bool(b) => line.push_str(if *b { "true" } else { "false" }),
+        Value::Int(i) => lineproto::write::write_int(line, *i),
+        Value::Float(f) => lineproto::write_float(line, *f),
+        Value::Str(s) => lineproto::write::write_string(line, s),
+        _ => {}
+    }
+}
+
+/// [`encode_step_with`] for a step without record or tuple values (every value is one field):
+/// metrics told apart by index, values written straight into the line.
+fn encode_leaves<E: StepEvent>(
+    scratch: &mut Scratch,
+    ts: i64,
+    events: &[E],
     encodings: &[Encoding],
     default_measurement: &str,
     tags: &[(String, String)],
     out: &mut Vec<u8>,
 ) -> Vec<Dropped> {
     let mut dropped = Vec::new();
-    if scratch.prepared.len() != encodings.len() {
-        scratch.prepared = encodings
-            .iter()
-            .map(|e| prepare(e, default_measurement))
-            .collect();
+    let Scratch {
+        prepared,
+        metric,
+        groups,
+        line,
+        ..
+    } = scratch;
+    groups.clear();
+    // Metrics in first-appearance order of a written value; dropped values in event order.
+    for e in events {
+        let idx = e.output();
+        let Some(&g) = metric.get(idx) else {
+            continue;
+        };
+        let v = e.value();
+        if writable_leaf(v).is_none() {
+            if let (Err(reason), Some(enc)) = (field_value(v), encodings.get(idx)) {
+                let (measurement, field, connector) = target(enc, default_measurement);
+                dropped.push(Dropped {
+                    output: (if connector { measurement } else { field }).to_string(),
+                    reason,
+                });
+            }
+            continue;
+        }
+        if !groups.iter().any(|&(m, _)| m == g) {
+            groups.push((g, false));
+        }
     }
+    for &(g, _) in groups.iter() {
+        let Some((Some(measurement), _)) = prepared.get(g) else {
+            continue;
+        };
+        line.clear();
+        line.push_str(measurement);
+        for (k, v) in tags {
+            if lineproto::name_is_writable(k) && lineproto::name_is_writable(v) {
+                line.push(',');
+                lineproto::write_tag_key(line, k);
+                line.push('=');
+                lineproto::write_tag_value(line, v);
+            }
+        }
+        let mut sep = ' ';
+        for e in events {
+            let idx = e.output();
+            if metric.get(idx) != Some(&g) {
+                continue;
+            }
+            if let (Some(v), Some((_, Some(key)))) = (writable_leaf(e.value()), prepared.get(idx)) {
+                line.push(sep);
+                line.push_str(key);
+                write_leaf(line, v);
+                sep = ',';
+            }
+        }
+        if sep == ',' {
+            line.push(' ');
+            lineproto::write_timestamp(line, ts);
+            line.push('\n');
+            out.extend_from_slice(line.as_bytes());
+        }
+    }
+    dropped
+}
+
+/// [`encode_step_with`] for a step with record or tuple values (one field per member).
+fn encode_members<E: StepEvent>(
+    scratch: &mut Scratch,
+    ts: i64,
+    events: &[E],
+    encodings: &[Encoding],
+    default_measurement: &str,
+    tags: &[(String, String)],
+    out: &mut Vec<u8>,
+) -> Vec<Dropped> {
+    let mut dropped = Vec::new();
     let Scratch {
         prepared,
         groups,
         fields,
         line,
+        ..
     } = scratch;
     groups.clear();
     fields.clear();
-    for (idx, v) in events {
+    for e in events {
+        let (idx, v) = (&e.output(), e.value());
         let Some(enc) = encodings.get(*idx) else {
             continue;
         };
@@ -441,6 +636,22 @@ mod tests {
                 String::from_utf8_lossy(&expected)
             );
             assert_eq!(d.len(), 1, "{d:?}");
+            // The general path (records and tuples) writes the same for these plain values.
+            let mut general = Vec::new();
+            let dg = encode_members(
+                &mut scratch,
+                42,
+                &events,
+                &encodings,
+                "tessla",
+                &tags,
+                &mut general,
+            );
+            assert_eq!(
+                String::from_utf8_lossy(&general),
+                String::from_utf8_lossy(&out)
+            );
+            assert_eq!(dg, d);
         }
     }
 }

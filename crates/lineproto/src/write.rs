@@ -221,27 +221,33 @@ pub fn write_value(out: &mut String, value: &FieldValue) -> Result<(), NotFinite
     match value {
         FieldValue::Float(f) if !f.is_finite() => return Err(NotFinite),
         FieldValue::Float(f) => write_float(out, *f),
-        FieldValue::Int(i) => {
-            out.push_str(itoa::Buffer::new().format(*i));
-            out.push('i');
-        }
+        FieldValue::Int(i) => write_int(out, *i),
         FieldValue::UInt(u) => {
             out.push_str(itoa::Buffer::new().format(*u));
             out.push('u');
         }
         FieldValue::Bool(b) => out.push_str(if *b { "true" } else { "false" }),
-        FieldValue::Str(s) => {
-            out.push('"');
-            for c in s.chars() {
-                if c == '"' || c == '\\' {
-                    out.push('\\');
-                }
-                out.push(c);
-            }
-            out.push('"');
-        }
+        FieldValue::Str(s) => write_string(out, s),
     }
     Ok(())
+}
+
+/// Append an Int field value (`-5i`).
+pub fn write_int(out: &mut String, i: i64) {
+    out.push_str(itoa::Buffer::new().format(i));
+    out.push('i');
+}
+
+/// Append a String field value, quoted, `"` and `\` escaped.
+pub fn write_string(out: &mut String, s: &str) {
+    out.push('"');
+    for c in s.chars() {
+        if c == '"' || c == '\\' {
+            out.push('\\');
+        }
+        out.push(c);
+    }
+    out.push('"');
 }
 
 /// Append a finite float exactly as Rust's `Display` writes it: the shortest digits that read
