@@ -266,12 +266,14 @@ pub fn write_float(out: &mut String, f: f64) {
     let mut buf = zmij::Buffer::new();
     let s = buf.format_finite(f);
     // Usual case: zmij wrote plain decimal form `-?\d+\.\d+` (at most 17 significant digits).
-    // Its exponent form ends in `e` and at most four more bytes (`1e21`, `1.5e-308`), so only
-    // the tail is searched for it; the point is looked for (a short loop, not `str::find`'s
+    // Its exponent form ends in `e` and two to four more bytes (`1e21`, `1.5e-308`), so only
+    // those four places are looked at; the point is looked for (a short loop, not `str::find`'s
     // searcher) only where a tie is possible.
     let body = s.strip_prefix('-').unwrap_or(s);
     let bytes = body.as_bytes();
-    if !bytes.iter().rev().take(5).any(|&b| b == b'e') {
+    let n = bytes.len();
+    let at = |back: usize| n.checked_sub(back).and_then(|i| bytes.get(i)) == Some(&b'e');
+    if !(at(2) || at(3) || at(4) || at(5)) {
         if bytes.ends_with(b".0") {
             // A whole number: below 2^53 exact, above it even, never halfway at this digit.
             if body.len() < 18 {
