@@ -130,6 +130,9 @@ pub struct Scratch {
     /// Per encoding: the metric its fields go to, as the first encoding index of that metric
     /// (a connector output is its own metric; the others share one per measurement).
     metric: Vec<usize>,
+    /// The metric every output goes to, when there is one and its measurement is writable
+    /// (the usual case: outputs without annotations).
+    one_metric: Option<usize>,
     /// Metrics in first-appearance order: (the encoding index that opened it, is a connector
     /// metric); for a step of plain values, (its `metric` index, unused).
     groups: Vec<(usize, bool)>,
@@ -231,6 +234,10 @@ pub fn encode_step_with<E: StepEvent>(
             .map(|e| prepare(e, default_measurement))
             .collect();
         scratch.metric = metrics(encodings, default_measurement);
+        scratch.one_metric = scratch.metric.first().copied().filter(|&g| {
+            scratch.metric.iter().all(|&m| m == g)
+                && scratch.prepared.get(g).is_some_and(|p| p.0.is_some())
+        });
     }
     if events
         .iter()
@@ -319,33 +326,43 @@ fn encode_leaves<E: StepEvent>(
     let Scratch {
         prepared,
         metric,
+        one_metric,
         groups,
         line,
         ..
     } = scratch;
-    groups.clear();
-    // Metrics in first-appearance order of a written value; dropped values in event order.
-    for e in events {
-        let idx = e.output();
-        let Some(&g) = metric.get(idx) else {
-            continue;
-        };
-        let v = e.value();
-        if writable_leaf(v).is_none() {
-            if let (Err(reason), Some(enc)) = (field_value(v), encodings.get(idx)) {
-                let (measurement, field, connector) = target(enc, default_measurement);
-                dropped.push(Dropped {
-                    output: (if connector { measurement } else { field }).to_string(),
-                    reason,
-                });
-            }
-            continue;
+    // Why a value without a line-protocol form is dropped.
+    let drop_value = |dropped: &mut Vec<Dropped>, idx: usize, v: &Value| {
+        if let (Err(reason), Some(enc)) = (field_value(v), encodings.get(idx)) {
+            let (measurement, field, connector) = target(enc, default_measurement);
+            dropped.push(Dropped {
+                output: (if connector { measurement } else { field }).to_string(),
+                reason,
+            });
         }
-        if !groups.iter().any(|&(m, _)| m == g) {
-            groups.push((g, false));
+    };
+    groups.clear();
+    if let Some(g) = *one_metric {
+        // One metric: dropped values are found (in event order) while it is written.
+        groups.push((g, true));
+    } else {
+        // Metrics in first-appearance order of a written value; dropped values in event order.
+        for e in events {
+            let idx = e.output();
+            let Some(&g) = metric.get(idx) else {
+                continue;
+            };
+            let v = e.value();
+            if writable_leaf(v).is_none() {
+                drop_value(&mut dropped, idx, v);
+                continue;
+            }
+            if !groups.iter().any(|&(m, _)| m == g) {
+                groups.push((g, false));
+            }
         }
     }
-    for &(g, _) in groups.iter() {
+    for &(g, report) in groups.iter() {
         let Some((Some(measurement), _)) = prepared.get(g) else {
             continue;
         };
@@ -365,11 +382,15 @@ fn encode_leaves<E: StepEvent>(
             if metric.get(idx) != Some(&g) {
                 continue;
             }
-            if let (Some(v), Some((_, Some(key)))) = (writable_leaf(e.value()), prepared.get(idx)) {
-                line.push(sep);
-                line.push_str(key);
-                write_leaf(line, v);
-                sep = ',';
+            match (writable_leaf(e.value()), prepared.get(idx)) {
+                (Some(v), Some((_, Some(key)))) => {
+                    line.push(sep);
+                    line.push_str(key);
+                    write_leaf(line, v);
+                    sep = ',';
+                }
+                (None, _) if report => drop_value(&mut dropped, idx, e.value()),
+                _ => {}
             }
         }
         if sep == ',' {
@@ -653,5 +674,43 @@ mod tests {
             );
             assert_eq!(dg, d);
         }
+    }
+
+    /// Outputs that all go to one metric (no annotations): the line and the dropped values, in
+    /// event order, are those of the general path.
+    #[test]
+    fn one_metric_steps_match_the_general_path() {
+        let encodings: Vec<Encoding> = ["a", "b", "c", "d", "e"]
+            .iter()
+            .map(|n| Encoding::Default((*n).to_string()))
+            .collect();
+        let steps = [
+            vec![
+                (0, Value::Float(f64::NAN)),
+                (1, Value::Int(3)),
+                (2, Value::None),
+                (3, Value::Error(tessla_engine::RuntimeError::DivisionByZero)),
+                (4, Value::Float(0.25)),
+                (9, Value::Int(1)),
+            ],
+            vec![(2, Value::Float(f64::INFINITY))],
+            vec![(4, Value::Str(Arc::from("x\"y"))), (0, Value::Bool(true))],
+        ];
+        let mut scratch = Scratch::default();
+        let mut n_dropped = 0;
+        for events in &steps {
+            let (mut fast, mut general) = (Vec::new(), Vec::new());
+            let d = encode_step_with(&mut scratch, 5, events, &encodings, "m", &[], &mut fast);
+            let dg = encode_members(&mut scratch, 5, events, &encodings, "m", &[], &mut general);
+            assert_eq!(
+                String::from_utf8_lossy(&fast),
+                String::from_utf8_lossy(&general)
+            );
+            assert_eq!(d, dg);
+            n_dropped += d.len();
+        }
+        // NaN, the error value and infinity.
+        assert_eq!(n_dropped, 3);
+        assert!(scratch.one_metric.is_some());
     }
 }
