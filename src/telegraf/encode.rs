@@ -127,8 +127,14 @@ pub struct Scratch {
     /// Per encoding: its measurement escaped (`None`: not writable) and `key=` escaped
     /// (`None`: not writable).
     prepared: Vec<(Option<String>, Option<String>)>,
+    /// Per encoding: the metric its fields go to, as the first encoding index of that metric
+    /// (a connector output is its own metric; the others share one per measurement).
+    metric: Vec<usize>,
+    /// The metric every output goes to, when there is one and its measurement is writable
+    /// (the usual case: outputs without annotations).
+    one_metric: Option<usize>,
     /// Metrics in first-appearance order: (the encoding index that opened it, is a connector
-    /// metric).
+    /// metric); for a step of plain values, (its `metric` index, unused).
     groups: Vec<(usize, bool)>,
     /// Every written field: (its metric's position in `groups`, its encoding index, its value,
     /// the member path when it is a member of a record or tuple output).
@@ -161,6 +167,35 @@ fn prepare(enc: &Encoding, default_measurement: &str) -> (Option<String>, Option
     (m, k)
 }
 
+/// One output event of a step: the output's index and its value (`(output, value)`, or the
+/// processor's `(ts, output, value)`).
+pub trait StepEvent {
+    fn output(&self) -> usize;
+    fn value(&self) -> &Value;
+}
+
+impl StepEvent for (usize, Value) {
+    #[inline]
+    fn output(&self) -> usize {
+        self.0
+    }
+    #[inline]
+    fn value(&self) -> &Value {
+        &self.1
+    }
+}
+
+impl StepEvent for (i64, usize, Value) {
+    #[inline]
+    fn output(&self) -> usize {
+        self.1
+    }
+    #[inline]
+    fn value(&self) -> &Value {
+        &self.2
+    }
+}
+
 /// Encode the events of one step (all at `ts`) into `out`; returns the dropped values.
 pub fn encode_step(
     ts: i64,
@@ -184,31 +219,212 @@ pub fn encode_step(
 
 /// [`encode_step`] with buffers and escaped names kept in `scratch` between steps. The line is
 /// the one [`lineproto::LineWriter`] writes (a test compares them).
-pub fn encode_step_with(
+pub fn encode_step_with<E: StepEvent>(
     scratch: &mut Scratch,
     ts: i64,
-    events: &[(usize, Value)],
+    events: &[E],
+    encodings: &[Encoding],
+    default_measurement: &str,
+    tags: &[(String, String)],
+    out: &mut Vec<u8>,
+) -> Vec<Dropped> {
+    if scratch.prepared.len() != encodings.len() {
+        scratch.prepared = encodings
+            .iter()
+            .map(|e| prepare(e, default_measurement))
+            .collect();
+        scratch.metric = metrics(encodings, default_measurement);
+        scratch.one_metric = scratch.metric.first().copied().filter(|&g| {
+            scratch.metric.iter().all(|&m| m == g)
+                && scratch.prepared.get(g).is_some_and(|p| p.0.is_some())
+        });
+    }
+    if events
+        .iter()
+        .any(|e| matches!(e.value(), Value::Record(_) | Value::Tuple(_)))
+    {
+        encode_members(
+            scratch,
+            ts,
+            events,
+            encodings,
+            default_measurement,
+            tags,
+            out,
+        )
+    } else {
+        encode_leaves(
+            scratch,
+            ts,
+            events,
+            encodings,
+            default_measurement,
+            tags,
+            out,
+        )
+    }
+}
+
+/// Per encoding, the first encoding index of the metric its fields go to.
+fn metrics(encodings: &[Encoding], default_measurement: &str) -> Vec<usize> {
+    encodings
+        .iter()
+        .enumerate()
+        .map(|(i, e)| {
+            let (m, _, connector) = target(e, default_measurement);
+            if connector {
+                return i;
+            }
+            encodings
+                .iter()
+                .position(|o| {
+                    let (om, _, oc) = target(o, default_measurement);
+                    !oc && om == m
+                })
+                .unwrap_or(i)
+        })
+        .collect()
+}
+
+/// The scalar a value is written as (`Some(x)` as `x`), if it has a line-protocol form.
+#[inline]
+fn writable_leaf(v: &Value) -> Option<&Value> {
+    match v {
+        Value::Unit | Value::Bool(_) | Value::Int(_) | Value::Str(_) => Some(v),
+        Value::Float(f) if f.is_finite() => Some(v),
+        Value::Some(x) => writable_leaf(x),
+        _ => None,
+    }
+}
+
+/// Append a scalar from [`writable_leaf`] in line-protocol form (what [`field_value`] and
+/// [`lineproto::write_value`] write, without the intermediate [`FieldValue`]).
+#[inline]
+fn write_leaf(line: &mut String, v: &Value) {
+    match v {
+        Value::Unit => line.push_str("true"),
+        Value::Bool(b) => line.push_str(if *b { "true" } else { "false" }),
+        Value::Int(i) => lineproto::write::write_int(line, *i),
+        Value::Float(f) => lineproto::write_float(line, *f),
+        Value::Str(s) => lineproto::write::write_string(line, s),
+        _ => {}
+    }
+}
+
+/// [`encode_step_with`] for a step without record or tuple values (every value is one field):
+/// metrics told apart by index, values written straight into the line.
+fn encode_leaves<E: StepEvent>(
+    scratch: &mut Scratch,
+    ts: i64,
+    events: &[E],
     encodings: &[Encoding],
     default_measurement: &str,
     tags: &[(String, String)],
     out: &mut Vec<u8>,
 ) -> Vec<Dropped> {
     let mut dropped = Vec::new();
-    if scratch.prepared.len() != encodings.len() {
-        scratch.prepared = encodings
-            .iter()
-            .map(|e| prepare(e, default_measurement))
-            .collect();
+    let Scratch {
+        prepared,
+        metric,
+        one_metric,
+        groups,
+        line,
+        ..
+    } = scratch;
+    // Why a value without a line-protocol form is dropped.
+    let drop_value = |dropped: &mut Vec<Dropped>, idx: usize, v: &Value| {
+        if let (Err(reason), Some(enc)) = (field_value(v), encodings.get(idx)) {
+            let (measurement, field, connector) = target(enc, default_measurement);
+            dropped.push(Dropped {
+                output: (if connector { measurement } else { field }).to_string(),
+                reason,
+            });
+        }
+    };
+    groups.clear();
+    if let Some(g) = *one_metric {
+        // One metric: dropped values are found (in event order) while it is written.
+        groups.push((g, true));
+    } else {
+        // Metrics in first-appearance order of a written value; dropped values in event order.
+        for e in events {
+            let idx = e.output();
+            let Some(&g) = metric.get(idx) else {
+                continue;
+            };
+            let v = e.value();
+            if writable_leaf(v).is_none() {
+                drop_value(&mut dropped, idx, v);
+                continue;
+            }
+            if !groups.iter().any(|&(m, _)| m == g) {
+                groups.push((g, false));
+            }
+        }
     }
+    for &(g, report) in groups.iter() {
+        let Some((Some(measurement), _)) = prepared.get(g) else {
+            continue;
+        };
+        line.clear();
+        line.push_str(measurement);
+        for (k, v) in tags {
+            if lineproto::name_is_writable(k) && lineproto::name_is_writable(v) {
+                line.push(',');
+                lineproto::write_tag_key(line, k);
+                line.push('=');
+                lineproto::write_tag_value(line, v);
+            }
+        }
+        let mut sep = ' ';
+        for e in events {
+            let idx = e.output();
+            if metric.get(idx) != Some(&g) {
+                continue;
+            }
+            match (writable_leaf(e.value()), prepared.get(idx)) {
+                (Some(v), Some((_, Some(key)))) => {
+                    line.push(sep);
+                    line.push_str(key);
+                    write_leaf(line, v);
+                    sep = ',';
+                }
+                (None, _) if report => drop_value(&mut dropped, idx, e.value()),
+                _ => {}
+            }
+        }
+        if sep == ',' {
+            line.push(' ');
+            lineproto::write_timestamp(line, ts);
+            line.push('\n');
+            out.extend_from_slice(line.as_bytes());
+        }
+    }
+    dropped
+}
+
+/// [`encode_step_with`] for a step with record or tuple values (one field per member).
+fn encode_members<E: StepEvent>(
+    scratch: &mut Scratch,
+    ts: i64,
+    events: &[E],
+    encodings: &[Encoding],
+    default_measurement: &str,
+    tags: &[(String, String)],
+    out: &mut Vec<u8>,
+) -> Vec<Dropped> {
+    let mut dropped = Vec::new();
     let Scratch {
         prepared,
         groups,
         fields,
         line,
+        ..
     } = scratch;
     groups.clear();
     fields.clear();
-    for (idx, v) in events {
+    for e in events {
+        let (idx, v) = (&e.output(), e.value());
         let Some(enc) = encodings.get(*idx) else {
             continue;
         };
@@ -441,6 +657,60 @@ mod tests {
                 String::from_utf8_lossy(&expected)
             );
             assert_eq!(d.len(), 1, "{d:?}");
+            // The general path (records and tuples) writes the same for these plain values.
+            let mut general = Vec::new();
+            let dg = encode_members(
+                &mut scratch,
+                42,
+                &events,
+                &encodings,
+                "tessla",
+                &tags,
+                &mut general,
+            );
+            assert_eq!(
+                String::from_utf8_lossy(&general),
+                String::from_utf8_lossy(&out)
+            );
+            assert_eq!(dg, d);
         }
+    }
+
+    /// Outputs that all go to one metric (no annotations): the line and the dropped values, in
+    /// event order, are those of the general path.
+    #[test]
+    fn one_metric_steps_match_the_general_path() {
+        let encodings: Vec<Encoding> = ["a", "b", "c", "d", "e"]
+            .iter()
+            .map(|n| Encoding::Default((*n).to_string()))
+            .collect();
+        let steps = [
+            vec![
+                (0, Value::Float(f64::NAN)),
+                (1, Value::Int(3)),
+                (2, Value::None),
+                (3, Value::Error(tessla_engine::RuntimeError::DivisionByZero)),
+                (4, Value::Float(0.25)),
+                (9, Value::Int(1)),
+            ],
+            vec![(2, Value::Float(f64::INFINITY))],
+            vec![(4, Value::Str(Arc::from("x\"y"))), (0, Value::Bool(true))],
+        ];
+        let mut scratch = Scratch::default();
+        let mut n_dropped = 0;
+        for events in &steps {
+            let (mut fast, mut general) = (Vec::new(), Vec::new());
+            let d = encode_step_with(&mut scratch, 5, events, &encodings, "m", &[], &mut fast);
+            let dg = encode_members(&mut scratch, 5, events, &encodings, "m", &[], &mut general);
+            assert_eq!(
+                String::from_utf8_lossy(&fast),
+                String::from_utf8_lossy(&general)
+            );
+            assert_eq!(d, dg);
+            n_dropped += d.len();
+        }
+        // NaN, the error value and infinity.
+        assert_eq!(n_dropped, 3);
+        assert!(scratch.one_metric.is_some());
     }
 }

@@ -104,8 +104,6 @@ struct Emitter {
     encodings: Vec<Encoding>,
     measurement: String,
     events: Vec<(i64, usize, Value)>,
-    /// Scratch: one timestamp's events.
-    step: Vec<(usize, Value)>,
     /// Scratch: the encoder's buffers.
     encode: encode::Scratch,
 }
@@ -157,7 +155,6 @@ impl Processor {
                 encodings,
                 measurement: opts.measurement.clone(),
                 events: Vec::new(),
-                step: Vec::new(),
                 encode: encode::Scratch::default(),
             },
             keep: opts.max_instances.max(1),
@@ -584,20 +581,17 @@ impl Emitter {
         if self.events.is_empty() {
             return;
         }
-        let mut events = std::mem::take(&mut self.events);
-        let mut step = std::mem::take(&mut self.step);
-        let mut it = events.drain(..).peekable();
-        while let Some((ts, o, v)) = it.next() {
-            step.clear();
-            step.push((o, v));
-            while let Some((o, v)) = it.next_if(|e| e.0 == ts).map(|(_, o, v)| (o, v)) {
-                step.push((o, v));
-            }
+        let mut rest = &self.events[..];
+        while let Some(&(ts, _, _)) = rest.first() {
+            // One timestamp's events, encoded in place.
+            let n = rest.iter().take_while(|e| e.0 == ts).count();
+            let (step, tail) = rest.split_at(n);
+            rest = tail;
             counters.outputs += step.len() as u64;
             let dropped = encode::encode_step_with(
                 &mut self.encode,
                 ts,
-                &step,
+                step,
                 &self.encodings,
                 &self.measurement,
                 tags,
@@ -610,11 +604,8 @@ impl Emitter {
                 });
             }
         }
-        drop(it);
-        step.clear();
-        // Keep the buffers' capacity for the next step.
-        self.events = events;
-        self.step = step;
+        // Keep the buffer's capacity for the next step.
+        self.events.clear();
     }
 }
 

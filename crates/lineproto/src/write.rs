@@ -221,27 +221,33 @@ pub fn write_value(out: &mut String, value: &FieldValue) -> Result<(), NotFinite
     match value {
         FieldValue::Float(f) if !f.is_finite() => return Err(NotFinite),
         FieldValue::Float(f) => write_float(out, *f),
-        FieldValue::Int(i) => {
-            out.push_str(itoa::Buffer::new().format(*i));
-            out.push('i');
-        }
+        FieldValue::Int(i) => write_int(out, *i),
         FieldValue::UInt(u) => {
             out.push_str(itoa::Buffer::new().format(*u));
             out.push('u');
         }
         FieldValue::Bool(b) => out.push_str(if *b { "true" } else { "false" }),
-        FieldValue::Str(s) => {
-            out.push('"');
-            for c in s.chars() {
-                if c == '"' || c == '\\' {
-                    out.push('\\');
-                }
-                out.push(c);
-            }
-            out.push('"');
-        }
+        FieldValue::Str(s) => write_string(out, s),
     }
     Ok(())
+}
+
+/// Append an Int field value (`-5i`).
+pub fn write_int(out: &mut String, i: i64) {
+    out.push_str(itoa::Buffer::new().format(i));
+    out.push('i');
+}
+
+/// Append a String field value, quoted, `"` and `\` escaped.
+pub fn write_string(out: &mut String, s: &str) {
+    out.push('"');
+    for c in s.chars() {
+        if c == '"' || c == '\\' {
+            out.push('\\');
+        }
+        out.push(c);
+    }
+    out.push('"');
 }
 
 /// Append a finite float exactly as Rust's `Display` writes it: the shortest digits that read
@@ -260,22 +266,31 @@ pub fn write_float(out: &mut String, f: f64) {
     let mut buf = zmij::Buffer::new();
     let s = buf.format_finite(f);
     // Usual case: zmij wrote plain decimal form `-?\d+\.\d+` (at most 17 significant digits).
+    // Its exponent form ends in `e` and two to four more bytes (`1e21`, `1.5e-308`), so only
+    // those four places are looked at; the point is looked for (a short loop, not `str::find`'s
+    // searcher) only where a tie is possible.
     let body = s.strip_prefix('-').unwrap_or(s);
-    if !body.bytes().any(|b| b == b'e')
-        && let Some(dot) = body.find('.')
-    {
-        let frac_len = body.len() - dot - 1;
-        if body.ends_with(".0") {
+    let bytes = body.as_bytes();
+    let n = bytes.len();
+    let at = |back: usize| n.checked_sub(back).and_then(|i| bytes.get(i)) == Some(&b'e');
+    if !(at(2) || at(3) || at(4) || at(5)) {
+        if bytes.ends_with(b".0") {
             // A whole number: below 2^53 exact, above it even, never halfway at this digit.
             if body.len() < 18 {
                 out.push_str(s.get(..s.len() - 2).unwrap_or(s));
                 return;
             }
-        } else if body.len() < 17 || !is_tie(f, body.bytes(), -(frac_len as i32) - 1) {
+        } else if body.len() < 17 {
+            // Too few digits for a tie (see below).
             out.push_str(s);
             return;
-        } else {
-            let _ = write!(out, "{f}");
+        } else if let Some(dot) = bytes.iter().position(|&b| b == b'.') {
+            let frac_len = body.len() - dot - 1;
+            if !is_tie(f, body.bytes(), -(frac_len as i32) - 1) {
+                out.push_str(s);
+            } else {
+                let _ = write!(out, "{f}");
+            }
             return;
         }
     }

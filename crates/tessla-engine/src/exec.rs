@@ -240,7 +240,13 @@ impl Fast {
     pub fn run(&self, args: &[&Value]) -> Option<Value> {
         Some(match self {
             Fast::Binary(op, a, b) => binary(*op, a.get(args)?, b.get(args)?),
-            Fast::Unary(op, a) => ops::unary_value(*op, a.get(args)?),
+            Fast::Unary(op, a) => {
+                let a = a.get(args)?;
+                match ops::unary_fast(*op, a) {
+                    Some(r) => r,
+                    None => ops::unary_value(*op, a),
+                }
+            }
             Fast::Native1(f, a) => call_native(*f, &[a.get(args)?.clone()]),
             Fast::Native2(f, a, b) => {
                 call_native(*f, &[a.get(args)?.clone(), b.get(args)?.clone()])
@@ -359,6 +365,9 @@ pub fn binary(op: BinOp, a: &Value, b: &Value) -> Value {
     if let Some(sop) = scalar_op(op)
         && let Some(r) = sop.eval_values(a, b)
     {
+        return r;
+    }
+    if let Some(r) = ops::eq_values(op, a, b) {
         return r;
     }
     ops::binary_value(op, a, b)

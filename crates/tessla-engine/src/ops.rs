@@ -179,6 +179,34 @@ pub fn unary_value(op: UnaryOp, a: &Value) -> Value {
     })
 }
 
+/// `==` and `!=` on two scalars of the same kind (Float, Int, Bool), computed inline; `None`
+/// for anything else (the general path, [`binary_value`], decides).
+#[inline(always)]
+pub fn eq_values(op: BinOp, a: &Value, b: &Value) -> Option<Value> {
+    let eq = match (a, b) {
+        (Value::Float(x), Value::Float(y)) => x == y,
+        (Value::Int(x), Value::Int(y)) => x == y,
+        (Value::Bool(x), Value::Bool(y)) => x == y,
+        _ => return None,
+    };
+    match op {
+        BinOp::Eq => Some(Value::Bool(eq)),
+        BinOp::Ne => Some(Value::Bool(!eq)),
+        _ => None,
+    }
+}
+
+/// `!b` and `-.f` computed inline; `None` for anything else (the general path,
+/// [`unary_value`], decides).
+#[inline(always)]
+pub fn unary_fast(op: UnaryOp, a: &Value) -> Option<Value> {
+    match (op, a) {
+        (UnaryOp::Not, Value::Bool(b)) => Some(Value::Bool(!b)),
+        (UnaryOp::FNeg, Value::Float(f)) => Some(Value::Float(-f)),
+        _ => None,
+    }
+}
+
 /// TeSSLa's `Operators.<name>` functions as natives (`slift(x, y, Operators.add)`); missing
 /// operands are Unit, which no operator accepts.
 pub mod natives {
@@ -450,6 +478,37 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn the_inline_equality_and_negation_agree_with_the_general_path() {
+        for op in ALL {
+            for a in samples() {
+                for b in samples() {
+                    if let Some(fast) = eq_values(op, &a, &b) {
+                        assert!(matches!(op, BinOp::Eq | BinOp::Ne));
+                        assert_eq!(
+                            format!("{fast:?}"),
+                            format!("{:?}", binary_value(op, &a, &b)),
+                            "{op:?} on {a:?}, {b:?}"
+                        );
+                    }
+                }
+            }
+        }
+        for op in [UnaryOp::Not, UnaryOp::BitNot, UnaryOp::Neg, UnaryOp::FNeg] {
+            for a in samples() {
+                if let Some(fast) = unary_fast(op, &a) {
+                    assert_eq!(
+                        format!("{fast:?}"),
+                        format!("{:?}", unary_value(op, &a)),
+                        "{op:?} on {a:?}"
+                    );
+                }
+            }
+        }
+        assert!(eq_values(BinOp::Ne, &Value::Float(0.5), &Value::Float(0.25)).is_some());
+        assert!(unary_fast(UnaryOp::Not, &Value::Bool(true)).is_some());
     }
 
     #[test]
