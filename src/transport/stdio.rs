@@ -173,7 +173,7 @@ impl Shards {
         let spans = rec
             .bytes
             .split_last()
-            .is_some_and(|(_, head)| head.contains(&b'\n'));
+            .is_some_and(|(_, head)| memchr::memchr(b'\n', head).is_some());
         if spans && !rec.oversized && lineproto::parse_record(rec.bytes).is_err() {
             for (line, part) in (rec.line..).zip(rec.bytes.split_inclusive(|&b| b == b'\n')) {
                 self.route(RecordRef {
