@@ -7,9 +7,10 @@
 //!
 //! With `--threads N` and `--instance-by`, instances are spread over N threads ([`Shards`]): each
 //! read's records are routed by instance key (one instance always to the same thread), every
-//! thread steps its records, and the read's outputs are written once all threads are done, so a
-//! record is still answered before the next read. Each instance's outputs keep their order; the
-//! order between instances within one read follows the threads. The records are handed over
+//! thread steps its records, and the read's outputs are written once all threads are done (one
+//! `writev`, the workers' outputs not copied behind the reader's), so a record is still
+//! answered before the next read. Each instance's outputs keep their order; the order between
+//! instances within one read follows the threads. The records are handed over
 //! in one reused byte buffer per thread (no allocation per record). A thread waiting for the
 //! other side spins briefly before it sleeps ([`SPIN`]): waking a sleeping thread costs more
 //! than the wait between two reads while records flow.
@@ -199,8 +200,8 @@ impl Shards {
         }
     }
 
-    /// Step the routed records (then flush every shard when `flush`), appending the outputs to
-    /// `out`.
+    /// Step the routed records (then flush every shard when `flush`): shard 0's outputs are
+    /// appended to `out`, the workers' kept in `outs` for [`write_out`].
     fn process(
         &mut self,
         proc: &mut Processor,
@@ -228,10 +229,6 @@ impl Shards {
             self.workers.get_mut(shard - 1).ok_or_else(lost)?.proc = Some(p);
             *self.batches.get_mut(shard).ok_or_else(lost)? = batch;
             *self.outs.get_mut(shard).ok_or_else(lost)? = o;
-        }
-        for o in self.outs.iter_mut().skip(1) {
-            out.extend_from_slice(o);
-            o.clear();
         }
         Ok(())
     }
@@ -329,7 +326,7 @@ async fn run_shards(
             _ = sighup.recv() => {
                 on_hangup(proc, &mut out);
                 shards.each(|p| on_hangup(p, &mut out));
-                if write_out(&mut out).is_err() {
+                if write_out(&mut out, &mut shards.outs).is_err() {
                     return Ok(Ending::OutputClosed);
                 }
                 continue;
@@ -351,7 +348,7 @@ async fn run_shards(
             splitter.push_with(bytes, |rec| shards.route(rec));
             shards.process(proc, n < BUF, &mut out)?;
         }
-        if write_out(&mut out).is_err() {
+        if write_out(&mut out, &mut shards.outs).is_err() {
             return Ok(Ending::OutputClosed);
         }
     };
@@ -359,18 +356,45 @@ async fn run_shards(
         shards.route(rec.view());
     }
     shards.process(proc, true, &mut out)?;
-    if write_out(&mut out).is_err() {
+    if write_out(&mut out, &mut shards.outs).is_err() {
         return Ok(Ending::OutputClosed);
     }
     Ok(ending)
 }
 
-fn write_out(out: &mut Vec<u8>) -> std::io::Result<()> {
-    if out.is_empty() {
-        return Ok(());
+/// Write `out` and then the workers' outputs (`outs[1..]`) with one `writev`, and flush;
+/// empties them all (the workers' outputs are not copied behind `out` first).
+fn write_out(out: &mut Vec<u8>, outs: &mut [Vec<u8>]) -> std::io::Result<()> {
+    use std::io::IoSlice;
+    let mut slices: Vec<IoSlice<'_>> = std::iter::once(out.as_slice())
+        .chain(outs.iter().skip(1).map(Vec::as_slice))
+        .filter(|s| !s.is_empty())
+        .map(IoSlice::new)
+        .collect();
+    let mut r = Ok(());
+    if !slices.is_empty() {
+        let mut stdout = std::io::stdout().lock();
+        let mut rest = slices.as_mut_slice();
+        while !rest.is_empty() {
+            match stdout.write_vectored(rest) {
+                Ok(0) => {
+                    r = Err(std::io::ErrorKind::WriteZero.into());
+                    break;
+                }
+                Ok(n) => IoSlice::advance_slices(&mut rest, n),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => {
+                    r = Err(e);
+                    break;
+                }
+            }
+        }
+        r = r.and_then(|()| stdout.flush());
     }
-    let mut stdout = std::io::stdout().lock();
-    let r = stdout.write_all(out).and_then(|()| stdout.flush());
+    drop(slices);
     out.clear();
+    for o in outs.iter_mut().skip(1) {
+        o.clear();
+    }
     r
 }
