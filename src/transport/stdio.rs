@@ -157,6 +157,10 @@ impl Shards {
                 .map_err(|e| format!("cannot start a worker thread: {e}"))?;
             let mut sibling = proc.sibling()?;
             sibling.keep_instances(share(shard));
+            // The wiring diagnostics watch the first thread's records only: closed before a
+            // record is seen, a worker's check reports nothing (its first 1,000 records would
+            // cost it 239k instructions each, and every thread would warn about the same input).
+            sibling.finish_wiring();
             workers.push(Worker {
                 tx: Some(tx),
                 proc: Some(Box::new(sibling)),
