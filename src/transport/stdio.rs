@@ -25,7 +25,7 @@
 
 use super::{Ending, Hooks};
 use crate::telegraf::instances::shard_of;
-use crate::telegraf::processor::Processor;
+use crate::telegraf::processor::{MAX_OPEN_STEPS, Processor};
 use lineproto::{RecordRef, RecordSplitter};
 use std::io::Write;
 use std::sync::mpsc;
@@ -132,7 +132,12 @@ impl Shards {
             threads.clamp(1, total)
         };
         let share = |shard: usize| total / threads + usize::from(shard < total % threads);
+        // The steps held open are split the same way: together the threads hold (and keep in
+        // memory) as many as one thread.
+        let open =
+            |shard: usize| MAX_OPEN_STEPS / threads + usize::from(shard < MAX_OPEN_STEPS % threads);
         proc.keep_instances(share(0));
+        proc.keep_open_steps(open(0));
         let (done_tx, done) = mpsc::channel::<Done>();
         let mut workers = Vec::new();
         for shard in 1..threads {
@@ -157,6 +162,7 @@ impl Shards {
                 .map_err(|e| format!("cannot start a worker thread: {e}"))?;
             let mut sibling = proc.sibling()?;
             sibling.keep_instances(share(shard));
+            sibling.keep_open_steps(open(shard));
             // The wiring diagnostics watch the first thread's records only: closed before a
             // record is seen, a worker's check reports nothing (its first 1,000 records would
             // cost it 239k instructions each, and every thread would warn about the same input).
