@@ -108,8 +108,9 @@ impl Batch {
             };
             p.record_ref(rec, out);
         }
-        // A batch that held a very long record does not keep its memory.
-        if self.bytes.capacity() > 16 * BUF {
+        // A batch that held a very long record does not keep its memory (a read's worth of
+        // records, up to 1 MiB, it keeps).
+        if self.bytes.capacity() > 4 * THREADS_BUF {
             self.bytes = Vec::new();
         }
         self.bytes.clear();
