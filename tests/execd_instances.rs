@@ -346,3 +346,61 @@ fn threads_keep_the_output_set_and_each_instances_order() {
         assert!(err.contains("303 instances"), "{err}");
     }
 }
+
+/// The same over many reads: a fleet larger than one read (records cut by read boundaries), with
+/// an unbalanced quote that swallows the lines after it (taken apart line by line, each line to
+/// its own instance's thread), a record longer than the limit (skipped once, not once per
+/// thread), a record without the instance tag, and a last record without a newline (it comes
+/// out of the splitter when the input ends): the output set, each instance's order and the
+/// summary's counts are those of one thread.
+#[test]
+fn threads_agree_with_one_thread_over_many_reads() {
+    let mut input = String::new();
+    for round in 0..40 {
+        for r in 0..200 {
+            input.push_str(&format!(
+                "mqtt_consumer,host=h,topic=fleet/r{r} expectedSpeed=0.05,actualSpeed=\"0.0{}\" {}\n",
+                (r + round) % 9 + 1,
+                1_800_000_000_000_000_000i64 + round * 200_000_000 + r
+            ));
+            if round == 7 && r == 50 {
+                input.push_str("mqtt_consumer,host=h,topic=fleet/r50 actualSpeed=\"0.01 1\n");
+            }
+            if round == 9 && r == 3 {
+                input.push_str("mqtt_consumer,host=h expectedSpeed=0.05 1800000001800000000\n");
+            }
+        }
+    }
+    let huge = format!(
+        "mqtt_consumer,topic=fleet/r9 note=\"{}\" 1800000001000000000\n",
+        "x".repeat(16 * 1024 * 1024)
+    );
+    let cut = input.len() / 2;
+    let cut = cut + input[cut..].find('\n').unwrap() + 1;
+    input.insert_str(cut, &huge);
+    input.pop();
+    assert!(input.len() > 16 * 1024 * 1024 + 8 * 65536);
+    let summary = |err: &str| {
+        err.lines()
+            .find(|l| l.contains("summary:"))
+            .map(str::to_string)
+    };
+    let (one, err, code) = run(&["--instance-by", "topic", "--threads", "1"], &input);
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("parse error"), "{err}");
+    for threads in ["2", "3"] {
+        let (many, err_many, code) = run(&["--instance-by", "topic", "--threads", threads], &input);
+        assert_eq!(code, 0, "{err_many}");
+        assert_eq!(
+            sorted_lines(&one),
+            sorted_lines(&many),
+            "--threads {threads}"
+        );
+        assert_eq!(
+            per_instance(&one),
+            per_instance(&many),
+            "--threads {threads}"
+        );
+        assert_eq!(summary(&err), summary(&err_many), "--threads {threads}");
+    }
+}

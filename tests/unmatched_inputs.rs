@@ -158,3 +158,32 @@ fn a_well_wired_run_warns_about_nothing() {
     assert_eq!(code, 0);
     assert!(warnings(&err).is_empty(), "{err}");
 }
+
+/// With `--threads 2` the instances live in two threads, but a miswired input is still warned
+/// about once: only the first thread's records are watched.
+#[test]
+fn a_misnamed_field_is_reported_once_over_threads() {
+    let p2 = spec("p2_tolerance.tessla");
+    let mut input = String::new();
+    for i in 0..3000 {
+        input.push_str(&format!(
+            "mqtt_consumer,host=tb3,topic=robot{} expectedSpeed=0.1,actual_speed=0.05 {}\n",
+            i % 8,
+            i + 1
+        ));
+    }
+    let args = [
+        "--spec",
+        &p2,
+        "--no-passthrough",
+        "--instance-by",
+        "topic",
+        "--threads",
+        "2",
+    ];
+    let (_, err, code) = run_all(&args, &input);
+    assert_eq!(code, 0, "{err}");
+    let w = warnings(&err);
+    assert_eq!(w.len(), 1, "{err}");
+    assert!(w[0].contains("did you mean `actual_speed`?"), "{}", w[0]);
+}

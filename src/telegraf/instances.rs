@@ -184,20 +184,29 @@ impl<T> Table<T> {
 /// Read from the raw series key when it holds no backslash or quote and no instance tag twice
 /// (the values are then exactly the parsed ones); otherwise from the parsed record. A record
 /// that does not parse goes to shard 0 (it only produces its error there).
+///
+/// It runs for every record of a `--threads` run: one pass over the series key, and `FxHasher` (rustc-hash: a multiply per
+/// word, the high bits rotated down by `finish`) instead of the keyed SipHash of `DefaultHasher`.
 pub fn shard_of(bytes: &[u8], instance_by: &[String], shards: usize) -> usize {
     use std::hash::{Hash, Hasher};
     if shards <= 1 {
         return 0;
     }
-    let mut h = std::collections::hash_map::DefaultHasher::new();
-    let end = bytes
-        .iter()
-        .position(|&b| b == b' ' || b == b'\t' || b == b'\n' || b == b'\r')
-        .unwrap_or(bytes.len());
+    let mut h = rustc_hash::FxHasher::default();
+    let mut plain = true;
+    let mut end = bytes.len();
+    for (i, &b) in bytes.iter().enumerate() {
+        match b {
+            b' ' | b'\t' | b'\n' | b'\r' => {
+                end = i;
+                break;
+            }
+            b'\\' | b'"' => plain = false,
+            _ => {}
+        }
+    }
     let series = bytes.get(..end).unwrap_or_default();
-    let plain = !series.is_empty()
-        && series.first() != Some(&b'#')
-        && !series.iter().any(|&b| b == b'\\' || b == b'"');
+    plain &= !series.is_empty() && series.first() != Some(&b'#');
     let mut from_raw = plain;
     if plain {
         for t in instance_by {
@@ -214,7 +223,7 @@ pub fn shard_of(bytes: &[u8], instance_by: &[String], shards: usize) -> usize {
         let Ok(Some(m)) = lineproto::parse_record(bytes) else {
             return 0;
         };
-        h = std::collections::hash_map::DefaultHasher::new();
+        h = rustc_hash::FxHasher::default();
         for t in instance_by {
             m.tag(t).map(str::as_bytes).hash(&mut h);
         }
@@ -338,5 +347,23 @@ mod tests {
             .collect();
         assert_eq!(used.len(), 2);
         assert_eq!(shard_of(b"m,robot=a x=1 1", &by, 1), 0);
+    }
+
+    /// A fleet's robots spread evenly: 10,000 robot names over 2, 3 and 4 shards, each shard
+    /// within 5% of its even part.
+    #[test]
+    fn shards_spread_a_fleet_evenly() {
+        let by = vec!["robot".to_string()];
+        for n in [2, 3, 4] {
+            let mut count = vec![0usize; n];
+            for r in 0..10_000 {
+                let line = format!("mqtt_consumer,host=dt,robot=tb3-{r:05},topic=t x=1 1\n");
+                count[shard_of(line.as_bytes(), &by, n)] += 1;
+            }
+            let even = 10_000 / n;
+            for c in &count {
+                assert!(c.abs_diff(even) * 20 < even, "{n} shards: {count:?}");
+            }
+        }
     }
 }

@@ -115,6 +115,8 @@ pub struct Processor {
     opts: Options,
     /// Most instances kept here: `--max-instances`, or this thread's share of it.
     keep: usize,
+    /// Most steps held open here: [`MAX_OPEN_STEPS`], or this thread's share of it.
+    keep_open: usize,
     pub counters: Counters,
     instances: Table<Instance>,
     /// Stands in for "now" when no idle limit needs the clock.
@@ -158,6 +160,7 @@ impl Processor {
                 encode: encode::Scratch::default(),
             },
             keep: opts.max_instances.max(1),
+            keep_open: MAX_OPEN_STEPS,
             opts,
             counters: Counters::default(),
             instances: Table::default(),
@@ -181,6 +184,12 @@ impl Processor {
     /// Keep at most `n` instances here (at least 1): a `--threads` shard's share of the total.
     pub fn keep_instances(&mut self, n: usize) {
         self.keep = n.max(1);
+    }
+
+    /// Hold at most `n` steps open here (at least 1): a `--threads` shard's share of
+    /// [`MAX_OPEN_STEPS`], so that the threads together hold as much as one.
+    pub fn keep_open_steps(&mut self, n: usize) {
+        self.keep_open = n.max(1);
     }
 
     /// The tags that select an instance (`--instance-by`).
@@ -423,7 +432,7 @@ impl Processor {
     /// evaluate the steps open longest. A later record of such an instance with the same
     /// timestamp is then late, as after a pause in the input.
     fn close_oldest_steps(&mut self, out: &mut Vec<u8>) {
-        while self.instances.open_count() > MAX_OPEN_STEPS {
+        while self.instances.open_count() > self.keep_open {
             let Some(i) = self.instances.take_oldest_open() else {
                 break;
             };

@@ -7,10 +7,13 @@
 //!
 //! With `--threads N` and `--instance-by`, instances are spread over N threads ([`Shards`]): each
 //! read's records are routed by instance key (one instance always to the same thread), every
-//! thread steps its records, and the read's outputs are written once all threads are done, so a
-//! record is still answered before the next read. Each instance's outputs keep their order; the
-//! order between instances within one read follows the threads. The records are handed over
-//! in one reused byte buffer per thread (no allocation per record).
+//! thread steps its records, and the read's outputs are written once all threads are done (one
+//! `writev`, the workers' outputs not copied behind the reader's), so a record is still
+//! answered before the next read. Each instance's outputs keep their order; the order between
+//! instances within one read follows the threads. The records are handed over
+//! in one reused byte buffer per thread (no allocation per record). A thread waiting for the
+//! other side spins briefly before it sleeps ([`SPIN`]): waking a sleeping thread costs more
+//! than the wait between two reads while records flow.
 //!
 //! On one thread the records are stepped straight from the read buffer as the splitter finds
 //! them (pass-through copies them from there).
@@ -22,13 +25,19 @@
 
 use super::{Ending, Hooks};
 use crate::telegraf::instances::shard_of;
-use crate::telegraf::processor::Processor;
+use crate::telegraf::processor::{MAX_OPEN_STEPS, Processor};
 use lineproto::{RecordRef, RecordSplitter};
 use std::io::Write;
 use std::sync::mpsc;
 use tokio::io::AsyncReadExt;
 
 const BUF: usize = 64 * 1024;
+/// With worker threads, a pipe on stdin is enlarged to this (`F_SETPIPE_SZ`; Linux allows up to
+/// 1 MiB without privileges) and read this much at a time: each read ends with every thread
+/// waiting for the slowest, and how many of the read's records each thread got varies from
+/// read to read, so fewer, larger reads lose less to that wait and to the wake-ups. One thread
+/// keeps 64 KiB reads (larger ones made it slower: the buffers leave the caches).
+const THREADS_BUF: usize = 1024 * 1024;
 
 /// Standard input: the pipe read directly when it is one, tokio's stdin otherwise.
 enum Input {
@@ -48,6 +57,18 @@ impl Input {
         match pipe {
             Ok(r) => Input::Pipe(r),
             Err(_) => Input::Other(tokio::io::stdin()),
+        }
+    }
+
+    /// Enlarge a pipe to `size` bytes; returns the read size that means "the pipe was full":
+    /// its new capacity (at most `size`), or [`BUF`] when stdin is not a pipe or cannot be
+    /// enlarged (a user over the kernel's pipe-buffer quota, an older kernel).
+    fn grow(&self, size: usize) -> usize {
+        match self {
+            Input::Pipe(r) => rustix::pipe::fcntl_setpipe_size(r, size)
+                .map(|cap| cap.clamp(BUF, size))
+                .unwrap_or(BUF),
+            Input::Other(_) => BUF,
         }
     }
 
@@ -87,8 +108,9 @@ impl Batch {
             };
             p.record_ref(rec, out);
         }
-        // A batch that held a very long record does not keep its memory.
-        if self.bytes.capacity() > 16 * BUF {
+        // A batch that held a very long record does not keep its memory (a read's worth of
+        // records, up to 1 MiB, it keeps).
+        if self.bytes.capacity() > 4 * THREADS_BUF {
             self.bytes = Vec::new();
         }
         self.bytes.clear();
@@ -129,7 +151,12 @@ impl Shards {
             threads.clamp(1, total)
         };
         let share = |shard: usize| total / threads + usize::from(shard < total % threads);
+        // The steps held open are split the same way: together the threads hold (and keep in
+        // memory) as many as one thread.
+        let open =
+            |shard: usize| MAX_OPEN_STEPS / threads + usize::from(shard < MAX_OPEN_STEPS % threads);
         proc.keep_instances(share(0));
+        proc.keep_open_steps(open(0));
         let (done_tx, done) = mpsc::channel::<Done>();
         let mut workers = Vec::new();
         for shard in 1..threads {
@@ -138,7 +165,10 @@ impl Shards {
             let handle = std::thread::Builder::new()
                 .name(format!("shard-{shard}"))
                 .spawn(move || {
-                    while let Ok((mut p, mut batch, mut out, flush)) = rx.recv() {
+                    // Spin for the next read only while records are flowing.
+                    let mut flowing = false;
+                    while let Ok((mut p, mut batch, mut out, flush)) = recv(&rx, flowing) {
+                        flowing = !flush;
                         batch.step(&mut p, &mut out);
                         if flush {
                             p.flush(&mut out);
@@ -151,6 +181,11 @@ impl Shards {
                 .map_err(|e| format!("cannot start a worker thread: {e}"))?;
             let mut sibling = proc.sibling()?;
             sibling.keep_instances(share(shard));
+            sibling.keep_open_steps(open(shard));
+            // The wiring diagnostics watch the first thread's records only: closed before a
+            // record is seen, a worker's check reports nothing (its first 1,000 records would
+            // cost it 239k instructions each, and every thread would warn about the same input).
+            sibling.finish_wiring();
             workers.push(Worker {
                 tx: Some(tx),
                 proc: Some(Box::new(sibling)),
@@ -173,7 +208,7 @@ impl Shards {
         let spans = rec
             .bytes
             .split_last()
-            .is_some_and(|(_, head)| head.contains(&b'\n'));
+            .is_some_and(|(_, head)| memchr::memchr(b'\n', head).is_some());
         if spans && !rec.oversized && lineproto::parse_record(rec.bytes).is_err() {
             for (line, part) in (rec.line..).zip(rec.bytes.split_inclusive(|&b| b == b'\n')) {
                 self.route(RecordRef {
@@ -194,8 +229,8 @@ impl Shards {
         }
     }
 
-    /// Step the routed records (then flush every shard when `flush`), appending the outputs to
-    /// `out`.
+    /// Step the routed records (then flush every shard when `flush`): shard 0's outputs are
+    /// appended to `out`, the workers' kept in `outs` for [`write_out`].
     fn process(
         &mut self,
         proc: &mut Processor,
@@ -219,14 +254,10 @@ impl Shards {
             proc.flush(out);
         }
         for _ in 0..self.workers.len() {
-            let (shard, p, batch, o) = self.done.recv().map_err(|_| lost())?;
+            let (shard, p, batch, o) = recv(&self.done, true).map_err(|_| lost())?;
             self.workers.get_mut(shard - 1).ok_or_else(lost)?.proc = Some(p);
             *self.batches.get_mut(shard).ok_or_else(lost)? = batch;
             *self.outs.get_mut(shard).ok_or_else(lost)? = o;
-        }
-        for o in self.outs.iter_mut().skip(1) {
-            out.extend_from_slice(o);
-            o.clear();
         }
         Ok(())
     }
@@ -255,6 +286,33 @@ impl Shards {
     }
 }
 
+/// How long a thread waiting for the other side spins before it sleeps: a sleeping thread
+/// takes 20 to 50 µs to run again once woken on a 2-core VM, a tenth of a 64 KiB read's work.
+/// The workers spin for the next read only while records are flowing (the last read filled the
+/// buffer); the reader always spins for the workers' answers.
+const SPIN: std::time::Duration = std::time::Duration::from_micros(100);
+
+/// Receive from `rx`, spinning up to [`SPIN`] first when `spin`.
+fn recv<T>(rx: &mpsc::Receiver<T>, spin: bool) -> Result<T, mpsc::RecvError> {
+    if spin {
+        let start = std::time::Instant::now();
+        loop {
+            match rx.try_recv() {
+                Ok(v) => return Ok(v),
+                Err(mpsc::TryRecvError::Disconnected) => return Err(mpsc::RecvError),
+                Err(mpsc::TryRecvError::Empty) => {}
+            }
+            if start.elapsed() >= SPIN {
+                break;
+            }
+            for _ in 0..32 {
+                std::hint::spin_loop();
+            }
+        }
+    }
+    rx.recv()
+}
+
 /// Run until EOF, a signal, or a closed stdout. Pending steps are always evaluated and written.
 /// `threads` > 1 spreads `--instance-by` instances over that many threads.
 pub async fn run(
@@ -275,7 +333,12 @@ async fn run_shards(
 ) -> std::io::Result<Ending> {
     let mut stdin = Input::open();
     let mut splitter = RecordSplitter::default();
-    let mut buf = vec![0u8; BUF];
+    let size = if shards.workers.is_empty() {
+        BUF
+    } else {
+        stdin.grow(THREADS_BUF)
+    };
+    let mut buf = vec![0u8; size];
     let mut out = Vec::with_capacity(BUF);
     let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
     let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())?;
@@ -297,7 +360,7 @@ async fn run_shards(
             _ = sighup.recv() => {
                 on_hangup(proc, &mut out);
                 shards.each(|p| on_hangup(p, &mut out));
-                if write_out(&mut out).is_err() {
+                if write_out(&mut out, &mut shards.outs).is_err() {
                     return Ok(Ending::OutputClosed);
                 }
                 continue;
@@ -312,14 +375,14 @@ async fn run_shards(
         if shards.workers.is_empty() {
             // One thread: each record straight from the read buffer (no copy per record).
             splitter.push_with(bytes, |rec| proc.record_ref(rec, &mut out));
-            if n < BUF {
+            if n < size {
                 proc.flush(&mut out);
             }
         } else {
             splitter.push_with(bytes, |rec| shards.route(rec));
-            shards.process(proc, n < BUF, &mut out)?;
+            shards.process(proc, n < size, &mut out)?;
         }
-        if write_out(&mut out).is_err() {
+        if write_out(&mut out, &mut shards.outs).is_err() {
             return Ok(Ending::OutputClosed);
         }
     };
@@ -327,18 +390,45 @@ async fn run_shards(
         shards.route(rec.view());
     }
     shards.process(proc, true, &mut out)?;
-    if write_out(&mut out).is_err() {
+    if write_out(&mut out, &mut shards.outs).is_err() {
         return Ok(Ending::OutputClosed);
     }
     Ok(ending)
 }
 
-fn write_out(out: &mut Vec<u8>) -> std::io::Result<()> {
-    if out.is_empty() {
-        return Ok(());
+/// Write `out` and then the workers' outputs (`outs[1..]`) with one `writev`, and flush;
+/// empties them all (the workers' outputs are not copied behind `out` first).
+fn write_out(out: &mut Vec<u8>, outs: &mut [Vec<u8>]) -> std::io::Result<()> {
+    use std::io::IoSlice;
+    let mut slices: Vec<IoSlice<'_>> = std::iter::once(out.as_slice())
+        .chain(outs.iter().skip(1).map(Vec::as_slice))
+        .filter(|s| !s.is_empty())
+        .map(IoSlice::new)
+        .collect();
+    let mut r = Ok(());
+    if !slices.is_empty() {
+        let mut stdout = std::io::stdout().lock();
+        let mut rest = slices.as_mut_slice();
+        while !rest.is_empty() {
+            match stdout.write_vectored(rest) {
+                Ok(0) => {
+                    r = Err(std::io::ErrorKind::WriteZero.into());
+                    break;
+                }
+                Ok(n) => IoSlice::advance_slices(&mut rest, n),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => {
+                    r = Err(e);
+                    break;
+                }
+            }
+        }
+        r = r.and_then(|()| stdout.flush());
     }
-    let mut stdout = std::io::stdout().lock();
-    let r = stdout.write_all(out).and_then(|()| stdout.flush());
+    drop(slices);
     out.clear();
+    for o in outs.iter_mut().skip(1) {
+        o.clear();
+    }
     r
 }
