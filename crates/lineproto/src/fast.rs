@@ -184,8 +184,10 @@ fn timestamp(digits: &str, neg: bool) -> Option<i64> {
 
 /// One field value at the cursor, consumed, written into `out` (a string slot keeps its buffer).
 /// The usual value, a short decimal float (360 in a lidar record), is tried first and written
-/// over the slot's float in place; anything else is read by [`other_value`].
-#[inline]
+/// over the slot's float in place; anything else is read by [`other_value`]. Forced inline: a
+/// call per field saved and restored six registers (callgrind, 3,000 lidar records through
+/// `parse_only`: 370.1M -> 362.3M instructions).
+#[inline(always)]
 fn value(c: &mut Cursor<'_>, out: &mut FieldValue) -> Option<()> {
     let Some((f, end)) = short_float(c.s.as_bytes(), c.i) else {
         return other_value(c, out);
