@@ -379,7 +379,12 @@ fn table_has_duplicate_keys(
     table: &mut [u64],
     stamp: u64,
 ) -> bool {
-    let mask = (fields.len() * 2).next_power_of_two() - 1;
+    // As an array, so that a slot index masked below its length needs no bounds check.
+    let Ok(table) = <&mut [u64; TABLE_SLOTS]>::try_from(table) else {
+        let mut keys = std::collections::HashSet::with_capacity(fields.len());
+        return !fields.iter().all(|(k, _)| keys.insert(k.as_str()));
+    };
+    let mask = ((fields.len() * 2).next_power_of_two() - 1) & (TABLE_SLOTS - 1);
     for (i, (k, _)) in fields.iter().enumerate() {
         let h = key_hash(k.as_bytes());
         // The stamp, 21 bits of the hash, the field's index + 1.
