@@ -46,14 +46,14 @@ impl<'a> Cursor<'a> {
         self.s.as_bytes().get(self.i).copied()
     }
 
-    /// A run of plain bytes (at least one). Found with `position` over the rest of the record
-    /// (a pointer walk) instead of indexing the record byte by byte: 364 names a lidar record,
-    /// callgrind 380.8M -> 370.1M instructions for 3,000 lidar records through `parse_only`.
+    /// A run of plain bytes (at least one).
     #[inline]
     fn name(&mut self) -> Option<&'a str> {
+        let b = self.s.as_bytes();
         let start = self.i;
-        let rest = self.s.as_bytes().get(start..).unwrap_or_default();
-        self.i = start + rest.iter().position(|&c| !plain(c)).unwrap_or(rest.len());
+        while b.get(self.i).is_some_and(|&c| plain(c)) {
+            self.i += 1;
+        }
         // Plain bytes stop only at ASCII delimiters, so both ends are character boundaries.
         (self.i > start)
             .then(|| self.s.get(start..self.i))
@@ -184,10 +184,8 @@ fn timestamp(digits: &str, neg: bool) -> Option<i64> {
 
 /// One field value at the cursor, consumed, written into `out` (a string slot keeps its buffer).
 /// The usual value, a short decimal float (360 in a lidar record), is tried first and written
-/// over the slot's float in place; anything else is read by [`other_value`]. Forced inline: a
-/// call per field saved and restored six registers (callgrind, 3,000 lidar records through
-/// `parse_only`: 370.1M -> 362.3M instructions).
-#[inline(always)]
+/// over the slot's float in place; anything else is read by [`other_value`].
+#[inline]
 fn value(c: &mut Cursor<'_>, out: &mut FieldValue) -> Option<()> {
     let Some((f, end)) = short_float(c.s.as_bytes(), c.i) else {
         return other_value(c, out);
@@ -379,12 +377,7 @@ fn table_has_duplicate_keys(
     table: &mut [u64],
     stamp: u64,
 ) -> bool {
-    // As an array, so that a slot index masked below its length needs no bounds check.
-    let Ok(table) = <&mut [u64; TABLE_SLOTS]>::try_from(table) else {
-        let mut keys = std::collections::HashSet::with_capacity(fields.len());
-        return !fields.iter().all(|(k, _)| keys.insert(k.as_str()));
-    };
-    let mask = ((fields.len() * 2).next_power_of_two() - 1) & (TABLE_SLOTS - 1);
+    let mask = (fields.len() * 2).next_power_of_two() - 1;
     for (i, (k, _)) in fields.iter().enumerate() {
         let h = key_hash(k.as_bytes());
         // The stamp, 21 bits of the hash, the field's index + 1.
