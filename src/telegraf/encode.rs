@@ -366,16 +366,7 @@ fn encode_leaves<E: StepEvent>(
         let Some((Some(measurement), _)) = prepared.get(g) else {
             continue;
         };
-        line.clear();
-        line.push_str(measurement);
-        for (k, v) in tags {
-            if lineproto::name_is_writable(k) && lineproto::name_is_writable(v) {
-                line.push(',');
-                lineproto::write_tag_key(line, k);
-                line.push('=');
-                lineproto::write_tag_value(line, v);
-            }
-        }
+        start_line(line, measurement, tags);
         let mut sep = ' ';
         for e in events {
             let idx = e.output();
@@ -394,10 +385,7 @@ fn encode_leaves<E: StepEvent>(
             }
         }
         if sep == ',' {
-            line.push(' ');
-            lineproto::write_timestamp(line, ts);
-            line.push('\n');
-            out.extend_from_slice(line.as_bytes());
+            end_line(line, ts, out);
         }
     }
     dropped
@@ -476,16 +464,7 @@ fn encode_members<E: StepEvent>(
         let Some((Some(measurement), _)) = prepared.get(first) else {
             continue;
         };
-        line.clear();
-        line.push_str(measurement);
-        for (k, v) in tags {
-            if lineproto::name_is_writable(k) && lineproto::name_is_writable(v) {
-                line.push(',');
-                lineproto::write_tag_key(line, k);
-                line.push('=');
-                lineproto::write_tag_value(line, v);
-            }
-        }
+        start_line(line, measurement, tags);
         let mut sep = ' ';
         for (_, i, v, path) in fields.iter().filter(|f| f.0 == g) {
             if let Some((_, Some(key))) = prepared.get(*i) {
@@ -526,13 +505,35 @@ fn encode_members<E: StepEvent>(
             }
         }
         if sep == ',' {
-            line.push(' ');
-            lineproto::write_timestamp(line, ts);
-            line.push('\n');
-            out.extend_from_slice(line.as_bytes());
+            end_line(line, ts, out);
         }
     }
     dropped
+}
+
+/// Start a verdict line in `line`: the measurement and the writable tags.
+#[inline]
+fn start_line(line: &mut String, measurement: &str, tags: &[(String, String)]) {
+    line.clear();
+    line.push_str(measurement);
+    for (k, v) in tags {
+        if lineproto::name_is_writable(k) && lineproto::name_is_writable(v) {
+            line.push(',');
+            lineproto::write_tag_key(line, k);
+            line.push('=');
+            lineproto::write_tag_value(line, v);
+        }
+    }
+}
+
+/// End a verdict line that has at least one field: the timestamp, the newline, then append it
+/// to `out`.
+#[inline]
+fn end_line(line: &mut String, ts: i64, out: &mut Vec<u8>) {
+    line.push(' ');
+    lineproto::write_timestamp(line, ts);
+    line.push('\n');
+    out.extend_from_slice(line.as_bytes());
 }
 
 #[cfg(test)]
