@@ -327,12 +327,21 @@ fn threads_keep_the_output_set_and_each_instances_order() {
             ));
         }
     }
-    let (one, err, code) = run(&["--instance-by", "topic", "--threads", "1"], &input);
-    assert_eq!(code, 0, "{err}");
+    let (one, _) = threads_agree_with_one(&input, |_, err_many| {
+        assert!(err_many.contains("303 instances"), "{err_many}");
+    });
     assert!(one.lines().count() > input.lines().count());
+}
+
+/// Runs `input` with `--instance-by topic` on 1, 2 and 3 threads and asserts that 2 and 3 threads
+/// write the same set of lines as one, each instance's lines in the same order; `check` gets the
+/// one-thread and the many-thread stderr. Returns the one-thread stdout and stderr.
+fn threads_agree_with_one(input: &str, check: impl Fn(&str, &str)) -> (String, String) {
+    let (one, err, code) = run(&["--instance-by", "topic", "--threads", "1"], input);
+    assert_eq!(code, 0, "{err}");
     for threads in ["2", "3"] {
-        let (many, err, code) = run(&["--instance-by", "topic", "--threads", threads], &input);
-        assert_eq!(code, 0, "{err}");
+        let (many, err_many, code) = run(&["--instance-by", "topic", "--threads", threads], input);
+        assert_eq!(code, 0, "{err_many}");
         assert_eq!(
             sorted_lines(&one),
             sorted_lines(&many),
@@ -343,8 +352,9 @@ fn threads_keep_the_output_set_and_each_instances_order() {
             per_instance(&many),
             "--threads {threads}"
         );
-        assert!(err.contains("303 instances"), "{err}");
+        check(&err, &err_many);
     }
+    (one, err)
 }
 
 /// The same over many reads: a fleet larger than one read (records cut by read boundaries), with
@@ -385,22 +395,8 @@ fn threads_agree_with_one_thread_over_many_reads() {
             .find(|l| l.contains("summary:"))
             .map(str::to_string)
     };
-    let (one, err, code) = run(&["--instance-by", "topic", "--threads", "1"], &input);
-    assert_eq!(code, 0, "{err}");
+    let (_, err) = threads_agree_with_one(&input, |err, err_many| {
+        assert_eq!(summary(err), summary(err_many));
+    });
     assert!(err.contains("parse error"), "{err}");
-    for threads in ["2", "3"] {
-        let (many, err_many, code) = run(&["--instance-by", "topic", "--threads", threads], &input);
-        assert_eq!(code, 0, "{err_many}");
-        assert_eq!(
-            sorted_lines(&one),
-            sorted_lines(&many),
-            "--threads {threads}"
-        );
-        assert_eq!(
-            per_instance(&one),
-            per_instance(&many),
-            "--threads {threads}"
-        );
-        assert_eq!(summary(&err), summary(&err_many), "--threads {threads}");
-    }
 }
