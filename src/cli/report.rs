@@ -10,18 +10,19 @@ pub struct ReportArgs {
     /// Line protocol written by `tessla-telegraf run` (pass-through telemetry and verdicts);
     /// `-` reads stdin.
     pub file: PathBuf,
-    /// Folder to write `index.html` and the SVG plots into (created when missing).
-    #[arg(
-        short = 'o',
-        long = "output",
-        value_name = "DIR",
-        required_unless_present = "summary"
-    )]
+    /// Folder to write `index.html` and the SVG plots into (created when missing); without it,
+    /// `report` (in the current folder), unless `--summary` or `--timeline` alone is asked for.
+    #[arg(short = 'o', long = "output", value_name = "DIR")]
     pub output: Option<PathBuf>,
     /// Print a short summary to stdout (steps, violations per property, augmented actions and
     /// why, the final MSE); without `-o`, write no files.
     #[arg(long)]
     pub summary: bool,
+    /// Print to stdout, before any summary, when each verdict changed and each run of augmented
+    /// actions with its reason and speeds (one line per time, at most 80 characters wide);
+    /// without `-o`, write no files.
+    #[arg(long)]
+    pub timeline: bool,
 }
 
 /// Run the subcommand.
@@ -37,14 +38,26 @@ pub fn run(args: ReportArgs) -> CliResult {
         })?;
         (text, args.file.display().to_string())
     };
-    let Some(output) = &args.output else {
-        let s = crate::report::summarize(&text);
-        print!("{}", s.text(&name));
-        return Ok(());
+    if args.timeline {
+        print!("{}", crate::report::timeline(&text, &name, 80));
+    }
+    let output = match (&args.output, args.summary || args.timeline) {
+        (Some(dir), _) => dir.clone(),
+        (None, false) => PathBuf::from("report"),
+        (None, true) => {
+            let s = crate::report::summarize(&text);
+            warn_missing(&s, &name);
+            if args.summary {
+                print!("{}", s.text(&name));
+            }
+            return Ok(());
+        }
     };
+    let output = &output;
     let written = crate::report::write_report(&text, &name, output)
         .map_err(|e| CliError::io(format!("report: {e}")))?;
     let s = &written.summary;
+    warn_missing(s, &name);
     if args.summary {
         print!("{}", s.text(&name));
     }
@@ -55,10 +68,38 @@ pub fn run(args: ReportArgs) -> CliResult {
     let mse = s
         .mse
         .map_or_else(|| "no data".to_string(), |v| format!("{v:.6e}"));
-    eprintln!(
-        "I! report: {} records; MSE expected/actual speed {mse}; P1 violated {} unknown {}; \
-         P2 violated {}; P3 spikes {} dropouts {}",
-        s.records, s.p1_violated, s.p1_unknown, s.p2_violations, s.p3_spikes, s.p3_dropouts
-    );
+    let mut line = format!("I! report: {} records", s.records);
+    if s.missing_robot.len() < 5 {
+        line.push_str(&format!(
+            "; MSE expected/actual speed {mse}; P1 violated {} unknown {}; P2 violated {}; \
+             P3 spikes {} dropouts {}",
+            s.p1_violated,
+            s.p1_unknown,
+            s.p2_violations,
+            crate::report::outputs::short(s.p3_spikes),
+            crate::report::outputs::short(s.p3_dropouts)
+        ));
+    }
+    if let Some(silence) = &s.silence {
+        line.push_str(&format!(
+            "; robot silent {} times, {} s",
+            silence.periods.len(),
+            crate::report::outputs::short(silence.total())
+        ));
+    }
+    eprintln!("{line}");
     Ok(())
+}
+
+/// One warning naming the robot spec's outputs the run lacks (the report then shows the spec's
+/// own outputs and verdicts, and leaves the robot's lines and plots out).
+fn warn_missing(s: &crate::report::stats::Summary, source: &str) {
+    if s.missing_robot.is_empty() {
+        return;
+    }
+    eprintln!(
+        "W! report: {source} lacks the robot spec's outputs {}: their counts and plots \
+         are left out; the spec's own outputs and verdicts are shown",
+        s.missing_robot.join(", ")
+    );
 }

@@ -96,6 +96,9 @@ pub fn run(args: RunArgs) -> CliResult {
         (None, None, Some(n)) => n,
         (None, None, None) => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
+    if let Some(listen) = &args.udp_listen {
+        check_udp(listen, &args.udp_send)?;
+    }
     let rt = runtime()?;
     let result = rt.block_on(async {
         match &args.udp_listen {
@@ -118,6 +121,27 @@ pub fn run(args: RunArgs) -> CliResult {
         save_state(path, &proc, &state_ctx, Level::Info);
     }
     finish(rt, result, &proc)
+}
+
+/// UDP mode's addresses, checked before anything runs, so a mistake names its flag and address
+/// (and no summary of a run that never started comes first): an address that does not resolve
+/// is a bad command line (exit 2), one that cannot be bound an I/O error (exit 3).
+fn check_udp(listen: &str, send: &str) -> CliResult {
+    use std::net::ToSocketAddrs;
+    let form = "expected HOST:PORT, e.g. 127.0.0.1:1653 or [::1]:1653";
+    for (flag, addr) in [("--udp-listen", listen), ("--udp-send", send)] {
+        if let Err(e) = addr.to_socket_addrs() {
+            return Err(CliError::spec(format!(
+                "{flag} {addr}: not a UDP address ({e}); {form}"
+            )));
+        }
+    }
+    std::net::UdpSocket::bind(listen).map(drop).map_err(|e| {
+        CliError::io(format!(
+            "{flag} {listen}: cannot listen there: {e}",
+            flag = "--udp-listen"
+        ))
+    })
 }
 
 /// The single-threaded runtime the transports run on.

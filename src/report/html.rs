@@ -93,6 +93,58 @@ pub fn page(source_name: &str, s: &Summary, plots: &[(&str, &str)], run: &Run) -
     ));
     out.push_str("</table>\n");
 
+    if let Some(silence) = &s.silence {
+        out.push_str("<h2>Robot silent</h2>\n<table id=\"silence\">\n");
+        out.push_str(&count_row(
+            "silent-periods",
+            "Periods without the robot's messages (robot_silent)",
+            silence.periods.len(),
+            None,
+        ));
+        out.push_str(&number_row(
+            "silent-total",
+            "Time without the robot's messages [s]",
+            Some(silence.total()),
+            super::outputs::short(silence.total()),
+        ));
+        out.push_str("</table>\n");
+    }
+    if !s.verdicts.is_empty() {
+        out.push_str("<h2>Verdicts</h2>\n<table id=\"verdicts\">\n");
+        for (name, counts) in &s.verdicts {
+            for (value, n) in counts {
+                out.push_str(&count_row(
+                    &format!("verdict-{name}-{value}"),
+                    &format!("{name} = {value}: steps"),
+                    *n,
+                    None,
+                ));
+            }
+        }
+        out.push_str("</table>\n");
+    }
+    if s.missing_robot.len() == 5 {
+        out.push_str(
+            "<p>The run has none of the robot spec's outputs: no robot counts or plots.</p>\n",
+        );
+    } else {
+        robot_rows(&mut out, s);
+    }
+    out.push_str("<h2>Plots</h2>\n");
+    for (file, title) in plots {
+        out.push_str(&format!(
+            "<figure><img src=\"{}\" alt=\"{}\"/><figcaption>{}</figcaption></figure>\n",
+            escape(file),
+            escape(title),
+            escape(title)
+        ));
+    }
+    out.push_str("</body>\n</html>\n");
+    out
+}
+
+/// The robot spec's violation counts.
+fn robot_rows(out: &mut String, s: &Summary) {
     out.push_str("<h2>Violations</h2>\n<table id=\"violations\">\n");
     out.push_str(&count_row(
         "p1-violated",
@@ -142,25 +194,15 @@ pub fn page(source_name: &str, s: &Summary, plots: &[(&str, &str)], run: &Run) -
         "p3-spikes",
         "P3 lidar: spikes in all scans",
         Some(s.p3_spikes),
-        format!("{}", s.p3_spikes),
+        super::outputs::short(s.p3_spikes),
     ));
     out.push_str(&number_row(
         "p3-dropouts",
         "P3 lidar: dropouts in all scans",
         Some(s.p3_dropouts),
-        format!("{}", s.p3_dropouts),
+        super::outputs::short(s.p3_dropouts),
     ));
-    out.push_str("</table>\n<h2>Plots</h2>\n");
-    for (file, title) in plots {
-        out.push_str(&format!(
-            "<figure><img src=\"{}\" alt=\"{}\"/><figcaption>{}</figcaption></figure>\n",
-            escape(file),
-            escape(title),
-            escape(title)
-        ));
-    }
-    out.push_str("</body>\n</html>\n");
-    out
+    out.push_str("</table>\n");
 }
 
 #[cfg(test)]

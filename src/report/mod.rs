@@ -8,6 +8,7 @@
 
 pub mod data;
 pub mod html;
+pub mod outputs;
 pub mod plots;
 pub mod series;
 pub mod stats;
@@ -29,6 +30,29 @@ pub fn summarize(text: &str) -> stats::Summary {
     stats::Summary::compute(&run, &picked)
 }
 
+/// The terminal view of `text` (line protocol): verdict changes, runs of augmented actions.
+pub fn timeline(text: &str, source: &str, width: usize) -> String {
+    let run = data::Run::parse(text);
+    let picked = series::Picked::from_run(&run);
+    let outputs = outputs::Outputs::from_run(&run);
+    let lines = outputs::timeline(&picked, &outputs, width);
+    if lines.is_empty() {
+        return format!("{source}: no verdicts and no augmented actions\n");
+    }
+    let start = run
+        .start_ns
+        .and_then(|ns| u64::try_from(ns).ok())
+        .map(|ns| {
+            let at = std::time::UNIX_EPOCH + std::time::Duration::from_nanos(ns);
+            format!(", {}", humantime::format_rfc3339_seconds(at))
+        })
+        .unwrap_or_default();
+    format!(
+        "{source}: when each verdict changed; the augmented actions\n\
+         (seconds from the first record{start})\n{lines}"
+    )
+}
+
 /// Read `text` (line protocol) and write `index.html` and the SVG plots into `dir`.
 pub fn write_report(text: &str, source_name: &str, dir: &Path) -> Result<Written, String> {
     let run = data::Run::parse(text);
@@ -36,13 +60,16 @@ pub fn write_report(text: &str, source_name: &str, dir: &Path) -> Result<Written
     let summary = stats::Summary::compute(&run, &picked);
     std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
     let mut svgs = Vec::new();
-    for plot in plots::render_all(&picked)? {
+    let outputs = outputs::Outputs::from_run(&run);
+    let rendered = plots::render_all(&picked, &outputs)?;
+    let titles: Vec<(&str, &str)> = rendered.iter().map(|p| (p.file_name, p.title)).collect();
+    for plot in &rendered {
         let path = dir.join(plot.file_name);
         std::fs::write(&path, &plot.svg)
             .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
         svgs.push(path);
     }
-    let page = html::page(source_name, &summary, &plots::FILES, &run);
+    let page = html::page(source_name, &summary, &titles, &run);
     let html_path = dir.join("index.html");
     std::fs::write(&html_path, page)
         .map_err(|e| format!("cannot write {}: {e}", html_path.display()))?;

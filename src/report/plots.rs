@@ -5,8 +5,14 @@
 //!   augmented actions marked (as the paper's figures) by reason, capped ones apart;
 //! - `p1.svg`: P1's margin `Ldist − Bdist` over time, each step coloured by its status;
 //! - `p3.svg`: P3's spikes and dropouts per scan;
-//! - `mse.svg`: the running MSE between expected and actual speed.
+//! - `mse.svg`: the running MSE between expected and actual speed;
+//! - `outputs.svg`: any spec's numeric outputs over time, one panel each;
+//! - `verdicts.svg`: any spec's verdicts, the steps per value counted up over time.
+//!
+//! The robot's charts are drawn only when the run has their data; the robot's silent periods
+//! (`robot_silent`) are shaded on them. Legends sit right of the plotting area, never on the data.
 
+use super::outputs::{Outputs, short};
 use super::series::Picked;
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
@@ -22,30 +28,56 @@ pub struct Plot {
 }
 
 /// File names and titles of the charts, in page order.
-pub const FILES: [(&str, &str); 4] = [
+pub const FILES: [(&str, &str); 6] = [
     ("speeds.svg", "Expected and actual speed, augmented actions"),
     ("p1.svg", "P1 braking distance: margin and status"),
     ("p3.svg", "P3 lidar: spikes and dropouts per scan"),
     ("mse.svg", "Running mean squared error of the speed"),
+    ("outputs.svg", "The spec's numeric outputs"),
+    (
+        "verdicts.svg",
+        "The spec's verdicts: steps per value, counted up",
+    ),
 ];
 
 const SIZE: (u32, u32) = (960, 420);
+/// Room right of the plotting area for the legend.
+const LEGEND_W: u32 = 200;
+/// Most panels in `outputs.svg` and lines in `verdicts.svg`.
+pub const MOST: usize = 12;
 const EXPECTED: RGBColor = RGBColor(31, 119, 180);
 const ACTUAL: RGBColor = RGBColor(214, 39, 40);
 const ACTION: RGBColor = RGBColor(44, 160, 44);
 const AUGMENTED: RGBColor = RGBColor(0, 0, 0);
 const UNKNOWN: RGBColor = RGBColor(150, 150, 150);
 const DROPOUT: RGBColor = RGBColor(255, 127, 14);
+const SILENT: RGBColor = RGBColor(148, 103, 189);
+const PALETTE: [RGBColor; 6] = [EXPECTED, ACTUAL, ACTION, DROPOUT, SILENT, AUGMENTED];
 
-/// All charts of [`FILES`], in that order.
-pub fn render_all(picked: &Picked) -> Result<Vec<Plot>, String> {
+/// The charts this run has data for, in [`FILES`] order.
+pub fn render_all(picked: &Picked, outputs: &Outputs) -> Result<Vec<Plot>, String> {
+    let has_speeds = !(picked.expected_speed.is_empty()
+        && picked.actual_speed.is_empty()
+        && picked.action_speed.is_empty());
+    let has_p1 = !(picked.p1_status.is_empty() && picked.p1_margin.is_empty());
+    let has_p3 = !(picked.p3_spikes.is_empty() && picked.p3_dropouts.is_empty());
+    let has_mse = !(picked.speed_mse.is_empty() && picked.running_mse.is_empty());
     let mut plots = Vec::new();
     for (file_name, title) in FILES {
         let svg = match file_name {
-            "speeds.svg" => render(title, |root| speeds(root, picked, title)),
-            "p1.svg" => render(title, |root| p1(root, picked, title)),
-            "p3.svg" => render(title, |root| p3(root, picked, title)),
-            _ => render(title, |root| mse(root, picked, title)),
+            "speeds.svg" if has_speeds => render(title, SIZE, |root| speeds(root, picked, title)),
+            "p1.svg" if has_p1 => render(title, SIZE, |root| p1(root, picked, title)),
+            "p3.svg" if has_p3 => render(title, SIZE, |root| p3(root, picked, title)),
+            "mse.svg" if has_mse => render(title, SIZE, |root| mse(root, picked, title)),
+            "outputs.svg" if !outputs.numeric.is_empty() => {
+                let panels = outputs.numeric.len().min(MOST) as u32;
+                let size = (SIZE.0, 60 + 150 * panels);
+                render(title, size, |root| numeric(root, picked, outputs, title))
+            }
+            "verdicts.svg" if !outputs.verdicts.is_empty() => {
+                render(title, SIZE, |root| verdicts(root, picked, outputs, title))
+            }
+            _ => continue,
         }?;
         plots.push(Plot {
             file_name,
@@ -59,10 +91,14 @@ pub fn render_all(picked: &Picked) -> Result<Vec<Plot>, String> {
 type Root<'a> = DrawingArea<SVGBackend<'a>, Shift>;
 type DrawResult = Result<(), Box<dyn std::error::Error + 'static>>;
 
-fn render(title: &str, draw: impl FnOnce(&Root<'_>) -> DrawResult) -> Result<String, String> {
+fn render(
+    title: &str,
+    size: (u32, u32),
+    draw: impl FnOnce(&Root<'_>) -> DrawResult,
+) -> Result<String, String> {
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, SIZE).into_drawing_area();
+        let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
         root.fill(&WHITE)
             .map_err(|e| format!("plot {title:?}: {e}"))?;
         draw(&root).map_err(|e| format!("plot {title:?}: {e}"))?;
@@ -103,13 +139,12 @@ fn time_span(picked: &Picked) -> Range<f64> {
         .chain(&picked.actual_speed.points)
         .chain(&picked.p1_margin.points)
         .chain(&picked.p3_spikes.points)
-        .map(|(t, _)| *t);
+        .chain(&picked.action_speed.points)
+        .chain(&picked.speed_mse.points)
+        .map(|(t, _)| *t)
+        .chain(picked.end_t);
     let r = span(times, true);
     0.0..r.end
-}
-
-fn legend(color: RGBColor) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
-    move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
 }
 
 type Chart<'a, 'b> = ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
@@ -126,6 +161,7 @@ fn chart<'a, 'b>(
     let mut chart = ChartBuilder::on(root)
         .caption(title, ("sans-serif", 20))
         .margin(12)
+        .margin_right(LEGEND_W)
         .x_label_area_size(40)
         .y_label_area_size(y_label_width)
         .build_cartesian_2d(time_span(picked), ys)?;
@@ -133,35 +169,107 @@ fn chart<'a, 'b>(
         .configure_mesh()
         .x_desc("time [s]")
         .y_desc(y_desc)
+        .x_label_formatter(&|v| short(*v))
+        .y_label_formatter(&|v| short(*v))
         .draw()?;
     Ok(chart)
+}
+
+/// Shade the robot's silent periods (`robot_silent`) over the whole height of `ys`.
+fn silent_periods(
+    chart: &mut Chart<'_, '_>,
+    legend: &mut Legend,
+    picked: &Picked,
+    ys: &Range<f64>,
+) -> DrawResult {
+    let Some(silence) = &picked.silence else {
+        return Ok(());
+    };
+    if silence.periods.is_empty() {
+        return Ok(());
+    }
+    let (lo, hi) = (ys.start, ys.end);
+    chart.draw_series(
+        silence
+            .periods
+            .iter()
+            .map(|(a, b)| Rectangle::new([(*a, lo), (*b, hi)], SILENT.mix(0.2).filled())),
+    )?;
+    legend.push(("robot silent".to_string(), Mark::Band(SILENT)));
+    Ok(())
 }
 
 /// A labelled line through `points`.
 fn line(
     chart: &mut Chart<'_, '_>,
+    legend: &mut Legend,
     points: &[(f64, f64)],
     color: RGBColor,
     width: u32,
     label: &str,
 ) -> DrawResult {
-    chart
-        .draw_series(LineSeries::new(
-            points.iter().copied(),
-            color.stroke_width(width),
-        ))?
-        .label(label)
-        .legend(legend(color));
+    chart.draw_series(LineSeries::new(
+        points.iter().copied(),
+        color.stroke_width(width),
+    ))?;
+    legend.push((label.to_string(), Mark::Line(color, width)));
     Ok(())
 }
 
-/// The legend box, drawn last.
-fn legend_box<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>) -> DrawResult {
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
+/// How a legend entry is drawn.
+#[derive(Clone, Copy)]
+enum Mark {
+    Line(RGBColor, u32),
+    Triangle(RGBColor),
+    Circle(RGBColor),
+    Band(RGBColor),
+}
+
+/// A chart's legend entries, in drawing order.
+type Legend = Vec<(String, Mark)>;
+
+/// The legend box, drawn last on `area` (a whole chart's area, in pixels) in the room right of
+/// the plotting area that [`chart`] keeps free ([`LEGEND_W`]), so it never covers the data.
+fn legend_box(area: &Root<'_>, legend: &Legend, top: i32) -> DrawResult {
+    if legend.is_empty() {
+        return Ok(());
+    }
+    let (width, _) = area.dim_in_pixel();
+    let x0 = width as i32 - LEGEND_W as i32 + 4;
+    let row = 18;
+    let h = row * legend.len() as i32 + 8;
+    let w = LEGEND_W as i32 - 12;
+    area.draw(&Rectangle::new(
+        [(x0, top), (x0 + w, top + h)],
+        WHITE.filled(),
+    ))?;
+    area.draw(&Rectangle::new([(x0, top), (x0 + w, top + h)], BLACK))?;
+    for (i, (label, mark)) in legend.iter().enumerate() {
+        let y = top + 4 + row * i as i32 + row / 2;
+        let (x, m) = (x0 + 6, x0 + 16);
+        match *mark {
+            Mark::Line(c, width) => area.draw(&PathElement::new(
+                vec![(x, y), (x + 20, y)],
+                c.stroke_width(width),
+            ))?,
+            Mark::Triangle(c) => area.draw(&TriangleMarker::new((m, y), 5, c.filled()))?,
+            Mark::Circle(c) => area.draw(&Circle::new((m, y), 3, c.filled()))?,
+            Mark::Band(c) => area.draw(&Rectangle::new(
+                [(x, y - 5), (x + 20, y + 5)],
+                c.mix(0.4).filled(),
+            ))?,
+        }
+        let text = if label.chars().count() > 24 {
+            format!("{}…", label.chars().take(23).collect::<String>())
+        } else {
+            label.clone()
+        };
+        area.draw(&Text::new(
+            text,
+            (x0 + 32, y - 6),
+            ("sans-serif", 12).into_font(),
+        ))?;
+    }
     Ok(())
 }
 
@@ -176,9 +284,13 @@ fn speeds(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
         .chain(&picked.actual_speed.points)
         .chain(&picked.action_speed.points)
         .map(|(_, v)| *v);
-    let mut chart = chart(root, picked, title, span(ys, true), "speed [m/s]", 64)?;
+    let ys = span(ys, true);
+    let mut legend = Legend::new();
+    let mut chart = chart(root, picked, title, ys.clone(), "speed [m/s]", 64)?;
+    silent_periods(&mut chart, &mut legend, picked, &ys)?;
     line(
         &mut chart,
+        &mut legend,
         &picked.expected_speed.points,
         EXPECTED,
         2,
@@ -186,6 +298,7 @@ fn speeds(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
     )?;
     line(
         &mut chart,
+        &mut legend,
         &picked.actual_speed.points,
         ACTUAL,
         2,
@@ -193,6 +306,7 @@ fn speeds(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
     )?;
     line(
         &mut chart,
+        &mut legend,
         &picked.action_speed.points,
         ACTION,
         1,
@@ -245,16 +359,15 @@ fn speeds(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
         if marks.is_empty() {
             continue;
         }
-        chart
-            .draw_series(
-                marks
-                    .into_iter()
-                    .map(move |p| TriangleMarker::new(p, 5, color.filled())),
-            )?
-            .label(label)
-            .legend(move |(x, y)| TriangleMarker::new((x + 10, y), 5, color.filled()));
+        chart.draw_series(
+            marks
+                .into_iter()
+                .map(move |p| TriangleMarker::new(p, 5, color.filled())),
+        )?;
+        legend.push((label.to_string(), Mark::Triangle(color)));
     }
-    legend_box(&mut chart)
+    drop(chart);
+    legend_box(root, &legend, 40)
 }
 
 fn status_color(status: &str) -> RGBColor {
@@ -268,13 +381,29 @@ fn status_color(status: &str) -> RGBColor {
 fn p1(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
     let ys = picked.p1_margin.points.iter().map(|(_, v)| *v);
     let ys = span(ys.chain([0.0]), false);
-    let mut chart = chart(root, picked, title, ys, "margin Ldist - Bdist [m]", 64)?;
+    let mut legend = Legend::new();
+    let mut chart = chart(
+        root,
+        picked,
+        title,
+        ys.clone(),
+        "margin Ldist - Bdist [m]",
+        64,
+    )?;
+    silent_periods(&mut chart, &mut legend, picked, &ys)?;
     let end = time_span(picked).end;
     chart.draw_series(LineSeries::new(
         vec![(0.0, 0.0), (end, 0.0)],
         BLACK.mix(0.5),
     ))?;
-    line(&mut chart, &picked.p1_margin.points, EXPECTED, 2, "margin")?;
+    line(
+        &mut chart,
+        &mut legend,
+        &picked.p1_margin.points,
+        EXPECTED,
+        2,
+        "margin",
+    )?;
     // Status at each step: on the margin curve where there is one, else on the zero line.
     for status in ["ok", "violated", "unknown"] {
         let color = status_color(status);
@@ -293,16 +422,15 @@ fn p1(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
                 (*t, y)
             })
             .collect();
-        chart
-            .draw_series(
-                points
-                    .into_iter()
-                    .map(|p| Circle::new(p, 3, color.filled())),
-            )?
-            .label(format!("status {status}"))
-            .legend(move |(x, y)| Circle::new((x + 10, y), 3, color.filled()));
+        chart.draw_series(
+            points
+                .into_iter()
+                .map(|p| Circle::new(p, 3, color.filled())),
+        )?;
+        legend.push((format!("status {status}"), Mark::Circle(color)));
     }
-    legend_box(&mut chart)
+    drop(chart);
+    legend_box(root, &legend, 40)
 }
 
 fn p3(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
@@ -312,12 +440,15 @@ fn p3(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
         .iter()
         .chain(&picked.p3_dropouts.points)
         .map(|(_, v)| *v);
-    let mut chart = chart(root, picked, title, span(ys, true), "beams per scan", 64)?;
+    let ys = span(ys, true);
+    let mut legend = Legend::new();
+    let mut chart = chart(root, picked, title, ys.clone(), "beams per scan", 64)?;
+    silent_periods(&mut chart, &mut legend, picked, &ys)?;
     for (series, color, label) in [
         (&picked.p3_spikes, ACTUAL, "spikes"),
         (&picked.p3_dropouts, DROPOUT, "dropouts"),
     ] {
-        line(&mut chart, &series.points, color, 1, label)?;
+        line(&mut chart, &mut legend, &series.points, color, 1, label)?;
         chart.draw_series(
             series
                 .points
@@ -325,7 +456,8 @@ fn p3(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
                 .map(|p| Circle::new(*p, 2, color.filled())),
         )?;
     }
-    legend_box(&mut chart)
+    drop(chart);
+    legend_box(root, &legend, 40)
 }
 
 fn mse(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
@@ -335,6 +467,7 @@ fn mse(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
         .iter()
         .chain(&picked.running_mse.points)
         .map(|(_, v)| *v);
+    let mut legend = Legend::new();
     let mut chart = chart(
         root,
         picked,
@@ -345,12 +478,110 @@ fn mse(root: &Root<'_>, picked: &Picked, title: &str) -> DrawResult {
     )?;
     line(
         &mut chart,
+        &mut legend,
         &picked.speed_mse.points,
         EXPECTED,
         2,
         "speed_mse (spec)",
     )?;
     let label = "MSE of the telemetry (report)";
-    line(&mut chart, &picked.running_mse.points, ACTUAL, 1, label)?;
-    legend_box(&mut chart)
+    line(
+        &mut chart,
+        &mut legend,
+        &picked.running_mse.points,
+        ACTUAL,
+        1,
+        label,
+    )?;
+    drop(chart);
+    legend_box(root, &legend, 40)
+}
+
+/// Any spec's numeric outputs: one panel each (at most [`MOST`]), over the run's time span.
+fn numeric(root: &Root<'_>, picked: &Picked, outputs: &Outputs, title: &str) -> DrawResult {
+    let root = root.titled(title, ("sans-serif", 20))?;
+    let shown: Vec<_> = outputs.numeric.iter().take(MOST).collect();
+    let areas = root.split_evenly((shown.len().max(1), 1));
+    for (i, (area, output)) in areas.iter().zip(shown).enumerate() {
+        let ys = span(output.points.iter().map(|(_, v)| *v), false);
+        let mut legend = Legend::new();
+        let mut chart = ChartBuilder::on(area)
+            .margin(8)
+            .margin_right(LEGEND_W)
+            .x_label_area_size(30)
+            .y_label_area_size(70)
+            .build_cartesian_2d(time_span(picked), ys.clone())?;
+        chart
+            .configure_mesh()
+            .x_desc("time [s]")
+            .x_label_formatter(&|v| short(*v))
+            .y_label_formatter(&|v| short(*v))
+            .draw()?;
+        silent_periods(&mut chart, &mut legend, picked, &ys)?;
+        let color = PALETTE[i % PALETTE.len()];
+        line(
+            &mut chart,
+            &mut legend,
+            &output.points,
+            color,
+            2,
+            &output.name,
+        )?;
+        chart.draw_series(
+            output
+                .points
+                .iter()
+                .map(|p| Circle::new(*p, 2, color.filled())),
+        )?;
+        drop(chart);
+        legend_box(area, &legend, 8)?;
+    }
+    Ok(())
+}
+
+/// Any spec's verdicts: for each verdict and value (at most [`MOST`] lines), the steps with
+/// that value counted up over time.
+fn verdicts(root: &Root<'_>, picked: &Picked, outputs: &Outputs, title: &str) -> DrawResult {
+    let mut lines: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
+    for o in &outputs.verdicts {
+        let mut values: Vec<&str> = Vec::new();
+        for (_, v) in &o.points {
+            if !values.contains(&v.as_str()) {
+                values.push(v);
+            }
+        }
+        for value in values {
+            let mut n = 0.0;
+            let points = o
+                .points
+                .iter()
+                .filter(|(_, v)| v == value)
+                .map(|(t, _)| {
+                    n += 1.0;
+                    (*t, n)
+                })
+                .collect();
+            lines.push((format!("{} {value}", o.name), points));
+        }
+    }
+    lines.truncate(MOST);
+    let ys = span(
+        lines.iter().flat_map(|(_, p)| p.iter().map(|(_, v)| *v)),
+        true,
+    );
+    let mut legend = Legend::new();
+    let mut chart = chart(root, picked, title, ys.clone(), "steps so far", 64)?;
+    silent_periods(&mut chart, &mut legend, picked, &ys)?;
+    for (i, (label, points)) in lines.iter().enumerate() {
+        line(
+            &mut chart,
+            &mut legend,
+            points,
+            PALETTE[i % PALETTE.len()],
+            2,
+            label,
+        )?;
+    }
+    drop(chart);
+    legend_box(root, &legend, 40)
 }

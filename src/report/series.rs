@@ -49,6 +49,10 @@ pub struct Picked {
     pub p3_spikes: Series<f64>,
     pub p3_dropouts: Series<f64>,
     pub p3_ok: Series<bool>,
+    /// The robot's silent periods (`robot_silent`), when the run has them.
+    pub silence: Option<super::outputs::Silence>,
+    /// The time of the run's last record.
+    pub end_t: Option<f64>,
 }
 
 impl Picked {
@@ -75,6 +79,8 @@ impl Picked {
             p3_spikes: pick(run, "p3_spikes", Value::as_f64),
             p3_dropouts: pick(run, "p3_dropouts", Value::as_f64),
             p3_ok: pick(run, "p3_ok", Value::as_bool),
+            silence: super::outputs::Silence::from_run(run),
+            end_t: run.records.iter().map(|r| r.t).reduce(f64::max),
         }
     }
 }

@@ -38,7 +38,24 @@ pub struct Summary {
     pub p3_spikes: f64,
     pub p3_dropouts: f64,
     pub p3_scans: usize,
+    /// The spec's other verdicts (any spec's): steps per value, most frequent first.
+    pub verdicts: Vec<(String, Vec<(String, usize)>)>,
+    /// The robot's silent periods, when the run has `robot_silent`.
+    pub silence: Option<super::outputs::Silence>,
+    /// The robot spec's outputs this report looks for that the run does not have.
+    pub missing_robot: Vec<&'static str>,
 }
+
+/// Verdicts the robot's lines of the summary already show.
+const ROBOT_VERDICTS: [&str; 7] = [
+    "p1_status",
+    "p2_violated",
+    "p3_ok",
+    "p2_augmented",
+    "augmented",
+    "reason",
+    "robot_silent",
+];
 
 impl Summary {
     pub fn compute(run: &Run, picked: &Picked) -> Summary {
@@ -53,7 +70,30 @@ impl Summary {
                 .filter(|(_, v)| v == s)
                 .count()
         };
+        let outputs = super::outputs::Outputs::from_run(run);
+        let verdicts = outputs
+            .verdict_counts()
+            .into_iter()
+            .filter(|(name, _)| {
+                let base = name.split('[').next().unwrap_or(name);
+                !ROBOT_VERDICTS.contains(&base)
+            })
+            .collect();
+        let missing_robot = [
+            ("p1_status", picked.p1_status.is_empty()),
+            ("p2_violated", picked.p2_violated.is_empty()),
+            ("p3_spikes", picked.p3_spikes.is_empty()),
+            ("action", picked.augmented.is_empty()),
+            ("speed_mse", picked.speed_mse.is_empty()),
+        ]
+        .into_iter()
+        .filter(|(_, absent)| *absent)
+        .map(|(name, _)| name)
+        .collect();
         Summary {
+            verdicts,
+            silence: super::outputs::Silence::from_run(run),
+            missing_robot,
             records: run.records.len(),
             skipped: run.skipped,
             duration_s: last - first,
@@ -119,44 +159,87 @@ fn capped(picked: &Picked) -> usize {
 }
 
 impl Summary {
-    /// A few lines for a person (`report --summary`, `make run`): steps, violations per
-    /// property, augmented actions and why, the final MSE.
+    /// A few lines for a person (`report --summary`, `make run`), none wider than 80
+    /// characters: steps, violations per property, augmented actions and why, the final MSE
+    /// (the robot's lines only for the robot outputs the run has), the silent periods, and any
+    /// other verdicts of the spec with their steps per value.
     pub fn text(&self, source: &str) -> String {
-        let steps = self.actions.max(self.p2_steps).max(self.p3_scans);
+        use super::outputs::{short, wrap};
+        let steps = self.actions.max(self.p2_steps).max(self.p3_scans).max(
+            self.verdicts
+                .iter()
+                .map(|(_, c)| c.iter().map(|(_, n)| n).sum::<usize>())
+                .max()
+                .unwrap_or(0),
+        );
+        let mut out = format!(
+            "summary of {source}: {steps} steps over {} s\n",
+            short(self.duration_s)
+        );
+        let mut line = |text: String| out.push_str(&wrap("  ", &text, 80, 2));
         let p1_steps = self.p1_violated + self.p1_unknown + self.p1_ok;
-        let reasons: Vec<String> = self
-            .reasons
-            .iter()
-            .map(|(r, n)| format!("{r} {n}"))
-            .collect();
-        let (mse, how) = match (self.mse, self.spec_mse) {
-            (Some(m), _) => (Some(m), "from the telemetry"),
-            (None, Some(m)) => (Some(m), "the spec's speed_mse at the end"),
-            (None, None) => (None, ""),
+        if p1_steps > 0 {
+            line(format!(
+                "P1 braking distance: {} violated, {} unknown (blinded), {} ok, of {p1_steps}",
+                self.p1_violated, self.p1_unknown, self.p1_ok
+            ));
+        }
+        if self.p2_steps > 0 {
+            line(format!(
+                "P2 speed tolerance: {} violated of {}",
+                self.p2_violations, self.p2_steps
+            ));
+        }
+        if self.p3_scans > 0 {
+            line(format!(
+                "P3 lidar: {} spikes in {} of {} scans, {} dropouts",
+                short(self.p3_spikes),
+                self.p3_scans_with_spikes,
+                self.p3_scans,
+                short(self.p3_dropouts)
+            ));
+        }
+        if self.actions > 0 {
+            let reasons: Vec<String> = self
+                .reasons
+                .iter()
+                .map(|(r, n)| format!("{r} {n}"))
+                .collect();
+            line(format!(
+                "actions: {} of {} augmented; why: {}, \
+                 capped at unknown_speed_cap while P1 was unknown: {}",
+                self.augmented_actions,
+                self.actions,
+                reasons.join(", "),
+                self.capped_actions,
+            ));
+        }
+        if let Some(s) = &self.silence {
+            let open = if s.open_at_end {
+                " (the last still silent at the end)"
+            } else {
+                ""
+            };
+            line(format!(
+                "robot silent: {} periods, {} s in all, longest {} s{open}",
+                s.periods.len(),
+                short(s.total()),
+                short(s.longest())
+            ));
+        }
+        for (name, counts) in &self.verdicts {
+            let counts: Vec<String> = counts.iter().map(|(v, n)| format!("{v} {n}")).collect();
+            line(format!("{name}: {} (steps per value)", counts.join(", ")));
+        }
+        let mse = match (self.mse, self.spec_mse) {
+            (Some(m), _) => Some(format!("{m:.6e} (from the telemetry)")),
+            (None, Some(m)) => Some(format!("{m:.6e} (the spec's speed_mse at the end)")),
+            (None, None) => None,
         };
-        let mse = mse.map_or_else(|| "no data".to_string(), |m| format!("{m:.6e} ({how})"));
-        format!(
-            "summary of {source}: {steps} steps over {:.1} s\n\
-             \x20 P1 braking distance: {} violated, {} unknown (sector ahead blinded), {} ok, of {p1_steps}\n\
-             \x20 P2 speed tolerance: {} violated of {}\n\
-             \x20 P3 lidar: {} spikes in {} of {} scans, {} dropouts\n\
-             \x20 actions: {} of {} augmented; why: {}; capped at unknown_speed_cap while P1 was unknown: {}\n\
-             \x20 final MSE expected/actual speed: {mse}\n",
-            self.duration_s,
-            self.p1_violated,
-            self.p1_unknown,
-            self.p1_ok,
-            self.p2_violations,
-            self.p2_steps,
-            self.p3_spikes,
-            self.p3_scans_with_spikes,
-            self.p3_scans,
-            self.p3_dropouts,
-            self.augmented_actions,
-            self.actions,
-            reasons.join(", "),
-            self.capped_actions,
-        )
+        if let Some(mse) = mse {
+            line(format!("final MSE expected/actual speed: {mse}"));
+        }
+        out
     }
 }
 

@@ -183,6 +183,33 @@ fn field_value(
     }
 }
 
+/// A bare value that is neither a number nor one of Telegraf's booleans (`t`, `true`, `True`,
+/// `TRUE` and the same for false): the crate would report only "No fields were provided".
+/// NaN and infinities get their own words, since they are what a robot's float usually is.
+fn not_a_value(tok: &[u8], start: usize, key: &str) -> Result<(), Fault> {
+    const BOOLS: [&[u8]; 10] = [
+        b"t", b"T", b"true", b"True", b"TRUE", b"f", b"F", b"false", b"False", b"FALSE",
+    ];
+    if BOOLS.contains(&tok) {
+        return Ok(());
+    }
+    let text = String::from_utf8_lossy(tok);
+    let lower = text.to_ascii_lowercase();
+    let bare = lower.trim_start_matches(['+', '-']);
+    let reason = if matches!(bare, "nan" | "inf" | "infinity") {
+        format!(
+            "field `{key}`: the value {text} is not a number line protocol accepts (only finite \
+             numbers are; leave the field out, or send it as a string: {key}=\"{text}\")"
+        )
+    } else {
+        format!(
+            "field `{key}`: `{text}` is not a value (line protocol takes a number such as 1.5, \
+             2i or 3u, true/false, or a string in double quotes)"
+        )
+    };
+    Err(fault(start, reason))
+}
+
 /// Telegraf's number forms the crate does not share (see the module comment).
 fn number_fixes(
     tok: &[u8],
@@ -194,9 +221,12 @@ fn number_fixes(
         return Ok(());
     };
     if !(first == b'-' || first == b'.' || first.is_ascii_digit()) {
-        return Ok(());
+        return not_a_value(tok, start, key);
     }
     let sign = usize::from(first == b'-');
+    if tok.get(sign).is_some_and(u8::is_ascii_alphabetic) {
+        return not_a_value(tok, start, key);
+    }
     if let Some((&last, digits)) = tok.split_last()
         && (last == b'i' || last == b'u')
     {
@@ -264,6 +294,22 @@ mod tests {
             assert_eq!(f.at, at, "{bad:?}: {f:?}");
         }
         assert!(normalize("m a=0i,b=-0i,c=0u,d=10i 1").is_ok());
+        assert!(normalize("m a=t,b=F,c=true,d=False,e=TRUE 1").is_ok());
+        for (bad, at, says) in [
+            ("m battery=NaN 1", 10, "the value NaN is not a number"),
+            ("m x=1,battery=-inf 1", 14, "the value -inf is not a number"),
+            (
+                "m battery=+Infinity 1",
+                10,
+                "the value +Infinity is not a number",
+            ),
+            ("m battery=full 1", 10, "`full` is not a value"),
+        ] {
+            let f = normalize(bad).unwrap_err();
+            assert_eq!(f.at, at, "{bad:?}: {f:?}");
+            assert!(f.reason.contains(says), "{bad:?}: {f:?}");
+            assert!(f.reason.contains("field `battery`"), "{bad:?}: {f:?}");
+        }
         assert!(normalize("m s=\"nul \0 inside\" 1").is_ok());
     }
 }

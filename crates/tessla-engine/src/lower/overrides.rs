@@ -33,7 +33,13 @@ impl Compiler<'_> {
                         None,
                         format!("--set {name}: the spec has no top-level constant `{name}`"),
                     )
-                    .with_help(format!("known constants: {}", k.join(", "))),
+                    .with_help(if k.is_empty() {
+                        "the spec has no top-level constants `--set` could change (a constant is a \
+                         top-level `def NAME = literal` without parameters, e.g. `def delta = 0.02`)"
+                            .to_string()
+                    } else {
+                        format!("known constants: {}", k.join(", "))
+                    }),
                 );
                 continue;
             };

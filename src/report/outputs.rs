@@ -1,0 +1,399 @@
+//! Any spec's outputs, as the report shows them without knowing the spec: its numeric outputs
+//! over time, its verdicts (Bool fields and text fields such as a status) with the times each
+//! changed, the augmented actions in runs, and the robot's silent periods (`robot_silent`).
+//!
+//! Telemetry passed through is left out: the measurement `mqtt_consumer` (Telegraf's MQTT
+//! input, what every shipped conf feeds the monitor). Every other measurement is the spec's.
+//! An output is named by its field, or by its measurement when the field is `value` (the
+//! connector's `@TelegrafOut` form); `action` fields that repeat another measurement's field are
+//! shown once, from the other measurement (the robot's action copies its verdicts).
+
+use super::data::{Run, Value};
+use super::series::Picked;
+
+/// Measurements that carry the robot's telemetry, not the spec's outputs.
+pub const TELEMETRY: [&str; 1] = ["mqtt_consumer"];
+
+/// One output of the spec over time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Output<T> {
+    /// The output's name (its field, or its measurement for a `value` field), with the
+    /// instance's tags in brackets when the run has more than one tag set.
+    pub name: String,
+    pub points: Vec<(f64, T)>,
+}
+
+/// The spec's outputs found in a run.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Outputs {
+    pub numeric: Vec<Output<f64>>,
+    /// Bool outputs as `true`/`false`, text outputs as they are.
+    pub verdicts: Vec<Output<String>>,
+}
+
+fn label(measurement: &str, field: &str) -> String {
+    if field == "value" {
+        measurement.to_string()
+    } else {
+        field.to_string()
+    }
+}
+
+impl Outputs {
+    pub fn from_run(run: &Run) -> Outputs {
+        let ours = |m: &str| !TELEMETRY.contains(&m);
+        let mut tag_sets: Vec<&[(String, String)]> = Vec::new();
+        for r in run.records.iter().filter(|r| ours(&r.measurement)) {
+            if !tag_sets.contains(&r.tags.as_slice()) {
+                tag_sets.push(&r.tags);
+            }
+        }
+        let show_tags = tag_sets.len() > 1;
+        // Names that a measurement other than `action` carries: `action`'s copy is left out.
+        let mut elsewhere: Vec<String> = Vec::new();
+        for r in run
+            .records
+            .iter()
+            .filter(|r| ours(&r.measurement) && r.measurement != "action")
+        {
+            for (f, _) in &r.fields {
+                let name = label(&r.measurement, f);
+                if !elsewhere.contains(&name) {
+                    elsewhere.push(name);
+                }
+            }
+        }
+        let mut out = Outputs::default();
+        for r in run.records.iter().filter(|r| ours(&r.measurement)) {
+            for (f, v) in &r.fields {
+                let mut name = label(&r.measurement, f);
+                if r.measurement == "action" && elsewhere.contains(&name) {
+                    continue;
+                }
+                if show_tags && !r.tags.is_empty() {
+                    let tags: Vec<String> =
+                        r.tags.iter().map(|(k, v)| format!("{k}={v}")).collect();
+                    name = format!("{name}[{}]", tags.join(","));
+                }
+                match v {
+                    Value::Float(_) | Value::Int(_) => {
+                        if let Some(x) = v.as_f64() {
+                            push(&mut out.numeric, name, (r.t, x));
+                        }
+                    }
+                    Value::Bool(b) => push(&mut out.verdicts, name, (r.t, b.to_string())),
+                    Value::Str(s) => match v.as_f64() {
+                        Some(x) => push(&mut out.numeric, name, (r.t, x)),
+                        None => push(&mut out.verdicts, name, (r.t, s.clone())),
+                    },
+                }
+            }
+        }
+        out
+    }
+
+    /// Steps per value of each verdict, most frequent first: `(name, [(value, steps)])`.
+    pub fn verdict_counts(&self) -> Vec<(String, Vec<(String, usize)>)> {
+        self.verdicts
+            .iter()
+            .map(|o| {
+                let mut counts: Vec<(String, usize)> = Vec::new();
+                for (_, v) in &o.points {
+                    match counts.iter_mut().find(|(k, _)| k == v) {
+                        Some((_, n)) => *n += 1,
+                        None => counts.push((v.clone(), 1)),
+                    }
+                }
+                counts.sort_by(|a, b| b.1.cmp(&a.1).then_with(|| a.0.cmp(&b.0)));
+                (o.name.clone(), counts)
+            })
+            .collect()
+    }
+}
+
+fn push<T>(list: &mut Vec<Output<T>>, name: String, point: (f64, T)) {
+    match list.iter_mut().find(|o| o.name == name) {
+        Some(o) => o.points.push(point),
+        None => list.push(Output {
+            name,
+            points: vec![point],
+        }),
+    }
+}
+
+/// The robot's silent periods from its `robot_silent` verdict: `true` when its messages
+/// stopped for longer than `max_silence`, `false` when they resumed.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Silence {
+    /// `(from, to)` in seconds since the run's start; `to` is the run's end for a period that
+    /// had not ended.
+    pub periods: Vec<(f64, f64)>,
+    /// Whether the last period was still open at the end of the run.
+    pub open_at_end: bool,
+}
+
+impl Silence {
+    /// `None` when the run has no `robot_silent` field.
+    pub fn from_run(run: &Run) -> Option<Silence> {
+        let series = super::series::pick(run, "robot_silent", Value::as_bool);
+        if series.is_empty() {
+            return None;
+        }
+        let end = run.records.iter().map(|r| r.t).fold(0.0, f64::max);
+        let mut s = Silence::default();
+        let mut since: Option<f64> = None;
+        for (t, silent) in &series.points {
+            match (since, silent) {
+                (None, true) => since = Some(*t),
+                (Some(from), false) => {
+                    s.periods.push((from, *t));
+                    since = None;
+                }
+                _ => {}
+            }
+        }
+        if let Some(from) = since {
+            s.periods.push((from, end.max(from)));
+            s.open_at_end = true;
+        }
+        Some(s)
+    }
+
+    pub fn total(&self) -> f64 {
+        self.periods.iter().map(|(a, b)| b - a).sum()
+    }
+
+    pub fn longest(&self) -> f64 {
+        self.periods.iter().map(|(a, b)| b - a).fold(0.0, f64::max)
+    }
+}
+
+/// A number for people: at most 4 significant digits, never `-0`.
+pub fn short(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return if v.is_finite() {
+            "0".into()
+        } else {
+            v.to_string()
+        };
+    }
+    let s = if v.abs() >= 1e-3 && v.abs() < 1e6 {
+        let text = format!("{v:.4}");
+        let text = text.trim_end_matches('0').trim_end_matches('.').to_string();
+        if v.abs() >= 100.0 {
+            format!("{v:.1}")
+                .trim_end_matches('0')
+                .trim_end_matches('.')
+                .to_string()
+        } else {
+            text
+        }
+    } else {
+        format!("{v:.3e}")
+    };
+    if s == "-0" { "0".into() } else { s }
+}
+
+/// The terminal view (`report --timeline`): when each verdict changed (changes at one time on
+/// one line), each run of augmented actions with its reason, and the silent periods, in time
+/// order, every line at most `width` characters.
+pub fn timeline(picked: &Picked, outputs: &Outputs, width: usize) -> String {
+    // (time, order within the time, text)
+    let mut events: Vec<(f64, u8, String)> = Vec::new();
+    // Verdict changes. `action`'s `reason` is shown with the actions.
+    let mut changes: Vec<(f64, String)> = Vec::new();
+    for o in &outputs.verdicts {
+        // The action's flags are shown with the runs of augmented actions.
+        let base = o.name.split('[').next().unwrap_or(&o.name);
+        if !picked.augmented.is_empty() && ["reason", "augmented", "p2_augmented"].contains(&base) {
+            continue;
+        }
+        let mut last: Option<&str> = None;
+        for (t, v) in &o.points {
+            if last != Some(v.as_str()) {
+                changes.push((*t, format!("{} {v}", o.name)));
+                last = Some(v.as_str());
+            }
+        }
+    }
+    changes.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut i = 0;
+    while let Some((t, _)) = changes.get(i) {
+        let t = *t;
+        let same: Vec<&str> = changes
+            .iter()
+            .skip(i)
+            .take_while(|(u, _)| *u == t)
+            .map(|(_, s)| s.as_str())
+            .collect();
+        i += same.len();
+        events.push((t, 0, same.join(", ")));
+    }
+    // Augmented actions: consecutive augmented actions with one reason form a run.
+    let reason_at = |t: f64| {
+        picked
+            .reason
+            .points
+            .iter()
+            .find(|(u, _)| *u == t)
+            .map_or("none given", |(_, r)| r.as_str())
+    };
+    let value_at =
+        |points: &[(f64, f64)], t: f64| points.iter().rev().find(|(u, _)| *u <= t).map(|(_, v)| *v);
+    let mut k = 0;
+    let acts = &picked.augmented.points;
+    while let Some((t0, aug)) = acts.get(k) {
+        if !aug {
+            k += 1;
+            continue;
+        }
+        let reason = reason_at(*t0);
+        let run_len = acts
+            .iter()
+            .skip(k)
+            .take_while(|(t, a)| *a && reason_at(*t) == reason)
+            .count();
+        let times: Vec<f64> = acts.iter().skip(k).take(run_len).map(|(t, _)| *t).collect();
+        let sent: Vec<f64> = times
+            .iter()
+            .filter_map(|t| value_at(&picked.action_speed.points, *t))
+            .collect();
+        let asked: Vec<f64> = times
+            .iter()
+            .filter_map(|t| value_at(&picked.expected_speed.points, *t))
+            .collect();
+        let last = times.last().copied().unwrap_or(*t0);
+        let what = if run_len == 1 {
+            "1 action".to_string()
+        } else {
+            format!("{run_len} actions to {}", secs(last))
+        };
+        let mut text = format!("augmented, reason {reason}: {what}");
+        if !sent.is_empty() {
+            text.push_str(&format!(", speed {}", range(&sent)));
+            if !asked.is_empty() {
+                text.push_str(&format!(" for {}", range(&asked)));
+            }
+        }
+        events.push((*t0, 1, text));
+        k += run_len.max(1);
+    }
+    events.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let mut out = String::new();
+    for (t, _, text) in events {
+        let head = format!("{:>7} ", secs(t));
+        out.push_str(&wrap(&head, &text, width, 0));
+    }
+    out
+}
+
+/// `12.4 s`.
+fn secs(t: f64) -> String {
+    format!("{:.1} s", t + 0.0)
+}
+
+/// `0.05` or `0.05..0.06`.
+fn range(values: &[f64]) -> String {
+    let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if (hi - lo).abs() < 1e-12 {
+        short(lo)
+    } else {
+        format!("{}..{}", short(lo), short(hi))
+    }
+}
+
+/// `head` then `text`, word-wrapped so no line is wider than `width` (unless one word is);
+/// continuation lines indented under the text, `extra_indent` further.
+pub fn wrap(head: &str, text: &str, width: usize, extra_indent: usize) -> String {
+    let indent = " ".repeat(head.chars().count() + extra_indent);
+    let mut out = String::new();
+    let mut line = head.to_string();
+    let mut empty = true;
+    for word in text.split(' ').filter(|w| !w.is_empty()) {
+        let len = line.chars().count() + usize::from(!empty) + word.chars().count();
+        if !empty && len > width {
+            out.push_str(&line);
+            out.push('\n');
+            line = indent.clone();
+            empty = true;
+        }
+        if !empty {
+            line.push(' ');
+        }
+        line.push_str(word);
+        empty = false;
+    }
+    out.push_str(&line);
+    out.push('\n');
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_for_people_never_show_minus_zero() {
+        assert_eq!(short(-0.0), "0");
+        assert_eq!(short(-0.00001), "-1.000e-5");
+        assert_eq!(short(0.0575), "0.0575");
+        assert_eq!(short(0.099999999), "0.1");
+        assert_eq!(short(-0.00004), "-4.000e-5");
+        assert_eq!(short(123.456), "123.5");
+        assert_eq!(secs(-0.0), "0.0 s");
+    }
+
+    #[test]
+    fn outputs_verdicts_and_silence() {
+        let run = Run::parse(
+            "mqtt_consumer actualSpeed=\"0.1\",ok=true 0\n\
+             tessla hot=false,level=\"low\",temp=20.5,robot_silent=false 0\n\
+             hot value=true 1000000000\n\
+             tessla hot=true,level=\"high\",temp=31,robot_silent=true 2000000000\n\
+             tessla hot=true,level=\"high\",temp=30,robot_silent=false 5000000000\n\
+             tessla robot_silent=true 6000000000\n\
+             tessla temp=29 7000000000\n",
+        );
+        let o = Outputs::from_run(&run);
+        let names: Vec<&str> = o.numeric.iter().map(|n| n.name.as_str()).collect();
+        assert_eq!(names, ["temp"], "telemetry is left out");
+        let verdicts: Vec<&str> = o.verdicts.iter().map(|n| n.name.as_str()).collect();
+        assert_eq!(verdicts, ["hot", "level", "robot_silent"]);
+        assert_eq!(
+            o.verdicts[0].points.len(),
+            4,
+            "the `hot value=` form joins `hot`"
+        );
+        let counts = o.verdict_counts();
+        assert_eq!(counts[1].1, vec![("high".into(), 2), ("low".into(), 1)]);
+        let s = Silence::from_run(&run).unwrap();
+        assert_eq!(s.periods, vec![(2.0, 5.0), (6.0, 7.0)]);
+        assert!(s.open_at_end);
+        assert_eq!(s.total(), 4.0);
+        let picked = Picked::from_run(&run);
+        let text = timeline(&picked, &o, 80);
+        assert!(
+            text.contains("0.0 s hot false, level low, robot_silent false"),
+            "{text}"
+        );
+        assert!(
+            text.contains("2.0 s level high, robot_silent true"),
+            "{text}"
+        );
+        assert!(!text.contains("temp"), "{text}");
+    }
+
+    #[test]
+    fn wraps_at_commas() {
+        let w = wrap("   1.0 s ", "aaaa bbbb, cccc dddd, eeee", 22, 0);
+        assert_eq!(
+            w,
+            "   1.0 s aaaa bbbb,\n         cccc dddd,\n         eeee\n"
+        );
+        assert_eq!(wrap("  ", "a b c", 5, 2), "  a b\n    c\n");
+        for line in w.lines() {
+            assert!(line.chars().count() <= 22);
+        }
+    }
+}
