@@ -1,16 +1,17 @@
 # Every command the README mentions lives here. `make run` and `make test` are the README's first two.
-.PHONY: run test setup build bench bench-criterion bench-process bench-nats soak fmt lint ci fixtures conformance fuzz reproduce
+.PHONY: run test setup build install deb profiling bench bench-criterion bench-process bench-nats soak fmt lint ci fixtures conformance fuzz reproduce
 
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
 
-# The main job on its bundled default: the robot monitors over the recorded-run fixture, their
-# verdicts and actions (no pass-through), then a short summary (steps, violations per property,
-# augmented actions and why, final MSE). `make run PASSTHROUGH=1` echoes every record as well.
+# The main job on its bundled default: the robot monitors over the recorded-run fixture. The full
+# line protocol (verdicts and actions; with PASSTHROUGH=1 every record too) goes to target/run.lp;
+# the screen gets what a person reads: when each verdict changed, the augmented actions with their
+# reasons, and the summary (`report --timeline --summary`).
 run: build
-	./target/release/tessla-telegraf run $(if $(PASSTHROUGH),,--no-passthrough) < $(RUN_FIXTURE) > target/run.lp
-	cat target/run.lp
-	./target/release/tessla-telegraf report --summary target/run.lp
+	@./target/release/tessla-telegraf run --log-level warn $(if $(PASSTHROUGH),,--no-passthrough) < $(RUN_FIXTURE) > target/run.lp
+	@./target/release/tessla-telegraf report --timeline --summary target/run.lp
+	@echo "full line protocol ($$(wc -l < target/run.lp) lines, as Telegraf gets it): target/run.lp"
 
 build:
 	$(CARGO) build --release
@@ -18,9 +19,44 @@ build:
 setup:
 	bash tools/setup.sh
 
-# The test command (also what .ci/run calls).
+# The test command (also what .ci/run calls). Suites that need TeSSLa's conformance cases skip
+# without them; tools/test-skips.sh then prints loudly which were skipped, why, and how to get
+# the cases (a skip never passes in silence).
+SKIP_DIR = $${CARGO_TARGET_DIR:-target}/tmp/skipped-suites
+
 test: setup
-	$(CARGO) test --workspace
+	@rm -rf $(SKIP_DIR)
+	$(CARGO) test --workspace; status=$$?; bash tools/test-skips.sh $(SKIP_DIR); exit $$status
+
+# Install the release binary, its man page and shell completions under PREFIX (DESTDIR for
+# staging): PREFIX/bin, PREFIX/share/man/man1, PREFIX/share/{bash-completion,zsh,fish}.
+PREFIX ?= /usr/local
+BIN = ./target/release/tessla-telegraf
+
+install: build
+	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/man/man1 \
+	  $(DESTDIR)$(PREFIX)/share/bash-completion/completions \
+	  $(DESTDIR)$(PREFIX)/share/zsh/site-functions \
+	  $(DESTDIR)$(PREFIX)/share/fish/vendor_completions.d \
+	  $(DESTDIR)$(PREFIX)/share/tessla-telegraf
+	install -m 755 $(BIN) $(DESTDIR)$(PREFIX)/bin/tessla-telegraf
+	$(BIN) manpage > $(DESTDIR)$(PREFIX)/share/man/man1/tessla-telegraf.1
+	$(BIN) completions bash > $(DESTDIR)$(PREFIX)/share/bash-completion/completions/tessla-telegraf
+	$(BIN) completions zsh > $(DESTDIR)$(PREFIX)/share/zsh/site-functions/_tessla-telegraf
+	$(BIN) completions fish > $(DESTDIR)$(PREFIX)/share/fish/vendor_completions.d/tessla-telegraf.fish
+	install -m 644 specs/telegraf.tessla $(DESTDIR)$(PREFIX)/share/tessla-telegraf/telegraf.tessla
+
+# The Debian package (cargo-deb; `cargo install cargo-deb` once): the binary, man page, shell
+# completions, telegraf.tessla, the sample confs, dashboards, examples and docs, and any
+# Telegraf systemd drop-in under telegraf/systemd/. Writes target/debian/tessla-telegraf_*.deb.
+deb: build
+	bash tools/deb-assets.sh $(BIN) target/deb-assets
+	$(CARGO) deb --no-build
+
+# A release build that keeps debug info, for perf and valgrind --tool=callgrind:
+# target/profiling/tessla-telegraf (the release profile carries none).
+profiling:
+	$(CARGO) build --profile profiling
 
 # Benchmarks; figures in BENCHMARKS.md. Criterion guards of the hot paths (codec, binding, engine
 # step, output formatting, whole record path), then the whole-process runs against the baselines

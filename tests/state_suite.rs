@@ -114,7 +114,7 @@ fn check_case(dir: &Path, desc: &serde_json::Value) -> Result_ {
 
 #[test]
 fn restored_monitors_continue_every_suite_case_exactly() {
-    let Some(root) = tessla_suite::suite_or_skip("snapshots") else {
+    let Some(root) = tessla_suite::suite_or_skip("state_suite") else {
         return;
     };
     let (mut cases_checked, mut cuts, mut skipped, mut unsaved) = (0, 0, 0, 0);

@@ -85,10 +85,18 @@ enum Style {
     Plain,
 }
 
+/// `--version`: the crate's version, the commit it was built from, the TeSSLa version implemented.
+pub const VERSION: &str = concat!(
+    env!("CARGO_PKG_VERSION"),
+    " (commit ",
+    env!("TESSLA_TELEGRAF_COMMIT"),
+    "; implements TeSSLa 1.2)"
+);
+
 #[derive(Debug, Parser)]
 #[command(
     name = "tessla-telegraf",
-    version,
+    version = VERSION,
     about = "Runtime verification of TeSSLa specifications as a Telegraf processors.execd plugin",
     args_conflicts_with_subcommands = true
 )]
@@ -117,6 +125,17 @@ pub enum Command {
     /// Run a simulated TurtleBot3 in closed loop with the monitors (the digital twin's behaviour).
     #[cfg(feature = "tools")]
     Simulate(simulate::SimulateArgs),
+    /// Print a shell completion script for this command line (`make install` installs them).
+    Completions(CompletionsArgs),
+    /// Print the man page (roff), made from this command line (`make install` installs it).
+    Manpage,
+}
+
+#[derive(Debug, Args, Clone)]
+pub struct CompletionsArgs {
+    /// The shell to complete in.
+    #[arg(value_enum)]
+    pub shell: clap_complete::Shell,
 }
 
 /// Options shared by every subcommand that loads a spec.
@@ -235,6 +254,8 @@ pub fn main() -> ExitCode {
         Some(Command::Report(a)) => (report::run(a), Style::Log),
         #[cfg(feature = "tools")]
         Some(Command::Simulate(a)) => (simulate::run(a), Style::Log),
+        Some(Command::Completions(a)) => (completions(a.shell), Style::Plain),
+        Some(Command::Manpage) => (manpage(), Style::Plain),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -253,6 +274,32 @@ pub fn main() -> ExitCode {
             ExitCode::from(e.code as u8)
         }
     }
+}
+
+/// `completions SHELL`: the script clap_complete makes from [`Cli`].
+fn completions(shell: clap_complete::Shell) -> CliResult {
+    let mut cmd = <Cli as clap::CommandFactory>::command();
+    let mut out = Vec::new();
+    clap_complete::generate(shell, &mut cmd, "tessla-telegraf", &mut out);
+    write_stdout(&out)
+}
+
+/// `manpage`: the roff page clap_mangen makes from [`Cli`] (the subcommands listed in it).
+fn manpage() -> CliResult {
+    let cmd = <Cli as clap::CommandFactory>::command();
+    let mut out = Vec::new();
+    clap_mangen::Man::new(cmd)
+        .render(&mut out)
+        .map_err(|e| CliError::io(format!("manpage: {e}")))?;
+    write_stdout(&out)
+}
+
+fn write_stdout(bytes: &[u8]) -> CliResult {
+    let mut stdout = std::io::stdout().lock();
+    stdout
+        .write_all(bytes)
+        .and_then(|()| stdout.flush())
+        .map_err(|e| CliError::io(format!("cannot write to stdout: {e}")))
 }
 
 impl SpecOptions {

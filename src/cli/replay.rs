@@ -58,6 +58,10 @@ pub struct ReplayArgs {
     /// Pause between records that have no timestamp, in milliseconds (5 Hz scans: 200).
     #[arg(long, value_name = "MS", default_value_t = 200)]
     pub interval_ms: u64,
+    /// Wait at most this long between two messages (`5s`, `1m`), however long the recording
+    /// pauses there; every wait of 10 s or more, and every one shortened, is announced on stderr.
+    #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration)]
+    pub max_gap: Option<Duration>,
     /// MQTT quality of service: 0, 1 (default: every message acknowledged by the broker) or 2.
     #[arg(long, default_value_t = 1)]
     pub qos: u8,
@@ -90,7 +94,13 @@ fn replay(args: &ReplayArgs) -> CliResult {
         time_key: args.time_key.clone(),
     };
     let times: Vec<Option<i64>> = recording.samples.iter().map(|s| s.time_ns).collect();
-    let due = pacing::offsets(&times, speed, Duration::from_millis(args.interval_ms));
+    let (due, gaps) = pacing::offsets_capped(
+        &times,
+        speed,
+        Duration::from_millis(args.interval_ms),
+        args.max_gap,
+    );
+    let mut gaps = gaps.into_iter().peekable();
 
     let client_id = args
         .client_id
@@ -101,7 +111,10 @@ fn replay(args: &ReplayArgs) -> CliResult {
 
     let bar = progress_bar(recording.samples.len());
     let start = Instant::now();
-    for (sample, offset) in recording.samples.iter().zip(&due) {
+    for (i, (sample, offset)) in recording.samples.iter().zip(&due).enumerate() {
+        if let Some(gap) = gaps.next_if(|g| g.index == i) {
+            bar.suspend(|| announce(&args.file, sample.line, &gap));
+        }
         let wait = offset.saturating_sub(start.elapsed());
         if !wait.is_zero() {
             std::thread::sleep(wait);
@@ -126,13 +139,35 @@ fn replay(args: &ReplayArgs) -> CliResult {
     Ok(())
 }
 
+/// Say that a long wait starts, or that `--max-gap` shortened one.
+fn announce(file: &Path, line: usize, gap: &pacing::Gap) {
+    let secs = |d: Duration| format!("{:.1} s", d.as_secs_f64());
+    if gap.waited < gap.recorded {
+        eprintln!(
+            "I! replay: {}: line {line}: the recording pauses {} here; waiting {} (--max-gap)",
+            file.display(),
+            secs(gap.recorded),
+            secs(gap.waited)
+        );
+    } else {
+        eprintln!(
+            "I! replay: {}: line {line}: the recording pauses {} here; waiting (--max-gap \
+             DURATION shortens such waits)",
+            file.display(),
+            secs(gap.recorded)
+        );
+    }
+}
+
 fn read_recording(
     path: &Path,
     format: InputFormat,
     measurement: Option<&str>,
 ) -> Result<Recording, CliError> {
-    let text = std::fs::read_to_string(path)
+    let bytes = std::fs::read(path)
         .map_err(|e| CliError::io(format!("cannot read {}: {e}", path.display())))?;
+    // A line that is not UTF-8 is skipped and reported, as `run` does, not the whole file.
+    let (text, not_utf8) = read_lp::valid_lines(&bytes);
     let is_csv = match format {
         InputFormat::Csv => true,
         InputFormat::Lp => false,
@@ -140,11 +175,14 @@ fn read_recording(
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("csv")),
     };
-    if is_csv {
-        read_csv::read(&text).map_err(|e| CliError::io(format!("{}: {e}", path.display())))
+    let mut recording = if is_csv {
+        read_csv::read(&text).map_err(|e| CliError::io(format!("{}: {e}", path.display())))?
     } else {
-        Ok(read_lp::read(&text, measurement))
-    }
+        read_lp::read(&text, measurement)
+    };
+    recording.skipped.extend(not_utf8);
+    recording.skipped.sort_by_key(|s| s.line);
+    Ok(recording)
 }
 
 /// A progress bar on stderr when it is a terminal, hidden otherwise.

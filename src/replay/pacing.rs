@@ -18,6 +18,53 @@ pub fn check_speed(speed: f64) -> Result<f64, String> {
     }
 }
 
+/// A wait between two messages worth announcing: at least [`LONG_GAP`], or shortened by
+/// `--max-gap`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Gap {
+    /// The sample the wait comes before.
+    pub index: usize,
+    /// The wait the recording asks for (scaled by the speed).
+    pub recorded: Duration,
+    /// The wait the replay makes (the same, or `--max-gap`).
+    pub waited: Duration,
+}
+
+/// A wait this long (after scaling) is announced before it starts.
+pub const LONG_GAP: Duration = Duration::from_secs(10);
+
+/// The due offset of every sample, from its timestamp (`None` = untimed), with every wait
+/// between two messages at most `max_gap`; and the long or shortened waits.
+pub fn offsets_capped(
+    times_ns: &[Option<i64>],
+    speed: f64,
+    interval: Duration,
+    max_gap: Option<Duration>,
+) -> (Vec<Duration>, Vec<Gap>) {
+    let recorded = offsets(times_ns, speed, interval);
+    let mut out = Vec::with_capacity(recorded.len());
+    let mut gaps = Vec::new();
+    let mut shift = Duration::ZERO;
+    for (i, at) in recorded.iter().enumerate() {
+        if i > 0
+            && let Some(before) = recorded.get(i - 1)
+        {
+            let wait = at.saturating_sub(*before);
+            let waited = max_gap.map_or(wait, |m| wait.min(m));
+            shift += wait - waited;
+            if wait >= LONG_GAP || waited < wait {
+                gaps.push(Gap {
+                    index: i,
+                    recorded: wait,
+                    waited,
+                });
+            }
+        }
+        out.push(at.saturating_sub(shift));
+    }
+    (out, gaps)
+}
+
 /// The due offset of every sample, from its timestamp (`None` = untimed).
 pub fn offsets(times_ns: &[Option<i64>], speed: f64, interval: Duration) -> Vec<Duration> {
     let mut offsets = Vec::with_capacity(times_ns.len());
@@ -106,6 +153,44 @@ mod tests {
             offsets(&back, 1.0, Duration::from_millis(100)),
             vec![Duration::ZERO, Duration::ZERO, Duration::from_millis(200)]
         );
+    }
+
+    #[test]
+    fn long_gaps_are_found_and_capped() {
+        let s = 1_000 * MS;
+        let t = [Some(0), Some(s), Some(3601 * s), Some(3602 * s)];
+        let (due, gaps) = offsets_capped(&t, 1.0, Duration::from_millis(200), None);
+        assert_eq!(due[3], Duration::from_secs(3602));
+        assert_eq!(
+            gaps,
+            vec![Gap {
+                index: 2,
+                recorded: Duration::from_secs(3600),
+                waited: Duration::from_secs(3600)
+            }]
+        );
+        let cap = Some(Duration::from_secs(5));
+        let (due, gaps) = offsets_capped(&t, 1.0, Duration::from_millis(200), cap);
+        assert_eq!(
+            due,
+            vec![
+                Duration::ZERO,
+                Duration::from_secs(1),
+                Duration::from_secs(6),
+                Duration::from_secs(7)
+            ]
+        );
+        assert_eq!(gaps[0].waited, Duration::from_secs(5));
+        // A short gap shortened by the cap is announced too; one under both is not.
+        let (_, gaps) = offsets_capped(
+            &t[..2],
+            1.0,
+            Duration::ZERO,
+            Some(Duration::from_millis(500)),
+        );
+        assert_eq!(gaps.len(), 1);
+        let (_, gaps) = offsets_capped(&t[..2], 1.0, Duration::ZERO, None);
+        assert!(gaps.is_empty());
     }
 
     #[test]

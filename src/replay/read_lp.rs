@@ -8,6 +8,37 @@
 use super::{FieldValue, Recording, Sample, SkippedRecord};
 use influxdb_line_protocol::{FieldValue as LpValue, parse_lines, split_lines};
 
+/// A file's bytes as text a reader takes: a line that is not valid UTF-8 is reported (line
+/// number, column of the first bad byte) and blanked, so line numbers stay right and the rest
+/// of the file is read, as `run` skips such a line. Used for line protocol and CSV alike.
+pub fn valid_lines(bytes: &[u8]) -> (String, Vec<SkippedRecord>) {
+    if let Ok(text) = std::str::from_utf8(bytes) {
+        return (text.to_string(), Vec::new());
+    }
+    let mut text = String::with_capacity(bytes.len());
+    let mut skipped = Vec::new();
+    for (i, line) in bytes.split_inclusive(|&b| b == b'\n').enumerate() {
+        match std::str::from_utf8(line) {
+            Ok(l) => text.push_str(l),
+            Err(e) => {
+                let good = line.get(..e.valid_up_to()).unwrap_or_default();
+                skipped.push(SkippedRecord {
+                    line: i + 1,
+                    reason: format!(
+                        "not UTF-8 (a bad byte at column {}): {}",
+                        String::from_utf8_lossy(good).chars().count() + 1,
+                        excerpt(&String::from_utf8_lossy(line))
+                    ),
+                });
+                if line.ends_with(b"\n") {
+                    text.push('\n');
+                }
+            }
+        }
+    }
+    (text, skipped)
+}
+
 /// Read every record of `text`; with `measurement`, only records of that measurement.
 pub fn read(text: &str, measurement: Option<&str>) -> Recording {
     let mut recording = Recording::default();
@@ -103,6 +134,22 @@ mod tests {
         assert_eq!(rec.skipped.len(), 1);
         assert_eq!(rec.skipped[0].line, 2);
         assert!(rec.skipped[0].reason.contains("this is not valid"));
+    }
+
+    #[test]
+    fn a_line_that_is_not_utf8_is_skipped_alone() {
+        let bytes = b"m a=1 1\nm a=\xff\xfe 2\nm a=3 3\n";
+        let (text, skipped) = valid_lines(bytes);
+        assert_eq!(skipped.len(), 1);
+        assert_eq!(skipped[0].line, 2);
+        assert!(
+            skipped[0].reason.contains("column 5"),
+            "{}",
+            skipped[0].reason
+        );
+        let rec = read(&text, None);
+        assert_eq!(rec.samples.len(), 2);
+        assert_eq!(rec.samples[1].line, 3);
     }
 
     #[test]

@@ -36,11 +36,22 @@ pub fn suite_or_skip(test: &str) -> Option<PathBuf> {
         "REQUIRE_TESSLA_SUITE is set but the TeSSLa suite was not found at {} (set TESSLA_SUITE or put it at ../shared/tessla-suite)",
         dir.display()
     );
-    eprintln!(
-        "{test}: TeSSLa suite not found at {}; skipped (set TESSLA_SUITE)",
+    let why = format!(
+        "TeSSLa suite not found at {} (set TESSLA_SUITE)",
         dir.display()
     );
+    eprintln!("{test}: SKIPPED: {why}");
+    note_skip(test, &why);
     None
+}
+
+/// Leave a note that `test` was skipped, and why, for `make test` to print loudly at the end
+/// (`tools/test-skips.sh` reads `target/tmp/skipped-suites/`).
+pub fn note_skip(test: &str, why: &str) {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("skipped-suites");
+    // Best effort: the note only adds to the skip message above.
+    let _ = std::fs::create_dir_all(&dir);
+    let _ = std::fs::write(dir.join(test), format!("{why}\n"));
 }
 
 /// One case: its name (`folder/case`), the folder of its files, its descriptor.

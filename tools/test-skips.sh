@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# After `cargo test` (make test): say loudly which suites skipped and why. A test that skips
+# writes a note into the folder given here (target/tmp/skipped-suites: see
+# tests/support/tessla_suite.rs); no note, no skip.
+set -u
+dir=${1:-target/tmp/skipped-suites}
+shopt -s nullglob
+notes=("$dir"/*)
+if [ ${#notes[@]} -eq 0 ]; then
+  echo "make test: no suite was skipped"
+  exit 0
+fi
+bar='!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!!'
+echo "$bar"
+echo "SKIPPED, NOT PASSED: ${#notes[@]} suite(s) did not run (their tests count as passed above):"
+for note in "${notes[@]}"; do
+  echo "  - $(basename "$note"): $(head -n 1 "$note")"
+done
+cat <<'TXT'
+They need TeSSLa's conformance cases (the TeSSLa project's back-end test suite, one folder
+per topic with a <case>.json descriptor per case: see the README, "Tests and TeSSLa's suite").
+Put the folder at ../shared/tessla-suite beside this repository, or point TESSLA_SUITE at it:
+  TESSLA_SUITE=/path/to/tessla-suite make test
+REQUIRE_TESSLA_SUITE=1 (as CI sets) turns a missing suite into a failure.
+TXT
+echo "$bar"
