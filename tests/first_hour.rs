@@ -21,11 +21,20 @@ fn run_in(dir: &Path, args: &[&str], stdin: &[u8]) -> Output {
         .stderr(Stdio::piped())
         .spawn()
         .expect("spawn the binary");
-    if let Some(mut input) = child.stdin.take() {
-        // A child that exits before reading (a bad command line) closes the pipe: not a failure.
-        let _ = std::io::Write::write_all(&mut input, stdin);
+    // Written from a thread while the output is read, so a large input cannot deadlock on a
+    // full pipe; a child that exits before reading (a bad command line) closes the pipe, which
+    // is not a failure.
+    let writer = child.stdin.take().map(|mut input| {
+        let bytes = stdin.to_vec();
+        std::thread::spawn(move || {
+            let _ = std::io::Write::write_all(&mut input, &bytes);
+        })
+    });
+    let out = child.wait_with_output().expect("wait for the binary");
+    if let Some(w) = writer {
+        let _ = w.join();
     }
-    child.wait_with_output().expect("wait for the binary")
+    out
 }
 
 fn run(args: &[&str], stdin: &[u8]) -> Output {
@@ -146,7 +155,7 @@ fn version_names_the_commit_and_tessla() {
 #[test]
 fn completions_and_the_man_page_come_from_the_command_line() {
     for (shell, marker) in [
-        ("bash", "_tessla-telegraf()"),
+        ("bash", "complete -F _tessla__telegraf"),
         ("zsh", "#compdef tessla-telegraf"),
         ("fish", "complete -c tessla-telegraf"),
     ] {
@@ -293,7 +302,11 @@ fn report_counts_the_silent_periods_and_shades_them() {
 
 /// Points of every `<polyline>` in an SVG, and the legend box (the white rectangle with a
 /// border that is not the whole image).
-fn legend_and_lines(svg: &str) -> ((f64, f64, f64, f64), Vec<Vec<(f64, f64)>>) {
+/// A box `(x0, y0, x1, y1)` and the points of each line, in SVG pixels.
+type Box4 = (f64, f64, f64, f64);
+type Lines = Vec<Vec<(f64, f64)>>;
+
+fn legend_and_lines(svg: &str) -> (Box4, Lines) {
     let doc = roxmltree::Document::parse(svg).expect("well-formed SVG");
     let num = |n: roxmltree::Node<'_, '_>, a: &str| {
         n.attribute(a)

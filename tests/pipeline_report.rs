@@ -167,7 +167,17 @@ fn report_is_well_formed_with_independent_numbers() {
         .filter(|n| n.tag_name().name() == "img")
         .filter_map(|n| n.attribute("src"))
         .collect();
-    assert_eq!(images, vec!["speeds.svg", "p1.svg", "p3.svg", "mse.svg"]);
+    assert_eq!(
+        images,
+        vec![
+            "speeds.svg",
+            "p1.svg",
+            "p3.svg",
+            "mse.svg",
+            "outputs.svg",
+            "verdicts.svg"
+        ]
+    );
     let speeds = check_svg(&out_dir.join("speeds.svg"), 3);
     assert!(speeds.contains("expected speed") && speeds.contains("augmented action"));
     assert!(
@@ -209,9 +219,12 @@ fn report_of_empty_input_still_renders() {
     );
     let html = std::fs::read_to_string(out_dir.join("index.html")).unwrap();
     assert!(html.contains("no data"));
-    for svg in ["speeds.svg", "p1.svg", "p3.svg", "mse.svg"] {
-        check_svg(&out_dir.join(svg), 0);
+    assert!(html.contains("none of the robot spec's outputs"), "{html}");
+    // Nothing to plot: no chart is drawn, and the page shows none.
+    for svg in ["speeds.svg", "p1.svg", "p3.svg", "mse.svg", "outputs.svg"] {
+        assert!(!out_dir.join(svg).exists(), "{svg} drawn without data");
     }
+    assert!(!html.contains("<img"), "{html}");
 }
 
 #[test]

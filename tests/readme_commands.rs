@@ -67,11 +67,14 @@ fn readme_commands(readme: &str) -> Vec<Cmd> {
     while let Some(line) = lines.get(i) {
         if line.trim() == "<!-- output of the command above -->" {
             marker = true;
-        } else if line.starts_with("```") {
+        } else if line.trim_start().starts_with("```") {
             let sh = line.trim() == "```sh";
             let start = i + 1;
             let mut end = start;
-            while lines.get(end).is_some_and(|l| !l.starts_with("```")) {
+            while lines
+                .get(end)
+                .is_some_and(|l| !l.trim_start().starts_with("```"))
+            {
                 end += 1;
             }
             let body = lines.get(start..end).unwrap_or_default();

@@ -176,7 +176,11 @@ impl Summary {
             "summary of {source}: {steps} steps over {} s\n",
             short(self.duration_s)
         );
-        let mut line = |text: String| out.push_str(&wrap("  ", &text, 80, 2));
+        // A line of the summary; one starting with two spaces goes under the previous line.
+        let mut line = |text: String| {
+            let head = if text.starts_with("  ") { "    " } else { "  " };
+            out.push_str(&wrap(head, &text, 80, 2));
+        };
         let p1_steps = self.p1_violated + self.p1_unknown + self.p1_ok;
         if p1_steps > 0 {
             line(format!(
@@ -206,11 +210,13 @@ impl Summary {
                 .map(|(r, n)| format!("{r} {n}"))
                 .collect();
             line(format!(
-                "actions: {} of {} augmented; why: {}, \
-                 capped at unknown_speed_cap while P1 was unknown: {}",
+                "actions: {} of {} augmented; why: {}",
                 self.augmented_actions,
                 self.actions,
                 reasons.join(", "),
+            ));
+            line(format!(
+                "  capped at unknown_speed_cap while P1 was unknown: {}",
                 self.capped_actions,
             ));
         }
