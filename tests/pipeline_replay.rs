@@ -234,3 +234,54 @@ fn many_full_scans_all_arrive_even_with_qos_0() {
         assert_eq!(lidar[359], json!(expected_last));
     }
 }
+
+#[test]
+fn a_line_that_is_not_utf8_is_skipped_and_a_long_gap_is_announced_and_capped() {
+    let Some(broker) = servers::Mosquitto::start() else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("gap.lp");
+    // Line 2 is not UTF-8; an hour passes between lines 3 and 4.
+    let mut bytes = format!("mqtt_consumer expectedSpeed=1 {T0}\n").into_bytes();
+    bytes.extend_from_slice(b"mqtt_consumer note=\"\xc3\x28\" 1\n");
+    bytes.extend(format!("mqtt_consumer expectedSpeed=2 {}\n", T0 + S / 5).into_bytes());
+    bytes.extend(format!("mqtt_consumer expectedSpeed=3 {}\n", T0 + 3600 * S).into_bytes());
+    std::fs::write(&file, bytes).unwrap();
+    let rx = mqtt_client::subscribe(broker.port, "gap", "test-sub-gap");
+    let start = std::time::Instant::now();
+    let out = replay(&[
+        file.to_str().unwrap(),
+        "--broker",
+        &broker.url(),
+        "--topic",
+        "gap",
+        "--max-gap",
+        "500ms",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "replay failed: {stderr}");
+    assert!(
+        start.elapsed() < Duration::from_secs(20),
+        "the hour was capped: {:?}",
+        start.elapsed()
+    );
+    assert!(
+        stderr.contains("skipped line 2: not UTF-8 (a bad byte at column 21)"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("line 4: the recording pauses 3599.8 s here; waiting 0.5 s (--max-gap)"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("published 3 messages"), "{stderr}");
+    let got = as_json(&mqtt_client::collect(&rx, 3, Duration::from_secs(10)));
+    assert_eq!(
+        got,
+        vec![
+            json!({"expectedSpeed": 1.0}),
+            json!({"expectedSpeed": 2.0}),
+            json!({"expectedSpeed": 3.0}),
+        ]
+    );
+}

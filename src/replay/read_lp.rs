@@ -27,7 +27,7 @@ pub fn valid_lines(bytes: &[u8]) -> (String, Vec<SkippedRecord>) {
                     reason: format!(
                         "not UTF-8 (a bad byte at column {}): {}",
                         String::from_utf8_lossy(good).chars().count() + 1,
-                        excerpt(&String::from_utf8_lossy(line))
+                        excerpt(String::from_utf8_lossy(line).trim_end_matches(['\n', '\r']))
                     ),
                 });
                 if line.ends_with(b"\n") {
