@@ -482,3 +482,79 @@ fn replay_skips_a_line_that_is_not_utf8_and_reads_on() {
     assert!(err.contains("cannot reach MQTT broker"), "{err}");
     assert_eq!(out.status.code(), Some(3), "{err}");
 }
+
+/// Link `name` of the repository into `dir`.
+fn link(dir: &Path, name: &str) {
+    let target = dir.join(name);
+    if let Some(parent) = target.parent() {
+        std::fs::create_dir_all(parent).unwrap();
+    }
+    std::os::unix::fs::symlink(root().join(name), target).unwrap();
+}
+
+#[test]
+fn the_package_assets_hold_man_page_completions_docs_and_a_systemd_drop_in() {
+    // A copy of the repository's layout with a Telegraf systemd drop-in added, as another
+    // change may add one under telegraf/systemd/.
+    let dir = tempfile::tempdir().unwrap();
+    for name in [
+        "specs",
+        "docs",
+        "examples",
+        "README.md",
+        "RELIABILITY.md",
+        "tools",
+    ] {
+        link(dir.path(), name);
+    }
+    for name in [
+        "telegraf.conf",
+        "telegraf-fleet.conf",
+        "telegraf-udp.conf",
+        "dashboards",
+    ] {
+        link(dir.path(), &format!("telegraf/{name}"));
+    }
+    let systemd = dir.path().join("telegraf/systemd");
+    std::fs::create_dir_all(&systemd).unwrap();
+    write(
+        &systemd,
+        "tessla-telegraf.conf",
+        "[Service]\nEnvironment=X=1\n",
+    );
+    let out = Command::new("bash")
+        .arg("tools/deb-assets.sh")
+        .arg(BIN)
+        .arg("staged")
+        .current_dir(dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let staged = dir.path().join("staged/usr");
+    for file in [
+        "share/man/man1/tessla-telegraf.1.gz",
+        "share/bash-completion/completions/tessla-telegraf",
+        "share/zsh/vendor-completions/_tessla-telegraf",
+        "share/fish/vendor_completions.d/tessla-telegraf.fish",
+        "share/tessla-telegraf/telegraf.tessla",
+        "share/doc/tessla-telegraf/README.md",
+        "share/doc/tessla-telegraf/telegraf/telegraf.conf",
+        "share/doc/tessla-telegraf/telegraf/dashboards/grafana-influxql.json",
+        "share/doc/tessla-telegraf/examples/first-spec/battery.tessla",
+        "share/doc/tessla-telegraf/examples/message.lp",
+        "lib/systemd/system/telegraf.service.d/tessla-telegraf.conf",
+    ] {
+        let p = staged.join(file);
+        assert!(p.is_file(), "{file} is staged");
+        assert!(std::fs::metadata(&p).unwrap().len() > 0, "{file} is empty");
+    }
+    // The example's annotations are a file, not a link that would dangle once installed.
+    let annotations = staged.join("share/doc/tessla-telegraf/examples/first-spec/telegraf.tessla");
+    assert!(
+        !annotations
+            .symlink_metadata()
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+}
