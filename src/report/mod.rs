@@ -47,8 +47,13 @@ pub fn timeline(text: &str, source: &str, width: usize) -> String {
             format!(", {}", humantime::format_rfc3339_seconds(at))
         })
         .unwrap_or_default();
+    let actions = if picked.augmented.is_empty() {
+        ""
+    } else {
+        "; the augmented actions"
+    };
     format!(
-        "{source}: when each verdict changed; the augmented actions\n\
+        "{source}: when each verdict changed{actions}\n\
          (seconds from the first record{start})\n{lines}"
     )
 }
