@@ -246,6 +246,73 @@ fn report_works_for_any_spec_and_says_what_it_lacks() {
     assert!(!summary.contains("-0"), "{summary}");
 }
 
+#[test]
+fn report_leaves_out_the_telemetry_it_is_told_of() {
+    // The battery run with pass-through: the input measurement `robot` is telemetry.
+    let dir = tempfile::tempdir().unwrap();
+    let spec = write(
+        dir.path(),
+        "b.tessla",
+        "in battery: Events[Float]\nout battery <. 11.0 as low\n",
+    );
+    let input = "robot battery=12.0 1000000000\nrobot battery=10.0 2000000000\n";
+    let out = run(&["run", "--spec", spec.to_str().unwrap()], input.as_bytes());
+    let lp = write(dir.path(), "run.lp", &text(&out.stdout));
+    let summary = |extra: &[&str]| {
+        let mut args = vec!["report", "--summary", lp.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        text(&run(&args, b"").stdout)
+    };
+    let with_robot = summary(&[]);
+    assert!(with_robot.contains("low: false 1, true 1"), "{with_robot}");
+    let timeline = text(
+        &run(
+            &[
+                "report",
+                "--timeline",
+                lp.to_str().unwrap(),
+                "--telemetry",
+                "robot",
+            ],
+            b"",
+        )
+        .stdout,
+    );
+    assert!(timeline.contains("1.0 s low true"), "{timeline}");
+    let report_dir = dir.path().join("r");
+    let out = run(
+        &[
+            "report",
+            lp.to_str().unwrap(),
+            "-o",
+            report_dir.to_str().unwrap(),
+        ],
+        b"",
+    );
+    assert_eq!(out.status.code(), Some(0));
+    let outputs = std::fs::read_to_string(report_dir.join("outputs.svg")).unwrap();
+    assert!(
+        outputs.contains("battery"),
+        "without --telemetry, `robot` counts as output"
+    );
+    let out = run(
+        &[
+            "report",
+            lp.to_str().unwrap(),
+            "-o",
+            report_dir.to_str().unwrap(),
+            "--telemetry",
+            "robot",
+        ],
+        b"",
+    );
+    assert_eq!(out.status.code(), Some(0));
+    assert!(
+        !report_dir.join("outputs.svg").exists(),
+        "--telemetry robot leaves `battery` out: no numeric output is left to plot"
+    );
+}
+
 const T0: i64 = 1_700_000_000_000_000_000;
 const S: i64 = 1_000_000_000;
 

@@ -23,6 +23,10 @@ pub struct ReportArgs {
     /// without `-o`, write no files.
     #[arg(long)]
     pub timeline: bool,
+    /// A measurement that holds telemetry passed through rather than the spec's outputs
+    /// (repeatable; default `mqtt_consumer`, Telegraf's MQTT input).
+    #[arg(long, value_name = "MEASUREMENT")]
+    pub telemetry: Vec<String>,
 }
 
 /// Run the subcommand.
@@ -39,13 +43,16 @@ pub fn run(args: ReportArgs) -> CliResult {
         (text, args.file.display().to_string())
     };
     if args.timeline {
-        print!("{}", crate::report::timeline(&text, &name, 80));
+        print!(
+            "{}",
+            crate::report::timeline(&text, &name, 80, &args.telemetry)
+        );
     }
     let output = match (&args.output, args.summary || args.timeline) {
         (Some(dir), _) => dir.clone(),
         (None, false) => PathBuf::from("report"),
         (None, true) => {
-            let s = crate::report::summarize(&text);
+            let s = crate::report::summarize(&text, &args.telemetry);
             warn_missing(&s, &name);
             if args.summary {
                 print!("{}", s.text(&name));
@@ -54,7 +61,7 @@ pub fn run(args: ReportArgs) -> CliResult {
         }
     };
     let output = &output;
-    let written = crate::report::write_report(&text, &name, output)
+    let written = crate::report::write_report(&text, &name, output, &args.telemetry)
         .map_err(|e| CliError::io(format!("report: {e}")))?;
     let s = &written.summary;
     warn_missing(s, &name);

@@ -73,11 +73,17 @@ pub struct Run {
     pub start_ns: Option<i64>,
     /// Records that were not line protocol.
     pub skipped: usize,
+    /// Measurements that hold telemetry passed through, not the spec's outputs
+    /// (`report --telemetry`; [`Run::parse`] sets `mqtt_consumer`).
+    pub telemetry: Vec<String>,
 }
 
 impl Run {
     pub fn parse(text: &str) -> Run {
-        let mut run = Run::default();
+        let mut run = Run {
+            telemetry: vec![super::outputs::TELEMETRY.to_string()],
+            ..Run::default()
+        };
         let mut previous_t = 0.0;
         for chunk in split_lines(text) {
             for parsed in parse_lines(chunk.trim_end_matches('\r')) {

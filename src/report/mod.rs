@@ -23,16 +23,25 @@ pub struct Written {
     pub summary: stats::Summary,
 }
 
+/// The run in `text`; `telemetry` (when not empty) replaces the default telemetry measurement.
+fn parse(text: &str, telemetry: &[String]) -> data::Run {
+    let mut run = data::Run::parse(text);
+    if !telemetry.is_empty() {
+        run.telemetry = telemetry.to_vec();
+    }
+    run
+}
+
 /// The summary of `text` (line protocol) alone, without plots or files.
-pub fn summarize(text: &str) -> stats::Summary {
-    let run = data::Run::parse(text);
+pub fn summarize(text: &str, telemetry: &[String]) -> stats::Summary {
+    let run = parse(text, telemetry);
     let picked = series::Picked::from_run(&run);
     stats::Summary::compute(&run, &picked)
 }
 
 /// The terminal view of `text` (line protocol): verdict changes, runs of augmented actions.
-pub fn timeline(text: &str, source: &str, width: usize) -> String {
-    let run = data::Run::parse(text);
+pub fn timeline(text: &str, source: &str, width: usize, telemetry: &[String]) -> String {
+    let run = parse(text, telemetry);
     let picked = series::Picked::from_run(&run);
     let outputs = outputs::Outputs::from_run(&run);
     let lines = outputs::timeline(&picked, &outputs, width);
@@ -59,8 +68,13 @@ pub fn timeline(text: &str, source: &str, width: usize) -> String {
 }
 
 /// Read `text` (line protocol) and write `index.html` and the SVG plots into `dir`.
-pub fn write_report(text: &str, source_name: &str, dir: &Path) -> Result<Written, String> {
-    let run = data::Run::parse(text);
+pub fn write_report(
+    text: &str,
+    source_name: &str,
+    dir: &Path,
+    telemetry: &[String],
+) -> Result<Written, String> {
+    let run = parse(text, telemetry);
     let picked = series::Picked::from_run(&run);
     let summary = stats::Summary::compute(&run, &picked);
     std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
@@ -68,6 +82,19 @@ pub fn write_report(text: &str, source_name: &str, dir: &Path) -> Result<Written
     let outputs = outputs::Outputs::from_run(&run);
     let rendered = plots::render_all(&picked, &outputs)?;
     let titles: Vec<(&str, &str)> = rendered.iter().map(|p| (p.file_name, p.title)).collect();
+    // A chart this run has no data for is not drawn: remove an earlier report's copy, so the
+    // folder holds what the page shows.
+    for (file, _) in plots::FILES {
+        if !titles.iter().any(|(f, _)| *f == file) {
+            let stale = dir.join(file);
+            match std::fs::remove_file(&stale) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(format!("cannot remove {}: {e}", stale.display()));
+                }
+                _ => {}
+            }
+        }
+    }
     for plot in &rendered {
         let path = dir.join(plot.file_name);
         std::fs::write(&path, &plot.svg)

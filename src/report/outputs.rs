@@ -3,7 +3,8 @@
 //! changed, the augmented actions in runs, and the robot's silent periods (`robot_silent`).
 //!
 //! Telemetry passed through is left out: the measurement `mqtt_consumer` (Telegraf's MQTT
-//! input, what every shipped conf feeds the monitor). Every other measurement is the spec's.
+//! input, what every shipped conf feeds the monitor), or those `report --telemetry` names.
+//! Every other measurement is the spec's.
 //! An output is named by its field, or by its measurement when the field is `value` (the
 //! connector's `@TelegrafOut` form); `action` fields that repeat another measurement's field are
 //! shown once, from the other measurement (the robot's action copies its verdicts).
@@ -11,8 +12,8 @@
 use super::data::{Run, Value};
 use super::series::Picked;
 
-/// Measurements that carry the robot's telemetry, not the spec's outputs.
-pub const TELEMETRY: [&str; 1] = ["mqtt_consumer"];
+/// The measurement that carries the robot's telemetry by default (Telegraf's MQTT input).
+pub const TELEMETRY: &str = "mqtt_consumer";
 
 /// One output of the spec over time.
 #[derive(Debug, Clone, PartialEq)]
@@ -41,7 +42,7 @@ fn label(measurement: &str, field: &str) -> String {
 
 impl Outputs {
     pub fn from_run(run: &Run) -> Outputs {
-        let ours = |m: &str| !TELEMETRY.contains(&m);
+        let ours = |m: &str| !run.telemetry.iter().any(|t| t == m);
         let mut tag_sets: Vec<&[(String, String)]> = Vec::new();
         for r in run.records.iter().filter(|r| ours(&r.measurement)) {
             if !tag_sets.contains(&r.tags.as_slice()) {
