@@ -1,5 +1,5 @@
 # Every command the README mentions lives here. `make run` and `make test` are the README's first two.
-.PHONY: run test setup build install deb profiling bench bench-criterion bench-process bench-nats soak fmt lint ci fixtures conformance fuzz reproduce
+.PHONY: run test setup build install deb profiling readme-run bench bench-criterion bench-process bench-nats soak fmt lint ci fixtures conformance fuzz reproduce
 
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
@@ -15,6 +15,12 @@ run: build
 
 build:
 	$(CARGO) build --release
+
+# Rewrite the README's `make run` block with what `make run` prints now (after a change to the
+# bundled spec or the fixture; tests/first_hour.rs checks the two agree).
+readme-run: build
+	$(MAKE) -s run > target/make-run.txt
+	python3 tools/readme_run_block.py target/make-run.txt
 
 setup:
 	bash tools/setup.sh

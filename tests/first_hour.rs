@@ -481,7 +481,10 @@ fn make_run_fits_one_screen_and_the_readme_shows_it() {
         .nth(1)
         .and_then(|r| r.split("```").next())
         .expect("the README shows make run's output after <!-- make run output -->");
-    assert_eq!(block, screen, "README's make run block is out of date");
+    assert_eq!(
+        block, screen,
+        "README's make run block is out of date: `make readme-run` rewrites it"
+    );
 }
 
 #[test]
