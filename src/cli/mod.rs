@@ -168,9 +168,21 @@ pub struct RunArgs {
     /// never in UDP mode).
     #[arg(long)]
     pub no_passthrough: bool,
-    /// What to do with a record whose timestamp is not after the last evaluated step.
+    /// What to do with a record stamped before its instance's last step (README, "Time"): a
+    /// step of its own 1 ns after it, or dropped. A record with the same timestamp as the last
+    /// step is always stepped 1 ns after it.
     #[arg(long, value_enum, default_value_t)]
     pub late: crate::telegraf::processor::LateMode,
+    /// Refuse a record stamped more than this ahead of the wall clock (warned, counted, passed
+    /// through, not evaluated), so one wrong timestamp cannot move a monitor's clock; `off` for
+    /// simulated data stamped in the future.
+    #[arg(long, value_name = "DURATION|off", default_value = "10s", value_parser = parse_bound)]
+    pub max_ahead: Bound,
+    /// While an instance's input is silent, its time follows the wall clock this far behind, so
+    /// that `delay`s (watchdogs, timeouts, `period`) fire while the robot is quiet; a record
+    /// delivered later than this after its time is late.
+    #[arg(long, value_name = "DURATION", default_value = "250ms", value_parser = humantime::parse_duration)]
+    pub allowed_lateness: std::time::Duration,
     /// Measurement of the metric that groups outputs without a Telegraf annotation.
     #[arg(long, default_value = "tessla")]
     pub measurement: String,
@@ -219,6 +231,19 @@ pub struct RunArgs {
     /// loses at most this much. Needs --state.
     #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration, requires = "state")]
     pub state_interval: Option<std::time::Duration>,
+}
+
+/// A duration, or `off`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Bound(pub Option<std::time::Duration>);
+
+fn parse_bound(s: &str) -> Result<Bound, String> {
+    if s.eq_ignore_ascii_case("off") {
+        return Ok(Bound(None));
+    }
+    humantime::parse_duration(s)
+        .map(|d| Bound(Some(d)))
+        .map_err(|e| format!("{e} (a duration such as `10s`, `5m`, or `off`)"))
 }
 
 /// Parse the command line, run the subcommand, report its error (if any) and return the exit code.

@@ -204,6 +204,21 @@ impl Monitor {
         self.targets.iter().filter_map(|t| *t).min()
     }
 
+    /// When the next armed `delay` fires, if one is armed (the Telegraf binding fires it by the
+    /// wall clock while the input is silent, through [`Monitor::advance_to`]).
+    pub fn next_firing(&self) -> Option<i64> {
+        self.next_delay()
+    }
+
+    /// The latest time this monitor has reached: its open step, its last evaluated step, or its
+    /// origin.
+    pub fn clock(&self) -> i64 {
+        self.pending
+            .into_iter()
+            .chain(self.last_evaluated)
+            .fold(self.t0, i64::max)
+    }
+
     fn step<S: FnMut(OutputEvent<'_>)>(&mut self, ts: i64, sink: &mut S) {
         // The thread's scratch; a nested step (from a sink) gets a fresh one.
         SCRATCH.with(|cell| match cell.try_borrow_mut() {
