@@ -31,6 +31,7 @@ pub const FILES: &[(&str, &str)] = &[
         "lib/p3_lidar.tessla",
         include_str!("../specs/lib/p3_lidar.tessla"),
     ),
+    ("lib/link.tessla", include_str!("../specs/lib/link.tessla")),
     ("robot.tessla", include_str!("../specs/robot.tessla")),
 ];
 

@@ -954,9 +954,16 @@ mod tests {
         assert_eq!(p.counters.ahead, 1);
         let later = now + 1_000;
         let out = feed(&mut p, &format!("m x=3 {later}\n"));
-        assert!(out.ends_with(&format!("tessla c=2i,x=3i {later}\n")), "{out}");
+        assert!(
+            out.ends_with(&format!("tessla c=2i,x=3i {later}\n")),
+            "{out}"
+        );
         assert_eq!(p.counters.late, 0);
-        assert!(p.summary().contains(", 1 ahead of the clock,"), "{}", p.summary());
+        assert!(
+            p.summary().contains(", 1 ahead of the clock,"),
+            "{}",
+            p.summary()
+        );
         // Off: simulated data far in the future is evaluated.
         let mut p = processor(Options {
             passthrough: false,
@@ -1009,10 +1016,16 @@ mod tests {
         p.advance_wall(t0 + Duration::from_nanos(900), &mut out);
         assert!(out.is_empty());
         p.advance_wall(t0 + Duration::from_nanos(1000) + lateness, &mut out);
-        assert_eq!(String::from_utf8(out).unwrap(), "tessla,robot=a quiet=true 6000\n");
+        assert_eq!(
+            String::from_utf8(out).unwrap(),
+            "tessla,robot=a quiet=true 6000\n"
+        );
         let mut out = Vec::new();
         p.advance_wall(t0 + Duration::from_nanos(1500) + lateness, &mut out);
-        assert_eq!(String::from_utf8(out).unwrap(), "tessla,robot=b quiet=true 6500\n");
+        assert_eq!(
+            String::from_utf8(out).unwrap(),
+            "tessla,robot=b quiet=true 6500\n"
+        );
         assert_eq!(p.next_deadline(), None);
         // A record after the firing but stamped before it is late: a step of its own after it.
         p.set_wall(Wall {

@@ -24,8 +24,8 @@
 //! read: most of the answer latency of a single record on a busy machine).
 
 use super::{Ending, Hooks};
-use crate::telegraf::instances::shard_of;
 use crate::telegraf::clock::Wall;
+use crate::telegraf::instances::shard_of;
 use crate::telegraf::processor::Processor;
 use lineproto::{RecordRef, RecordSplitter};
 use std::io::Write;

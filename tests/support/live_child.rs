@@ -131,6 +131,13 @@ impl LiveChild {
         }
     }
 
+    /// Take every stdout line received so far into `out`, without waiting.
+    pub fn drain_out(&mut self) {
+        while let Ok(l) = self.out_rx.try_recv() {
+            self.out.push(l);
+        }
+    }
+
     fn drain_err(&mut self) {
         while let Ok(l) = self.err_rx.try_recv() {
             self.err.push(l);
