@@ -421,7 +421,9 @@ fn a_restart_with_a_poisoned_state_file_recovers() {
     assert!(!f.stderr.contains("starts fresh"), "{}", f.stderr);
 }
 
-const WATCHDOG: &str = "in battery: Events[Float]\ndef silent = delay(const(1000000000, battery), battery)\nout silent\n";
+const WATCHDOG: &str = "in battery: Events[Float]\n\
+    def silent = delay(const(1000000000, battery), battery)\n\
+    out silent\nout battery\n";
 
 /// Scenario 3: the watchdog written the TeSSLa way fires while stdin stays open and nothing
 /// arrives, about delay + allowed lateness after the last record, stamped with its TeSSLa time.
@@ -430,6 +432,11 @@ fn a_watchdog_fires_while_the_robot_is_silent() {
     let spec = spec_file(WATCHDOG);
     let path = spec.path().to_str().unwrap();
     let mut c = LiveChild::spawn(&["run", "--spec", path, "--no-passthrough"]);
+    // A first record, answered: the child has started and reads its input.
+    let ts0 = unix_ns();
+    c.write(&format!("robot battery=51.0 {ts0}\n"));
+    let first = format!("tessla battery=51 {ts0}\n");
+    c.wait_out("the first answer", |l| l == first);
     let ts = unix_ns();
     let written = Instant::now();
     c.write(&format!("robot battery=50.0 {ts}\n"));
@@ -448,7 +455,11 @@ fn a_watchdog_fires_while_the_robot_is_silent() {
     let (out, err, code) = c.finish();
     assert_eq!(code, 0, "{err}");
     // At the end of input nothing pending fires: the robot did not fall silent, the input ended.
-    assert_eq!(out, expected, "{err}");
+    assert_eq!(
+        out,
+        format!("{first}tessla battery=50 {ts}\n{expected}tessla battery=49 {ts2}\n"),
+        "{err}"
+    );
 }
 
 /// One silent robot among 1,000 busy ones (each sending every 50 ms) gets its watchdog on time,
@@ -465,6 +476,11 @@ fn a_silent_robot_in_a_busy_fleet_gets_its_watchdog() {
         "--instance-by",
         "robot",
     ]);
+    let ts0 = unix_ns();
+    c.write(&format!("m,robot=quiet battery=51.0 {ts0}\n"));
+    c.wait_out("the first answer", |l| {
+        l.starts_with("tessla,robot=quiet battery=51 ")
+    });
     let ts = unix_ns();
     let written = Instant::now();
     c.write(&format!("m,robot=quiet battery=50.0 {ts}\n"));
@@ -519,11 +535,14 @@ fn a_replayed_file_fires_only_at_gaps_in_its_own_timestamps() {
         Duration::from_secs(30),
     );
     assert_eq!(f.code, Some(0), "{}", f.stderr);
+    let out = f.stdout_text();
+    let silent: Vec<&str> = out.lines().filter(|l| l.contains("silent=")).collect();
     assert_eq!(
-        f.stdout_text(),
-        format!(
-            "tessla silent=true {}\n",
+        silent,
+        [format!(
+            "tessla silent=true {}",
             base + 19 * 200_000_000 + 1_000_000_000
-        )
+        )]
     );
+    assert_eq!(out.lines().count(), 51, "{out}");
 }
