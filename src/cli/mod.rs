@@ -180,9 +180,10 @@ pub struct RunArgs {
     pub max_ahead: Bound,
     /// While an instance's input is silent, its time follows the wall clock this far behind, so
     /// that `delay`s (watchdogs, timeouts, `period`) fire while the robot is quiet; a record
-    /// delivered later than this after its time is late.
-    #[arg(long, value_name = "DURATION", default_value = "250ms", value_parser = humantime::parse_duration)]
-    pub allowed_lateness: std::time::Duration,
+    /// delivered later than this after its time is late. `off`: time moves only with the
+    /// records (as in TeSSLa's offline traces; for replaying files slower than they were recorded).
+    #[arg(long, value_name = "DURATION|off", default_value = "250ms", value_parser = parse_bound)]
+    pub allowed_lateness: Bound,
     /// Measurement of the metric that groups outputs without a Telegraf annotation.
     #[arg(long, default_value = "tessla")]
     pub measurement: String,

@@ -242,13 +242,18 @@ pub async fn run(proc: &mut Processor, mut fleet: Fleet<'_>) -> std::io::Result<
     lease_poll.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let ending = loop {
         // A standby holds no instances: only the process stepping a partition advances clocks.
-        let deadline = proc.next_deadline().filter(|_| l.active);
+        // A record partly read is input arriving, not silence.
+        let deadline = proc
+            .next_deadline()
+            .filter(|_| l.active && splitter.buffered() == 0);
         let n = tokio::select! {
-            r = stdin.read(&mut buf) => r?,
-            _ = crate::transport::sleep_until(deadline) => {
-                let wall = Wall::now();
-                proc.set_wall(wall);
-                proc.advance_wall(wall.at, &mut out);
+            // Biased, in this order: a signal is never starved by input, and a delay falls due
+            // by the wall clock only when no input is waiting (input not read yet is not silence).
+            biased;
+            _ = sigterm.recv() => break Ending::Signal,
+            _ = sigint.recv() => break Ending::Signal,
+            _ = sighup.recv() => {
+                (l.f.on_hangup)(proc, &mut out);
                 if write_out(&mut out).is_err() {
                     return Ok(finish(l, proc, Ending::OutputClosed));
                 }
@@ -265,15 +270,16 @@ pub async fn run(proc: &mut Processor, mut fleet: Fleet<'_>) -> std::io::Result<
                 }
                 continue;
             }
-            _ = sighup.recv() => {
-                (l.f.on_hangup)(proc, &mut out);
+            r = stdin.read(&mut buf) => r?,
+            _ = crate::transport::sleep_until(deadline) => {
+                let wall = Wall::now();
+                proc.set_wall(wall);
+                proc.advance_wall(wall.at, &mut out);
                 if write_out(&mut out).is_err() {
                     return Ok(finish(l, proc, Ending::OutputClosed));
                 }
                 continue;
             }
-            _ = sigterm.recv() => break Ending::Signal,
-            _ = sigint.recv() => break Ending::Signal,
         };
         if n == 0 {
             break Ending::Eof;

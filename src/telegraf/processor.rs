@@ -46,8 +46,8 @@ pub struct Options {
     /// Refuse a record stamped more than this ahead of the wall clock (`None`: `--max-ahead off`).
     pub max_ahead: Option<Duration>,
     /// How far an instance's time stays behind the wall clock while its input is silent, before
-    /// its `delay`s fire (`--allowed-lateness`).
-    pub allowed_lateness: Duration,
+    /// its `delay`s fire (`--allowed-lateness`); `None` (`off`): time moves only with records.
+    pub allowed_lateness: Option<Duration>,
 }
 
 pub const DEFAULT_MAX_INSTANCES: usize = 100_000;
@@ -73,7 +73,7 @@ impl Default for Options {
             max_instances: DEFAULT_MAX_INSTANCES,
             instance_idle: None,
             max_ahead: Some(DEFAULT_MAX_AHEAD),
-            allowed_lateness: DEFAULT_ALLOWED_LATENESS,
+            allowed_lateness: Some(DEFAULT_ALLOWED_LATENESS),
         }
     }
 }
@@ -200,7 +200,7 @@ impl Processor {
         let encodings = encode::encodings(&program);
         let wiring = super::wiring::WiringCheck::new(&bindings);
         Ok(Processor {
-            has_delays: !program.delays.is_empty(),
+            has_delays: !program.delays.is_empty() && opts.allowed_lateness.is_some(),
             program,
             bindings,
             emitter: Emitter {
@@ -527,7 +527,7 @@ impl Processor {
         if !self.has_delays {
             return;
         }
-        let (at, lateness) = (self.wall.at, self.opts.allowed_lateness);
+        let (at, lateness) = (self.wall.at, self.lateness());
         if let Some(inst) = self.instances.get_mut(slot) {
             let anchor = Anchor { ts, at };
             inst.anchor = Some(anchor);
@@ -550,6 +550,11 @@ impl Processor {
         }
     }
 
+    /// `--allowed-lateness` (only read where it is on: `has_delays` is false when it is off).
+    fn lateness(&self) -> Duration {
+        self.opts.allowed_lateness.unwrap_or(Duration::MAX)
+    }
+
     /// The earliest wall-clock time at which an instance's `delay` may fall due (a transport
     /// sleeps until then when no input arrives).
     pub fn next_deadline(&self) -> Option<Instant> {
@@ -561,7 +566,7 @@ impl Processor {
     /// `--allowed-lateness`), firing those delays; their outputs carry their TeSSLa time.
     /// Touches only the instances with a due deadline.
     pub fn advance_wall(&mut self, now: Instant, out: &mut Vec<u8>) {
-        let lateness = self.opts.allowed_lateness;
+        let lateness = self.lateness();
         while let Some((due, id, slot)) = self.deadlines.pop_due(now) {
             let Some(inst) = self.instances.get_mut(slot) else {
                 continue;
@@ -738,11 +743,11 @@ impl Processor {
         self.emitter.encode = encode::Scratch::default();
         self.wiring = super::wiring::WiringCheck::new(&bindings);
         self.bindings = bindings;
-        self.has_delays = !program.delays.is_empty();
+        self.has_delays = !program.delays.is_empty() && self.opts.allowed_lateness.is_some();
         self.program = program;
         // The new program's delays: queue every instance afresh (a reload is rare).
         self.deadlines.clear();
-        let (at, lateness) = (Wall::now().at, self.opts.allowed_lateness);
+        let (at, lateness) = (Wall::now().at, self.lateness());
         for (slot, inst) in self.instances.slots_mut() {
             inst.queued = None;
             if inst.anchor.is_none() {
@@ -992,7 +997,7 @@ mod tests {
             Options {
                 passthrough: false,
                 instance_by: vec!["robot".into()],
-                allowed_lateness: lateness,
+                allowed_lateness: Some(lateness),
                 ..Options::default()
             },
         )

@@ -357,8 +357,30 @@ async fn run_shards(
         mut periodic,
     } = hooks;
     let ending = loop {
-        let deadline = shards.next_deadline(proc);
+        // A record partly read is input arriving, not silence.
+        let deadline = shards
+            .next_deadline(proc)
+            .filter(|_| splitter.buffered() == 0);
         let n = tokio::select! {
+            // Biased, in this order: a signal is never starved by input, and a delay falls due
+            // by the wall clock only when no input is waiting (input not read yet is not silence).
+            biased;
+            _ = sigterm.recv() => break Ending::Signal,
+            _ = sigint.recv() => break Ending::Signal,
+            _ = sighup.recv() => {
+                on_hangup(proc, &mut out);
+                shards.each(|p| on_hangup(p, &mut out));
+                if write_out(&mut out, &mut shards.outs).is_err() {
+                    return Ok(Ending::OutputClosed);
+                }
+                continue;
+            }
+            _ = super::tick(&mut timer) => {
+                if let Some((_, f)) = periodic.as_mut() {
+                    f(proc);
+                }
+                continue;
+            }
             r = stdin.read(&mut buf) => r?,
             _ = super::sleep_until(deadline) => {
                 // Silent input: the instances whose delays fell due move on by the wall clock.
@@ -374,22 +396,6 @@ async fn run_shards(
                 }
                 continue;
             }
-            _ = super::tick(&mut timer) => {
-                if let Some((_, f)) = periodic.as_mut() {
-                    f(proc);
-                }
-                continue;
-            }
-            _ = sighup.recv() => {
-                on_hangup(proc, &mut out);
-                shards.each(|p| on_hangup(p, &mut out));
-                if write_out(&mut out, &mut shards.outs).is_err() {
-                    return Ok(Ending::OutputClosed);
-                }
-                continue;
-            }
-            _ = sigterm.recv() => break Ending::Signal,
-            _ = sigint.recv() => break Ending::Signal,
         };
         if n == 0 {
             break Ending::Eof;

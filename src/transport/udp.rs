@@ -49,11 +49,13 @@ pub async fn run(
     loop {
         let deadline = proc.next_deadline();
         let n = tokio::select! {
-            r = sock.recv(&mut buf) => r?,
-            _ = super::sleep_until(deadline) => {
-                let wall = Wall::now();
-                proc.set_wall(wall);
-                proc.advance_wall(wall.at, &mut out);
+            // Biased, in this order: a signal is never starved by input, and a delay falls due
+            // by the wall clock only when no input is waiting (input not read yet is not silence).
+            biased;
+            _ = sigterm.recv() => break,
+            _ = sigint.recv() => break,
+            _ = sighup.recv() => {
+                on_hangup(proc, &mut out);
                 send_packed(&out_sock, &out, max_datagram).await;
                 out.clear();
                 continue;
@@ -64,14 +66,15 @@ pub async fn run(
                 }
                 continue;
             }
-            _ = sighup.recv() => {
-                on_hangup(proc, &mut out);
+            r = sock.recv(&mut buf) => r?,
+            _ = super::sleep_until(deadline) => {
+                let wall = Wall::now();
+                proc.set_wall(wall);
+                proc.advance_wall(wall.at, &mut out);
                 send_packed(&out_sock, &out, max_datagram).await;
                 out.clear();
                 continue;
             }
-            _ = sigterm.recv() => break,
-            _ = sigint.recv() => break,
         };
         proc.set_wall(Wall::now());
         let mut splitter = RecordSplitter::default();
