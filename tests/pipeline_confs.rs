@@ -336,18 +336,29 @@ fn udp_conf_as_shipped_end_to_end_and_loop_free() {
         std::thread::sleep(Duration::from_millis(50));
         outputs = telegraf.delivered();
     }
+    // The robot has stopped: max_silence (1 s) + the allowed lateness (250 ms) after its last
+    // message, the link's verdict `robot_silent=true` arrives, once, on the socket_listener's
+    // route (to InfluxDB, not to the robot).
+    std::thread::sleep(Duration::from_millis(1500));
+    let settled = telegraf.delivered();
+    assert_eq!(
+        settled,
+        vec![outputs[0], outputs[1] + 1, outputs[2]],
+        "the silence verdict, once"
+    );
     std::thread::sleep(Duration::from_millis(1500));
     assert_eq!(
         telegraf.delivered(),
-        outputs,
+        settled,
         "metrics still flowing: a loop"
     );
     let stats = telegraf.stop();
     // Conf order: mqtt (actions), influxdb (all), socket_writer (robot metrics).
     assert_eq!(stats.delivered[0], RECORDS);
     assert_eq!(stats.delivered[2], RECORDS);
-    // Robot metrics + verdicts + actions, each once: no echo comes back in UDP mode.
-    assert_eq!(stats.delivered[1], 3 * RECORDS);
+    // Robot metrics + verdicts + actions, each once, and the silence verdict: no echo comes
+    // back in UDP mode.
+    assert_eq!(stats.delivered[1], 3 * RECORDS + 1);
     // Even an echoed robot metric would stop at the socket_listener.
     let echoed = Metric {
         name: "mqtt_consumer".into(),
