@@ -402,3 +402,72 @@ fn threads_agree_with_one_thread_over_many_reads() {
     });
     assert!(err.contains("parse error"), "{err}");
 }
+
+/// The summary line counts the same on any thread count, every counter included: records,
+/// events, outputs, parse errors, late records, records ahead of the clock, dropped values,
+/// duplicates, instances and evictions.
+#[test]
+fn the_summary_is_the_same_on_any_thread_count() {
+    let mut input = String::new();
+    for round in 0..20i64 {
+        for r in 0..100i64 {
+            let ts = 1_600_000_000_000_000_000i64 + round * 200_000_000 + r;
+            let line = format!(
+                "mqtt_consumer,host=h,topic=fleet/r{r} expectedSpeed=0.05,actualSpeed=\"0.0{}\" {ts}\n",
+                (r + round) % 9 + 1
+            );
+            input.push_str(&line);
+            match (round + r) % 10 {
+                // A redelivered message: an exact duplicate.
+                0 => input.push_str(&line),
+                // A late record, a value that does not convert, one far in the future.
+                1 => input.push_str(&format!(
+                    "mqtt_consumer,host=h,topic=fleet/r{r} expectedSpeed=0.04 {}\n",
+                    ts - 100_000_000
+                )),
+                2 => input.push_str(&format!(
+                    "mqtt_consumer,host=h,topic=fleet/r{r} actualSpeed=\"fast\" {}\n",
+                    ts + 1
+                )),
+                3 => input.push_str(&format!(
+                    "mqtt_consumer,host=h,topic=fleet/r{r} expectedSpeed=0.04 {}\n",
+                    i64::MAX - 5
+                )),
+                4 => input.push_str(&format!("mqtt_consumer,topic=fleet/r{r} broken\n")),
+                _ => {}
+            }
+        }
+    }
+    let summary = |threads: &str| {
+        let (_, err, code) = run(
+            &[
+                "--no-passthrough",
+                "--instance-by",
+                "topic",
+                "--max-instances",
+                "80",
+                "--threads",
+                threads,
+            ],
+            &input,
+        );
+        assert_eq!(code, 0, "{err}");
+        err.lines()
+            .find(|l| l.starts_with("I! summary:"))
+            .unwrap_or_else(|| panic!("no summary: {err}"))
+            .to_string()
+    };
+    let one = summary("1");
+    for c in [
+        " 0 late records",
+        " 0 ahead of the clock",
+        " 0 duplicates",
+        " 0 parse errors",
+        " 0 evicted",
+        " 0 dropped values",
+    ] {
+        assert!(!one.contains(c), "the workload has some: {one}");
+    }
+    assert_eq!(summary("2"), one);
+    assert_eq!(summary("3"), one);
+}
