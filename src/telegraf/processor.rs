@@ -725,8 +725,9 @@ impl Processor {
         }
     }
 
-    /// Run `program` from now on (a spec reload). Every open step is evaluated first with the
-    /// old program; then `carry` turns each instance's monitor into one of the new program.
+    /// Run `program` from now on (a spec reload): `carry` turns each instance's monitor into
+    /// one of the new program (no step is open between records), and every instance's next
+    /// `delay` firing is queued afresh.
     /// Fails (nothing changed) when the new program's input annotations are malformed.
     pub fn replace_program(
         &mut self,

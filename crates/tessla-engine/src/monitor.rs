@@ -17,10 +17,12 @@
 //!   outputs sent to `sink`. Errors: `ts` earlier than the pending step (decreasing), or a second
 //!   event on the same input at the same `ts` (multiple events), or `ts` not later than the last
 //!   evaluated step (after a [`Monitor::flush`]).
-//! - [`Monitor::flush`] evaluates the pending step now (the Telegraf binding calls it as soon as
-//!   no more input is available). After it, only later timestamps may be pushed.
+//! - [`Monitor::flush`] evaluates the pending step now (the Telegraf binding calls it after
+//!   each record: every record is a step of its own). After it, only later timestamps may be
+//!   pushed.
 //! - [`Monitor::advance_to`] evaluates the pending step and the delay firings strictly before `ts`
-//!   without adding input (used for idle time).
+//!   without adding input (the Telegraf binding calls it when an instance's input is silent and
+//!   its next firing, [`Monitor::next_firing`], is due by the wall clock).
 //! - Runtime errors (division by zero, overflow, `getSome(None)`) are values: an output whose value
 //!   is [`Value::Error`] reaches the sink like any other event; the caller reports it.
 
