@@ -48,7 +48,7 @@ impl Wall {
 pub fn unix_ns() -> i64 {
     std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| ns_of(d))
+        .map_or(0, ns_of)
 }
 
 /// A duration in nanoseconds, saturating.
