@@ -152,7 +152,11 @@ fn pass_through_is_unchanged_with_instances() {
         assert_eq!(code, 0, "{err}");
         let echo = echoed(&out);
         assert_eq!(sorted_lines(&echo), sorted_lines(&input), "{threads:?}");
-        assert_eq!(per_instance(&echo), per_instance(&input), "{threads:?}");
+        assert_eq!(
+            child::per_instance(&echo, "topic"),
+            child::per_instance(&input, "topic"),
+            "{threads:?}"
+        );
     }
 }
 
@@ -300,20 +304,6 @@ fn shipped_fleet_conf_command_keeps_robots_apart() {
     }
 }
 
-/// Lines grouped by the instance they belong to (its `topic` tag), each group in output order.
-fn per_instance(out: &str) -> std::collections::BTreeMap<String, Vec<String>> {
-    let mut m = std::collections::BTreeMap::<String, Vec<String>>::new();
-    for l in out.lines() {
-        let topic = l
-            .split([',', ' '])
-            .find_map(|p| p.strip_prefix("topic="))
-            .unwrap_or("")
-            .to_string();
-        m.entry(topic).or_default().push(l.to_string());
-    }
-    m
-}
-
 /// `--threads N` spreads the instances over N threads: the output set and every instance's
 /// output order (pass-through included) are those of one thread.
 #[test]
@@ -350,8 +340,8 @@ fn threads_agree_with_one(input: &str, check: impl Fn(&str, &str)) -> (String, S
             "--threads {threads}"
         );
         assert_eq!(
-            per_instance(&one),
-            per_instance(&many),
+            child::per_instance(&one, "topic"),
+            child::per_instance(&many, "topic"),
             "--threads {threads}"
         );
         check(&err, &err_many);

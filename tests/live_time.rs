@@ -122,19 +122,26 @@ fn random_cuts(rng: &mut ChaCha8Rng, len: usize) -> Vec<usize> {
     cuts
 }
 
+/// `input` fed in random reads (seeded by `seed`) gives exactly the outputs of one read, which
+/// are returned.
+fn assert_reads_agree(make: fn() -> Processor, input: &str, seed: u64) -> String {
+    let whole = feed_in_reads(make(), input.as_bytes(), &[]);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let cuts = random_cuts(&mut rng, input.len());
+    let split = feed_in_reads(make(), input.as_bytes(), &cuts);
+    assert!(
+        split == whole,
+        "seed {seed}: the outputs differ with reads ending at {cuts:?}"
+    );
+    String::from_utf8(whole).unwrap()
+}
+
 #[test]
 fn reads_do_not_change_the_outputs_of_the_recorded_run() {
     let input = fixture();
-    let whole = feed_in_reads(robot_processor(), input.as_bytes(), &[]);
-    assert!(whole.len() > input.len());
     for seed in 0..60 {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let cuts = random_cuts(&mut rng, input.len());
-        let split = feed_in_reads(robot_processor(), input.as_bytes(), &cuts);
-        assert!(
-            split == whole,
-            "seed {seed}: the outputs differ with reads ending at {cuts:?}"
-        );
+        let out = assert_reads_agree(robot_processor, &input, seed);
+        assert!(out.len() > input.len());
     }
 }
 
@@ -142,21 +149,13 @@ fn reads_do_not_change_the_outputs_of_the_recorded_run() {
 fn reads_do_not_change_the_outputs_of_a_fleet_with_late_and_equal_timestamps() {
     for seed in 0..200 {
         let input = fleet_workload(40, 30, seed);
-        let whole = feed_in_reads(fleet_processor(), input.as_bytes(), &[]);
-        let text = String::from_utf8_lossy(&whole);
+        let out = assert_reads_agree(fleet_processor, &input, seed ^ 0x5eed);
         if seed == 0 {
             // The workload has what it is for: late records shifted, equal timestamps stepped
             // 1 ns apart, and the silent robot's watchdog.
-            assert!(text.contains("tessla,robot=r3 w=true "), "{text}");
-            assert!(text.lines().any(|l| l.ends_with('1')), "{text}");
+            assert!(out.contains("tessla,robot=r3 w=true "), "{out}");
+            assert!(out.lines().any(|l| l.ends_with('1')), "{out}");
         }
-        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed);
-        let cuts = random_cuts(&mut rng, input.len());
-        let split = feed_in_reads(fleet_processor(), input.as_bytes(), &cuts);
-        assert!(
-            split == whole,
-            "seed {seed}: the outputs differ with reads ending at {cuts:?}"
-        );
     }
 }
 
@@ -211,27 +210,13 @@ fn the_binary_answers_alike_however_its_input_arrives() {
                 );
             } else {
                 assert_eq!(
-                    per_instance(&split.stdout_text()),
-                    per_instance(&whole.stdout_text()),
+                    child::per_instance(&split.stdout_text(), "robot"),
+                    child::per_instance(&whole.stdout_text(), "robot"),
                     "seed {seed}: outputs differ on two threads"
                 );
             }
         }
     }
-}
-
-/// Lines by instance (`robot` tag), each instance's lines in order.
-fn per_instance(out: &str) -> std::collections::BTreeMap<String, Vec<String>> {
-    let mut m = std::collections::BTreeMap::<String, Vec<String>>::new();
-    for l in out.lines() {
-        let robot = l
-            .split([',', ' '])
-            .find_map(|p| p.strip_prefix("robot="))
-            .unwrap_or("")
-            .to_string();
-        m.entry(robot).or_default().push(l.to_string());
-    }
-    m
 }
 
 fn spec_file(text: &str) -> tempfile::NamedTempFile {
