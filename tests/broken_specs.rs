@@ -139,6 +139,14 @@ const PLACED: &[(&str, &str)] = &[
         "annotation_wrong_arguments",
         "annotation_wrong_arguments.tessla:3:13",
     ),
+    // TeSSLa's MultipleDefinitionsError (found by name resolution).
+    ("duplicate_input", "duplicate_input.tessla:4:4"),
+    ("input_and_definition", "input_and_definition.tessla:4:5"),
+    ("duplicate_parameter", "duplicate_parameter.tessla:4:15"),
+    (
+        "duplicate_record_field",
+        "duplicate_record_field.tessla:4:17",
+    ),
 ];
 
 /// Bad Telegraf annotations, found by the binding: exit 2 and a message naming the input (the

@@ -302,25 +302,8 @@ impl<'a> Compiler<'a> {
         overrides: &[(String, String)],
     ) -> Result<(Program, Vec<Diagnostic>), Vec<Diagnostic>> {
         let resolved = self.resolved;
-        for (prefix, s) in &resolved.statements {
+        for (_, s) in &resolved.statements {
             match s {
-                // The resolver keeps the first of two top-level defs of one name.
-                Statement::Def(d) if prefix.is_empty() => {
-                    if let Some(first) = resolved
-                        .def_id(&d.name.name)
-                        .and_then(|id| resolved.defs.get(id))
-                        && !std::ptr::eq(first.def, d)
-                    {
-                        self.diags.push(
-                            Diagnostic::error(
-                                Category::Other,
-                                Some(d.name.span),
-                                format!("`{}` is defined twice", d.name.name),
-                            )
-                            .with_note_at(first.def.name.span, "first defined here"),
-                        );
-                    }
-                }
                 Statement::In { name, ty, .. } => {
                     let elem = match ir_type(ty) {
                         Type::Events(t) => *t,
