@@ -147,6 +147,35 @@ const PLACED: &[(&str, &str)] = &[
         "duplicate_record_field",
         "duplicate_record_field.tessla:4:17",
     ),
+    // TeSSLa's rules for `liftable`, library signatures and type arguments (type checking).
+    (
+        "not_liftable_on_stream",
+        "not_liftable_on_stream.tessla:5:11",
+    ),
+    ("liftable_constant", "liftable_constant.tessla:3:1"),
+    (
+        "liftable_stream_parameter",
+        "liftable_stream_parameter.tessla:3:1",
+    ),
+    ("sum_of_floats", "sum_of_floats.tessla:4:13"),
+    (
+        "type_arguments_too_many",
+        "type_arguments_too_many.tessla:3:5",
+    ),
+    // TeSSLa's statement rules: `in`/`out` at the top level, imports, literal includes.
+    ("in_out_in_module", "in_out_in_module.tessla:4:3"),
+    ("import_ambiguous", "import_ambiguous.tessla:11:3"),
+    ("include_interpolated", "include_interpolated.tessla:3:10"),
+];
+
+/// Specs whose diagnostic must say how to fix them: (spec, text of the help).
+const HELPED: &[(&str, &str)] = &[
+    (
+        "sum_of_floats",
+        "help: `sum` is TeSSLa's `def sum(x: Events[Int]): Events[Int]`; for a Float stream \
+         write it with `fold`",
+    ),
+    ("not_liftable_on_stream", "declare `liftable def f(...)`"),
 ];
 
 /// Bad Telegraf annotations, found by the binding: exit 2 and a message naming the input (the
@@ -209,6 +238,19 @@ fn broken_specs_exit_2_naming_the_place() {
                 "{what} {name}: no `{place}` in:\n{text}"
             );
             assert!(text.contains("error"), "{what} {name}: {text}");
+        }
+    }
+}
+
+#[test]
+fn broken_specs_say_how_to_fix_them() {
+    for (name, help) in HELPED {
+        for (what, code, text) in both(name) {
+            assert_eq!(code, Some(2), "{what} {name}: {text}");
+            assert!(
+                text.contains(help),
+                "{what} {name}: no `{help}` in:\n{text}"
+            );
         }
     }
 }

@@ -86,9 +86,11 @@ pub fn load_with(
         }
     };
     let mut asts: Vec<_> = files.into_iter().map(|(_, f)| f).collect();
+    let mut library = None;
     // The bundled prelude's definitions the spec refers to (none for a spec of builtins only).
     if let Some(text) = crate::prelude::needed(&asts) {
         let id = sources.add("<prelude>", None, text.clone());
+        library = Some(id);
         let (file, diagnostics) = tessla_syntax::parser::parse(&text, id);
         if !diagnostics.is_empty() {
             return Err(LoadError {
@@ -98,7 +100,7 @@ pub fn load_with(
         }
         asts.push(file);
     }
-    let resolved = crate::resolve::Resolved::new(&asts);
+    let resolved = crate::resolve::Resolved::with_library(&asts, library);
     let (type_errors, types) = crate::typeck::check_resolved(&resolved);
     if !type_errors.is_empty() {
         return Err(LoadError {

@@ -63,12 +63,27 @@ pub struct Resolved<'a> {
     pub annotations: HashMap<(String, bool), &'a [ast::Param]>,
     /// Annotation definitions twice or inside a module, names defined twice in one scope.
     pub diagnostics: Vec<Diagnostic>,
+    /// The file of the bundled prelude, when the spec needs it: its definitions write in
+    /// TeSSLa what TeSSLa's library declares `extern` (a liftable `List.map` taking a function).
+    pub library: Option<tessla_syntax::source::FileId>,
 }
 
 impl<'a> Resolved<'a> {
     /// Flatten and resolve the statements of `files`.
     pub fn new(files: &'a [ast::File]) -> Self {
-        let mut r = Resolved::default();
+        Self::with_library(files, None)
+    }
+
+    /// [`Resolved::new`] where `library` is the file of the bundled prelude (see
+    /// [`Resolved::library`]): a spec's own definition of a name wins over the prelude's.
+    pub fn with_library(
+        files: &'a [ast::File],
+        library: Option<tessla_syntax::source::FileId>,
+    ) -> Self {
+        let mut r = Resolved {
+            library,
+            ..Resolved::default()
+        };
         for f in files {
             collect_type_names(&f.statements, &mut r.declared_types);
         }
@@ -81,6 +96,7 @@ impl<'a> Resolved<'a> {
         // The first definition or input of each dotted name, for TeSSLa's multiple
         // definitions rule (an input is a top-level name like a definition).
         let mut first_name: HashMap<String, tessla_syntax::source::Span> = HashMap::new();
+        let mut import_spans = Vec::new();
         let mut i = 0;
         while let Some((prefix, s)) = r.statements.get(i).cloned() {
             i += 1;
@@ -104,9 +120,18 @@ impl<'a> Resolved<'a> {
                     r.statements
                         .extend(inner.iter().map(|st| (inner_prefix.clone(), st)));
                 }
-                Statement::Import { path, .. } => {
+                Statement::Import { path, span } => {
                     let target: String = path.iter().map(|p| format!("{}.", p.name)).collect();
+                    import_spans.push(*span);
                     r.imports.push((prefix, target));
+                }
+                Statement::In { span, .. } | Statement::OutAll { span, .. }
+                    if !prefix.is_empty() =>
+                {
+                    r.diagnostics.push(in_out_in_module(*span));
+                }
+                Statement::Out(o) if !prefix.is_empty() => {
+                    r.diagnostics.push(in_out_in_module(o.expr.span));
                 }
                 Statement::In { name, ty, .. } => {
                     r.define(&mut first_name, format!("{prefix}{}", name.name), name);
@@ -158,7 +183,59 @@ impl<'a> Resolved<'a> {
                 Statement::TypeDef { .. } | Statement::GlobalAnnotation(_) => {}
             }
         }
+        r.ambiguous_imports(&import_spans);
         r
+    }
+
+    /// TeSSLa's rule: two imports into one module may not bring the same name (`import Bar`
+    /// and `import Baz` both defining `foo`); the later import is reported.
+    fn ambiguous_imports(&mut self, spans: &[tessla_syntax::source::Span]) {
+        let mut seen: HashMap<(String, String), String> = HashMap::new();
+        for (k, (at, target)) in self.imports.iter().enumerate() {
+            let relative = format!("{at}{target}");
+            let module = if self.modules.contains(&relative) {
+                relative
+            } else {
+                target.clone()
+            };
+            let mut names: Vec<&str> = self
+                .by_name
+                .keys()
+                .filter_map(|n| n.strip_prefix(module.as_str()))
+                .filter(|n| !n.contains('.'))
+                .collect();
+            names.sort_unstable();
+            for n in names {
+                let key = (at.clone(), n.to_string());
+                match seen.get(&key) {
+                    Some(first) if *first != module => {
+                        let shown = |m: &str| m.trim_end_matches('.').to_string();
+                        self.diagnostics.push(
+                            Diagnostic::error(
+                                Category::Name,
+                                spans.get(k).copied(),
+                                format!(
+                                    "cannot import `{n}` from `{}`: `{n}` is already imported \
+                                     from `{}`",
+                                    shown(&module),
+                                    shown(first)
+                                ),
+                            )
+                            .with_label("ambiguous import")
+                            .with_help(format!(
+                                "drop one of the imports and write `{}.{n}` where it is meant",
+                                shown(&module)
+                            )),
+                        );
+                        break;
+                    }
+                    Some(_) => {}
+                    None => {
+                        seen.insert(key, module.clone());
+                    }
+                }
+            }
+        }
     }
 
     /// Note the definition (or input) `ident` of the dotted name `name`: a second one of a
@@ -170,6 +247,8 @@ impl<'a> Resolved<'a> {
         ident: &Ident,
     ) {
         match first.get(&name) {
+            // The prelude's definition of a name the spec defines itself is not used.
+            Some(_) if self.library == Some(ident.span.file) => {}
             Some(at) => self.diagnostics.push(defined_twice(ident, *at)),
             None => {
                 first.insert(name, ident.span);
@@ -262,6 +341,17 @@ impl<'a> Resolved<'a> {
             .filter_map(move |k| k.strip_prefix(prefix))
             .chain(self.input_by_name.keys().map(String::as_str))
     }
+}
+
+/// TeSSLa's rule: `in` and `out` only at the top level.
+fn in_out_in_module(span: tessla_syntax::source::Span) -> Diagnostic {
+    Diagnostic::error(
+        Category::Name,
+        Some(span),
+        "inputs and outputs are not allowed inside a module",
+    )
+    .with_label("inside a module")
+    .with_help("declare inputs and outputs at the top level of the spec, as `out Module.name`")
 }
 
 /// TeSSLa's `MultipleDefinitionsError`: `ident` is a second definition in the scope of the

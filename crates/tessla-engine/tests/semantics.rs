@@ -166,7 +166,7 @@ fn sets_and_maps() {
 #[test]
 fn module_members_see_each_other_and_can_be_imported() {
     let spec = "in x: Events[Int]\n\
-        module Foo {\n  def double(a: Int) = 2 * a\n  def bar = double(x)\n}\n\
+        module Foo {\n  liftable def double(a: Int) = 2 * a\n  def bar = double(x)\n}\n\
         module Baz {\n  def k = 7\n}\nimport Baz\n\
         out Foo.bar as b\nout k\n";
     assert_eq!(run(spec, &[(1, "x", int(21))]), ["0: k = 7", "1: b = 42"]);
