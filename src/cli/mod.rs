@@ -295,5 +295,10 @@ pub fn load_options(o: &SpecOptions) -> Result<tessla_engine::LoadOptions, Strin
         base_time: Some(o.base_time_or_default()),
         overrides,
         time_units_need_base: false,
+        bundled_includes: crate::bundled::LIBRARIES
+            .iter()
+            .map(|(n, t)| (n.to_string(), t.to_string()))
+            .collect(),
+        on_bundled_include: Some(crate::bundled::say_bundled_include),
     })
 }

@@ -483,7 +483,15 @@ impl<'a> Compiler<'a> {
                         Some(a.name.span),
                         format!("annotation `@{}` is not declared", a.name.name),
                     )
-                    .with_help(format!("declare it: `def @{}(...)`", a.name.name)),
+                    .with_help(if a.name.name.starts_with("Telegraf") {
+                        // The connector's annotations come with the connector (and with us).
+                        "add this line at the top of the spec: include \"Telegraf.tessla\" \
+                         (the Telegraf annotations, bundled when no such file is beside the \
+                         spec)"
+                            .to_string()
+                    } else {
+                        format!("declare it: `def @{}(...)`", a.name.name)
+                    }),
                 );
             }
             let mut args = Vec::new();
