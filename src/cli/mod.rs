@@ -143,6 +143,14 @@ pub struct CheckArgs {
     /// (without this flag a spec without outputs is an error, since it would check nothing).
     #[arg(long)]
     pub library: bool,
+    /// Print only the names of the spec's input streams, one a line (TeSSLa's `compile-core
+    /// --list-in-streams`); with --list-out-streams, the outputs' names follow.
+    #[arg(long)]
+    pub list_in_streams: bool,
+    /// Print only the names of the spec's output streams, one a line (TeSSLa's `compile-core
+    /// --list-out-streams`).
+    #[arg(long)]
+    pub list_out_streams: bool,
     #[command(flatten)]
     pub spec_options: SpecOptions,
 }
