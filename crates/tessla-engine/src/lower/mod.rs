@@ -303,35 +303,32 @@ impl<'a> Compiler<'a> {
     ) -> Result<(Program, Vec<Diagnostic>), Vec<Diagnostic>> {
         let resolved = self.resolved;
         for (_, s) in &resolved.statements {
-            match s {
-                Statement::In { name, ty, .. } => {
-                    let elem = match ir_type(ty) {
-                        Type::Events(t) => *t,
-                        _ => {
-                            self.diags.push(
-                                Diagnostic::error(
-                                    Category::Type,
-                                    Some(ty.span()),
-                                    format!("input `{}` must have a type Events[T]", name.name),
-                                )
-                                .with_help(format!(
-                                    "write `in {}: Events[Float]` (or another element type)",
-                                    name.name
-                                )),
-                            );
-                            Type::Unknown
-                        }
-                    };
-                    let idx = self.inputs.len();
-                    let n = self.node(Node::Input(idx));
-                    self.input_nodes.push(n);
-                    self.inputs.push(InputInfo {
-                        name: name.name.clone(),
-                        ty: elem,
-                        annotations: Vec::new(),
-                    });
-                }
-                _ => {}
+            if let Statement::In { name, ty, .. } = s {
+                let elem = match ir_type(ty) {
+                    Type::Events(t) => *t,
+                    _ => {
+                        self.diags.push(
+                            Diagnostic::error(
+                                Category::Type,
+                                Some(ty.span()),
+                                format!("input `{}` must have a type Events[T]", name.name),
+                            )
+                            .with_help(format!(
+                                "write `in {}: Events[Float]` (or another element type)",
+                                name.name
+                            )),
+                        );
+                        Type::Unknown
+                    }
+                };
+                let idx = self.inputs.len();
+                let n = self.node(Node::Input(idx));
+                self.input_nodes.push(n);
+                self.inputs.push(InputInfo {
+                    name: name.name.clone(),
+                    ty: elem,
+                    annotations: Vec::new(),
+                });
             }
         }
         // --set overrides replace the body of a top-level constant.
