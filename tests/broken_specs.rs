@@ -166,7 +166,52 @@ const PLACED: &[(&str, &str)] = &[
     ("in_out_in_module", "in_out_in_module.tessla:4:3"),
     ("import_ambiguous", "import_ambiguous.tessla:11:3"),
     ("include_interpolated", "include_interpolated.tessla:3:10"),
+    // The rest of TeSSLa core's error tests, each in a spec of our own.
+    (
+        "function_argument_arity",
+        "function_argument_arity.tessla:6:15",
+    ),
+    ("record_wrong_member", "record_wrong_member.tessla:6:11"),
+    ("record_extra_member", "record_extra_member.tessla:4:32"),
+    (
+        "lambda_without_parameters",
+        "lambda_without_parameters.tessla:4:5",
+    ),
+    ("call_of_a_constant", "call_of_a_constant.tessla:5:5"),
+    ("record_unknown_member", "record_unknown_member.tessla:4:10"),
+    (
+        "recursion_delay_on_itself",
+        "recursion_delay_on_itself.tessla:4:35",
+    ),
+    (
+        "include_invalid_escape",
+        "include_invalid_escape.tessla:3:13",
+    ),
 ];
+
+// TeSSLa core's error tests (core/src/test/resources/.../core/errors in TeSSLa's repository)
+// and the spec here that has each one's rule (its first error; TeSSLa's files are not copied):
+// annotationdef-in-module: annotation_in_module; annotations-arity-mismatch: annotation_arity;
+// annotations-type-mismatch: annotation_argument_type; global-annotations-arity-mismatch:
+// annotation_global_arity; global-annotations-as-annotation: annotation_global_used_locally;
+// non-literal-annotation: annotation_not_constant; arity-mismatch: type_wrong_arity;
+// cycle-detection-in-delay: recursion_delay_on_itself; cycle-detection-in-last,
+// infinite/*: recursion_self, recursion_macro_mutual; duplicate-definitions:
+// duplicate_definition, duplicate_input, duplicate_record_field; hof-arity-mismatch 1-3:
+// function_argument_arity; imports-ambiguous: import_ambiguous; include-invalid-escape,
+// include-test: include_invalid_escape; inout-in-modules: in_out_in_module;
+// interpolated-include: include_interpolated; multiple-definitions-annotation 1-2:
+// annotation_defined_twice; namedarg-after-posarg: named_after_positional; object-type-error:
+// record_wrong_member; parameterless-lambda: lambda_without_parameters;
+// parameterless-without-parens: call_of_a_constant; type-arg-not-inferred:
+// type_argument_not_inferable; type-arity-mismatch: type_arguments_too_many;
+// types/input-non-stream: type_input_not_events; types/missing-parameter-type:
+// missing_parameter_type; types/missing-return-type: missing_recursive_type;
+// types/no-subtyping: record_extra_member; types/type-mismatch: type_annotation_mismatch;
+// types/unliftable-macro-type: liftable_stream_parameter; undefined-members:
+// record_unknown_member; undefined-named-arg: named_unknown_parameter; undefined-type:
+// unknown_type; undefined-variable: unknown_stream; unknown-timeunit (a base time of an
+// unknown unit): tests/check_cli.rs. annotation-constant-folding is accepted, as by TeSSLa.
 
 /// Specs whose diagnostic must say how to fix them: (spec, text of the help).
 const HELPED: &[(&str, &str)] = &[

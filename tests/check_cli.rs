@@ -48,3 +48,10 @@ fn list_in_and_out_streams_print_names_one_a_line() {
     assert_eq!((code, out.as_str()), (Some(2), ""));
     assert!(err.contains("spec.tessla:2:5"), "{err}");
 }
+
+#[test]
+fn a_base_time_of_an_unknown_unit_is_a_command_line_error() {
+    let (code, out, err) = check(&["--base-time", "1foo"], SPEC);
+    assert_eq!((code, out.as_str()), (Some(2), ""));
+    assert!(err.contains("unknown unit in base time `1foo`"), "{err}");
+}
