@@ -125,7 +125,7 @@ pub struct SpecOptions {
     /// Base time unit of time literals, in TeSSLa's form (`1 ns`, `1 ms`, `33333 µs`); `run`
     /// and `check` default to `1 ns` (Telegraf's unit); `trace` without it rejects time literals,
     /// as TeSSLa's interpreter does.
-    #[arg(long, value_name = "UNIT")]
+    #[arg(short = 't', long, value_name = "UNIT")]
     pub base_time: Option<String>,
     /// Override a top-level constant of the spec: `--set delta=0.05` (repeatable).
     #[arg(long = "set", value_name = "NAME=VALUE")]
@@ -143,6 +143,14 @@ pub struct CheckArgs {
     /// (without this flag a spec without outputs is an error, since it would check nothing).
     #[arg(long)]
     pub library: bool,
+    /// Print only the names of the spec's input streams, one a line (TeSSLa's `compile-core
+    /// --list-in-streams`); with --list-out-streams, the outputs' names follow.
+    #[arg(long)]
+    pub list_in_streams: bool,
+    /// Print only the names of the spec's output streams, one a line (TeSSLa's `compile-core
+    /// --list-out-streams`).
+    #[arg(long)]
+    pub list_out_streams: bool,
     #[command(flatten)]
     pub spec_options: SpecOptions,
 }
@@ -153,6 +161,24 @@ pub struct TraceArgs {
     pub spec: PathBuf,
     /// The input trace (`TS: name = value` lines); stdin when absent.
     pub trace: Option<PathBuf>,
+    /// Stop when this output stream writes its first event (TeSSLa's `-S`).
+    #[arg(short = 'S', long, value_name = "STREAM")]
+    pub stop_on: Option<String>,
+    /// Stop reading after N+1 input events, counted as TeSSLa's interpreter counts them (from
+    /// 0), then end the run as at the end of the trace.
+    #[arg(short = 'a', long, value_name = "N")]
+    pub abort_at: Option<u64>,
+    /// An event on a stream the spec does not declare is an error (exit 1); by default it is
+    /// ignored, but time still advances to its timestamp, as in TeSSLa's interpreter.
+    #[arg(short = 'r', long)]
+    pub reject_undeclared_inputs: bool,
+    /// The trace is CSV: a header `time,stream1,stream2,...`, then `TS,value,value,...` lines
+    /// (an empty column is no event; values are TeSSLa expressions).
+    #[arg(long, conflicts_with = "ctf")]
+    pub csv: bool,
+    /// The trace is a CTF (Common Trace Format) trace directory (a trace file is required).
+    #[arg(long)]
+    pub ctf: bool,
     #[command(flatten)]
     pub spec_options: SpecOptions,
 }
@@ -303,5 +329,10 @@ pub fn load_options(o: &SpecOptions) -> Result<tessla_engine::LoadOptions, Strin
         base_time: Some(o.base_time_or_default()),
         overrides,
         time_units_need_base: false,
+        bundled_includes: crate::bundled::LIBRARIES
+            .iter()
+            .map(|(n, t)| (n.to_string(), t.to_string()))
+            .collect(),
+        on_bundled_include: Some(crate::bundled::say_bundled_include),
     })
 }

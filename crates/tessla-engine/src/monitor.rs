@@ -147,6 +147,23 @@ impl Monitor {
         if input >= self.inputs.len() {
             return Err(InputError::UnknownInput(input));
         }
+        self.open_step(ts, sink)?;
+        if self.inputs[input].is_some() {
+            return Err(InputError::Multiple { input, ts });
+        }
+        self.inputs[input] = Some(value);
+        Ok(())
+    }
+
+    /// Open the step at `ts` without an input event (time advances to `ts`: the pending step
+    /// before it and the delays firing before it are evaluated), as TeSSLa's interpreter does
+    /// for an event on a stream the spec does not declare. The step at `ts` is evaluated when
+    /// time passes it or at [`Monitor::flush`]; a `ts` before the open step is an error.
+    pub fn open_step<S: FnMut(OutputEvent<'_>)>(
+        &mut self,
+        ts: i64,
+        sink: &mut S,
+    ) -> Result<(), InputError> {
         if let Some(p) = self.pending {
             if ts < p {
                 return Err(InputError::Decreasing { last: p, got: ts });
@@ -161,15 +178,10 @@ impl Monitor {
                 got: ts,
             });
         }
-        if self.pending == Some(ts) {
-            if self.inputs[input].is_some() {
-                return Err(InputError::Multiple { input, ts });
-            }
-        } else {
+        if self.pending != Some(ts) {
             self.advance_to(ts, sink);
             self.pending = Some(ts);
         }
-        self.inputs[input] = Some(value);
         Ok(())
     }
 
