@@ -38,7 +38,7 @@ fn endpoints(port: u16, influx: Option<&servers::Influxd>) -> Endpoints {
         mqtt_port: port,
         influx_url: influx.map(|i| i.url("")),
         udp: Vec::new(),
-        programs: vec![("tessla-telegraf".into(), BIN.into())],
+        programs: vec![("/usr/bin/tessla-telegraf".into(), BIN.into())],
         host: "robot-pc".into(),
         seed: 7,
     }
