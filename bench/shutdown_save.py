@@ -58,7 +58,8 @@ def feed(stdin, n, tpl):
 def one_run(binary, n, state):
     proc = subprocess.Popen(
         [binary, "run", "--no-passthrough", "--instance-by", "topic",
-         "--max-instances", str(n + 1), "--state", state, "--log-level", "info"],
+         "--max-instances", str(n + 1), "--state", state, "--log-level", "info"] +
+        (["--threads", "1"] if state.startswith("nats://") else []),
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     seen = threading.Event()
 
@@ -96,13 +97,17 @@ def one_run(binary, n, state):
             saved = (int(m.group(1)), int(m.group(2)))
     if saved is None or saved[0] != n + 1:
         sys.exit(f"no save of {n + 1} instances logged: " + "\n".join(err_lines[-5:]))
-    return took, saved[1] / 1000.0, os.path.getsize(state)
+    return took, saved[1] / 1000.0, (0 if state.startswith("nats://") else os.path.getsize(state))
 
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--instances", type=int, nargs="+", default=[10_000, 25_000, 50_000])
     ap.add_argument("--reps", type=int, default=5)
+    ap.add_argument("--nats", default=None, metavar="HOST:PORT[,HOST:PORT...]",
+                    help="save to a JetStream bucket on these nats-servers instead of a file")
+    ap.add_argument("--nats-options", default="", metavar="QUERY",
+                    help="the bucket URL's options, e.g. replicas=3")
     ap.add_argument("--dir", default=None, help="folder for the state files (default: the system temp folder)")
     ap.add_argument("--bin", default=str(ROOT / "target/release/tessla-telegraf"))
     args = ap.parse_args()
@@ -111,9 +116,15 @@ def main():
         exits, saves, size = [], [], 0
         with tempfile.TemporaryDirectory(dir=args.dir) as d:
             for rep in range(args.reps):
-                state = os.path.join(d, f"state-{rep}.json")
+                if args.nats:
+                    state = f"nats://{args.nats}/save{n}x{rep}"
+                    if args.nats_options:
+                        state += "?" + args.nats_options
+                else:
+                    state = os.path.join(d, f"state-{rep}.json")
                 took, save, size = one_run(args.bin, n, state)
-                os.remove(state)
+                if not args.nats:
+                    os.remove(state)
                 exits.append(took)
                 saves.append(save)
                 print(f"  {n} instances, run {rep + 1}: stdin closed -> exit {took:.2f} s "

@@ -20,9 +20,21 @@
 //!   measurement without `=`), floats `'f'` shortest, NaN/Inf fields dropped, strings with `\`
 //!   and `"` escaped, a metric without fields dropped.
 //! - `plugins/processors/execd/execd.go`, `models/running_processor.go`: metrics passing the
-//!   processor's filter go to the child's stdin; what it prints is parsed (influx) and continues
-//!   with only the tags it carries (no agent tags for processor-made metrics); other metrics skip
-//!   the processor. stderr is read line by line (`E! `/`W! `/`I! `/`D! `/`T! ` prefixes as levels,
+//!   processor's filter go to the child's stdin; what it prints is parsed (influx, the streaming
+//!   reader of 1.33.3 and later: no line cap, a newline inside a string field is part of it; the
+//!   scanner of 1.30.0 to 1.33.2 is [`read_stdout`]'s other model) and continues with only the
+//!   tags it carries (no agent tags for processor-made metrics); other metrics skip the
+//!   processor.
+//! - Acknowledgement (v1.39.3, the same at head): `execd.go` `Add` lines 82-98 write the metric to
+//!   the child's stdin and then `m.Accept()`, and `mqtt_consumer.go` `onDelivered` lines 219-236
+//!   sends the PUBACK (with `persistent_session`) once every metric of the message is accepted or
+//!   dropped: a message is acknowledged when it is in the pipe, not after the child answered or
+//!   an output delivered. A failed write is dropped by `agent/agent.go` lines 658-662, which
+//!   acknowledges it too (`metric/tracking.go`: delivered means "none rejected"). A dead child is
+//!   restarted after `restart_delay` (`internal/process/process.go` lines 138-162); stopping
+//!   closes its stdin, then SIGTERM after 5 s, SIGKILL after 5 more (`process_posix.go`). See
+//!   [`Telegraf`].
+//! - stderr is read line by line (`E! `/`W! `/`I! `/`D! `/`T! ` prefixes as levels,
 //!   since 1.37.0; anything else an error `stderr: "<line>"`), at most 64 KiB a line
 //!   (`bufio.Scanner`'s default; a longer line stops the reader for good).
 //! - `plugins/inputs/socket_listener`, `plugins/outputs/socket_writer`: influx over UDP.
@@ -38,8 +50,11 @@
 //!   `namedrop`, `tagpass`, `tagdrop`; processors before outputs; every output sees every metric
 //!   its filter passes.
 //!
-//! Not modelled: batching and `flush_interval` (each metric is delivered at once), acknowledging
-//! a QoS 1 message only after delivery (rumqttc acknowledges on receipt), aggregators. A conf key
+//! Not modelled: batching, `flush_interval` and `metric_buffer_limit` (each metric is delivered
+//! at once, none buffered or dropped by an output), the acknowledgement of a tracked metric that
+//! skips the processor (acknowledged when handed to the outputs; Telegraf waits until every
+//! output wrote it), Windows (a kill 5 s after stdin closed), aggregators. The simple
+//! [`StandIn`] below subscribes with a clean session that acknowledges on receipt. A conf key
 //! the stand-in does not know fails the test, so every key of a shipped conf is either honoured
 //! or listed here as not modelled.
 //!
@@ -409,6 +424,80 @@ pub fn parse_influx(text: &str, now: i64) -> Vec<Result<Metric, String>> {
             })
         })
         .collect()
+}
+
+// ---------------------------------------------------------------- execd's stdout reader
+
+/// Whether `record` (bytes up to a newline) is a whole line-protocol record: its newline is not
+/// inside a string field value. Telegraf's streaming influx parser reads on past such a newline.
+pub fn record_complete(record: &[u8]) -> bool {
+    let (mut i, mut spaces, mut in_string) = (0, 0, false);
+    while i < record.len() {
+        let c = record[i];
+        if c == b'\\' {
+            i += 2;
+            continue;
+        }
+        if in_string {
+            in_string = c != b'"';
+        } else if c == b' ' {
+            spaces += 1;
+        } else if c == b'"' && spaces == 1 && i > 0 && record[i - 1] == b'=' {
+            in_string = true;
+        }
+        i += 1;
+    }
+    !in_string
+}
+
+/// How `processors.execd` reads the child's stdout (`execd.go` `cmdReadOut`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StdoutReader {
+    /// Telegraf 1.33.3 and later with `data_format = "influx"` (PR #16535): the streaming
+    /// parser, no line cap, a newline inside a string field is part of the value; a parse error
+    /// skips that record.
+    Streaming,
+    /// Telegraf 1.30.0 to 1.33.2 (the parser arrived wrapped in a `RunningParser` and was not
+    /// recognised): `bufio.Scanner` with a 256 KiB maximum, each line parsed alone; a longer line
+    /// stops the reader for good (the child then blocks on a full pipe).
+    Scanner,
+}
+
+/// What Telegraf reads from the child's stdout: the metrics, the parse errors, and whether the
+/// reader stopped for good before the end.
+pub fn read_stdout(bytes: &[u8], how: StdoutReader) -> (Vec<Metric>, usize, bool) {
+    let (mut metrics, mut errors) = (Vec::new(), 0);
+    let mut parse = |text: &[u8]| {
+        for r in parse_influx(&String::from_utf8_lossy(text), now_ns()) {
+            match r {
+                Ok(m) => metrics.push(m),
+                Err(_) => errors += 1,
+            }
+        }
+    };
+    let mut pending: Vec<u8> = Vec::new();
+    for line in bytes.split_inclusive(|b| *b == b'\n') {
+        match how {
+            StdoutReader::Scanner => {
+                let body = line.strip_suffix(b"\n").unwrap_or(line);
+                if body.len() >= 262_144 {
+                    return (metrics, errors, true);
+                }
+                parse(body);
+            }
+            StdoutReader::Streaming => {
+                pending.extend_from_slice(line);
+                if record_complete(&pending) {
+                    parse(&pending);
+                    pending.clear();
+                }
+            }
+        }
+    }
+    if !pending.is_empty() {
+        parse(&pending);
+    }
+    (metrics, errors, false)
 }
 
 // ---------------------------------------------------------------- JSON serializer
@@ -1083,15 +1172,20 @@ fn spawn_child(command: &[String], shared: &Arc<Shared>, out_tx: &Sender<Tracked
     shared.child_pid.store(c.id(), Ordering::SeqCst);
     let tx = out_tx.clone();
     let sh = shared.clone();
+    // Telegraf >= 1.33.3: the streaming reader (see [`StdoutReader`]).
     let out = std::thread::spawn(move || {
         let mut r = BufReader::new(stdout);
-        let mut line = String::new();
-        while r.read_line(&mut line).unwrap_or(0) > 0 {
-            for m in parse_influx(&line, now_ns()).into_iter().flatten() {
+        let mut record = Vec::new();
+        while r.read_until(b'\n', &mut record).unwrap_or(0) > 0 {
+            if !record_complete(&record) {
+                continue;
+            }
+            let text = String::from_utf8_lossy(&record).into_owned();
+            for m in parse_influx(&text, now_ns()).into_iter().flatten() {
                 sh.from_processor.lock().unwrap().push(m.clone());
                 let _ = tx.send((m, None));
             }
-            line.clear();
+            record.clear();
         }
     });
     let sh = shared.clone();
