@@ -133,6 +133,28 @@ fn last_delay_and_count_per_robot_survive_restarts() {
     check_restarts(&args, &lines, &[33], "EOF");
 }
 
+/// Enough robots that the save encodes them on several threads (512 and more per thread).
+#[test]
+fn thousands_of_robots_saved_in_parallel_continue_as_one_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = write_spec(dir.path(), "spec.tessla", SPEC);
+    let args = [
+        "--spec",
+        s(&spec),
+        "--instance-by",
+        "robot",
+        "--no-passthrough",
+    ];
+    let mut lines = Vec::new();
+    for round in 0..4i64 {
+        for r in 0..3000 {
+            let t = 100 + round * 7 + (r % 3);
+            lines.push(format!("m,robot=r{r} x={}i {t}\n", (r + round) % 11));
+        }
+    }
+    check_restarts(&args, &lines, &[6000], "EOF");
+}
+
 #[test]
 fn the_state_file_is_json_with_a_versioned_header() {
     let dir = tempfile::tempdir().unwrap();
