@@ -132,9 +132,10 @@ fn a_killed_child_loses_the_restart_delay_and_nothing_is_resent() {
         .map(|(s, _)| *s)
         .collect();
     eprintln!(
-        "restart_delay {delay} s, child down {gap:.2} s: lost {} ({lost:?}), dropped at write {}, resent {}",
+        "restart_delay {delay} s, child down {gap:.2} s: lost {} ({lost:?}), dropped at write {}, written and not answered {}, resent {}",
         lost.len(),
         stats.dropped_at_write,
+        stats.to_processor - seen.len(),
         resent.len()
     );
     // Nothing is resent: every message was acknowledged, the dropped ones included.
@@ -143,17 +144,11 @@ fn a_killed_child_loses_the_restart_delay_and_nothing_is_resent() {
     assert_eq!(stats.acked, N, "each one acknowledged");
     assert_eq!(stats.restarts, 1);
     // Lost: what failed to be written while the child was down, plus what was in the pipe or
-    // read but not answered when it died (nothing here: at 5 Hz it answers each at once).
-    assert_eq!(
-        lost.len(),
-        stats.dropped_at_write + (stats.to_processor - seen.len()),
-        "{lost:?}"
-    );
-    assert_eq!(
-        stats.to_processor,
-        seen.len(),
-        "nothing was left in the pipe"
-    );
+    // read but not answered when it died: at 5 Hz at most the message written just before the
+    // kill (the kill follows the 15th write at once).
+    let in_pipe = stats.to_processor - seen.len();
+    assert_eq!(lost.len(), stats.dropped_at_write + in_pipe, "{lost:?}");
+    assert!(in_pipe <= 1, "{in_pipe} written and never answered");
     // One stretch of messages, about the child's down time at 5 Hz.
     assert!(lost.windows(2).all(|w| w[1] == w[0] + 1), "{lost:?}");
     let expected = gap / PERIOD.as_secs_f64();
@@ -220,9 +215,9 @@ fn a_telegraf_stop_loses_nothing_and_resends_the_unacknowledged() {
     assert_eq!(one.to_processor, one.received);
     assert_eq!(one.dropped_at_write, 0);
     // Resent: exactly what was received and not acknowledged, each processed twice; at most
-    // Mosquitto's max_inflight_messages (20) are unacknowledged at a time.
+    // mqtt_consumer's max_undelivered_messages (1000) are taken and not delivered at a time.
     assert_eq!(resent.len(), unacked, "{resent:?}");
-    assert!(unacked <= 20, "{unacked}");
+    assert!(unacked <= MAX_UNDELIVERED, "{unacked}");
     assert!(seen.values().all(|c| *c <= 2));
     assert_eq!(two.received, N - one.received + unacked);
     assert_eq!(

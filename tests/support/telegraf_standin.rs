@@ -1082,6 +1082,8 @@ struct Shared {
     stdin: Mutex<Option<ChildStdin>>,
     child_pid: AtomicU32,
     side: Mutex<Vec<JoinHandle<()>>>,
+    /// Messages taken from the broker and not yet delivered (tracked).
+    undelivered: AtomicUsize,
 }
 
 /// One MQTT message's tracking (`metric/tracking.go`): the metrics made of it, and the PUBACK
@@ -1092,19 +1094,29 @@ struct Shared {
 struct Delivery {
     publish: rumqttc::Publish,
     client: Client,
+    /// `persistent_session`: acknowledge (else the client acknowledged on receipt).
+    ack: bool,
     left: AtomicUsize,
     shared: Arc<Shared>,
 }
 
 impl Delivery {
     fn done(&self) {
-        if self.left.fetch_sub(1, Ordering::SeqCst) == 1 && !self.shared.stop.load(Ordering::SeqCst)
-        {
+        if self.left.fetch_sub(1, Ordering::SeqCst) != 1 {
+            return;
+        }
+        // The semaphore slot of max_undelivered_messages is given back (onDelivered).
+        self.shared.undelivered.fetch_sub(1, Ordering::SeqCst);
+        if self.ack && !self.shared.stop.load(Ordering::SeqCst) {
             let _ = self.client.try_ack(&self.publish);
             self.shared.acked.fetch_add(1, Ordering::Relaxed);
         }
     }
 }
+
+/// `max_undelivered_messages` (mqtt_consumer.go line 32): `onMessage` blocks while this many
+/// messages are not yet delivered.
+pub const MAX_UNDELIVERED: usize = 1000;
 
 type Tracked = (Metric, Option<Arc<Delivery>>);
 
@@ -1126,6 +1138,8 @@ fn done(t: &Option<Arc<Delivery>>) {
 /// - `internal/process/process.go` `cmdLoop` (lines 138-162): a child that exits, for any
 ///   reason, is started again after `restart_delay` (default 10 s, `execd.go` line 195); the
 ///   stand-in models the gap (writes fail and are dropped) and the fresh pipes.
+/// - `mqtt_consumer` takes at most `max_undelivered_messages` (1000) messages that are not yet
+///   delivered (`onMessage` waits on a semaphore, lines 136 and 239).
 /// - Stopping (`Process.Stop`, lines 81-91; `process_posix.go` `gracefulStop`): inputs stop
 ///   first (`mqtt_consumer.Stop`: disconnect; later acknowledgements are never sent), the
 ///   processor drains its channel into the child, then stdin is closed; SIGTERM follows after
@@ -1263,6 +1277,7 @@ impl Telegraf {
             stdin: Mutex::new(None),
             child_pid: AtomicU32::new(0),
             side: Mutex::new(Vec::new()),
+            undelivered: AtomicUsize::new(0),
         });
         let (out_tx, out_rx) = channel::<Tracked>();
         let outputs = Some(start_outputs(conf, env, out_rx, shared.clone()));
@@ -1355,6 +1370,12 @@ impl Telegraf {
                                     }
                                 }
                                 Ok(Event::Incoming(Packet::Publish(p))) => {
+                                    // onMessage takes a semaphore slot first.
+                                    while sh.undelivered.load(Ordering::SeqCst) >= MAX_UNDELIVERED
+                                        && !sh.stop.load(Ordering::SeqCst)
+                                    {
+                                        std::thread::sleep(Duration::from_millis(1));
+                                    }
                                     sh.received.fetch_add(1, Ordering::Relaxed);
                                     let mut tags = BTreeMap::new();
                                     tags.insert("host".to_string(), host.clone());
@@ -1375,14 +1396,14 @@ impl Telegraf {
                                             continue;
                                         }
                                     };
-                                    let track = persistent.then(|| {
-                                        Arc::new(Delivery {
-                                            publish: p.clone(),
-                                            client: client.clone(),
-                                            left: AtomicUsize::new(ms.len()),
-                                            shared: sh.clone(),
-                                        })
-                                    });
+                                    sh.undelivered.fetch_add(1, Ordering::SeqCst);
+                                    let track = Some(Arc::new(Delivery {
+                                        publish: p.clone(),
+                                        client: client.clone(),
+                                        ack: persistent,
+                                        left: AtomicUsize::new(ms.len()),
+                                        shared: sh.clone(),
+                                    }));
                                     for m in ms {
                                         // A metric the input's filter drops is dropped.
                                         if !select.passes(&m) {
