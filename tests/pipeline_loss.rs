@@ -4,7 +4,8 @@
 //! header), a real Mosquitto and the real binary, with `telegraf/telegraf.conf` as shipped. Each
 //! robot message carries a sequence number; the child's echo says which messages it processed.
 //! The counts are checked against the README's guarantee table ("Guarantees with the shipped
-//! confs").
+//! confs"), as is Mosquitto's queue for a persistent session while Telegraf is away
+//! (`max_queued_messages`).
 
 #[path = "support/mqtt_client.rs"]
 mod mqtt_client;
