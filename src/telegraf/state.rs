@@ -219,7 +219,7 @@ const PER_THREAD: usize = 512;
 fn encode_instances(
     instances: &[(&Key, &tessla_engine::Monitor)],
     keys: &[u64],
-) -> (Vec<u8>, usize) {
+) -> io::Result<(Vec<u8>, usize)> {
     let mut out = Vec::with_capacity(instances.len() * 2048);
     let mut unsaved = 0;
     for (i, (key, m)) in instances.iter().enumerate() {
@@ -228,10 +228,9 @@ fn encode_instances(
         if i > 0 {
             out.push(b',');
         }
-        // Serialising owned plain data to memory cannot fail.
-        let _ = serde_json::to_writer(&mut out, &SavedRef { key, monitor });
+        serde_json::to_writer(&mut out, &SavedRef { key, monitor }).map_err(io::Error::other)?;
     }
-    (out, unsaved)
+    Ok((out, unsaved))
 }
 
 /// Save every instance of `proc` to `path` atomically. Returns the number of instances saved.
@@ -247,7 +246,7 @@ pub fn save(path: &Path, proc: &Processor, ctx: &Context) -> io::Result<usize> {
     let threads = cores.min(monitors.len() / PER_THREAD).max(1);
     let chunk = monitors.len().div_ceil(threads).max(1);
     let parts: Vec<(Vec<u8>, usize)> = if threads == 1 {
-        vec![encode_instances(&monitors, &keys)]
+        vec![encode_instances(&monitors, &keys)?]
     } else {
         std::thread::scope(|s| {
             let handles: Vec<_> = monitors
@@ -258,7 +257,7 @@ pub fn save(path: &Path, proc: &Processor, ctx: &Context) -> io::Result<usize> {
                 .into_iter()
                 .map(|h| {
                     h.join()
-                        .map_err(|_| io::Error::other("a state encoding thread failed"))
+                        .map_err(|_| io::Error::other("a state encoding thread failed"))?
                 })
                 .collect::<io::Result<Vec<_>>>()
         })?
