@@ -284,7 +284,7 @@ fn shipped_fleet_conf_command_keeps_robots_apart() {
         .iter()
         .map(|x| x.as_str().unwrap())
         .collect();
-    assert_eq!(cmd[0], "tessla-telegraf");
+    assert_eq!(cmd[0], "/usr/bin/tessla-telegraf");
     // The MQTT topic template reads the tag the instances are keyed by.
     let by = cmd[cmd.iter().position(|a| *a == "--instance-by").unwrap() + 1];
     let topic = v["outputs"]["mqtt"][0]["topic"].as_str().unwrap();

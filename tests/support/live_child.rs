@@ -144,6 +144,11 @@ impl LiveChild {
         }
     }
 
+    /// Close stdin (EOF, how Telegraf stops its child) without waiting for the exit.
+    pub fn close_stdin(&mut self) {
+        drop(self.stdin.take());
+    }
+
     pub fn signal(&self, sig: &str) {
         let pid = self.child.id().to_string();
         assert!(
