@@ -1,5 +1,5 @@
 # Every command the README mentions lives here. `make run` and `make test` are the README's first two.
-.PHONY: run test setup build install deb profiling readme-run bench bench-criterion bench-process bench-nats soak fmt lint ci fixtures conformance fuzz reproduce
+.PHONY: run test setup build install deb profiling readme-run bench bench-criterion bench-process bench-nats shutdown-save soak fmt lint ci fixtures conformance fuzz reproduce
 
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
@@ -84,6 +84,14 @@ bench-process:
 # standby's takeover time, on a 3-node nats-server cluster started on free loopback ports.
 bench-nats: build
 	$(CARGO) run --release --example fleet_nats -- --robots 64 --reps 3
+
+# Shutdown with --state (README, "Restarts and reloads"): from stdin closed (how Telegraf stops
+# the child) to exit with N robot instances to save, 5 runs each, medians; Telegraf's budget is
+# 5 s to SIGTERM and 5 more to SIGKILL (Windows: a kill after 5 s). SHUTDOWN_ARGS="--nats
+# HOST:PORT,... --nats-options replicas=3" saves to a JetStream bucket instead of a file.
+SHUTDOWN_INSTANCES ?= 10000 50000 100000
+shutdown-save: build
+	python3 bench/shutdown_save.py --instances $(SHUTDOWN_INSTANCES) --reps 5 $(SHUTDOWN_ARGS)
 
 # Soak test (not in CI): 10 million fleet records (1,000 robots) through the release binary with
 # --instance-by robot, RSS sampled every second; fails unless memory stays flat after warm-up.

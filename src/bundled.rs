@@ -31,8 +31,27 @@ pub const FILES: &[(&str, &str)] = &[
         "lib/p3_lidar.tessla",
         include_str!("../specs/lib/p3_lidar.tessla"),
     ),
+    ("lib/link.tessla", include_str!("../specs/lib/link.tessla")),
     ("robot.tessla", include_str!("../specs/robot.tessla")),
 ];
+
+/// Library files a user's spec may include without having them: the TeSSLa Telegraf
+/// Connector's `Telegraf.tessla` (its annotations, which come with the connector, not with the
+/// spec), served by our `telegraf.tessla` when no such file is beside the spec.
+pub const LIBRARIES: &[(&str, &str)] =
+    &[("Telegraf.tessla", include_str!("../specs/telegraf.tessla"))];
+
+/// The `I!` line saying a bundled library served an include (`name` as written in `from`).
+pub fn say_bundled_include(name: &str, from: &str) {
+    crate::log::log(
+        crate::log::Level::Info,
+        &format!(
+            "{from}: include \"{name}\": no such file beside the spec, using the bundled \
+             Telegraf annotations (@TelegrafIn, @TelegrafOut, @TelegrafField, \
+             @TelegrafListLength)"
+        ),
+    );
+}
 
 /// The name of the default spec.
 pub const DEFAULT: &str = "robot.tessla";

@@ -139,6 +139,88 @@ const PLACED: &[(&str, &str)] = &[
         "annotation_wrong_arguments",
         "annotation_wrong_arguments.tessla:3:13",
     ),
+    // TeSSLa's MultipleDefinitionsError (found by name resolution).
+    ("duplicate_input", "duplicate_input.tessla:4:4"),
+    ("input_and_definition", "input_and_definition.tessla:4:5"),
+    ("duplicate_parameter", "duplicate_parameter.tessla:4:15"),
+    (
+        "duplicate_record_field",
+        "duplicate_record_field.tessla:4:17",
+    ),
+    // TeSSLa's rules for `liftable`, library signatures and type arguments (type checking).
+    (
+        "not_liftable_on_stream",
+        "not_liftable_on_stream.tessla:5:11",
+    ),
+    ("liftable_constant", "liftable_constant.tessla:3:1"),
+    (
+        "liftable_stream_parameter",
+        "liftable_stream_parameter.tessla:3:1",
+    ),
+    ("sum_of_floats", "sum_of_floats.tessla:4:13"),
+    (
+        "type_arguments_too_many",
+        "type_arguments_too_many.tessla:3:5",
+    ),
+    // TeSSLa's statement rules: `in`/`out` at the top level, imports, literal includes.
+    ("in_out_in_module", "in_out_in_module.tessla:4:3"),
+    ("import_ambiguous", "import_ambiguous.tessla:11:3"),
+    ("include_interpolated", "include_interpolated.tessla:3:10"),
+    // The rest of TeSSLa core's error tests, each in a spec of our own.
+    (
+        "function_argument_arity",
+        "function_argument_arity.tessla:6:15",
+    ),
+    ("record_wrong_member", "record_wrong_member.tessla:6:11"),
+    ("record_extra_member", "record_extra_member.tessla:4:32"),
+    (
+        "lambda_without_parameters",
+        "lambda_without_parameters.tessla:4:5",
+    ),
+    ("call_of_a_constant", "call_of_a_constant.tessla:5:5"),
+    ("record_unknown_member", "record_unknown_member.tessla:4:10"),
+    (
+        "recursion_delay_on_itself",
+        "recursion_delay_on_itself.tessla:4:35",
+    ),
+    (
+        "include_invalid_escape",
+        "include_invalid_escape.tessla:3:13",
+    ),
+];
+
+// TeSSLa core's error tests (core/src/test/resources/.../core/errors in TeSSLa's repository)
+// and the spec here that has each one's rule (its first error; TeSSLa's files are not copied):
+// annotationdef-in-module: annotation_in_module; annotations-arity-mismatch: annotation_arity;
+// annotations-type-mismatch: annotation_argument_type; global-annotations-arity-mismatch:
+// annotation_global_arity; global-annotations-as-annotation: annotation_global_used_locally;
+// non-literal-annotation: annotation_not_constant; arity-mismatch: type_wrong_arity;
+// cycle-detection-in-delay: recursion_delay_on_itself; cycle-detection-in-last,
+// infinite/*: recursion_self, recursion_macro_mutual; duplicate-definitions:
+// duplicate_definition, duplicate_input, duplicate_record_field; hof-arity-mismatch 1-3:
+// function_argument_arity; imports-ambiguous: import_ambiguous; include-invalid-escape,
+// include-test: include_invalid_escape; inout-in-modules: in_out_in_module;
+// interpolated-include: include_interpolated; multiple-definitions-annotation 1-2:
+// annotation_defined_twice; namedarg-after-posarg: named_after_positional; object-type-error:
+// record_wrong_member; parameterless-lambda: lambda_without_parameters;
+// parameterless-without-parens: call_of_a_constant; type-arg-not-inferred:
+// type_argument_not_inferable; type-arity-mismatch: type_arguments_too_many;
+// types/input-non-stream: type_input_not_events; types/missing-parameter-type:
+// missing_parameter_type; types/missing-return-type: missing_recursive_type;
+// types/no-subtyping: record_extra_member; types/type-mismatch: type_annotation_mismatch;
+// types/unliftable-macro-type: liftable_stream_parameter; undefined-members:
+// record_unknown_member; undefined-named-arg: named_unknown_parameter; undefined-type:
+// unknown_type; undefined-variable: unknown_stream; unknown-timeunit (a base time of an
+// unknown unit): tests/check_cli.rs. annotation-constant-folding is accepted, as by TeSSLa.
+
+/// Specs whose diagnostic must say how to fix them: (spec, text of the help).
+const HELPED: &[(&str, &str)] = &[
+    (
+        "sum_of_floats",
+        "help: `sum` is TeSSLa's `def sum(x: Events[Int]): Events[Int]`; for a Float stream \
+         write it with `fold`",
+    ),
+    ("not_liftable_on_stream", "declare `liftable def f(...)`"),
 ];
 
 /// Bad Telegraf annotations, found by the binding: exit 2 and a message naming the input (the
@@ -201,6 +283,19 @@ fn broken_specs_exit_2_naming_the_place() {
                 "{what} {name}: no `{place}` in:\n{text}"
             );
             assert!(text.contains("error"), "{what} {name}: {text}");
+        }
+    }
+}
+
+#[test]
+fn broken_specs_say_how_to_fix_them() {
+    for (name, help) in HELPED {
+        for (what, code, text) in both(name) {
+            assert_eq!(code, Some(2), "{what} {name}: {text}");
+            assert!(
+                text.contains(help),
+                "{what} {name}: no `{help}` in:\n{text}"
+            );
         }
     }
 }

@@ -157,7 +157,7 @@ fn shipped_conf_command_runs_as_telegraf_would() {
         .iter()
         .map(|x| x.as_str().unwrap().to_string())
         .collect();
-    assert_eq!(cmd[0], "tessla-telegraf");
+    assert_eq!(cmd[0], "/usr/bin/tessla-telegraf");
     assert_eq!(execd["namepass"][0].as_str(), Some("mqtt_consumer"));
     let args: Vec<&str> = cmd[1..].iter().map(String::as_str).collect();
     let input = fixture_lines(3).concat();

@@ -102,15 +102,17 @@ fn each_instance_computes_what_its_robot_gets_alone() {
 
 #[test]
 fn one_instance_mixes_robots_that_share_timestamps() {
-    // Without --instance-by, robots 0 and 2 share timestamps: their records join one step and
-    // the second event of an input in a step is refused. This is what instances prevent.
+    // Without --instance-by, robots 0 and 2 share one clock: robot 2 is 14 records ahead of
+    // robot 0, so every record of robot 0 is late in the shared instance (stepped 1 ns after the
+    // last step, its own time lost). This is what instances prevent.
     let (_, err, code) = run(&["--no-passthrough"], &fleet(&[0, 2]));
     assert_eq!(code, 0, "{err}");
-    assert!(!err.contains("0 dropped values"), "{err}");
+    assert!(!err.contains(" 0 late records"), "{err}");
     let (_, err, _) = run(
         &["--no-passthrough", "--instance-by", "topic"],
         &fleet(&[0, 2]),
     );
+    assert!(err.contains(" 0 late records"), "{err}");
     assert!(err.contains("0 dropped values"), "{err}");
 }
 
@@ -150,7 +152,11 @@ fn pass_through_is_unchanged_with_instances() {
         assert_eq!(code, 0, "{err}");
         let echo = echoed(&out);
         assert_eq!(sorted_lines(&echo), sorted_lines(&input), "{threads:?}");
-        assert_eq!(per_instance(&echo), per_instance(&input), "{threads:?}");
+        assert_eq!(
+            child::per_instance(&echo, "topic"),
+            child::per_instance(&input, "topic"),
+            "{threads:?}"
+        );
     }
 }
 
@@ -278,7 +284,7 @@ fn shipped_fleet_conf_command_keeps_robots_apart() {
         .iter()
         .map(|x| x.as_str().unwrap())
         .collect();
-    assert_eq!(cmd[0], "tessla-telegraf");
+    assert_eq!(cmd[0], "/usr/bin/tessla-telegraf");
     // The MQTT topic template reads the tag the instances are keyed by.
     let by = cmd[cmd.iter().position(|a| *a == "--instance-by").unwrap() + 1];
     let topic = v["outputs"]["mqtt"][0]["topic"].as_str().unwrap();
@@ -298,20 +304,6 @@ fn shipped_fleet_conf_command_keeps_robots_apart() {
     }
 }
 
-/// Lines grouped by the instance they belong to (its `topic` tag), each group in output order.
-fn per_instance(out: &str) -> std::collections::BTreeMap<String, Vec<String>> {
-    let mut m = std::collections::BTreeMap::<String, Vec<String>>::new();
-    for l in out.lines() {
-        let topic = l
-            .split([',', ' '])
-            .find_map(|p| p.strip_prefix("topic="))
-            .unwrap_or("")
-            .to_string();
-        m.entry(topic).or_default().push(l.to_string());
-    }
-    m
-}
-
 /// `--threads N` spreads the instances over N threads: the output set and every instance's
 /// output order (pass-through included) are those of one thread.
 #[test]
@@ -323,7 +315,7 @@ fn threads_keep_the_output_set_and_each_instances_order() {
             input.push_str(&format!(
                 "mqtt_consumer,host=h,topic=fleet/r{r} expectedSpeed=0.05,actualSpeed=\"0.0{}\" {}\n",
                 (r + round) % 9 + 1,
-                1_800_000_000_000_000_000i64 + round * 200_000_000 + r
+                1_600_000_000_000_000_000i64 + round * 200_000_000 + r
             ));
         }
     }
@@ -348,8 +340,8 @@ fn threads_agree_with_one(input: &str, check: impl Fn(&str, &str)) -> (String, S
             "--threads {threads}"
         );
         assert_eq!(
-            per_instance(&one),
-            per_instance(&many),
+            child::per_instance(&one, "topic"),
+            child::per_instance(&many, "topic"),
             "--threads {threads}"
         );
         check(&err, &err_many);
@@ -371,18 +363,18 @@ fn threads_agree_with_one_thread_over_many_reads() {
             input.push_str(&format!(
                 "mqtt_consumer,host=h,topic=fleet/r{r} expectedSpeed=0.05,actualSpeed=\"0.0{}\" {}\n",
                 (r + round) % 9 + 1,
-                1_800_000_000_000_000_000i64 + round * 200_000_000 + r
+                1_600_000_000_000_000_000i64 + round * 200_000_000 + r
             ));
             if round == 7 && r == 50 {
                 input.push_str("mqtt_consumer,host=h,topic=fleet/r50 actualSpeed=\"0.01 1\n");
             }
             if round == 9 && r == 3 {
-                input.push_str("mqtt_consumer,host=h expectedSpeed=0.05 1800000001800000000\n");
+                input.push_str("mqtt_consumer,host=h expectedSpeed=0.05 1600000001800000000\n");
             }
         }
     }
     let huge = format!(
-        "mqtt_consumer,topic=fleet/r9 note=\"{}\" 1800000001000000000\n",
+        "mqtt_consumer,topic=fleet/r9 note=\"{}\" 1600000001000000000\n",
         "x".repeat(16 * 1024 * 1024)
     );
     let cut = input.len() / 2;
@@ -399,4 +391,73 @@ fn threads_agree_with_one_thread_over_many_reads() {
         assert_eq!(summary(err), summary(err_many));
     });
     assert!(err.contains("parse error"), "{err}");
+}
+
+/// The summary line counts the same on any thread count, every counter included: records,
+/// events, outputs, parse errors, late records, records ahead of the clock, dropped values,
+/// duplicates, instances and evictions.
+#[test]
+fn the_summary_is_the_same_on_any_thread_count() {
+    let mut input = String::new();
+    for round in 0..20i64 {
+        for r in 0..100i64 {
+            let ts = 1_600_000_000_000_000_000i64 + round * 200_000_000 + r;
+            let line = format!(
+                "mqtt_consumer,host=h,topic=fleet/r{r} expectedSpeed=0.05,actualSpeed=\"0.0{}\" {ts}\n",
+                (r + round) % 9 + 1
+            );
+            input.push_str(&line);
+            match (round + r) % 10 {
+                // A redelivered message: an exact duplicate.
+                0 => input.push_str(&line),
+                // A late record, a value that does not convert, one far in the future.
+                1 => input.push_str(&format!(
+                    "mqtt_consumer,host=h,topic=fleet/r{r} expectedSpeed=0.04 {}\n",
+                    ts - 100_000_000
+                )),
+                2 => input.push_str(&format!(
+                    "mqtt_consumer,host=h,topic=fleet/r{r} actualSpeed=\"fast\" {}\n",
+                    ts + 1
+                )),
+                3 => input.push_str(&format!(
+                    "mqtt_consumer,host=h,topic=fleet/r{r} expectedSpeed=0.04 {}\n",
+                    i64::MAX - 5
+                )),
+                4 => input.push_str(&format!("mqtt_consumer,topic=fleet/r{r} broken\n")),
+                _ => {}
+            }
+        }
+    }
+    let summary = |threads: &str| {
+        let (_, err, code) = run(
+            &[
+                "--no-passthrough",
+                "--instance-by",
+                "topic",
+                "--max-instances",
+                "80",
+                "--threads",
+                threads,
+            ],
+            &input,
+        );
+        assert_eq!(code, 0, "{err}");
+        err.lines()
+            .find(|l| l.starts_with("I! summary:"))
+            .unwrap_or_else(|| panic!("no summary: {err}"))
+            .to_string()
+    };
+    let one = summary("1");
+    for c in [
+        " 0 late records",
+        " 0 ahead of the clock",
+        " 0 duplicates",
+        " 0 parse errors",
+        " 0 evicted",
+        " 0 dropped values",
+    ] {
+        assert!(!one.contains(c), "the workload has some: {one}");
+    }
+    assert_eq!(summary("2"), one);
+    assert_eq!(summary("3"), one);
 }

@@ -133,6 +133,69 @@ fn last_delay_and_count_per_robot_survive_restarts() {
     check_restarts(&args, &lines, &[33], "EOF");
 }
 
+/// Enough robots that the save encodes them on several threads (512 and more per thread).
+#[test]
+fn thousands_of_robots_saved_in_parallel_continue_as_one_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = write_spec(dir.path(), "spec.tessla", SPEC);
+    let args = [
+        "--spec",
+        s(&spec),
+        "--instance-by",
+        "robot",
+        "--no-passthrough",
+    ];
+    let mut lines = Vec::new();
+    for round in 0..4i64 {
+        for r in 0..3000 {
+            let t = 100 + round * 7 + (r % 3);
+            lines.push(format!("m,robot=r{r} x={}i {t}\n", (r + round) % 11));
+        }
+    }
+    check_restarts(&args, &lines, &[6000], "EOF");
+}
+
+/// Telegraf closes stdin, then sends SIGTERM 5 s later: a SIGTERM that arrives while the save
+/// at EOF runs does not cut it short.
+#[test]
+fn a_sigterm_right_after_eof_does_not_cut_the_save() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = write_spec(dir.path(), "spec.tessla", SPEC);
+    let state = dir.path().join("state.json");
+    let args = [
+        "--spec",
+        s(&spec),
+        "--instance-by",
+        "robot",
+        "--state",
+        s(&state),
+    ];
+    let mut lines = Vec::new();
+    for round in 0..2i64 {
+        for r in 0..5000 {
+            lines.push(format!("m,robot=r{r} x={}i {}\n", r % 11, 100 + round * 7));
+        }
+    }
+    let mut c = LiveChild::spawn(&args);
+    c.write(&lines.concat());
+    let last = lines.last().unwrap().clone();
+    c.wait_out("echoing the last record", |l| l == last);
+    c.close_stdin();
+    c.signal("TERM");
+    let (_, err, code) = c.finish();
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("I! state: saved 5000 monitor instances"),
+        "{err}"
+    );
+    let (_, err, code) = run_all(&args, "");
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("I! state: restored 5000 monitor instances"),
+        "{err}"
+    );
+}
+
 #[test]
 fn the_state_file_is_json_with_a_versioned_header() {
     let dir = tempfile::tempdir().unwrap();

@@ -245,7 +245,7 @@ fn timestamps_beyond_i64_are_reported() {
 fn a_missing_timestamp_gets_the_wall_clock_and_later_records_are_late() {
     // Without a timestamp the record is stamped with the wall clock (as Telegraf does) and
     // answered at that time; the record at 3000 after it is then late: reported with its line
-    // and joined to the open step (`--late shift`).
+    // and evaluated as a step of its own 1 ns after the wall-clock step (`--late shift`).
     let before = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .unwrap()
@@ -260,9 +260,12 @@ fn a_missing_timestamp_gets_the_wall_clock_and_later_records_are_late() {
         .filter_map(|l| l.rsplit(' ').next()?.parse().ok())
         .filter(|&ts| ts >= before)
         .collect();
-    assert_eq!(stamped.len(), 1, "{}", f.stdout_text());
+    // The wall-clock record's action, and the late record's 1 ns after it.
+    assert_eq!(stamped.len(), 2, "{}", f.stdout_text());
+    assert_eq!(stamped[1], stamped[0] + 1, "{}", f.stdout_text());
     assert!(
-        f.stderr.contains("line 3: timestamp 3000 is not after"),
+        f.stderr.contains("line 3: timestamp 3000 is ")
+            && f.stderr.contains("before its instance's last step"),
         "{}",
         f.stderr
     );
@@ -272,21 +275,19 @@ fn a_missing_timestamp_gets_the_wall_clock_and_later_records_are_late() {
 fn decreasing_and_repeated_timestamps_are_reported_and_answered() {
     let mut input = robot(1000);
     input.push_str(&robot(2000));
-    input.push_str(&robot(1500)); // decreasing: late, joins the open step at 2000
+    input.push_str(&robot(1500)); // decreasing: late, a step of its own at 2001
     input.push_str(&robot(3000));
-    // Repeated timestamp, other values: the same step, a second event per input. (An exact
-    // repeat would be a redelivered message, dropped as a duplicate.)
+    // Repeated timestamp, other values: a step of its own 1 ns later, every value evaluated.
+    // (An exact repeat would be a redelivered message, dropped as a duplicate.)
     input.push_str(&robot(3000).replace("expectedSpeed=0.015", "expectedSpeed=0.02"));
     input.push_str(&robot(3000));
     input.push_str(&robot(4000));
     let f = run_bytes(&["run", "--no-passthrough"], input.into_bytes(), DEADLINE);
-    assert_survived(&f, 3, &[1000, 2000, 3000, 4000]);
+    assert_survived(&f, 3, &[1000, 2000, 2001, 3000, 3001, 4000]);
     assert!(f.stderr.contains("line 3: timestamp 1500"), "{}", f.stderr);
-    assert!(
-        f.stderr.contains("line 5: input") && f.stderr.contains("second event"),
-        "{}",
-        f.stderr
-    );
+    assert!(!f.stderr.contains("second event"), "{}", f.stderr);
+    assert!(f.stderr.contains(", 1 late records,"), "{}", f.stderr);
+    assert!(f.stderr.contains(", 0 dropped values,"), "{}", f.stderr);
     assert!(f.stderr.contains("line 6: exact repeat"), "{}", f.stderr);
     assert!(f.stderr.contains(", 1 duplicates"), "{}", f.stderr);
     // --late drop: the late record's events are dropped, the rest answered.

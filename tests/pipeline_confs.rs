@@ -38,7 +38,7 @@ fn endpoints(port: u16, influx: Option<&servers::Influxd>) -> Endpoints {
         mqtt_port: port,
         influx_url: influx.map(|i| i.url("")),
         udp: Vec::new(),
-        programs: vec![("tessla-telegraf".into(), BIN.into())],
+        programs: vec![("/usr/bin/tessla-telegraf".into(), BIN.into())],
         host: "robot-pc".into(),
         seed: 7,
     }
@@ -336,18 +336,29 @@ fn udp_conf_as_shipped_end_to_end_and_loop_free() {
         std::thread::sleep(Duration::from_millis(50));
         outputs = telegraf.delivered();
     }
+    // The robot has stopped: max_silence (1 s) + the allowed lateness (250 ms) after its last
+    // message, the link's verdict `robot_silent=true` arrives, once, on the socket_listener's
+    // route (to InfluxDB, not to the robot).
+    std::thread::sleep(Duration::from_millis(1500));
+    let settled = telegraf.delivered();
+    assert_eq!(
+        settled,
+        vec![outputs[0], outputs[1] + 1, outputs[2]],
+        "the silence verdict, once"
+    );
     std::thread::sleep(Duration::from_millis(1500));
     assert_eq!(
         telegraf.delivered(),
-        outputs,
+        settled,
         "metrics still flowing: a loop"
     );
     let stats = telegraf.stop();
     // Conf order: mqtt (actions), influxdb (all), socket_writer (robot metrics).
     assert_eq!(stats.delivered[0], RECORDS);
     assert_eq!(stats.delivered[2], RECORDS);
-    // Robot metrics + verdicts + actions, each once: no echo comes back in UDP mode.
-    assert_eq!(stats.delivered[1], 3 * RECORDS);
+    // Robot metrics + verdicts + actions, each once, and the silence verdict: no echo comes
+    // back in UDP mode.
+    assert_eq!(stats.delivered[1], 3 * RECORDS + 1);
     // Even an echoed robot metric would stop at the socket_listener.
     let echoed = Metric {
         name: "mqtt_consumer".into(),
@@ -405,8 +416,46 @@ fn every_shipped_conf_is_read_whole_and_sets_the_guarantees() {
             assert_eq!(o["qos"].as_integer(), Some(1), "{name}");
             assert_eq!(o["json_timestamp_units"].as_str(), Some("1ms"), "{name}");
         }
+        if let Some(execd) = v.get("processors").and_then(|p| p.get("execd")) {
+            check_execd(&execd[0], "1s", 50_000, &name.to_string());
+        }
     }
     assert_eq!(n, 3);
+}
+
+/// An execd block as the README's guarantees need it: an absolute command path (systemd's
+/// PATH), the restart_delay chosen for 5 Hz, and with --instance-by a --max-instances whose
+/// save at a stop fits Telegraf's budget (README, "Restarts and reloads").
+fn check_execd(execd: &toml::Value, delay: &str, max_instances: u64, name: &str) {
+    let cmd: Vec<&str> = execd["command"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_str().unwrap())
+        .collect();
+    assert_eq!(cmd[0], "/usr/bin/tessla-telegraf", "{name}");
+    assert_eq!(execd["restart_delay"].as_str(), Some(delay), "{name}");
+    if cmd.contains(&"--instance-by") {
+        let at = cmd.iter().position(|a| *a == "--max-instances");
+        let n: u64 = at
+            .and_then(|i| cmd.get(i + 1))
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("{name}: --max-instances is set"));
+        assert!(n <= max_instances, "{name}: {n}");
+    }
+}
+
+#[test]
+fn the_nats_confs_bound_what_a_stop_saves() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("telegraf/fleet-nats");
+    let mut n = 0;
+    for part in ["telegraf-p0.conf", "telegraf-p1.conf"] {
+        let text = std::fs::read_to_string(dir.join(part)).unwrap();
+        let v: toml::Value = toml::from_str(&text).unwrap();
+        check_execd(&v["processors"]["execd"][0], "2s", 10_000, part);
+        n += 1;
+    }
+    assert_eq!(n, 2);
 }
 
 // ------------------------------------------------------------ the stand-in against Telegraf

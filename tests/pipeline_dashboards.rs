@@ -85,6 +85,7 @@ fn dashboards_cover_the_issue_panels() {
             "p3_spikes",
             "p3_dropouts",
             "speed_mse",
+            "robot_silent",
         ] {
             assert!(text.contains(name), "a panel shows {name}");
         }

@@ -457,10 +457,11 @@ fn check_lists_only_parameters_under_set() {
         "half_track",
         "min_valid_fraction",
         "unknown_speed_cap",
+        "max_silence",
     ] {
         assert!(names.contains(&p), "{p} missing: {names:?}");
     }
-    assert_eq!(names.len(), 13, "only parameters: {names:?}");
+    assert_eq!(names.len(), 14, "only parameters: {names:?}");
     assert!(
         params
             .iter()

@@ -160,3 +160,131 @@ fn time_units_need_a_base_time_as_in_tessla() {
     assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
     assert_eq!(text(&out.stdout), "3: d = ()\n");
 }
+
+#[test]
+fn base_time_has_tesslas_short_name() {
+    let spec = temp(
+        "units_t.tessla",
+        "in x: Events[Int]\ndef d := delay(const(2 s, x), x)\nout d\n",
+    );
+    let out = trace(
+        spec.to_str().unwrap(),
+        &["-t", "1 s"],
+        "1: x = 1\n5: x = 2\n",
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert_eq!(text(&out.stdout), "3: d = ()\n");
+}
+
+#[test]
+fn undeclared_inputs_are_ignored_unless_rejected() {
+    let spec = temp("undeclared.tessla", "in speed: Events[Int]\nout speed\n");
+    let s = spec.to_str().unwrap();
+    let input = "1: speed = 1\n2: speed = 2\n3: sped = 3\n3: battery = 90\n4: speed = 4\n";
+    let out = trace(s, &[], input);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert_eq!(
+        text(&out.stdout),
+        "1: speed = 1\n2: speed = 2\n4: speed = 4\n"
+    );
+    for flag in ["-r", "--reject-undeclared-inputs"] {
+        let out = trace(s, &[flag], input);
+        // As in TeSSLa, the step pending at the error (t = 2) is not written.
+        assert_eq!(out.status.code(), Some(1), "{flag}");
+        assert_eq!(text(&out.stdout), "1: speed = 1\n", "{flag}");
+        let err = text(&out.stderr);
+        assert!(
+            err.contains("<stdin>:3: Undeclared input stream sped (did you mean `speed`?)"),
+            "{flag}: {err}"
+        );
+    }
+}
+
+#[test]
+fn stop_on_stops_at_the_streams_first_event() {
+    let spec = temp(
+        "stop.tessla",
+        "in x: Events[Int]\ndef alarm := filter(x, x > 2)\nout alarm\n",
+    );
+    let s = spec.to_str().unwrap();
+    let input = "1: x = 1\n2: x = 3\n3: x = 5\n";
+    for flag in ["-S", "--stop-on"] {
+        let out = trace(s, &[flag, "alarm"], input);
+        assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+        assert_eq!(text(&out.stdout), "2: alarm = 3\n", "{flag}");
+    }
+    let out = trace(s, &["-S", "alarn"], input);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("did you mean `alarm`?"),
+        "{}",
+        text(&out.stderr)
+    );
+}
+
+#[test]
+fn abort_at_counts_events_as_tessla_does() {
+    let spec = temp("abort.tessla", "in x: Events[Int]\nout x\n");
+    let s = spec.to_str().unwrap();
+    let input = "1: x = 1\n-- a comment is no event\n2: x = 2\n3: x = 3\n4: x = 4\n";
+    for flag in ["-a", "--abort-at"] {
+        let out = trace(s, &[flag, "1"], input);
+        assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+        assert_eq!(text(&out.stdout), "1: x = 1\n2: x = 2\n", "{flag}");
+    }
+    let out = trace(s, &["-a", "-1"], input);
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+}
+
+#[test]
+fn csv_traces_from_a_file_and_stdin() {
+    let spec = temp(
+        "csv.tessla",
+        "in a: Events[Int]\nin b: Events[String]\nout a\nout b\n",
+    );
+    let s = spec.to_str().unwrap();
+    let csv = "ts,a,b,c\n1,5,\"x, y\",\n2,,\"z\",7\n3,6,,\n";
+    let want = "1: a = 5\n1: b = x, y\n2: b = z\n3: a = 6\n";
+    let sorted = |o: &Output| {
+        let mut l: Vec<String> = text(&o.stdout).lines().map(str::to_string).collect();
+        l.sort();
+        l.join("\n") + "\n"
+    };
+    let out = trace(s, &["--csv"], csv);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert_eq!(sorted(&out), want);
+    let file = temp("trace.csv", csv);
+    let out = trace(s, &["--csv", file.to_str().unwrap()], "");
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert_eq!(sorted(&out), want);
+    // The undeclared column `c` is ignored, or rejected with -r.
+    let out = trace(s, &["--csv", "-r"], csv);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        text(&out.stderr).contains("<stdin>:3: Undeclared input stream c"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = trace(s, &["--csv"], "1,2\n");
+    assert_eq!(out.status.code(), Some(1));
+    assert!(text(&out.stderr).contains("<stdin>:1: No header row found"));
+}
+
+#[test]
+fn ctf_needs_a_trace_and_says_it_cannot_read_it() {
+    let spec = temp("ctf.tessla", "in x: Events[Int]\nout x\n");
+    let s = spec.to_str().unwrap();
+    let out = trace(s, &["--ctf"], "");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("--ctf needs a trace"));
+    let dir = std::env::temp_dir();
+    let out = trace(s, &["--ctf", dir.to_str().unwrap()], "");
+    assert_eq!(out.status.code(), Some(3));
+    assert!(
+        text(&out.stderr).contains("CTF traces are not supported yet"),
+        "{}",
+        text(&out.stderr)
+    );
+    let out = trace(s, &["--ctf", "--csv", dir.to_str().unwrap()], "");
+    assert_eq!(out.status.code(), Some(2));
+}

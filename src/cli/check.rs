@@ -1,7 +1,8 @@
 //! `tessla-telegraf check SPEC`: parse and check a spec, print its inputs and outputs with types
 //! and annotations, then its parameters (the top-level constants `--set` can change, with the
 //! comment above each); exit 0, or 2 with diagnostics (also for a spec without outputs, unless
-//! `--library`: a file of definitions other specs include).
+//! `--library`: a file of definitions other specs include). `--list-in-streams` and
+//! `--list-out-streams` print only the streams' names, as TeSSLa's `compile-core` does.
 
 use super::{CheckArgs, CliError, CliResult};
 use std::io::Write;
@@ -33,11 +34,18 @@ pub fn run(args: CheckArgs) -> CliResult {
     // The Telegraf binding reads the annotations: check them as `run` does.
     crate::telegraf::binding::bindings(&loaded.program)
         .map_err(|e| CliError::spec(format!("error: {e}")))?;
+    let p = &loaded.program;
+    if args.list_in_streams || args.list_out_streams {
+        return write_out(&list_streams(
+            p,
+            args.list_in_streams,
+            args.list_out_streams,
+        ));
+    }
     if !args.library {
         require_outputs(&loaded.program, &args.spec.display().to_string())
             .map_err(|e| CliError::spec(format!("error: {e}")))?;
     }
-    let p = &loaded.program;
     let ann = |a: &[tessla_engine::Annotation]| {
         a.iter()
             .map(|a| {
@@ -97,11 +105,27 @@ pub fn run(args: CheckArgs) -> CliResult {
     if args.ir {
         out.push_str(&p.ir().to_string());
     }
+    write_out(&out)
+}
+
+fn write_out(out: &str) -> CliResult {
     let mut stdout = std::io::stdout().lock();
     stdout
         .write_all(out.as_bytes())
         .and_then(|()| stdout.flush())
         .map_err(|e| CliError::io(format!("error: writing the result: {e}")))
+}
+
+/// The names of the inputs and/or outputs, one a line (inputs first), as TeSSLa's
+/// `compile-core --list-in-streams` / `--list-out-streams` print them.
+fn list_streams(p: &tessla_engine::Program, inputs: bool, outputs: bool) -> String {
+    let ins = p.inputs.iter().map(|i| i.name.as_str()).filter(|_| inputs);
+    let outs = p
+        .outputs
+        .iter()
+        .map(|o| o.name.as_str())
+        .filter(|_| outputs);
+    ins.chain(outs).map(|n| format!("{n}\n")).collect()
 }
 
 /// How many definitions and modules the spec's files (includes too) hold, nested ones counted.

@@ -144,7 +144,7 @@ pub struct SpecOptions {
     /// Base time unit of time literals, in TeSSLa's form (`1 ns`, `1 ms`, `33333 µs`); `run`
     /// and `check` default to `1 ns` (Telegraf's unit); `trace` without it rejects time literals,
     /// as TeSSLa's interpreter does.
-    #[arg(long, value_name = "UNIT")]
+    #[arg(short = 't', long, value_name = "UNIT")]
     pub base_time: Option<String>,
     /// Override a top-level constant of the spec: `--set delta=0.05` (repeatable).
     #[arg(long = "set", value_name = "NAME=VALUE")]
@@ -162,6 +162,14 @@ pub struct CheckArgs {
     /// (without this flag a spec without outputs is an error, since it would check nothing).
     #[arg(long)]
     pub library: bool,
+    /// Print only the names of the spec's input streams, one a line (TeSSLa's `compile-core
+    /// --list-in-streams`); with --list-out-streams, the outputs' names follow.
+    #[arg(long)]
+    pub list_in_streams: bool,
+    /// Print only the names of the spec's output streams, one a line (TeSSLa's `compile-core
+    /// --list-out-streams`).
+    #[arg(long)]
+    pub list_out_streams: bool,
     #[command(flatten)]
     pub spec_options: SpecOptions,
 }
@@ -172,6 +180,24 @@ pub struct TraceArgs {
     pub spec: PathBuf,
     /// The input trace (`TS: name = value` lines); stdin when absent.
     pub trace: Option<PathBuf>,
+    /// Stop when this output stream writes its first event (TeSSLa's `-S`).
+    #[arg(short = 'S', long, value_name = "STREAM")]
+    pub stop_on: Option<String>,
+    /// Stop reading after N+1 input events, counted as TeSSLa's interpreter counts them (from
+    /// 0), then end the run as at the end of the trace.
+    #[arg(short = 'a', long, value_name = "N")]
+    pub abort_at: Option<u64>,
+    /// An event on a stream the spec does not declare is an error (exit 1); by default it is
+    /// ignored, but time still advances to its timestamp, as in TeSSLa's interpreter.
+    #[arg(short = 'r', long)]
+    pub reject_undeclared_inputs: bool,
+    /// The trace is CSV: a header `time,stream1,stream2,...`, then `TS,value,value,...` lines
+    /// (an empty column is no event; values are TeSSLa expressions).
+    #[arg(long, conflicts_with = "ctf")]
+    pub csv: bool,
+    /// The trace is a CTF (Common Trace Format) trace directory (a trace file is required).
+    #[arg(long)]
+    pub ctf: bool,
     #[command(flatten)]
     pub spec_options: SpecOptions,
 }
@@ -187,9 +213,22 @@ pub struct RunArgs {
     /// never in UDP mode).
     #[arg(long)]
     pub no_passthrough: bool,
-    /// What to do with a record whose timestamp is not after the last evaluated step.
+    /// What to do with a record stamped before its instance's last step (README, "Time"): a
+    /// step of its own 1 ns after it, or dropped. A record with the same timestamp as the last
+    /// step is always stepped 1 ns after it.
     #[arg(long, value_enum, default_value_t)]
     pub late: crate::telegraf::processor::LateMode,
+    /// Refuse a record stamped more than this ahead of the wall clock (warned, counted, passed
+    /// through, not evaluated), so one wrong timestamp cannot move a monitor's clock; `off` for
+    /// simulated data stamped in the future.
+    #[arg(long, value_name = "DURATION|off", default_value = "10s", value_parser = parse_bound)]
+    pub max_ahead: Bound,
+    /// While an instance's input is silent, its time follows the wall clock this far behind, so
+    /// that `delay`s (watchdogs, timeouts, `period`) fire while the robot is quiet; a record
+    /// delivered later than this after its time is late. `off`: time moves only with the
+    /// records (as in TeSSLa's offline traces; for replaying files slower than they were recorded).
+    #[arg(long, value_name = "DURATION|off", default_value = "250ms", value_parser = parse_bound)]
+    pub allowed_lateness: Bound,
     /// Measurement of the metric that groups outputs without a Telegraf annotation.
     #[arg(long, default_value = "tessla")]
     pub measurement: String,
@@ -238,6 +277,19 @@ pub struct RunArgs {
     /// loses at most this much. Needs --state.
     #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration, requires = "state")]
     pub state_interval: Option<std::time::Duration>,
+}
+
+/// A duration, or `off`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Bound(pub Option<std::time::Duration>);
+
+fn parse_bound(s: &str) -> Result<Bound, String> {
+    if s.eq_ignore_ascii_case("off") {
+        return Ok(Bound(None));
+    }
+    humantime::parse_duration(s)
+        .map(|d| Bound(Some(d)))
+        .map_err(|e| format!("{e} (a duration such as `10s`, `5m`, or `off`)"))
 }
 
 /// Parse the command line, run the subcommand, report its error (if any) and return the exit code.
@@ -324,5 +376,10 @@ pub fn load_options(o: &SpecOptions) -> Result<tessla_engine::LoadOptions, Strin
         base_time: Some(o.base_time_or_default()),
         overrides,
         time_units_need_base: false,
+        bundled_includes: crate::bundled::LIBRARIES
+            .iter()
+            .map(|(n, t)| (n.to_string(), t.to_string()))
+            .collect(),
+        on_bundled_include: Some(crate::bundled::say_bundled_include),
     })
 }

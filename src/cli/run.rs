@@ -57,6 +57,8 @@ pub fn run(args: RunArgs) -> CliResult {
             .collect(),
         max_instances: args.max_instances,
         instance_idle: args.instance_idle,
+        max_ahead: args.max_ahead.0,
+        allowed_lateness: args.allowed_lateness.0,
     };
     let state_ctx = state::Context {
         instance_by: opts.instance_by.clone(),

@@ -1,10 +1,11 @@
 //! `tessla-telegraf trace SPEC [TRACE]`: run a spec over a TeSSLa input trace (file or stdin,
 //! read line by line) and print TeSSLa's output format as outputs are produced. Exit 1 on a
 //! runtime or trace error (outputs before it are printed, the error goes to stderr), 2 on a
-//! spec error, 3 when the trace cannot be read; 0 also when stdout is closed by the reader.
+//! spec error or an option that does not fit the spec, 3 when the trace cannot be read; 0 also
+//! when stdout is closed by the reader. The options are TeSSLa's `interpreter` command's.
 
 use super::{CliError, CliResult, TraceArgs};
-use crate::trace::{ErrorKind, run_stream};
+use crate::trace::{ErrorKind, Format, Options, run_stream_with};
 use std::cell::RefCell;
 use std::io::{BufReader, BufWriter, IsTerminal, Read, StdoutLock, Write};
 use std::rc::Rc;
@@ -58,15 +59,39 @@ pub fn run(args: TraceArgs) -> CliResult {
     }
     super::check::require_outputs(&loaded.program, &args.spec.display().to_string())
         .map_err(|e| CliError::spec(format!("error: {e}")))?;
+    if args.ctf {
+        // As TeSSLa's interpreter: a CTF trace is a directory, never stdin.
+        return Err(match &args.trace {
+            None => CliError::spec(
+                "error: --ctf needs a trace (a CTF trace directory); stdin is not supported",
+            ),
+            Some(p) => CliError::io(format!(
+                "error: cannot read {}: CTF traces are not supported yet; give the trace as \
+                 `TS: name = value` lines or as CSV (--csv)",
+                p.display()
+            )),
+        });
+    }
+    let options = Options {
+        format: if args.csv {
+            Format::Csv
+        } else {
+            Format::Tessla
+        },
+        reject_undeclared: args.reject_undeclared_inputs,
+        stop_on: args.stop_on.clone(),
+        abort_at: args.abort_at,
+    };
     let stdout = std::io::stdout();
     let result = match &args.trace {
         // A trace file is read as fast as possible: outputs are block-buffered.
         Some(p) => match std::fs::File::open(p) {
-            Ok(f) => run_stream(
+            Ok(f) => run_stream_with(
                 &loaded.program,
                 &p.display().to_string(),
                 BufReader::new(f),
                 &mut BufWriter::new(stdout.lock()),
+                &options,
             ),
             Err(e) => {
                 return Err(CliError::io(format!(
@@ -83,13 +108,20 @@ pub fn run(args: TraceArgs) -> CliResult {
                 inner: std::io::stdin(),
                 out: out.clone(),
             });
-            run_stream(&loaded.program, "<stdin>", input, &mut SharedOut(out))
+            run_stream_with(
+                &loaded.program,
+                "<stdin>",
+                input,
+                &mut SharedOut(out),
+                &options,
+            )
         }
     };
     match result {
         Ok(()) => Ok(()),
         Err(e) if e.kind == ErrorKind::OutputClosed => Ok(()),
         Err(e) if e.kind == ErrorKind::Io => Err(CliError::io(e.to_string())),
+        Err(e) if e.kind == ErrorKind::Usage => Err(CliError::spec(e.to_string())),
         Err(e) => Err(CliError::runtime(e.to_string())),
     }
 }

@@ -9,6 +9,7 @@
 //! losing it, dropping every instance; the save points (`--state-interval`, every ending while
 //! holding the lease, then releasing it). Signals and SIGHUP as in the stdio transport.
 
+use super::clock::Wall;
 use super::instances::Key;
 use super::processor::Processor;
 use super::state::Backend;
@@ -160,25 +161,28 @@ impl Loop<'_, '_> {
         let buffer = std::mem::take(&mut self.buffer);
         self.buffered_bytes = 0;
         let mut keyed = Vec::with_capacity(buffer.len());
-        for (_, rec) in buffer {
+        for (at, rec) in buffer {
             let k = self.key_of(&rec);
             if let Some((key, _)) = &k {
                 self.f.backend.arriving(key, proc);
             }
-            keyed.push((k, rec));
+            keyed.push((k, at, rec));
         }
         let covered: HashMap<Key, i64> = proc
             .monitors()
             .filter_map(|(k, m)| Some((k.clone(), m.last_evaluated()?)))
             .collect();
         let (mut stepped, mut skipped) = (0usize, 0usize);
-        for (k, rec) in keyed {
+        for (k, at, rec) in keyed {
             if let Some((key, Some(ts))) = &k
                 && covered.get(key).is_some_and(|last| ts <= last)
             {
                 skipped += 1;
                 continue;
             }
+            // Each record stepped as when it arrived: its instance's silent time counts from
+            // then, as in a process that held the lease all along.
+            proc.set_wall(Wall::at(at));
             proc.record(&rec, out);
             stepped += 1;
         }
@@ -237,8 +241,24 @@ pub async fn run(proc: &mut Processor, mut fleet: Fleet<'_>) -> std::io::Result<
     let mut lease_poll = tokio::time::interval(Duration::from_millis(20));
     lease_poll.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let ending = loop {
+        // A standby holds no instances: only the process stepping a partition advances clocks.
+        // A record partly read is input arriving, not silence.
+        let deadline = proc
+            .next_deadline()
+            .filter(|_| l.active && splitter.buffered() == 0);
         let n = tokio::select! {
-            r = stdin.read(&mut buf) => r?,
+            // Biased, in this order: a signal is never starved by input, and a delay falls due
+            // by the wall clock only when no input is waiting (input not read yet is not silence).
+            biased;
+            _ = sigterm.recv() => break Ending::Signal,
+            _ = sigint.recv() => break Ending::Signal,
+            _ = sighup.recv() => {
+                (l.f.on_hangup)(proc, &mut out);
+                if write_out(&mut out).is_err() {
+                    return Ok(finish(l, proc, Ending::OutputClosed));
+                }
+                continue;
+            }
             _ = saves.tick(), if l.f.interval.is_some() => {
                 l.save(proc, Level::Debug);
                 continue;
@@ -250,21 +270,23 @@ pub async fn run(proc: &mut Processor, mut fleet: Fleet<'_>) -> std::io::Result<
                 }
                 continue;
             }
-            _ = sighup.recv() => {
-                (l.f.on_hangup)(proc, &mut out);
+            r = stdin.read(&mut buf) => r?,
+            _ = crate::transport::sleep_until(deadline) => {
+                let wall = Wall::now();
+                proc.set_wall(wall);
+                proc.advance_wall(wall.at, &mut out);
                 if write_out(&mut out).is_err() {
                     return Ok(finish(l, proc, Ending::OutputClosed));
                 }
                 continue;
             }
-            _ = sigterm.recv() => break Ending::Signal,
-            _ = sigint.recv() => break Ending::Signal,
         };
         if n == 0 {
             break Ending::Eof;
         }
         l.follow_lease(proc, &mut out);
-        splitter.push(&buf[..n]);
+        proc.set_wall(Wall::now());
+        splitter.push(buf.get(..n).unwrap_or_default());
         while let Some(rec) = splitter.next_record() {
             if l.active {
                 l.step(proc, &rec, &mut out);

@@ -2,12 +2,11 @@
 //!
 //! Owns: keys (the values of the instance tags in a metric; a missing tag is part of the key as
 //! "absent"), slots that stay valid while an instance lives, least-recently-used order for
-//! `--max-instances`, wall-clock idleness for `--instance-idle`, and the list of instances with
-//! a step still open (so "no more input right now" evaluates only those, not the whole fleet).
+//! `--max-instances`, and wall-clock idleness for `--instance-idle`.
 //! What an instance holds is up to the caller (the step loop stores a monitor and its tags).
 //! Also: which worker thread a record's instance belongs to ([`shard_of`], `--threads`).
 
-use std::collections::{BTreeMap, HashMap, VecDeque};
+use std::collections::{BTreeMap, HashMap};
 use std::time::{Duration, Instant};
 
 /// The values of the instance tags in one metric, in `--instance-by` order.
@@ -19,8 +18,6 @@ struct Slot<T> {
     /// Position in `lru`.
     seq: u64,
     last_used: Instant,
-    /// Whether the slot's index is in `open`.
-    open: bool,
 }
 
 /// Instances by key, with LRU order. Slot indices are reused after eviction.
@@ -30,7 +27,6 @@ pub struct Table<T> {
     index: HashMap<Key, usize>,
     lru: BTreeMap<u64, usize>,
     next_seq: u64,
-    open: VecDeque<usize>,
 }
 
 impl<T> Default for Table<T> {
@@ -41,7 +37,6 @@ impl<T> Default for Table<T> {
             index: HashMap::new(),
             lru: BTreeMap::new(),
             next_seq: 0,
-            open: VecDeque::new(),
         }
     }
 }
@@ -82,7 +77,6 @@ impl<T> Table<T> {
             value,
             seq,
             last_used: now,
-            open: false,
         };
         let i = match self.free.pop() {
             Some(i) => {
@@ -108,41 +102,6 @@ impl<T> Table<T> {
             .map(|s| &mut s.value)
     }
 
-    /// Note that slot `i` has a step open (evaluated by the next [`Table::take_open`]).
-    pub fn mark_open(&mut self, i: usize) {
-        if let Some(Some(s)) = self.slots.get_mut(i)
-            && !s.open
-        {
-            s.open = true;
-            self.open.push_back(i);
-        }
-    }
-
-    /// The slots with a step open, clearing the list.
-    pub fn take_open(&mut self) -> Vec<usize> {
-        let open = std::mem::take(&mut self.open);
-        for &i in &open {
-            if let Some(Some(s)) = self.slots.get_mut(i) {
-                s.open = false;
-            }
-        }
-        open.into()
-    }
-
-    /// How many slots have a step open.
-    pub fn open_count(&self) -> usize {
-        self.open.len()
-    }
-
-    /// The slot whose step has been open longest, taken off the list.
-    pub fn take_oldest_open(&mut self) -> Option<usize> {
-        let i = self.open.pop_front()?;
-        if let Some(Some(s)) = self.slots.get_mut(i) {
-            s.open = false;
-        }
-        Some(i)
-    }
-
     /// The least recently used instance, if the table holds more than `max`, or if it was
     /// last used more than `idle` before `now`.
     pub fn evictable(&self, max: usize, idle: Option<Duration>, now: Instant) -> Option<usize> {
@@ -161,6 +120,14 @@ impl<T> Table<T> {
         })
     }
 
+    /// Every instance's slot and value, in no particular order.
+    pub fn slots_mut(&mut self) -> impl Iterator<Item = (usize, &mut T)> {
+        self.slots
+            .iter_mut()
+            .enumerate()
+            .filter_map(|(i, s)| Some((i, &mut s.as_mut()?.value)))
+    }
+
     /// Every instance's value, in no particular order.
     pub fn values_mut(&mut self) -> impl Iterator<Item = &mut T> {
         self.slots.iter_mut().flatten().map(|s| &mut s.value)
@@ -171,9 +138,6 @@ impl<T> Table<T> {
         let s = self.slots.get_mut(i)?.take()?;
         self.lru.remove(&s.seq);
         self.index.remove(&s.key);
-        if s.open {
-            self.open.retain(|&j| j != i);
-        }
         self.free.push(i);
         Some((s.key, s.value))
     }
@@ -307,20 +271,6 @@ mod tests {
             t.evictable(10, idle, later + Duration::from_secs(3)),
             Some(b)
         );
-    }
-
-    #[test]
-    fn open_slots_are_listed_once_and_forgotten_on_removal() {
-        let now = Instant::now();
-        let mut t = Table::default();
-        let a = t.insert(k("a"), (), now);
-        let b = t.insert(k("b"), (), now);
-        t.mark_open(a);
-        t.mark_open(a);
-        t.mark_open(b);
-        t.remove(b);
-        assert_eq!(t.take_open(), vec![a]);
-        assert_eq!(t.take_open(), Vec::<usize>::new());
     }
 
     /// A record's shard depends only on its instance key, whether read from the raw series key

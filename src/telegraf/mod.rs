@@ -9,6 +9,7 @@
 //! Transports (stdin/stdout, UDP) feed bytes to a [`processor::Processor`].
 
 pub mod binding;
+pub mod clock;
 pub mod dedup;
 pub mod encode;
 pub mod fleet;

@@ -2,15 +2,18 @@
 //!
 //! Owns: routing each metric to its monitor instance (one, or one per value of the
 //! `--instance-by` tags, each with its own state, timestamps and late-record rule; evicted past
-//! `--max-instances` or after `--instance-idle`); when a step is evaluated (a record with a later
-//! timestamp arrives, or the transport says no more input is available right now: [`flush`]);
-//! late records (`--late shift|drop`); records without a timestamp (wall clock, as Telegraf);
-//! pass-through of each record's exact bytes before the outputs it causes; and the counters of
-//! the summary line. Bad records are reported with their line number and skipped.
-//!
-//! [`flush`]: Processor::flush
+//! `--max-instances` or after `--instance-idle`); the time model of live input (README, "Time"):
+//! every record is a step of its own, evaluated at once, so the outputs never depend on how the
+//! input was split into reads; a record not after its instance's last step is stepped 1 ns after
+//! it (`--late shift`) or dropped (`--late drop`, only when it is earlier); a record stamped
+//! beyond `--max-ahead` of the wall clock is refused; and while an instance's input is silent,
+//! its armed `delay`s fire by the wall clock ([`Processor::advance_wall`], with [`super::clock`]).
+//! Also: records without a timestamp (wall clock, as Telegraf), pass-through of each record's
+//! exact bytes before the outputs it causes, and the counters of the summary line. Bad records
+//! are reported with their line number and skipped.
 
 use super::binding::{self, InputBinding};
+use super::clock::{self, Anchor, Deadlines, Wall};
 use super::encode::{self, Encoding};
 use super::instances::{Key, Table};
 use crate::log;
@@ -21,7 +24,7 @@ use tessla_engine::{InputError, Monitor, OutputEvent, Program, Value};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Default)]
 pub enum LateMode {
-    /// Evaluate a late record at the last evaluated step + 1 ns.
+    /// Evaluate a late record as a step of its own, 1 ns after its instance's last step.
     #[default]
     Shift,
     /// Drop a late record's events (it is still passed through).
@@ -40,13 +43,24 @@ pub struct Options {
     pub max_instances: usize,
     /// Evict an instance not used for this long (wall clock).
     pub instance_idle: Option<Duration>,
+    /// Refuse a record stamped more than this ahead of the wall clock (`None`: `--max-ahead off`).
+    pub max_ahead: Option<Duration>,
+    /// How far an instance's time stays behind the wall clock while its input is silent, before
+    /// its `delay`s fire (`--allowed-lateness`); `None` (`off`): time moves only with records.
+    pub allowed_lateness: Option<Duration>,
 }
 
-/// Most monitor instances with a step open at once (see [`Processor::record`]); past it the
-/// steps open longest are evaluated.
-pub const MAX_OPEN_STEPS: usize = 1024;
-
 pub const DEFAULT_MAX_INSTANCES: usize = 100_000;
+/// `--max-ahead`: Telegraf stamps a metric when it parses the message, on a host kept by NTP
+/// within milliseconds of ours; a robot's own clock (`json_time_key`) may be off by seconds. Ten
+/// seconds allows both and bounds the harm of a clock that is wrong: until the wall clock
+/// catches up, the instance's later records are late.
+pub const DEFAULT_MAX_AHEAD: Duration = Duration::from_secs(10);
+/// `--allowed-lateness`: the robot's messages cross Wi-Fi, the broker and Telegraf; their
+/// delivery varies by tens of milliseconds, by more in a Wi-Fi retry. A quarter of a second
+/// covers that at the robot's 5 Hz, and a watchdog still fires within a quarter second of its
+/// time.
+pub const DEFAULT_ALLOWED_LATENESS: Duration = Duration::from_millis(250);
 
 impl Default for Options {
     fn default() -> Self {
@@ -58,6 +72,8 @@ impl Default for Options {
             instance_by: Vec::new(),
             max_instances: DEFAULT_MAX_INSTANCES,
             instance_idle: None,
+            max_ahead: Some(DEFAULT_MAX_AHEAD),
+            allowed_lateness: Some(DEFAULT_ALLOWED_LATENESS),
         }
     }
 }
@@ -69,6 +85,8 @@ pub struct Counters {
     pub outputs: u64,
     pub parse_errors: u64,
     pub late: u64,
+    /// Records refused for a timestamp beyond `--max-ahead` of the wall clock.
+    pub ahead: u64,
     pub dropped_values: u64,
     /// Monitor instances created.
     pub instances: u64,
@@ -79,16 +97,31 @@ pub struct Counters {
 }
 
 impl Counters {
-    /// Add `other`'s counts (a `--threads` worker's, at the end of a run).
+    /// Add `other`'s counts (a `--threads` worker's, at the end of a run). Every field: the
+    /// summary must not depend on the thread count.
     pub fn add(&mut self, other: &Counters) {
-        self.records += other.records;
-        self.events += other.events;
-        self.outputs += other.outputs;
-        self.parse_errors += other.parse_errors;
-        self.late += other.late;
-        self.dropped_values += other.dropped_values;
-        self.instances += other.instances;
-        self.evicted += other.evicted;
+        let Counters {
+            records,
+            events,
+            outputs,
+            parse_errors,
+            late,
+            ahead,
+            dropped_values,
+            instances,
+            evicted,
+            duplicates,
+        } = other;
+        self.records += records;
+        self.events += events;
+        self.outputs += outputs;
+        self.parse_errors += parse_errors;
+        self.late += late;
+        self.ahead += ahead;
+        self.dropped_values += dropped_values;
+        self.instances += instances;
+        self.evicted += evicted;
+        self.duplicates += duplicates;
     }
 }
 
@@ -97,6 +130,14 @@ struct Instance {
     monitor: Monitor,
     tags: Vec<(String, String)>,
     recent: super::dedup::Recent,
+    /// Never reused: tells this instance's queued deadlines from a former occupant's of its slot.
+    id: u64,
+    /// The instance's last record (or its restore): where its silent time is measured from.
+    anchor: Option<Anchor>,
+    /// When its next `delay` firing falls due by the wall clock.
+    deadline: Option<Instant>,
+    /// The deadline of its entry in the queue, if it has one.
+    queued: Option<Instant>,
 }
 
 /// What writing a step's outputs needs, apart from the instance.
@@ -115,8 +156,6 @@ pub struct Processor {
     opts: Options,
     /// Most instances kept here: `--max-instances`, or this thread's share of it.
     keep: usize,
-    /// Most steps held open here: [`MAX_OPEN_STEPS`], or this thread's share of it.
-    keep_open: usize,
     pub counters: Counters,
     instances: Table<Instance>,
     /// Stands in for "now" when no idle limit needs the clock.
@@ -127,12 +166,13 @@ pub struct Processor {
     scratch: Metric,
     /// Warns about inputs the first records never feed (see [`super::wiring`]).
     wiring: super::wiring::WiringCheck,
-}
-
-fn now_ns() -> i64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
+    /// The wall clock of the current read ([`Processor::set_wall`]).
+    wall: Wall,
+    /// Instances' next `delay` firings by the wall clock.
+    deadlines: Deadlines,
+    /// Whether the program has a `delay` at all (without one, no deadline is ever computed).
+    has_delays: bool,
+    next_id: u64,
 }
 
 fn describe(instance_by: &[String], key: &Key) -> String {
@@ -144,6 +184,15 @@ fn describe(instance_by: &[String], key: &Key) -> String {
         .join(",")
 }
 
+/// " (instance robot=a)", or nothing without `--instance-by`.
+fn instance_note(instance_by: &[String], key: &Key) -> String {
+    if instance_by.is_empty() {
+        String::new()
+    } else {
+        format!(" (instance {})", describe(instance_by, key))
+    }
+}
+
 impl Processor {
     /// A processor for `program`; fails when an input annotation is malformed.
     pub fn new(program: Arc<Program>, opts: Options) -> Result<Processor, String> {
@@ -151,6 +200,7 @@ impl Processor {
         let encodings = encode::encodings(&program);
         let wiring = super::wiring::WiringCheck::new(&bindings);
         Ok(Processor {
+            has_delays: !program.delays.is_empty() && opts.allowed_lateness.is_some(),
             program,
             bindings,
             emitter: Emitter {
@@ -160,7 +210,6 @@ impl Processor {
                 encode: encode::Scratch::default(),
             },
             keep: opts.max_instances.max(1),
-            keep_open: MAX_OPEN_STEPS,
             opts,
             counters: Counters::default(),
             instances: Table::default(),
@@ -168,6 +217,9 @@ impl Processor {
             single: None,
             scratch: Metric::default(),
             wiring,
+            wall: Wall::now(),
+            deadlines: Deadlines::default(),
+            next_id: 0,
         })
     }
 
@@ -186,12 +238,6 @@ impl Processor {
         self.keep = n.max(1);
     }
 
-    /// Hold at most `n` steps open here (at least 1): a `--threads` shard's share of
-    /// [`MAX_OPEN_STEPS`], so that the threads together hold as much as one.
-    pub fn keep_open_steps(&mut self, n: usize) {
-        self.keep_open = n.max(1);
-    }
-
     /// The tags that select an instance (`--instance-by`).
     pub fn instance_by(&self) -> &[String] {
         &self.opts.instance_by
@@ -200,6 +246,12 @@ impl Processor {
     /// Monitor instances alive now.
     pub fn instance_count(&self) -> usize {
         self.instances.len()
+    }
+
+    /// The wall clock for the records that follow: a transport sets it once per read (the
+    /// records of one read arrived together), a replay to when each record arrived.
+    pub fn set_wall(&mut self, wall: Wall) {
+        self.wall = wall;
     }
 
     fn now(&self) -> Instant {
@@ -253,12 +305,17 @@ impl Processor {
         if !self.opts.instance_by.is_empty() {
             tags.sort();
         }
+        self.next_id += 1;
         let i = self.instances.insert(
             key,
             Instance {
                 monitor,
                 tags,
                 recent: Default::default(),
+                id: self.next_id,
+                anchor: None,
+                deadline: None,
+                queued: None,
             },
             now,
         );
@@ -268,16 +325,17 @@ impl Processor {
         i
     }
 
-    /// Evict instances past `--max-instances` or idle too long, writing their pending outputs.
-    fn evict(&mut self, now: Instant, out: &mut Vec<u8>) {
+    /// Evict instances past `--max-instances` or idle too long. Nothing is pending in an
+    /// instance between records (each record is evaluated at once); its armed `delay`s are
+    /// dropped with it (their queue entries go stale).
+    fn evict(&mut self, now: Instant) {
         let max = self.keep;
         let total = self.opts.max_instances;
         while let Some(i) = self.instances.evictable(max, self.opts.instance_idle, now) {
             let full = self.instances.len() > max;
-            let Some((key, mut inst)) = self.instances.remove(i) else {
+            let Some((key, _)) = self.instances.remove(i) else {
                 break;
             };
-            self.emitter.flush(&mut inst, &mut self.counters, out);
             self.counters.evicted += 1;
             let by = &self.opts.instance_by;
             log::warn_limited("instance evicted", || {
@@ -349,7 +407,40 @@ impl Processor {
         }
     }
 
-    /// Route one parsed record to its instance: pass-through, completed steps, its events.
+    fn passthrough(&self, rec: &RecordRef<'_>, out: &mut Vec<u8>) {
+        if self.opts.passthrough {
+            out.extend_from_slice(rec.bytes);
+            if rec.bytes.last() != Some(&b'\n') {
+                out.push(b'\n');
+            }
+        }
+    }
+
+    /// Whether `ts` is beyond `--max-ahead` of the wall clock: then the record is refused
+    /// (passed through, not evaluated), warned about and counted, and `true` is returned.
+    fn refuse_ahead(&mut self, rec: &RecordRef<'_>, metric: &Metric, ts: i64) -> bool {
+        let Some(bound) = self.opts.max_ahead else {
+            return false;
+        };
+        let wall = self.wall.ns;
+        if ts <= wall.saturating_add(clock::ns_of(bound)) {
+            return false;
+        }
+        self.counters.ahead += 1;
+        let inst = instance_note(&self.opts.instance_by, &self.key(metric));
+        log::warn_limited("ahead of the clock", || {
+            format!(
+                "line {}: timestamp {ts} is {} ahead of the wall clock{inst}; refused (not evaluated), so it cannot move the monitor's clock (--max-ahead {}; `--max-ahead off` for simulated data)",
+                rec.line,
+                clock::human_ns(ts.saturating_sub(wall)),
+                humantime::format_duration(bound)
+            )
+        });
+        true
+    }
+
+    /// Route one parsed record to its instance: delay firings before it, pass-through, then
+    /// its own step, evaluated at once.
     fn record_metric(&mut self, rec: &RecordRef<'_>, metric: &Metric, out: &mut Vec<u8>) {
         if metric.overwritten > 0 {
             log::warn_limited("repeated field", || {
@@ -359,7 +450,11 @@ impl Processor {
                 )
             });
         }
-        let mut ts = metric.timestamp.unwrap_or_else(now_ns);
+        let mut ts = metric.timestamp.unwrap_or(self.wall.ns);
+        if self.refuse_ahead(rec, metric, ts) {
+            self.passthrough(rec, out);
+            return;
+        }
         let now = self.now();
         let slot = self.instance_for(metric, ts, now);
         let Some(inst) = self.instances.get_mut(slot) else {
@@ -378,67 +473,121 @@ impl Processor {
             return;
         }
         let monitor = &mut inst.monitor;
-        let mut late = false;
-        // The earliest timestamp still accepted: the open step, or just after the last evaluated one.
-        let min = match (monitor.pending(), monitor.last_evaluated()) {
-            (Some(p), _) => Some(p),
-            (None, Some(l)) => Some(l.saturating_add(1)),
-            (None, None) => None,
-        };
-        if let Some(min) = min
-            && ts < min
+        let mut dropped = false;
+        // A record not after its instance's last step (a record, or a delay that fired) is a
+        // step of its own 1 ns after it: it never joins or collides with an evaluated step.
+        if let Some(last) = monitor.last_evaluated()
+            && ts <= last
         {
-            late = true;
-            self.counters.late += 1;
-            let mode = self.opts.late;
-            log::warn_limited("late record", || {
-                format!(
-                    "line {}: timestamp {ts} is not after the last evaluated step; {}",
-                    rec.line,
-                    if mode == LateMode::Shift {
-                        format!("evaluated at {min}")
-                    } else {
-                        "its events are dropped".into()
-                    }
-                )
-            });
-            ts = min;
-        }
-        // Evaluate the open step and the delay firings before `ts` now, so their outputs
-        // precede this record's pass-through whenever the previous read ended.
-        if monitor.pending().is_none_or(|p| ts > p) {
-            let events = &mut self.emitter.events;
-            monitor.advance_to(ts, &mut |e: OutputEvent<'_>| {
-                events.push((e.ts, e.output, e.value.clone()))
-            });
-            self.emitter.emit(&inst.tags, &mut self.counters, out);
-        }
-        if self.opts.passthrough {
-            out.extend_from_slice(rec.bytes);
-            if rec.bytes.last() != Some(&b'\n') {
-                out.push(b'\n');
+            let at = last.saturating_add(1);
+            if ts < last {
+                self.counters.late += 1;
+                dropped = self.opts.late == LateMode::Drop;
+                let inst_note = if self.opts.instance_by.is_empty() {
+                    String::new()
+                } else {
+                    let key: Key = (self.opts.instance_by.iter())
+                        .map(|t| metric.tag(t).map(str::to_string))
+                        .collect();
+                    instance_note(&self.opts.instance_by, &key)
+                };
+                log::warn_limited("late record", || {
+                    format!(
+                        "line {}: timestamp {ts} is {} before its instance's last step at {last}{inst_note}; {}",
+                        rec.line,
+                        clock::human_ns(last.saturating_sub(ts)),
+                        if dropped {
+                            "its events are dropped (--late drop)".to_string()
+                        } else {
+                            format!("evaluated as a step of its own at {at} (--late shift)")
+                        }
+                    )
+                });
             }
+            ts = at;
         }
-        if !(late && self.opts.late == LateMode::Drop) {
+        // The delay firings before `ts` first, so their outputs precede this record's
+        // pass-through.
+        let events = &mut self.emitter.events;
+        monitor.advance_to(ts, &mut |e: OutputEvent<'_>| {
+            events.push((e.ts, e.output, e.value.clone()))
+        });
+        self.emitter.emit(&inst.tags, &mut self.counters, out);
+        self.passthrough(rec, out);
+        if !dropped {
             self.push_fields(metric, rec.line, ts, slot, out);
         }
-        self.instances.mark_open(slot);
-        self.close_oldest_steps(out);
-        self.evict(now, out);
+        self.schedule(slot, ts);
+        self.evict(now);
     }
 
-    /// Bound the steps held open: past [`MAX_OPEN_STEPS`] (a fleet piped in faster than it is
-    /// read never pauses, so every robot would hold its last record's events, 360 beams each),
-    /// evaluate the steps open longest. A later record of such an instance with the same
-    /// timestamp is then late, as after a pause in the input.
-    fn close_oldest_steps(&mut self, out: &mut Vec<u8>) {
-        while self.instances.open_count() > self.keep_open {
-            let Some(i) = self.instances.take_oldest_open() else {
-                break;
+    /// Note instance `slot`'s last record at `ts` and queue its next `delay` firing by the wall
+    /// clock. Without a `delay` in the program this is one comparison.
+    fn schedule(&mut self, slot: usize, ts: i64) {
+        if !self.has_delays {
+            return;
+        }
+        let (at, lateness) = (self.wall.at, self.lateness());
+        if let Some(inst) = self.instances.get_mut(slot) {
+            let anchor = Anchor { ts, at };
+            inst.anchor = Some(anchor);
+            Self::queue(&mut self.deadlines, inst, slot, lateness);
+        }
+    }
+
+    /// Recompute `inst`'s deadline from its anchor and next firing; queue it unless an entry at
+    /// or before it is queued already (that entry, when due, queues the later one).
+    fn queue(deadlines: &mut Deadlines, inst: &mut Instance, slot: usize, lateness: Duration) {
+        inst.deadline = match (inst.anchor, inst.monitor.next_firing()) {
+            (Some(a), Some(t)) => a.deadline(t, lateness),
+            _ => None,
+        };
+        if let Some(d) = inst.deadline
+            && inst.queued.is_none_or(|q| q > d)
+        {
+            deadlines.push(d, inst.id, slot);
+            inst.queued = Some(d);
+        }
+    }
+
+    /// `--allowed-lateness` (only read where it is on: `has_delays` is false when it is off).
+    fn lateness(&self) -> Duration {
+        self.opts.allowed_lateness.unwrap_or(Duration::MAX)
+    }
+
+    /// The earliest wall-clock time at which an instance's `delay` may fall due (a transport
+    /// sleeps until then when no input arrives).
+    pub fn next_deadline(&self) -> Option<Instant> {
+        self.deadlines.next()
+    }
+
+    /// The input is silent: move every instance whose `delay` has fallen due on to its time by
+    /// the wall clock (its last record's time plus the wall time since, less
+    /// `--allowed-lateness`), firing those delays; their outputs carry their TeSSLa time.
+    /// Touches only the instances with a due deadline.
+    pub fn advance_wall(&mut self, now: Instant, out: &mut Vec<u8>) {
+        let lateness = self.lateness();
+        while let Some((due, id, slot)) = self.deadlines.pop_due(now) {
+            let Some(inst) = self.instances.get_mut(slot) else {
+                continue;
             };
-            if let Some(inst) = self.instances.get_mut(i) {
-                self.emitter.flush(inst, &mut self.counters, out);
+            if inst.id != id || inst.queued != Some(due) {
+                continue;
             }
+            inst.queued = None;
+            let (Some(anchor), Some(deadline)) = (inst.anchor, inst.deadline) else {
+                continue;
+            };
+            if deadline <= now {
+                let time = anchor.time_at(now, lateness);
+                let events = &mut self.emitter.events;
+                inst.monitor
+                    .advance_to(time.saturating_add(1), &mut |e: OutputEvent<'_>| {
+                        events.push((e.ts, e.output, e.value.clone()))
+                    });
+                self.emitter.emit(&inst.tags, &mut self.counters, out);
+            }
+            Self::queue(&mut self.deadlines, inst, slot, lateness);
         }
     }
 
@@ -449,12 +598,15 @@ impl Processor {
             .is_some_and(|(_, head)| head.contains(&b'\n'))
     }
 
-    /// Feed the metric's bound fields to instance `slot` as events at `ts`.
+    /// Feed the metric's bound fields to instance `slot` as events at `ts`, evaluate the step
+    /// and write its outputs.
     fn push_fields(&mut self, metric: &Metric, line: u64, ts: i64, slot: usize, out: &mut Vec<u8>) {
         self.wiring.observe(metric, &self.bindings);
         let Some(inst) = self.instances.get_mut(slot) else {
             return;
         };
+        let events = &mut self.emitter.events;
+        let mut sink = |e: OutputEvent<'_>| events.push((e.ts, e.output, e.value.clone()));
         for b in &self.bindings {
             if !b.matches(metric) {
                 continue;
@@ -470,48 +622,37 @@ impl Processor {
                         )
                     });
                 }
-                Some(Ok(v)) => {
-                    let events = &mut self.emitter.events;
-                    let r = inst
-                        .monitor
-                        .push(ts, b.input, v, &mut |e: OutputEvent<'_>| {
-                            events.push((e.ts, e.output, e.value.clone()))
+                Some(Ok(v)) => match inst.monitor.push(ts, b.input, v, &mut sink) {
+                    Ok(()) => self.counters.events += 1,
+                    Err(err) => {
+                        self.counters.dropped_values += 1;
+                        let why = match err {
+                            InputError::Multiple { .. } => {
+                                "a second event on this input in the same record".to_string()
+                            }
+                            InputError::Decreasing { last, got } => format!(
+                                "timestamp {got} is not after the last evaluated one ({last})"
+                            ),
+                            InputError::UnknownInput(i) => {
+                                format!("the spec has no input number {i}")
+                            }
+                        };
+                        log::warn_limited("input event", || {
+                            format!("line {line}: input `{}`: {why}; value skipped", b.name)
                         });
-                    match r {
-                        Ok(()) => self.counters.events += 1,
-                        Err(err) => {
-                            self.counters.dropped_values += 1;
-                            let why = match err {
-                                InputError::Multiple { .. } => {
-                                    "a second event on this input in the same step".to_string()
-                                }
-                                InputError::Decreasing { last, got } => format!(
-                                    "timestamp {got} is before the last evaluated one ({last})"
-                                ),
-                                InputError::UnknownInput(i) => {
-                                    format!("the spec has no input number {i}")
-                                }
-                            };
-                            log::warn_limited("input event", || {
-                                format!("line {line}: input `{}`: {why}; value skipped", b.name)
-                            });
-                        }
                     }
-                }
+                },
             }
         }
+        inst.monitor.flush(&mut sink);
         self.emitter.emit(&inst.tags, &mut self.counters, out);
     }
 
-    /// No more input right now: evaluate every instance's pending step and append its outputs.
-    pub fn flush(&mut self, out: &mut Vec<u8>) {
-        for i in self.instances.take_open() {
-            if let Some(inst) = self.instances.get_mut(i) {
-                self.emitter.flush(inst, &mut self.counters, out);
-            }
-        }
+    /// No more input right now (the end of a read): evict idle instances. Every record has
+    /// been evaluated already.
+    pub fn flush(&mut self, _out: &mut Vec<u8>) {
         let now = self.now();
-        self.evict(now, out);
+        self.evict(now);
     }
 
     /// The input ended: warn about inputs that what was seen never fed (once).
@@ -524,21 +665,69 @@ impl Processor {
         &self.program
     }
 
-    /// Every instance's key and monitor, least recently used first (`--state`).
-    pub fn monitors(&self) -> impl Iterator<Item = (&Key, &Monitor)> {
-        self.instances.iter_lru().map(|(k, i)| (k, &i.monitor))
+    /// Whether `monitor`'s clock is beyond `--max-ahead` of the wall clock now.
+    fn clock_ahead(&self, monitor: &Monitor) -> Option<i64> {
+        let bound = self.opts.max_ahead?;
+        let ahead = monitor.clock().saturating_sub(clock::unix_ns());
+        (ahead > clock::ns_of(bound)).then_some(ahead)
     }
 
-    /// Add an instance restored from saved state; ignored when `key` already has one.
+    /// Every instance's key and monitor, least recently used first (`--state`). An instance
+    /// whose clock is beyond `--max-ahead` of the wall clock is left out: a wrong clock is
+    /// never saved.
+    pub fn monitors(&self) -> impl Iterator<Item = (&Key, &Monitor)> {
+        self.instances
+            .iter_lru()
+            .map(|(k, i)| (k, &i.monitor))
+            .filter(|(k, m)| match self.clock_ahead(m) {
+                None => true,
+                Some(ahead) => {
+                    log::warn_limited("state clock", || {
+                        format!(
+                            "monitor instance {} not saved: its clock is {} ahead of the wall clock (--max-ahead)",
+                            describe(&self.opts.instance_by, k),
+                            clock::human_ns(ahead)
+                        )
+                    });
+                    false
+                }
+            })
+    }
+
+    /// Add an instance restored from saved state; ignored when `key` already has one, and
+    /// refused (the instance starts fresh with its next record) when its clock is beyond
+    /// `--max-ahead` of the wall clock. Its silent time counts from now.
     pub fn restore_instance(&mut self, key: Key, monitor: Monitor) {
+        if let Some(ahead) = self.clock_ahead(&monitor) {
+            log::log(
+                log::Level::Warn,
+                &format!(
+                    "state: monitor instance {} saved with a clock {} ahead of the wall clock (beyond --max-ahead {}); it starts fresh",
+                    if self.opts.instance_by.is_empty() {
+                        "(the only one)".to_string()
+                    } else {
+                        describe(&self.opts.instance_by, &key)
+                    },
+                    clock::human_ns(ahead),
+                    self.opts
+                        .max_ahead
+                        .map(|d| humantime::format_duration(d).to_string())
+                        .unwrap_or_default()
+                ),
+            );
+            return;
+        }
         let now = self.now();
         if self.instances.find(&key, now).is_none() {
-            self.insert_instance(key, monitor, now);
+            let ts = monitor.clock();
+            let slot = self.insert_instance(key, monitor, now);
+            self.schedule(slot, ts);
         }
     }
 
-    /// Run `program` from now on (a spec reload). Every open step is evaluated first with the
-    /// old program; then `carry` turns each instance's monitor into one of the new program.
+    /// Run `program` from now on (a spec reload): `carry` turns each instance's monitor into
+    /// one of the new program (no step is open between records), and every instance's next
+    /// `delay` firing is queued afresh.
     /// Fails (nothing changed) when the new program's input annotations are malformed.
     pub fn replace_program(
         &mut self,
@@ -555,7 +744,21 @@ impl Processor {
         self.emitter.encode = encode::Scratch::default();
         self.wiring = super::wiring::WiringCheck::new(&bindings);
         self.bindings = bindings;
+        self.has_delays = !program.delays.is_empty() && self.opts.allowed_lateness.is_some();
         self.program = program;
+        // The new program's delays: queue every instance afresh (a reload is rare).
+        self.deadlines.clear();
+        let (at, lateness) = (Wall::now().at, self.lateness());
+        for (slot, inst) in self.instances.slots_mut() {
+            inst.queued = None;
+            if inst.anchor.is_none() {
+                let ts = inst.monitor.clock();
+                inst.anchor = Some(Anchor { ts, at });
+            }
+            if self.has_delays {
+                Self::queue(&mut self.deadlines, inst, slot, lateness);
+            }
+        }
         Ok(())
     }
 
@@ -563,8 +766,15 @@ impl Processor {
     pub fn summary(&self) -> String {
         let c = &self.counters;
         let mut s = format!(
-            "summary: {} records, {} events, {} outputs, {} parse errors, {} late records, {} dropped values, {} duplicates",
-            c.records, c.events, c.outputs, c.parse_errors, c.late, c.dropped_values, c.duplicates
+            "summary: {} records, {} events, {} outputs, {} parse errors, {} late records, {} ahead of the clock, {} dropped values, {} duplicates",
+            c.records,
+            c.events,
+            c.outputs,
+            c.parse_errors,
+            c.late,
+            c.ahead,
+            c.dropped_values,
+            c.duplicates
         );
         if !self.opts.instance_by.is_empty() {
             s.push_str(&format!(
@@ -577,14 +787,6 @@ impl Processor {
 }
 
 impl Emitter {
-    /// Evaluate the instance's pending step (or its first step) and write the outputs.
-    fn flush(&mut self, inst: &mut Instance, counters: &mut Counters, out: &mut Vec<u8>) {
-        let events = &mut self.events;
-        inst.monitor
-            .flush(&mut |e: OutputEvent<'_>| events.push((e.ts, e.output, e.value.clone())));
-        self.emit(&inst.tags, counters, out);
-    }
-
     /// Write the collected events as metrics, one group per timestamp.
     fn emit(&mut self, tags: &[(String, String)], counters: &mut Counters, out: &mut Vec<u8>) {
         if self.events.is_empty() {
@@ -667,40 +869,6 @@ mod tests {
         assert_eq!(out, "m x=4,s=\"two\nlines\" 400\ntessla c=4i,x=4i 400\n");
     }
 
-    /// A fleet that never pauses holds at most MAX_OPEN_STEPS steps open: the oldest are
-    /// evaluated while records keep coming, with the outputs they would get at a pause.
-    #[test]
-    fn open_steps_are_bounded_without_changing_outputs() {
-        let robots = MAX_OPEN_STEPS + 100;
-        let mut p = processor(Options {
-            passthrough: false,
-            instance_by: vec!["robot".into()],
-            ..Options::default()
-        });
-        let mut out = Vec::new();
-        for r in 0..robots {
-            let rec = Record {
-                bytes: format!("m,robot=r{r} x={r}i 100\n").into_bytes(),
-                line: r as u64 + 1,
-                oversized: false,
-            };
-            p.record(&rec, &mut out);
-        }
-        let before_flush = String::from_utf8(out.clone()).unwrap();
-        // The first 100 robots' steps were closed without a pause in the input.
-        assert_eq!(before_flush.lines().count(), 100, "{before_flush}");
-        assert!(before_flush.starts_with("tessla,robot=r0 c=1i,k=7i,x=0i 100\n"));
-        assert_eq!(p.instances.open_count(), MAX_OPEN_STEPS);
-        p.flush(&mut out);
-        let all = String::from_utf8(out).unwrap();
-        assert_eq!(all.lines().count(), robots);
-        for r in 0..robots {
-            let line = format!("tessla,robot=r{r} c=1i,k=7i,x={r}i 100\n");
-            assert!(all.contains(&line), "missing {line}");
-        }
-        assert_eq!(p.counters.late, 0);
-    }
-
     #[test]
     fn time_zero_events_carry_the_first_records_timestamp() {
         let mut p = processor(Options {
@@ -711,17 +879,30 @@ mod tests {
         assert_eq!(out, "tessla c=1i,k=7i,x=5i 1700000000000000000\n");
     }
 
+    /// Every record is a step of its own, answered right after its pass-through; a record with
+    /// the timestamp of its instance's last step is stepped 1 ns after it (not late).
     #[test]
-    fn records_with_one_timestamp_join_one_step_after_their_pass_through() {
+    fn records_with_one_timestamp_are_stepped_each_apart() {
         let mut p = processor(Options::default());
         let out = feed(&mut p, "m x=5 100\nm y=1 100\nm x=6 200\n");
-        // The step at 100 is evaluated when the record at 200 arrives, before it is echoed.
         assert_eq!(
             out,
-            "m x=5 100\nm y=1 100\ntessla c=1i,k=7i,x=5i 100\nm x=6 200\ntessla c=2i,x=6i 200\n"
+            "m x=5 100\ntessla c=1i,k=7i,x=5i 100\nm y=1 100\nm x=6 200\ntessla c=2i,x=6i 200\n"
         );
         assert_eq!(p.counters.records, 3);
         assert_eq!(p.counters.events, 2);
+        assert_eq!(p.counters.late, 0);
+        // Two values of one input at one timestamp: both evaluated, the second 1 ns later.
+        let mut p = processor(Options {
+            passthrough: false,
+            ..Options::default()
+        });
+        assert_eq!(
+            feed(&mut p, "m x=1 100\nm x=2 100\n"),
+            "tessla c=1i,k=7i,x=1i 100\ntessla c=2i,x=2i 101\n"
+        );
+        assert_eq!(p.counters.dropped_values, 0);
+        assert_eq!(p.counters.late, 0);
     }
 
     #[test]
@@ -733,13 +914,22 @@ mod tests {
         feed(&mut p, "m x=1 100\n");
         assert_eq!(feed(&mut p, "m x=2 50\n"), "tessla c=2i,x=2i 101\n");
         assert_eq!(p.counters.late, 1);
+        // In one read: the late record is a step of its own after the last, never merged.
+        let mut p = processor(Options {
+            passthrough: false,
+            ..Options::default()
+        });
+        assert_eq!(
+            feed(&mut p, "m x=1 100\nm x=2 200\nm x=3 150\n"),
+            "tessla c=1i,k=7i,x=1i 100\ntessla c=2i,x=2i 200\ntessla c=3i,x=3i 201\n"
+        );
         let mut p = processor(Options {
             passthrough: false,
             late: LateMode::Drop,
             ..Options::default()
         });
         feed(&mut p, "m x=1 100\n");
-        assert_eq!(feed(&mut p, "m x=2 100\n"), "");
+        assert_eq!(feed(&mut p, "m x=2 50\n"), "");
         assert_eq!(feed(&mut p, "m x=3 300\n"), "tessla c=2i,x=3i 300\n");
         assert_eq!(p.counters.late, 1);
     }
@@ -750,25 +940,107 @@ mod tests {
             passthrough: false,
             ..Options::default()
         });
-        let before = now_ns();
+        let before = clock::unix_ns();
+        p.set_wall(Wall::now());
         let out = feed(&mut p, "m x=1\n");
-        let after = now_ns();
+        let after = clock::unix_ns();
         let m = parse_record(out.as_bytes()).unwrap().unwrap();
         let ts = m.timestamp.unwrap();
         assert!(before <= ts && ts <= after, "{before} <= {ts} <= {after}");
     }
 
+    /// A record stamped beyond --max-ahead is echoed, not evaluated, and cannot move the clock.
     #[test]
-    fn a_second_event_in_one_step_is_counted_and_skipped() {
+    fn a_record_far_ahead_of_the_wall_clock_is_refused() {
+        let mut p = processor(Options::default());
+        let now = clock::unix_ns();
+        let out = feed(&mut p, &format!("m x=1 {now}\nm x=2 9223372036854775807\n"));
+        assert!(out.contains("m x=2 9223372036854775807\n"), "{out}");
+        assert!(!out.contains("x=2i"), "{out}");
+        assert_eq!(p.counters.ahead, 1);
+        let later = now + 1_000;
+        let out = feed(&mut p, &format!("m x=3 {later}\n"));
+        assert!(
+            out.ends_with(&format!("tessla c=2i,x=3i {later}\n")),
+            "{out}"
+        );
+        assert_eq!(p.counters.late, 0);
+        assert!(
+            p.summary().contains(", 1 ahead of the clock,"),
+            "{}",
+            p.summary()
+        );
+        // Off: simulated data far in the future is evaluated.
         let mut p = processor(Options {
             passthrough: false,
+            max_ahead: None,
             ..Options::default()
         });
+        let out = feed(&mut p, "m x=2 9000000000000000000\n");
+        assert_eq!(out, "tessla c=1i,k=7i,x=2i 9000000000000000000\n");
+    }
+
+    /// A watchdog fires by the wall clock while the input is silent: at the instance's last
+    /// record plus the delay, once the allowed lateness has passed; its output carries its TeSSLa
+    /// time. Only the instance whose deadline is due is touched.
+    #[test]
+    fn delays_fire_by_the_wall_clock_while_the_input_is_silent() {
+        let spec = "in x: Events[Int]\n\
+                    def quiet = delay(const(1000, x), x)\n\
+                    out quiet\nout x\n";
+        let resolver = MemResolver {
+            files: [("w.tessla".to_string(), spec.to_string())].into(),
+        };
+        let loaded = tessla_engine::load_with("w.tessla", &resolver, &Default::default()).unwrap();
+        let lateness = Duration::from_micros(100);
+        let mut p = Processor::new(
+            loaded.program,
+            Options {
+                passthrough: false,
+                instance_by: vec!["robot".into()],
+                allowed_lateness: Some(lateness),
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        let t0 = Instant::now();
+        p.set_wall(Wall { at: t0, ns: 0 });
+        let out = feed(&mut p, "m,robot=a x=1i 5000\nm,robot=b x=1i 5000\n");
+        assert_eq!(out.lines().count(), 2);
+        // Due 1000 ns + lateness after the records arrived.
         assert_eq!(
-            feed(&mut p, "m x=1 100\nm x=2 100\n"),
-            "tessla c=1i,k=7i,x=1i 100\n"
+            p.next_deadline(),
+            Some(t0 + Duration::from_nanos(1000) + lateness)
         );
-        assert_eq!(p.counters.dropped_values, 1);
+        // Robot b speaks again half-way; only a falls silent.
+        p.set_wall(Wall {
+            at: t0 + Duration::from_nanos(500),
+            ns: 0,
+        });
+        feed(&mut p, "m,robot=b x=2i 5500\n");
+        let mut out = Vec::new();
+        p.advance_wall(t0 + Duration::from_nanos(900), &mut out);
+        assert!(out.is_empty());
+        p.advance_wall(t0 + Duration::from_nanos(1000) + lateness, &mut out);
+        assert_eq!(
+            String::from_utf8(out).unwrap(),
+            "tessla,robot=a quiet=true 6000\n"
+        );
+        let mut out = Vec::new();
+        p.advance_wall(t0 + Duration::from_nanos(1500) + lateness, &mut out);
+        assert_eq!(
+            String::from_utf8(out).unwrap(),
+            "tessla,robot=b quiet=true 6500\n"
+        );
+        assert_eq!(p.next_deadline(), None);
+        // A record after the firing but stamped before it is late: a step of its own after it.
+        p.set_wall(Wall {
+            at: t0 + Duration::from_millis(1),
+            ns: 0,
+        });
+        let out = feed(&mut p, "m,robot=a x=3i 5900\n");
+        assert_eq!(out, "tessla,robot=a x=3i 6001\n");
+        assert_eq!(p.counters.late, 1);
     }
 
     #[test]

@@ -195,22 +195,74 @@ pub fn check_entry(
     ))
 }
 
+/// One instance as the file holds it, borrowed for writing (the same JSON as [`SavedInstance`]).
+#[derive(Serialize)]
+struct SavedRef<'a> {
+    key: &'a Key,
+    monitor: Snapshot,
+}
+
+/// The file's fields before `instances`, in [`StateFile`]'s order.
+#[derive(Serialize)]
+struct HeaderOut<'a> {
+    magic: &'a str,
+    version: u32,
+    fingerprint: &'a str,
+    written: u64,
+}
+
+/// Instances per encoding thread below which one thread does it all.
+const PER_THREAD: usize = 512;
+
+/// The JSON of `instances`, comma-separated, and the count of stream values that could not be
+/// saved.
+fn encode_instances(
+    instances: &[(&Key, &tessla_engine::Monitor)],
+    keys: &[u64],
+) -> io::Result<(Vec<u8>, usize)> {
+    let mut out = Vec::with_capacity(instances.len() * 2048);
+    let mut unsaved = 0;
+    for (i, (key, m)) in instances.iter().enumerate() {
+        let monitor = snapshot::snapshot_with_keys(m, keys);
+        unsaved += monitor.unsaved;
+        if i > 0 {
+            out.push(b',');
+        }
+        serde_json::to_writer(&mut out, &SavedRef { key, monitor }).map_err(io::Error::other)?;
+    }
+    Ok((out, unsaved))
+}
+
 /// Save every instance of `proc` to `path` atomically. Returns the number of instances saved.
+///
+/// The instances are snapshotted and encoded on up to as many threads as the machine has cores
+/// (each a contiguous run of them, so the file lists them in the same order, least recently used
+/// first), then written in one pass: the bytes are those of [`StateFile`] serialised whole.
 pub fn save(path: &Path, proc: &Processor, ctx: &Context) -> io::Result<usize> {
     let program = proc.program();
     let keys = snapshot::node_keys(program);
-    let mut unsaved = 0;
-    let instances: Vec<SavedInstance> = proc
-        .monitors()
-        .map(|(key, m)| {
-            let monitor = snapshot::snapshot_with_keys(m, &keys);
-            unsaved += monitor.unsaved;
-            SavedInstance {
-                key: key.clone(),
-                monitor,
-            }
-        })
-        .collect();
+    let monitors: Vec<(&Key, &tessla_engine::Monitor)> = proc.monitors().collect();
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let threads = cores.min(monitors.len() / PER_THREAD).max(1);
+    let chunk = monitors.len().div_ceil(threads).max(1);
+    let parts: Vec<(Vec<u8>, usize)> = if threads == 1 {
+        vec![encode_instances(&monitors, &keys)?]
+    } else {
+        std::thread::scope(|s| {
+            let handles: Vec<_> = monitors
+                .chunks(chunk)
+                .map(|c| s.spawn(|| encode_instances(c, &keys)))
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join()
+                        .map_err(|_| io::Error::other("a state encoding thread failed"))?
+                })
+                .collect::<io::Result<Vec<_>>>()
+        })?
+    };
+    let unsaved: usize = parts.iter().map(|(_, u)| u).sum();
     if unsaved > 0 {
         log::log(
             Level::Warn,
@@ -219,18 +271,33 @@ pub fn save(path: &Path, proc: &Processor, ctx: &Context) -> io::Result<usize> {
             ),
         );
     }
-    let file = StateFile {
-        magic: MAGIC.into(),
+    let fingerprint = fingerprint(program, ctx);
+    let header = serde_json::to_vec(&HeaderOut {
+        magic: MAGIC,
         version: VERSION,
-        fingerprint: fingerprint(program, ctx),
+        fingerprint: &fingerprint,
         written: unix_now(),
-        instances,
-    };
+    })
+    .map_err(io::Error::other)?;
+    // `{...}` without its closing brace, then the instances.
+    let open = header.strip_suffix(b"}").unwrap_or(&header);
     write_atomic(path, |w| {
-        serde_json::to_writer(&mut *w, &file).map_err(io::Error::other)?;
-        w.write_all(b"\n")
+        w.write_all(open)?;
+        w.write_all(b",\"instances\":[")?;
+        let mut first = true;
+        for (bytes, _) in &parts {
+            if bytes.is_empty() {
+                continue;
+            }
+            if !first {
+                w.write_all(b",")?;
+            }
+            first = false;
+            w.write_all(bytes)?;
+        }
+        w.write_all(b"]}\n")
     })?;
-    Ok(file.instances.len())
+    Ok(monitors.len())
 }
 
 /// Write `path` through a temporary file in the same folder: fsync, rename over `path`, fsync

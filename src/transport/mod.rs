@@ -40,6 +40,14 @@ pub(crate) async fn tick(timer: &mut Option<tokio::time::Interval>) {
     }
 }
 
+/// Sleep until `deadline` (forever without one): a processor's next `delay` by the wall clock.
+pub(crate) async fn sleep_until(deadline: Option<std::time::Instant>) {
+    match deadline {
+        Some(d) => tokio::time::sleep_until(tokio::time::Instant::from_std(d)).await,
+        None => std::future::pending().await,
+    }
+}
+
 /// How a transport's run ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Ending {

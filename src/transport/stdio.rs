@@ -1,9 +1,9 @@
 //! stdin -> processor -> stdout, as Telegraf's execd processor drives its child.
 //!
-//! Owns: reading without waiting for a full buffer, flushing the pending step whenever a read
-//! returns less than a full buffer (no more input right now: never wait for the next record to
-//! answer this one), flushing stdout after every batch, SIGTERM/SIGINT, SIGHUP (handed to the
-//! caller's reload between reads), and a closed stdout.
+//! Owns: reading without waiting for a full buffer (every record is answered within the read
+//! that brought it), the wall clock of each read, waking when an instance's `delay` falls due
+//! while the input is silent ([`Processor::advance_wall`]), flushing stdout after every batch,
+//! SIGTERM/SIGINT, SIGHUP (handed to the caller's reload between reads), and a closed stdout.
 //!
 //! With `--threads N` and `--instance-by`, instances are spread over N threads ([`Shards`]): each
 //! read's records are routed by instance key (one instance always to the same thread), every
@@ -24,8 +24,9 @@
 //! read: most of the answer latency of a single record on a busy machine).
 
 use super::{Ending, Hooks};
+use crate::telegraf::clock::Wall;
 use crate::telegraf::instances::shard_of;
-use crate::telegraf::processor::{MAX_OPEN_STEPS, Processor};
+use crate::telegraf::processor::Processor;
 use lineproto::{RecordRef, RecordSplitter};
 use std::io::Write;
 use std::sync::mpsc;
@@ -119,8 +120,8 @@ impl Batch {
 }
 
 /// One step of a worker thread: its processor, its records, its output buffer, whether to flush
-/// afterwards.
-type Job = (Box<Processor>, Batch, Vec<u8>, bool);
+/// afterwards, the read's wall clock.
+type Job = (Box<Processor>, Batch, Vec<u8>, bool, Wall);
 /// A worker's answer: its shard, its processor back, the emptied batch, its output.
 type Done = (usize, Box<Processor>, Batch, Vec<u8>);
 
@@ -151,12 +152,7 @@ impl Shards {
             threads.clamp(1, total)
         };
         let share = |shard: usize| total / threads + usize::from(shard < total % threads);
-        // The steps held open are split the same way: together the threads hold (and keep in
-        // memory) as many as one thread.
-        let open =
-            |shard: usize| MAX_OPEN_STEPS / threads + usize::from(shard < MAX_OPEN_STEPS % threads);
         proc.keep_instances(share(0));
-        proc.keep_open_steps(open(0));
         let (done_tx, done) = mpsc::channel::<Done>();
         let mut workers = Vec::new();
         for shard in 1..threads {
@@ -167,8 +163,9 @@ impl Shards {
                 .spawn(move || {
                     // Spin for the next read only while records are flowing.
                     let mut flowing = false;
-                    while let Ok((mut p, mut batch, mut out, flush)) = recv(&rx, flowing) {
+                    while let Ok((mut p, mut batch, mut out, flush, wall)) = recv(&rx, flowing) {
                         flowing = !flush;
+                        p.set_wall(wall);
                         batch.step(&mut p, &mut out);
                         if flush {
                             p.flush(&mut out);
@@ -181,7 +178,6 @@ impl Shards {
                 .map_err(|e| format!("cannot start a worker thread: {e}"))?;
             let mut sibling = proc.sibling()?;
             sibling.keep_instances(share(shard));
-            sibling.keep_open_steps(open(shard));
             // The wiring diagnostics watch the first thread's records only: closed before a
             // record is seen, a worker's check reports nothing (its first 1,000 records would
             // cost it 239k instructions each, and every thread would warn about the same input).
@@ -235,6 +231,7 @@ impl Shards {
         &mut self,
         proc: &mut Processor,
         flush: bool,
+        wall: Wall,
         out: &mut Vec<u8>,
     ) -> std::io::Result<()> {
         let lost = || std::io::Error::other("a worker thread stopped");
@@ -244,9 +241,10 @@ impl Shards {
             let p = w.proc.take().ok_or_else(lost)?;
             w.tx.as_ref()
                 .ok_or_else(lost)?
-                .send((p, batch, o, flush))
+                .send((p, batch, o, flush, wall))
                 .map_err(|_| lost())?;
         }
+        proc.set_wall(wall);
         if let Some(b) = self.batches.first_mut() {
             b.step(proc, out);
         }
@@ -269,6 +267,16 @@ impl Shards {
                 f(p);
             }
         }
+    }
+
+    /// The earliest wall-clock deadline of any thread's instances (see
+    /// [`Processor::next_deadline`]).
+    fn next_deadline(&self, proc: &Processor) -> Option<std::time::Instant> {
+        self.workers
+            .iter()
+            .filter_map(|w| w.proc.as_ref()?.next_deadline())
+            .chain(proc.next_deadline())
+            .min()
     }
 
     /// Stop the workers and add their counters to `proc`'s (the summary covers every thread).
@@ -349,14 +357,16 @@ async fn run_shards(
         mut periodic,
     } = hooks;
     let ending = loop {
+        // A record partly read is input arriving, not silence.
+        let deadline = shards
+            .next_deadline(proc)
+            .filter(|_| splitter.buffered() == 0);
         let n = tokio::select! {
-            r = stdin.read(&mut buf) => r?,
-            _ = super::tick(&mut timer) => {
-                if let Some((_, f)) = periodic.as_mut() {
-                    f(proc);
-                }
-                continue;
-            }
+            // Biased, in this order: a signal is never starved by input, and a delay falls due
+            // by the wall clock only when no input is waiting (input not read yet is not silence).
+            biased;
+            _ = sigterm.recv() => break Ending::Signal,
+            _ = sigint.recv() => break Ending::Signal,
             _ = sighup.recv() => {
                 on_hangup(proc, &mut out);
                 shards.each(|p| on_hangup(p, &mut out));
@@ -365,22 +375,43 @@ async fn run_shards(
                 }
                 continue;
             }
-            _ = sigterm.recv() => break Ending::Signal,
-            _ = sigint.recv() => break Ending::Signal,
+            _ = super::tick(&mut timer) => {
+                if let Some((_, f)) = periodic.as_mut() {
+                    f(proc);
+                }
+                continue;
+            }
+            r = stdin.read(&mut buf) => r?,
+            _ = super::sleep_until(deadline) => {
+                // Silent input: the instances whose delays fell due move on by the wall clock.
+                let wall = Wall::now();
+                proc.set_wall(wall);
+                proc.advance_wall(wall.at, &mut out);
+                shards.each(|p| {
+                    p.set_wall(wall);
+                    p.advance_wall(wall.at, &mut out);
+                });
+                if write_out(&mut out, &mut shards.outs).is_err() {
+                    return Ok(Ending::OutputClosed);
+                }
+                continue;
+            }
         };
         if n == 0 {
             break Ending::Eof;
         }
+        let wall = Wall::now();
         let bytes = buf.get(..n).unwrap_or_default();
         if shards.workers.is_empty() {
             // One thread: each record straight from the read buffer (no copy per record).
+            proc.set_wall(wall);
             splitter.push_with(bytes, |rec| proc.record_ref(rec, &mut out));
             if n < size {
                 proc.flush(&mut out);
             }
         } else {
             splitter.push_with(bytes, |rec| shards.route(rec));
-            shards.process(proc, n < size, &mut out)?;
+            shards.process(proc, n < size, wall, &mut out)?;
         }
         if write_out(&mut out, &mut shards.outs).is_err() {
             return Ok(Ending::OutputClosed);
@@ -389,7 +420,7 @@ async fn run_shards(
     while let Some(rec) = splitter.finish() {
         shards.route(rec.view());
     }
-    shards.process(proc, true, &mut out)?;
+    shards.process(proc, true, Wall::now(), &mut out)?;
     if write_out(&mut out, &mut shards.outs).is_err() {
         return Ok(Ending::OutputClosed);
     }

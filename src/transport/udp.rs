@@ -1,12 +1,14 @@
 //! The TeSSLa Telegraf Connector's transport: line protocol over UDP.
 //!
 //! Owns: receiving datagrams (several lines each; every line parsed alone, so one bad line costs
-//! only itself), evaluating the step at the end of each datagram, and sending outputs packed
+//! only itself; each record evaluated at once, as on stdin), the wall clock of each datagram and
+//! waking for `delay`s that fall due while no datagram arrives, and sending outputs packed
 //! into datagrams of at most `max_datagram` bytes without splitting a line. Input records are
 //! never echoed in this mode (see `run`'s options): Telegraf already sends the robot metric to
 //! its other outputs.
 
 use super::{Ending, Hooks};
+use crate::telegraf::clock::Wall;
 use crate::telegraf::processor::Processor;
 use lineproto::RecordSplitter;
 use tokio::net::UdpSocket;
@@ -45,25 +47,38 @@ pub async fn run(
         mut periodic,
     } = hooks;
     loop {
+        let deadline = proc.next_deadline();
         let n = tokio::select! {
-            r = sock.recv(&mut buf) => r?,
-            _ = super::tick(&mut timer) => {
-                if let Some((_, f)) = periodic.as_mut() {
-                    f(proc);
-                }
-                continue;
-            }
+            // Biased, in this order: a signal is never starved by input, and a delay falls due
+            // by the wall clock only when no input is waiting (input not read yet is not silence).
+            biased;
+            _ = sigterm.recv() => break,
+            _ = sigint.recv() => break,
             _ = sighup.recv() => {
                 on_hangup(proc, &mut out);
                 send_packed(&out_sock, &out, max_datagram).await;
                 out.clear();
                 continue;
             }
-            _ = sigterm.recv() => break,
-            _ = sigint.recv() => break,
+            _ = super::tick(&mut timer) => {
+                if let Some((_, f)) = periodic.as_mut() {
+                    f(proc);
+                }
+                continue;
+            }
+            r = sock.recv(&mut buf) => r?,
+            _ = super::sleep_until(deadline) => {
+                let wall = Wall::now();
+                proc.set_wall(wall);
+                proc.advance_wall(wall.at, &mut out);
+                send_packed(&out_sock, &out, max_datagram).await;
+                out.clear();
+                continue;
+            }
         };
+        proc.set_wall(Wall::now());
         let mut splitter = RecordSplitter::default();
-        splitter.push(&buf[..n]);
+        splitter.push(buf.get(..n).unwrap_or_default());
         while let Some(rec) = splitter.next_record() {
             proc.record(&rec, &mut out);
         }

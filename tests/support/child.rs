@@ -126,3 +126,19 @@ pub fn vm_hwm_kib(pid: u32) -> Option<u64> {
         .parse()
         .ok()
 }
+
+/// Output lines grouped by the instance they belong to (the value of their `tag` tag; "" without
+/// it), each instance's lines in output order.
+pub fn per_instance(out: &str, tag: &str) -> std::collections::BTreeMap<String, Vec<String>> {
+    let prefix = format!("{tag}=");
+    let mut m = std::collections::BTreeMap::<String, Vec<String>>::new();
+    for l in out.lines() {
+        let value = l
+            .split([',', ' '])
+            .find_map(|p| p.strip_prefix(prefix.as_str()))
+            .unwrap_or("")
+            .to_string();
+        m.entry(value).or_default().push(l.to_string());
+    }
+    m
+}

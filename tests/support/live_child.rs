@@ -131,10 +131,22 @@ impl LiveChild {
         }
     }
 
+    /// Take every stdout line received so far into `out`, without waiting.
+    pub fn drain_out(&mut self) {
+        while let Ok(l) = self.out_rx.try_recv() {
+            self.out.push(l);
+        }
+    }
+
     fn drain_err(&mut self) {
         while let Ok(l) = self.err_rx.try_recv() {
             self.err.push(l);
         }
+    }
+
+    /// Close stdin (EOF, how Telegraf stops its child) without waiting for the exit.
+    pub fn close_stdin(&mut self) {
+        drop(self.stdin.take());
     }
 
     pub fn signal(&self, sig: &str) {

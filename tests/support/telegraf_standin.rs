@@ -20,9 +20,21 @@
 //!   measurement without `=`), floats `'f'` shortest, NaN/Inf fields dropped, strings with `\`
 //!   and `"` escaped, a metric without fields dropped.
 //! - `plugins/processors/execd/execd.go`, `models/running_processor.go`: metrics passing the
-//!   processor's filter go to the child's stdin; what it prints is parsed (influx) and continues
-//!   with only the tags it carries (no agent tags for processor-made metrics); other metrics skip
-//!   the processor. stderr is read line by line (`E! `/`W! `/`I! `/`D! `/`T! ` prefixes as levels,
+//!   processor's filter go to the child's stdin; what it prints is parsed (influx, the streaming
+//!   reader of 1.33.3 and later: no line cap, a newline inside a string field is part of it; the
+//!   scanner of 1.30.0 to 1.33.2 is [`read_stdout`]'s other model) and continues with only the
+//!   tags it carries (no agent tags for processor-made metrics); other metrics skip the
+//!   processor.
+//! - Acknowledgement (v1.39.3, the same at head): `execd.go` `Add` lines 82-98 write the metric to
+//!   the child's stdin and then `m.Accept()`, and `mqtt_consumer.go` `onDelivered` lines 219-236
+//!   sends the PUBACK (with `persistent_session`) once every metric of the message is accepted or
+//!   dropped: a message is acknowledged when it is in the pipe, not after the child answered or
+//!   an output delivered. A failed write is dropped by `agent/agent.go` lines 658-662, which
+//!   acknowledges it too (`metric/tracking.go`: delivered means "none rejected"). A dead child is
+//!   restarted after `restart_delay` (`internal/process/process.go` lines 138-162); stopping
+//!   closes its stdin, then SIGTERM after 5 s, SIGKILL after 5 more (`process_posix.go`). See
+//!   [`Telegraf`].
+//! - stderr is read line by line (`E! `/`W! `/`I! `/`D! `/`T! ` prefixes as levels,
 //!   since 1.37.0; anything else an error `stderr: "<line>"`), at most 64 KiB a line
 //!   (`bufio.Scanner`'s default; a longer line stops the reader for good).
 //! - `plugins/inputs/socket_listener`, `plugins/outputs/socket_writer`: influx over UDP.
@@ -38,8 +50,11 @@
 //!   `namedrop`, `tagpass`, `tagdrop`; processors before outputs; every output sees every metric
 //!   its filter passes.
 //!
-//! Not modelled: batching and `flush_interval` (each metric is delivered at once), acknowledging
-//! a QoS 1 message only after delivery (rumqttc acknowledges on receipt), aggregators. A conf key
+//! Not modelled: batching, `flush_interval` and `metric_buffer_limit` (each metric is delivered
+//! at once, none buffered or dropped by an output), the acknowledgement of a tracked metric that
+//! skips the processor (acknowledged when handed to the outputs; Telegraf waits until every
+//! output wrote it), Windows (a kill 5 s after stdin closed), aggregators. The simple
+//! [`StandIn`] below subscribes with a clean session that acknowledges on receipt. A conf key
 //! the stand-in does not know fails the test, so every key of a shipped conf is either honoured
 //! or listed here as not modelled.
 //!
@@ -54,8 +69,8 @@ use serde_json::Value;
 use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::UdpSocket;
-use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::process::{Child, ChildStdin, Command, ExitStatus, Stdio};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
 use std::sync::mpsc::{Receiver, Sender, channel};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -411,6 +426,80 @@ pub fn parse_influx(text: &str, now: i64) -> Vec<Result<Metric, String>> {
         .collect()
 }
 
+// ---------------------------------------------------------------- execd's stdout reader
+
+/// Whether `record` (bytes up to a newline) is a whole line-protocol record: its newline is not
+/// inside a string field value. Telegraf's streaming influx parser reads on past such a newline.
+pub fn record_complete(record: &[u8]) -> bool {
+    let (mut i, mut spaces, mut in_string) = (0, 0, false);
+    while i < record.len() {
+        let c = record[i];
+        if c == b'\\' {
+            i += 2;
+            continue;
+        }
+        if in_string {
+            in_string = c != b'"';
+        } else if c == b' ' {
+            spaces += 1;
+        } else if c == b'"' && spaces == 1 && i > 0 && record[i - 1] == b'=' {
+            in_string = true;
+        }
+        i += 1;
+    }
+    !in_string
+}
+
+/// How `processors.execd` reads the child's stdout (`execd.go` `cmdReadOut`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StdoutReader {
+    /// Telegraf 1.33.3 and later with `data_format = "influx"` (PR #16535): the streaming
+    /// parser, no line cap, a newline inside a string field is part of the value; a parse error
+    /// skips that record.
+    Streaming,
+    /// Telegraf 1.30.0 to 1.33.2 (the parser arrived wrapped in a `RunningParser` and was not
+    /// recognised): `bufio.Scanner` with a 256 KiB maximum, each line parsed alone; a longer line
+    /// stops the reader for good (the child then blocks on a full pipe).
+    Scanner,
+}
+
+/// What Telegraf reads from the child's stdout: the metrics, the parse errors, and whether the
+/// reader stopped for good before the end.
+pub fn read_stdout(bytes: &[u8], how: StdoutReader) -> (Vec<Metric>, usize, bool) {
+    let (mut metrics, mut errors) = (Vec::new(), 0);
+    let mut parse = |text: &[u8]| {
+        for r in parse_influx(&String::from_utf8_lossy(text), now_ns()) {
+            match r {
+                Ok(m) => metrics.push(m),
+                Err(_) => errors += 1,
+            }
+        }
+    };
+    let mut pending: Vec<u8> = Vec::new();
+    for line in bytes.split_inclusive(|b| *b == b'\n') {
+        match how {
+            StdoutReader::Scanner => {
+                let body = line.strip_suffix(b"\n").unwrap_or(line);
+                if body.len() >= 262_144 {
+                    return (metrics, errors, true);
+                }
+                parse(body);
+            }
+            StdoutReader::Streaming => {
+                pending.extend_from_slice(line);
+                if record_complete(&pending) {
+                    parse(&pending);
+                    pending.clear();
+                }
+            }
+        }
+    }
+    if !pending.is_empty() {
+        parse(&pending);
+    }
+    (metrics, errors, false)
+}
+
 // ---------------------------------------------------------------- JSON serializer
 
 /// Go's `encoding/json` for a float64: `'f'` shortest in [1e-6, 1e21), else `'e'` with the
@@ -653,6 +742,8 @@ enum Input {
 #[derive(Debug, Clone)]
 struct Execd {
     command: Vec<String>,
+    /// `restart_delay` (default 10 s, `execd.go` line 195).
+    restart_delay: Duration,
     select: Selector,
 }
 
@@ -777,6 +868,7 @@ impl Conf {
                     "interval",
                     "flush_interval",
                     "skip_processors_after_aggregators",
+                    "metric_buffer_limit",
                 ],
             );
         }
@@ -858,8 +950,14 @@ impl Conf {
                 if let Some((_, path)) = env.programs.iter().find(|(p, _)| *p == command[0]) {
                     command[0] = path.clone();
                 }
+                let restart_delay = Duration::from_nanos(
+                    t.get("restart_delay")
+                        .and_then(|d| d.as_str())
+                        .map_or(10_000_000_000, go_duration_ns) as u64,
+                );
                 Execd {
                     command,
+                    restart_delay,
                     select: selector(t),
                 }
             })
@@ -944,32 +1042,115 @@ impl Conf {
 pub struct Stats {
     /// Metrics each output delivered, in conf order (mqtt, influxdb, socket_writer).
     pub delivered: Vec<usize>,
-    /// Metrics written to the processor's child.
+    /// Metrics written to the processor's child (each acknowledged at that moment).
     pub to_processor: usize,
+    /// Metrics the processor failed to write (no child, or a broken pipe): Telegraf logs the
+    /// error and drops each, which also acknowledges it (see [`Telegraf`]).
+    pub dropped_at_write: usize,
+    /// Every metric the children printed, in order (the echo, verdicts, actions).
+    pub from_processor: Vec<Metric>,
+    /// Times the child was restarted after it exited (`restart_delay`).
+    pub restarts: usize,
+    /// Messages acknowledged to the broker (PUBACK), with `persistent_session`.
+    pub acked: usize,
+    /// Messages received from the broker.
+    pub received: usize,
     /// Messages the JSON parser rejected (Telegraf logs an error and drops each).
     pub parse_errors: usize,
     /// The child's stderr as Telegraf logs it.
     pub stderr: Vec<(char, String)>,
     pub child_status: Option<ExitStatus>,
+    /// The signal the stop had to send because the child was still running 5 s after its
+    /// stdin closed (`"SIGTERM"`), or 5 s after that (`"SIGKILL"`).
+    pub signalled: Option<&'static str>,
 }
 
 struct Shared {
     stop: AtomicBool,
+    /// Telegraf is stopping its processors: a child that exits is not restarted.
+    quitting: AtomicBool,
     delivered: Vec<AtomicUsize>,
     to_processor: AtomicUsize,
+    dropped_at_write: AtomicUsize,
+    from_processor: Mutex<Vec<Metric>>,
+    restarts: AtomicUsize,
+    acked: AtomicUsize,
+    received: AtomicUsize,
     parse_errors: AtomicUsize,
     stderr: Mutex<Vec<(char, String)>>,
+    /// The running child's stdin; `None` between its exit and its restart.
+    stdin: Mutex<Option<ChildStdin>>,
+    child_pid: AtomicU32,
+    side: Mutex<Vec<JoinHandle<()>>>,
+    /// Messages taken from the broker and not yet delivered (tracked).
+    undelivered: AtomicUsize,
+}
+
+/// One MQTT message's tracking (`metric/tracking.go`): the metrics made of it, and the PUBACK
+/// sent when the last of them is accepted or dropped (`mqtt_consumer.go` `onDelivered`: the
+/// message is acknowledged when `Delivered()`, that is when no metric was rejected; a drop is
+/// not a rejection). Only with `persistent_session` (the client's auto-acknowledge is off then);
+/// nothing is sent once the input has stopped.
+struct Delivery {
+    publish: rumqttc::Publish,
+    client: Client,
+    /// `persistent_session`: acknowledge (else the client acknowledged on receipt).
+    ack: bool,
+    left: AtomicUsize,
+    shared: Arc<Shared>,
+}
+
+impl Delivery {
+    fn done(&self) {
+        if self.left.fetch_sub(1, Ordering::SeqCst) != 1 {
+            return;
+        }
+        // The semaphore slot of max_undelivered_messages is given back (onDelivered).
+        self.shared.undelivered.fetch_sub(1, Ordering::SeqCst);
+        if self.ack && !self.shared.stop.load(Ordering::SeqCst) {
+            let _ = self.client.try_ack(&self.publish);
+            self.shared.acked.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// `max_undelivered_messages` (mqtt_consumer.go line 32): `onMessage` blocks while this many
+/// messages are not yet delivered.
+pub const MAX_UNDELIVERED: usize = 1000;
+
+type Tracked = (Metric, Option<Arc<Delivery>>);
+
+fn done(t: &Option<Arc<Delivery>>) {
+    if let Some(d) = t {
+        d.done();
+    }
 }
 
 /// Telegraf running a conf: inputs -> processors (execd, the real binary) -> outputs.
+///
+/// Acknowledgement and restarts as Telegraf keeps them (v1.39.3):
+/// - `plugins/processors/execd/execd.go` `Add` (lines 82-98): the metric is serialised, written
+///   to the child's stdin, then `m.Accept()`: a message counts as delivered once it is in the
+///   pipe, and `mqtt_consumer` sends its PUBACK then (`onDelivered`, lines 219-236).
+/// - `agent/agent.go` `runProcessors` (lines 658-662): when `Add` fails (the child is gone,
+///   a broken pipe) the error is logged and the metric dropped, `m.Drop()`, which also counts
+///   as delivered (`metric/tracking.go`: `Delivered()` is "no metric rejected").
+/// - `internal/process/process.go` `cmdLoop` (lines 138-162): a child that exits, for any
+///   reason, is started again after `restart_delay` (default 10 s, `execd.go` line 195); the
+///   stand-in models the gap (writes fail and are dropped) and the fresh pipes.
+/// - `mqtt_consumer` takes at most `max_undelivered_messages` (1000) messages that are not yet
+///   delivered (`onMessage` waits on a semaphore, lines 136 and 239).
+/// - Stopping (`Process.Stop`, lines 81-91; `process_posix.go` `gracefulStop`): inputs stop
+///   first (`mqtt_consumer.Stop`: disconnect; later acknowledgements are never sent), the
+///   processor drains its channel into the child, then stdin is closed; SIGTERM follows after
+///   5 s and SIGKILL 5 s later (Windows, `process_windows.go`: a kill after 5 s, not modelled).
 pub struct Telegraf {
     shared: Arc<Shared>,
     inputs: Vec<JoinHandle<()>>,
     processor: Option<JoinHandle<()>>,
-    child: Option<Child>,
-    side: Vec<JoinHandle<()>>,
+    supervisor: Option<JoinHandle<(Option<ExitStatus>, Option<&'static str>)>>,
     outputs: Option<JoinHandle<()>>,
-    to_processors: Option<Sender<Metric>>,
+    to_processors: Option<Sender<Tracked>>,
 }
 
 fn mqtt_options(id: &str, port: u16) -> MqttOptions {
@@ -989,69 +1170,153 @@ fn random_id() -> String {
     )
 }
 
+/// Start the execd child: its stdout parsed into `out_tx` (and kept in `from_processor`), its
+/// stderr logged, its stdin put where the processor writes.
+fn spawn_child(command: &[String], shared: &Arc<Shared>, out_tx: &Sender<Tracked>) -> Child {
+    let mut c = Command::new(&command[0])
+        .args(&command[1..])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the execd command starts");
+    let stdout = c.stdout.take().unwrap();
+    let stderr = c.stderr.take().unwrap();
+    *shared.stdin.lock().unwrap() = c.stdin.take();
+    shared.child_pid.store(c.id(), Ordering::SeqCst);
+    let tx = out_tx.clone();
+    let sh = shared.clone();
+    // Telegraf >= 1.33.3: the streaming reader (see [`StdoutReader`]).
+    let out = std::thread::spawn(move || {
+        let mut r = BufReader::new(stdout);
+        let mut record = Vec::new();
+        while r.read_until(b'\n', &mut record).unwrap_or(0) > 0 {
+            if !record_complete(&record) {
+                continue;
+            }
+            let text = String::from_utf8_lossy(&record).into_owned();
+            for m in parse_influx(&text, now_ns()).into_iter().flatten() {
+                sh.from_processor.lock().unwrap().push(m.clone());
+                let _ = tx.send((m, None));
+            }
+            record.clear();
+        }
+    });
+    let sh = shared.clone();
+    let err = std::thread::spawn(move || {
+        let (lines, _) = read_stderr(stderr);
+        let mut log = sh.stderr.lock().unwrap();
+        log.extend(lines.iter().map(|l| stderr_log(l)));
+    });
+    shared.side.lock().unwrap().extend([out, err]);
+    c
+}
+
+/// `internal/process`: wait for the child; restart it after `delay` unless Telegraf is
+/// stopping; when stopping, SIGTERM after 5 s and SIGKILL 5 s later.
+fn supervise(
+    mut child: Child,
+    command: Vec<String>,
+    delay: Duration,
+    shared: Arc<Shared>,
+    out_tx: Sender<Tracked>,
+) -> (Option<ExitStatus>, Option<&'static str>) {
+    loop {
+        let mut quit_since: Option<std::time::Instant> = None;
+        let mut signalled = None;
+        let status = loop {
+            if let Ok(Some(s)) = child.try_wait() {
+                break s;
+            }
+            if shared.quitting.load(Ordering::SeqCst) {
+                let since = *quit_since.get_or_insert_with(std::time::Instant::now);
+                let pid = child.id().to_string();
+                if signalled.is_none() && since.elapsed() >= Duration::from_secs(5) {
+                    let _ = Command::new("kill").args(["-TERM", &pid]).status();
+                    signalled = Some("SIGTERM");
+                } else if signalled == Some("SIGTERM") && since.elapsed() >= Duration::from_secs(10)
+                {
+                    let _ = child.kill();
+                    signalled = Some("SIGKILL");
+                }
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        };
+        if shared.quitting.load(Ordering::SeqCst) {
+            return (Some(status), signalled);
+        }
+        // Exited on its own: after Wait the old pipe is closed, every write fails.
+        shared.stdin.lock().unwrap().take();
+        let until = std::time::Instant::now() + delay;
+        while std::time::Instant::now() < until {
+            if shared.quitting.load(Ordering::SeqCst) {
+                return (Some(status), None);
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        shared.restarts.fetch_add(1, Ordering::Relaxed);
+        child = spawn_child(&command, &shared, &out_tx);
+    }
+}
+
 impl Telegraf {
     /// Start everything `conf` holds; returns once every MQTT subscription is confirmed.
     pub fn start(conf: &Conf, env: &Endpoints) -> Telegraf {
         let shared = Arc::new(Shared {
             stop: AtomicBool::new(false),
+            quitting: AtomicBool::new(false),
             delivered: conf.outputs.iter().map(|_| AtomicUsize::new(0)).collect(),
             to_processor: AtomicUsize::new(0),
+            dropped_at_write: AtomicUsize::new(0),
+            from_processor: Mutex::new(Vec::new()),
+            restarts: AtomicUsize::new(0),
+            acked: AtomicUsize::new(0),
+            received: AtomicUsize::new(0),
             parse_errors: AtomicUsize::new(0),
             stderr: Mutex::new(Vec::new()),
+            stdin: Mutex::new(None),
+            child_pid: AtomicU32::new(0),
+            side: Mutex::new(Vec::new()),
+            undelivered: AtomicUsize::new(0),
         });
-        let (out_tx, out_rx) = channel::<Metric>();
+        let (out_tx, out_rx) = channel::<Tracked>();
         let outputs = Some(start_outputs(conf, env, out_rx, shared.clone()));
-        let (proc_tx, proc_rx) = channel::<Metric>();
-        let mut side = Vec::new();
-        let mut child = None;
+        let (proc_tx, proc_rx) = channel::<Tracked>();
+        let mut supervisor = None;
         let processor = match conf.processors.first() {
             Some(execd) => {
                 assert!(conf.processors.len() == 1, "one execd is modelled");
-                let mut c = Command::new(&execd.command[0])
-                    .args(&execd.command[1..])
-                    .stdin(Stdio::piped())
-                    .stdout(Stdio::piped())
-                    .stderr(Stdio::piped())
-                    .spawn()
-                    .expect("the execd command starts");
-                let stdout = c.stdout.take().unwrap();
-                let stderr = c.stderr.take().unwrap();
-                let mut stdin = c.stdin.take().unwrap();
-                child = Some(c);
-                let tx = out_tx.clone();
-                side.push(std::thread::spawn(move || {
-                    let mut r = BufReader::new(stdout);
-                    let mut line = String::new();
-                    while r.read_line(&mut line).unwrap_or(0) > 0 {
-                        for m in parse_influx(&line, now_ns()).into_iter().flatten() {
-                            let _ = tx.send(m);
-                        }
-                        line.clear();
-                    }
-                }));
-                let sh = shared.clone();
-                side.push(std::thread::spawn(move || {
-                    let (lines, _) = read_stderr(stderr);
-                    let mut log = sh.stderr.lock().unwrap();
-                    log.extend(lines.iter().map(|l| stderr_log(l)));
+                let child = spawn_child(&execd.command, &shared, &out_tx);
+                let (command, delay) = (execd.command.clone(), execd.restart_delay);
+                let (sh, tx) = (shared.clone(), out_tx.clone());
+                supervisor = Some(std::thread::spawn(move || {
+                    supervise(child, command, delay, sh, tx)
                 }));
                 let select = execd.select.clone();
                 let tx = out_tx.clone();
                 let sh = shared.clone();
                 Some(std::thread::spawn(move || {
-                    for m in proc_rx {
+                    for (m, t) in proc_rx {
                         if select.passes(&m) {
+                            // Serialise, write, then Accept; a failed write is dropped (both
+                            // count as delivered).
                             if let Some(line) = to_line(&m) {
-                                sh.to_processor.fetch_add(1, Ordering::Relaxed);
-                                if stdin.write_all(line.as_bytes()).is_err() {
-                                    break;
+                                let mut stdin = sh.stdin.lock().unwrap();
+                                let written = stdin
+                                    .as_mut()
+                                    .is_some_and(|s| s.write_all(line.as_bytes()).is_ok());
+                                drop(stdin);
+                                if written {
+                                    sh.to_processor.fetch_add(1, Ordering::Relaxed);
+                                } else {
+                                    sh.dropped_at_write.fetch_add(1, Ordering::Relaxed);
                                 }
                             }
+                            done(&t);
                         } else {
-                            let _ = tx.send(m);
+                            let _ = tx.send((m, t));
                         }
                     }
-                    // stdin drops here: EOF, as when Telegraf stops.
                 }))
             }
             None => {
@@ -1081,6 +1346,8 @@ impl Telegraf {
                     let id = client_id.unwrap_or_else(random_id);
                     let mut o = mqtt_options(&id, env.mqtt_port);
                     o.set_clean_session(!persistent);
+                    // `SetAutoAckDisabled(m.PersistentSession)` (mqtt_consumer.go line 338).
+                    o.set_manual_acks(persistent);
                     let (client, mut connection) = Client::new(o, 1024);
                     for t in &topics {
                         client.subscribe(t, qos).unwrap();
@@ -1089,10 +1356,9 @@ impl Telegraf {
                     let host = env.host.clone();
                     let mut rng = ChaCha8Rng::seed_from_u64(env.seed.wrapping_add(n as u64));
                     inputs.push(std::thread::spawn(move || {
-                        let _client = client;
                         let mut acks = 0;
-                        while !sh.stop.load(Ordering::Relaxed) {
-                            let Ok(event) = connection.recv_timeout(Duration::from_millis(50))
+                        while !sh.stop.load(Ordering::SeqCst) {
+                            let Ok(event) = connection.recv_timeout(Duration::from_millis(20))
                             else {
                                 continue;
                             };
@@ -1104,24 +1370,59 @@ impl Telegraf {
                                     }
                                 }
                                 Ok(Event::Incoming(Packet::Publish(p))) => {
+                                    // onMessage takes a semaphore slot first.
+                                    while sh.undelivered.load(Ordering::SeqCst) >= MAX_UNDELIVERED
+                                        && !sh.stop.load(Ordering::SeqCst)
+                                    {
+                                        std::thread::sleep(Duration::from_millis(1));
+                                    }
+                                    sh.received.fetch_add(1, Ordering::Relaxed);
                                     let mut tags = BTreeMap::new();
                                     tags.insert("host".to_string(), host.clone());
                                     tags.insert(topic_tag.clone(), p.topic.to_string());
-                                    match parser.parse(&p.payload, &tags, now_ns(), &mut rng) {
-                                        Ok(ms) => {
-                                            for m in ms {
-                                                if select.passes(&m) && tx.send(m).is_err() {
-                                                    return;
-                                                }
+                                    let parsed =
+                                        parser.parse(&p.payload, &tags, now_ns(), &mut rng);
+                                    let ms = match parsed {
+                                        Ok(ms) if !ms.is_empty() => ms,
+                                        // No metric: acknowledged at once (onMessage).
+                                        other => {
+                                            if other.is_err() {
+                                                sh.parse_errors.fetch_add(1, Ordering::Relaxed);
                                             }
+                                            if persistent {
+                                                let _ = client.try_ack(&p);
+                                                sh.acked.fetch_add(1, Ordering::Relaxed);
+                                            }
+                                            continue;
                                         }
-                                        Err(_) => {
-                                            sh.parse_errors.fetch_add(1, Ordering::Relaxed);
+                                    };
+                                    sh.undelivered.fetch_add(1, Ordering::SeqCst);
+                                    let track = Some(Arc::new(Delivery {
+                                        publish: p.clone(),
+                                        client: client.clone(),
+                                        ack: persistent,
+                                        left: AtomicUsize::new(ms.len()),
+                                        shared: sh.clone(),
+                                    }));
+                                    for m in ms {
+                                        // A metric the input's filter drops is dropped.
+                                        if !select.passes(&m) {
+                                            done(&track);
+                                        } else if tx.send((m, track.clone())).is_err() {
+                                            return;
                                         }
                                     }
                                 }
                                 Ok(_) => {}
                                 Err(_) => std::thread::sleep(Duration::from_millis(50)),
+                            }
+                        }
+                        // mqtt_consumer.Stop: disconnect; the session stays with the broker.
+                        let _ = client.try_disconnect();
+                        let until = std::time::Instant::now() + Duration::from_millis(200);
+                        while std::time::Instant::now() < until {
+                            if let Ok(Err(_)) = connection.recv_timeout(Duration::from_millis(20)) {
+                                break;
                             }
                         }
                     }));
@@ -1135,13 +1436,13 @@ impl Telegraf {
                         .unwrap();
                     inputs.push(std::thread::spawn(move || {
                         let mut buf = vec![0u8; 65_536];
-                        while !sh.stop.load(Ordering::Relaxed) {
+                        while !sh.stop.load(Ordering::SeqCst) {
                             let Ok(n) = sock.recv(&mut buf) else {
                                 continue;
                             };
                             let text = String::from_utf8_lossy(&buf[..n]).into_owned();
                             for m in parse_influx(&text, now_ns()).into_iter().flatten() {
-                                if select.passes(&m) && tx.send(m).is_err() {
+                                if select.passes(&m) && tx.send((m, None)).is_err() {
                                     return;
                                 }
                             }
@@ -1154,8 +1455,7 @@ impl Telegraf {
             shared,
             inputs,
             processor,
-            child,
-            side,
+            supervisor,
             outputs,
             to_processors: Some(proc_tx),
         }
@@ -1170,19 +1470,42 @@ impl Telegraf {
             .collect()
     }
 
-    /// Stop as Telegraf does: inputs first, then the processor's stdin closes (EOF) and the
-    /// child drains; outputs deliver what is left.
+    /// The running child's process id (0 before the first start).
+    pub fn child_pid(&self) -> u32 {
+        self.shared.child_pid.load(Ordering::SeqCst)
+    }
+
+    /// Metrics written to the child so far.
+    pub fn to_processor(&self) -> usize {
+        self.shared.to_processor.load(Ordering::Relaxed)
+    }
+
+    /// Child restarts so far.
+    pub fn restarts(&self) -> usize {
+        self.shared.restarts.load(Ordering::Relaxed)
+    }
+
+    /// Stop as Telegraf does: inputs first (no acknowledgement after that), then the processor
+    /// drains what is queued into the child and closes its stdin (EOF; SIGTERM after 5 s,
+    /// SIGKILL after 10 s); outputs deliver what is left.
     pub fn stop(mut self) -> Stats {
-        self.shared.stop.store(true, Ordering::Relaxed);
-        self.to_processors.take();
+        self.shared.stop.store(true, Ordering::SeqCst);
         for h in self.inputs.drain(..) {
             let _ = h.join();
         }
+        self.to_processors.take();
         if let Some(p) = self.processor.take() {
             let _ = p.join();
         }
-        let status = self.child.take().map(|mut c| c.wait().unwrap());
-        for h in self.side.drain(..) {
+        self.shared.quitting.store(true, Ordering::SeqCst);
+        self.shared.stdin.lock().unwrap().take();
+        let (status, signalled) = self
+            .supervisor
+            .take()
+            .map(|s| s.join().unwrap())
+            .unwrap_or((None, None));
+        let side: Vec<JoinHandle<()>> = self.shared.side.lock().unwrap().drain(..).collect();
+        for h in side {
             let _ = h.join();
         }
         if let Some(o) = self.outputs.take() {
@@ -1191,9 +1514,15 @@ impl Telegraf {
         Stats {
             delivered: self.delivered(),
             to_processor: self.shared.to_processor.load(Ordering::Relaxed),
+            dropped_at_write: self.shared.dropped_at_write.load(Ordering::Relaxed),
+            from_processor: std::mem::take(&mut *self.shared.from_processor.lock().unwrap()),
+            restarts: self.shared.restarts.load(Ordering::Relaxed),
+            acked: self.shared.acked.load(Ordering::Relaxed),
+            received: self.shared.received.load(Ordering::Relaxed),
             parse_errors: self.shared.parse_errors.load(Ordering::Relaxed),
             stderr: self.shared.stderr.lock().unwrap().clone(),
             child_status: status,
+            signalled,
         }
     }
 }
@@ -1201,7 +1530,7 @@ impl Telegraf {
 fn start_outputs(
     conf: &Conf,
     env: &Endpoints,
-    rx: Receiver<Metric>,
+    rx: Receiver<Tracked>,
     shared: Arc<Shared>,
 ) -> JoinHandle<()> {
     enum Live {
@@ -1244,7 +1573,9 @@ fn start_outputs(
     }
     let selects: Vec<Selector> = conf.outputs.iter().map(|o| o.select().clone()).collect();
     std::thread::spawn(move || {
-        for m in rx {
+        for (m, track) in rx {
+            // A tracked metric that skipped the processor: accepted once the outputs had it.
+            done(&track);
             for (i, (out, select)) in live.iter().zip(&selects).enumerate() {
                 if !select.passes(&m) {
                     continue;

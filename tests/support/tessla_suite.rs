@@ -115,5 +115,6 @@ pub fn load_options(desc: &serde_json::Value) -> LoadOptions {
             .map(str::to_string),
         overrides: Vec::new(),
         time_units_need_base: true,
+        ..Default::default()
     }
 }

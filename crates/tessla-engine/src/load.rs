@@ -25,6 +25,13 @@ pub struct LoadOptions {
     /// When true and `base_time` is `None`, time literals are rejected (the conformance runner
     /// sets it for cases without a base time); when false, `None` means 1 ns.
     pub time_units_need_base: bool,
+    /// Library files bundled with the program, by file name (`Telegraf.tessla`, the TeSSLa
+    /// Telegraf Connector's annotations): an `include` of that name (`"./Telegraf.tessla"`,
+    /// `"Telegraf.tessla"`, any case) with no such file beside the including spec reads the
+    /// bundled text instead. A file that exists is read as written.
+    pub bundled_includes: Vec<(String, String)>,
+    /// Called once for each bundled include used: (the name as written, the including file).
+    pub on_bundled_include: Option<fn(&str, &str)>,
 }
 
 /// A checked, compiled spec.
@@ -50,9 +57,45 @@ impl LoadError {
     }
 }
 
-/// Load the spec at `path` from the file system (includes relative to the including file).
+/// Load the spec at `path` from the file system (includes relative to the including file,
+/// then [`LoadOptions::bundled_includes`]).
 pub fn load_file(path: &Path, options: &LoadOptions) -> Result<Loaded, LoadError> {
-    load_with(&path.display().to_string(), &FsResolver, options)
+    let resolver = FsOrBundled {
+        bundled: &options.bundled_includes,
+        on_use: options.on_bundled_include,
+    };
+    load_with(&path.display().to_string(), &resolver, options)
+}
+
+/// The file system, with [`LoadOptions::bundled_includes`] for includes of missing files.
+struct FsOrBundled<'a> {
+    bundled: &'a [(String, String)],
+    on_use: Option<fn(&str, &str)>,
+}
+
+impl Resolver for FsOrBundled<'_> {
+    fn resolve(&self, from: Option<&str>, name: &str) -> Result<(String, String), String> {
+        let Some(from) = from else {
+            return FsResolver.resolve(None, name);
+        };
+        let beside = Path::new(from)
+            .parent()
+            .map_or_else(|| Path::new(name).to_path_buf(), |d| d.join(name));
+        let file_name = name.strip_prefix("./").unwrap_or(name);
+        let bundled = self
+            .bundled
+            .iter()
+            .find(|(n, _)| n.eq_ignore_ascii_case(file_name));
+        match bundled {
+            Some((n, text)) if !beside.exists() => {
+                if let Some(f) = self.on_use {
+                    f(name, from);
+                }
+                Ok((format!("<bundled>/{n}"), text.clone()))
+            }
+            _ => FsResolver.resolve(Some(from), name),
+        }
+    }
 }
 
 /// Load the spec named `root` through `resolver` (the bundled specs use an in-memory resolver).
@@ -86,9 +129,11 @@ pub fn load_with(
         }
     };
     let mut asts: Vec<_> = files.into_iter().map(|(_, f)| f).collect();
+    let mut library = None;
     // The bundled prelude's definitions the spec refers to (none for a spec of builtins only).
     if let Some(text) = crate::prelude::needed(&asts) {
         let id = sources.add("<prelude>", None, text.clone());
+        library = Some(id);
         let (file, diagnostics) = tessla_syntax::parser::parse(&text, id);
         if !diagnostics.is_empty() {
             return Err(LoadError {
@@ -98,7 +143,7 @@ pub fn load_with(
         }
         asts.push(file);
     }
-    let resolved = crate::resolve::Resolved::new(&asts);
+    let resolved = crate::resolve::Resolved::with_library(&asts, library);
     let (type_errors, types) = crate::typeck::check_resolved(&resolved);
     if !type_errors.is_empty() {
         return Err(LoadError {

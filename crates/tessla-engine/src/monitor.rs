@@ -17,10 +17,12 @@
 //!   outputs sent to `sink`. Errors: `ts` earlier than the pending step (decreasing), or a second
 //!   event on the same input at the same `ts` (multiple events), or `ts` not later than the last
 //!   evaluated step (after a [`Monitor::flush`]).
-//! - [`Monitor::flush`] evaluates the pending step now (the Telegraf binding calls it as soon as
-//!   no more input is available). After it, only later timestamps may be pushed.
+//! - [`Monitor::flush`] evaluates the pending step now (the Telegraf binding calls it after
+//!   each record: every record is a step of its own). After it, only later timestamps may be
+//!   pushed.
 //! - [`Monitor::advance_to`] evaluates the pending step and the delay firings strictly before `ts`
-//!   without adding input (used for idle time).
+//!   without adding input (the Telegraf binding calls it when an instance's input is silent and
+//!   its next firing, [`Monitor::next_firing`], is due by the wall clock).
 //! - Runtime errors (division by zero, overflow, `getSome(None)`) are values: an output whose value
 //!   is [`Value::Error`] reaches the sink like any other event; the caller reports it.
 
@@ -145,6 +147,23 @@ impl Monitor {
         if input >= self.inputs.len() {
             return Err(InputError::UnknownInput(input));
         }
+        self.open_step(ts, sink)?;
+        if self.inputs[input].is_some() {
+            return Err(InputError::Multiple { input, ts });
+        }
+        self.inputs[input] = Some(value);
+        Ok(())
+    }
+
+    /// Open the step at `ts` without an input event (time advances to `ts`: the pending step
+    /// before it and the delays firing before it are evaluated), as TeSSLa's interpreter does
+    /// for an event on a stream the spec does not declare. The step at `ts` is evaluated when
+    /// time passes it or at [`Monitor::flush`]; a `ts` before the open step is an error.
+    pub fn open_step<S: FnMut(OutputEvent<'_>)>(
+        &mut self,
+        ts: i64,
+        sink: &mut S,
+    ) -> Result<(), InputError> {
         if let Some(p) = self.pending {
             if ts < p {
                 return Err(InputError::Decreasing { last: p, got: ts });
@@ -159,15 +178,10 @@ impl Monitor {
                 got: ts,
             });
         }
-        if self.pending == Some(ts) {
-            if self.inputs[input].is_some() {
-                return Err(InputError::Multiple { input, ts });
-            }
-        } else {
+        if self.pending != Some(ts) {
             self.advance_to(ts, sink);
             self.pending = Some(ts);
         }
-        self.inputs[input] = Some(value);
         Ok(())
     }
 
@@ -202,6 +216,21 @@ impl Monitor {
 
     fn next_delay(&self) -> Option<i64> {
         self.targets.iter().filter_map(|t| *t).min()
+    }
+
+    /// When the next armed `delay` fires, if one is armed (the Telegraf binding fires it by the
+    /// wall clock while the input is silent, through [`Monitor::advance_to`]).
+    pub fn next_firing(&self) -> Option<i64> {
+        self.next_delay()
+    }
+
+    /// The latest time this monitor has reached: its open step, its last evaluated step, or its
+    /// origin.
+    pub fn clock(&self) -> i64 {
+        self.pending
+            .into_iter()
+            .chain(self.last_evaluated)
+            .fold(self.t0, i64::max)
     }
 
     fn step<S: FnMut(OutputEvent<'_>)>(&mut self, ts: i64, sink: &mut S) {

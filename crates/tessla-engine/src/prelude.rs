@@ -139,6 +139,8 @@ struct Entry {
     alias: Option<String>,
     /// Its parameter names (for named arguments to the builtin).
     params: Vec<String>,
+    /// Its declaration as parsed (the types of a builtin it stands for).
+    decl: Def,
 }
 
 struct Catalog {
@@ -184,6 +186,17 @@ pub fn param_names(builtin: &str) -> Option<Vec<String>> {
         .iter()
         .find(|e| e.alias.as_deref() == Some(builtin))?;
     Some(e.params.clone()).filter(|p| !p.is_empty())
+}
+
+/// The declaration of the library function a builtin serves (`sum` -> `def sum(x: Events[Int]):
+/// Events[Int]`), whose types are the builtin's signature; `None` when the prelude declares no
+/// such function.
+pub fn declaration(builtin: &str) -> Option<&'static Def> {
+    catalog()
+        .entries
+        .iter()
+        .find(|e| e.alias.as_deref() == Some(builtin))
+        .map(|e| &e.decl)
 }
 
 /// The parameter names of the value function a native implements (`String.format` ->
@@ -304,6 +317,7 @@ fn build() -> Catalog {
                 .flatten()
                 .map(|p| p.name.name.clone())
                 .collect(),
+            decl: r.def.clone(),
         });
     }
     Catalog { entries, by_key }

@@ -5,7 +5,8 @@
 //!
 //! Owns: [`Resolved`] (built once per spec by [`Resolved::new`]), [`DefId`], the global lookup
 //! rule ([`Resolved::global`]) and the diagnostics of names at the statement level (annotation
-//! definitions twice or inside a module). Both later passes look global names up only here:
+//! definitions twice or inside a module, and TeSSLa's multiple definitions rule: a name defined
+//! twice in one scope, be it a definition, an input, a parameter or a record field). Both later passes look global names up only here:
 //! the type checker (`typeck.rs`) and the lowering (`lower/`); local names (parameters, blocks,
 //! `where`, macro arguments) are each pass's own, and the types of definitions the checker's.
 
@@ -40,7 +41,7 @@ pub struct Resolved<'a> {
     /// (each module's statements after the statements of the level around it).
     pub statements: Vec<(String, &'a Statement)>,
     /// Global definitions in that order; the first of two with one dotted name wins (the
-    /// lowering reports a second top-level one).
+    /// second is in `diagnostics`).
     pub defs: Vec<GlobalDef<'a>>,
     by_name: HashMap<String, DefId>,
     /// Every module by its full prefix (`A.`, `A.B.`).
@@ -60,14 +61,29 @@ pub struct Resolved<'a> {
     pub declared_types: HashMap<String, usize>,
     /// `def @Name(..)` (false) and `def @@Name(..)` (true) by (name, global): the parameters.
     pub annotations: HashMap<(String, bool), &'a [ast::Param]>,
-    /// Annotation definitions twice or inside a module.
+    /// Annotation definitions twice or inside a module, names defined twice in one scope.
     pub diagnostics: Vec<Diagnostic>,
+    /// The file of the bundled prelude, when the spec needs it: its definitions write in
+    /// TeSSLa what TeSSLa's library declares `extern` (a liftable `List.map` taking a function).
+    pub library: Option<tessla_syntax::source::FileId>,
 }
 
 impl<'a> Resolved<'a> {
     /// Flatten and resolve the statements of `files`.
     pub fn new(files: &'a [ast::File]) -> Self {
-        let mut r = Resolved::default();
+        Self::with_library(files, None)
+    }
+
+    /// [`Resolved::new`] where `library` is the file of the bundled prelude (see
+    /// [`Resolved::library`]): a spec's own definition of a name wins over the prelude's.
+    pub fn with_library(
+        files: &'a [ast::File],
+        library: Option<tessla_syntax::source::FileId>,
+    ) -> Self {
+        let mut r = Resolved {
+            library,
+            ..Resolved::default()
+        };
         for f in files {
             collect_type_names(&f.statements, &mut r.declared_types);
         }
@@ -77,12 +93,18 @@ impl<'a> Resolved<'a> {
         }
         let mut first_annotation: HashMap<(String, bool), tessla_syntax::source::Span> =
             HashMap::new();
+        // The first definition or input of each dotted name, for TeSSLa's multiple
+        // definitions rule (an input is a top-level name like a definition).
+        let mut first_name: HashMap<String, tessla_syntax::source::Span> = HashMap::new();
+        let mut import_spans = Vec::new();
         let mut i = 0;
         while let Some((prefix, s)) = r.statements.get(i).cloned() {
             i += 1;
             match s {
                 Statement::Def(d) => {
                     let name = format!("{prefix}{}", d.name.name);
+                    r.define(&mut first_name, name.clone(), &d.name);
+                    multiple_definitions_in_def(d, &mut r.diagnostics);
                     if let std::collections::hash_map::Entry::Vacant(slot) = r.by_name.entry(name) {
                         slot.insert(r.defs.len());
                         r.defs.push(GlobalDef { def: d, prefix });
@@ -98,15 +120,29 @@ impl<'a> Resolved<'a> {
                     r.statements
                         .extend(inner.iter().map(|st| (inner_prefix.clone(), st)));
                 }
-                Statement::Import { path, .. } => {
+                Statement::Import { path, span } => {
                     let target: String = path.iter().map(|p| format!("{}.", p.name)).collect();
+                    import_spans.push(*span);
                     r.imports.push((prefix, target));
                 }
+                Statement::In { span, .. } | Statement::OutAll { span, .. }
+                    if !prefix.is_empty() =>
+                {
+                    r.diagnostics.push(in_out_in_module(*span));
+                }
+                Statement::Out(o) if !prefix.is_empty() => {
+                    r.diagnostics.push(in_out_in_module(o.expr.span));
+                }
                 Statement::In { name, ty, .. } => {
+                    r.define(&mut first_name, format!("{prefix}{}", name.name), name);
+                    multiple_definitions_in_type(ty, &mut r.diagnostics);
                     r.input_by_name.insert(name.name.clone(), r.inputs.len());
                     r.inputs.push((name, ty));
                 }
-                Statement::Out(o) => r.outputs.push(o),
+                Statement::Out(o) => {
+                    multiple_definitions_in_expr(&o.expr, &mut r.diagnostics);
+                    r.outputs.push(o);
+                }
                 Statement::OutAll { .. } => r.out_all = true,
                 Statement::AnnotationDef {
                     name,
@@ -147,7 +183,77 @@ impl<'a> Resolved<'a> {
                 Statement::TypeDef { .. } | Statement::GlobalAnnotation(_) => {}
             }
         }
+        r.ambiguous_imports(&import_spans);
         r
+    }
+
+    /// TeSSLa's rule: two imports into one module may not bring the same name (`import Bar`
+    /// and `import Baz` both defining `foo`); the later import is reported.
+    fn ambiguous_imports(&mut self, spans: &[tessla_syntax::source::Span]) {
+        let mut seen: HashMap<(String, String), String> = HashMap::new();
+        for (k, (at, target)) in self.imports.iter().enumerate() {
+            let relative = format!("{at}{target}");
+            let module = if self.modules.contains(&relative) {
+                relative
+            } else {
+                target.clone()
+            };
+            let mut names: Vec<&str> = self
+                .by_name
+                .keys()
+                .filter_map(|n| n.strip_prefix(module.as_str()))
+                .filter(|n| !n.contains('.'))
+                .collect();
+            names.sort_unstable();
+            for n in names {
+                let key = (at.clone(), n.to_string());
+                match seen.get(&key) {
+                    Some(first) if *first != module => {
+                        let shown = |m: &str| m.trim_end_matches('.').to_string();
+                        self.diagnostics.push(
+                            Diagnostic::error(
+                                Category::Name,
+                                spans.get(k).copied(),
+                                format!(
+                                    "cannot import `{n}` from `{}`: `{n}` is already imported \
+                                     from `{}`",
+                                    shown(&module),
+                                    shown(first)
+                                ),
+                            )
+                            .with_label("ambiguous import")
+                            .with_help(format!(
+                                "drop one of the imports and write `{}.{n}` where it is meant",
+                                shown(&module)
+                            )),
+                        );
+                        break;
+                    }
+                    Some(_) => {}
+                    None => {
+                        seen.insert(key, module.clone());
+                    }
+                }
+            }
+        }
+    }
+
+    /// Note the definition (or input) `ident` of the dotted name `name`: a second one of a
+    /// name in one scope is TeSSLa's multiple definitions error.
+    fn define(
+        &mut self,
+        first: &mut HashMap<String, tessla_syntax::source::Span>,
+        name: String,
+        ident: &Ident,
+    ) {
+        match first.get(&name) {
+            // The prelude's definition of a name the spec defines itself is not used.
+            Some(_) if self.library == Some(ident.span.file) => {}
+            Some(at) => self.diagnostics.push(defined_twice(ident, *at)),
+            None => {
+                first.insert(name, ident.span);
+            }
+        }
     }
 
     /// The global definition with the dotted name `name` (`A.B.x`).
@@ -237,6 +343,160 @@ impl<'a> Resolved<'a> {
     }
 }
 
+/// TeSSLa's rule: `in` and `out` only at the top level.
+fn in_out_in_module(span: tessla_syntax::source::Span) -> Diagnostic {
+    Diagnostic::error(
+        Category::Name,
+        Some(span),
+        "inputs and outputs are not allowed inside a module",
+    )
+    .with_label("inside a module")
+    .with_help("declare inputs and outputs at the top level of the spec, as `out Module.name`")
+}
+
+/// TeSSLa's `MultipleDefinitionsError`: `ident` is a second definition in the scope of the
+/// one at `first` (a definition, input, parameter, record field).
+fn defined_twice(ident: &Ident, first: tessla_syntax::source::Span) -> Diagnostic {
+    Diagnostic::error(
+        Category::Name,
+        Some(ident.span),
+        format!("`{}` is defined twice in the same scope", ident.name),
+    )
+    .with_label("defined again here")
+    .with_note_at(first, "first defined here")
+    .with_help("rename or remove one of them")
+}
+
+/// The second and later of the names in one scope, each against the first.
+fn unique_names<'n>(names: impl IntoIterator<Item = &'n Ident>, out: &mut Vec<Diagnostic>) {
+    let mut seen: HashMap<&str, tessla_syntax::source::Span> = HashMap::new();
+    for n in names {
+        match seen.get(n.name.as_str()) {
+            Some(first) => out.push(defined_twice(n, *first)),
+            None => {
+                seen.insert(&n.name, n.span);
+            }
+        }
+    }
+}
+
+/// Names defined twice inside a definition: its parameters, its `where` definitions, and
+/// the scopes of its body.
+fn multiple_definitions_in_def(d: &Def, out: &mut Vec<Diagnostic>) {
+    if let Some(params) = &d.params {
+        unique_names(params.iter().map(|p| &p.name), out);
+        for p in params {
+            if let Some(t) = &p.ty {
+                multiple_definitions_in_type(t, out);
+            }
+        }
+    }
+    if let Some(t) = &d.result_type {
+        multiple_definitions_in_type(t, out);
+    }
+    if let ast::Body::Expr { expr, where_defs } = &d.body {
+        unique_names(where_defs.iter().map(|w| &w.name), out);
+        for w in where_defs {
+            multiple_definitions_in_def(w, out);
+        }
+        multiple_definitions_in_expr(expr, out);
+    }
+}
+
+/// Fields named twice in a record type.
+fn multiple_definitions_in_type(t: &ast::Type, out: &mut Vec<Diagnostic>) {
+    match t {
+        ast::Type::Name(_) => {}
+        ast::Type::App { args, .. } => args
+            .iter()
+            .for_each(|a| multiple_definitions_in_type(a, out)),
+        ast::Type::Function { params, result, .. } => {
+            params
+                .iter()
+                .for_each(|(_, p)| multiple_definitions_in_type(p, out));
+            multiple_definitions_in_type(result, out);
+        }
+        ast::Type::Record { fields, .. } => {
+            unique_names(fields.iter().map(|(n, _)| n), out);
+            fields
+                .iter()
+                .for_each(|(_, f)| multiple_definitions_in_type(f, out));
+        }
+        ast::Type::Tuple { elems, .. } => elems
+            .iter()
+            .for_each(|e| multiple_definitions_in_type(e, out)),
+    }
+}
+
+/// Names defined twice in the scopes inside an expression: a block's definitions, a lambda's
+/// parameters, a record's fields.
+fn multiple_definitions_in_expr(e: &ast::Expr, out: &mut Vec<Diagnostic>) {
+    use ast::ExprKind as K;
+    match &e.kind {
+        K::Var(_) | K::RootMember(_) | K::Int { .. } | K::Float(_) => {}
+        K::Str { parts, .. } => {
+            for p in parts {
+                if let ast::StrPart::Interp { expr, .. } = p {
+                    multiple_definitions_in_expr(expr, out);
+                }
+            }
+        }
+        K::Tuple(items) => items
+            .iter()
+            .for_each(|i| multiple_definitions_in_expr(i, out)),
+        K::Block { defs, result } => {
+            unique_names(defs.iter().map(|d| &d.name), out);
+            defs.iter()
+                .for_each(|d| multiple_definitions_in_def(d, out));
+            multiple_definitions_in_expr(result, out);
+        }
+        K::Record(fields) => {
+            unique_names(fields.iter().map(|(n, _)| n), out);
+            fields
+                .iter()
+                .for_each(|(_, v)| multiple_definitions_in_expr(v, out));
+        }
+        K::Call {
+            function,
+            type_args,
+            args,
+        } => {
+            multiple_definitions_in_expr(function, out);
+            type_args
+                .iter()
+                .for_each(|t| multiple_definitions_in_type(t, out));
+            for a in args.iter().flatten() {
+                multiple_definitions_in_expr(&a.value, out);
+            }
+        }
+        K::Member { object, .. } => multiple_definitions_in_expr(object, out),
+        K::Unary { operand, .. } => multiple_definitions_in_expr(operand, out),
+        K::Binary { lhs, rhs, .. } => {
+            multiple_definitions_in_expr(lhs, out);
+            multiple_definitions_in_expr(rhs, out);
+        }
+        K::If {
+            cond,
+            then_branch,
+            else_branch,
+            ..
+        } => {
+            multiple_definitions_in_expr(cond, out);
+            multiple_definitions_in_expr(then_branch, out);
+            multiple_definitions_in_expr(else_branch, out);
+        }
+        K::Lambda { params, body } => {
+            unique_names(params.iter().map(|p| &p.name), out);
+            for p in params {
+                if let Some(t) = &p.ty {
+                    multiple_definitions_in_type(t, out);
+                }
+            }
+            multiple_definitions_in_expr(body, out);
+        }
+    }
+}
+
 /// An annotation's name as written at its use: `@Name` or `@@Name`.
 pub fn at(name: &Ident, global: bool) -> String {
     format!("{}{}", if global { "@@" } else { "@" }, name.name)
@@ -310,6 +570,30 @@ mod tests {
         assert_eq!(r.global("v", "Q."), id("Q.v"));
         assert_eq!(r.global("v", "Z."), id("v"));
         assert_eq!(r.global("v", ""), id("v"));
+    }
+
+    #[test]
+    fn a_name_defined_twice_in_one_scope_is_an_error_of_name_resolution() {
+        let files = [parse(
+            "in x: Events[Int]\nin x: Events[Int]\ndef x = 1\n\
+             def f(a: Int, a: Int): Int = { def b = 1\n def b = 2\n b }\n\
+             def g = (c: Int, c: Int) => c\n\
+             def r: {p: Int, p: Int} = {q = 1, q = 2}\n\
+             module M {\n  def x = 1\n  def y = 1\n  def y = 2\n}\nout x\n",
+        )];
+        let r = Resolved::new(&files);
+        let names: Vec<&str> = r
+            .diagnostics
+            .iter()
+            .map(|d| d.message.split('`').nth(1).unwrap_or(""))
+            .collect();
+        // Inputs and definitions share the top level; `M.x` is in another scope.
+        assert_eq!(names, ["x", "x", "a", "b", "c", "p", "q", "y"]);
+        assert!(
+            r.diagnostics
+                .iter()
+                .all(|d| d.message.ends_with("is defined twice in the same scope"))
+        );
     }
 
     #[test]

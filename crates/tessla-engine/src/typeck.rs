@@ -691,6 +691,7 @@ impl<'a> Checker<'a> {
     }
 
     fn infer_def_body(&mut self, d: &'a Def, scope: &Rc<Scope<'a>>) -> Ty {
+        self.check_liftable(d);
         let mut tparams: HashMap<String, Ty> = HashMap::new();
         for tp in &d.type_params {
             let v = self.fresh();
@@ -1309,10 +1310,26 @@ impl<'a> Checker<'a> {
                 for t in type_args {
                     self.ast_type(t, &HashMap::new());
                 }
-                if let ExprKind::Var(id) = &function.kind
-                    && let Some(Found::Def(d)) = self.find(&id.name, scope)
-                {
-                    self.type_arguments(d.def, type_args, args.is_some(), function.span, e.span);
+                if let ExprKind::Var(id) = &function.kind {
+                    match self.find(&id.name, scope) {
+                        Some(Found::Def(d)) => self.type_arguments(
+                            d.def,
+                            type_args,
+                            args.is_some(),
+                            function.span,
+                            e.span,
+                        ),
+                        // A builtin takes the type arguments its library declaration names.
+                        None if !type_args.is_empty() => {
+                            let name = crate::prelude::builtin_alias(&id.name).unwrap_or(&id.name);
+                            if let Some(d) = builtins::get(name)
+                                .and_then(|b| crate::prelude::declaration(b.name))
+                            {
+                                self.type_arguments(d, type_args, false, function.span, e.span);
+                            }
+                        }
+                        _ => {}
+                    }
                 }
                 let f = self.infer(function, scope);
                 let Some(args) = args else {
@@ -1552,7 +1569,33 @@ impl<'a> Checker<'a> {
             ExprKind::Var(id) => id.name.clone(),
             _ => "the function".into(),
         };
-        self.apply(f, &ts, args, span, &name)
+        // A user function's parameters of value types, before the call binds anything.
+        let value_params = match (function.dotted_path(), self.shallow(&f)) {
+            (Some(path), Ty::Fn(ps, _)) => match self.find(&path, scope) {
+                // A def without parameters (`def g = f`) names a function whose liftability
+                // is its value's, not modelled: let through.
+                Some(Found::Def(d)) if !d.def.liftable && d.def.params.is_some() => {
+                    Some((d, self.value_params(&ps)))
+                }
+                _ => None,
+            },
+            _ => None,
+        };
+        let before = self.diags.len();
+        let r = self.apply(f, &ts, args, span, &name);
+        if self.diags.len() == before
+            && let Some((d, value_params)) = value_params
+        {
+            self.check_not_lifted(d.def, &value_params, &ts, args, span);
+        }
+        if self.diags.len() > before
+            && self.find(&name, scope).is_none()
+            && let Some(h) = library_hint(&name)
+            && let Some(d) = self.diags.last_mut()
+        {
+            d.help = Some(h.to_string());
+        }
+        r
     }
 
     /// Apply a function type to arguments.
@@ -1634,9 +1677,188 @@ impl<'a> Checker<'a> {
         // Two variables per use, `A`/`K` and `B`/`V`, whether the signature uses them or not.
         let vars = [self.fresh(), self.fresh()];
         let name = crate::prelude::builtin_alias(name).unwrap_or(name);
-        let template = template(builtins::get(name)?.name)?;
+        let b = builtins::get(name)?;
+        // A builtin without a signature of its own has the one its library function declares
+        // (`sum(x: Events[Int]): Events[Int]`).
+        if b.sig == Sig::Any
+            && let Some(d) = crate::prelude::declaration(b.name)
+        {
+            return Some(self.declared_signature(d));
+        }
+        let template = template(b.name)?;
         Some(with_vars(template, &vars))
     }
+
+    /// The type a library declaration gives (fresh variables for its type parameters). Its
+    /// types are TeSSLa's own: a name this checker does not model becomes a fresh variable,
+    /// and nothing is reported (the declaration's spans are not in the spec's files).
+    fn declared_signature(&mut self, d: &Def) -> Ty {
+        let quiet = self.diags.len();
+        let tparams: HashMap<String, Ty> = d
+            .type_params
+            .iter()
+            .map(|tp| (tp.name.clone(), self.fresh()))
+            .collect();
+        let r = match &d.result_type {
+            Some(t) => self.ast_type(t, &tparams),
+            None => self.fresh(),
+        };
+        let t = match &d.params {
+            Some(ps) => {
+                let ps = ps
+                    .iter()
+                    .map(|p| match &p.ty {
+                        Some(t) => self.ast_type(t, &tparams),
+                        None => self.fresh(),
+                    })
+                    .collect();
+                func(ps, r)
+            }
+            None => r,
+        };
+        self.diags.truncate(quiet);
+        t
+    }
+
+    /// TeSSLa's rules for `liftable`: only a macro (a def with parameters or type parameters)
+    /// can be liftable (`LiftableOnNonMacro`), and only when its parameter and result types
+    /// are value types, not streams (`UnliftableMacroType`; see [`is_value_type`]).
+    fn check_liftable(&mut self, d: &Def) {
+        if !d.liftable {
+            return;
+        }
+        if d.params.is_none() && d.type_params.is_empty() {
+            self.report(
+                Diagnostic::error(
+                    Category::Type,
+                    Some(d.span),
+                    format!(
+                        "`{}` is not a function, so it cannot be `liftable`",
+                        d.name.name
+                    ),
+                )
+                .with_label("liftable without parameters")
+                .with_help(format!(
+                    "remove `liftable`: only functions with parameters are lifted to streams \
+                     (TeSSLa: Non-macro \"{}\" can not be liftable)",
+                    d.name.name
+                )),
+            );
+            return;
+        }
+        let library = self.resolved.and_then(|r| r.library);
+        if matches!(d.body, Body::Extern { .. }) || library == Some(d.span.file) {
+            return;
+        }
+        let bad = d
+            .params
+            .iter()
+            .flatten()
+            .filter_map(|p| p.ty.as_ref())
+            .chain(d.result_type.as_ref())
+            .find(|t| !is_value_type(t));
+        if let Some(t) = bad {
+            self.report(
+                Diagnostic::error(
+                    Category::Type,
+                    Some(d.span),
+                    format!(
+                        "`{}` is declared `liftable`, but its type does not allow being lifted",
+                        d.name.name
+                    ),
+                )
+                .with_note_at(t.span(), "a stream type")
+                .with_help(
+                    "a liftable function takes and returns plain values (Int, Float, records, \
+                     ...), which TeSSLa lifts to streams; remove `liftable`, or the stream types",
+                ),
+            );
+        }
+    }
+
+    /// Each parameter type that is a plain value type (`Int`, not a stream, not a type
+    /// variable), as `Some(type)`.
+    fn value_params(&self, ps: &[Ty]) -> Vec<Option<Ty>> {
+        ps.iter()
+            .map(|p| match self.shallow(p) {
+                Ty::Var(_) | Ty::Con("Events", _) => None,
+                t @ (Ty::Con(..) | Ty::Fn(..) | Ty::Record(_)) => Some(t),
+            })
+            .collect()
+    }
+
+    /// TeSSLa lifts only `liftable` functions to streams: a stream given for a parameter of
+    /// a plain value type (`Int`) of another function is a type mismatch. `ps` are the
+    /// callee's value parameter types ([`Checker::value_params`]), `ts` the arguments'.
+    fn check_not_lifted(
+        &mut self,
+        d: &Def,
+        ps: &[Option<Ty>],
+        ts: &[Ty],
+        args: &[ast::Arg],
+        span: Span,
+    ) {
+        for (i, (p, t)) in ps.iter().zip(ts).enumerate() {
+            if let Some(p) = p
+                && self.is_stream(t)
+            {
+                let n = &d.name.name;
+                let (ps, ts) = (show(&self.resolve(p)), show(&self.resolve(t)));
+                let sp = args.get(i).map_or(span, |a| a.value.span);
+                self.report(
+                    Diagnostic::error(
+                        Category::Type,
+                        Some(sp),
+                        format!("argument {} of `{n}`: expected {ps}, found {ts}", i + 1),
+                    )
+                    .with_label(format!("a stream, but `{n}` is not liftable"))
+                    .with_help(format!(
+                        "only `liftable` functions apply to streams event by event: declare \
+                         `liftable def {n}(...)`, or give the parameter a stream type \
+                         (`Events[...]`)"
+                    )),
+                );
+                return;
+            }
+        }
+    }
+}
+
+/// TeSSLa's value types (what a liftable function may take and return): not a stream, and no
+/// record or tuple holding one. A type name (an alias) counts as a value. TeSSLa also excludes
+/// function types, but its library declares its liftable functions taking functions
+/// (`List.map`) as `extern`, which the bundled prelude (and the corpus run with it) writes as
+/// definitions: a function type is let through here.
+fn is_value_type(t: &ast::Type) -> bool {
+    match t {
+        ast::Type::Name(_) => true,
+        ast::Type::App { name, args, .. } => {
+            name.name != "Events" && args.iter().all(is_value_type)
+        }
+        ast::Type::Function { .. } => true,
+        ast::Type::Record { fields, .. } => fields.iter().all(|(_, t)| is_value_type(t)),
+        ast::Type::Tuple { elems, .. } => elems.iter().all(is_value_type),
+    }
+}
+
+/// The help for a library function given an argument of the wrong type: how to write it for
+/// the type at hand.
+fn library_hint(name: &str) -> Option<&'static str> {
+    Some(match name {
+        "sum" => {
+            "`sum` is TeSSLa's `def sum(x: Events[Int]): Events[Int]`; for a Float stream \
+             write it with `fold`: `fold(x, 0.0, (acc: Float, v: Float) => acc +. v)`"
+        }
+        "maximum" | "minimum" => {
+            "`maximum` and `minimum` are declared for Events[Int]; for a Float stream use \
+             `reduce(x, (a: Float, b: Float) => if a >. b then a else b)` (`<.` for the minimum)"
+        }
+        "average" => {
+            "`average` is declared for Events[Int]; for a Float stream divide a `fold` sum \
+             by `count(x)`"
+        }
+        _ => return None,
+    })
 }
 
 /// Is `name` a builtin a spec may name (directly or by its prelude alias)? `extern`-only
@@ -1885,7 +2107,7 @@ mod tests {
 
     #[test]
     fn the_type_table_has_outputs_and_defs() {
-        let spec = "in x: Events[Int]\ndef f(a: Int) = (a, true)\ndef g = f(x)\nout g\nout f(x) as h\nout *";
+        let spec = "in x: Events[Int]\nliftable def f(a: Int) = (a, true)\ndef g = f(x)\nout g\nout f(x) as h\nout *";
         let (file, diags) = tessla_syntax::parse(spec, tessla_syntax::source::FileId::default());
         assert!(diags.is_empty());
         let (errors, types) = check_typed(&[file]);

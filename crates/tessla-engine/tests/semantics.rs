@@ -14,6 +14,7 @@ fn load(spec: &str, base_time: Option<&str>) -> Result<Loaded, String> {
         base_time: base_time.map(str::to_string),
         overrides: Vec::new(),
         time_units_need_base: false,
+        ..Default::default()
     };
     tessla_engine::load_with("spec.tessla", &resolver, &options).map_err(|e| e.render())
 }
@@ -166,7 +167,7 @@ fn sets_and_maps() {
 #[test]
 fn module_members_see_each_other_and_can_be_imported() {
     let spec = "in x: Events[Int]\n\
-        module Foo {\n  def double(a: Int) = 2 * a\n  def bar = double(x)\n}\n\
+        module Foo {\n  liftable def double(a: Int) = 2 * a\n  def bar = double(x)\n}\n\
         module Baz {\n  def k = 7\n}\nimport Baz\n\
         out Foo.bar as b\nout k\n";
     assert_eq!(run(spec, &[(1, "x", int(21))]), ["0: k = 7", "1: b = 42"]);
@@ -222,6 +223,7 @@ fn robot_monitor_instance_state_is_small() {
         base_time: Some("1 ns".into()),
         overrides: Vec::new(),
         time_units_need_base: false,
+        ..Default::default()
     };
     let loaded = tessla_engine::load_file(&root, &options).expect("robot spec loads");
     let p = &loaded.program;
@@ -259,6 +261,7 @@ fn set_lists_only_parameters_as_known_constants() {
         base_time: None,
         overrides: vec![("nope".into(), "1".into())],
         time_units_need_base: false,
+        ..Default::default()
     };
     let e = tessla_engine::load_with("spec.tessla", &resolver, &options)
         .unwrap_err()
@@ -281,6 +284,7 @@ fn set_accepts_a_negative_float() {
         base_time: None,
         overrides: vec![("delta".into(), "-0.5".into())],
         time_units_need_base: false,
+        ..Default::default()
     };
     let loaded = tessla_engine::load_with("spec.tessla", &resolver, &options).unwrap();
     let mut m = Monitor::new(loaded.program.clone());

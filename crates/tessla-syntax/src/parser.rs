@@ -359,8 +359,24 @@ impl<'a> Parser<'a> {
             if self.is_kw("include") {
                 let start = self.advance().span;
                 match self.peek().clone() {
-                    Tok::Str { parts, .. } => {
+                    Tok::Str { parts, format } => {
                         let end = self.advance().span;
+                        // TeSSLa's rule: an include names its file literally.
+                        let interp = parts.iter().find_map(|p| match p {
+                            LexStrPart::Interp { span, .. } => Some(*span),
+                            LexStrPart::Text(_) => None,
+                        });
+                        if let Some(sp) = interp.or(format.then_some(end)) {
+                            let _ = self.err::<()>(
+                                sp,
+                                "string interpolation and format specifiers are not allowed in \
+                                 `include`: write the file name as it is",
+                            );
+                            if self.eos().is_err() {
+                                self.recover();
+                            }
+                            continue;
+                        }
                         let path = parts
                             .iter()
                             .map(|p| match p {

@@ -29,6 +29,8 @@ pub enum ErrorKind {
     Io,
     /// The reader of the outputs went away (a closed pipe): not a failure of the run.
     OutputClosed,
+    /// An option that does not fit the spec (`--stop-on` naming no output).
+    Usage,
 }
 
 /// The error that stopped a run.
@@ -42,6 +44,31 @@ impl fmt::Display for RunError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(&self.message)
     }
+}
+
+/// The format of an input trace.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Format {
+    /// `TS: name = value` lines.
+    #[default]
+    Tessla,
+    /// A header `time,a,b`, then `TS,value,value` lines (see [`reader::CsvReader`]).
+    Csv,
+}
+
+/// How to run a trace: the options of TeSSLa's `interpreter` command.
+#[derive(Debug, Clone, Default)]
+pub struct Options {
+    pub format: Format,
+    /// An event on a stream the spec does not declare is an error (`-r`); by default it is
+    /// ignored, but time still advances to its timestamp.
+    pub reject_undeclared: bool,
+    /// Stop after the first event of this output stream (`-S`): the events of its step
+    /// written before it are kept, the rest of the run is not evaluated.
+    pub stop_on: Option<String>,
+    /// Read no more than this many events plus one (`-a N`; TeSSLa's interpreter counts from
+    /// 0, so `-a 2` reads 3 events), then end the run as at the end of the trace.
+    pub abort_at: Option<u64>,
 }
 
 /// The result of running a trace held in memory: the printed output and the error, if any.
@@ -58,8 +85,13 @@ pub fn run(program: &Arc<Program>, trace: &str) -> TraceRun {
 
 /// Run `program` over the trace text; `source` names the trace in error messages.
 pub fn run_named(program: &Arc<Program>, source: &str, trace: &str) -> TraceRun {
+    run_with(program, source, trace, &Options::default())
+}
+
+/// Run `program` over the trace text with `options`; `source` names the trace in messages.
+pub fn run_with(program: &Arc<Program>, source: &str, trace: &str, options: &Options) -> TraceRun {
     let mut out = Vec::new();
-    let error = run_stream(program, source, trace.as_bytes(), &mut out).err();
+    let error = run_stream_with(program, source, trace.as_bytes(), &mut out, options).err();
     TraceRun {
         output: String::from_utf8_lossy(&out).into_owned(),
         error,
@@ -71,12 +103,18 @@ struct Printer<'a, W: Write> {
     program: &'a Program,
     out: &'a mut W,
     error: Option<RunError>,
+    /// The output index of `-S`'s stream.
+    stop_on: Option<usize>,
+    stopped: bool,
 }
 
 impl<W: Write> Printer<'_, W> {
     fn event(&mut self, e: OutputEvent<'_>) {
-        if self.error.is_some() {
+        if self.error.is_some() || self.stopped {
             return;
+        }
+        if Some(e.output) == self.stop_on {
+            self.stopped = true;
         }
         if let Value::Error(err) = e.value {
             self.error = Some(RunError {
@@ -113,50 +151,112 @@ pub fn run_stream(
     input: impl BufRead,
     out: &mut impl Write,
 ) -> Result<(), RunError> {
+    run_stream_with(program, source, input, out, &Options::default())
+}
+
+/// [`run_stream`] with `options`.
+pub fn run_stream_with(
+    program: &Arc<Program>,
+    source: &str,
+    input: impl BufRead,
+    out: &mut impl Write,
+    options: &Options,
+) -> Result<(), RunError> {
+    let stop_on = match &options.stop_on {
+        None => None,
+        Some(name) => match program.outputs.iter().position(|o| o.name == *name) {
+            Some(i) => Some(i),
+            None => {
+                let near = tessla_syntax::diag::nearest(
+                    name,
+                    program.outputs.iter().map(|o| o.name.as_str()),
+                );
+                let hint = if near.is_empty() {
+                    String::new()
+                } else {
+                    format!(" (did you mean `{}`?)", near.join("` or `"))
+                };
+                return Err(RunError {
+                    kind: ErrorKind::Usage,
+                    message: format!(
+                        "error: --stop-on {name}: the spec has no output stream `{name}`{hint}"
+                    ),
+                });
+            }
+        },
+    };
     let mut monitor = Monitor::new(program.clone());
     let mut printer = Printer {
         program,
         out,
         error: None,
+        stop_on,
+        stopped: false,
     };
     let at = |line: usize, msg: &str| format!("{source}:{line}: {msg}");
-    for (i, raw) in input.lines().enumerate() {
+    let read_error = |e: reader::ReadError| RunError {
+        kind: match e.kind {
+            reader::ReadErrorKind::Malformed => ErrorKind::Input,
+            reader::ReadErrorKind::Unsupported => ErrorKind::Unsupported,
+        },
+        message: at(e.line, &e.message),
+    };
+    let mut csv = reader::CsvReader::default();
+    let mut events_read: u64 = 0;
+    'lines: for (i, raw) in input.lines().enumerate() {
         let line = i + 1;
         let raw = raw.map_err(|e| io_error(&format!("reading {source}"), &e))?;
-        let ev = match reader::parse_line(&raw, line, program) {
-            None => continue,
-            Some(Ok(ev)) => ev,
-            Some(Err(e)) => {
-                return Err(RunError {
-                    kind: match e.kind {
-                        reader::ReadErrorKind::Malformed => ErrorKind::Input,
-                        reader::ReadErrorKind::Unsupported => ErrorKind::Unsupported,
-                    },
-                    message: at(e.line, &e.message),
-                });
-            }
+        let reads = match options.format {
+            Format::Tessla => match reader::parse_line_any(&raw, line, program) {
+                None => continue,
+                Some(r) => vec![r.map_err(read_error)?],
+            },
+            Format::Csv => csv.parse_line(&raw, line, program).map_err(read_error)?,
         };
-        let pushed = monitor.push(ev.ts, ev.input, ev.value, &mut |e| printer.event(e));
-        if let Some(e) = printer.error.take() {
-            return Err(e);
+        for read in reads {
+            if options.abort_at.is_some_and(|n| events_read > n) {
+                break 'lines;
+            }
+            events_read += 1;
+            let pushed = match read {
+                reader::Read::Event(ev) => {
+                    monitor.push(ev.ts, ev.input, ev.value, &mut |e| printer.event(e))
+                }
+                reader::Read::Undeclared { line, ts, name } => {
+                    if options.reject_undeclared {
+                        return Err(read_error(reader::undeclared(line, &name, program)));
+                    }
+                    monitor.open_step(ts, &mut |e| printer.event(e))
+                }
+            };
+            if let Some(e) = printer.error.take() {
+                return Err(e);
+            }
+            if printer.stopped {
+                return finish(printer);
+            }
+            let message = match pushed {
+                Ok(()) => continue,
+                Err(InputError::Decreasing { last, got }) => {
+                    format!("Decreasing time stamps: first = {last}, second = {got}")
+                }
+                Err(InputError::Multiple { input, ts }) => {
+                    let name = program.inputs.get(input).map_or("?", |i| i.name.as_str());
+                    format!("Multiple events \"{name}\" at timestamp {ts}")
+                }
+                Err(InputError::UnknownInput(i)) => format!("unknown input {i}"),
+            };
+            return Err(RunError {
+                kind: ErrorKind::Runtime,
+                message: at(line, &message),
+            });
         }
-        let message = match pushed {
-            Ok(()) => continue,
-            Err(InputError::Decreasing { last, got }) => {
-                format!("Decreasing time stamps: first = {last}, second = {got}")
-            }
-            Err(InputError::Multiple { input, ts }) => {
-                let name = program.inputs.get(input).map_or("?", |i| i.name.as_str());
-                format!("Multiple events \"{name}\" at timestamp {ts}")
-            }
-            Err(InputError::UnknownInput(i)) => format!("unknown input {i}"),
-        };
-        return Err(RunError {
-            kind: ErrorKind::Runtime,
-            message: at(line, &message),
-        });
     }
     monitor.flush(&mut |e| printer.event(e));
+    finish(printer)
+}
+
+fn finish<W: Write>(mut printer: Printer<'_, W>) -> Result<(), RunError> {
     if let Some(e) = printer.error.take() {
         return Err(e);
     }
@@ -205,15 +305,95 @@ pub(crate) mod tests {
             ),
             (
                 "1: a = 1\n2: a = 1\n3: b = 1",
-                "t:3: Undeclared input stream b",
+                "t:3: Undeclared input stream b (did you mean `a`?)",
             ),
         ] {
-            let r = run_named(&p, "t", trace);
+            let reject = Options {
+                reject_undeclared: true,
+                ..Options::default()
+            };
+            let r = run_with(&p, "t", trace, &reject);
             assert_eq!(r.output, "1: a = 1\n", "{trace}");
             let e = r.error.unwrap();
             assert_eq!(e.message, message);
             assert_ne!(e.kind, ErrorKind::Unsupported);
         }
+    }
+
+    #[test]
+    fn undeclared_inputs_are_ignored_but_advance_time() {
+        let p = program("in x: Events[Int]\nout delay(x, x) as d\nout x");
+        // The delay set at 1 fires at 4: the event on `y` at 4 opens that step, so it is
+        // evaluated at the end; without it the trace ends at 1 and the delay never fires.
+        let r = run(&p, "1: x = 3\n4: y = \"ignored\"\n");
+        assert_eq!(r.error, None);
+        assert_eq!(r.output, "1: x = 3\n4: d = ()\n");
+        let r = run(&p, "1: x = 3\n");
+        assert_eq!(r.output, "1: x = 3\n");
+        // An ignored event still takes part in the check of increasing timestamps.
+        let r = run_named(&p, "t", "1: x = 3\n5: y = 1\n3: x = 1\n");
+        assert_eq!(
+            r.error.map(|e| e.message).as_deref(),
+            Some("t:3: Decreasing time stamps: first = 5, second = 3")
+        );
+        // A value that cannot be read is an error on any stream.
+        let r = run_named(&p, "t", "1: y = (1,\n");
+        assert_eq!(r.error.map(|e| e.kind), Some(ErrorKind::Input));
+    }
+
+    #[test]
+    fn csv_traces() {
+        let p = program("in a: Events[Int]\nin b: Events[String]\nout a\nout b");
+        let csv = Options {
+            format: Format::Csv,
+            ..Options::default()
+        };
+        let r = run_with(&p, "t", "time,a,b\n1,5,\"x,y\"\n2,,\"z\"\n3,7,\n", &csv);
+        assert_eq!(r.error, None);
+        let mut got: Vec<&str> = r.output.lines().collect();
+        got.sort();
+        assert_eq!(got, ["1: a = 5", "1: b = x,y", "2: b = z", "3: a = 7"]);
+        for (trace, message) in [
+            ("1,2,3\n", "t:1: No header row found"),
+            (
+                "t,a\n1,2,3\n",
+                "t:2: 2 value columns, but the header names 1 streams",
+            ),
+            (
+                "t,a\nx,2\n",
+                "t:2: `x` is not a non-negative integer timestamp",
+            ),
+        ] {
+            let e = run_with(&p, "t", trace, &csv).error.unwrap();
+            assert!(e.message.starts_with(message), "{trace}: {}", e.message);
+        }
+    }
+
+    #[test]
+    fn stop_on_and_abort_at() {
+        let p = program("in x: Events[Int]\nout x\nout x > 2 as big");
+        let trace = "1: x = 1\n2: x = 3\n3: x = 4\n";
+        let stop = |name: &str| Options {
+            stop_on: Some(name.into()),
+            ..Options::default()
+        };
+        let r = run_with(&p, "t", trace, &stop("x"));
+        assert_eq!((r.output.as_str(), r.error), ("1: x = 1\n", None));
+        let e = run_with(&p, "t", trace, &stop("bog")).error.unwrap();
+        assert_eq!(e.kind, ErrorKind::Usage);
+        assert!(e.message.contains("did you mean `big`?"), "{}", e.message);
+        // TeSSLa counts from 0: `-a 1` reads two events.
+        let abort = Options {
+            abort_at: Some(1),
+            ..Options::default()
+        };
+        let r = run_with(&p, "t", trace, &abort);
+        let mut got: Vec<&str> = r.output.lines().collect();
+        got.sort();
+        assert_eq!(
+            got,
+            ["1: big = false", "1: x = 1", "2: big = true", "2: x = 3"]
+        );
     }
 
     #[test]

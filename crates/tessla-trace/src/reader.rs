@@ -56,13 +56,137 @@ impl ReadError {
     }
 }
 
-/// Read one line of a trace: `None` for blank and comment lines.
+/// One event of a trace as read: on a declared input, or on a stream the spec does not declare
+/// (its value was read, but not checked against a type).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Read {
+    Event(Event),
+    Undeclared { line: usize, ts: i64, name: String },
+}
+
+/// Read one line of a trace: `None` for blank and comment lines. An event on an undeclared
+/// stream is an error (see [`parse_line_any`] to keep it).
 pub fn parse_line(raw: &str, line: usize, program: &Program) -> Option<Result<Event, ReadError>> {
+    parse_line_any(raw, line, program).map(|r| {
+        r.and_then(|read| match read {
+            Read::Event(e) => Ok(e),
+            Read::Undeclared { line, name, .. } => Err(undeclared(line, &name, program)),
+        })
+    })
+}
+
+/// Read one line of a trace: `None` for blank and comment lines.
+pub fn parse_line_any(
+    raw: &str,
+    line: usize,
+    program: &Program,
+) -> Option<Result<Read, ReadError>> {
     let l = strip_comment(raw).trim();
     if l.is_empty() {
         return None;
     }
     Some(parse_event(l, line, program))
+}
+
+/// "Undeclared input stream NAME" (TeSSLa's message), with the declared inputs nearest to it.
+pub fn undeclared(line: usize, name: &str, program: &Program) -> ReadError {
+    let near = tessla_syntax::diag::nearest(name, program.inputs.iter().map(|i| i.name.as_str()));
+    let mut message = format!("Undeclared input stream {name}");
+    if !near.is_empty() {
+        let near: Vec<String> = near.iter().map(|n| format!("`{n}`")).collect();
+        message.push_str(&format!(" (did you mean {}?)", near.join(" or ")));
+    }
+    ReadError::malformed(line, message)
+}
+
+/// A CSV trace as TeSSLa's interpreter reads it (`--csv`): a header `time,a,b` (the first
+/// column's name is not used) and then lines `TS,value,value` with one column per stream; an
+/// empty column is no event. Columns are TeSSLa expressions, split at top-level commas (a
+/// string, tuple or list may hold commas), so this is not RFC 4180 CSV: a quote opens a TeSSLa
+/// string literal, not a quoted field.
+#[derive(Debug, Default)]
+pub struct CsvReader {
+    header: Option<Vec<String>>,
+}
+
+impl CsvReader {
+    /// The events of one line (none for the header, blank and comment lines).
+    pub fn parse_line(
+        &mut self,
+        raw: &str,
+        line: usize,
+        program: &Program,
+    ) -> Result<Vec<Read>, ReadError> {
+        let l = strip_comment(raw).trim();
+        if l.is_empty() {
+            return Ok(Vec::new());
+        }
+        let columns = split_top_level_commas(l);
+        let Some(header) = &self.header else {
+            let names: Vec<String> = columns.iter().map(|c| c.trim().to_string()).collect();
+            let ident = |n: &str| {
+                n.chars()
+                    .next()
+                    .is_some_and(|c| c.is_alphabetic() || c == '_')
+                    && n.chars().all(|c| c.is_alphanumeric() || c == '_')
+            };
+            if names.len() < 2 || !names.iter().all(|n| ident(n)) {
+                return Err(ReadError::malformed(
+                    line,
+                    "No header row found: the first line of a CSV trace names the columns, \
+                     `time,stream1,stream2,...`",
+                ));
+            }
+            self.header = Some(names.into_iter().skip(1).collect());
+            return Ok(Vec::new());
+        };
+        let mut columns = columns.into_iter();
+        let ts = parse_ts(columns.next().unwrap_or(""), line)?;
+        let mut out = Vec::new();
+        for (k, text) in columns.enumerate() {
+            let text = text.trim();
+            if text.is_empty() {
+                continue;
+            }
+            let Some(name) = header.get(k) else {
+                return Err(ReadError::malformed(
+                    line,
+                    format!(
+                        "{} value columns, but the header names {} streams",
+                        k + 1,
+                        header.len()
+                    ),
+                ));
+            };
+            out.push(event(ts, name, Some(text), line, program)?);
+        }
+        Ok(out)
+    }
+}
+
+/// `text` split at the commas outside string literals and brackets.
+fn split_top_level_commas(text: &str) -> Vec<&str> {
+    let mut parts = Vec::new();
+    let (mut depth, mut in_str, mut escape, mut start) = (0i32, false, false, 0);
+    for (i, c) in text.char_indices() {
+        if escape {
+            escape = false;
+            continue;
+        }
+        match c {
+            '\\' if in_str => escape = true,
+            '"' => in_str = !in_str,
+            '(' | '[' | '{' if !in_str => depth += 1,
+            ')' | ']' | '}' if !in_str => depth -= 1,
+            ',' if !in_str && depth == 0 => {
+                parts.push(&text[start..i]);
+                start = i + 1;
+            }
+            _ => {}
+        }
+    }
+    parts.push(&text[start..]);
+    parts
 }
 
 /// The events of a whole trace text, in order.
@@ -98,10 +222,19 @@ fn strip_comment(line: &str) -> &str {
     line
 }
 
-fn parse_event(l: &str, line: usize, program: &Program) -> Result<Event, ReadError> {
+fn parse_event(l: &str, line: usize, program: &Program) -> Result<Read, ReadError> {
     let (ts, rest) = l
         .split_once(':')
         .ok_or_else(|| ReadError::malformed(line, "expected `TIMESTAMP: name = value`"))?;
+    let ts = parse_ts(ts, line)?;
+    let (name, value) = match rest.split_once('=') {
+        Some((n, v)) => (n.trim(), Some(v.trim())),
+        None => (rest.trim(), None),
+    };
+    event(ts, name, value, line, program)
+}
+
+fn parse_ts(ts: &str, line: usize) -> Result<i64, ReadError> {
     let ts: i64 = ts.trim().parse().map_err(|_| {
         ReadError::malformed(
             line,
@@ -114,13 +247,32 @@ fn parse_event(l: &str, line: usize, program: &Program) -> Result<Event, ReadErr
             format!("timestamp {ts} is negative"),
         ));
     }
-    let (name, value) = match rest.split_once('=') {
-        Some((n, v)) => (n.trim(), Some(v.trim())),
-        None => (rest.trim(), None),
+    Ok(ts)
+}
+
+/// The event `ts: name = value` (`value` `None` for a unit event). The value of an event on
+/// an undeclared stream is read too (a bad one is an error, as in TeSSLa), but not type-checked.
+fn event(
+    ts: i64,
+    name: &str,
+    value: Option<&str>,
+    line: usize,
+    program: &Program,
+) -> Result<Read, ReadError> {
+    let Some(input) = program.input_index(name) else {
+        // A value this engine cannot represent does not matter on a stream it ignores.
+        if let Some(v) = value
+            && let Err(e) = read_value(v, line)
+            && e.kind == ReadErrorKind::Malformed
+        {
+            return Err(e);
+        }
+        return Ok(Read::Undeclared {
+            line,
+            ts,
+            name: name.to_string(),
+        });
     };
-    let input = program
-        .input_index(name)
-        .ok_or_else(|| ReadError::malformed(line, format!("Undeclared input stream {name}")))?;
     let ty = program
         .inputs
         .get(input)
@@ -131,12 +283,12 @@ fn parse_event(l: &str, line: usize, program: &Program) -> Result<Event, ReadErr
     };
     let value = coerce(value, &ty)
         .map_err(|why| ReadError::malformed(line, format!("input {name}: {why}")))?;
-    Ok(Event {
+    Ok(Read::Event(Event {
         line,
         ts,
         input,
         value,
-    })
+    }))
 }
 
 /// Parse and evaluate the value text of one event.
@@ -618,7 +770,7 @@ mod tests {
         assert_eq!(e.message, "input x: \"text\" is not of type Int.");
         assert_eq!(e.kind, ReadErrorKind::Malformed);
         let e = read(spec, "1: y = 1").unwrap_err();
-        assert_eq!(e.message, "Undeclared input stream y");
+        assert_eq!(e.message, "Undeclared input stream y (did you mean `x`?)");
         let e = read(spec, "x = 1").unwrap_err();
         assert!(e.message.contains("TIMESTAMP"), "{}", e.message);
         let e = read(spec, "1: x = (1").unwrap_err();

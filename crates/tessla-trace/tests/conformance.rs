@@ -1,6 +1,6 @@
 //! TeSSLa's own conformance cases (`$TESSLA_SUITE` or `../shared/tessla-suite` beside the
 //! workspace), run through the same code path as `tessla-telegraf trace`
-//! ([`tessla_trace::run_named`]).
+//! ([`tessla_trace::run_with`]).
 //!
 //! Outputs are compared as sets of lines (`ts: name = value`) with floats compared by value.
 //! Cases expecting errors pass when we report an error of that kind: a compile error (a syntax
@@ -116,7 +116,12 @@ fn run_case(dir: &Path, desc: &serde_json::Value) -> Outcome {
     }
     let input_name = get("input").map_or_else(|| "input".to_string(), |p| p.display().to_string());
     let input = read("input").unwrap_or_default();
-    let run = tessla_trace::run_named(&loaded.program, &input_name, &input);
+    // TeSSLa's test harness runs its interpreter with `-r` (reject undeclared inputs).
+    let reject = tessla_trace::Options {
+        reject_undeclared: true,
+        ..Default::default()
+    };
+    let run = tessla_trace::run_with(&loaded.program, &input_name, &input, &reject);
     let expected = lines(&read("expectedOutput").unwrap_or_default());
     let ours = lines(&run.output);
     let expected_runtime = read("expectedRuntimeErrors");

@@ -302,53 +302,33 @@ impl<'a> Compiler<'a> {
         overrides: &[(String, String)],
     ) -> Result<(Program, Vec<Diagnostic>), Vec<Diagnostic>> {
         let resolved = self.resolved;
-        for (prefix, s) in &resolved.statements {
-            match s {
-                // The resolver keeps the first of two top-level defs of one name.
-                Statement::Def(d) if prefix.is_empty() => {
-                    if let Some(first) = resolved
-                        .def_id(&d.name.name)
-                        .and_then(|id| resolved.defs.get(id))
-                        && !std::ptr::eq(first.def, d)
-                    {
+        for (_, s) in &resolved.statements {
+            if let Statement::In { name, ty, .. } = s {
+                let elem = match ir_type(ty) {
+                    Type::Events(t) => *t,
+                    _ => {
                         self.diags.push(
                             Diagnostic::error(
-                                Category::Other,
-                                Some(d.name.span),
-                                format!("`{}` is defined twice", d.name.name),
+                                Category::Type,
+                                Some(ty.span()),
+                                format!("input `{}` must have a type Events[T]", name.name),
                             )
-                            .with_note_at(first.def.name.span, "first defined here"),
+                            .with_help(format!(
+                                "write `in {}: Events[Float]` (or another element type)",
+                                name.name
+                            )),
                         );
+                        Type::Unknown
                     }
-                }
-                Statement::In { name, ty, .. } => {
-                    let elem = match ir_type(ty) {
-                        Type::Events(t) => *t,
-                        _ => {
-                            self.diags.push(
-                                Diagnostic::error(
-                                    Category::Type,
-                                    Some(ty.span()),
-                                    format!("input `{}` must have a type Events[T]", name.name),
-                                )
-                                .with_help(format!(
-                                    "write `in {}: Events[Float]` (or another element type)",
-                                    name.name
-                                )),
-                            );
-                            Type::Unknown
-                        }
-                    };
-                    let idx = self.inputs.len();
-                    let n = self.node(Node::Input(idx));
-                    self.input_nodes.push(n);
-                    self.inputs.push(InputInfo {
-                        name: name.name.clone(),
-                        ty: elem,
-                        annotations: Vec::new(),
-                    });
-                }
-                _ => {}
+                };
+                let idx = self.inputs.len();
+                let n = self.node(Node::Input(idx));
+                self.input_nodes.push(n);
+                self.inputs.push(InputInfo {
+                    name: name.name.clone(),
+                    ty: elem,
+                    annotations: Vec::new(),
+                });
             }
         }
         // --set overrides replace the body of a top-level constant.
@@ -500,7 +480,15 @@ impl<'a> Compiler<'a> {
                         Some(a.name.span),
                         format!("annotation `@{}` is not declared", a.name.name),
                     )
-                    .with_help(format!("declare it: `def @{}(...)`", a.name.name)),
+                    .with_help(if a.name.name.starts_with("Telegraf") {
+                        // The connector's annotations come with the connector (and with us).
+                        "add this line at the top of the spec: include \"Telegraf.tessla\" \
+                         (the Telegraf annotations, bundled when no such file is beside the \
+                         spec)"
+                            .to_string()
+                    } else {
+                        format!("declare it: `def @{}(...)`", a.name.name)
+                    }),
                 );
             }
             let mut args = Vec::new();
