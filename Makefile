@@ -16,8 +16,9 @@ run: build
 build:
 	$(CARGO) build --release
 
-# Rewrite the README's `make run` block with what `make run` prints now (after a change to the
-# bundled spec or the fixture; tests/first_hour.rs checks the two agree).
+# Rewrite the README's `make run` block and the command outputs it shows with what the binary
+# prints now (after a change to the bundled spec or the fixture; tests/first_hour.rs and
+# tests/readme_commands.rs check that they agree).
 readme-run: build
 	$(MAKE) -s run > target/make-run.txt
 	python3 tools/readme_run_block.py target/make-run.txt

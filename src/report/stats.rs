@@ -220,18 +220,24 @@ impl Summary {
                 self.capped_actions,
             ));
         }
-        if let Some(s) = &self.silence {
-            let open = if s.open_at_end {
-                " (the last still silent at the end)"
-            } else {
-                ""
-            };
-            line(format!(
-                "robot silent: {} periods, {} s in all, longest {} s{open}",
-                s.periods.len(),
-                short(s.total()),
-                short(s.longest())
-            ));
+        match &self.silence {
+            Some(s) if s.periods.is_empty() => {
+                line("robot silent: never (robot_silent false throughout)".to_string());
+            }
+            Some(s) => {
+                let open = if s.open_at_end {
+                    " (the last still silent at the end)"
+                } else {
+                    ""
+                };
+                line(format!(
+                    "robot silent: {} periods, {} s in all, longest {} s{open}",
+                    s.periods.len(),
+                    short(s.total()),
+                    short(s.longest())
+                ));
+            }
+            None => {}
         }
         for (name, counts) in &self.verdicts {
             let counts: Vec<String> = counts.iter().map(|(v, n)| format!("{v} {n}")).collect();
