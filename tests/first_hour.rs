@@ -619,3 +619,23 @@ fn the_package_assets_hold_man_page_completions_docs_and_a_systemd_drop_in() {
         assert!(std::fs::metadata(&p).unwrap().len() > 0, "{file} is empty");
     }
 }
+
+#[test]
+fn check_lists_the_constants_of_a_spec_whose_annotations_are_bundled() {
+    // No telegraf.tessla beside the spec: the bundled annotations serve the include, and the
+    // spec's constants are still listed.
+    let dir = tempfile::tempdir().unwrap();
+    let spec = write(
+        dir.path(),
+        "b.tessla",
+        "include \"telegraf.tessla\"\n@TelegrafIn(\"\", \"\", \"battery\")\nin battery: Events[Float]\n\
+         -- Below this, go home.\ndef low_voltage = 11.0\nout battery <. low_voltage as low\n",
+    );
+    let out = run_in(dir.path(), &["check", spec.to_str().unwrap()], b"");
+    let said = text(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    assert!(
+        said.contains("parameters (`--set`):\n  low_voltage = 11.0  -- Below this, go home."),
+        "{said}"
+    );
+}

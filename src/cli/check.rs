@@ -157,6 +157,24 @@ fn count_defs(spec: &std::path::Path) -> (usize, usize) {
     n
 }
 
+/// The file system, then the bundled libraries (`include "Telegraf.tessla"` without the file),
+/// as the spec was loaded: so a spec that includes them still has its parameters listed.
+struct FsOrLibraries;
+
+impl tessla_syntax::include::Resolver for FsOrLibraries {
+    fn resolve(&self, from: Option<&str>, name: &str) -> Result<(String, String), String> {
+        let fs = tessla_syntax::include::FsResolver.resolve(from, name);
+        let file_name = name.strip_prefix("./").unwrap_or(name);
+        match crate::bundled::LIBRARIES
+            .iter()
+            .find(|(n, _)| n.eq_ignore_ascii_case(file_name))
+        {
+            Some((n, text)) if fs.is_err() => Ok((format!("<bundled>/{n}"), text.to_string())),
+            _ => fs,
+        }
+    }
+}
+
 /// The spec's parameters: top-level definitions without parameters whose body is a literal
 /// (a number, possibly negated, a string, `true`/`false`), as `name = value` (the `--set` value
 /// when given) with the comment lines right above each, in file order (includes first).
@@ -165,7 +183,7 @@ fn parameters(spec: &std::path::Path, overrides: &[(String, String)]) -> Vec<(St
     let mut sources = tessla_syntax::source::SourceMap::new();
     let Ok(files) = tessla_syntax::include::load_spec(
         &spec.display().to_string(),
-        &tessla_syntax::include::FsResolver,
+        &FsOrLibraries,
         &mut sources,
     ) else {
         return Vec::new();
