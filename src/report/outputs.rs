@@ -190,7 +190,15 @@ pub fn short(v: f64) -> String {
             text
         }
     } else {
-        format!("{v:.3e}")
+        // `5.000e-4` as `5e-4`, `1.250e-5` as `1.25e-5`.
+        let text = format!("{v:.3e}");
+        match text.split_once('e') {
+            Some((mantissa, exp)) if mantissa.contains('.') => {
+                let mantissa = mantissa.trim_end_matches('0').trim_end_matches('.');
+                format!("{mantissa}e{exp}")
+            }
+            _ => text,
+        }
     };
     if s == "-0" { "0".into() } else { s }
 }
@@ -337,10 +345,12 @@ mod tests {
     #[test]
     fn numbers_for_people_never_show_minus_zero() {
         assert_eq!(short(-0.0), "0");
-        assert_eq!(short(-0.00001), "-1.000e-5");
+        assert_eq!(short(-0.00001), "-1e-5");
+        assert_eq!(short(0.0005), "5e-4");
+        assert_eq!(short(0.0000125), "1.25e-5");
         assert_eq!(short(0.0575), "0.0575");
         assert_eq!(short(0.099999999), "0.1");
-        assert_eq!(short(-0.00004), "-4.000e-5");
+        assert_eq!(short(-0.00004), "-4e-5");
         assert_eq!(short(123.456), "123.5");
         assert_eq!(secs(-0.0), "0.0 s");
     }

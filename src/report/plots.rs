@@ -52,7 +52,22 @@ const AUGMENTED: RGBColor = RGBColor(0, 0, 0);
 const UNKNOWN: RGBColor = RGBColor(150, 150, 150);
 const DROPOUT: RGBColor = RGBColor(255, 127, 14);
 const SILENT: RGBColor = RGBColor(148, 103, 189);
-const PALETTE: [RGBColor; 6] = [EXPECTED, ACTUAL, ACTION, DROPOUT, SILENT, AUGMENTED];
+/// Twelve colours told apart (Tableau 10, then black and olive), one per line of a chart with
+/// at most [`MOST`] lines.
+const PALETTE: [RGBColor; 12] = [
+    EXPECTED,
+    ACTUAL,
+    ACTION,
+    DROPOUT,
+    SILENT,
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+    RGBColor(188, 189, 34),
+    RGBColor(23, 190, 207),
+    AUGMENTED,
+    RGBColor(128, 128, 0),
+];
 
 /// The charts this run has data for, in [`FILES`] order.
 pub fn render_all(picked: &Picked, outputs: &Outputs) -> Result<Vec<Plot>, String> {
