@@ -639,3 +639,35 @@ fn check_lists_the_constants_of_a_spec_whose_annotations_are_bundled() {
         "{said}"
     );
 }
+
+#[test]
+fn the_readme_pitfalls_quote_what_check_says() {
+    let dir = tempfile::tempdir().unwrap();
+    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let readme = readme.split_whitespace().collect::<Vec<_>>().join(" ");
+    for (spec, says) in [
+        (
+            "in battery: Events[Float]\nout battery < 11.0 as low\n",
+            vec![
+                "`<` is not defined for Float in TeSSLa 1.2",
+                "use `<.` for Float",
+            ],
+        ),
+        (
+            "in battery: Events[Float]\nout sum(battery) as total\n",
+            vec![
+                "argument 1 of `sum`: expected Events[Int], found Events[Float]",
+                "fold",
+            ],
+        ),
+    ] {
+        let p = write(dir.path(), "p.tessla", spec);
+        let out = run(&["check", p.to_str().unwrap()], b"");
+        let err = text(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        for s in says {
+            assert!(err.contains(s), "check says `{s}`: {err}");
+            assert!(readme.contains(s), "the README quotes `{s}`");
+        }
+    }
+}
