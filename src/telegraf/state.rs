@@ -39,9 +39,12 @@ pub enum Target {
     Nats(super::state_nats::Url),
 }
 
-/// Parse `--state`: `nats://...` is a bucket, anything else a file path.
+/// Parse `--state`: `nats://...` is a bucket, anything else a file path. Anything that looks
+/// like a URL (`SCHEME://`, or `nats:` without `//`) is parsed as one, so a mistyped bucket URL
+/// is refused rather than taken as a file name.
 pub fn parse_target(s: &str) -> Result<Target, String> {
-    if s.starts_with("nats://") {
+    let lower = s.to_ascii_lowercase();
+    if s.contains("://") || lower.starts_with("nats:") || lower.starts_with("tls:") {
         super::state_nats::Url::parse(s).map(Target::Nats)
     } else if s.is_empty() {
         Err("empty path".into())
