@@ -255,7 +255,7 @@ pub fn main() -> ExitCode {
             match style {
                 Style::Log => crate::log::log(crate::log::Level::Error, &e.message),
                 Style::Plain => {
-                    let mut text = e.message;
+                    let mut text = crate::telegraf::state_nats::mask(&e.message);
                     if !text.ends_with('\n') {
                         text.push('\n');
                     }

@@ -575,12 +575,22 @@ fn connect_failure(url: &Url, e: &async_nats::ConnectError) -> String {
             url.identity()
         ),
         K::Tls => tls_failure(&at, &detail),
-        K::Io if url.tls.required && !detail.contains("refused") => tls_failure(&at, &detail),
+        K::Io if looks_like_tls(url, &detail) => tls_failure(&at, &detail),
         _ => format!(
             "cannot connect to {at}: no NATS server answered ({detail}); is nats-server running there, \
              and are the hosts and ports right?"
         ),
     }
+}
+
+/// An I/O error during the TLS handshake (the crate reports some as I/O): a certificate the
+/// client does not trust, or a TLS client meeting a plain server.
+fn looks_like_tls(url: &Url, detail: &str) -> bool {
+    let d = detail.to_ascii_lowercase();
+    d.contains("certificate")
+        || d.contains("tls")
+        || d.contains("handshake")
+        || (url.tls.required && !d.contains("refused"))
 }
 
 fn tls_failure(at: &str, detail: &str) -> String {
