@@ -48,7 +48,7 @@ pub fn log(level: Level, msg: &str) {
     }
     // A URL in a message never shows its password (README, "Security").
     let masked;
-    let msg = if msg.contains("://") && msg.contains('@') {
+    let msg = if msg.contains(":/") && msg.contains('@') {
         masked = crate::telegraf::state_nats::mask(msg);
         masked.as_str()
     } else {

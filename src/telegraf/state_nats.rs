@@ -115,13 +115,15 @@ pub struct Tls {
 pub const FORM: &str =
     "nats://HOST:PORT[,HOST:PORT...]/BUCKET[?lease=NAME&user=NAME&password-env=VAR&tls-ca=PATH...]";
 
-/// `text` with the user-info of every `scheme://USERINFO@` replaced: `USER:***@`, or `***@`
+/// `text` with the user-info of every `scheme://USERINFO@` (or `scheme:/USERINFO@`) replaced: `USER:***@`, or `***@`
 /// for a token. For anything shown to a person (messages, logs) that may hold a URL.
 pub fn mask(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
     let mut rest = text;
-    while let Some(i) = rest.find("://") {
-        let (head, tail) = rest.split_at(i + 3);
+    // `scheme:/` too: a path that went through normalisation loses one of the two slashes.
+    while let Some(i) = rest.find(":/") {
+        let slashes = rest[i + 1..].bytes().take_while(|&b| b == b'/').count();
+        let (head, tail) = rest.split_at(i + 1 + slashes);
         out.push_str(head);
         // The authority ends at the first `/`, `?`, `#` or white space; its user-info at its
         // last `@`.
@@ -1359,6 +1361,8 @@ mod tests {
             "x 'nats://u:***@h:1,h:2/b?lease=p0' and mqtt://***@h/ and nats://h/b"
         );
         assert_eq!(mask("nats://u:p@ss@h/b"), "nats://u:***@h/b");
+        assert_eq!(mask("`nats:/u:pw@h:1/b`"), "`nats:/u:***@h:1/b`");
+        assert_eq!(mask("a: /x and 12:30"), "a: /x and 12:30");
         assert_eq!(partition_of("lease.vp0"), "p0");
         assert_eq!(partition_of("lease.vp_2e1"), "p.1");
     }
