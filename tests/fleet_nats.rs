@@ -325,6 +325,7 @@ fn standbys_take_over_killed_primaries_with_the_monitor_state() {
         std::thread::sleep(Duration::from_millis(5));
     }
     cluster.kill(2);
+    let node_lost_at = Instant::now();
     let passwords: Vec<String> = ["fleet-p0", "fleet-p1", "admin"]
         .iter()
         .map(|u| u.to_string())
@@ -359,6 +360,31 @@ fn standbys_take_over_killed_primaries_with_the_monitor_state() {
         finished.push((name, status, published, stderr));
     }
     let (telemetry, actions) = observer.finish();
+    // Measured, not asserted: the longest pause between two actions (any robot) in the 10 s
+    // after the NATS node was killed, against the longest one before the first kill.
+    let longest_gap = |from: Instant, to: Instant| -> Duration {
+        let mut times: Vec<Instant> = actions
+            .iter()
+            .map(|(t, _, _)| *t)
+            .filter(|t| *t >= from && *t <= to)
+            .collect();
+        times.sort();
+        times
+            .windows(2)
+            .map(|w| w[1] - w[0])
+            .max()
+            .unwrap_or_default()
+    };
+    let first_action = actions
+        .iter()
+        .map(|(t, _, _)| *t)
+        .min()
+        .unwrap_or(killed_at);
+    eprintln!(
+        "longest pause between actions: {} ms in the 10 s after the NATS node was killed, {} ms before any kill",
+        longest_gap(node_lost_at, node_lost_at + Duration::from_secs(10)).as_millis(),
+        longest_gap(first_action, killed_at).as_millis()
+    );
 
     // Which partition each robot's records went to (the mapping), and the reference run.
     let mut partition_of = BTreeMap::new();
