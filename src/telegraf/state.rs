@@ -36,7 +36,7 @@ pub enum Target {
     /// `--state FILE`: one file, this module.
     File(PathBuf),
     /// `--state nats://HOST:PORT[,HOST:PORT...]/BUCKET[?options]`: a JetStream key-value bucket.
-    Nats(super::state_nats::Url),
+    Nats(Box<super::state_nats::Url>),
 }
 
 /// Parse `--state`: `nats://...` is a bucket, anything else a file path. Anything that looks
@@ -45,7 +45,7 @@ pub enum Target {
 pub fn parse_target(s: &str) -> Result<Target, String> {
     let lower = s.to_ascii_lowercase();
     if s.contains("://") || lower.starts_with("nats:") || lower.starts_with("tls:") {
-        super::state_nats::Url::parse(s).map(Target::Nats)
+        super::state_nats::Url::parse(s).map(|u| Target::Nats(Box::new(u)))
     } else if s.is_empty() {
         Err("empty path".into())
     } else {

@@ -250,13 +250,11 @@ impl Url {
             None => Auth::None,
             Some(info) => match info.split_once(':') {
                 Some((user, password)) => Auth::UserPassword {
-                    user: percent_decode(user).map_err(|e| form(e))?,
-                    password: SecretSource::Given(Secret(
-                        percent_decode(password).map_err(|e| form(e))?,
-                    )),
+                    user: percent_decode(user).map_err(&form)?,
+                    password: SecretSource::Given(Secret(percent_decode(password).map_err(&form)?)),
                 },
                 None => Auth::Token(SecretSource::Given(Secret(
-                    percent_decode(info).map_err(|e| form(e))?,
+                    percent_decode(info).map_err(&form)?,
                 ))),
             },
         };

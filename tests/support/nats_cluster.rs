@@ -68,8 +68,8 @@ struct Security {
 }
 
 /// How a test-side client logs in: nothing on an open cluster; a user, its password and the
-/// test CA on a secured one.
-#[derive(Clone, Debug)]
+/// test CA on a secured one. (No `Debug`: it holds a password.)
+#[derive(Clone)]
 pub struct Login {
     pub user: Option<String>,
     pub password: String,
