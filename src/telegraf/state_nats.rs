@@ -203,7 +203,8 @@ impl Url {
             Some((scheme, rest)) if scheme.eq_ignore_ascii_case("nats") => rest,
             Some((scheme, _)) => {
                 return Err(form(format!(
-                    "scheme `{scheme}://` is not a state store; TLS is `?tls=1` or `tls-ca=PATH`"
+                    "scheme `{scheme}://` is not a state store (a file: give its path; NATS over TLS: \
+                     nats://...?tls-ca=PATH)"
                 )));
             }
             None => {
