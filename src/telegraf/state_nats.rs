@@ -1,14 +1,19 @@
 //! `--state nats://HOST:PORT[,HOST:PORT...]/BUCKET[?options]`: monitor state in a JetStream
 //! key-value bucket, shared by the processes of a fleet, and the partition lease.
 //!
-//! Owns: parsing the URL ([`Url`]), the connection (async-nats on a runtime thread of its own,
-//! so lease renewals go on while the step loop is busy), bucket creation, instance keys as NATS
+//! Owns: parsing the URL ([`Url`], with its login: user and password, token, NKey seed, `.creds`
+//! file, TLS files; secrets never shown, [`mask`] for any text), the connection (async-nats on a
+//! runtime thread of its own, so lease renewals go on while the step loop is busy; credentials and
+//! TLS through the crate's own options; refused credentials, TLS, an unreachable server and a
+//! denied permission each told apart, [`Failure`]), bucket creation, instance keys as NATS
 //! KV keys ([`kv_key`]), one entry per instance (the format of [`super::state`]: magic, version,
 //! fingerprint), restoring an instance when its first record arrives, saving every instance,
 //! setting a foreign or corrupt entry aside (`aside.<key>.<unix seconds>`, with a warning), and
 //! the lease ([`Lease`]): one key per partition, held by one process at a time (create if absent,
 //! renewed by compare-and-set on its revision, taken over by compare-and-set when it has not
-//! changed for the lease TTL, deleted on a clean stop). The design and its guarantees are in
+//! changed for the lease TTL, deleted on a clean stop), with the operator mistakes caught: a lease
+//! live in another bucket refuses the start, a long standby reports partitions nobody holds.
+//! The design and its guarantees are in
 //! `docs/state-and-reload.md` ("Shared state on NATS").
 
 use super::instances::Key;
