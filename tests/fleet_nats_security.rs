@@ -446,11 +446,13 @@ fn fleet_mistakes_are_refused_or_loud() {
     let holder = spawn(format!("{base}/fleet?lease=p1&ttl=1s"));
     std::thread::sleep(Duration::from_millis(800));
 
-    // A standby of p1 given another bucket: refused at start (exit 2), naming both buckets.
+    // A standby of p1 given another bucket: refused at start (exit 2), naming both buckets,
+    // before that bucket is created.
     let (err, code) = finish(spawn(format!("{base}/fleet_b?lease=p1&ttl=1s")));
     assert_eq!(code, 2, "{err}");
+    assert!(!err.contains("created bucket fleet_b"), "{err}");
     assert!(
-        err.contains("E! lease: partition p1 is held in bucket fleet by ")
+        err.contains("E! state: partition p1's lease is held in bucket fleet by ")
             && err.contains("this process was given bucket fleet_b"),
         "{err}"
     );

@@ -26,7 +26,7 @@ pub fn run(
         Failure::Config(m) => CliError::spec(format!("state: {m}")),
         Failure::Io(m) => CliError::io(format!("state: {m}")),
     })?;
-    let lease = backend.lease().map_err(CliError::spec)?;
+    let lease = backend.lease();
     let program = proc.program().clone();
     let fresh = move || Processor::new(program.clone(), opts.clone()).ok();
     let mut on_hangup = |p: &mut Processor, out: &mut Vec<u8>| {

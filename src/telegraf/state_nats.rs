@@ -630,7 +630,7 @@ fn permission_failure(url: &Url, text: &str) -> String {
 }
 
 /// Connect and open (or create) the bucket.
-async fn open(url: Url) -> Result<(jetstream::Context, kv::Store), Failure> {
+async fn open(url: Url) -> Result<kv::Store, Failure> {
     let violations = Arc::new(Mutex::new(Vec::new()));
     let options = connect_options(&url, Arc::clone(&violations)).await?;
     let client = options
@@ -638,6 +638,24 @@ async fn open(url: Url) -> Result<(jetstream::Context, kv::Store), Failure> {
         .await
         .map_err(|e| Failure::Io(connect_failure(&url, &e)))?;
     let js = jetstream::new(client.clone());
+    // Before the bucket is looked up (or created): the partition's lease live in another bucket
+    // means the processes of one partition were given different buckets; each would step the
+    // partition's monitors and every action would be sent twice.
+    if let Some(name) = &url.lease {
+        let key = format!("lease.{}", kv_key_part_of(name));
+        if let Some((bucket, holder)) =
+            lease_elsewhere(js.clone(), url.bucket.clone(), key, url.ttl).await
+        {
+            return Err(Failure::Config(format!(
+                "partition {name}'s lease is held in bucket {bucket} by {holder}, who renews it, but this \
+                 process was given bucket {}: the processes of one partition must name the same bucket \
+                 (in another, each would step the partition's monitors and every action would be sent \
+                 twice). Fix --state of whichever is wrong; two fleets sharing a NATS account need \
+                 different lease names",
+                url.bucket
+            )));
+        }
+    }
     // Processes of a fleet start together: another may be creating the bucket right now, and
     // a bucket just created may take a moment to answer everywhere. Try a few times.
     let mut last = String::new();
@@ -646,7 +664,7 @@ async fn open(url: Url) -> Result<(jetstream::Context, kv::Store), Failure> {
             tokio::time::sleep(Duration::from_millis(300) * attempt).await;
         }
         if let Ok(store) = js.get_key_value(url.bucket.clone()).await {
-            return Ok((js, store));
+            return Ok(store);
         }
         if let Some(v) = violation(&violations) {
             return Err(Failure::Io(permission_failure(&url, &v)));
@@ -666,7 +684,7 @@ async fn open(url: Url) -> Result<(jetstream::Context, kv::Store), Failure> {
                         url.bucket, url.replicas
                     ),
                 );
-                return Ok((js, store));
+                return Ok(store);
             }
             Err(e) => last = e,
         }
@@ -703,7 +721,6 @@ async fn create(js: &jetstream::Context, url: &Url) -> Result<kv::Store, String>
 pub struct NatsBackend {
     url: Url,
     conn: Conn,
-    js: jetstream::Context,
     store: kv::Store,
     fingerprint: String,
     /// Instances already looked up (or created) in this process: not restored again.
@@ -716,44 +733,23 @@ impl NatsBackend {
     pub fn connect(url: &Url, proc: &Processor, ctx: &Context) -> Result<NatsBackend, Failure> {
         let conn =
             Conn::start().map_err(|e| Failure::Io(format!("cannot start the NATS thread: {e}")))?;
-        let (js, store) = conn
+        let store = conn
             .call(open(url.clone()))
             .ok_or_else(|| Failure::Io("the NATS thread stopped".to_string()))??;
         Ok(NatsBackend {
             url: url.clone(),
             conn,
-            js,
             store,
             fingerprint: state::fingerprint(proc.program(), ctx),
             seen: HashSet::new(),
         })
     }
 
-    /// Start holding (or waiting for) the lease named in the URL, if any. Refuses (the message
-    /// says why) when another bucket of the account has a live lease of the same name: the
-    /// processes of one partition were given different buckets, and each would step the
-    /// partition's monitors, so every action would be sent twice.
-    pub fn lease(&self) -> Result<Option<Lease>, String> {
-        let Some(name) = self.url.lease.clone() else {
-            return Ok(None);
-        };
+    /// Start holding (or waiting for) the lease named in the URL, if any. (A lease live in
+    /// another bucket was refused by [`NatsBackend::connect`].)
+    pub fn lease(&self) -> Option<Lease> {
+        let name = self.url.lease.clone()?;
         let key = format!("lease.{}", kv_key_part_of(&name));
-        let elsewhere = self.conn.call(lease_elsewhere(
-            self.js.clone(),
-            self.url.bucket.clone(),
-            key.clone(),
-            self.url.ttl,
-        ));
-        if let Some(Some((bucket, holder))) = elsewhere {
-            return Err(format!(
-                "lease: partition {name} is held in bucket {bucket} by {holder}, who renews it, but this \
-                 process was given bucket {}: the processes of one partition must name the same bucket \
-                 (in another, each would step the partition's monitors and every action would be sent \
-                 twice). Fix --state of whichever is wrong; two fleets sharing a NATS account need \
-                 different lease names",
-                self.url.bucket
-            ));
-        }
         let shared = Arc::new(Mutex::new(LeaseState {
             mode: Mode::Standby,
             lost: false,
@@ -810,7 +806,7 @@ impl NatsBackend {
             shared,
             seen,
         ));
-        Ok(Some(lease))
+        Some(lease)
     }
 
     /// Put `bytes` aside as `aside.<key>.<unix seconds>` and delete `key`'s entry.
