@@ -306,6 +306,34 @@ fn token_and_nkey_logins() {
     );
 }
 
+/// A server that asks for a client certificate (`verify: true`): without one the handshake
+/// fails (a TLS failure, exit 3); with the test client certificate the process gets in.
+#[test]
+fn a_client_certificate_where_the_server_asks_for_one() {
+    let certs = tempfile::tempdir().unwrap();
+    nats_cluster::make_certs(certs.path());
+    let c = certs.path().display();
+    let Some(server) = Single::start(&format!(
+        "tls {{ cert_file: \"{c}/server.pem\", key_file: \"{c}/server-key.pem\", \
+         ca_file: \"{c}/ca.pem\", verify: true, timeout: 2 }}"
+    )) else {
+        return;
+    };
+    let base = format!("nats://127.0.0.1:{}/b?tls-ca={c}/ca.pem", server.port);
+    let (out, code) = run_state(&base, &[], &[]);
+    assert_eq!(code, 3, "{out}");
+    assert!(
+        out.contains("E! state: TLS failed with nats://127.0.0.1:"),
+        "{out}"
+    );
+    let (out, code) = run_state(
+        &format!("{base}&tls-cert={c}/client.pem&tls-key={c}/client-key.pem"),
+        &[],
+        &[],
+    );
+    assert_eq!(code, 0, "{out}");
+}
+
 #[test]
 fn a_malformed_url_is_a_command_line_error_with_the_expected_form() {
     for (url, why) in [

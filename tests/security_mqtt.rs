@@ -40,6 +40,11 @@ impl Drop for Broker {
 
 impl Broker {
     fn start() -> Option<Broker> {
+        Self::start_with("")
+    }
+
+    /// The shipped conf with `extra` appended (settings of its listener).
+    fn start_with(extra: &str) -> Option<Broker> {
         let mosquitto = servers::require("mosquitto", "mosquitto")?;
         let dir = tempfile::tempdir().unwrap();
         let certs = dir.path().join("certs");
@@ -84,7 +89,11 @@ impl Broker {
             "{conf}"
         );
         let conf_path = dir.path().join("mosquitto.conf");
-        std::fs::write(&conf_path, conf + "log_dest stdout\npersistence false\n").unwrap();
+        std::fs::write(
+            &conf_path,
+            format!("{conf}{extra}\nlog_dest stdout\npersistence false\n"),
+        )
+        .unwrap();
         let log = std::fs::File::create(dir.path().join("log")).unwrap();
         let child = Command::new(mosquitto)
             .args(["-c", conf_path.to_str().unwrap()])
@@ -372,4 +381,36 @@ fn each_refusal_says_why() {
     );
     assert_eq!(code, 2, "{out}");
     assert!(out.contains("robot1:***@127.0.0.1:1"), "{out}");
+}
+
+/// A broker that asks for a client certificate (`require_certificate true`): without one the
+/// handshake fails (exit 3, a TLS failure); with the test client certificate `replay` gets in.
+#[test]
+fn a_client_certificate_where_the_broker_asks_for_one() {
+    let Some(broker) = Broker::start_with("require_certificate true") else {
+        return;
+    };
+    let file = three_records(broker.dir.path());
+    let tls = broker.tls();
+    let tls: Vec<&str> = tls.iter().map(String::as_str).collect();
+    let (out, code) = broker.replay(&file, "tessla/robot1", Some(("robot1", ROBOT1_PW)), &tls);
+    assert_eq!(code, 3, "{out}");
+    assert!(
+        out.contains("E! replay: TLS failed with MQTT broker"),
+        "{out}"
+    );
+    let cert = broker.certs.join("client.pem").display().to_string();
+    let key = broker.certs.join("client-key.pem").display().to_string();
+    let with_cert: Vec<&str> = tls
+        .iter()
+        .copied()
+        .chain(["--tls-cert", cert.as_str(), "--tls-key", key.as_str()])
+        .collect();
+    let (out, code) = broker.replay(
+        &file,
+        "tessla/robot1",
+        Some(("robot1", ROBOT1_PW)),
+        &with_cert,
+    );
+    assert_eq!(code, 0, "{out}");
 }
