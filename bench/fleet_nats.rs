@@ -185,6 +185,7 @@ fn throughput(a: &Args, msgs: &[Vec<u8>], partitions: usize) -> f64 {
                 &cluster.url(p % 3),
                 p,
                 &args_for(&cluster, p),
+                &cluster.login("admin"),
             )
         })
         .collect();
@@ -214,9 +215,23 @@ fn throughput(a: &Args, msgs: &[Vec<u8>], partitions: usize) -> f64 {
 /// Kill the primary with `signal` 3 s into a paced run; ms to the standby's first action.
 fn takeover(a: &Args, msgs: &[Vec<u8>], signal: &str) -> f64 {
     let cluster = Cluster::start(&nats_cluster::mapping(1)).expect("nats-server");
-    let primary = NatsStandIn::start(&a.bin, "a", &cluster.url(0), 0, &args_for(&cluster, 0));
+    let primary = NatsStandIn::start(
+        &a.bin,
+        "a",
+        &cluster.url(0),
+        0,
+        &args_for(&cluster, 0),
+        &cluster.login("admin"),
+    );
     std::thread::sleep(Duration::from_millis(500));
-    let standby = NatsStandIn::start(&a.bin, "b", &cluster.url(1), 0, &args_for(&cluster, 0));
+    let standby = NatsStandIn::start(
+        &a.bin,
+        "b",
+        &cluster.url(1),
+        0,
+        &args_for(&cluster, 0),
+        &cluster.login("admin"),
+    );
     let url = cluster.url(1);
     let robots = a.robots.min(16);
     let paced: Vec<Vec<u8>> = msgs.to_vec();

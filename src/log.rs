@@ -46,6 +46,14 @@ pub fn log(level: Level, msg: &str) {
     if !enabled(level) {
         return;
     }
+    // A URL in a message never shows its password (README, "Security").
+    let masked;
+    let msg = if msg.contains(":/") && msg.contains('@') {
+        masked = crate::telegraf::state_nats::mask(msg);
+        masked.as_str()
+    } else {
+        msg
+    };
     let _ = std::io::stderr()
         .lock()
         .write_all(format(level, msg).as_bytes());

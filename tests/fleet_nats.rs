@@ -1,5 +1,6 @@
-//! The fleet on a real 3-node NATS cluster (JetStream, MQTT gateway, the shipped subject
-//! mapping into 2 partitions), with 2 partitions × (primary + standby) stand-in Telegrafs running
+//! The fleet on a real 3-node NATS cluster secured as shipped (`telegraf/fleet-nats/`: TLS on
+//! client, route and MQTT connections, the users and permissions of `accounts.conf`, the
+//! shipped subject mapping into 2 partitions; JetStream, MQTT gateway), with 2 partitions × (primary + standby) stand-in Telegrafs running
 //! the real binary with `--state nats://...?lease=p<N>`. Robots replay the recorded run over MQTT
 //! into the gateway (the real `replay` subcommand). Mid-run the primary of partition 0 is
 //! SIGKILLed, the primary of partition 1 SIGTERMed, and one NATS node killed. Checked: each
@@ -7,6 +8,9 @@
 //! records except records in flight (counted; at most `--state-interval` of the partition's
 //! records after SIGKILL, none after SIGTERM); no action differs from it, so no monitor restarted
 //! from zero (and the standby's first action of each robot carries the running counts).
+//! Every process logs in as the shipped users: the monitors of partition N as `fleet-pN`
+//! (password from a file, TLS with the test CA), each robot as itself over MQTT with TLS; no
+//! password appears in any process's output.
 
 #[path = "support/nats_cluster.rs"]
 mod nats_cluster;
@@ -15,7 +19,7 @@ mod nats_standin;
 #[path = "support/servers.rs"]
 mod servers;
 
-use nats_cluster::Cluster;
+use nats_cluster::{Cluster, Login};
 use nats_standin::{NatsStandIn, Published, action_message, robot_of, telemetry_line};
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write;
@@ -28,6 +32,12 @@ const ROBOTS: usize = 6;
 const SPEED: &str = "3";
 const INTERVAL_S: u64 = 1;
 const TTL: &str = "2s";
+/// The bucket the shipped permissions (accounts.conf) let the monitors use.
+const BUCKET: &str = "tessla_state";
+
+fn robot_ids() -> Vec<String> {
+    (0..ROBOTS).map(|k| format!("robot{k}")).collect()
+}
 
 fn fixture() -> String {
     format!(
@@ -48,7 +58,8 @@ struct Observer {
 }
 
 impl Observer {
-    fn start(url: &str) -> Observer {
+    fn start(url: &str, login: &Login) -> Observer {
+        let login = login.clone();
         let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
         let (ready_tx, ready_rx) = std::sync::mpsc::channel();
         let url = url.to_string();
@@ -61,7 +72,7 @@ impl Observer {
                 .unwrap();
             rt.block_on(async move {
                 use futures_util::StreamExt;
-                let client = async_nats::connect(url.as_str()).await.unwrap();
+                let client = login.connect(url.as_str()).await.unwrap();
                 let mut telemetry = client
                     .subscribe("fleet.*.robots.*.telemetry")
                     .await
@@ -123,25 +134,25 @@ impl Observer {
 }
 
 /// The value of the lease key of `partition` (`host:pid` of its holder), if any.
-fn lease_holder(url: &str, partition: usize) -> Option<String> {
+fn lease_holder(url: &str, login: &Login, partition: usize) -> Option<String> {
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
         .unwrap();
     rt.block_on(async {
-        let client = async_nats::connect(url).await.ok()?;
+        let client = login.connect(url).await.ok()?;
         let js = async_nats::jetstream::new(client);
-        let kv = js.get_key_value("fleet_state").await.ok()?;
+        let kv = js.get_key_value(BUCKET).await.ok()?;
         let e = kv.entry(format!("lease.vp{partition}")).await.ok()??;
         (e.operation == async_nats::jetstream::kv::Operation::Put)
             .then(|| String::from_utf8_lossy(&e.value).into_owned())
     })
 }
 
-fn wait_for_holder(url: &str, partition: usize, pid: u32) {
+fn wait_for_holder(url: &str, login: &Login, partition: usize, pid: u32) {
     let deadline = Instant::now() + Duration::from_secs(30);
     while Instant::now() < deadline {
-        if lease_holder(url, partition).is_some_and(|h| h.ends_with(&format!(":{pid}"))) {
+        if lease_holder(url, login, partition).is_some_and(|h| h.ends_with(&format!(":{pid}"))) {
             return;
         }
         std::thread::sleep(Duration::from_millis(50));
@@ -149,13 +160,22 @@ fn wait_for_holder(url: &str, partition: usize, pid: u32) {
     panic!("partition {partition}: process {pid} never held the lease");
 }
 
+/// `--broker mqtts://...` of node 0's MQTT gateway and the test CA.
+fn mqtt_tls(cluster: &Cluster) -> [String; 4] {
+    [
+        "--broker".into(),
+        format!("mqtts://127.0.0.1:{}", cluster.nodes[0].ports.mqtt),
+        "--tls-ca".into(),
+        cluster.certs().join("ca.pem").display().to_string(),
+    ]
+}
+
 fn robot(cluster: &Cluster, k: usize) -> Child {
+    let id = format!("robot{k}");
     Command::new(BIN)
         .args([
             "replay",
             &fixture(),
-            "--broker",
-            &format!("mqtt://127.0.0.1:{}", cluster.nodes[0].ports.mqtt),
             "--topic",
             &format!("robots/robot{k}/telemetry"),
             "--speed",
@@ -171,6 +191,9 @@ fn robot(cluster: &Cluster, k: usize) -> Child {
             "--client-id",
             &format!("robot{k}"),
         ])
+        .args(mqtt_tls(cluster))
+        .args(["--username", &id, "--password-env", "ROBOT_PASSWORD"])
+        .env("ROBOT_PASSWORD", cluster.password(&id))
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
@@ -188,10 +211,9 @@ fn warm_up_mqtt(cluster: &Cluster) {
     loop {
         let out = Command::new(BIN)
             .args(["replay", one.to_str().unwrap(), "--topic", "warmup/robot"])
-            .args([
-                "--broker",
-                &format!("mqtt://127.0.0.1:{}", cluster.nodes[0].ports.mqtt),
-            ])
+            .args(mqtt_tls(cluster))
+            .args(["--username", "admin", "--password-env", "ADMIN_PASSWORD"])
+            .env("ADMIN_PASSWORD", cluster.password("admin"))
             .output()
             .unwrap();
         if out.status.success() {
@@ -235,18 +257,30 @@ fn timestamp(message: &str) -> i64 {
 
 #[test]
 fn standbys_take_over_killed_primaries_with_the_monitor_state() {
-    let Some(mut cluster) = Cluster::start(&nats_cluster::shipped_mapping()) else {
+    let Some(mut cluster) = Cluster::start_secured(&nats_cluster::shipped_mapping(), &robot_ids())
+    else {
         return;
     };
-    let observer = Observer::start(&cluster.url(1));
+    let admin = cluster.login("admin");
+    let observer = Observer::start(&cluster.url(1), &admin);
+    // Each partition's password in a file (password-file=PATH), as a deployment keeps it.
+    for p in 0..2 {
+        std::fs::write(
+            cluster.dir().join(format!("fleet-p{p}.password")),
+            cluster.password(&format!("fleet-p{p}")) + "\n",
+        )
+        .unwrap();
+    }
     let args = |p: usize| -> Vec<String> {
         vec![
             "--instance-by".into(),
             "robot".into(),
             "--state".into(),
             format!(
-                "nats://{}/fleet_state?lease=p{p}&ttl={TTL}&replicas=3",
-                cluster.hosts()
+                "nats://{}/{BUCKET}?lease=p{p}&ttl={TTL}&replicas=3&user=fleet-p{p}&password-file={}&tls-ca={}",
+                cluster.hosts(),
+                cluster.dir().join(format!("fleet-p{p}.password")).display(),
+                cluster.certs().join("ca.pem").display()
             ),
             "--state-interval".into(),
             format!("{INTERVAL_S}s"),
@@ -255,12 +289,28 @@ fn standbys_take_over_killed_primaries_with_the_monitor_state() {
     // Primaries first (each takes its partition's lease), then the standbys.
     let mut primaries = Vec::new();
     for p in 0..2 {
-        let s = NatsStandIn::start(BIN, &format!("p{p}-a"), &cluster.url(0), p, &args(p));
-        wait_for_holder(&cluster.url(0), p, s.pid());
+        let s = NatsStandIn::start(
+            BIN,
+            &format!("p{p}-a"),
+            &cluster.url(0),
+            p,
+            &args(p),
+            &cluster.login(&format!("fleet-p{p}")),
+        );
+        wait_for_holder(&cluster.url(0), &admin, p, s.pid());
         primaries.push(s);
     }
     let standbys: Vec<NatsStandIn> = (0..2)
-        .map(|p| NatsStandIn::start(BIN, &format!("p{p}-b"), &cluster.url(1), p, &args(p)))
+        .map(|p| {
+            NatsStandIn::start(
+                BIN,
+                &format!("p{p}-b"),
+                &cluster.url(1),
+                p,
+                &args(p),
+                &cluster.login(&format!("fleet-p{p}")),
+            )
+        })
         .collect();
 
     warm_up_mqtt(&cluster);
@@ -275,14 +325,22 @@ fn standbys_take_over_killed_primaries_with_the_monitor_state() {
         std::thread::sleep(Duration::from_millis(5));
     }
     cluster.kill(2);
+    let node_lost_at = Instant::now();
+    let passwords: Vec<String> = ["fleet-p0", "fleet-p1", "admin"]
+        .iter()
+        .map(|u| u.to_string())
+        .chain(robot_ids())
+        .map(|u| cluster.password(&u))
+        .collect();
     for r in robots {
         let out = r.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
         assert!(
             out.status.success(),
-            "a robot's replay failed: {}\n{}",
-            out.status,
-            String::from_utf8_lossy(&out.stderr)
+            "a robot's replay failed: {}\n{err}",
+            out.status
         );
+        assert!(!passwords.iter().any(|p| err.contains(p.as_str())), "{err}");
     }
     // Past the lease TTL and a replay: the standbys are active and caught up.
     std::thread::sleep(Duration::from_secs(4));
@@ -295,9 +353,38 @@ fn standbys_take_over_killed_primaries_with_the_monitor_state() {
             "--- {name}: {status}, {fed} records fed, {} actions\n{stderr}",
             published.len()
         );
+        assert!(
+            !passwords.iter().any(|p| stderr.contains(p.as_str())),
+            "a password in {name}'s output"
+        );
         finished.push((name, status, published, stderr));
     }
     let (telemetry, actions) = observer.finish();
+    // Measured, not asserted: the longest pause between two actions (any robot) in the 10 s
+    // after the NATS node was killed, against the longest one before the first kill.
+    let longest_gap = |from: Instant, to: Instant| -> Duration {
+        let mut times: Vec<Instant> = actions
+            .iter()
+            .map(|(t, _, _)| *t)
+            .filter(|t| *t >= from && *t <= to)
+            .collect();
+        times.sort();
+        times
+            .windows(2)
+            .map(|w| w[1] - w[0])
+            .max()
+            .unwrap_or_default()
+    };
+    let first_action = actions
+        .iter()
+        .map(|(t, _, _)| *t)
+        .min()
+        .unwrap_or(killed_at);
+    eprintln!(
+        "longest pause between actions: {} ms in the 10 s after the NATS node was killed, {} ms before any kill",
+        longest_gap(node_lost_at, node_lost_at + Duration::from_secs(10)).as_millis(),
+        longest_gap(first_action, killed_at).as_millis()
+    );
 
     // Which partition each robot's records went to (the mapping), and the reference run.
     let mut partition_of = BTreeMap::new();

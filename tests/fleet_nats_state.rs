@@ -186,7 +186,9 @@ fn an_unreachable_server_is_a_clear_error() {
     );
     assert_eq!(code, 3, "{err}");
     assert!(
-        err.contains(&format!("E! state: cannot connect to 127.0.0.1:{port}")),
+        err.contains(&format!(
+            "E! state: cannot connect to nats://127.0.0.1:{port}/b: no NATS server answered"
+        )),
         "{err}"
     );
     let (_, err, code) = run(&["--state", "nats://127.0.0.1:1/bad.name"], "");

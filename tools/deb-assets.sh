@@ -21,7 +21,9 @@ cp docs/*.md "$doc/"
 cp -rL examples/. "$doc/examples/"
 cp telegraf/*.conf "$doc/telegraf/"
 cp -r telegraf/dashboards "$doc/telegraf/"
-[ -d telegraf/fleet-nats ] && cp -r telegraf/fleet-nats "$doc/telegraf/"
+for d in fleet-nats mosquitto; do
+  if [ -d "telegraf/$d" ]; then cp -r "telegraf/$d" "$doc/telegraf/"; fi
+done
 # A Telegraf systemd drop-in (telegraf/systemd/*): files straight in the folder are drop-ins for
 # telegraf.service; sub-folders keep their layout under /usr/lib/systemd/system.
 if [ -d telegraf/systemd ]; then

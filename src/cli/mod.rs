@@ -294,7 +294,20 @@ fn parse_bound(s: &str) -> Result<Bound, String> {
 
 /// Parse the command line, run the subcommand, report its error (if any) and return the exit code.
 pub fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            // clap quotes a rejected value; a URL in it may carry a password.
+            let text = crate::telegraf::state_nats::mask(&e.to_string());
+            let written = if e.use_stderr() {
+                std::io::stderr().lock().write_all(text.as_bytes())
+            } else {
+                std::io::stdout().lock().write_all(text.as_bytes())
+            };
+            drop(written);
+            return ExitCode::from(u8::try_from(e.exit_code()).unwrap_or(2));
+        }
+    };
     let (result, style) = match cli.command {
         None => (run::run(cli.run), Style::Log),
         Some(Command::Run(a)) => (run::run(*a), Style::Log),
@@ -315,7 +328,7 @@ pub fn main() -> ExitCode {
             match style {
                 Style::Log => crate::log::log(crate::log::Level::Error, &e.message),
                 Style::Plain => {
-                    let mut text = e.message;
+                    let mut text = crate::telegraf::state_nats::mask(&e.message);
                     if !text.ends_with('\n') {
                         text.push('\n');
                     }

@@ -6,7 +6,7 @@
 
 use crate::cli::{CliError, CliResult};
 use crate::replay::message::{MessageOptions, to_json};
-use crate::replay::mqtt::{Broker, Publisher, parse_qos};
+use crate::replay::mqtt::{Broker, Login, Publisher, parse_qos};
 use crate::replay::{Recording, pacing, read_csv, read_lp};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -68,6 +68,63 @@ pub struct ReplayArgs {
     /// MQTT client id (default: tessla-replay-<pid>).
     #[arg(long)]
     pub client_id: Option<String>,
+    /// Log in to the broker as this user (its password: --password-env).
+    #[arg(long, value_name = "NAME")]
+    pub username: Option<String>,
+    /// The environment variable holding the password (so it appears neither on the command
+    /// line nor in `ps`). Needs --username.
+    #[arg(long, value_name = "VAR", requires = "username")]
+    pub password_env: Option<String>,
+    /// TLS (with an mqtts:// broker): the CA certificate (PEM) that signed the broker's.
+    #[arg(long, value_name = "PATH")]
+    pub tls_ca: Option<PathBuf>,
+    /// TLS: a client certificate (PEM), for brokers that ask for one. Needs --tls-key.
+    #[arg(long, value_name = "PATH", requires = "tls_key")]
+    pub tls_cert: Option<PathBuf>,
+    /// TLS: the client certificate's private key (PEM). Needs --tls-cert.
+    #[arg(long, value_name = "PATH", requires = "tls_cert")]
+    pub tls_key: Option<PathBuf>,
+}
+
+/// The login from the command line: the password read from its variable, the TLS files read.
+fn login(args: &ReplayArgs, broker: &Broker) -> Result<Login, CliError> {
+    let password = match &args.password_env {
+        None => None,
+        Some(var) => Some(std::env::var(var).map_err(|_| {
+            CliError::spec(format!(
+                "--password-env {var}: the environment variable {var} is not set (or not UTF-8)"
+            ))
+        })?),
+    };
+    let read = |p: &PathBuf, what: &str| {
+        std::fs::read(p).map_err(|e| CliError::spec(format!("{what} {}: {e}", p.display())))
+    };
+    let ca = args
+        .tls_ca
+        .as_ref()
+        .map(|p| read(p, "--tls-ca"))
+        .transpose()?;
+    let client = match (&args.tls_cert, &args.tls_key) {
+        (Some(c), Some(k)) => Some((read(c, "--tls-cert")?, read(k, "--tls-key")?)),
+        _ => None,
+    };
+    if broker.tls && ca.is_none() {
+        return Err(CliError::spec(format!(
+            "{broker} is TLS: --tls-ca PATH must name the CA that signed its certificate"
+        )));
+    }
+    if !broker.tls && (ca.is_some() || client.is_some()) {
+        return Err(CliError::spec(format!(
+            "--tls-ca/--tls-cert need a TLS broker: write mqtts://{}:{}",
+            broker.host, broker.port
+        )));
+    }
+    Ok(Login {
+        username: args.username.clone(),
+        password,
+        ca,
+        client,
+    })
 }
 
 /// Run the subcommand; every error message starts with `replay: `.
@@ -79,6 +136,7 @@ fn replay(args: &ReplayArgs) -> CliResult {
     let speed = pacing::check_speed(args.speed).map_err(CliError::spec)?;
     let qos = parse_qos(args.qos).map_err(CliError::spec)?;
     let broker: Broker = args.broker.parse().map_err(CliError::spec)?;
+    let login = login(args, &broker)?;
     let recording = read_recording(&args.file, args.format, args.measurement.as_deref())?;
     for skipped in &recording.skipped {
         eprintln!("W! replay: {}: skipped {skipped}", args.file.display());
@@ -106,8 +164,9 @@ fn replay(args: &ReplayArgs) -> CliResult {
         .client_id
         .clone()
         .unwrap_or_else(|| format!("tessla-replay-{}", std::process::id()));
-    let mut publisher = Publisher::connect(&broker, &client_id, qos, Duration::from_secs(10))
-        .map_err(CliError::io)?;
+    let mut publisher =
+        Publisher::connect_with(&broker, &client_id, qos, Duration::from_secs(10), &login)
+            .map_err(CliError::io)?;
 
     let bar = progress_bar(recording.samples.len());
     let start = Instant::now();

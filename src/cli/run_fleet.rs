@@ -6,7 +6,7 @@ use crate::telegraf::fleet::{self, Fleet};
 use crate::telegraf::processor::{Options, Processor};
 use crate::telegraf::reload::{self, SpecSource};
 use crate::telegraf::state::{self, Backend};
-use crate::telegraf::state_nats::{NatsBackend, Url};
+use crate::telegraf::state_nats::{Failure, NatsBackend, Url};
 use std::time::Duration;
 
 pub fn run(
@@ -22,8 +22,10 @@ pub fn run(
             "--state nats://... runs on stdin/stdout (Telegraf's execd); --udp-listen is not supported with it",
         ));
     }
-    let mut backend =
-        NatsBackend::connect(url, &proc, ctx).map_err(|e| CliError::io(format!("state: {e}")))?;
+    let mut backend = NatsBackend::connect(url, &proc, ctx).map_err(|e| match e {
+        Failure::Config(m) => CliError::spec(format!("state: {m}")),
+        Failure::Io(m) => CliError::io(format!("state: {m}")),
+    })?;
     let lease = backend.lease();
     let program = proc.program().clone();
     let fresh = move || Processor::new(program.clone(), opts.clone()).ok();

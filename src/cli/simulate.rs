@@ -170,6 +170,12 @@ pub fn run(args: SimulateArgs) -> CliResult {
     let scenario = scenario_of(&args)?;
     let broker = match args.broker.as_deref().map(str::parse::<Broker>) {
         None => None,
+        // The twin speaks plain MQTT to a local broker (no login or TLS options).
+        Some(Ok(b)) if b.tls => {
+            return Err(bad(&format!(
+                "--broker {b}: TLS is not supported by simulate (a local broker: mqtt://HOST:PORT)"
+            )));
+        }
         Some(Ok(b)) => Some(b),
         Some(Err(e)) => return Err(bad(&e)),
     };

@@ -1,7 +1,8 @@
-//! Publishing to an MQTT broker with rumqttc (plain TCP, MQTT 3.1.1).
+//! Publishing to an MQTT broker with rumqttc (MQTT 3.1.1, plain TCP or TLS).
 //!
 //! [`Broker`] parses `mqtt://HOST:PORT` (also `tcp://`, or a bare `HOST[:PORT]`; port 1883 by
-//! default). [`Publisher::connect`] waits for the broker's CONNACK so an unreachable broker is
+//! default) and `mqtts://HOST:PORT` (also `ssl://`; TLS, port 8883 by default). [`Login`] holds
+//! the user name, password and TLS files (rumqttc's own TLS support does the handshake). [`Publisher::connect`] waits for the broker's CONNACK so an unreachable broker is
 //! reported up front, naming it; a background thread then drives the connection and counts
 //! acknowledgements, and [`Publisher::finish`] waits for them before disconnecting, so every
 //! message published with QoS 1 or 2 is known to have reached the broker.
@@ -19,15 +20,41 @@ use std::time::{Duration, Instant};
 pub struct Broker {
     pub host: String,
     pub port: u16,
+    /// `mqtts://`: TLS.
+    pub tls: bool,
 }
 
 impl fmt::Display for Broker {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let scheme = if self.tls { "mqtts" } else { "mqtt" };
         if self.host.contains(':') {
-            write!(f, "mqtt://[{}]:{}", self.host, self.port)
+            write!(f, "{scheme}://[{}]:{}", self.host, self.port)
         } else {
-            write!(f, "mqtt://{}:{}", self.host, self.port)
+            write!(f, "{scheme}://{}:{}", self.host, self.port)
         }
+    }
+}
+
+/// How the client logs in: user name and password (MQTT CONNECT), and the TLS files: the CA
+/// that signed the broker's certificate, and a client certificate and key when the broker asks
+/// for one. The password is never shown (`{:?}` included).
+#[derive(Clone, Default)]
+pub struct Login {
+    pub username: Option<String>,
+    pub password: Option<String>,
+    /// PEM contents: the CA, then (certificate, key).
+    pub ca: Option<Vec<u8>>,
+    pub client: Option<(Vec<u8>, Vec<u8>)>,
+}
+
+impl fmt::Debug for Login {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Login")
+            .field("username", &self.username)
+            .field("password", &self.password.as_ref().map(|_| "***"))
+            .field("ca", &self.ca.is_some())
+            .field("client", &self.client.is_some())
+            .finish()
     }
 }
 
@@ -35,17 +62,27 @@ impl FromStr for Broker {
     type Err = String;
 
     fn from_str(text: &str) -> Result<Self, String> {
-        let bad =
-            |why: &str| format!("bad broker address {text:?}: {why} (expected mqtt://HOST:PORT)");
-        let rest = match text.split_once("://") {
-            Some(("mqtt" | "tcp", rest)) => rest,
+        let shown = crate::telegraf::state_nats::mask(text);
+        let bad = |why: &str| {
+            format!(
+                "bad broker address {shown:?}: {why} (expected mqtt://HOST:PORT or mqtts://HOST:PORT)"
+            )
+        };
+        let (tls, rest) = match text.split_once("://") {
+            Some(("mqtt" | "tcp", rest)) => (false, rest),
+            Some(("mqtts" | "ssl", rest)) => (true, rest),
             Some((scheme, _)) => {
                 return Err(bad(&format!(
-                    "scheme {scheme:?} is not supported, only mqtt:// (plain TCP)"
+                    "scheme {scheme:?} is not supported, only mqtt:// (plain TCP) and mqtts:// (TLS)"
                 )));
             }
-            None => text,
+            None => (false, text),
         };
+        if rest.contains('@') {
+            return Err(bad(
+                "credentials do not go in the address: use --username and --password-env VAR",
+            ));
+        }
         let rest = rest.trim_end_matches('/');
         let (host, port) = if let Some(v6) = rest.strip_prefix('[') {
             let (host, after) = v6.split_once(']').ok_or_else(|| bad("unclosed '['"))?;
@@ -65,12 +102,45 @@ impl FromStr for Broker {
                 .ok()
                 .filter(|p| *p != 0)
                 .ok_or_else(|| bad(&format!("port {p:?} is not a number 1..65535")))?,
+            None if tls => 8883,
             None => 1883,
         };
         Ok(Broker {
             host: host.to_string(),
             port,
+            tls,
         })
+    }
+}
+
+/// Why connecting failed, in the user's terms: the broker refused the login, TLS failed, or no
+/// broker answered. The error texts of rumqttc name no secret.
+fn connect_failure(broker: &Broker, login: &Login, e: &rumqttc::ConnectionError) -> String {
+    use rumqttc::{ConnectReturnCode as C, ConnectionError as E};
+    let who = match &login.username {
+        Some(u) => format!("as user `{u}`"),
+        None => "without a user name".into(),
+    };
+    match e {
+        E::ConnectionRefused(C::BadUserNamePassword | C::NotAuthorized) => format!(
+            "MQTT broker {broker} refused the login ({who}: {e:?}); check --username and the \
+             password in the variable --password-env names"
+        ),
+        E::ConnectionRefused(code) => {
+            format!("MQTT broker {broker} refused the connection ({who}): {code:?}")
+        }
+        E::Tls(_) => format!(
+            "TLS failed with MQTT broker {broker}: {e}; check --tls-ca (the CA that signed the \
+             broker's certificate), the host name against the certificate, and --tls-cert/--tls-key \
+             when the broker asks for a client certificate"
+        ),
+        _ if broker.tls && format!("{e}").to_ascii_lowercase().contains("certificate") => format!(
+            "TLS failed with MQTT broker {broker}: {e}; check --tls-ca, --tls-cert and --tls-key"
+        ),
+        _ if !broker.tls && format!("{e}").contains("reset by peer") => format!(
+            "cannot reach MQTT broker {broker}: {e} (does the broker expect TLS? then write mqtts://)"
+        ),
+        _ => format!("cannot reach MQTT broker {broker}: {e}"),
     }
 }
 
@@ -103,7 +173,36 @@ impl Publisher {
         qos: QoS,
         timeout: Duration,
     ) -> Result<Self, String> {
+        Self::connect_with(broker, client_id, qos, timeout, &Login::default())
+    }
+
+    /// [`Publisher::connect`] with a login (credentials, TLS). A refused login, a TLS failure
+    /// and an unreachable broker each say so.
+    pub fn connect_with(
+        broker: &Broker,
+        client_id: &str,
+        qos: QoS,
+        timeout: Duration,
+        login: &Login,
+    ) -> Result<Self, String> {
         let mut options = MqttOptions::new(client_id, broker.host.clone(), broker.port);
+        if let Some(user) = &login.username {
+            options.set_credentials(user.clone(), login.password.clone().unwrap_or_default());
+        }
+        if broker.tls {
+            let Some(ca) = login.ca.clone() else {
+                return Err(format!(
+                    "{broker} is TLS: --tls-ca PATH must name the CA that signed its certificate"
+                ));
+            };
+            options.set_transport(rumqttc::Transport::tls_with_config(
+                rumqttc::TlsConfiguration::Simple {
+                    ca,
+                    alpn: None,
+                    client_auth: login.client.clone(),
+                },
+            ));
+        }
         options.set_keep_alive(Duration::from_secs(30));
         // A 360-beam scan is ~7 KB of JSON, over rumqttc's 10 KiB default only for larger scans,
         // but long recordings may carry more: allow up to 1 MiB either way.
@@ -121,7 +220,7 @@ impl Publisher {
             match connection.recv_timeout(left) {
                 Ok(Ok(Event::Incoming(Packet::ConnAck(_)))) => break,
                 Ok(Ok(_)) => {}
-                Ok(Err(e)) => return Err(format!("cannot reach MQTT broker {broker}: {e}")),
+                Ok(Err(e)) => return Err(connect_failure(broker, login, &e)),
                 Err(RecvTimeoutError::Timeout) => {}
                 Err(RecvTimeoutError::Disconnected) => {
                     return Err(format!("cannot reach MQTT broker {broker}: client closed"));
@@ -247,7 +346,8 @@ mod tests {
             b,
             Broker {
                 host: "127.0.0.1".into(),
-                port: 1884
+                port: 1884,
+                tls: false
             }
         );
         assert_eq!(b.to_string(), "mqtt://127.0.0.1:1884");
@@ -258,16 +358,22 @@ mod tests {
             b,
             Broker {
                 host: "::1".into(),
-                port: 99
+                port: 99,
+                tls: false
             }
         );
         assert_eq!(b.to_string(), "mqtt://[::1]:99");
+        let b: Broker = "mqtts://h".parse().unwrap();
+        assert_eq!((b.port, b.tls), (8883, true));
+        assert_eq!(b.to_string(), "mqtts://h:8883");
         assert!(
-            "mqtts://h:1"
+            "http://h:1"
                 .parse::<Broker>()
                 .unwrap_err()
                 .contains("not supported")
         );
+        let e = "mqtt://u:Secr3t@h:1".parse::<Broker>().unwrap_err();
+        assert!(e.contains("--password-env"), "{e}");
         assert!("mqtt://h:x".parse::<Broker>().unwrap_err().contains("port"));
         assert!(
             "mqtt://:1"
@@ -288,6 +394,7 @@ mod tests {
         let broker = Broker {
             host: "127.0.0.1".into(),
             port,
+            tls: false,
         };
         let err = Publisher::connect(&broker, "t", QoS::AtLeastOnce, Duration::from_secs(5))
             .err()

@@ -36,13 +36,16 @@ pub enum Target {
     /// `--state FILE`: one file, this module.
     File(PathBuf),
     /// `--state nats://HOST:PORT[,HOST:PORT...]/BUCKET[?options]`: a JetStream key-value bucket.
-    Nats(super::state_nats::Url),
+    Nats(Box<super::state_nats::Url>),
 }
 
-/// Parse `--state`: `nats://...` is a bucket, anything else a file path.
+/// Parse `--state`: `nats://...` is a bucket, anything else a file path. Anything that looks
+/// like a URL (`SCHEME://`, or `nats:` without `//`) is parsed as one, so a mistyped bucket URL
+/// is refused rather than taken as a file name.
 pub fn parse_target(s: &str) -> Result<Target, String> {
-    if s.starts_with("nats://") {
-        super::state_nats::Url::parse(s).map(Target::Nats)
+    let lower = s.to_ascii_lowercase();
+    if s.contains("://") || lower.starts_with("nats:") || lower.starts_with("tls:") {
+        super::state_nats::Url::parse(s).map(|u| Target::Nats(Box::new(u)))
     } else if s.is_empty() {
         Err("empty path".into())
     } else {

@@ -12,7 +12,8 @@
 //!   `json_timestamp_units = "1ms"`: one message per action on `robots/<robot>/action`, i.e.
 //!   NATS subject `robots.<robot>.action` (published here directly on that subject).
 //!
-//! Include with `#[path = "support/nats_standin.rs"] mod nats_standin;`.
+//! Include with `#[path = "support/nats_standin.rs"] mod nats_standin;`, after `nats_cluster`
+//! (its [`crate::nats_cluster::Login`]).
 #![allow(dead_code)]
 
 use influxdb_line_protocol::{FieldValue, parse_lines};
@@ -155,7 +156,9 @@ impl NatsStandIn {
         nats_url: &str,
         partition: usize,
         args: &[String],
+        login: &crate::nats_cluster::Login,
     ) -> NatsStandIn {
+        let login = login.clone();
         let mut child = Command::new(bin)
             .arg("run")
             .args(args)
@@ -181,7 +184,7 @@ impl NatsStandIn {
                 .unwrap();
             rt.block_on(async move {
                 use futures_util::StreamExt;
-                let client = async_nats::connect(url.as_str()).await.unwrap();
+                let client = login.connect(url.as_str()).await.unwrap();
                 let mut sub = client.queue_subscribe(subject, queue).await.unwrap();
                 client.flush().await.unwrap();
                 ready_tx.send(client.clone()).unwrap();
