@@ -17,7 +17,10 @@
 //! type written somewhere on its cycle (a function: its return type), a type argument no
 //! parameter type determines is given at the call, named arguments follow TeSSLa's order rule,
 //! and annotations are used as declared (kind, arity, argument types, constants; defined once,
-//! at the top level).
+//! at the top level). Only `liftable` functions apply to streams (a stream for a value parameter
+//! of another user function is a type mismatch), `liftable` needs a function of value types,
+//! and a builtin without a signature of its own is typed by its declaration in the bundled
+//! prelude (`sum(x: Events[Int])`), type arguments counted too.
 //!
 //! Soundness rule: the checker never rejects a spec TeSSLa accepts. Whatever it does not model
 //! (type aliases and extern types, named arguments of builtins, record fields of a value of still
