@@ -1,12 +1,12 @@
 //! `tessla-telegraf run --state nats://...`: the run with a shared state bucket (and, with
-//! `?lease=NAME`, a partition lease), driving [`crate::telegraf::fleet`] on stdin/stdout.
+//! `?lease=NAME`, a partition lease), driving [`crate::transport::nats_fleet`] on stdin/stdout.
 
 use super::{CliError, CliResult, RunArgs};
-use crate::telegraf::fleet::{self, Fleet};
 use crate::telegraf::processor::{Options, Processor};
 use crate::telegraf::reload::{self, SpecSource};
 use crate::telegraf::state::{self, Backend};
 use crate::telegraf::state_nats::{Failure, NatsBackend, Url};
+use crate::transport::nats_fleet::{self, Fleet};
 use std::time::Duration;
 
 pub fn run(
@@ -36,7 +36,7 @@ pub fn run(
     // (one minute without --state-interval) and two lease TTLs.
     let window = args.state_interval.unwrap_or(Duration::from_secs(30)) * 2 + url.ttl * 2;
     let rt = super::run::runtime()?;
-    let result = rt.block_on(fleet::run(
+    let result = rt.block_on(nats_fleet::run(
         &mut proc,
         Fleet {
             backend: &mut backend as &mut dyn Backend,

@@ -4,15 +4,14 @@
 //! value conversion), how outputs become metrics ([`encode`]: `@TelegrafOut`, `@TelegrafField`,
 //! the default grouped metric), and the step loop with pass-through, late records, exact
 //! duplicates ([`dedup`]) and counters ([`processor`]), `--state` persistence ([`state`]; a shared
-//! NATS bucket: [`state_nats`]), the partition-lease step loop of a fleet on NATS ([`fleet`]),
-//! SIGHUP spec reloads ([`reload`]) and warnings about inputs no metric feeds ([`wiring`]).
-//! Transports (stdin/stdout, UDP) feed bytes to a [`processor::Processor`].
+//! NATS bucket and partition lease: [`state_nats`]), SIGHUP spec reloads ([`reload`]) and warnings
+//! about inputs no metric feeds ([`wiring`]). Transports (stdin/stdout, UDP, and the partition-lease
+//! loop of a fleet on NATS: [`crate::transport`]) feed bytes to a [`processor::Processor`].
 
 pub mod binding;
 pub mod clock;
 pub mod dedup;
 pub mod encode;
-pub mod fleet;
 pub mod instances;
 pub mod processor;
 pub mod reload;

@@ -1,10 +1,12 @@
 //! Transports: moving bytes between the outside world and a [`crate::telegraf::processor::Processor`].
 //!
-//! Owns: stdin/stdout for Telegraf's `processors.execd` ([`stdio`]) and the TeSSLa Telegraf
+//! Owns: stdin/stdout for Telegraf's `processors.execd` ([`stdio`]), the same with a shared NATS
+//! state backend and partition lease for a fleet ([`nats_fleet`]) and the TeSSLa Telegraf
 //! Connector's UDP wiring ([`udp`]), including signals, end of input and closed outputs.
 
 use crate::telegraf::processor::Processor;
 
+pub mod nats_fleet;
 pub mod stdio;
 pub mod udp;
 

@@ -9,12 +9,12 @@
 //! losing it, dropping every instance; the save points (`--state-interval`, every ending while
 //! holding the lease, then releasing it). Signals and SIGHUP as in the stdio transport.
 
-use super::clock::Wall;
-use super::instances::Key;
-use super::processor::Processor;
-use super::state::Backend;
-use super::state_nats::Lease;
 use crate::log::{self, Level};
+use crate::telegraf::clock::Wall;
+use crate::telegraf::instances::Key;
+use crate::telegraf::processor::Processor;
+use crate::telegraf::state::Backend;
+use crate::telegraf::state_nats::Lease;
 use crate::transport::Ending;
 use lineproto::{Metric, Record, RecordSplitter, parse_record_into};
 use std::collections::{HashMap, VecDeque};
