@@ -12,7 +12,8 @@
 //!
 //! Also owns what `--state` names ([`Target`]: a file, or `nats://HOST:PORT/BUCKET`, whose
 //! backend lives in [`super::state_nats`]) and the format of one instance's entry
-//! ([`encode_entry`], [`check_entry`]: the same magic, version and fingerprint, per instance).
+//! ([`encode_entry`], [`check_entry`]: the same magic, version and fingerprint, per instance)
+//! and the warning both backends give for values that cannot be saved ([`warn_unsaved`]).
 
 use crate::log::{self, Level};
 use crate::telegraf::instances::Key;
@@ -143,6 +144,19 @@ pub fn encode_entry(
     (serde_json::to_vec(&entry).unwrap_or_default(), unsaved)
 }
 
+/// The warning of a save, in every backend, when `unsaved` stream values (functions) could not
+/// be saved; nothing when there are none.
+pub fn warn_unsaved(unsaved: usize) {
+    if unsaved > 0 {
+        log::log(
+            Level::Warn,
+            &format!(
+                "state: {unsaved} stream values are functions and cannot be saved; those streams restart empty"
+            ),
+        );
+    }
+}
+
 /// An instance key for a message: its tag values in `--instance-by` order, an absent tag as
 /// `(absent)`.
 fn show_key(key: &Key) -> String {
@@ -266,14 +280,7 @@ pub fn save(path: &Path, proc: &Processor, ctx: &Context) -> io::Result<usize> {
         })?
     };
     let unsaved: usize = parts.iter().map(|(_, u)| u).sum();
-    if unsaved > 0 {
-        log::log(
-            Level::Warn,
-            &format!(
-                "state: {unsaved} stream values are functions and cannot be saved; those streams restart empty"
-            ),
-        );
-    }
+    warn_unsaved(unsaved);
     let fingerprint = fingerprint(program, ctx);
     let header = serde_json::to_vec(&HeaderOut {
         magic: MAGIC,

@@ -956,14 +956,7 @@ impl Backend for NatsBackend {
                 (kv_key(key), bytes::Bytes::from(bytes))
             })
             .collect();
-        if unsaved > 0 {
-            log::log(
-                Level::Warn,
-                &format!(
-                    "state: {unsaved} stream values are functions and cannot be saved; those streams restart empty"
-                ),
-            );
-        }
+        state::warn_unsaved(unsaved);
         let n = entries.len();
         let store = self.store.clone();
         let result = self.conn.call(async move {
