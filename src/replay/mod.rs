@@ -24,15 +24,8 @@ pub struct Sample {
     pub fields: Vec<(String, FieldValue)>,
 }
 
-/// A field value as recorded.
-#[derive(Debug, Clone, PartialEq)]
-pub enum FieldValue {
-    Float(f64),
-    Int(i64),
-    UInt(u64),
-    Bool(bool),
-    Str(String),
-}
+/// A field value as recorded: the line-protocol codec's own type.
+pub use lineproto::FieldValue;
 
 /// A record of the input that could not be read; reading goes on with the next one.
 #[derive(Debug, Clone, PartialEq)]

@@ -11,9 +11,9 @@
 use super::closed_loop::{Action, Message, Reply, Twin};
 use super::in_process::action_of;
 use crate::log::{self, Level};
+use crate::replay::Sample;
 use crate::replay::message::{MessageOptions, to_json};
 use crate::replay::mqtt::{Broker, Publisher};
-use crate::replay::{FieldValue as SampleValue, Sample};
 use lineproto::{FieldValue, LineWriter, Metric};
 use rumqttc::{Client, Event, MqttOptions, Packet, QoS, RecvTimeoutError};
 use serde_json::Value;
@@ -115,19 +115,19 @@ fn sample_of(message: &Message) -> Sample {
     let mut fields = vec![
         (
             "expectedSpeed".to_string(),
-            SampleValue::Float(message.expected_speed),
+            FieldValue::Float(message.expected_speed),
         ),
         (
             "actualSpeed".to_string(),
-            SampleValue::Str(message.actual_speed_text()),
+            FieldValue::Str(message.actual_speed_text()),
         ),
         (
             "expectedAngular".to_string(),
-            SampleValue::Float(message.expected_angular),
+            FieldValue::Float(message.expected_angular),
         ),
         (
             "actualAngular".to_string(),
-            SampleValue::Float((message.actual_angular * 1e4).round() / 1e4),
+            FieldValue::Float((message.actual_angular * 1e4).round() / 1e4),
         ),
     ];
     fields.extend(
@@ -135,7 +135,7 @@ fn sample_of(message: &Message) -> Sample {
             .lidar
             .iter()
             .enumerate()
-            .map(|(i, r)| (format!("lidar_{i}"), SampleValue::Float(*r))),
+            .map(|(i, r)| (format!("lidar_{i}"), FieldValue::Float(*r))),
     );
     Sample {
         line: 0,
