@@ -3,7 +3,11 @@
 //! Owns: stdin/stdout for Telegraf's `processors.execd` ([`stdio`]), the same with a shared NATS
 //! state backend and partition lease for a fleet ([`nats_fleet`]) and the TeSSLa Telegraf
 //! Connector's UDP wiring ([`udp`]), including signals, end of input and closed outputs.
+//! What their step loops share lives here: the signals ([`Signals`], with the order every loop
+//! selects in), the periodic timer, the wall-clock deadline and the silent-input step
+//! ([`advance_silent`]).
 
+use crate::telegraf::clock::Wall;
 use crate::telegraf::processor::Processor;
 
 pub mod nats_fleet;
@@ -48,6 +52,38 @@ pub(crate) async fn sleep_until(deadline: Option<std::time::Instant>) {
         Some(d) => tokio::time::sleep_until(tokio::time::Instant::from_std(d)).await,
         None => std::future::pending().await,
     }
+}
+
+/// The signals every step loop answers: SIGTERM and SIGINT end the run, SIGHUP reloads the spec.
+///
+/// Each loop selects on them first (`biased`: SIGTERM, SIGINT, SIGHUP), then its periodic
+/// ticks, then its input, then the wall-clock deadline ([`sleep_until`], [`advance_silent`]).
+/// Signals first so input never starves them; the deadline last so a delay falls due by the
+/// wall clock only when no input is waiting (input not read yet is not silence).
+pub(crate) struct Signals {
+    pub term: tokio::signal::unix::Signal,
+    pub int: tokio::signal::unix::Signal,
+    pub hup: tokio::signal::unix::Signal,
+}
+
+impl Signals {
+    /// Install the handlers (before the first read, so no signal is missed).
+    pub(crate) fn new() -> std::io::Result<Self> {
+        use tokio::signal::unix::{SignalKind, signal};
+        Ok(Self {
+            term: signal(SignalKind::terminate())?,
+            int: signal(SignalKind::interrupt())?,
+            hup: signal(SignalKind::hangup())?,
+        })
+    }
+}
+
+/// The silent input: the deadline of [`sleep_until`] passed with no input waiting, so `proc`
+/// moves on to `wall` (read once per wake-up, the same for every processor of the loop) and the
+/// delays that fell due are evaluated, outputs appended to `out`.
+pub(crate) fn advance_silent(proc: &mut Processor, wall: Wall, out: &mut Vec<u8>) {
+    proc.set_wall(wall);
+    proc.advance_wall(wall.at, out);
 }
 
 /// How a transport's run ended.

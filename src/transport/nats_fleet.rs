@@ -231,10 +231,7 @@ pub async fn run(proc: &mut Processor, mut fleet: Fleet<'_>) -> std::io::Result<
     let mut splitter = RecordSplitter::default();
     let mut buf = vec![0u8; BUF];
     let mut out = Vec::with_capacity(BUF);
-    use tokio::signal::unix::{SignalKind, signal};
-    let mut sigterm = signal(SignalKind::terminate())?;
-    let mut sigint = signal(SignalKind::interrupt())?;
-    let mut sighup = signal(SignalKind::hangup())?;
+    let mut signals = crate::transport::Signals::new()?;
     let period = l.f.interval.unwrap_or(Duration::from_secs(86_400 * 365));
     let mut saves = tokio::time::interval_at(tokio::time::Instant::now() + period, period);
     saves.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -247,12 +244,13 @@ pub async fn run(proc: &mut Processor, mut fleet: Fleet<'_>) -> std::io::Result<
             .next_deadline()
             .filter(|_| l.active && splitter.buffered() == 0);
         let n = tokio::select! {
-            // Biased, in this order: a signal is never starved by input, and a delay falls due
-            // by the wall clock only when no input is waiting (input not read yet is not silence).
+            // Biased, in this order (see `Signals`): a signal is never starved by input, and a
+            // delay falls due by the wall clock only when no input is waiting (input not read yet
+            // is not silence).
             biased;
-            _ = sigterm.recv() => break Ending::Signal,
-            _ = sigint.recv() => break Ending::Signal,
-            _ = sighup.recv() => {
+            _ = signals.term.recv() => break Ending::Signal,
+            _ = signals.int.recv() => break Ending::Signal,
+            _ = signals.hup.recv() => {
                 (l.f.on_hangup)(proc, &mut out);
                 if write_out(&mut out).is_err() {
                     return Ok(finish(l, proc, Ending::OutputClosed));
@@ -272,9 +270,7 @@ pub async fn run(proc: &mut Processor, mut fleet: Fleet<'_>) -> std::io::Result<
             }
             r = stdin.read(&mut buf) => r?,
             _ = crate::transport::sleep_until(deadline) => {
-                let wall = Wall::now();
-                proc.set_wall(wall);
-                proc.advance_wall(wall.at, &mut out);
+                crate::transport::advance_silent(proc, Wall::now(), &mut out);
                 if write_out(&mut out).is_err() {
                     return Ok(finish(l, proc, Ending::OutputClosed));
                 }

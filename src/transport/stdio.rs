@@ -348,9 +348,7 @@ async fn run_shards(
     };
     let mut buf = vec![0u8; size];
     let mut out = Vec::with_capacity(BUF);
-    let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
-    let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())?;
-    let mut sighup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
+    let mut signals = super::Signals::new()?;
     let mut timer = super::timer(&hooks.periodic);
     let Hooks {
         on_hangup,
@@ -362,12 +360,13 @@ async fn run_shards(
             .next_deadline(proc)
             .filter(|_| splitter.buffered() == 0);
         let n = tokio::select! {
-            // Biased, in this order: a signal is never starved by input, and a delay falls due
-            // by the wall clock only when no input is waiting (input not read yet is not silence).
+            // Biased, in this order (see `Signals`): a signal is never starved by input, and a
+            // delay falls due by the wall clock only when no input is waiting (input not read yet
+            // is not silence).
             biased;
-            _ = sigterm.recv() => break Ending::Signal,
-            _ = sigint.recv() => break Ending::Signal,
-            _ = sighup.recv() => {
+            _ = signals.term.recv() => break Ending::Signal,
+            _ = signals.int.recv() => break Ending::Signal,
+            _ = signals.hup.recv() => {
                 on_hangup(proc, &mut out);
                 shards.each(|p| on_hangup(p, &mut out));
                 if write_out(&mut out, &mut shards.outs).is_err() {
@@ -385,12 +384,8 @@ async fn run_shards(
             _ = super::sleep_until(deadline) => {
                 // Silent input: the instances whose delays fell due move on by the wall clock.
                 let wall = Wall::now();
-                proc.set_wall(wall);
-                proc.advance_wall(wall.at, &mut out);
-                shards.each(|p| {
-                    p.set_wall(wall);
-                    p.advance_wall(wall.at, &mut out);
-                });
+                super::advance_silent(proc, wall, &mut out);
+                shards.each(|p| super::advance_silent(p, wall, &mut out));
                 if write_out(&mut out, &mut shards.outs).is_err() {
                     return Ok(Ending::OutputClosed);
                 }

@@ -38,9 +38,7 @@ pub async fn run(
     );
     let mut buf = vec![0u8; 65_536];
     let mut out = Vec::new();
-    let mut sigterm = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())?;
-    let mut sigint = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::interrupt())?;
-    let mut sighup = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::hangup())?;
+    let mut signals = super::Signals::new()?;
     let mut timer = super::timer(&hooks.periodic);
     let Hooks {
         on_hangup,
@@ -49,12 +47,13 @@ pub async fn run(
     loop {
         let deadline = proc.next_deadline();
         let n = tokio::select! {
-            // Biased, in this order: a signal is never starved by input, and a delay falls due
-            // by the wall clock only when no input is waiting (input not read yet is not silence).
+            // Biased, in this order (see `Signals`): a signal is never starved by input, and a
+            // delay falls due by the wall clock only when no input is waiting (input not read yet
+            // is not silence).
             biased;
-            _ = sigterm.recv() => break,
-            _ = sigint.recv() => break,
-            _ = sighup.recv() => {
+            _ = signals.term.recv() => break,
+            _ = signals.int.recv() => break,
+            _ = signals.hup.recv() => {
                 on_hangup(proc, &mut out);
                 send_packed(&out_sock, &out, max_datagram).await;
                 out.clear();
@@ -68,9 +67,7 @@ pub async fn run(
             }
             r = sock.recv(&mut buf) => r?,
             _ = super::sleep_until(deadline) => {
-                let wall = Wall::now();
-                proc.set_wall(wall);
-                proc.advance_wall(wall.at, &mut out);
+                super::advance_silent(proc, Wall::now(), &mut out);
                 send_packed(&out_sock, &out, max_datagram).await;
                 out.clear();
                 continue;
