@@ -3,9 +3,9 @@
 //! Owns: stdin/stdout for Telegraf's `processors.execd` ([`stdio`]), the same with a shared NATS
 //! state backend and partition lease for a fleet ([`nats_fleet`]) and the TeSSLa Telegraf
 //! Connector's UDP wiring ([`udp`]), including signals, end of input and closed outputs.
-//! What their step loops share lives here: the signals ([`Signals`], with the order every loop
+//! What their step loops share lives here: the signals (`Signals`, with the order every loop
 //! selects in), the periodic timer, the wall-clock deadline and the silent-input step
-//! ([`advance_silent`]).
+//! (`advance_silent`).
 
 use crate::telegraf::clock::Wall;
 use crate::telegraf::processor::Processor;
