@@ -69,6 +69,8 @@ impl std::fmt::Display for ParseError {
     }
 }
 
+impl std::error::Error for ParseError {}
+
 /// At most 60 characters of `text` (control characters escaped), `…` marking a cut.
 fn excerpt(text: &str) -> String {
     const MAX: usize = 60;

@@ -57,6 +57,15 @@ impl LoadError {
     }
 }
 
+impl std::fmt::Display for LoadError {
+    /// Same text as [`LoadError::render`].
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.render())
+    }
+}
+
+impl std::error::Error for LoadError {}
+
 /// Load the spec at `path` from the file system (includes relative to the including file,
 /// then [`LoadOptions::bundled_includes`]).
 pub fn load_file(path: &Path, options: &LoadOptions) -> Result<Loaded, LoadError> {

@@ -46,6 +46,8 @@ impl fmt::Display for RunError {
     }
 }
 
+impl std::error::Error for RunError {}
+
 /// The format of an input trace.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Format {
