@@ -11,7 +11,7 @@ use std::path::Path;
 use std::sync::Arc;
 use tessla_syntax::diag::Category;
 use tessla_syntax::diag::Diagnostic;
-use tessla_syntax::include::{FsResolver, Resolver, load_spec};
+use tessla_syntax::include::{FsResolver, ResolveError, Resolver, load_spec};
 use tessla_syntax::source::SourceMap;
 
 /// Options that change how a spec compiles.
@@ -83,7 +83,7 @@ struct FsOrBundled<'a> {
 }
 
 impl Resolver for FsOrBundled<'_> {
-    fn resolve(&self, from: Option<&str>, name: &str) -> Result<(String, String), String> {
+    fn resolve(&self, from: Option<&str>, name: &str) -> Result<(String, String), ResolveError> {
         let Some(from) = from else {
             return FsResolver.resolve(None, name);
         };
