@@ -124,7 +124,7 @@ pub fn load_with(
         Some(Err(msg)) => {
             return Err(LoadError {
                 sources,
-                diagnostics: vec![Diagnostic::error(Category::Time, None, msg)],
+                diagnostics: vec![Diagnostic::error(Category::Time, None, msg.0)],
             });
         }
     };
