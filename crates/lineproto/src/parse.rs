@@ -246,6 +246,13 @@ fn offset_of(body: &str, reason: &str) -> usize {
 mod tests {
     use super::*;
 
+    #[test]
+    fn errors_are_std_errors() {
+        fn is_error<E: std::error::Error>() {}
+        is_error::<ParseError>();
+        is_error::<crate::NotFinite>();
+    }
+
     fn ok(s: &str) -> Metric {
         parse_record(s.as_bytes()).unwrap().unwrap()
     }
