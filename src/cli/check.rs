@@ -162,7 +162,11 @@ fn count_defs(spec: &std::path::Path) -> (usize, usize) {
 struct FsOrLibraries;
 
 impl tessla_syntax::include::Resolver for FsOrLibraries {
-    fn resolve(&self, from: Option<&str>, name: &str) -> Result<(String, String), String> {
+    fn resolve(
+        &self,
+        from: Option<&str>,
+        name: &str,
+    ) -> Result<(String, String), tessla_syntax::include::ResolveError> {
         let fs = tessla_syntax::include::FsResolver.resolve(from, name);
         let file_name = name.strip_prefix("./").unwrap_or(name);
         match crate::bundled::LIBRARIES

@@ -69,6 +69,8 @@ impl std::fmt::Display for ParseError {
     }
 }
 
+impl std::error::Error for ParseError {}
+
 /// At most 60 characters of `text` (control characters escaped), `…` marking a cut.
 fn excerpt(text: &str) -> String {
     const MAX: usize = 60;
@@ -243,6 +245,13 @@ fn offset_of(body: &str, reason: &str) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn errors_are_std_errors() {
+        fn is_error<E: std::error::Error>() {}
+        is_error::<ParseError>();
+        is_error::<crate::NotFinite>();
+    }
 
     fn ok(s: &str) -> Metric {
         parse_record(s.as_bytes()).unwrap().unwrap()

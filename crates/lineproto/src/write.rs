@@ -22,6 +22,14 @@ use std::fmt::Write as _;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NotFinite;
 
+impl std::fmt::Display for NotFinite {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("a Float that is NaN or infinite cannot be written as line protocol")
+    }
+}
+
+impl std::error::Error for NotFinite {}
+
 /// The escape written for `c` in a name, if it needs one.
 fn name_escape(c: char, escape_eq: bool) -> Option<&'static str> {
     Some(match c {

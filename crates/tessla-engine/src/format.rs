@@ -111,9 +111,26 @@ fn parse_spec(body: &str) -> Result<Spec, String> {
     Ok(spec)
 }
 
+/// What Java's `String.format` would throw for, in our words.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FormatError(pub String);
+
+impl std::fmt::Display for FormatError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for FormatError {}
+
 /// `fmt` with its conversions applied to the single argument `v`, as Java's
 /// `String.format(Locale.ROOT, fmt, v)`. `Err`: what Java would throw for, in our words.
-pub fn java_format(fmt: &str, v: &Value) -> Result<String, String> {
+pub fn java_format(fmt: &str, v: &Value) -> Result<String, FormatError> {
+    java_format_text(fmt, v).map_err(FormatError)
+}
+
+/// [`java_format`] with the error as text.
+fn java_format_text(fmt: &str, v: &Value) -> Result<String, String> {
     let mut out = String::new();
     let mut rest = fmt;
     let mut next_arg = 1usize;

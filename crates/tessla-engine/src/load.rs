@@ -11,7 +11,7 @@ use std::path::Path;
 use std::sync::Arc;
 use tessla_syntax::diag::Category;
 use tessla_syntax::diag::Diagnostic;
-use tessla_syntax::include::{FsResolver, Resolver, load_spec};
+use tessla_syntax::include::{FsResolver, ResolveError, Resolver, load_spec};
 use tessla_syntax::source::SourceMap;
 
 /// Options that change how a spec compiles.
@@ -57,6 +57,15 @@ impl LoadError {
     }
 }
 
+impl std::fmt::Display for LoadError {
+    /// Same text as [`LoadError::render`].
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.render())
+    }
+}
+
+impl std::error::Error for LoadError {}
+
 /// Load the spec at `path` from the file system (includes relative to the including file,
 /// then [`LoadOptions::bundled_includes`]).
 pub fn load_file(path: &Path, options: &LoadOptions) -> Result<Loaded, LoadError> {
@@ -74,7 +83,7 @@ struct FsOrBundled<'a> {
 }
 
 impl Resolver for FsOrBundled<'_> {
-    fn resolve(&self, from: Option<&str>, name: &str) -> Result<(String, String), String> {
+    fn resolve(&self, from: Option<&str>, name: &str) -> Result<(String, String), ResolveError> {
         let Some(from) = from else {
             return FsResolver.resolve(None, name);
         };
@@ -115,7 +124,7 @@ pub fn load_with(
         Some(Err(msg)) => {
             return Err(LoadError {
                 sources,
-                diagnostics: vec![Diagnostic::error(Category::Time, None, msg)],
+                diagnostics: vec![Diagnostic::error(Category::Time, None, msg.0)],
             });
         }
     };

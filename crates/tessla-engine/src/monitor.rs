@@ -52,6 +52,23 @@ pub enum InputError {
     UnknownInput(usize),
 }
 
+impl std::fmt::Display for InputError {
+    /// The input is named by its index (callers holding the program name it).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            InputError::Decreasing { last, got } => {
+                write!(f, "Decreasing time stamps: first = {last}, second = {got}")
+            }
+            InputError::Multiple { input, ts } => {
+                write!(f, "Multiple events on input {input} at timestamp {ts}")
+            }
+            InputError::UnknownInput(i) => write!(f, "unknown input {i}"),
+        }
+    }
+}
+
+impl std::error::Error for InputError {}
+
 /// The state of one program instance: only what must persist between steps. Cheap to clone
 /// (the program is shared). Per-step scratch (this step's event of each node, argument buffers)
 /// lives in a per-thread buffer shared by all instances, see [`Scratch`].

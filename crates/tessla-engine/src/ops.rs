@@ -32,6 +32,18 @@ pub enum OpError {
     Undefined,
 }
 
+impl std::fmt::Display for OpError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            OpError::Overflow => "Integer overflow",
+            OpError::DivisionByZero => "Division by zero",
+            OpError::Undefined => "operator not defined for these operands",
+        })
+    }
+}
+
+impl std::error::Error for OpError {}
+
 /// `a op b` for two values that are not errors (callers propagate error values first).
 pub fn binary(op: BinOp, a: &Value, b: &Value) -> Result<Value, OpError> {
     use Value::*;

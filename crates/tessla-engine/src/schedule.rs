@@ -23,6 +23,15 @@ impl Cycle {
     }
 }
 
+impl std::fmt::Display for Cycle {
+    /// The message of [`Cycle::diagnostic`].
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.diagnostic().message)
+    }
+}
+
+impl std::error::Error for Cycle {}
+
 /// Evaluation order: strict dependencies first; a cycle not through `last`/`delay` is an error.
 pub fn order(nodes: &[Node], roots: &[NodeId]) -> Result<Vec<NodeId>, Cycle> {
     let n = nodes.len();

@@ -102,6 +102,22 @@ pub enum SError {
     Other(String),
 }
 
+impl std::fmt::Display for SError {
+    /// The message of the runtime error it stands for.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SError::DivisionByZero => RuntimeError::DivisionByZero.fmt(f),
+            SError::Overflow => RuntimeError::Overflow.fmt(f),
+            SError::GetSomeOfNone => RuntimeError::GetSomeOfNone.fmt(f),
+            SError::IndexOutOfBounds => RuntimeError::IndexOutOfBounds.fmt(f),
+            SError::NonPositiveDelay => RuntimeError::NonPositiveDelay.fmt(f),
+            SError::Other(s) => f.write_str(s),
+        }
+    }
+}
+
+impl std::error::Error for SError {}
+
 impl SValue {
     /// `None` for a value holding a function (not serialisable).
     pub fn from_value(v: &Value) -> Option<SValue> {

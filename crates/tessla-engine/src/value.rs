@@ -254,6 +254,8 @@ impl fmt::Display for RuntimeError {
     }
 }
 
+impl std::error::Error for RuntimeError {}
+
 #[cfg(test)]
 mod tests {
     use super::*;

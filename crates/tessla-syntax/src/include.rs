@@ -9,11 +9,30 @@ use crate::source::{FileId, SourceMap};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
+/// Why a [`Resolver`] found no text for a name; its text goes into the "cannot load the spec"
+/// and "cannot include" diagnostics.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ResolveError(pub String);
+
+impl std::fmt::Display for ResolveError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for ResolveError {}
+
+impl From<String> for ResolveError {
+    fn from(message: String) -> Self {
+        ResolveError(message)
+    }
+}
+
 /// Finds the text of a spec file by name.
 pub trait Resolver {
     /// Resolve `name` as written in an `include` of the file `from` (`None` for the root spec).
     /// Returns a canonical name (used for loop detection and messages) and the text.
-    fn resolve(&self, from: Option<&str>, name: &str) -> Result<(String, String), String>;
+    fn resolve(&self, from: Option<&str>, name: &str) -> Result<(String, String), ResolveError>;
 }
 
 /// Resolves names relative to the including file's directory on the file system.
@@ -21,7 +40,7 @@ pub trait Resolver {
 pub struct FsResolver;
 
 impl Resolver for FsResolver {
-    fn resolve(&self, from: Option<&str>, name: &str) -> Result<(String, String), String> {
+    fn resolve(&self, from: Option<&str>, name: &str) -> Result<(String, String), ResolveError> {
         let path = normalize(&match from.and_then(|f| Path::new(f).parent()) {
             Some(dir) => dir.join(name),
             None => PathBuf::from(name),
@@ -81,11 +100,11 @@ pub struct MemResolver {
 }
 
 impl Resolver for MemResolver {
-    fn resolve(&self, _from: Option<&str>, name: &str) -> Result<(String, String), String> {
+    fn resolve(&self, _from: Option<&str>, name: &str) -> Result<(String, String), ResolveError> {
         self.files
             .get(name)
             .map(|t| (name.to_string(), t.clone()))
-            .ok_or_else(|| format!("no bundled spec named `{name}`"))
+            .ok_or_else(|| ResolveError(format!("no bundled spec named `{name}`")))
     }
 }
 
@@ -132,7 +151,7 @@ const MAX_INCLUDE_DEPTH: usize = 64;
 
 impl LoadState<'_> {
     /// Resolve an include as TeSSLa does: the name as written, else with `.tessla` appended.
-    fn resolve(&self, from: &str, name: &str) -> Result<(String, String), String> {
+    fn resolve(&self, from: &str, name: &str) -> Result<(String, String), ResolveError> {
         self.resolver.resolve(Some(from), name).or_else(|err| {
             if name.ends_with(".tessla") {
                 return Err(err);

@@ -46,6 +46,8 @@ impl fmt::Display for RunError {
     }
 }
 
+impl std::error::Error for RunError {}
+
 /// The format of an input trace.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Format {
@@ -420,5 +422,30 @@ pub(crate) mod tests {
         let p = program("in x: Events[Int]\nout x");
         let e = run_stream(&p, "t", "1: x = 1\n2: x = 2\n".as_bytes(), &mut Closed).unwrap_err();
         assert_eq!(e.kind, ErrorKind::OutputClosed);
+    }
+
+    /// The library errors are `std::error::Error`s, and their text is the message they carry.
+    #[test]
+    fn library_errors_are_std_errors_with_their_messages_as_text() {
+        fn is_error<E: std::error::Error>() {}
+        is_error::<RunError>();
+        is_error::<reader::ReadError>();
+        is_error::<tessla_engine::LoadError>();
+        is_error::<tessla_engine::InputError>();
+        is_error::<tessla_engine::RuntimeError>();
+        is_error::<tessla_engine::ops::OpError>();
+        is_error::<tessla_engine::snapshot::SError>();
+        is_error::<tessla_engine::schedule::Cycle>();
+        is_error::<tessla_engine::format::FormatError>();
+        is_error::<tessla_engine::lower::time::BaseTimeError>();
+        is_error::<tessla_syntax::include::ResolveError>();
+
+        let r = MemResolver::default();
+        let e = tessla_syntax::include::Resolver::resolve(&r, None, "x").unwrap_err();
+        assert_eq!(e.to_string(), "no bundled spec named `x`");
+        let e = tessla_engine::lower::time::parse_base_time("0 s").unwrap_err();
+        assert_eq!(e.to_string(), "base time `0 s` must be positive");
+        let e = tessla_engine::format::java_format("%", &Value::Int(1)).unwrap_err();
+        assert_eq!(e.to_string(), "`%` lacks a conversion character");
     }
 }

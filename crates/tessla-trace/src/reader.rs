@@ -46,6 +46,15 @@ pub struct ReadError {
     pub message: String,
 }
 
+impl std::fmt::Display for ReadError {
+    /// `line N: message`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "line {}: {}", self.line, self.message)
+    }
+}
+
+impl std::error::Error for ReadError {}
+
 impl ReadError {
     fn malformed(line: usize, message: impl Into<String>) -> ReadError {
         ReadError {

@@ -20,13 +20,31 @@ pub(crate) fn unit_factor(unit: &str) -> Option<i128> {
     })
 }
 
+/// Why a base time is not one: a bad number, an unknown unit, or not positive.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BaseTimeError(pub String);
+
+impl std::fmt::Display for BaseTimeError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for BaseTimeError {}
+
+impl From<String> for BaseTimeError {
+    fn from(message: String) -> Self {
+        BaseTimeError(message)
+    }
+}
+
 /// Parse a base time in TeSSLa's form (`1 ns`, `33333 µs`, `1ms`) into femtoseconds.
-pub fn parse_base_time(s: &str) -> Result<i128, String> {
+pub fn parse_base_time(s: &str) -> Result<i128, BaseTimeError> {
     parse_base_parts(s).map(|(n, unit)| n * unit)
 }
 
 /// A base time as (count, unit in femtoseconds): `33333 µs` -> (33333, 10^9).
-pub fn parse_base_parts(s: &str) -> Result<(i128, i128), String> {
+pub fn parse_base_parts(s: &str) -> Result<(i128, i128), BaseTimeError> {
     let s = s.trim();
     let split = s.find(|c: char| !c.is_ascii_digit()).unwrap_or(s.len());
     let (num, unit) = s.split_at(split);
@@ -40,7 +58,7 @@ pub fn parse_base_parts(s: &str) -> Result<(i128, i128), String> {
         format!("unknown unit in base time `{s}`: use fs, ps, ns, us, µs, ms, s, min, h or d")
     })?;
     if n <= 0 {
-        return Err(format!("base time `{s}` must be positive"));
+        return Err(BaseTimeError(format!("base time `{s}` must be positive")));
     }
     Ok((n, f))
 }
