@@ -184,12 +184,24 @@ fn describe(instance_by: &[String], key: &Key) -> String {
         .join(",")
 }
 
-/// " (instance robot=a)", or nothing without `--instance-by`.
-fn instance_note(instance_by: &[String], key: &Key) -> String {
+/// The values of the `instance_by` tags in `m`.
+fn key_of(instance_by: &[String], m: &Metric) -> Key {
+    instance_by
+        .iter()
+        .map(|t| m.tag(t).map(str::to_string))
+        .collect()
+}
+
+/// " (instance robot=a)" for the instance of `m`, or nothing without `--instance-by`. Built
+/// only inside a warning's closure: a rate-limited warning costs no allocation.
+fn instance_note(instance_by: &[String], m: &Metric) -> String {
     if instance_by.is_empty() {
         String::new()
     } else {
-        format!(" (instance {})", describe(instance_by, key))
+        format!(
+            " (instance {})",
+            describe(instance_by, &key_of(instance_by, m))
+        )
     }
 }
 
@@ -263,11 +275,7 @@ impl Processor {
     }
 
     fn key(&self, m: &Metric) -> Key {
-        self.opts
-            .instance_by
-            .iter()
-            .map(|t| m.tag(t).map(str::to_string))
-            .collect()
+        key_of(&self.opts.instance_by, m)
     }
 
     /// The instance for `m`, created (starting at `ts`) when new.
@@ -427,8 +435,9 @@ impl Processor {
             return false;
         }
         self.counters.ahead += 1;
-        let inst = instance_note(&self.opts.instance_by, &self.key(metric));
+        let by = &self.opts.instance_by;
         log::warn_limited("ahead of the clock", || {
+            let inst = instance_note(by, metric);
             format!(
                 "line {}: timestamp {ts} is {} ahead of the wall clock{inst}; refused (not evaluated), so it cannot move the monitor's clock (--max-ahead {}; `--max-ahead off` for simulated data)",
                 rec.line,
@@ -483,15 +492,9 @@ impl Processor {
             if ts < last {
                 self.counters.late += 1;
                 dropped = self.opts.late == LateMode::Drop;
-                let inst_note = if self.opts.instance_by.is_empty() {
-                    String::new()
-                } else {
-                    let key: Key = (self.opts.instance_by.iter())
-                        .map(|t| metric.tag(t).map(str::to_string))
-                        .collect();
-                    instance_note(&self.opts.instance_by, &key)
-                };
+                let by = &self.opts.instance_by;
                 log::warn_limited("late record", || {
+                    let inst_note = instance_note(by, metric);
                     format!(
                         "line {}: timestamp {ts} is {} before its instance's last step at {last}{inst_note}; {}",
                         rec.line,
