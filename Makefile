@@ -142,3 +142,11 @@ report-example: build
 # sweeps over 20 seeds and a few gain/delta values; writes docs/reproduction.md and its plots.
 reproduce: build
 	nice -n 10 python3 tools/reproduce.py target/release/tessla-telegraf
+
+# A refactor's guard: everything the engine prints (`run` on the fixture and bench workloads,
+# `trace` on the conformance suite and fixtures, `check`/`check --ir` of every shipped spec),
+# compared byte for byte with an older binary: make outputs-compare BASE=path/to/old/binary
+outputs-compare: build
+	bash tools/outputs.sh $(BASE) target/outputs-base
+	bash tools/outputs.sh target/release/tessla-telegraf target/outputs-new
+	diff -r target/outputs-base target/outputs-new && echo "outputs-compare: identical"
