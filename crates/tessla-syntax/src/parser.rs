@@ -67,6 +67,17 @@ const TIME_UNITS: &[&str] = &["fs", "ps", "ns", "us", "µs", "ms", "s", "min", "
 struct Fail;
 type PResult<T> = Result<T, Fail>;
 
+/// How a comma-separated list between brackets may be written (see [`Parser::comma_list`]).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum ListForm {
+    /// May be empty and may end in a comma: call arguments, tuples, records.
+    Open,
+    /// May be empty, no trailing comma: parameters, tuple and function types.
+    NoTrailing,
+    /// At least one item, no trailing comma: type parameters and type arguments.
+    NonEmpty,
+}
+
 struct Parser<'a> {
     toks: Vec<Token>,
     pos: usize,
@@ -451,36 +462,51 @@ impl<'a> Parser<'a> {
         Ok(Annotation { name, args, span })
     }
 
-    /// Arguments after `(`, up to and including `)`.
-    fn args_until_close(&mut self) -> PResult<Vec<Arg>> {
-        let mut args = Vec::new();
+    /// Items separated by commas after an opening bracket, up to and including `close`; newlines
+    /// may stand around every item and comma. Returns the items and whether the list ended in a
+    /// comma (only [`ListForm::Open`] accepts one).
+    fn comma_list<T>(
+        &mut self,
+        close: &str,
+        form: ListForm,
+        mut item: impl FnMut(&mut Self) -> PResult<T>,
+    ) -> PResult<(Vec<T>, bool)> {
+        let mut out = Vec::new();
         self.skip_nl();
-        if self.eat_punct(")") {
-            return Ok(args);
+        if form != ListForm::NonEmpty && self.eat_punct(close) {
+            return Ok((out, false));
         }
         loop {
-            let name = match (self.peek(), self.peek_n(1)) {
+            out.push(item(self)?);
+            self.skip_nl();
+            if self.eat_punct(",") {
+                self.skip_nl();
+                if form == ListForm::Open && self.eat_punct(close) {
+                    return Ok((out, true));
+                }
+                continue;
+            }
+            self.expect_punct(close)?;
+            return Ok((out, false));
+        }
+    }
+
+    /// Arguments after `(`, up to and including `)`.
+    fn args_until_close(&mut self) -> PResult<Vec<Arg>> {
+        let (args, _) = self.comma_list(")", ListForm::Open, |p| {
+            let name = match (p.peek(), p.peek_n(1)) {
                 (Tok::Ident(n), Tok::Punct("=")) if !KEYWORDS.contains(&n.as_str()) => {
-                    let id = self.ident()?;
-                    self.advance();
-                    self.skip_nl();
+                    let id = p.ident()?;
+                    p.advance();
+                    p.skip_nl();
                     Some(id)
                 }
                 _ => None,
             };
-            let value = self.expr()?;
-            args.push(Arg { name, value });
-            self.skip_nl();
-            if self.eat_punct(",") {
-                self.skip_nl();
-                if self.eat_punct(")") {
-                    return Ok(args);
-                }
-                continue;
-            }
-            self.expect_punct(")")?;
-            return Ok(args);
-        }
+            let value = p.expr()?;
+            Ok(Arg { name, value })
+        })?;
+        Ok(args)
     }
 
     fn statement(&mut self) -> PResult<Statement> {
@@ -685,21 +711,10 @@ impl<'a> Parser<'a> {
     }
 
     fn type_params(&mut self) -> PResult<Vec<Ident>> {
-        let mut out = Vec::new();
-        if self.eat_punct("[") {
-            self.skip_nl();
-            loop {
-                out.push(self.ident()?);
-                self.skip_nl();
-                if self.eat_punct(",") {
-                    self.skip_nl();
-                    continue;
-                }
-                self.expect_punct("]")?;
-                break;
-            }
+        if !self.eat_punct("[") {
+            return Ok(Vec::new());
         }
-        Ok(out)
+        Ok(self.comma_list("]", ListForm::NonEmpty, Self::ident)?.0)
     }
 
     fn string_text(&mut self) -> PResult<String> {
@@ -805,21 +820,7 @@ impl<'a> Parser<'a> {
 
     /// Parameters after `(`, up to and including `)`.
     fn params_until_close(&mut self) -> PResult<Vec<Param>> {
-        let mut out = Vec::new();
-        self.skip_nl();
-        if self.eat_punct(")") {
-            return Ok(out);
-        }
-        loop {
-            out.push(self.param()?);
-            self.skip_nl();
-            if self.eat_punct(",") {
-                self.skip_nl();
-                continue;
-            }
-            self.expect_punct(")")?;
-            return Ok(out);
-        }
+        Ok(self.comma_list(")", ListForm::NoTrailing, Self::param)?.0)
     }
 
     fn evaluation(&mut self) -> Evaluation {
@@ -885,21 +886,10 @@ impl<'a> Parser<'a> {
             let after = self.after_matching(0);
             let is_fn = matches!(self.tok_at(after), Tok::Punct("=>"));
             self.advance();
-            self.skip_nl();
-            let mut params = Vec::new();
-            if !self.is_punct(")") {
-                loop {
-                    let ev = self.evaluation();
-                    params.push((ev, self.ty()?));
-                    self.skip_nl();
-                    if self.eat_punct(",") {
-                        self.skip_nl();
-                        continue;
-                    }
-                    break;
-                }
-            }
-            self.expect_punct(")")?;
+            let (params, _) = self.comma_list(")", ListForm::NoTrailing, |p| {
+                let ev = p.evaluation();
+                Ok((ev, p.ty()?))
+            })?;
             if is_fn {
                 self.expect_punct("=>")?;
                 self.skip_nl();
@@ -917,20 +907,12 @@ impl<'a> Parser<'a> {
             });
         }
         if self.eat_punct("{") {
-            self.skip_nl();
-            let mut fields = Vec::new();
-            while !self.is_punct("}") {
-                let n = self.ident()?;
-                self.expect_punct(":")?;
-                self.skip_nl();
-                fields.push((n, self.ty()?));
-                self.skip_nl();
-                if !self.eat_punct(",") {
-                    break;
-                }
-                self.skip_nl();
-            }
-            self.expect_punct("}")?;
+            let (fields, _) = self.comma_list("}", ListForm::Open, |p| {
+                let n = p.ident()?;
+                p.expect_punct(":")?;
+                p.skip_nl();
+                Ok((n, p.ty()?))
+            })?;
             return Ok(Type::Record {
                 fields,
                 span: start.to(self.prev_span()),
@@ -938,18 +920,7 @@ impl<'a> Parser<'a> {
         }
         let name = self.ident()?;
         if self.eat_punct("[") {
-            self.skip_nl();
-            let mut args = Vec::new();
-            loop {
-                args.push(self.ty()?);
-                self.skip_nl();
-                if self.eat_punct(",") {
-                    self.skip_nl();
-                    continue;
-                }
-                break;
-            }
-            self.expect_punct("]")?;
+            let (args, _) = self.comma_list("]", ListForm::NonEmpty, Self::ty)?;
             return Ok(Type::App {
                 name,
                 args,
@@ -1119,18 +1090,7 @@ impl<'a> Parser<'a> {
                 };
             } else if self.is_punct("[") {
                 self.advance();
-                self.skip_nl();
-                let mut type_args = Vec::new();
-                loop {
-                    type_args.push(self.ty()?);
-                    self.skip_nl();
-                    if self.eat_punct(",") {
-                        self.skip_nl();
-                        continue;
-                    }
-                    break;
-                }
-                self.expect_punct("]")?;
+                let (type_args, _) = self.comma_list("]", ListForm::NonEmpty, Self::ty)?;
                 let args = if self.eat_punct("(") {
                     Some(self.args_until_close()?)
                 } else {
@@ -1241,21 +1201,7 @@ impl<'a> Parser<'a> {
             }
             Tok::Punct("(") => {
                 self.advance();
-                self.skip_nl();
-                let mut elems = Vec::new();
-                let mut trailing = false;
-                while !self.is_punct(")") {
-                    elems.push(self.expr()?);
-                    self.skip_nl();
-                    trailing = false;
-                    if self.eat_punct(",") {
-                        trailing = true;
-                        self.skip_nl();
-                        continue;
-                    }
-                    break;
-                }
-                self.expect_punct(")")?;
+                let (mut elems, trailing) = self.comma_list(")", ListForm::Open, Self::expr)?;
                 let span = start.to(self.prev_span());
                 if elems.len() == 1 && !trailing {
                     let mut e = elems.pop().ok_or(Fail)?;
@@ -1285,27 +1231,19 @@ impl<'a> Parser<'a> {
             _ => false,
         };
         if is_record {
-            let mut members = Vec::new();
-            while !self.is_punct("}") {
-                let name = self.ident()?;
-                let value = if self.eat_punct("=") || self.eat_punct(":") {
-                    self.skip_nl();
-                    self.expr()?
+            let (members, _) = self.comma_list("}", ListForm::Open, |p| {
+                let name = p.ident()?;
+                let value = if p.eat_punct("=") || p.eat_punct(":") {
+                    p.skip_nl();
+                    p.expr()?
                 } else {
                     Expr {
                         span: name.span,
                         kind: ExprKind::Var(name.clone()),
                     }
                 };
-                members.push((name, value));
-                self.skip_nl();
-                if !self.eat_punct(",") {
-                    break;
-                }
-                self.skip_nl();
-            }
-            self.skip_nl();
-            self.expect_punct("}")?;
+                Ok((name, value))
+            })?;
             return Ok(Expr {
                 span: start.to(self.prev_span()),
                 kind: ExprKind::Record(members),
