@@ -4,8 +4,8 @@
 //! state backend and partition lease for a fleet ([`nats_fleet`]) and the TeSSLa Telegraf
 //! Connector's UDP wiring ([`udp`]), including signals, end of input and closed outputs.
 //! What their step loops share lives here: the signals (`Signals`, with the order every loop
-//! selects in), the periodic timer, the wall-clock deadline and the silent-input step
-//! (`advance_silent`).
+//! selects in), the periodic task with its timer (`Ticker`), the wall-clock deadline and the
+//! silent-input step (`advance_silent`).
 
 use crate::telegraf::clock::Wall;
 use crate::telegraf::processor::Processor;
@@ -25,24 +25,47 @@ pub struct Hooks<'a> {
     pub periodic: Option<Periodic<'a>>,
 }
 
-/// A timer for [`Hooks::periodic`]: never fires without one. The first tick is one period
-/// from now; ticks missed while busy are not made up.
-pub(crate) fn timer(periodic: &Option<Periodic<'_>>) -> Option<tokio::time::Interval> {
-    periodic.as_ref().map(|(d, _)| {
-        let d = (*d).max(std::time::Duration::from_millis(1));
-        let mut i = tokio::time::interval_at(tokio::time::Instant::now() + d, d);
-        i.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-        i
-    })
+impl<'a> Hooks<'a> {
+    /// The SIGHUP hook, and the periodic task with its timer (the timer starts now).
+    pub(crate) fn split(self) -> (&'a mut dyn FnMut(&mut Processor, &mut Vec<u8>), Ticker<'a>) {
+        let timer = self.periodic.as_ref().map(|(d, _)| {
+            let d = (*d).max(std::time::Duration::from_millis(1));
+            let mut i = tokio::time::interval_at(tokio::time::Instant::now() + d, d);
+            i.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+            i
+        });
+        let ticker = Ticker {
+            timer,
+            task: self.periodic,
+        };
+        (self.on_hangup, ticker)
+    }
 }
 
-/// Wait for the next tick of `timer` (forever without one).
-pub(crate) async fn tick(timer: &mut Option<tokio::time::Interval>) {
-    match timer {
-        Some(t) => {
-            t.tick().await;
+/// [`Hooks::periodic`] with its timer: the periodic branch of every step loop,
+/// `_ = ticker.tick() => { ticker.run(proc); continue; }`. Never fires without a task. The
+/// first tick is one period after [`Hooks::split`]; ticks missed while busy are not made up.
+pub(crate) struct Ticker<'a> {
+    timer: Option<tokio::time::Interval>,
+    task: Option<Periodic<'a>>,
+}
+
+impl Ticker<'_> {
+    /// Wait for the next tick (forever without a periodic task).
+    pub(crate) async fn tick(&mut self) {
+        match &mut self.timer {
+            Some(t) => {
+                t.tick().await;
+            }
+            None => std::future::pending().await,
         }
-        None => std::future::pending().await,
+    }
+
+    /// Run the periodic task (on a tick).
+    pub(crate) fn run(&mut self, proc: &Processor) {
+        if let Some((_, f)) = self.task.as_mut() {
+            f(proc);
+        }
     }
 }
 

@@ -349,11 +349,7 @@ async fn run_shards(
     let mut buf = vec![0u8; size];
     let mut out = Vec::with_capacity(BUF);
     let mut signals = super::Signals::new()?;
-    let mut timer = super::timer(&hooks.periodic);
-    let Hooks {
-        on_hangup,
-        mut periodic,
-    } = hooks;
+    let (on_hangup, mut ticker) = hooks.split();
     let ending = loop {
         // A record partly read is input arriving, not silence.
         let deadline = shards
@@ -374,10 +370,8 @@ async fn run_shards(
                 }
                 continue;
             }
-            _ = super::tick(&mut timer) => {
-                if let Some((_, f)) = periodic.as_mut() {
-                    f(proc);
-                }
+            _ = ticker.tick() => {
+                ticker.run(proc);
                 continue;
             }
             r = stdin.read(&mut buf) => r?,

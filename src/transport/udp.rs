@@ -39,11 +39,7 @@ pub async fn run(
     let mut buf = vec![0u8; 65_536];
     let mut out = Vec::new();
     let mut signals = super::Signals::new()?;
-    let mut timer = super::timer(&hooks.periodic);
-    let Hooks {
-        on_hangup,
-        mut periodic,
-    } = hooks;
+    let (on_hangup, mut ticker) = hooks.split();
     loop {
         let deadline = proc.next_deadline();
         let n = tokio::select! {
@@ -59,10 +55,8 @@ pub async fn run(
                 out.clear();
                 continue;
             }
-            _ = super::tick(&mut timer) => {
-                if let Some((_, f)) = periodic.as_mut() {
-                    f(proc);
-                }
+            _ = ticker.tick() => {
+                ticker.run(proc);
                 continue;
             }
             r = sock.recv(&mut buf) => r?,
