@@ -11,6 +11,14 @@
 //! comma and the arguments are paired). Integers are unbounded, as TeSSLa's `Int`.
 //! Operators mean what they mean in a spec: their semantics are `tessla_engine::ops` (so a
 //! negative shift shifts the other way, as TeSSLa's unbounded integers do).
+//!
+//! The evaluator is the trace reader's own, not the engine's constant folding: the engine folds
+//! typed IR code after type checking and lowering, while a trace value is typed by its value
+//! (an operator applies to the values it meets, `-1.5` is a float, a record `{_1 = a}` may
+//! stand for a tuple, an integer literal beyond 64 bits is read), is checked against the
+//! declared type only afterwards, and has TeSSLa's own error wording. What they share is the
+//! engine's: operators (`ops`), sets and maps (`collections`), values and the type notation
+//! (`Type`'s `Display`).
 
 use std::sync::Arc;
 use tessla_engine::ops::{self, OpError};
@@ -332,9 +340,7 @@ fn read_value(text: &str, line: usize) -> Result<Value, ReadError> {
             ));
         }
     };
-    eval(&expr).map_err(|e| match e {
-        EvalError::Bad(m) => ReadError::malformed(line, format!("in the value `{text}`: {m}")),
-    })
+    eval(&expr).map_err(|m| ReadError::malformed(line, format!("in the value `{text}`: {m}")))
 }
 
 /// `->` (outside string literals) replaced by `,`: in TeSSLa's trace grammar it only separates
@@ -380,30 +386,14 @@ fn check_escapes(text: &str) -> Result<(), String> {
     Ok(())
 }
 
-/// Why a trace value cannot be evaluated.
-enum EvalError {
-    Bad(String),
-}
-
-impl From<String> for EvalError {
-    fn from(m: String) -> Self {
-        EvalError::Bad(m)
-    }
-}
-
-impl From<&str> for EvalError {
-    fn from(m: &str) -> Self {
-        EvalError::Bad(m.to_string())
-    }
-}
-
-/// Evaluate a constant trace expression.
-fn eval(e: &Expr) -> Result<Value, EvalError> {
+/// Evaluate a constant trace expression, or say why it is not a trace value.
+fn eval(e: &Expr) -> Result<Value, String> {
     match &e.kind {
         ExprKind::Int { value, unit: None } => Ok(Value::from_big((*value).into())),
-        ExprKind::Int { unit: Some(u), .. } => {
-            Err(format!("time units (`{}`) are not allowed in traces", u.name).into())
-        }
+        ExprKind::Int { unit: Some(u), .. } => Err(format!(
+            "time units (`{}`) are not allowed in traces",
+            u.name
+        )),
         ExprKind::Float(f) => Ok(Value::Float(*f)),
         ExprKind::Str { parts, format } => {
             if *format {
@@ -430,7 +420,7 @@ fn eval(e: &Expr) -> Result<Value, EvalError> {
             let mut out: Vec<(Arc<str>, Value)> = Vec::new();
             for (name, v) in fields {
                 if out.iter().any(|(n, _)| **n == *name.name) {
-                    return Err(format!("member {} is given twice", name.name).into());
+                    return Err(format!("member {} is given twice", name.name));
                 }
                 out.push((name.name.as_str().into(), eval(v)?));
             }
@@ -441,7 +431,7 @@ fn eval(e: &Expr) -> Result<Value, EvalError> {
             "true" => Ok(Value::Bool(true)),
             "false" => Ok(Value::Bool(false)),
             "None" => Ok(Value::None),
-            other => Err(format!("`{other}` is not a value").into()),
+            other => Err(format!("`{other}` is not a value")),
         },
         ExprKind::Call {
             function,
@@ -452,7 +442,7 @@ fn eval(e: &Expr) -> Result<Value, EvalError> {
                 return Err("only `Some`, `List`, `Set` and `Map` may be called in traces".into());
             };
             if let Some(a) = args.iter().find_map(|a| a.name.as_ref()) {
-                return Err(format!("named argument `{}` in a trace value", a.name).into());
+                return Err(format!("named argument `{}` in a trace value", a.name));
             }
             let vals = args
                 .iter()
@@ -473,24 +463,22 @@ fn eval(e: &Expr) -> Result<Value, EvalError> {
                     // A repeated key keeps the last value, as Scala's `toMap` does.
                     Ok(tessla_engine::collections::map_of(map))
                 }
-                (other, n) => {
-                    Err(format!("`{other}` with {n} arguments is not a trace value").into())
-                }
+                (other, n) => Err(format!("`{other}` with {n} arguments is not a trace value")),
             }
         }
-        ExprKind::Unary { op, operand } => Ok(unary(*op, eval(operand)?)?),
+        ExprKind::Unary { op, operand } => unary(*op, eval(operand)?),
         ExprKind::Binary { op, lhs, rhs } => match op {
             BinOp::And => match eval(lhs)? {
                 Value::Bool(false) => Ok(Value::Bool(false)),
-                Value::Bool(true) => Ok(bool_of(eval(rhs)?)?),
-                v => Err(format!("`&&` needs Bool operands, found {}", show(&v)).into()),
+                Value::Bool(true) => bool_of(eval(rhs)?),
+                v => Err(format!("`&&` needs Bool operands, found {}", show(&v))),
             },
             BinOp::Or => match eval(lhs)? {
                 Value::Bool(true) => Ok(Value::Bool(true)),
-                Value::Bool(false) => Ok(bool_of(eval(rhs)?)?),
-                v => Err(format!("`||` needs Bool operands, found {}", show(&v)).into()),
+                Value::Bool(false) => bool_of(eval(rhs)?),
+                v => Err(format!("`||` needs Bool operands, found {}", show(&v))),
             },
-            _ => Ok(binary(*op, eval(lhs)?, eval(rhs)?)?),
+            _ => binary(*op, eval(lhs)?, eval(rhs)?),
         },
         ExprKind::If {
             cond,
@@ -500,7 +488,10 @@ fn eval(e: &Expr) -> Result<Value, EvalError> {
         } => match eval(cond)? {
             Value::Bool(true) => eval(then_branch),
             Value::Bool(false) => eval(else_branch),
-            v => Err(format!("an `if` condition must be a Bool, found {}", show(&v)).into()),
+            v => Err(format!(
+                "an `if` condition must be a Bool, found {}",
+                show(&v)
+            )),
         },
         _ => Err("only constants, operators and `if` are allowed in trace values".into()),
     }
@@ -570,33 +561,10 @@ fn show(v: &Value) -> String {
     }
 }
 
-/// A type as TeSSLa writes it.
-pub fn type_name(t: &Type) -> String {
-    let join = |ts: &[Type]| ts.iter().map(type_name).collect::<Vec<_>>().join(", ");
-    match t {
-        Type::Unit => "Unit".into(),
-        Type::Bool => "Bool".into(),
-        Type::Int => "Int".into(),
-        Type::Float => "Float".into(),
-        Type::String => "String".into(),
-        Type::Option(t) => format!("Option[{}]", type_name(t)),
-        Type::List(t) => format!("List[{}]", type_name(t)),
-        Type::Tuple(ts) => format!("({})", join(ts)),
-        Type::Record(fs) => format!(
-            "{{{}}}",
-            fs.iter()
-                .map(|(n, t)| format!("{n}: {}", type_name(t)))
-                .collect::<Vec<_>>()
-                .join(", ")
-        ),
-        Type::Events(t) => format!("Events[{}]", type_name(t)),
-        Type::Unknown => "?".into(),
-    }
-}
-
-/// `v` as a value of type `t`, or why it is not one (TeSSLa's wording).
+/// `v` as a value of type `t`, or why it is not one (TeSSLa's wording; types in the engine's
+/// notation, `tessla_engine::Type`'s `Display`).
 fn coerce(v: Value, t: &Type) -> Result<Value, String> {
-    let mismatch = |v: &Value| format!("{} is not of type {}.", show(v), type_name(t));
+    let mismatch = |v: &Value| format!("{} is not of type {t}.", show(v));
     match (v, t) {
         (v, Type::Unknown) => Ok(v),
         (v @ Value::Unit, Type::Unit)
@@ -641,19 +609,16 @@ fn coerce(v: Value, t: &Type) -> Result<Value, String> {
                     .iter()
                     .find(|(k, _)| **k == **n)
                     .map(|(_, x)| x.clone())
-                    .ok_or_else(|| format!("Expected {} but {n} is missing.", type_name(t)))?;
+                    .ok_or_else(|| format!("Expected {t} but {n} is missing."))?;
                 out.push((n.as_str().into(), coerce(x, ft)?));
             }
             if let Some((extra, _)) = fs.iter().find(|(k, _)| !ts.iter().any(|(n, _)| **k == **n)) {
-                return Err(format!(
-                    "Expected {} but found the extra member {extra}.",
-                    type_name(t)
-                ));
+                return Err(format!("Expected {t} but found the extra member {extra}."));
             }
             out.sort_by(|a, b| a.0.cmp(&b.0));
             Ok(Value::Record(out.into()))
         }
-        (v, Type::Record(_)) => Err(format!("Expected {} but found {}.", type_name(t), show(&v))),
+        (v, Type::Record(_)) => Err(format!("Expected {t} but found {}.", show(&v))),
         (v, _) => Err(mismatch(&v)),
     }
 }
