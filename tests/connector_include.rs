@@ -3,11 +3,10 @@
 //! bundled Telegraf annotations and says so once at `I!`; a file that is there is read as
 //! written; a spec using the annotations without the include is told the line to add.
 
-use std::io::Write;
-use std::path::Path;
-use std::process::{Command, Output, Stdio};
+#[path = "support/run.rs"]
+mod run;
 
-const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use run::{run_in, text, write};
 
 /// The connector's CPU example, as its users write it.
 const SPEC: &str = "include \"INCLUDE\"\n\
@@ -18,34 +17,13 @@ const SPEC: &str = "include \"INCLUDE\"\n\
     @TelegrafOut(\"cpu_high\")\n\
     out high\n";
 
-fn tessla(dir: &Path, args: &[&str], stdin: &str) -> Output {
-    let mut child = Command::new(BIN)
-        .args(args)
-        .current_dir(dir)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let _ = child.stdin.take().unwrap().write_all(stdin.as_bytes());
-    child.wait_with_output().unwrap()
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
-
 #[test]
 fn the_connectors_include_works_from_an_empty_directory() {
     for include in ["./Telegraf.tessla", "Telegraf.tessla"] {
         let dir = tempfile::tempdir().unwrap();
-        std::fs::write(
-            dir.path().join("spec.tessla"),
-            SPEC.replace("INCLUDE", include),
-        )
-        .unwrap();
+        write(dir.path(), "spec.tessla", &SPEC.replace("INCLUDE", include));
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
-        let out = tessla(dir.path(), &["check", "spec.tessla"], "");
+        let out = run_in(dir.path(), &["check", "spec.tessla"], b"");
         let err = text(&out.stderr);
         assert_eq!(out.status.code(), Some(0), "{include}: {err}");
         assert!(
@@ -61,10 +39,10 @@ fn the_connectors_include_works_from_an_empty_directory() {
             "{err}"
         );
         assert!(!err.contains("W! ") && !err.contains("warning"), "{err}");
-        let out = tessla(
+        let out = run_in(
             dir.path(),
             &["run", "--spec", "spec.tessla", "--no-passthrough"],
-            "cpu usage_idle=20.0 1000000000\ncpu usage_idle=90.0 2000000000\n",
+            b"cpu usage_idle=20.0 1000000000\ncpu usage_idle=90.0 2000000000\n",
         );
         assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
         assert_eq!(
@@ -83,24 +61,24 @@ fn the_connectors_include_works_from_an_empty_directory() {
 fn a_telegraf_tessla_beside_the_spec_is_used_as_written() {
     let dir = tempfile::tempdir().unwrap();
     // The connector's own file plus a definition of the user's: the spec uses both.
-    std::fs::write(
-        dir.path().join("Telegraf.tessla"),
+    write(
+        dir.path(),
+        "Telegraf.tessla",
         "def @TelegrafIn(measurement: String, tags: String, field: String)\n\
          def @TelegrafOut(name: String)\n\
          def limit = 50.0\n",
-    )
-    .unwrap();
+    );
     let spec = SPEC
         .replace("INCLUDE", "./Telegraf.tessla")
         .replace("busy >. 50.0", "busy >. limit");
-    std::fs::write(dir.path().join("spec.tessla"), spec).unwrap();
-    let out = tessla(dir.path(), &["check", "spec.tessla"], "");
+    write(dir.path(), "spec.tessla", &spec);
+    let out = run_in(dir.path(), &["check", "spec.tessla"], b"");
     let err = text(&out.stderr);
     assert_eq!(out.status.code(), Some(0), "{err}");
     assert!(!err.contains("bundled"), "{err}");
     // The bundled library has no `limit`: with it the spec would not load.
     std::fs::remove_file(dir.path().join("Telegraf.tessla")).unwrap();
-    let out = tessla(dir.path(), &["check", "spec.tessla"], "");
+    let out = run_in(dir.path(), &["check", "spec.tessla"], b"");
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("unknown name `limit`"));
 }
@@ -109,8 +87,8 @@ fn a_telegraf_tessla_beside_the_spec_is_used_as_written() {
 fn an_undeclared_telegraf_annotation_gets_the_include_line_to_add() {
     let dir = tempfile::tempdir().unwrap();
     let spec = SPEC.replace("include \"INCLUDE\"\n", "");
-    std::fs::write(dir.path().join("spec.tessla"), spec).unwrap();
-    let out = tessla(dir.path(), &["check", "spec.tessla"], "");
+    write(dir.path(), "spec.tessla", &spec);
+    let out = run_in(dir.path(), &["check", "spec.tessla"], b"");
     let err = text(&out.stderr);
     assert!(
         err.contains("annotation `@TelegrafIn` is not declared"),

@@ -2,53 +2,15 @@
 //! to mislead, `--version`, completions and the man page, `report` on any spec (and on the
 //! robot's silent periods), the terminal view `make run` prints, and `make test`'s skip notice.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output, Stdio};
+#[path = "support/run.rs"]
+mod run;
 
-const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// Run the binary in `dir` with `args`, `stdin` as its input.
-fn run_in(dir: &Path, args: &[&str], stdin: &[u8]) -> Output {
-    let mut child = Command::new(BIN)
-        .args(args)
-        .current_dir(dir)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn the binary");
-    // Written from a thread while the output is read, so a large input cannot deadlock on a
-    // full pipe; a child that exits before reading (a bad command line) closes the pipe, which
-    // is not a failure.
-    let writer = child.stdin.take().map(|mut input| {
-        let bytes = stdin.to_vec();
-        std::thread::spawn(move || {
-            let _ = std::io::Write::write_all(&mut input, &bytes);
-        })
-    });
-    let out = child.wait_with_output().expect("wait for the binary");
-    if let Some(w) = writer {
-        let _ = w.join();
-    }
-    out
-}
+use run::{BIN, root, run_in, text, write};
+use std::path::Path;
+use std::process::{Command, Output};
 
 fn run(args: &[&str], stdin: &[u8]) -> Output {
     run_in(&root(), args, stdin)
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
-
-fn write(dir: &Path, name: &str, content: &str) -> PathBuf {
-    let p = dir.join(name);
-    std::fs::write(&p, content).expect("write a test file");
-    p
 }
 
 #[test]

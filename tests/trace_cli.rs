@@ -1,36 +1,27 @@
 //! `tessla-telegraf trace SPEC [TRACE]` as a user runs it: TeSSLa's output format on stdout,
 //! errors on stderr, exit codes 0 (ok), 1 (runtime or trace error), 2 (spec error), 3 (I/O).
 
+#[path = "support/run.rs"]
+mod run;
+
+use run::{BIN, root, run_in, text};
 use std::io::Write;
 use std::process::{Command, Output, Stdio};
 
-const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
-
+/// `name` with `text` in this test run's folder of specs and traces.
 fn temp(name: &str, text: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("tessla-trace-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let p = dir.join(name);
-    std::fs::write(&p, text).unwrap();
-    p
+    run::write(&dir, name, text)
 }
 
+/// `tessla-telegraf trace SPEC ARGS...` with `stdin` as its input.
 fn trace(spec: &str, args: &[&str], stdin: &str) -> Output {
-    let mut child = Command::new(BIN)
-        .arg("trace")
-        .arg(spec)
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    // A spec error ends the child before it reads its input: a closed pipe is not a failure.
-    let _ = child.stdin.take().unwrap().write_all(stdin.as_bytes());
-    child.wait_with_output().unwrap()
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
+    let all: Vec<&str> = ["trace", spec]
+        .into_iter()
+        .chain(args.iter().copied())
+        .collect();
+    run_in(&root(), &all, stdin.as_bytes())
 }
 
 #[test]
