@@ -19,7 +19,7 @@ mod servers;
 use nats_cluster::Cluster;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
 /// A password that must never be printed.
@@ -202,57 +202,27 @@ fn a_secured_cluster_lets_in_only_the_right_login_and_says_why_not() {
 }
 
 /// A single nats-server with JetStream and `conf` (text), on a free port; killed on drop.
-struct Single {
-    port: u16,
-    child: Child,
-    _dir: tempfile::TempDir,
-}
-
-impl Drop for Single {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-impl Single {
-    fn start(conf: &str) -> Option<Single> {
-        let binary = nats_cluster::require_nats_server()?;
-        let dir = tempfile::tempdir().unwrap();
-        let port = servers::free_port();
-        let path = dir.path().join("nats.conf");
-        std::fs::write(
-            &path,
-            format!(
-                "listen: 127.0.0.1:{port}\njetstream {{ store_dir: \"{}\" }}\n{conf}\n",
-                dir.path().join("js").display()
-            ),
-        )
-        .unwrap();
-        let log = std::fs::File::create(dir.path().join("log")).unwrap();
-        let child = Command::new(binary)
-            .args(["-c", path.to_str().unwrap()])
-            .stdin(Stdio::null())
-            .stdout(log.try_clone().unwrap())
-            .stderr(log)
-            .spawn()
-            .unwrap();
-        let deadline = Instant::now() + Duration::from_secs(30);
-        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-            assert!(Instant::now() < deadline, "nats-server did not listen");
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        Some(Single {
-            port,
-            child,
-            _dir: dir,
-        })
-    }
+fn single(conf: &str) -> Option<servers::Server> {
+    let binary = nats_cluster::require_nats_server()?;
+    let dir = tempfile::tempdir().unwrap();
+    let port = servers::free_port();
+    let conf = format!(
+        "listen: 127.0.0.1:{port}\njetstream {{ store_dir: \"{}\" }}\n{conf}\n",
+        dir.path().join("js").display()
+    );
+    Some(servers::Server::start(
+        &binary,
+        &["-c"],
+        dir,
+        port,
+        "nats.conf",
+        &conf,
+    ))
 }
 
 #[test]
 fn token_and_nkey_logins() {
-    let Some(server) = Single::start(&format!("authorization {{ token: \"{MARKER}\" }}")) else {
+    let Some(server) = single(&format!("authorization {{ token: \"{MARKER}\" }}")) else {
         return;
     };
     let p = server.port;
@@ -280,7 +250,7 @@ fn token_and_nkey_logins() {
 
     let user = nkeys::KeyPair::new_user();
     let seed = user.seed().unwrap();
-    let Some(server) = Single::start(&format!(
+    let Some(server) = single(&format!(
         "authorization {{ users: [ {{ nkey: {} }} ] }}",
         user.public_key()
     )) else {
@@ -313,7 +283,7 @@ fn a_client_certificate_where_the_server_asks_for_one() {
     let certs = tempfile::tempdir().unwrap();
     nats_cluster::make_certs(certs.path());
     let c = certs.path().display();
-    let Some(server) = Single::start(&format!(
+    let Some(server) = single(&format!(
         "tls {{ cert_file: \"{c}/server.pem\", key_file: \"{c}/server-key.pem\", \
          ca_file: \"{c}/ca.pem\", verify: true, timeout: 2 }}"
     )) else {
@@ -447,7 +417,7 @@ fn the_marker_password_is_never_printed() {
 /// it stands by, that a partition has no holder.
 #[test]
 fn fleet_mistakes_are_refused_or_loud() {
-    let Some(server) = Single::start("") else {
+    let Some(server) = single("") else {
         return;
     };
     let base = format!("nats://127.0.0.1:{}", server.port);

@@ -229,58 +229,14 @@ fn a_telegraf_stop_loses_nothing_and_resends_the_unacknowledged() {
     assert_eq!(one.signalled, None);
 }
 
-/// A Mosquitto with `max_queued_messages` set (`persistence false`, as the test servers).
-struct QueueBroker {
-    port: u16,
-    child: std::process::Child,
-    _dir: tempfile::TempDir,
-}
-
-impl QueueBroker {
-    fn start(max_queued: usize) -> Option<QueueBroker> {
-        let binary = servers::require("mosquitto", "mosquitto")?;
-        let dir = tempfile::tempdir().unwrap();
-        let port = servers::free_port();
-        let conf = dir.path().join("mosquitto.conf");
-        std::fs::write(
-            &conf,
-            format!(
-                "listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n\
-                 max_queued_messages {max_queued}\nlog_dest stdout\n"
-            ),
-        )
-        .unwrap();
-        let log = std::fs::File::create(dir.path().join("mosquitto.log")).unwrap();
-        let child = std::process::Command::new(binary)
-            .args(["-c", conf.to_str().unwrap()])
-            .stdout(log.try_clone().unwrap())
-            .stderr(log)
-            .spawn()
-            .unwrap();
-        wait_until("mosquitto listening", Duration::from_secs(30), || {
-            std::net::TcpStream::connect(("127.0.0.1", port)).is_ok()
-        });
-        Some(QueueBroker {
-            port,
-            child,
-            _dir: dir,
-        })
-    }
-}
-
-impl Drop for QueueBroker {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
 /// While Telegraf is away the broker queues for its persistent session up to
 /// `max_queued_messages`; past it the newest messages are dropped (the oldest are kept).
 #[test]
 fn the_broker_keeps_the_oldest_max_queued_messages_while_telegraf_is_away() {
     const QUEUE: usize = 10;
-    let Some(broker) = QueueBroker::start(QUEUE) else {
+    // `max_queued_messages` set (`persistence false`, as the test servers).
+    let Some(broker) = servers::Mosquitto::start_with(&format!("max_queued_messages {QUEUE}\n"))
+    else {
         return;
     };
     let env = endpoints(broker.port);

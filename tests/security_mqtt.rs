@@ -14,7 +14,7 @@ mod servers;
 
 use rumqttc::{Client, Event, MqttOptions, Packet, QoS, TlsConfiguration, Transport};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::sync::mpsc::{Receiver, channel};
 use std::time::{Duration, Instant};
 
@@ -27,15 +27,7 @@ const TELEGRAF_PW: &str = "Mark3r-telegraf-pw";
 struct Broker {
     port: u16,
     certs: PathBuf,
-    child: Child,
-    dir: tempfile::TempDir,
-}
-
-impl Drop for Broker {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
+    server: servers::Server,
 }
 
 impl Broker {
@@ -88,40 +80,18 @@ impl Broker {
             conf.contains(&format!("listener {port} 127.0.0.1")),
             "{conf}"
         );
-        let conf_path = dir.path().join("mosquitto.conf");
-        std::fs::write(
-            &conf_path,
-            format!("{conf}{extra}\nlog_dest stdout\npersistence false\n"),
-        )
-        .unwrap();
-        let log = std::fs::File::create(dir.path().join("log")).unwrap();
-        let child = Command::new(mosquitto)
-            .args(["-c", conf_path.to_str().unwrap()])
-            .stdin(Stdio::null())
-            .stdout(log.try_clone().unwrap())
-            .stderr(log)
-            .spawn()
-            .unwrap();
-        let broker = Broker {
+        let conf = format!("{conf}{extra}\nlog_dest stdout\npersistence false\n");
+        let server =
+            servers::Server::start(&mosquitto, &["-c"], dir, port, "mosquitto.conf", &conf);
+        Some(Broker {
             port,
             certs,
-            child,
-            dir,
-        };
-        let deadline = Instant::now() + Duration::from_secs(30);
-        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-            assert!(
-                Instant::now() < deadline,
-                "mosquitto did not listen: {}",
-                broker.log()
-            );
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        Some(broker)
+            server,
+        })
     }
 
     fn log(&self) -> String {
-        std::fs::read_to_string(self.dir.path().join("log")).unwrap_or_default()
+        self.server.log()
     }
 
     /// A subscriber logged in as `user`, over TLS; returns once subscribed.
@@ -228,7 +198,7 @@ fn replay_publishes_through_tls_and_the_acl_keeps_robots_apart() {
     let Some(broker) = Broker::start() else {
         return;
     };
-    let file = three_records(broker.dir.path());
+    let file = three_records(broker.server.dir.path());
     let tls = broker.tls();
     let tls: Vec<&str> = tls.iter().map(String::as_str).collect();
 
@@ -298,7 +268,7 @@ fn each_refusal_says_why() {
     let Some(broker) = Broker::start() else {
         return;
     };
-    let file = three_records(broker.dir.path());
+    let file = three_records(broker.server.dir.path());
     let tls = broker.tls();
     let tls: Vec<&str> = tls.iter().map(String::as_str).collect();
 
@@ -390,7 +360,7 @@ fn a_client_certificate_where_the_broker_asks_for_one() {
     let Some(broker) = Broker::start_with("require_certificate true") else {
         return;
     };
-    let file = three_records(broker.dir.path());
+    let file = three_records(broker.server.dir.path());
     let tls = broker.tls();
     let tls: Vec<&str> = tls.iter().map(String::as_str).collect();
     let (out, code) = broker.replay(&file, "tessla/robot1", Some(("robot1", ROBOT1_PW)), &tls);

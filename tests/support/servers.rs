@@ -1,5 +1,7 @@
 //! Real servers for the pipeline tests: Mosquitto and InfluxDB 1.x, each started on a free
-//! 127.0.0.1 port with a temporary data folder and stopped (killed and reaped) on drop.
+//! 127.0.0.1 port with a temporary data folder and stopped (killed and reaped) on drop; and
+//! [`Server`], the same for a server run from a conf of the test's own (a secured broker, a
+//! single nats-server).
 //!
 //! When a server binary is missing: with `REQUIRE_SERVERS=1` (set by `.ci/run`) the test fails;
 //! otherwise `start` prints how to install it and returns `None`, and the test skips itself.
@@ -7,7 +9,6 @@
 //! Include with `#[path = "support/servers.rs"] mod servers;`.
 #![allow(dead_code)]
 
-use std::io::Write;
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -56,64 +57,115 @@ pub fn require(name: &str, package: &str) -> Option<PathBuf> {
     None
 }
 
-fn wait_for_port(port: u16, child: &mut Child, what: &str, log: &Path) {
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while Instant::now() < deadline {
-        if TcpStream::connect(("127.0.0.1", port)).is_ok() {
-            return;
-        }
-        if let Ok(Some(status)) = child.try_wait() {
-            panic!(
-                "{what} exited ({status}) before listening on {port}; log:\n{}",
-                std::fs::read_to_string(log).unwrap_or_default()
-            );
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    panic!(
-        "{what} did not listen on 127.0.0.1:{port} within 30 s; log:\n{}",
-        std::fs::read_to_string(log).unwrap_or_default()
-    );
+/// A server process started from a conf file in a temporary folder (its output in a log file
+/// there), ready once it accepts connections on 127.0.0.1:`port`; killed and reaped on drop.
+/// [`Mosquitto`] and [`Influxd`] are ones; tests start others with a conf of their own.
+pub struct Server {
+    pub port: u16,
+    /// The temporary folder: the conf, the log and whatever the test put there.
+    pub dir: tempfile::TempDir,
+    child: Child,
+    log: PathBuf,
 }
 
-fn spawn(binary: &Path, args: &[&str], log: &Path) -> Child {
-    let out = std::fs::File::create(log).unwrap();
-    let err = out.try_clone().unwrap();
-    Command::new(binary)
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(out)
-        .stderr(err)
-        .spawn()
-        .unwrap_or_else(|e| panic!("cannot start {}: {e}", binary.display()))
+impl Server {
+    /// Write `conf` to `dir/conf_name`, run `binary` with `args` and the conf's path, and wait
+    /// (30 s at most) until it listens on `port`; fails the test, with the log, if it exits
+    /// before or never listens.
+    pub fn start(
+        binary: &Path,
+        args: &[&str],
+        dir: tempfile::TempDir,
+        port: u16,
+        conf_name: &str,
+        conf: &str,
+    ) -> Server {
+        let conf_path = dir.path().join(conf_name);
+        std::fs::write(&conf_path, conf).unwrap();
+        let log = dir.path().join("server.log");
+        let out = std::fs::File::create(&log).unwrap();
+        let err = out.try_clone().unwrap();
+        let mut child = Command::new(binary)
+            .args(args)
+            .arg(&conf_path)
+            .stdin(Stdio::null())
+            .stdout(out)
+            .stderr(err)
+            .spawn()
+            .unwrap_or_else(|e| panic!("cannot start {}: {e}", binary.display()));
+        let what = binary.display();
+        let deadline = Instant::now() + Duration::from_secs(30);
+        loop {
+            if TcpStream::connect(("127.0.0.1", port)).is_ok() {
+                break;
+            }
+            if let Ok(Some(status)) = child.try_wait() {
+                panic!(
+                    "{what} exited ({status}) before listening on {port}; log:\n{}",
+                    std::fs::read_to_string(&log).unwrap_or_default()
+                );
+            }
+            if Instant::now() >= deadline {
+                let _ = child.kill();
+                let _ = child.wait();
+                panic!(
+                    "{what} did not listen on 127.0.0.1:{port} within 30 s; log:\n{}",
+                    std::fs::read_to_string(&log).unwrap_or_default()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        Server {
+            port,
+            dir,
+            child,
+            log,
+        }
+    }
+
+    /// What the server printed so far.
+    pub fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
 }
 
 /// A running Mosquitto broker.
 pub struct Mosquitto {
     pub port: u16,
-    child: Child,
-    _dir: tempfile::TempDir,
+    _server: Server,
 }
 
 impl Mosquitto {
     pub fn start() -> Option<Mosquitto> {
+        Self::start_with("")
+    }
+
+    /// A broker with `extra` lines added to the test conf (anonymous, no persistence).
+    pub fn start_with(extra: &str) -> Option<Mosquitto> {
         let binary = require("mosquitto", "mosquitto")?;
-        let dir = tempfile::tempdir().unwrap();
         let port = free_port();
-        let conf = dir.path().join("mosquitto.conf");
-        let mut f = std::fs::File::create(&conf).unwrap();
-        writeln!(f, "listener {port} 127.0.0.1").unwrap();
-        writeln!(f, "allow_anonymous true").unwrap();
-        writeln!(f, "persistence false").unwrap();
-        writeln!(f, "log_dest stdout").unwrap();
-        drop(f);
-        let log = dir.path().join("mosquitto.log");
-        let mut child = spawn(&binary, &["-c", conf.to_str().unwrap()], &log);
-        wait_for_port(port, &mut child, "mosquitto", &log);
+        let conf = format!(
+            "listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n\
+             log_dest stdout\n{extra}"
+        );
+        let server = Server::start(
+            &binary,
+            &["-c"],
+            tempfile::tempdir().unwrap(),
+            port,
+            "mosquitto.conf",
+            &conf,
+        );
         Some(Mosquitto {
             port,
-            child,
-            _dir: dir,
+            _server: server,
         })
     }
 
@@ -122,18 +174,10 @@ impl Mosquitto {
     }
 }
 
-impl Drop for Mosquitto {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
 /// A running InfluxDB 1.x server.
 pub struct Influxd {
     pub port: u16,
-    child: Child,
-    dir: tempfile::TempDir,
+    server: Server,
 }
 
 impl Influxd {
@@ -142,25 +186,25 @@ impl Influxd {
         let dir = tempfile::tempdir().unwrap();
         let port = free_port();
         let rpc_port = free_port();
-        let d = dir.path().display();
-        let conf = dir.path().join("influxdb.conf");
-        std::fs::write(
+        let d = dir.path().display().to_string();
+        let conf = format!(
+            "reporting-disabled = true\n\
+             bind-address = \"127.0.0.1:{rpc_port}\"\n\
+             [meta]\n  dir = \"{d}/meta\"\n\
+             [data]\n  dir = \"{d}/data\"\n  wal-dir = \"{d}/wal\"\n  query-log-enabled = false\n\
+             [http]\n  bind-address = \"127.0.0.1:{port}\"\n  log-enabled = false\n\
+             [monitor]\n  store-enabled = false\n\
+             [continuous_queries]\n  enabled = false\n"
+        );
+        let server = Server::start(
+            &binary,
+            &["run", "-config"],
+            dir,
+            port,
+            "influxdb.conf",
             &conf,
-            format!(
-                "reporting-disabled = true\n\
-                 bind-address = \"127.0.0.1:{rpc_port}\"\n\
-                 [meta]\n  dir = \"{d}/meta\"\n\
-                 [data]\n  dir = \"{d}/data\"\n  wal-dir = \"{d}/wal\"\n  query-log-enabled = false\n\
-                 [http]\n  bind-address = \"127.0.0.1:{port}\"\n  log-enabled = false\n\
-                 [monitor]\n  store-enabled = false\n\
-                 [continuous_queries]\n  enabled = false\n"
-            ),
-        )
-        .unwrap();
-        let log = dir.path().join("influxd.log");
-        let mut child = spawn(&binary, &["run", "-config", conf.to_str().unwrap()], &log);
-        wait_for_port(port, &mut child, "influxd", &log);
-        let server = Influxd { port, child, dir };
+        );
+        let server = Influxd { port, server };
         // The HTTP port opens before the service is ready: wait for /ping to answer 204.
         let deadline = Instant::now() + Duration::from_secs(30);
         loop {
@@ -183,7 +227,7 @@ impl Influxd {
     }
 
     pub fn log(&self) -> String {
-        std::fs::read_to_string(self.dir.path().join("influxd.log")).unwrap_or_default()
+        self.server.log()
     }
 
     /// Run an InfluxQL statement (POST /query); returns the status and the JSON answer.
@@ -216,13 +260,6 @@ impl Influxd {
             status,
             response.body_mut().read_to_string().unwrap_or_default(),
         )
-    }
-}
-
-impl Drop for Influxd {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
     }
 }
 
