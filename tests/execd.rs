@@ -5,6 +5,8 @@
 
 #[path = "support/child.rs"]
 mod child;
+#[path = "support/udp_ends.rs"]
+mod udp_ends;
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::process::{Child, Command, Stdio};
@@ -172,14 +174,7 @@ fn shipped_conf_command_runs_as_telegraf_would() {
 
 #[test]
 fn udp_mode_round_trips() {
-    let recv = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
-    let send_to = recv.local_addr().unwrap().to_string();
-    // A free port for the monitor to listen on.
-    let listen = std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .to_string();
+    let (recv, send_to, listen) = udp_ends::open(Duration::from_millis(500));
     let mut child = spawn(&[
         "--udp-listen",
         &listen,
@@ -187,8 +182,6 @@ fn udp_mode_round_trips() {
         &send_to,
         "--no-passthrough",
     ]);
-    recv.set_read_timeout(Some(Duration::from_millis(500)))
-        .unwrap();
     let sock = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     let lines = fixture_lines(2);
     // Two records and a bad line in one datagram: the bad line costs only itself. The datagram

@@ -8,6 +8,8 @@
 mod live_child;
 #[path = "support/recorded.rs"]
 mod recorded;
+#[path = "support/udp_ends.rs"]
+mod udp_ends;
 
 use live_child::{LiveChild, run_all};
 use std::path::Path;
@@ -161,7 +163,7 @@ fn udp_mode_reloads_on_sighup() {
     let main = dir.path().join("main.tessla");
     std::fs::write(dir.path().join("lib.tessla"), LIB_V1).unwrap();
     std::fs::write(&main, MAIN_V1).unwrap();
-    let (recv, send_to, listen) = live_child::udp_ends();
+    let (recv, send_to, listen) = udp_ends::open(std::time::Duration::from_secs(30));
     let mut c = LiveChild::spawn(&[
         "--spec",
         s(&main),

@@ -8,6 +8,8 @@
 mod live_child;
 #[path = "support/recorded.rs"]
 mod recorded;
+#[path = "support/udp_ends.rs"]
+mod udp_ends;
 
 use live_child::{LiveChild, run_all};
 use std::path::{Path, PathBuf};
@@ -353,7 +355,7 @@ fn udp_mode_saves_and_restores_state() {
         "in x: Events[Int]\ndef c = count(x)\nout c\n",
     );
     let state = dir.path().join("state.json");
-    let (recv, send_to, listen) = live_child::udp_ends();
+    let (recv, send_to, listen) = udp_ends::open(std::time::Duration::from_secs(30));
     let args = [
         "--spec",
         s(&spec),

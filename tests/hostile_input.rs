@@ -6,6 +6,8 @@
 
 #[path = "support/child.rs"]
 mod child;
+#[path = "support/udp_ends.rs"]
+mod udp_ends;
 
 use child::{Finished, run_bytes, run_with};
 use std::io::Write;
@@ -439,21 +441,14 @@ mod udp {
 
     impl Monitor {
         fn start() -> Monitor {
-            let recv = UdpSocket::bind("127.0.0.1:0").unwrap();
-            recv.set_read_timeout(Some(Duration::from_millis(200)))
-                .unwrap();
-            let listen = UdpSocket::bind("127.0.0.1:0")
-                .unwrap()
-                .local_addr()
-                .unwrap()
-                .to_string();
+            let (recv, send_to, listen) = udp_ends::open(Duration::from_millis(200));
             let child = std::process::Command::new(child::BIN)
                 .args([
                     "run",
                     "--udp-listen",
                     &listen,
                     "--udp-send",
-                    &recv.local_addr().unwrap().to_string(),
+                    &send_to,
                     "--no-passthrough",
                 ])
                 .stdin(std::process::Stdio::null())

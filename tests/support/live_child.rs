@@ -191,18 +191,3 @@ pub fn run_all(args: &[&str], input: &str) -> (String, String, i32) {
     w.join().unwrap();
     r
 }
-
-/// The test's ends of UDP mode: a socket receiving the child's outputs (30 s read timeout), its
-/// address (for `--udp-send`), and a free address for the child to listen on (`--udp-listen`).
-pub fn udp_ends() -> (std::net::UdpSocket, String, String) {
-    let recv = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
-    recv.set_read_timeout(Some(Duration::from_secs(30)))
-        .unwrap();
-    let send_to = recv.local_addr().unwrap().to_string();
-    let listen = std::net::UdpSocket::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .to_string();
-    (recv, send_to, listen)
-}
