@@ -17,27 +17,26 @@ pub mod udp;
 /// A periodic task: how often, and what.
 pub type Periodic<'a> = (std::time::Duration, &'a mut dyn FnMut(&Processor));
 
+/// On SIGHUP (the spec reload); may append outputs to the buffer.
+pub type OnHangup<'a> = &'a mut dyn FnMut(&mut Processor, &mut Vec<u8>);
+
 /// What the caller wants done between two reads.
 pub struct Hooks<'a> {
-    /// On SIGHUP (the spec reload); may append outputs to the buffer.
-    pub on_hangup: &'a mut dyn FnMut(&mut Processor, &mut Vec<u8>),
+    /// On SIGHUP (see [`OnHangup`]).
+    pub on_hangup: OnHangup<'a>,
     /// Every this long (`--state-interval`: save the state).
     pub periodic: Option<Periodic<'a>>,
 }
 
 impl<'a> Hooks<'a> {
     /// The SIGHUP hook, and the periodic task with its timer (the timer starts now).
-    pub(crate) fn split(self) -> (&'a mut dyn FnMut(&mut Processor, &mut Vec<u8>), Ticker<'a>) {
-        let timer = self.periodic.as_ref().map(|(d, _)| {
-            let d = (*d).max(std::time::Duration::from_millis(1));
+    pub(crate) fn split(self) -> (OnHangup<'a>, Ticker<'a>) {
+        let ticker = Ticker(self.periodic.map(|periodic| {
+            let d = periodic.0.max(std::time::Duration::from_millis(1));
             let mut i = tokio::time::interval_at(tokio::time::Instant::now() + d, d);
             i.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-            i
-        });
-        let ticker = Ticker {
-            timer,
-            task: self.periodic,
-        };
+            (i, periodic)
+        }));
         (self.on_hangup, ticker)
     }
 }
@@ -45,17 +44,14 @@ impl<'a> Hooks<'a> {
 /// [`Hooks::periodic`] with its timer: the periodic branch of every step loop,
 /// `_ = ticker.tick() => { ticker.run(proc); continue; }`. Never fires without a task. The
 /// first tick is one period after [`Hooks::split`]; ticks missed while busy are not made up.
-pub(crate) struct Ticker<'a> {
-    timer: Option<tokio::time::Interval>,
-    task: Option<Periodic<'a>>,
-}
+pub(crate) struct Ticker<'a>(Option<(tokio::time::Interval, Periodic<'a>)>);
 
 impl Ticker<'_> {
     /// Wait for the next tick (forever without a periodic task).
     pub(crate) async fn tick(&mut self) {
-        match &mut self.timer {
-            Some(t) => {
-                t.tick().await;
+        match &mut self.0 {
+            Some((timer, _)) => {
+                timer.tick().await;
             }
             None => std::future::pending().await,
         }
@@ -63,8 +59,8 @@ impl Ticker<'_> {
 
     /// Run the periodic task (on a tick).
     pub(crate) fn run(&mut self, proc: &Processor) {
-        if let Some((_, f)) = self.task.as_mut() {
-            f(proc);
+        if let Some((_, (_, task))) = &mut self.0 {
+            task(proc);
         }
     }
 }
