@@ -3,10 +3,10 @@
 //! bundled Telegraf annotations and says so once at `I!`; a file that is there is read as
 //! written; a spec using the annotations without the include is told the line to add.
 
-#[path = "support/run.rs"]
-mod run;
+#[path = "support/child.rs"]
+mod child;
 
-use run::{run_in, text, write};
+use child::{run_in, text, write};
 
 /// The connector's CPU example, as its users write it.
 const SPEC: &str = "include \"INCLUDE\"\n\

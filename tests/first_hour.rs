@@ -2,10 +2,10 @@
 //! to mislead, `--version`, completions and the man page, `report` on any spec (and on the
 //! robot's silent periods), the terminal view `make run` prints, and `make test`'s skip notice.
 
-#[path = "support/run.rs"]
-mod run;
+#[path = "support/child.rs"]
+mod child;
 
-use run::{BIN, root, run_in, text, write};
+use child::{BIN, root, run_in, text, write};
 use std::path::Path;
 use std::process::{Command, Output};
 

@@ -1,10 +1,10 @@
 //! `tessla-telegraf trace SPEC [TRACE]` as a user runs it: TeSSLa's output format on stdout,
 //! errors on stderr, exit codes 0 (ok), 1 (runtime or trace error), 2 (spec error), 3 (I/O).
 
-#[path = "support/run.rs"]
-mod run;
+#[path = "support/child.rs"]
+mod child;
 
-use run::{BIN, root, run_in, text};
+use child::{BIN, root, run_in, text};
 use std::io::Write;
 use std::process::{Command, Output, Stdio};
 
@@ -12,7 +12,7 @@ use std::process::{Command, Output, Stdio};
 fn temp(name: &str, text: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("tessla-trace-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    run::write(&dir, name, text)
+    child::write(&dir, name, text)
 }
 
 /// `tessla-telegraf trace SPEC ARGS...` with `stdin` as its input.

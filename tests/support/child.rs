@@ -1,13 +1,15 @@
 //! The binary as a child process under a deadline: input written from a writer thread, stdout and
 //! stderr collected by reader threads, the child killed (and the test failed, with its stderr) if
 //! it has not exited by the deadline, and its peak resident memory (VmHWM) read from /proc while
-//! it runs.
+//! it runs. Also the binary run once in a folder, the way a user runs it ([`run_in`]: its whole
+//! `Output`), and the spec or trace files such a run reads ([`write`]).
 //!
 //! Include with `#[path = "support/child.rs"] mod child;`.
 #![allow(dead_code)]
 
 use std::io::{Read, Write};
-use std::process::{ChildStdin, Command, Stdio};
+use std::path::{Path, PathBuf};
+use std::process::{Child, ChildStdin, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 pub const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
@@ -29,19 +31,26 @@ impl Finished {
     }
 }
 
+/// The binary started with `args` (in `dir`, or in this process's folder), all three pipes open.
+fn spawn_piped(args: &[&str], dir: Option<&Path>) -> Child {
+    let mut c = Command::new(BIN);
+    c.args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped());
+    if let Some(dir) = dir {
+        c.current_dir(dir);
+    }
+    c.spawn().expect("spawn the binary")
+}
+
 /// Run the binary with `args`, `feed` writing its stdin (stdin is closed when `feed` returns);
 /// panics if the child has not exited after `deadline`.
 pub fn run_with<F>(args: &[&str], deadline: Duration, feed: F) -> Finished
 where
     F: FnOnce(&mut ChildStdin) + Send + 'static,
 {
-    let mut child = Command::new(BIN)
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn the binary");
+    let mut child = spawn_piped(args, None);
     let pid = child.id();
     let mut stdin = child.stdin.take().expect("stdin");
     let writer = std::thread::spawn(move || {
@@ -112,6 +121,42 @@ pub const DEADLINE: Duration = Duration::from_secs(120);
 pub fn run_text(args: &[&str], input: &str) -> (String, String, i32) {
     let f = run_bytes(args, input.as_bytes().to_vec(), DEADLINE);
     (f.stdout_text(), f.stderr, f.code.unwrap_or(-1))
+}
+
+/// The package's root folder (where `cargo test` runs the tests).
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Run the binary in `dir` with `args`, `stdin` as its input.
+pub fn run_in(dir: &Path, args: &[&str], stdin: &[u8]) -> Output {
+    let mut child = spawn_piped(args, Some(dir));
+    // Written from a thread while the output is read, so a large input cannot deadlock on a
+    // full pipe; a child that exits before reading (a bad command line, a spec error) closes
+    // the pipe, which is not a failure.
+    let writer = child.stdin.take().map(|mut input| {
+        let bytes = stdin.to_vec();
+        std::thread::spawn(move || {
+            let _ = std::io::Write::write_all(&mut input, &bytes);
+        })
+    });
+    let out = child.wait_with_output().expect("wait for the binary");
+    if let Some(w) = writer {
+        let _ = w.join();
+    }
+    out
+}
+
+/// Output bytes as text (invalid UTF-8 replaced).
+pub fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// Write `content` to `dir/name`; returns the path.
+pub fn write(dir: &Path, name: &str, content: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, content).expect("write a test file");
+    p
 }
 
 /// VmHWM of process `pid` in KiB (None once it has exited or on non-Linux systems).
