@@ -1,0 +1,582 @@
+//! The binary side of CTF 1.8: a stream file's packets (packet header, packet context) and its
+//! events (event header, stream event context, event context, fields) decoded with the types of
+//! [`super::tsdl`]. Integers of 1 to 64 bits at any bit alignment in either byte order, floats,
+//! strings, enums, structs, arrays, sequences and tagged variants. Every read is bounds-checked
+//! against the packet's content: bad data is an error naming the byte, never a panic.
+
+use super::tsdl::{IntType, Len, Metadata, Order, Stream, StructType, Type};
+
+/// A decoded value.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Field {
+    Int(i128),
+    Float(f64),
+    Str(String),
+    /// The value and its label (none when no label's range holds it).
+    Enum(i128, Option<String>),
+    Struct(Vec<(String, Field)>),
+    Array(Vec<Field>),
+    /// The chosen option's name and value.
+    Variant(String, Box<Field>),
+}
+
+impl Field {
+    /// The member at a dotted path of nested structs (variants are passed through, as a tag
+    /// or length path may lead through one).
+    pub fn get(&self, path: &str) -> Option<&Field> {
+        let mut f = self;
+        for part in path.split('.') {
+            if let Field::Variant(_, inner) = f {
+                f = inner;
+            }
+            let Field::Struct(fs) = f else { return None };
+            f = fs.iter().find(|(n, _)| n == part).map(|(_, v)| v)?;
+        }
+        Some(f)
+    }
+
+    fn int(&self) -> Option<i128> {
+        match self {
+            Field::Int(i) | Field::Enum(i, _) => Some(*i),
+            _ => None,
+        }
+    }
+}
+
+/// One decoded event.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RawEvent {
+    /// Index into `Metadata::events`.
+    pub decl: usize,
+    /// The clock value (cycles), extended over the header's wrapping timestamp field.
+    pub ts: u64,
+    pub header: Option<Field>,
+    pub stream_context: Option<Field>,
+    pub context: Option<Field>,
+    pub fields: Option<Field>,
+    pub packet_context: Option<Field>,
+}
+
+/// Bits of one packet.
+struct Bits<'a> {
+    data: &'a [u8],
+    /// Position in bits from the start of `data`.
+    pos: u64,
+    /// The end of the content, in bits.
+    end: u64,
+    big_endian: bool,
+}
+
+type R<T> = Result<T, String>;
+
+impl Bits<'_> {
+    fn align(&mut self, a: u32) -> R<()> {
+        let a = u64::from(a.max(1));
+        let p = self.pos.div_ceil(a).saturating_mul(a);
+        if p > self.end {
+            return Err(self.truncated(p - self.pos));
+        }
+        self.pos = p;
+        Ok(())
+    }
+
+    fn truncated(&self, bits: u64) -> String {
+        format!(
+            "truncated: {bits} bits needed at byte {}, the content ends at byte {}",
+            self.pos / 8,
+            self.end / 8
+        )
+    }
+
+    fn bit(&self, p: u64, big: bool) -> u8 {
+        let byte = self.data.get((p / 8) as usize).copied().unwrap_or(0);
+        let k = (p % 8) as u8;
+        if big {
+            (byte >> (7 - k)) & 1
+        } else {
+            (byte >> k) & 1
+        }
+    }
+
+    /// `n` bits (1 to 64) as an unsigned number.
+    fn uint(&mut self, n: u32, order: Order) -> R<u64> {
+        let n64 = u64::from(n);
+        if self.pos.saturating_add(n64) > self.end {
+            return Err(self.truncated(n64));
+        }
+        let big = match order {
+            Order::Native => self.big_endian,
+            Order::Be => true,
+            Order::Le => false,
+        };
+        let mut v: u64 = 0;
+        if self.pos % 8 == 0 && n % 8 == 0 {
+            let start = (self.pos / 8) as usize;
+            let bytes = self
+                .data
+                .get(start..start + (n / 8) as usize)
+                .ok_or_else(|| self.truncated(n64))?;
+            for (k, b) in bytes.iter().enumerate() {
+                if big {
+                    v = (v << 8) | u64::from(*b);
+                } else {
+                    v |= u64::from(*b) << (8 * k);
+                }
+            }
+        } else if big {
+            for i in 0..n64 {
+                v = (v << 1) | u64::from(self.bit(self.pos + i, true));
+            }
+        } else {
+            for i in 0..n64 {
+                v |= u64::from(self.bit(self.pos + i, false)) << i;
+            }
+        }
+        self.pos += n64;
+        Ok(v)
+    }
+
+    fn int(&mut self, t: &IntType) -> R<i128> {
+        self.align(t.align)?;
+        let v = self.uint(t.size, t.order)?;
+        Ok(
+            if t.signed && t.size < 128 && (v >> (t.size - 1)) & 1 == 1 {
+                i128::from(v) - (1i128 << t.size)
+            } else {
+                i128::from(v)
+            },
+        )
+    }
+}
+
+/// Decodes the events of one stream file, packet by packet.
+pub struct StreamDecoder<'a> {
+    md: &'a Metadata,
+    data: &'a [u8],
+    /// Start of the current packet in bytes.
+    packet_start: usize,
+    bits: Option<Bits<'a>>,
+    stream: Option<&'a Stream>,
+    packet_context: Option<Field>,
+    packet_header: Option<Field>,
+    last_ts: u64,
+    /// Partially decoded structs, innermost last, for sequence lengths and variant tags.
+    scopes: Vec<Vec<(String, Field)>>,
+    /// Completed scopes of the current event (`stream.event.header`, ...).
+    done: Vec<(&'static str, Field)>,
+    failed: bool,
+}
+
+impl<'a> StreamDecoder<'a> {
+    pub fn new(md: &'a Metadata, data: &'a [u8]) -> StreamDecoder<'a> {
+        StreamDecoder {
+            md,
+            data,
+            packet_start: 0,
+            bits: None,
+            stream: None,
+            packet_context: None,
+            packet_header: None,
+            last_ts: 0,
+            scopes: Vec::new(),
+            done: Vec::new(),
+            failed: false,
+        }
+    }
+
+    /// The byte offset where the current packet starts (for messages).
+    pub fn packet_offset(&self) -> usize {
+        self.packet_start
+    }
+
+    /// The next event, `None` at the end of the file; after an error, `None`.
+    pub fn next_event(&mut self) -> Option<R<RawEvent>> {
+        if self.failed {
+            return None;
+        }
+        let r = self.next_inner();
+        if !matches!(r, Some(Ok(_))) {
+            self.failed = true;
+        }
+        r
+    }
+
+    fn next_inner(&mut self) -> Option<R<RawEvent>> {
+        loop {
+            match &self.bits {
+                Some(b) if b.pos < b.end => return Some(self.event()),
+                Some(_) => {
+                    let size = self.packet_size();
+                    self.bits = None;
+                    self.packet_start = self.packet_start.saturating_add(size);
+                }
+                None => {
+                    if self.packet_start >= self.data.len() {
+                        return None;
+                    }
+                    if let Err(e) = self.open_packet() {
+                        return Some(Err(e));
+                    }
+                }
+            }
+        }
+    }
+
+    /// The packet's size in bytes (`packet_size` of its context; the rest of the file without).
+    fn packet_size(&self) -> usize {
+        let rest = self.data.len().saturating_sub(self.packet_start);
+        match self
+            .packet_context
+            .as_ref()
+            .and_then(|c| c.get("packet_size"))
+            .and_then(Field::int)
+        {
+            Some(bits) => usize::try_from(bits / 8).unwrap_or(rest).max(1),
+            None => rest,
+        }
+    }
+
+    fn open_packet(&mut self) -> R<()> {
+        let data = self.data.get(self.packet_start..).unwrap_or_default();
+        self.bits = Some(Bits {
+            data,
+            pos: 0,
+            end: (data.len() as u64).saturating_mul(8),
+            big_endian: self.md.big_endian,
+        });
+        self.done.clear();
+        self.packet_header = match &self.md.packet_header {
+            Some(t) => Some(self.read(t)?),
+            None => None,
+        };
+        if let Some(h) = &self.packet_header {
+            if let Some(m) = h.get("magic").and_then(Field::int) {
+                if m != 0xC1FC_1FC1 {
+                    return Err(format!(
+                        "bad packet magic number {m:#x} (expected 0xc1fc1fc1)"
+                    ));
+                }
+            }
+            self.done.push(("trace.packet.header", h.clone()));
+        }
+        let sid = self
+            .packet_header
+            .as_ref()
+            .and_then(|h| h.get("stream_id"))
+            .and_then(Field::int)
+            .unwrap_or(0);
+        let stream = self.md.streams.iter().find(|s| i128::from(s.id) == sid);
+        let stream = match stream {
+            Some(s) => Some(s),
+            None if self.md.streams.is_empty() && sid == 0 => None,
+            None => {
+                return Err(format!(
+                    "packet of stream {sid}, which the metadata does not declare"
+                ));
+            }
+        };
+        self.stream = stream;
+        self.packet_context = match stream.and_then(|s| s.packet_context.as_ref()) {
+            Some(t) => Some(self.read(t)?),
+            None => None,
+        };
+        let rest = (data.len() as u64).saturating_mul(8);
+        if let Some(c) = &self.packet_context {
+            let int = |k| c.get(k).and_then(Field::int);
+            let content = int("content_size").or_else(|| int("packet_size"));
+            let size = int("packet_size").or(content);
+            if let (Some(content), Some(size)) = (content, size) {
+                let pos = self.bits.as_ref().map_or(0, |b| b.pos);
+                if content < i128::from(pos)
+                    || size < content
+                    || size > i128::from(rest)
+                    || size % 8 != 0
+                {
+                    return Err(format!(
+                        "packet context: content size {content} bits, packet size {size} bits do not fit the {rest} bits left in the file"
+                    ));
+                }
+                if let Some(b) = &mut self.bits {
+                    b.end = u64::try_from(content).unwrap_or(0);
+                }
+            }
+            self.last_ts = int("timestamp_begin")
+                .and_then(|t| u64::try_from(t).ok())
+                .unwrap_or(0);
+            self.done.push(("stream.packet.context", c.clone()));
+        }
+        Ok(())
+    }
+
+    fn event(&mut self) -> R<RawEvent> {
+        let start = self.bits.as_ref().map_or(0, |b| b.pos);
+        self.done.truncate(
+            usize::from(self.packet_header.is_some()) + usize::from(self.packet_context.is_some()),
+        );
+        let stream = self.stream;
+        let header = match stream.and_then(|s| s.event_header.as_ref()) {
+            Some(t) => Some(self.read(t)?),
+            None => None,
+        };
+        let (mut id, mut ts) = (None, None);
+        if let Some(h) = &header {
+            let field = |f: &Field, k: &str| f.get(k).cloned();
+            id = field(h, "id").and_then(|f| f.int());
+            ts = field(h, "timestamp");
+            if let Some(Field::Variant(_, v)) = h.get("v") {
+                if let Some(i) = v.get("id").and_then(Field::int) {
+                    id = Some(i);
+                }
+                if let Some(t) = v.get("timestamp") {
+                    ts = Some(t.clone());
+                }
+            }
+            self.done.push(("stream.event.header", h.clone()));
+        }
+        if let Some(Field::Int(t)) = ts {
+            let bits = self.timestamp_bits(header.as_ref());
+            let t = u64::try_from(t).unwrap_or(0);
+            self.last_ts = if bits >= 64 {
+                t
+            } else {
+                let mask = (1u64 << bits) - 1;
+                let mut v = (self.last_ts & !mask) | t;
+                if v < self.last_ts {
+                    v = v.wrapping_add(1u64 << bits);
+                }
+                v
+            };
+        }
+        let sid = stream.map_or(0, |s| s.id);
+        let in_stream: Vec<usize> = (0..self.md.events.len())
+            .filter(|&i| self.md.events[i].stream_id == sid)
+            .collect();
+        let decl = match id {
+            Some(id) => in_stream
+                .iter()
+                .copied()
+                .find(|&i| i128::from(self.md.events[i].id) == id),
+            None if in_stream.len() == 1 => in_stream.first().copied(),
+            None => None,
+        };
+        let Some(decl) = decl else {
+            return Err(format!(
+                "event id {} is not declared for stream {sid}",
+                id.map_or_else(|| "(none)".to_string(), |i| i.to_string())
+            ));
+        };
+        let stream_context = match stream.and_then(|s| s.event_context.as_ref()) {
+            Some(t) => {
+                let f = self.read(t)?;
+                self.done.push(("stream.event.context", f.clone()));
+                Some(f)
+            }
+            None => None,
+        };
+        let d = &self.md.events[decl];
+        let context = match &d.context {
+            Some(t) => {
+                let f = self.read(t)?;
+                self.done.push(("event.context", f.clone()));
+                Some(f)
+            }
+            None => None,
+        };
+        let fields = match &d.fields {
+            Some(t) => Some(self.read(t)?),
+            None => None,
+        };
+        if self.bits.as_ref().map_or(0, |b| b.pos) == start {
+            return Err(format!("empty event `{}`", d.name));
+        }
+        Ok(RawEvent {
+            decl,
+            ts: self.last_ts,
+            header,
+            stream_context,
+            context,
+            fields,
+            packet_context: self.packet_context.clone(),
+        })
+    }
+
+    /// The size of the event header's timestamp field (64 when not found).
+    fn timestamp_bits(&self, header: Option<&Field>) -> u32 {
+        fn find(t: &Type, sel: Option<&Field>) -> Option<u32> {
+            match t {
+                Type::Struct(s) => s.fields.iter().find_map(|(n, ft)| match (n.as_str(), ft) {
+                    ("timestamp", Type::Int(i)) => Some(i.size),
+                    ("v", Type::Variant { options, .. }) => {
+                        let chosen = match sel.and_then(|h| h.get("v")) {
+                            Some(Field::Variant(name, _)) => name.clone(),
+                            _ => return None,
+                        };
+                        options
+                            .iter()
+                            .find(|(o, _)| *o == chosen)
+                            .and_then(|(_, ot)| find(ot, None))
+                    }
+                    _ => None,
+                }),
+                _ => None,
+            }
+        }
+        self.stream
+            .and_then(|s| s.event_header.as_ref())
+            .and_then(|t| find(t, header))
+            .unwrap_or(64)
+    }
+
+    /// Read a scope's top type.
+    fn read(&mut self, t: &Type) -> R<Field> {
+        self.scopes.clear();
+        self.value(t)
+    }
+
+    fn lookup(&self, path: &str) -> Option<i128> {
+        let f = self.lookup_field(path)?;
+        f.int()
+    }
+
+    fn lookup_field(&self, path: &str) -> Option<&Field> {
+        for (scope, f) in self.done.iter().rev() {
+            if let Some(rest) = path.strip_prefix(scope).and_then(|r| r.strip_prefix('.')) {
+                return f.get(rest);
+            }
+        }
+        let (head, rest) = path.split_once('.').unwrap_or((path, ""));
+        for scope in self.scopes.iter().rev() {
+            if let Some((_, f)) = scope.iter().find(|(n, _)| n == head) {
+                return if rest.is_empty() {
+                    Some(f)
+                } else {
+                    f.get(rest)
+                };
+            }
+        }
+        None
+    }
+
+    fn value(&mut self, t: &Type) -> R<Field> {
+        let Some(b) = self.bits.as_mut() else {
+            return Err("no packet".into());
+        };
+        match t {
+            Type::Int(i) => Ok(Field::Int(b.int(i)?)),
+            Type::Enum(i, labels) => {
+                let v = b.int(i)?;
+                let label = labels
+                    .iter()
+                    .find(|(_, lo, hi)| *lo <= v && v <= *hi)
+                    .map(|(l, _, _)| l.clone());
+                Ok(Field::Enum(v, label))
+            }
+            Type::Float {
+                exp, align, order, ..
+            } => {
+                b.align(*align)?;
+                if *exp == 8 {
+                    Ok(Field::Float(f64::from(f32::from_bits(
+                        b.uint(32, *order)? as u32
+                    ))))
+                } else {
+                    Ok(Field::Float(f64::from_bits(b.uint(64, *order)?)))
+                }
+            }
+            Type::Str => {
+                b.align(8)?;
+                let start = (b.pos / 8) as usize;
+                let end = (b.end / 8) as usize;
+                let bytes = b.data.get(start..end).unwrap_or_default();
+                let Some(n) = bytes.iter().position(|&c| c == 0) else {
+                    return Err(format!(
+                        "string at byte {start} has no terminating zero before the end of the packet content"
+                    ));
+                };
+                b.pos += (n as u64 + 1) * 8;
+                Ok(Field::Str(
+                    String::from_utf8_lossy(&bytes[..n]).into_owned(),
+                ))
+            }
+            Type::Struct(s) => self.strukt(s),
+            Type::Array(elem, len) => {
+                let n = match len {
+                    Len::Fixed(n) => i128::from(*n),
+                    Len::Field(p) => self.lookup(p).ok_or_else(|| {
+                        format!("sequence length `{p}` is not an integer field read before")
+                    })?,
+                };
+                let (pos, left) = self
+                    .bits
+                    .as_ref()
+                    .map_or((0, 0), |b| (b.pos, b.end.saturating_sub(b.pos)));
+                if n < 0 || n > i128::from(left) {
+                    return Err(format!(
+                        "array length {n} at byte {} is more than the {left} bits left in the packet",
+                        pos / 8
+                    ));
+                }
+                let mut items = Vec::new();
+                for _ in 0..n {
+                    items.push(self.value(elem)?);
+                }
+                Ok(Field::Array(items))
+            }
+            Type::Variant { tag, options } => {
+                let label = match self.lookup_field(tag) {
+                    Some(Field::Enum(_, Some(l))) => l.clone(),
+                    Some(Field::Enum(v, None)) => {
+                        return Err(format!(
+                            "variant tag `{tag}` = {v} matches no label of its enum"
+                        ));
+                    }
+                    _ => {
+                        return Err(format!(
+                            "variant tag `{tag}` is not an enum field read before"
+                        ));
+                    }
+                };
+                let Some((name, ot)) = options.iter().find(|(n, _)| *n == label) else {
+                    return Err(format!("variant has no option `{label}` (tag `{tag}`)"));
+                };
+                let v = self.value(ot)?;
+                Ok(Field::Variant(name.clone(), Box::new(v)))
+            }
+        }
+    }
+
+    fn strukt(&mut self, s: &StructType) -> R<Field> {
+        if let Some(b) = self.bits.as_mut() {
+            b.align(s.align.max(max_align(s)))?;
+        }
+        self.scopes.push(Vec::new());
+        for (name, t) in &s.fields {
+            let v = match self.value(t) {
+                Ok(v) => v,
+                Err(e) => {
+                    self.scopes.pop();
+                    return Err(e);
+                }
+            };
+            if let Some(top) = self.scopes.last_mut() {
+                top.push((name.clone(), v));
+            }
+        }
+        Ok(Field::Struct(self.scopes.pop().unwrap_or_default()))
+    }
+}
+
+/// A struct's alignment: the largest of its fields'.
+fn max_align(s: &StructType) -> u32 {
+    fn align(t: &Type) -> u32 {
+        match t {
+            Type::Int(i) | Type::Enum(i, _) => i.align,
+            Type::Float { align, .. } => *align,
+            Type::Str => 8,
+            Type::Struct(s) => s.align.max(max_align(s)),
+            Type::Array(e, _) => align(e),
+            Type::Variant { .. } => 1,
+        }
+    }
+    s.fields.iter().map(|(_, t)| align(t)).max().unwrap_or(1)
+}
