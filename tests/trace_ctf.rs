@@ -5,7 +5,6 @@
 //! against babeltrace2's own reading of the same trace when the `babeltrace2` command is present.
 
 #[path = "support/servers.rs"]
-#[allow(dead_code)]
 mod servers;
 
 use std::path::{Path, PathBuf};

@@ -110,7 +110,7 @@ impl Bits<'_> {
             Order::Le => false,
         };
         let mut v: u64 = 0;
-        if self.pos % 8 == 0 && n % 8 == 0 {
+        if self.pos.is_multiple_of(8) && n.is_multiple_of(8) {
             let start = (self.pos / 8) as usize;
             let bytes = self
                 .data
@@ -250,12 +250,12 @@ impl<'a> StreamDecoder<'a> {
             None => None,
         };
         if let Some(h) = &self.packet_header {
-            if let Some(m) = h.get("magic").and_then(Field::int) {
-                if m != 0xC1FC_1FC1 {
-                    return Err(format!(
-                        "bad packet magic number {m:#x} (expected 0xc1fc1fc1)"
-                    ));
-                }
+            if let Some(m) = h.get("magic").and_then(Field::int)
+                && m != 0xC1FC_1FC1
+            {
+                return Err(format!(
+                    "bad packet magic number {m:#x} (expected 0xc1fc1fc1)"
+                ));
             }
             self.done.push(("trace.packet.header", h.clone()));
         }

@@ -145,9 +145,7 @@ fn merge(
             .enumerate()
             .filter_map(|(i, h)| key(i, h))
             .min();
-        let Some((_, _, i)) = next else {
-            return None;
-        };
+        let (_, _, i) = next?;
         let head = heads.get_mut(i).and_then(Option::take);
         match head {
             Some(Ok(raw)) => {

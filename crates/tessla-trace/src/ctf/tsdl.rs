@@ -330,6 +330,9 @@ enum Val {
     Path(String),
 }
 
+/// A block's `key = value;` and `key := type;` statements.
+type Block = (Vec<(String, Val)>, Vec<(String, Type)>);
+
 struct Parser {
     toks: Vec<Lexed>,
     pos: usize,
@@ -446,7 +449,7 @@ impl Parser {
     }
 
     /// The statements of a `{ ... }` block of `key = value;` and `key := type;` (the `{` read).
-    fn block(&mut self) -> R<(Vec<(String, Val)>, Vec<(String, Type)>)> {
+    fn block(&mut self) -> R<Block> {
         let (mut vals, mut types) = (Vec::new(), Vec::new());
         while !self.eat("}") {
             if self.peek().is_none() {
@@ -569,7 +572,7 @@ impl Parser {
             ));
         }
         if t.align == 0 {
-            t.align = if t.size % 8 == 0 { 8 } else { 1 };
+            t.align = if t.size.is_multiple_of(8) { 8 } else { 1 };
         }
         if !t.align.is_power_of_two() {
             return self.err(format!("alignment {} is not a power of two", t.align));
@@ -718,7 +721,8 @@ impl Parser {
                     match self.aliases.get("int") {
                         Some(Type::Int(i)) => i.clone(),
                         _ => {
-                            return self.err("an enum needs a base type (`enum : uint8_t { ... }`)");
+                            return self
+                                .err("an enum needs a base type (`enum : uint8_t { ... }`)");
                         }
                     }
                 } else {
