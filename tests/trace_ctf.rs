@@ -110,6 +110,11 @@ fn temp_fields(value: i64, unit: &str, b: u16, n: u8, level: u8) -> Vec<u8> {
 
 /// A packet of stream 0 for `cpu` holding `events`, padded to a multiple of 64 bytes.
 fn packet(cpu: u32, begin: u64, end: u64, events: &[Ev]) -> Vec<u8> {
+    packet_lost(cpu, begin, end, 0, events)
+}
+
+/// [`packet`] after `discarded` events were discarded in this stream so far.
+fn packet_lost(cpu: u32, begin: u64, end: u64, discarded: u64, events: &[Ev]) -> Vec<u8> {
     let mut body = Vec::new();
     for e in events {
         if e.compact {
@@ -132,7 +137,7 @@ fn packet(cpu: u32, begin: u64, end: u64, events: &[Ev]) -> Vec<u8> {
     p.extend(end.to_le_bytes());
     p.extend((content as u64 * 8).to_le_bytes());
     p.extend((size as u64 * 8).to_le_bytes());
-    p.extend(0u64.to_le_bytes());
+    p.extend(discarded.to_le_bytes());
     p.extend(cpu.to_le_bytes());
     p.extend(body);
     p.resize(size, 0);
@@ -534,5 +539,44 @@ fn agrees_with_babeltrace2() {
         stdout(&o).contains("value = 42, unit = \"C\", inner = { a = 7, b = 300 }"),
         "{}",
         stdout(&o)
+    );
+}
+
+/// A packet whose `events_discarded` grew starts with a `Lost event` at its start time, as in
+/// Trace Compass: it advances time, and `-r` stops at it.
+#[test]
+fn discarded_events_are_a_lost_event() {
+    let t = dir("lost");
+    std::fs::write(t.join("metadata"), METADATA).unwrap();
+    let ev = |ts, value| Ev {
+        id: 0,
+        ts,
+        compact: false,
+        vtid: 1,
+        fields: temp_fields(value, "C", 1, 0, 0),
+    };
+    let mut data = packet_lost(0, 1000, 2000, 0, &[ev(1005, 1)]);
+    data.extend(packet_lost(0, 3000, 4000, 3, &[ev(3500, 2)]));
+    // An empty packet: no lost event even though more were discarded.
+    data.extend(packet_lost(0, 4000, 5000, 5, &[]));
+    std::fs::write(t.join("chan_0"), data).unwrap();
+    let (events, err) = tessla_telegraf::trace::ctf::read_dir(&t).unwrap();
+    assert!(err.is_none());
+    let got: Vec<(u64, &str)> = events.iter().map(|e| (e.ts, e.name.as_str())).collect();
+    assert_eq!(got, [(1005, "temp"), (3000, "Lost event"), (3500, "temp")]);
+    let s = spec(
+        "lost",
+        "in temp: Events[CTF]\nout CTF.getInt(temp, \"value\") as v\n",
+    );
+    let o = run(&s, &[], &t);
+    assert_eq!(stdout(&o), "1005: v = 1\n3500: v = 2\n");
+    // As for text traces, the pending step (1005) is dropped at the error.
+    let o = run(&s, &["-r"], &t);
+    assert_eq!(o.status.code(), Some(1));
+    assert_eq!(stdout(&o), "");
+    assert!(
+        stderr(&o).contains("event at 3000: Undeclared input stream Lost event"),
+        "{}",
+        stderr(&o)
     );
 }

@@ -5,6 +5,12 @@
 //! against the packet's content: bad data is an error naming the byte, never a panic.
 
 use super::tsdl::{IntType, Len, Metadata, Order, Stream, StructType, Type};
+use std::collections::HashMap;
+
+/// The name of the event a packet starts with when the writer discarded events before it
+/// (its `events_discarded` grew), as Trace Compass's reader names it; its fields are
+/// `Lost events` (how many) and `duration` (to the packet's end).
+pub const LOST_EVENT: &str = "Lost event";
 
 /// A decoded value.
 #[derive(Debug, Clone, PartialEq)]
@@ -46,8 +52,8 @@ impl Field {
 /// One decoded event.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RawEvent {
-    /// Index into `Metadata::events`.
-    pub decl: usize,
+    /// Index into `Metadata::events`; `None` for a [`LOST_EVENT`].
+    pub decl: Option<usize>,
     /// The clock value (cycles), extended over the header's wrapping timestamp field.
     pub ts: u64,
     pub header: Option<Field>,
@@ -165,6 +171,12 @@ pub struct StreamDecoder<'a> {
     /// Completed scopes of the current event (`stream.event.header`, ...).
     done: Vec<(&'static str, Field)>,
     failed: bool,
+    /// The events of each stream, by id.
+    ids: HashMap<u64, Vec<(u64, usize)>>,
+    /// `events_discarded` of the previous packet.
+    discarded: i128,
+    /// The lost event the current packet starts with: how many, and the duration.
+    lost: Option<(i128, u64)>,
 }
 
 impl<'a> StreamDecoder<'a> {
@@ -181,6 +193,16 @@ impl<'a> StreamDecoder<'a> {
             scopes: Vec::new(),
             done: Vec::new(),
             failed: false,
+            ids: md
+                .events
+                .iter()
+                .enumerate()
+                .fold(HashMap::new(), |mut m, (i, e)| {
+                    m.entry(e.stream_id).or_default().push((e.id, i));
+                    m
+                }),
+            discarded: 0,
+            lost: None,
         }
     }
 
@@ -204,7 +226,12 @@ impl<'a> StreamDecoder<'a> {
     fn next_inner(&mut self) -> Option<R<RawEvent>> {
         loop {
             match &self.bits {
-                Some(b) if b.pos < b.end => return Some(self.event()),
+                Some(b) if b.pos < b.end => {
+                    if let Some((count, duration)) = self.lost.take() {
+                        return Some(Ok(self.lost_event(count, duration)));
+                    }
+                    return Some(self.event());
+                }
                 Some(_) => {
                     let size = self.packet_size();
                     self.bits = None;
@@ -303,6 +330,15 @@ impl<'a> StreamDecoder<'a> {
             self.last_ts = int("timestamp_begin")
                 .and_then(|t| u64::try_from(t).ok())
                 .unwrap_or(0);
+            if let Some(d) = int("events_discarded") {
+                let lost = d - self.discarded;
+                self.discarded = d;
+                let end = int("timestamp_end").and_then(|t| u64::try_from(t).ok());
+                if lost > 0 {
+                    let duration = end.map_or(0, |e| e.saturating_sub(self.last_ts));
+                    self.lost = Some((lost, duration));
+                }
+            }
             self.done.push(("stream.packet.context", c.clone()));
         }
         Ok(())
@@ -348,18 +384,16 @@ impl<'a> StreamDecoder<'a> {
             };
         }
         let sid = stream.map_or(0, |s| s.id);
-        let in_stream: Vec<usize> = (0..self.md.events.len())
-            .filter(|&i| self.md.events[i].stream_id == sid)
-            .collect();
+        let in_stream = self.ids.get(&sid).map_or(&[][..], Vec::as_slice);
         let decl = match id {
             Some(id) => in_stream
                 .iter()
-                .copied()
-                .find(|&i| i128::from(self.md.events[i].id) == id),
-            None if in_stream.len() == 1 => in_stream.first().copied(),
+                .find(|(e, _)| i128::from(*e) == id)
+                .map(|(_, i)| *i),
+            None if in_stream.len() == 1 => in_stream.first().map(|(_, i)| *i),
             None => None,
         };
-        let Some(decl) = decl else {
+        let Some((decl, d)) = decl.and_then(|i| Some((i, self.md.events.get(i)?))) else {
             return Err(format!(
                 "event id {} is not declared for stream {sid}",
                 id.map_or_else(|| "(none)".to_string(), |i| i.to_string())
@@ -373,7 +407,6 @@ impl<'a> StreamDecoder<'a> {
             }
             None => None,
         };
-        let d = &self.md.events[decl];
         let context = match &d.context {
             Some(t) => {
                 let f = self.read(t)?;
@@ -390,7 +423,7 @@ impl<'a> StreamDecoder<'a> {
             return Err(format!("empty event `{}`", d.name));
         }
         Ok(RawEvent {
-            decl,
+            decl: Some(decl),
             ts: self.last_ts,
             header,
             stream_context,
@@ -398,6 +431,21 @@ impl<'a> StreamDecoder<'a> {
             fields,
             packet_context: self.packet_context.clone(),
         })
+    }
+
+    fn lost_event(&self, count: i128, duration: u64) -> RawEvent {
+        RawEvent {
+            decl: None,
+            ts: self.last_ts,
+            header: None,
+            stream_context: None,
+            context: None,
+            fields: Some(Field::Struct(vec![
+                ("Lost events".into(), Field::Int(count)),
+                ("duration".into(), Field::Int(i128::from(duration))),
+            ])),
+            packet_context: self.packet_context.clone(),
+        }
     }
 
     /// The size of the event header's timestamp field (64 when not found).

@@ -4,6 +4,10 @@
 //! named after the event's declared name, at its timestamp, carrying the event as a `CTF` value
 //! (read with `CTF.getInt`/`CTF.getString`).
 //!
+//! When a packet's `events_discarded` grew, the packet's events are preceded by one named
+//! `Lost event` at the packet's start time (fields `Lost events` and `duration`), as in Trace
+//! Compass: no spec can declare that name, so it only advances time (or stops `-r`).
+//!
 //! Timestamps are the clock values as the event headers hold them (clock cycles, a wrapping
 //! compact timestamp extended over the previous one), without the clock's offset and frequency:
 //! that is what TeSSLa's reader (Trace Compass's `ctf.core`, `IEventDefinition.getTimestamp`)
@@ -152,10 +156,13 @@ fn merge(
                 if let Some(l) = last.get_mut(i) {
                     *l = raw.ts;
                 }
-                let name = md
-                    .events
-                    .get(raw.decl)
-                    .map_or_else(String::new, |d| d.name.clone());
+                let name = match raw.decl {
+                    Some(d) => md
+                        .events
+                        .get(d)
+                        .map_or_else(String::new, |d| d.name.clone()),
+                    None => decode::LOST_EVENT.to_string(),
+                };
                 let ev = CtfEvent {
                     value: to_value(&name, &raw),
                     name,
