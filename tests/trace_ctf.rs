@@ -580,3 +580,64 @@ fn discarded_events_are_a_lost_event() {
         stderr(&o)
     );
 }
+
+/// Metadata in packets (as LTTng writes it): the same trace, the same outputs.
+#[test]
+fn packetized_metadata() {
+    let t = write_trace("packetized");
+    let mut md = Vec::new();
+    // Packets of at most 900 bytes of text, each padded to 1024 bytes.
+    for chunk in METADATA.as_bytes().chunks(900) {
+        let content = 37 + chunk.len();
+        let mut p = Vec::new();
+        p.extend(0x75D1_1D57u32.to_le_bytes());
+        p.extend([0u8; 16]); // uuid
+        p.extend(0u32.to_le_bytes()); // checksum
+        p.extend((content as u32 * 8).to_le_bytes());
+        p.extend((1024u32 * 8).to_le_bytes());
+        p.extend([0, 0, 0, 1, 8]); // compression, encryption, checksum scheme, major, minor
+        p.extend(chunk);
+        p.resize(1024, 0);
+        md.extend(p);
+    }
+    std::fs::write(t.join("metadata"), md).unwrap();
+    let o = run(&spec("packetized", MEMBERS), &[], &t);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(stdout(&o).lines().count(), 4 * 6);
+    assert!(stdout(&o).contains("1500: value = 100\n"), "{}", stdout(&o));
+}
+
+/// A trace written by babeltrace2's own CTF writer (`sink.ctf.fs`, from dmesg-style lines):
+/// read with its event names, clock values and string fields.
+#[test]
+fn reads_a_trace_written_by_babeltrace2() {
+    let Some(bt) = servers::require("babeltrace2", "babeltrace2") else {
+        return;
+    };
+    let d = dir("bt-written");
+    let log = d.join("kernel.log");
+    std::fs::write(
+        &log,
+        "[    0.000100] first line\n[    1.500000] second: thing\n[    2.000001] third\n",
+    )
+    .unwrap();
+    let out = d.join("out");
+    let o = Command::new(bt)
+        .arg("--component=src.text.dmesg")
+        .arg(format!("--params=path=\"{}\"", log.display()))
+        .arg("--component=sink.ctf.fs")
+        .arg(format!("--params=path=\"{}\"", out.display()))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    let s = spec(
+        "bt-written",
+        "in string: Events[CTF]\nout CTF.getString(string, \"_str\") as s\n",
+    );
+    let o = run(&s, &[], &out.join("kernel.log"));
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(
+        stdout(&o),
+        "100000: s = first line\n1500000000: s = second: thing\n2000001000: s = third\n"
+    );
+}
