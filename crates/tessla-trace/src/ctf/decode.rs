@@ -171,6 +171,8 @@ pub struct StreamDecoder<'a> {
     /// Completed scopes of the current event (`stream.event.header`, ...).
     done: Vec<(&'static str, Field)>,
     failed: bool,
+    /// The scope being read (`event.fields`, ...).
+    current: &'static str,
     /// The events of each stream, by id.
     ids: HashMap<u64, Vec<(u64, usize)>>,
     /// `events_discarded` of the previous packet.
@@ -193,6 +195,7 @@ impl<'a> StreamDecoder<'a> {
             scopes: Vec::new(),
             done: Vec::new(),
             failed: false,
+            current: "",
             ids: md
                 .events
                 .iter()
@@ -273,7 +276,7 @@ impl<'a> StreamDecoder<'a> {
         });
         self.done.clear();
         self.packet_header = match &self.md.packet_header {
-            Some(t) => Some(self.read(t)?),
+            Some(t) => Some(self.read(t, "trace.packet.header")?),
             None => None,
         };
         if let Some(h) = &self.packet_header {
@@ -304,7 +307,7 @@ impl<'a> StreamDecoder<'a> {
         };
         self.stream = stream;
         self.packet_context = match stream.and_then(|s| s.packet_context.as_ref()) {
-            Some(t) => Some(self.read(t)?),
+            Some(t) => Some(self.read(t, "stream.packet.context")?),
             None => None,
         };
         let rest = (data.len() as u64).saturating_mul(8);
@@ -351,7 +354,7 @@ impl<'a> StreamDecoder<'a> {
         );
         let stream = self.stream;
         let header = match stream.and_then(|s| s.event_header.as_ref()) {
-            Some(t) => Some(self.read(t)?),
+            Some(t) => Some(self.read(t, "stream.event.header")?),
             None => None,
         };
         let (mut id, mut ts) = (None, None);
@@ -401,7 +404,7 @@ impl<'a> StreamDecoder<'a> {
         };
         let stream_context = match stream.and_then(|s| s.event_context.as_ref()) {
             Some(t) => {
-                let f = self.read(t)?;
+                let f = self.read(t, "stream.event.context")?;
                 self.done.push(("stream.event.context", f.clone()));
                 Some(f)
             }
@@ -409,14 +412,14 @@ impl<'a> StreamDecoder<'a> {
         };
         let context = match &d.context {
             Some(t) => {
-                let f = self.read(t)?;
+                let f = self.read(t, "event.context")?;
                 self.done.push(("event.context", f.clone()));
                 Some(f)
             }
             None => None,
         };
         let fields = match &d.fields {
-            Some(t) => Some(self.read(t)?),
+            Some(t) => Some(self.read(t, "event.fields")?),
             None => None,
         };
         if self.bits.as_ref().map_or(0, |b| b.pos) == start {
@@ -476,8 +479,11 @@ impl<'a> StreamDecoder<'a> {
     }
 
     /// Read a scope's top type.
-    fn read(&mut self, t: &Type) -> R<Field> {
+    /// Read a scope's top type; `scope` is its absolute name (`event.fields`), for length and
+    /// tag paths that name it.
+    fn read(&mut self, t: &Type, scope: &'static str) -> R<Field> {
         self.scopes.clear();
+        self.current = scope;
         self.value(t)
     }
 
@@ -487,6 +493,18 @@ impl<'a> StreamDecoder<'a> {
     }
 
     fn lookup_field(&self, path: &str) -> Option<&Field> {
+        if let Some(rest) = path
+            .strip_prefix(self.current)
+            .and_then(|r| r.strip_prefix('.'))
+        {
+            let (head, tail) = rest.split_once('.').unwrap_or((rest, ""));
+            let (_, f) = self.scopes.first()?.iter().find(|(n, _)| n == head)?;
+            return if tail.is_empty() {
+                Some(f)
+            } else {
+                f.get(tail)
+            };
+        }
         for (scope, f) in self.done.iter().rev() {
             if let Some(rest) = path.strip_prefix(scope).and_then(|r| r.strip_prefix('.')) {
                 return f.get(rest);
@@ -681,6 +699,41 @@ mod tests {
             error.as_deref(),
             Some("truncated: 16 bits needed at byte 3, the content ends at byte 4")
         );
+    }
+
+    /// Sequence lengths and variant tags by relative and absolute paths, into the current
+    /// struct, an enclosing one, or a scope read before (the stream event context).
+    #[test]
+    fn lengths_and_tags_by_path() {
+        let md = "
+            typealias integer { size = 8; align = 8; signed = false; } := u8;
+            trace { major = 1; minor = 8; byte_order = le; };
+            stream { event.context := struct { u8 ctxlen; }; };
+            event { name = \"e\"; fields := struct {
+                u8 n;
+                enum : u8 { none, num } tag;
+                struct { u8 a[event.fields.n]; u8 b[n]; u8 c[stream.event.context.ctxlen]; } inner;
+                variant <event.fields.tag> { struct { } none; u8 num; } v;
+                variant <tag> { struct { } none; struct { u8 x; u8 y[x]; } num; } w;
+            }; };";
+        // ctxlen, n, tag, inner.a, inner.b, inner.c, v, w.x, w.y
+        let data = [1, 2, 1, 10, 20, 30, 40, 99, 1, 2, 5, 6];
+        let (events, error) = decode_all(md, &data);
+        assert_eq!(error, None);
+        let f = events[0].fields.as_ref().unwrap();
+        let ints = |path: &str| match f.get(path) {
+            Some(Field::Array(v)) => v.iter().filter_map(Field::int).collect::<Vec<_>>(),
+            other => panic!("{path}: {other:?}"),
+        };
+        assert_eq!(ints("inner.a"), [10, 20]);
+        assert_eq!(ints("inner.b"), [30, 40]);
+        assert_eq!(ints("inner.c"), [99]);
+        assert_eq!(
+            f.get("v"),
+            Some(&Field::Variant("num".into(), Box::new(Field::Int(1))))
+        );
+        assert_eq!(ints("w.y"), [5, 6]);
+        assert_eq!(f.get("w.x"), Some(&Field::Int(2)));
     }
 
     /// Random bytes under a metadata with every kind of type, and random edits of metadata
