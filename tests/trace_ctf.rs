@@ -400,6 +400,17 @@ fn a_ctf_value_cannot_be_printed_and_a_typed_input_is_refused() {
         "{}",
         stderr(&o)
     );
+    let o = run(
+        &spec("nested", "in temp: Events[CTF]\nout Some(temp) as p\n"),
+        &[],
+        &t,
+    );
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("output `p` at t = 1005: a CTF event object"),
+        "{}",
+        stderr(&o)
+    );
     let o = run(&spec("typed", "in temp: Events[Int]\nout temp\n"), &[], &t);
     assert_eq!(o.status.code(), Some(1));
     assert!(

@@ -255,6 +255,20 @@ pub fn is_ctf(v: &Value) -> bool {
     matches!(v, Value::Record(fs) if fs.first().is_some_and(|(n, _)| &**n == CTF_MARKER))
 }
 
+/// Is this a `CTF` value or one holding one (in an option, tuple, list, record, set, map)?
+pub fn holds_ctf(v: &Value) -> bool {
+    is_ctf(v)
+        || match v {
+            Value::Some(x) => holds_ctf(x),
+            Value::List(xs) => xs.iter().any(holds_ctf),
+            Value::Tuple(xs) => xs.iter().any(holds_ctf),
+            Value::Record(fs) => fs.iter().any(|(_, x)| holds_ctf(x)),
+            Value::Set(xs) => xs.iter().any(holds_ctf),
+            Value::Map(kv) => kv.iter().any(|(k, x)| holds_ctf(k) || holds_ctf(x)),
+            _ => false,
+        }
+}
+
 /// Run `program` over the CTF trace in `dir`, writing outputs to `out` as they are produced.
 /// The options are those of text traces, except that `-a N` reads N events, as TeSSLa's CTF
 /// reader counts. A bad event stops the run after the outputs of the steps before it.
@@ -293,7 +307,7 @@ pub fn run_dir(
             return false;
         };
         let mut print = |e: tessla_engine::OutputEvent<'_>| {
-            if printer.error.is_none() && is_ctf(e.value) {
+            if printer.error.is_none() && holds_ctf(e.value) {
                 let name = program
                     .outputs
                     .get(e.output)
