@@ -944,6 +944,38 @@ mod tests {
         assert_eq!(h.align, 8);
     }
 
+    /// LTTng declares its headers as named structs and refers to them by name; integers of
+    /// several words (`unsigned long`); quoted enum labels; `callsite` blocks.
+    #[test]
+    fn named_structs_and_multi_word_types() {
+        let md = parse(
+            r#"typealias integer { size = 64; align = 8; signed = false; } := unsigned long;
+            typealias integer { size = 8; align = 8; signed = 1; } := int8_t;
+            struct packet_context { unsigned long content_size; unsigned long packet_size; } align(8);
+            enum level : int8_t { "A b" = -1, C };
+            callsite { name = "x"; func = "f"; ip = 0x1234; file = "a.c"; line = 3; };
+            stream { id = 1; packet.context := struct packet_context; };
+            event { name = "e"; stream_id = 1; fields := struct { enum level l; }; };"#,
+        )
+        .unwrap();
+        let Some(Type::Struct(pc)) = &md.streams[0].packet_context else {
+            panic!("packet context")
+        };
+        assert_eq!(pc.fields.len(), 2);
+        assert_eq!(pc.fields[1].0, "packet_size");
+        let Some(Type::Struct(f)) = &md.events[0].fields else {
+            panic!("fields")
+        };
+        let Type::Enum(base, labels) = &f.fields[0].1 else {
+            panic!("enum")
+        };
+        assert!(base.signed);
+        assert_eq!(
+            **labels,
+            [("A b".to_string(), -1, -1), ("C".to_string(), 0, 0)]
+        );
+    }
+
     #[test]
     fn errors_name_line_and_column() {
         let e = parse("trace {\n  byte_order = le;\n  packet.header := struct { foo x; };\n};")
