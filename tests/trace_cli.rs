@@ -262,17 +262,19 @@ fn csv_traces_from_a_file_and_stdin() {
 }
 
 #[test]
-fn ctf_needs_a_trace_and_says_it_cannot_read_it() {
+fn ctf_needs_a_trace_directory_with_metadata() {
     let spec = temp("ctf.tessla", "in x: Events[Int]\nout x\n");
     let s = spec.to_str().unwrap();
     let out = trace(s, &["--ctf"], "");
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("--ctf needs a trace"));
-    let dir = std::env::temp_dir();
+    // A directory without a `metadata` file is not a CTF trace (tests/trace_ctf.rs reads real ones).
+    let dir = std::env::temp_dir().join(format!("tessla-ctf-empty-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
     let out = trace(s, &["--ctf", dir.to_str().unwrap()], "");
     assert_eq!(out.status.code(), Some(3));
     assert!(
-        text(&out.stderr).contains("CTF traces are not supported yet"),
+        text(&out.stderr).contains("metadata") && text(&out.stderr).contains("No such file"),
         "{}",
         text(&out.stderr)
     );

@@ -2,7 +2,8 @@
 //! read line by line) and print TeSSLa's output format as outputs are produced. Exit 1 on a
 //! runtime or trace error (outputs before it are printed, the error goes to stderr), 2 on a
 //! spec error or an option that does not fit the spec, 3 when the trace cannot be read; 0 also
-//! when stdout is closed by the reader. The options are TeSSLa's `interpreter` command's.
+//! when stdout is closed by the reader. The options are TeSSLa's `interpreter` command's; with
+//! `--ctf` the trace is a CTF trace directory (see `tessla_trace::ctf`).
 
 use super::{CliError, CliResult, TraceArgs};
 use crate::trace::{ErrorKind, Format, Options, run_stream_with};
@@ -59,19 +60,6 @@ pub fn run(args: TraceArgs) -> CliResult {
     }
     super::check::require_outputs(&loaded.program, &args.spec.display().to_string())
         .map_err(|e| CliError::spec(format!("error: {e}")))?;
-    if args.ctf {
-        // As TeSSLa's interpreter: a CTF trace is a directory, never stdin.
-        return Err(match &args.trace {
-            None => CliError::spec(
-                "error: --ctf needs a trace (a CTF trace directory); stdin is not supported",
-            ),
-            Some(p) => CliError::io(format!(
-                "error: cannot read {}: CTF traces are not supported yet; give the trace as \
-                 `TS: name = value` lines or as CSV (--csv)",
-                p.display()
-            )),
-        });
-    }
     let options = Options {
         format: if args.csv {
             Format::Csv
@@ -84,6 +72,18 @@ pub fn run(args: TraceArgs) -> CliResult {
     };
     let stdout = std::io::stdout();
     let result = match &args.trace {
+        // As TeSSLa's interpreter: a CTF trace is a directory, never stdin.
+        None if args.ctf => {
+            return Err(CliError::spec(
+                "error: --ctf needs a trace (a CTF trace directory); stdin is not supported",
+            ));
+        }
+        Some(p) if args.ctf => tessla_trace::ctf::run_dir(
+            &loaded.program,
+            p,
+            &mut BufWriter::new(stdout.lock()),
+            &options,
+        ),
         // A trace file is read as fast as possible: outputs are block-buffered.
         Some(p) => match std::fs::File::open(p) {
             Ok(f) => run_stream_with(

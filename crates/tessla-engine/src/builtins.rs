@@ -437,8 +437,8 @@ pub static BUILTINS: &[Builtin] = &[
     operator("Operators.fnegate", ops::natives::fneg),
     operator("Operators.bitflip", ops::natives::bitflip),
     // Natives reached only through `extern("name")` (declared in the bundled specs).
-    external("CTF.getInt", core::ctf_get),
-    external("CTF.getString", core::ctf_get),
+    external("CTF.getInt", core::ctf_get_int),
+    external("CTF.getString", core::ctf_get_string),
     external("List_size", core::list_size),
     external("List_get", core::list_get),
     external("List_fold", core::list_fold),

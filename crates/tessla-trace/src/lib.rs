@@ -8,6 +8,7 @@
 //! outputs of the steps before are kept, the pending step is dropped (as TeSSLa does). An error
 //! value reaching an output stops the run at that step.
 
+pub mod ctf;
 pub mod reader;
 pub mod writer;
 
@@ -145,26 +146,9 @@ fn io_error(what: &str, err: &io::Error) -> RunError {
     }
 }
 
-/// Run `program` over a trace read line by line from `input`, writing outputs to `out` as they
-/// are produced. Stops at the first error (see the module doc).
-pub fn run_stream(
-    program: &Arc<Program>,
-    source: &str,
-    input: impl BufRead,
-    out: &mut impl Write,
-) -> Result<(), RunError> {
-    run_stream_with(program, source, input, out, &Options::default())
-}
-
-/// [`run_stream`] with `options`.
-pub fn run_stream_with(
-    program: &Arc<Program>,
-    source: &str,
-    input: impl BufRead,
-    out: &mut impl Write,
-    options: &Options,
-) -> Result<(), RunError> {
-    let stop_on = match &options.stop_on {
+/// The output index of `-S`'s stream; an output the spec lacks is a usage error.
+fn stop_on_index(program: &Program, options: &Options) -> Result<Option<usize>, RunError> {
+    Ok(match &options.stop_on {
         None => None,
         Some(name) => match program.outputs.iter().position(|o| o.name == *name) {
             Some(i) => Some(i),
@@ -186,7 +170,29 @@ pub fn run_stream_with(
                 });
             }
         },
-    };
+    })
+}
+
+/// Run `program` over a trace read line by line from `input`, writing outputs to `out` as they
+/// are produced. Stops at the first error (see the module doc).
+pub fn run_stream(
+    program: &Arc<Program>,
+    source: &str,
+    input: impl BufRead,
+    out: &mut impl Write,
+) -> Result<(), RunError> {
+    run_stream_with(program, source, input, out, &Options::default())
+}
+
+/// [`run_stream`] with `options`.
+pub fn run_stream_with(
+    program: &Arc<Program>,
+    source: &str,
+    input: impl BufRead,
+    out: &mut impl Write,
+    options: &Options,
+) -> Result<(), RunError> {
+    let stop_on = stop_on_index(program, options)?;
     let mut monitor = Monitor::new(program.clone());
     let mut printer = Printer {
         program,

@@ -180,17 +180,77 @@ pub fn string_format(a: &[Value]) -> Value {
     }
 }
 
-/// `CTF.getInt`/`CTF.getString`: CTF event objects only come from Common Trace Format traces,
-/// which this engine does not read, so no value of type `CTF` exists and a call never happens
-/// with one; any other argument is a type error.
-pub fn ctf_get(a: &[Value]) -> Value {
-    let what = a.first().map_or_else(String::new, |v| format!("`{v}` "));
-    err(RuntimeError::Other(
-        format!(
-            "CTF.getInt/getString: {what}is not a CTF event object (those come only from Common Trace Format traces, which this engine does not read)"
-        )
-        .into(),
-    ))
+/// The marker field of a `CTF` value: the record `trace --ctf` builds for a CTF event, with the
+/// event's name here and one field per key prefix of TeSSLa (`context`, `eventcontext`,
+/// `eventheader`, `packetcontext`, `fields`), each a record of the decoded struct (`Unit` when
+/// the trace has none). Not an identifier, so no TeSSLa record has it.
+pub const CTF_MARKER: &str = "$ctf";
+
+/// `CTF.getInt(event, key)`: the integer member at `key` (TeSSLa's key rules: see [`ctf_get`]).
+pub fn ctf_get_int(a: &[Value]) -> Value {
+    ctf_get(a, "Int", |v| matches!(v, Value::Int(_) | Value::BigInt(_)))
+}
+
+/// `CTF.getString(event, key)`: the string member at `key`.
+pub fn ctf_get_string(a: &[Value]) -> Value {
+    ctf_get(a, "String", |v| matches!(v, Value::Str(_)))
+}
+
+/// A member of a CTF event as TeSSLa finds it: `prefix:path` picks a section (`context`,
+/// `eventcontext`, `eventheader`, `packetcontext`, `fields`), no prefix means `fields`; the path
+/// is a member name, else a dotted path through nested structs. TeSSLa's errors: `Unknown prefix`,
+/// `Key "k" not found`, `Value for key "k" is not of type T` (enums, floats, arrays and variants
+/// are members of other types).
+fn ctf_get(a: &[Value], ty: &str, is: fn(&Value) -> bool) -> Value {
+    let (Some(Value::Record(event)), Some(Value::Str(key))) = (a.first(), a.get(1)) else {
+        let what = a.first().map_or_else(String::new, |v| format!("`{v}` "));
+        return err(RuntimeError::Other(
+            format!("CTF.get{ty}: {what}is not a CTF event object (those come from `trace --ctf`)")
+                .into(),
+        ));
+    };
+    let (prefix, path) = key.split_once(':').unwrap_or(("fields", key));
+    const PREFIXES: [&str; 5] = [
+        "context",
+        "eventcontext",
+        "eventheader",
+        "packetcontext",
+        "fields",
+    ];
+    if !PREFIXES.contains(&prefix) {
+        return err(RuntimeError::Other(
+            format!(
+                "Unknown prefix \"{prefix}\". Available prefixes are context, eventcontext, eventheader, packetcontext and fields"
+            )
+            .into(),
+        ));
+    }
+    fn member<'v>(v: &'v Value, name: &str) -> Option<&'v Value> {
+        match v {
+            Value::Record(fs) => fs.iter().find(|(n, _)| &**n == name).map(|(_, v)| v),
+            _ => None,
+        }
+    }
+    fn find<'v>(v: &'v Value, key: &str) -> Option<&'v Value> {
+        if let Some(m) = member(v, key) {
+            return Some(m);
+        }
+        let (head, tail) = key.split_once('.')?;
+        match member(v, head)? {
+            inner @ Value::Record(_) => find(inner, tail),
+            _ => None,
+        }
+    }
+    let section = event.iter().find(|(n, _)| &**n == prefix).map(|(_, v)| v);
+    match section.and_then(|s| find(s, path)) {
+        Some(v) if is(v) => v.clone(),
+        Some(_) => err(RuntimeError::Other(
+            format!("Value for key \"{key}\" is not of type {ty}").into(),
+        )),
+        None => err(RuntimeError::Other(
+            format!("Key \"{key}\" not found").into(),
+        )),
+    }
 }
 
 pub fn some(a: &[Value]) -> Value {
