@@ -2,7 +2,8 @@
 # Installs what the tests need on a fresh Debian/Ubuntu machine: the Rust toolchain is assumed
 # (rustup), the MQTT broker, InfluxDB 1.x and nats-server (the fleet tests' 3-node cluster) come
 # from Debian packages, and the openssl command line (the security tests make their TEST-ONLY
-# certificates with telegraf/fleet-nats/make-test-certs.sh). Idempotent: does nothing when
+# certificates with telegraf/fleet-nats/make-test-certs.sh) and babeltrace2 (the reference CTF reader
+# that tests/trace_ctf.rs checks `trace --ctf` against). Idempotent: does nothing when
 # everything is present. Needs root (or sudo) only when something is missing.
 set -euo pipefail
 
@@ -12,6 +13,7 @@ command -v influxd >/dev/null 2>&1 || [ -x /usr/bin/influxd ] || need+=(influxdb
 command -v nats-server >/dev/null 2>&1 || [ -x /usr/bin/nats-server ] || need+=(nats-server)
 command -v python3 >/dev/null 2>&1 || need+=(python3)
 command -v openssl >/dev/null 2>&1 || need+=(openssl)
+command -v babeltrace2 >/dev/null 2>&1 || need+=(babeltrace2)
 
 if [ ${#need[@]} -eq 0 ]; then
     exit 0

@@ -16,11 +16,20 @@ echo "SKIPPED, NOT PASSED: ${#notes[@]} suite(s) did not run (their tests count 
 for note in "${notes[@]}"; do
   echo "  - $(basename "$note"): $(head -n 1 "$note")"
 done
+if ls "$dir" | grep -qv '^needs-'; then
 cat <<'TXT'
-They need TeSSLa's conformance cases (the TeSSLa project's back-end test suite, one folder
-per topic with a <case>.json descriptor per case: see the README, "Tests and TeSSLa's suite").
-Put the folder at ../shared/tessla-suite beside this repository, or point TESSLA_SUITE at it:
+Suites named after a test need TeSSLa's conformance cases (the TeSSLa project's back-end test
+suite, one folder per topic with a <case>.json descriptor per case: see the README, "Tests and
+TeSSLa's suite"). Put the folder at ../shared/tessla-suite beside this repository, or point
+TESSLA_SUITE at it:
   TESSLA_SUITE=/path/to/tessla-suite make test
 REQUIRE_TESSLA_SUITE=1 (as CI sets) turns a missing suite into a failure.
 TXT
+fi
+if ls "$dir" | grep -q '^needs-'; then
+cat <<'TXT'
+Suites named needs-<program> need that server or tool: `bash tools/setup.sh` installs them
+(Debian packages). REQUIRE_SERVERS=1 (as CI sets) turns a missing one into a failure.
+TXT
+fi
 echo "$bar"

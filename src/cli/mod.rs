@@ -178,13 +178,14 @@ pub struct CheckArgs {
 pub struct TraceArgs {
     /// The `.tessla` file.
     pub spec: PathBuf,
-    /// The input trace (`TS: name = value` lines); stdin when absent.
+    /// The input trace (`TS: name = value` lines; with --ctf a CTF trace directory); stdin when
+    /// absent (never with --ctf).
     pub trace: Option<PathBuf>,
     /// Stop when this output stream writes its first event (TeSSLa's `-S`).
     #[arg(short = 'S', long, value_name = "STREAM")]
     pub stop_on: Option<String>,
-    /// Stop reading after N+1 input events, counted as TeSSLa's interpreter counts them (from
-    /// 0), then end the run as at the end of the trace.
+    /// Stop reading after N+1 input events of a text or CSV trace, N events of a CTF trace (as
+    /// TeSSLa's interpreter counts each), then end the run as at the end of the trace.
     #[arg(short = 'a', long, value_name = "N")]
     pub abort_at: Option<u64>,
     /// An event on a stream the spec does not declare is an error (exit 1); by default it is
@@ -195,7 +196,8 @@ pub struct TraceArgs {
     /// (an empty column is no event; values are TeSSLa expressions).
     #[arg(long, conflicts_with = "ctf")]
     pub csv: bool,
-    /// The trace is a CTF (Common Trace Format) trace directory (a trace file is required).
+    /// The trace is a CTF 1.8 (Common Trace Format) trace directory: each event is an event of the
+    /// input named after it, of type `Events[CTF]` (read with `CTF.getInt`/`CTF.getString`).
     #[arg(long)]
     pub ctf: bool,
     #[command(flatten)]
