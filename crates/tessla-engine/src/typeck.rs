@@ -154,13 +154,35 @@ enum Found<'a> {
     Def(Rc<DefInfo<'a>>),
 }
 
-/// The types the checker found that later passes use: the element type of each output
-/// (by the span of its expression) and of each top-level parameterless def (by dotted name).
-/// Types the checker leaves open are [`Type::Unknown`] inside.
+/// An expression of the resolved spec, by identity: its address in the syntax tree. The
+/// checker and the lowering borrow the same parsed files, which stay put while a spec loads,
+/// so an id the checker records is the id the lowering looks up (no AST field needed).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct ExprId(usize);
+
+impl ExprId {
+    pub fn of(e: &Expr) -> Self {
+        ExprId(std::ptr::from_ref(e) as usize)
+    }
+}
+
+/// The typed program the checker hands the lowering: element types by expression id. Every
+/// output expression has one, and so has every operator and `if` the checker typed (the
+/// lowering records them on the nodes it makes; it has no type rules of its own), and each
+/// top-level parameterless def (by dotted name, for `out *`). Types the checker leaves open
+/// are [`Type::Unknown`] inside.
 #[derive(Debug, Default)]
 pub struct Types {
-    pub outputs: HashMap<Span, Type>,
+    pub exprs: HashMap<ExprId, Type>,
+    pub outputs: Vec<ExprId>,
     pub defs: HashMap<String, Type>,
+}
+
+impl Types {
+    /// The element type of an expression the checker typed ([`Type::Unknown`]: none, or open).
+    pub fn of(&self, e: &Expr) -> Type {
+        self.exprs.get(&ExprId::of(e)).cloned().unwrap_or(Type::Unknown)
+    }
 }
 
 /// Check the statements of all files (includes first); returns the type errors found.
@@ -216,9 +238,8 @@ pub fn check_resolved(resolved: &Resolved<'_>) -> (Vec<Diagnostic>, Types) {
     for o in &resolved.outputs {
         let scope = c.module_scope("");
         let t = c.infer(&o.expr, &scope);
-        types
-            .outputs
-            .insert(o.expr.span, element_type(&c.resolve(&t)));
+        types.outputs.push(ExprId::of(&o.expr));
+        c.typed.push((ExprId::of(&o.expr), t.clone()));
         // A parameterless function (`def foo() = 42`) is called.
         if let Ty::Fn(ps, _) = c.resolve(&t)
             && !ps.is_empty()
@@ -242,6 +263,9 @@ pub fn check_resolved(resolved: &Resolved<'_>) -> (Vec<Diagnostic>, Types) {
         {
             types.defs.insert(name, element_type(&c.resolve(&s.ty)));
         }
+    }
+    for (id, t) in std::mem::take(&mut c.typed) {
+        types.exprs.insert(id, element_type(&c.resolve(&t)));
     }
     c.break_cycles();
     (std::mem::take(&mut c.diags), types)
@@ -287,6 +311,48 @@ fn ir_type_of(t: &Ty) -> Type {
     }
 }
 
+/// TeSSLa's rules for named arguments: every name is a parameter, and once a named argument
+/// stands elsewhere than at its parameter's position, no positional argument follows. Returns
+/// the parameter position of each argument. The one place of this rule: the checker applies
+/// it to user functions and annotations, the lowering to the callees only it resolves
+/// (builtins, natives, lambdas).
+pub fn order_named(
+    args: &[ast::Arg],
+    params: &[&str],
+    callee: &str,
+) -> Result<Vec<usize>, Diagnostic> {
+    let mut out = Vec::with_capacity(args.len());
+    let mut positional_ok = true;
+    for (i, a) in args.iter().enumerate() {
+        match &a.name {
+            Some(n) => {
+                let Some(pos) = params.iter().position(|p| *p == n.name) else {
+                    return Err(Diagnostic::error(
+                        Category::Name,
+                        Some(n.span),
+                        format!("`{}` is no parameter of `{callee}`", n.name),
+                    )
+                    .with_label("no such parameter")
+                    .with_help(format!("its parameters are ({})", params.join(", "))));
+                };
+                positional_ok &= pos == i;
+                out.push(pos);
+            }
+            None if !positional_ok => {
+                return Err(Diagnostic::error(
+                    Category::Type,
+                    Some(a.value.span),
+                    "a positional argument after a named one",
+                )
+                .with_label("positional")
+                .with_help("name this argument too, or put the positional arguments first"));
+            }
+            None => out.push(i),
+        }
+    }
+    Ok(out)
+}
+
 /// Type names every spec may use.
 const BUILTIN_TYPES: [&str; 10] = [
     "Int", "Float", "Bool", "String", "Unit", "Events", "Option", "List", "Set", "Map",
@@ -318,6 +384,9 @@ struct Checker<'a> {
     untyped_recursive: Vec<usize>,
     /// Members of literals being inferred through [`Checker::literal_member`].
     literal_members: Vec<(usize, String)>,
+    /// The expressions whose types go to [`Types::exprs`] (outputs, operators, `if`), resolved
+    /// when checking ends.
+    typed: Vec<(ExprId, Ty)>,
 }
 
 impl<'a> Checker<'a> {
@@ -410,51 +479,16 @@ impl<'a> Checker<'a> {
         }
     }
 
-    /// TeSSLa's rules for named arguments: every name is a parameter, and once a named
-    /// argument stands elsewhere than at its parameter's position, no positional argument
-    /// follows. Returns the parameter position of each argument, or `None` after reporting.
+    /// [`order_named`], reporting its error.
     fn order_named(
         &mut self,
         args: &[ast::Arg],
         params: &[&str],
         callee: &str,
     ) -> Option<Vec<usize>> {
-        let mut out = Vec::with_capacity(args.len());
-        let mut positional_ok = true;
-        for (i, a) in args.iter().enumerate() {
-            match &a.name {
-                Some(n) => {
-                    let Some(pos) = params.iter().position(|p| *p == n.name) else {
-                        self.report(
-                            Diagnostic::error(
-                                Category::Name,
-                                Some(n.span),
-                                format!("`{}` is no parameter of `{callee}`", n.name),
-                            )
-                            .with_label("no such parameter")
-                            .with_help(format!("its parameters are ({})", params.join(", "))),
-                        );
-                        return None;
-                    };
-                    positional_ok &= pos == i;
-                    out.push(pos);
-                }
-                None if !positional_ok => {
-                    self.report(
-                        Diagnostic::error(
-                            Category::Type,
-                            Some(a.value.span),
-                            "a positional argument after a named one",
-                        )
-                        .with_label("positional")
-                        .with_help("name this argument too, or put the positional arguments first"),
-                    );
-                    return None;
-                }
-                None => out.push(i),
-            }
-        }
-        Some(out)
+        order_named(args, params, callee)
+            .map_err(|d| self.report(d))
+            .ok()
     }
 
     /// A new local scope under `parent`, registered for [`Checker::break_cycles`].
@@ -1106,6 +1140,18 @@ impl<'a> Checker<'a> {
     }
 
     fn infer_here(&mut self, e: &'a Expr, scope: &Rc<Scope<'a>>) -> Ty {
+        let t = self.infer_kind(e, scope);
+        // The lowering records these on the nodes it makes (the element types of operators).
+        if matches!(
+            e.kind,
+            ExprKind::Unary { .. } | ExprKind::Binary { .. } | ExprKind::If { .. }
+        ) {
+            self.typed.push((ExprId::of(e), t.clone()));
+        }
+        t
+    }
+
+    fn infer_kind(&mut self, e: &'a Expr, scope: &Rc<Scope<'a>>) -> Ty {
         match &e.kind {
             ExprKind::Var(id) => match id.name.as_str() {
                 n @ ("true" | "false" | "None" | "unit" | "nil")
@@ -2118,6 +2164,6 @@ mod tests {
         let pair = Type::Tuple(vec![Type::Int, Type::Bool]);
         assert_eq!(types.defs.get("g"), Some(&pair));
         assert_eq!(types.outputs.len(), 2);
-        assert!(types.outputs.values().all(|t| *t == pair));
+        assert!(types.outputs.iter().all(|id| types.exprs.get(id) == Some(&pair)));
     }
 }

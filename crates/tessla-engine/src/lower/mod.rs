@@ -49,7 +49,7 @@ use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
 use std::sync::Arc;
 use tessla_syntax::ast::{self, BinOp, Body, Def, Expr, ExprKind, Statement, StrPart, UnaryOp};
-use tessla_syntax::diag::{Category, Diagnostic, nearest};
+use tessla_syntax::diag::{Category, Diagnostic};
 use tessla_syntax::source::{SourceMap, Span};
 
 #[derive(Clone)]
@@ -386,7 +386,7 @@ impl<'a> Compiler<'a> {
                     Term::Stream(n) => self.stream_type(*n),
                     _ => Type::Unknown,
                 };
-                let ty = known_or(ty, self.types.outputs.get(&o.expr.span));
+                let ty = known_or(ty, Some(&self.types.of(&o.expr)));
                 if let Ok(n) = self.stream_of(t, o.expr.span) {
                     outputs.push(OutputInfo {
                         name,
