@@ -166,22 +166,25 @@ impl ExprId {
     }
 }
 
-/// The typed program the checker hands the lowering: element types by expression id. Every
-/// output expression has one, and so has every operator and `if` the checker typed (the
-/// lowering records them on the nodes it makes; it has no type rules of its own), and each
-/// top-level parameterless def (by dotted name, for `out *`). Types the checker leaves open
-/// are [`Type::Unknown`] inside.
+/// The typed program the checker hands the lowering: the element type of each input (by its
+/// index in [`Resolved::inputs`]), of each output (by the id of its expression; an object
+/// output's members are fields of it) and of each top-level parameterless def (by dotted
+/// name, for `out *`). Types the checker leaves open are [`Type::Unknown`] inside. The
+/// lowering takes its types from here only: it has no type rules of its own.
 #[derive(Debug, Default)]
 pub struct Types {
-    pub exprs: HashMap<ExprId, Type>,
-    pub outputs: Vec<ExprId>,
+    pub inputs: Vec<Type>,
+    pub outputs: HashMap<ExprId, Type>,
     pub defs: HashMap<String, Type>,
 }
 
 impl Types {
-    /// The element type of an expression the checker typed ([`Type::Unknown`]: none, or open).
-    pub fn of(&self, e: &Expr) -> Type {
-        self.exprs.get(&ExprId::of(e)).cloned().unwrap_or(Type::Unknown)
+    /// The element type of an output expression ([`Type::Unknown`]: none, or open).
+    pub fn output(&self, e: &Expr) -> Type {
+        self.outputs
+            .get(&ExprId::of(e))
+            .cloned()
+            .unwrap_or(Type::Unknown)
     }
 }
 
@@ -207,8 +210,28 @@ pub fn check_resolved(resolved: &Resolved<'_>) -> (Vec<Diagnostic>, Types) {
     for d in &resolved.diagnostics {
         c.report(d.clone());
     }
-    for (_, ty) in &resolved.inputs {
+    for (name, ty) in &resolved.inputs {
+        let before = c.diags.len();
         let t = c.ast_type(ty, &HashMap::new());
+        types.inputs.push(match c.resolve(&t) {
+            Ty::Con("Events", _) => element_type(&c.resolve(&t)),
+            // A type already reported (`Events[Int, Int]`) is not reported twice.
+            _ if c.diags.len() > before => Type::Unknown,
+            _ => {
+                c.report(
+                    Diagnostic::error(
+                        Category::Type,
+                        Some(ty.span()),
+                        format!("input `{}` must have a type Events[T]", name.name),
+                    )
+                    .with_help(format!(
+                        "write `in {}: Events[Float]` (or another element type)",
+                        name.name
+                    )),
+                );
+                Type::Unknown
+            }
+        });
         c.inputs.push(t);
     }
     for g in &resolved.defs {
@@ -238,8 +261,9 @@ pub fn check_resolved(resolved: &Resolved<'_>) -> (Vec<Diagnostic>, Types) {
     for o in &resolved.outputs {
         let scope = c.module_scope("");
         let t = c.infer(&o.expr, &scope);
-        types.outputs.push(ExprId::of(&o.expr));
-        c.typed.push((ExprId::of(&o.expr), t.clone()));
+        types
+            .outputs
+            .insert(ExprId::of(&o.expr), element_type(&c.resolve(&t)));
         // A parameterless function (`def foo() = 42`) is called.
         if let Ty::Fn(ps, _) = c.resolve(&t)
             && !ps.is_empty()
@@ -263,9 +287,6 @@ pub fn check_resolved(resolved: &Resolved<'_>) -> (Vec<Diagnostic>, Types) {
         {
             types.defs.insert(name, element_type(&c.resolve(&s.ty)));
         }
-    }
-    for (id, t) in std::mem::take(&mut c.typed) {
-        types.exprs.insert(id, element_type(&c.resolve(&t)));
     }
     c.break_cycles();
     (std::mem::take(&mut c.diags), types)
@@ -384,9 +405,6 @@ struct Checker<'a> {
     untyped_recursive: Vec<usize>,
     /// Members of literals being inferred through [`Checker::literal_member`].
     literal_members: Vec<(usize, String)>,
-    /// The expressions whose types go to [`Types::exprs`] (outputs, operators, `if`), resolved
-    /// when checking ends.
-    typed: Vec<(ExprId, Ty)>,
 }
 
 impl<'a> Checker<'a> {
@@ -1140,18 +1158,6 @@ impl<'a> Checker<'a> {
     }
 
     fn infer_here(&mut self, e: &'a Expr, scope: &Rc<Scope<'a>>) -> Ty {
-        let t = self.infer_kind(e, scope);
-        // The lowering records these on the nodes it makes (the element types of operators).
-        if matches!(
-            e.kind,
-            ExprKind::Unary { .. } | ExprKind::Binary { .. } | ExprKind::If { .. }
-        ) {
-            self.typed.push((ExprId::of(e), t.clone()));
-        }
-        t
-    }
-
-    fn infer_kind(&mut self, e: &'a Expr, scope: &Rc<Scope<'a>>) -> Ty {
         match &e.kind {
             ExprKind::Var(id) => match id.name.as_str() {
                 n @ ("true" | "false" | "None" | "unit" | "nil")
@@ -2155,7 +2161,17 @@ mod tests {
     }
 
     #[test]
-    fn the_type_table_has_outputs_and_defs() {
+    fn an_input_that_is_no_stream_is_a_type_error() {
+        let spec = "in x: Int\nout x";
+        let (file, _) = tessla_syntax::parse(spec, tessla_syntax::source::FileId::default());
+        let (errors, types) = check_typed(&[file]);
+        assert_eq!(types.inputs, vec![Type::Unknown]);
+        assert_eq!(errors.len(), 1);
+        assert_eq!(errors[0].message, "input `x` must have a type Events[T]");
+    }
+
+    #[test]
+    fn the_type_table_has_inputs_outputs_and_defs() {
         let spec = "in x: Events[Int]\nliftable def f(a: Int) = (a, true)\ndef g = f(x)\nout g\nout f(x) as h\nout *";
         let (file, diags) = tessla_syntax::parse(spec, tessla_syntax::source::FileId::default());
         assert!(diags.is_empty());
@@ -2163,7 +2179,8 @@ mod tests {
         assert!(errors.is_empty());
         let pair = Type::Tuple(vec![Type::Int, Type::Bool]);
         assert_eq!(types.defs.get("g"), Some(&pair));
+        assert_eq!(types.inputs, vec![Type::Int]);
         assert_eq!(types.outputs.len(), 2);
-        assert!(types.outputs.iter().all(|id| types.exprs.get(id) == Some(&pair)));
+        assert!(types.outputs.values().all(|t| *t == pair));
     }
 }

@@ -2,7 +2,7 @@
 //! streams, builtins, natives, closures), named arguments, and the argument accessors the
 //! stream operators use.
 //!
-//! Owns: `Compiler::call`, `call_compiled`, `order_named_args`, `typed_as_declared`,
+//! Owns: `Compiler::call`, `call_compiled`, `order_named_args`,
 //! `stream_arg`, `value_fn_arg`, `const_arg`.
 
 use super::*;
@@ -94,7 +94,7 @@ impl Compiler<'_> {
                         Term::Func(inner) => self.call(Term::Func(inner), args, span, env)?,
                         other => other,
                     };
-                    return Ok(self.typed_as_declared(r, def));
+                    return Ok(r);
                 }
                 if params.len() != args.len() {
                     return self.error(
@@ -213,16 +213,7 @@ impl Compiler<'_> {
             return Ok(Term::Code(Code::apply(Callee::Fn(f), vals)));
         }
         let r = self.apply_value_fn(Callee::Fn(f), all, span)?;
-        Ok(self.typed_as_declared(r, def))
-    }
-
-    /// Record a function's declared result type on the stream its call made.
-    pub(super) fn typed_as_declared(&mut self, t: Term, def: &Def) -> Term {
-        match def.result_type.as_ref().map(ir_type) {
-            Some(Type::Events(ty)) => self.typed(t, *ty),
-            Some(ty) => self.typed(t, ty),
-            None => t,
-        }
+        Ok(r)
     }
 
     pub(super) fn stream_arg(&mut self, args: &[Term], i: usize, span: Span) -> R<NodeId> {

@@ -157,7 +157,7 @@ impl Compiler<'_> {
             ExprKind::Unary { op, operand } => {
                 let t = self.expr(operand, env)?;
                 let r = self.apply_value_fn(Callee::Prim(Prim::Unary(*op)), vec![t], e.span)?;
-                Ok(self.typed(r, self.types.of(e)))
+                Ok(r)
             }
             ExprKind::Binary { op, lhs, rhs } => {
                 let a = self.expr(lhs, env)?;
@@ -188,7 +188,7 @@ impl Compiler<'_> {
                         _ => None,
                     });
                 }
-                Ok(self.typed(r, self.types.of(e)))
+                Ok(r)
             }
             ExprKind::If {
                 cond,
@@ -227,7 +227,7 @@ impl Compiler<'_> {
                     }),
                     _ => None,
                 });
-                Ok(self.typed(r, self.types.of(e)))
+                Ok(r)
             }
             ExprKind::Lambda { params, body } => Ok(Term::Func(Rc::new(FuncTerm::Lambda {
                 params: params.clone(),
