@@ -137,8 +137,11 @@ impl<'a> Checker<'a> {
         // Variadic builtins get their signature from the number of arguments.
         if let ExprKind::Var(id) = &function.kind
             && self.find(&id.name, scope).is_none()
-            && builtins::get(&id.name).is_some_and(|b| b.sig == Sig::Variadic)
-            && let Some(sig) = self.variadic(&id.name, ts.len())
+            && let Some(Builtin {
+                sig: Sig::Variadic(shape),
+                ..
+            }) = builtins::get(&id.name)
+            && let Some(sig) = self.variadic(shape, ts.len())
         {
             return self.apply(sig, &ts, args, span, &id.name);
         }

@@ -37,7 +37,7 @@
 //! type arguments), `defs` (definitions, recursion), `names` (lookup, written types),
 //! `signatures` (builtins from the table, prelude declarations), `annotations`, `liftable`.
 
-use crate::builtins::{self, Sig};
+use crate::builtins::{self, Builtin, Sig, Variadic};
 use crate::ir::Type;
 use crate::resolve::{Global, Resolved, at};
 use std::cell::RefCell;
@@ -347,6 +347,29 @@ mod tests {
                 assert_eq!(direct, cached, "{}", b.name);
             }
         }
+    }
+
+    #[test]
+    fn variadic_builtins_are_typed_from_their_shape_in_the_table() {
+        let mut c = Checker::default();
+        let mut typed = |name: &str, n: usize| match builtins::get(name).map(|b| b.sig) {
+            Some(Sig::Variadic(shape)) => c.variadic(&shape, n).map(|t| show(&t)),
+            other => Some(format!("{name} is not variadic: {other:?}")),
+        };
+        let lift2 = typed("lift2", 3);
+        assert_eq!(
+            lift2.as_deref(),
+            Some("(Events[?], Events[?], (Option[?], Option[?]) => Option[?]) => Events[?]")
+        );
+        let slift = typed("slift", 2);
+        assert_eq!(slift.as_deref(), Some("(Events[?], (?) => ?) => Events[?]"));
+        let merge3 = typed("merge3", 5);
+        assert_eq!(
+            merge3.as_deref(),
+            Some("(Events[?], Events[?], Events[?]) => Events[?]")
+        );
+        assert_eq!(typed("log", 5).as_deref(), Some("(Float, Float) => Float"));
+        assert_eq!(typed("log", 0).as_deref(), Some("(Float) => Float"));
     }
 
     #[test]

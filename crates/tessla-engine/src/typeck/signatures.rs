@@ -154,38 +154,37 @@ impl SigParser<'_> {
 }
 
 impl<'a> Checker<'a> {
-    /// Signatures of builtins whose arity varies (`lift`, `slift`, `merge`, `log`).
-    pub(super) fn variadic(&mut self, name: &str, n: usize) -> Option<Ty> {
-        let arity = |base: &str| -> Option<usize> {
-            let rest = name.strip_prefix(base)?;
-            if rest.is_empty() {
-                Some(n)
+    /// The signature of a variadic builtin (`lift3`, `merge`, `log`) for a call with `n`
+    /// arguments, built from its shape in the builtins table.
+    pub(super) fn variadic(&mut self, shape: &Variadic, n: usize) -> Option<Ty> {
+        let k = match (shape.count, shape.function) {
+            (Some(k), Some(_)) => k.min(n.saturating_sub(1)),
+            (None, Some(_)) => n.saturating_sub(1),
+            (Some(k), None) => k,
+            (None, None) => n,
+        }
+        .clamp(shape.min, shape.max);
+        let shared = self.fresh();
+        let r = self.fresh();
+        let mut ps = Vec::with_capacity(k + 1);
+        let mut fps = Vec::new();
+        for _ in 0..k {
+            let a = if shape.shared {
+                shared.clone()
             } else {
-                rest.parse().ok()
-            }
-        };
-        if let Some(k) = arity("slift").or_else(|| arity("lift")) {
-            let k = k.min(n.saturating_sub(1));
-            let xs: Vec<Ty> = (0..k).map(|_| self.fresh()).collect();
-            let r = self.fresh();
-            let is_lift = name.starts_with("lift");
-            let fty = if is_lift {
-                func(xs.iter().cloned().map(opt).collect(), opt(r.clone()))
-            } else {
-                func(xs.clone(), r.clone())
+                self.fresh()
             };
-            let mut ps: Vec<Ty> = xs.into_iter().map(ev).collect();
-            ps.push(fty);
-            return Some(func(ps, ev(r)));
+            let vars = [a, r.clone()];
+            ps.push(signature(shape.each, &vars)?);
+            if let Some((p, _)) = shape.function {
+                fps.push(signature(p, &vars)?);
+            }
         }
-        if let Some(k) = arity("merge") {
-            let a = self.fresh();
-            return Some(func(vec![ev(a.clone()); k], ev(a)));
+        let vars = [shared, r];
+        if let Some((_, fr)) = shape.function {
+            ps.push(func(fps, signature(fr, &vars)?));
         }
-        if name == "log" {
-            return Some(func(vec![float(); n.clamp(1, 2)], float()));
-        }
-        None
+        Some(func(ps, signature(shape.result, &vars)?))
     }
 
     /// The type of a builtin name, from its signature in the builtins table (`None`: not a
