@@ -1,5 +1,6 @@
-//! Annotations: each use checked against its definition (`@` on an `in`/`out`, `@@` on its own,
-//! arity, named arguments, argument types, constant arguments).
+//! Annotations: each use checked against its definition (arity, named arguments, argument
+//! types, constant arguments). That `@` stands on an `in`/`out` and `@@` on its own is a name
+//! rule of `crate::resolve`.
 
 use super::*;
 
@@ -11,37 +12,9 @@ impl<'a> Checker<'a> {
         let Some(defs) = self.resolved.map(|r| &r.annotations) else {
             return;
         };
+        // Not declared (a warning of the lowering), or declared as the other kind (an error
+        // of name resolution).
         let Some(params) = defs.get(&(a.name.name.clone(), global)).copied() else {
-            if defs.contains_key(&(a.name.name.clone(), !global)) {
-                let (msg, help) = if global {
-                    (
-                        format!(
-                            "`@{0}` annotates an `in` or `out`; it cannot be used as a global `@@{0}` annotation",
-                            a.name.name
-                        ),
-                        format!(
-                            "write `@{0}(...)` before an `in` or `out`, or define `def @@{0}` for a global one",
-                            a.name.name
-                        ),
-                    )
-                } else {
-                    (
-                        format!(
-                            "`@@{0}` is a global annotation; it cannot annotate an `in` or `out`",
-                            a.name.name
-                        ),
-                        format!(
-                            "write `@@{0}(...)` on a line of its own, or define `def @{0}` to annotate streams",
-                            a.name.name
-                        ),
-                    )
-                };
-                self.report(
-                    Diagnostic::error(Category::Name, Some(a.name.span), msg)
-                        .with_label("the other kind of annotation")
-                        .with_help(help),
-                );
-            }
             return;
         };
         let name = at(&a.name, global);
