@@ -11,7 +11,7 @@
 //! Signatures are written in TeSSLa's type notation: `(Events[A], Events[B]) => Events[A]`, a
 //! plain type for a constant (`List[A]`). `A`/`K` and `B`/`V` are the only type variables.
 //! `lift`, `slift`, `merge` (with or without an arity suffix) and `log` take a varying number
-//! of arguments: their signature is [`Sig::Variadic`] and the checker builds it per call.
+//! of arguments: their signature is a [`Sig::Variadic`] shape and the checker builds it per call.
 
 use crate::collections;
 use crate::natives::{self, NativeFn, core};
@@ -81,9 +81,74 @@ pub enum Sig {
     Any,
     /// A signature in TeSSLa's type notation.
     Fixed(&'static str),
-    /// Built per call from the number of arguments (`lift3`, `merge`, `log`).
-    Variadic,
+    /// Built per call from the number of arguments (`lift3`, `merge`, `log`), by its shape.
+    Variadic(Variadic),
 }
+
+/// The shape of a signature whose number of parameters a call decides: `count` repeated
+/// parameters of type `each`, then (for the lifts) one function of them, and a `result`, in
+/// TeSSLa's notation. `A` is a fresh variable per repeated parameter (one for all of them when
+/// `shared`), `B` one variable per use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Variadic {
+    /// How many repeated parameters: fixed by an arity suffix (`lift3`: 3), else as many as the
+    /// call gives (the function not counted); within `min..=max` either way.
+    pub count: Option<usize>,
+    pub min: usize,
+    pub max: usize,
+    pub each: &'static str,
+    pub shared: bool,
+    /// The last parameter, a function: the type of its parameter per repeated parameter, and
+    /// of its result.
+    pub function: Option<(&'static str, &'static str)>,
+    pub result: &'static str,
+}
+
+/// `lift`: `(Events[A1], ..., Events[Ak], (Option[A1], ..., Option[Ak]) => Option[B]) => Events[B]`.
+const fn lift_sig(count: Option<usize>) -> Sig {
+    lifted_sig(count, ("Option[A]", "Option[B]"))
+}
+
+/// `slift`: `(Events[A1], ..., Events[Ak], (A1, ..., Ak) => B) => Events[B]`.
+const fn slift_sig(count: Option<usize>) -> Sig {
+    lifted_sig(count, ("A", "B"))
+}
+
+const fn lifted_sig(count: Option<usize>, function: (&'static str, &'static str)) -> Sig {
+    Sig::Variadic(Variadic {
+        count,
+        min: 0,
+        max: usize::MAX,
+        each: "Events[A]",
+        shared: false,
+        function: Some(function),
+        result: "Events[B]",
+    })
+}
+
+/// `merge`: `(Events[A], ..., Events[A]) => Events[A]`.
+const fn merge_sig(count: Option<usize>) -> Sig {
+    Sig::Variadic(Variadic {
+        count,
+        min: 0,
+        max: usize::MAX,
+        each: "Events[A]",
+        shared: true,
+        function: None,
+        result: "Events[A]",
+    })
+}
+
+/// `log`: `(Float) => Float` or `(Float, Float) => Float`.
+const LOG_SIG: Sig = Sig::Variadic(Variadic {
+    count: None,
+    min: 1,
+    max: 2,
+    each: "Float",
+    shared: true,
+    function: None,
+    result: "Float",
+});
 
 /// One builtin.
 #[derive(Debug, Clone, Copy)]
@@ -210,26 +275,26 @@ pub static BUILTINS: &[Builtin] = &[
         S::DefaultFrom,
         "(Events[A], Events[A]) => Events[A]",
     ),
-    stream_any("lift", S::Lift, Sig::Variadic),
-    stream_any("lift1", S::Lift, Sig::Variadic),
-    stream_any("lift2", S::Lift, Sig::Variadic),
-    stream_any("lift3", S::Lift, Sig::Variadic),
-    stream_any("lift4", S::Lift, Sig::Variadic),
-    stream_any("lift5", S::Lift, Sig::Variadic),
-    stream_any("slift", S::SLift, Sig::Variadic),
-    stream_any("slift1", S::SLift, Sig::Variadic),
-    stream_any("slift2", S::SLift, Sig::Variadic),
-    stream_any("slift3", S::SLift, Sig::Variadic),
-    stream_any("slift4", S::SLift, Sig::Variadic),
-    stream_any("slift5", S::SLift, Sig::Variadic),
-    stream_any("merge", S::Merge, Sig::Variadic),
-    stream_any("merge2", S::Merge, Sig::Variadic),
-    stream_any("merge3", S::Merge, Sig::Variadic),
-    stream_any("merge4", S::Merge, Sig::Variadic),
-    stream_any("merge5", S::Merge, Sig::Variadic),
-    stream_any("merge6", S::Merge, Sig::Variadic),
-    stream_any("merge7", S::Merge, Sig::Variadic),
-    stream_any("merge8", S::Merge, Sig::Variadic),
+    stream_any("lift", S::Lift, lift_sig(None)),
+    stream_any("lift1", S::Lift, lift_sig(Some(1))),
+    stream_any("lift2", S::Lift, lift_sig(Some(2))),
+    stream_any("lift3", S::Lift, lift_sig(Some(3))),
+    stream_any("lift4", S::Lift, lift_sig(Some(4))),
+    stream_any("lift5", S::Lift, lift_sig(Some(5))),
+    stream_any("slift", S::SLift, slift_sig(None)),
+    stream_any("slift1", S::SLift, slift_sig(Some(1))),
+    stream_any("slift2", S::SLift, slift_sig(Some(2))),
+    stream_any("slift3", S::SLift, slift_sig(Some(3))),
+    stream_any("slift4", S::SLift, slift_sig(Some(4))),
+    stream_any("slift5", S::SLift, slift_sig(Some(5))),
+    stream_any("merge", S::Merge, merge_sig(None)),
+    stream_any("merge2", S::Merge, merge_sig(Some(2))),
+    stream_any("merge3", S::Merge, merge_sig(Some(3))),
+    stream_any("merge4", S::Merge, merge_sig(Some(4))),
+    stream_any("merge5", S::Merge, merge_sig(Some(5))),
+    stream_any("merge6", S::Merge, merge_sig(Some(6))),
+    stream_any("merge7", S::Merge, merge_sig(Some(7))),
+    stream_any("merge8", S::Merge, merge_sig(Some(8))),
     stream("const", S::Const, "(A, Events[B]) => Events[A]"),
     stream("first", S::First, "(Events[A], Events[B]) => Events[A]"),
     stream(
@@ -265,7 +330,7 @@ pub static BUILTINS: &[Builtin] = &[
     value("floatToInt", core::float_to_int, "(Float) => Int"),
     value("pow", core::pow, "(Float, Float) => Float"),
     Builtin {
-        sig: Sig::Variadic,
+        sig: LOG_SIG,
         ..value_any("log", core::log)
     },
     value("sin", core::sin, "(Float) => Float"),

@@ -5,10 +5,12 @@
 //!
 //! Owns: [`Resolved`] (built once per spec by [`Resolved::new`]), [`DefId`], the global lookup
 //! rule ([`Resolved::global`]) and the diagnostics of names at the statement level (annotation
-//! definitions twice or inside a module, and TeSSLa's multiple definitions rule: a name defined
-//! twice in one scope, be it a definition, an input, a parameter or a record field). Both later passes look global names up only here:
-//! the type checker (`typeck.rs`) and the lowering (`lower/`); local names (parameters, blocks,
-//! `where`, macro arguments) are each pass's own, and the types of definitions the checker's.
+//! definitions twice or inside a module, an annotation used as the other kind (`@` for `@@`),
+//! and TeSSLa's multiple definitions rule: a name defined twice in one scope, be it a
+//! definition, an input, a parameter or a record field). Both later passes look global names
+//! up only here: the type checker (`typeck/`) and the lowering (`lower/`); local names
+//! (parameters, blocks, `where`, macro arguments) are each pass's own, and the types of
+//! definitions the checker's.
 
 use std::collections::HashMap;
 use tessla_syntax::ast::{self, Def, Ident, Out, Statement};
@@ -184,7 +186,57 @@ impl<'a> Resolved<'a> {
             }
         }
         r.ambiguous_imports(&import_spans);
+        r.annotation_kinds();
         r
+    }
+
+    /// TeSSLa's two kinds of annotations: one defined by `def @A` annotates an `in` or `out`,
+    /// one defined by `def @@A` stands on its own; a use of the other kind is reported.
+    fn annotation_kinds(&mut self) {
+        let mut found = Vec::new();
+        for (_, s) in &self.statements {
+            let (anns, global): (&[ast::Annotation], bool) = match s {
+                Statement::In { annotations, .. } | Statement::OutAll { annotations, .. } => {
+                    (annotations, false)
+                }
+                Statement::Out(o) => (&o.annotations, false),
+                Statement::GlobalAnnotation(a) => (std::slice::from_ref(a), true),
+                _ => continue,
+            };
+            for a in anns {
+                let name = &a.name.name;
+                if self.annotations.contains_key(&(name.clone(), global))
+                    || !self.annotations.contains_key(&(name.clone(), !global))
+                {
+                    continue;
+                }
+                let (msg, help) = if global {
+                    (
+                        format!(
+                            "`@{name}` annotates an `in` or `out`; it cannot be used as a global `@@{name}` annotation"
+                        ),
+                        format!(
+                            "write `@{name}(...)` before an `in` or `out`, or define `def @@{name}` for a global one"
+                        ),
+                    )
+                } else {
+                    (
+                        format!(
+                            "`@@{name}` is a global annotation; it cannot annotate an `in` or `out`"
+                        ),
+                        format!(
+                            "write `@@{name}(...)` on a line of its own, or define `def @{name}` to annotate streams"
+                        ),
+                    )
+                };
+                found.push(
+                    Diagnostic::error(Category::Name, Some(a.name.span), msg)
+                        .with_label("the other kind of annotation")
+                        .with_help(help),
+                );
+            }
+        }
+        self.diagnostics.extend(found);
     }
 
     /// TeSSLa's rule: two imports into one module may not bring the same name (`import Bar`
@@ -609,6 +661,22 @@ mod tests {
             [
                 "annotation `@A` is defined twice",
                 "annotation `@B` is defined inside a module"
+            ]
+        );
+    }
+
+    #[test]
+    fn an_annotation_used_as_the_other_kind_is_an_error_of_name_resolution() {
+        let files = [parse(
+            "def @S\ndef @@G\n@@S\n@G\nin x: Events[Int]\n@S\nout x\n@@G\n@@U\n",
+        )];
+        let r = Resolved::new(&files);
+        let msgs: Vec<&str> = r.diagnostics.iter().map(|d| d.message.as_str()).collect();
+        assert_eq!(
+            msgs,
+            [
+                "`@S` annotates an `in` or `out`; it cannot be used as a global `@@S` annotation",
+                "`@@G` is a global annotation; it cannot annotate an `in` or `out`"
             ]
         );
     }

@@ -2,23 +2,22 @@
 //! streams, builtins, natives, closures), named arguments, and the argument accessors the
 //! stream operators use.
 //!
-//! Owns: `Compiler::call`, `call_compiled`, `order_named_args`, `typed_as_declared`,
+//! Owns: `Compiler::call`, `call_compiled`, `order_named_args`,
 //! `stream_arg`, `value_fn_arg`, `const_arg`.
 
 use super::*;
 
 impl Compiler<'_> {
-    /// Put named arguments (`f(b = 1, a = x)`) in the order of the function's parameters.
+    /// Put named arguments (`f(b = 1, a = x)`) in the order of the function's parameters, by
+    /// TeSSLa's rule ([`crate::typeck::order_named`]).
     pub(super) fn order_named_args(
         &mut self,
         f: &Term,
         args: &[ast::Arg],
         terms: Vec<Term>,
+        callee: &str,
         span: Span,
     ) -> R<Vec<Term>> {
-        if args.iter().all(|a| a.name.is_none()) {
-            return Ok(terms);
-        }
         let params: Vec<String> = match f {
             Term::Func(ft) => match &**ft {
                 FuncTerm::User { def, .. } => def
@@ -47,39 +46,16 @@ impl Compiler<'_> {
             },
             _ => return self.error(Category::Type, span, "named arguments need a function"),
         };
+        let names: Vec<&str> = params.iter().map(String::as_str).collect();
+        let positions = match crate::typeck::order_named(args, &names, callee) {
+            Ok(p) => p,
+            Err(d) => {
+                self.diags.push(d);
+                return Err(Fail);
+            }
+        };
         let mut slots: Vec<Option<Term>> = vec![None; params.len()];
-        let mut next = 0;
-        for (a, t) in args.iter().zip(terms) {
-            let idx = match &a.name {
-                Some(n) => match params.iter().position(|p| *p == n.name) {
-                    Some(i) => i,
-                    None => {
-                        let near = nearest(&n.name, params.iter().map(String::as_str)).join(", ");
-                        self.diags.push(
-                            Diagnostic::error(
-                                Category::Name,
-                                Some(n.span),
-                                format!("no parameter named `{}`", n.name),
-                            )
-                            .with_help(format!(
-                                "parameters: {}",
-                                if near.is_empty() {
-                                    params.join(", ")
-                                } else {
-                                    near
-                                }
-                            )),
-                        );
-                        return Err(Fail);
-                    }
-                },
-                None => {
-                    while next < slots.len() && slots[next].is_some() {
-                        next += 1;
-                    }
-                    next
-                }
-            };
+        for (idx, t) in positions.into_iter().zip(terms) {
             match slots.get_mut(idx) {
                 Some(slot @ None) => *slot = Some(t),
                 _ => {
@@ -118,7 +94,7 @@ impl Compiler<'_> {
                         Term::Func(inner) => self.call(Term::Func(inner), args, span, env)?,
                         other => other,
                     };
-                    return Ok(self.typed_as_declared(r, def));
+                    return Ok(r);
                 }
                 if params.len() != args.len() {
                     return self.error(
@@ -237,16 +213,7 @@ impl Compiler<'_> {
             return Ok(Term::Code(Code::apply(Callee::Fn(f), vals)));
         }
         let r = self.apply_value_fn(Callee::Fn(f), all, span)?;
-        Ok(self.typed_as_declared(r, def))
-    }
-
-    /// Record a function's declared result type on the stream its call made.
-    pub(super) fn typed_as_declared(&mut self, t: Term, def: &Def) -> Term {
-        match def.result_type.as_ref().map(ir_type) {
-            Some(Type::Events(ty)) => self.typed(t, *ty),
-            Some(ty) => self.typed(t, ty),
-            None => t,
-        }
+        Ok(r)
     }
 
     pub(super) fn stream_arg(&mut self, args: &[Term], i: usize, span: Span) -> R<NodeId> {

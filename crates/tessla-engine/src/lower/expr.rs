@@ -156,37 +156,13 @@ impl Compiler<'_> {
             }
             ExprKind::Unary { op, operand } => {
                 let t = self.expr(operand, env)?;
-                let op = *op;
-                let ty = match op {
-                    UnaryOp::Not => Type::Bool,
-                    UnaryOp::FNeg => Type::Float,
-                    UnaryOp::Neg | UnaryOp::BitNot => Type::Int,
-                };
-                let r = self.apply_value_fn(Callee::Prim(Prim::Unary(op)), vec![t], e.span)?;
-                Ok(self.typed(r, ty))
+                let r = self.apply_value_fn(Callee::Prim(Prim::Unary(*op)), vec![t], e.span)?;
+                Ok(r)
             }
             ExprKind::Binary { op, lhs, rhs } => {
                 let a = self.expr(lhs, env)?;
                 let b = self.expr(rhs, env)?;
                 let op = *op;
-                let int_op = crate::ops::integer_op(op);
-                let is_float = |c: &Compiler<'_>, t: &Term| match t {
-                    Term::Const(Value::Float(_)) => true,
-                    Term::Stream(n) => c.stream_type(*n) == Type::Float,
-                    _ => false,
-                };
-                if int_op && (is_float(self, &a) || is_float(self, &b)) {
-                    self.diags.push(
-                        Diagnostic::error(
-                            Category::Type,
-                            Some(e.span),
-                            format!("`{}` is not defined for Float in TeSSLa 1.2", op.symbol()),
-                        )
-                        .with_label("a Float operand")
-                        .with_help(format!("use `{}.` for Float", op.symbol())),
-                    );
-                    return Err(Fail);
-                }
                 if matches!(op, BinOp::And | BinOp::Or) {
                     // Lazy: the right side is not evaluated when the left decides.
                     if let Term::Code(_) | Term::Const(_) = a
@@ -200,23 +176,6 @@ impl Compiler<'_> {
                         }));
                     }
                 }
-                let ty = match op {
-                    BinOp::FAdd | BinOp::FSub | BinOp::FMul | BinOp::FDiv => Type::Float,
-                    BinOp::Add => match (&a, &b) {
-                        (Term::Stream(n), _) | (_, Term::Stream(n)) => self.stream_type(*n),
-                        _ => Type::Unknown,
-                    },
-                    BinOp::Sub
-                    | BinOp::Mul
-                    | BinOp::Div
-                    | BinOp::Mod
-                    | BinOp::Shl
-                    | BinOp::Shr
-                    | BinOp::BitAnd
-                    | BinOp::BitOr
-                    | BinOp::BitXor => Type::Int,
-                    _ => Type::Bool,
-                };
                 let r = self.apply_value_fn(Callee::Prim(Prim::Binary(op)), vec![a, b], e.span)?;
                 if let Some(sop) = scalar_op(op) {
                     self.inline_op(&r, |args, _| match args {
@@ -229,7 +188,7 @@ impl Compiler<'_> {
                         _ => None,
                     });
                 }
-                Ok(self.typed(r, ty))
+                Ok(r)
             }
             ExprKind::If {
                 cond,
@@ -259,11 +218,6 @@ impl Compiler<'_> {
                     return Ok(Term::Code(Code::If(Arc::new([fc, ft, ff]))));
                 }
                 let ite = Callee::Prim(Prim::Ite);
-                let ty = match (&t, &f) {
-                    (Term::Stream(n), _) | (_, Term::Stream(n)) => self.stream_type(*n),
-                    (Term::Const(v), _) => value_type(v),
-                    _ => Type::Unknown,
-                };
                 let r = self.apply_value_fn(ite, vec![c, t, f], e.span)?;
                 self.inline_op(&r, |args, _| match args {
                     [c, t, f] => Some(Node::Ite {
@@ -273,7 +227,7 @@ impl Compiler<'_> {
                     }),
                     _ => None,
                 });
-                Ok(self.typed(r, ty))
+                Ok(r)
             }
             ExprKind::Lambda { params, body } => Ok(Term::Func(Rc::new(FuncTerm::Lambda {
                 params: params.clone(),
@@ -298,7 +252,14 @@ impl Compiler<'_> {
                         terms.push(self.expr(&a.value, env)?);
                     }
                 }
-                let terms = self.order_named_args(&f, args, terms, e.span)?;
+                let terms = if args.iter().any(|a| a.name.is_some()) {
+                    let callee = function
+                        .dotted_path()
+                        .unwrap_or_else(|| "the function".into());
+                    self.order_named_args(&f, args, terms, &callee, e.span)?
+                } else {
+                    terms
+                };
                 self.call(f, terms, e.span, env)
             }
         }

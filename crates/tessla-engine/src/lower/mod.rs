@@ -12,11 +12,12 @@
 //! Owns: the [`Compiler`] and `program` (inputs, outputs, `out *` and their annotations) here.
 //! It reads the resolved spec (`crate::resolve`): which definition, input or imported member a
 //! global name means is decided there once, for the checker and the lowering; lowering keeps
-//! only its local scopes (parameters, blocks and `where`, macro arguments). By concern: `names`
+//! only its local scopes (parameters, blocks and `where`, macro arguments). Types come from the
+//! checker (`crate::typeck::Types`: inputs, outputs, `out *` defs); lowering has no type rules.
+//! By concern: `names`
 //! (local scopes over the resolved globals, definitions on first use, externs),
 //! `expr` (each expression form, operators), `call` (calls and arguments), `closure`
-//! (value-level functions into the function table, function values, constant folding), `stream` (the stream operators), `types` (element types
-//! of nodes), `time` (base time and time units), `overrides` (`--set`). Names and signatures of
+//! (value-level functions into the function table, function values, constant folding), `stream` (the stream operators), `time` (base time and time units), `overrides` (`--set`). Names and signatures of
 //! builtins are `crate::builtins`, operator semantics `crate::ops`, format strings
 //! `crate::format`, evaluation order and cross-step slots `crate::schedule`.
 
@@ -24,7 +25,6 @@ use crate::builtins::{self, Builtin, Kind, StreamOp};
 use crate::resolve::Resolved;
 use crate::schedule;
 use time::unit_factor;
-use types::{const_type_of, ir_type, value_type};
 
 mod call;
 mod closure;
@@ -34,7 +34,6 @@ mod objects;
 mod overrides;
 mod stream;
 pub mod time;
-mod types;
 
 use crate::exec::Exec;
 use crate::ir::{
@@ -49,7 +48,7 @@ use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
 use std::sync::Arc;
 use tessla_syntax::ast::{self, BinOp, Body, Def, Expr, ExprKind, Statement, StrPart, UnaryOp};
-use tessla_syntax::diag::{Category, Diagnostic, nearest};
+use tessla_syntax::diag::{Category, Diagnostic};
 use tessla_syntax::source::{SourceMap, Span};
 
 #[derive(Clone)]
@@ -179,8 +178,6 @@ pub struct Compiler<'a> {
     fold_fns: Vec<Option<Exec>>,
     fold_ctx: Option<Arc<crate::exec::Ctx>>,
     unit_node: Option<NodeId>,
-    /// Element types of stream nodes known from operators and declarations.
-    node_types: HashMap<NodeId, Type>,
     /// The unit of the base time in femtoseconds (`µs` in `33333 µs`); `None`: `base_ns`.
     base_unit: Option<i128>,
     /// Time literals are allowed (a base time is set, or 1 ns is assumed).
@@ -195,7 +192,7 @@ pub struct Compiler<'a> {
     /// compile leaked the whole name table (found by cargo fuzz's leak checker).
     scopes: Vec<Rc<RefCell<Option<Env>>>>,
     states: Vec<Rc<RefCell<DefState>>>,
-    /// The checker's types of outputs and top-level defs (see [`crate::typeck::Types`]).
+    /// The checker's types of inputs, outputs and top-level defs (see [`crate::typeck::Types`]).
     types: crate::typeck::Types,
 }
 
@@ -229,7 +226,6 @@ impl<'a> Compiler<'a> {
             unit_node: None,
             base_unit: None,
             time_units: true,
-            node_types: HashMap::new(),
             owner: 0,
             owners: Vec::new(),
             scopes: Vec::new(),
@@ -272,7 +268,7 @@ impl<'a> Compiler<'a> {
         self
     }
 
-    /// Use the checker's types for outputs whose element type lowering does not know.
+    /// The checker's types of inputs, outputs and `out *` defs (the only types lowering uses).
     pub fn with_types(mut self, types: crate::typeck::Types) -> Self {
         self.types = types;
         self
@@ -302,34 +298,15 @@ impl<'a> Compiler<'a> {
         overrides: &[(String, String)],
     ) -> Result<(Program, Vec<Diagnostic>), Vec<Diagnostic>> {
         let resolved = self.resolved;
-        for (_, s) in &resolved.statements {
-            if let Statement::In { name, ty, .. } = s {
-                let elem = match ir_type(ty) {
-                    Type::Events(t) => *t,
-                    _ => {
-                        self.diags.push(
-                            Diagnostic::error(
-                                Category::Type,
-                                Some(ty.span()),
-                                format!("input `{}` must have a type Events[T]", name.name),
-                            )
-                            .with_help(format!(
-                                "write `in {}: Events[Float]` (or another element type)",
-                                name.name
-                            )),
-                        );
-                        Type::Unknown
-                    }
-                };
-                let idx = self.inputs.len();
-                let n = self.node(Node::Input(idx));
-                self.input_nodes.push(n);
-                self.inputs.push(InputInfo {
-                    name: name.name.clone(),
-                    ty: elem,
-                    annotations: Vec::new(),
-                });
-            }
+        for (name, _) in &resolved.inputs {
+            let idx = self.inputs.len();
+            let n = self.node(Node::Input(idx));
+            self.input_nodes.push(n);
+            self.inputs.push(InputInfo {
+                name: name.name.clone(),
+                ty: self.types.inputs.get(idx).cloned().unwrap_or(Type::Unknown),
+                annotations: Vec::new(),
+            });
         }
         // --set overrides replace the body of a top-level constant.
         self.apply_overrides(overrides);
@@ -360,11 +337,7 @@ impl<'a> Compiler<'a> {
             match self.object_output(&o.expr, &env) {
                 Some(Ok(members)) => {
                     for (path, t) in members {
-                        let ty = match &t {
-                            Term::Const(v) => value_type(v),
-                            Term::Stream(n) => self.stream_type(*n),
-                            _ => Type::Unknown,
-                        };
+                        let ty = member_type(self.types.output(&o.expr), &path);
                         if let Ok(n) = self.stream_of(t, o.expr.span) {
                             outputs.push(OutputInfo {
                                 name: format!("{name}.{path}"),
@@ -381,12 +354,7 @@ impl<'a> Compiler<'a> {
                 None => {}
             }
             if let Ok(t) = self.expr(&o.expr, &env) {
-                let ty = match &t {
-                    Term::Const(v) => value_type(v),
-                    Term::Stream(n) => self.stream_type(*n),
-                    _ => Type::Unknown,
-                };
-                let ty = known_or(ty, self.types.outputs.get(&o.expr.span));
+                let ty = self.types.output(&o.expr);
                 if let Ok(n) = self.stream_of(t, o.expr.span) {
                     outputs.push(OutputInfo {
                         name,
@@ -415,7 +383,7 @@ impl<'a> Compiler<'a> {
                     && let Term::Stream(n) = t
                     && let Some(name) = resolved.name(id)
                 {
-                    let ty = known_or(self.stream_type(n), self.types.defs.get(&name));
+                    let ty = self.types.defs.get(&name).cloned().unwrap_or(Type::Unknown);
                     outputs.push(OutputInfo {
                         name,
                         ty,
@@ -553,11 +521,18 @@ impl<'a> Compiler<'a> {
     }
 }
 
-/// The checker's type when it is fully known (the type table is where types come from), else
-/// what lowering found for the node (`lower/types.rs`).
-fn known_or(lowered: Type, checked: Option<&Type>) -> Type {
-    match checked {
-        Some(c) if c.is_known() => c.clone(),
-        _ => lowered,
-    }
+/// The element type of the member at `path` (`a.b`, `_1`) of an object output of type `whole`.
+fn member_type(whole: Type, path: &str) -> Type {
+    path.split('.').fold(whole, |t, field| match t {
+        Type::Record(fs) => fs
+            .into_iter()
+            .find(|(n, _)| n == field)
+            .map_or(Type::Unknown, |(_, t)| t),
+        Type::Tuple(ts) => field
+            .strip_prefix('_')
+            .and_then(|k| k.parse::<usize>().ok())
+            .and_then(|k| ts.into_iter().nth(k.checked_sub(1)?))
+            .unwrap_or(Type::Unknown),
+        _ => Type::Unknown,
+    })
 }

@@ -63,16 +63,6 @@ impl Compiler<'_> {
                 self.owner = crate::snapshot::owner_key(self.sources.text(e.def.name.span));
                 let r = self.body(&e.def, &env);
                 self.owner = saved_owner;
-                let r = match (r, &e.def.result_type) {
-                    (Ok(t), Some(declared)) => {
-                        let ty = match ir_type(declared) {
-                            Type::Events(t) => *t,
-                            t => t,
-                        };
-                        Ok(self.typed(t, ty))
-                    }
-                    (r, _) => r,
-                };
                 self.lazy_depth = saved;
                 let (alias, eager) = match &*e.state.borrow() {
                     DefState::InProgress { alias, eager, .. } => (*alias, *eager),

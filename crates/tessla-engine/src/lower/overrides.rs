@@ -1,7 +1,8 @@
 //! `--set NAME=VALUE`: replace the body of a top-level constant (a global definition of the
 //! resolve pass) before lowering.
 //!
-//! Owns: `Compiler::apply_overrides`. Only top-level defs whose value is a literal constant can
+//! Owns: `Compiler::apply_overrides`, `const_type_of` (the type of a literal constant: a
+//! `--set` value is parsed after checking, so its type is read here). Only top-level defs whose value is a literal constant can
 //! be set; the new value must be a literal of the same type (`--set delta=-0.5` is the Float
 //! -0.5, written `-.0.5` in a spec). Errors name the known constants.
 
@@ -103,4 +104,23 @@ fn shown(t: Option<&Type>) -> String {
         || "an expression that is not a literal".to_string(),
         ToString::to_string,
     )
+}
+
+/// The type of a parameterless def's constant value, if it is a literal constant.
+fn const_type_of(d: &Def) -> Option<Type> {
+    match &d.body {
+        Body::Expr { expr, .. } => match &expr.kind {
+            ExprKind::Int { .. } => Some(Type::Int),
+            ExprKind::Float(_) => Some(Type::Float),
+            ExprKind::Str { .. } => Some(Type::String),
+            ExprKind::Var(v) if v.name == "true" || v.name == "false" => Some(Type::Bool),
+            ExprKind::Unary { operand, .. } => match &operand.kind {
+                ExprKind::Int { .. } => Some(Type::Int),
+                ExprKind::Float(_) => Some(Type::Float),
+                _ => None,
+            },
+            _ => None,
+        },
+        Body::Extern { .. } => None,
+    }
 }
