@@ -145,7 +145,7 @@ fn packet_lost(cpu: u32, begin: u64, end: u64, discarded: u64, events: &[Ev]) ->
 }
 
 fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir()
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR"))
         .join(format!("tessla-ctf-{}", std::process::id()))
         .join(name);
     let _ = std::fs::remove_dir_all(&d);

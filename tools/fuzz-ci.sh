@@ -31,6 +31,7 @@ flags_for() {
   case $1 in
     records) echo "-max_len=20000" ;;
     spec) echo "-max_len=4096 -detect_leaks=0" ;;
+    ctf) echo "-max_len=8192" ;;
     *) echo "" ;;
   esac
 }
