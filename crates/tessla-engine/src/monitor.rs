@@ -559,12 +559,23 @@ fn slift(
     Some(r)
 }
 
+/// The evaluator's state fields, per node (`last`, `targets` indexed by node id) whatever the
+/// monitor stores: what [`crate::snapshot`] saves and restores. Defined here, beside the fields
+/// it mirrors, so the snapshot module reads the monitor and never the other way round.
+pub(crate) struct RawState {
+    pub t0: i64,
+    pub pending: Option<i64>,
+    pub last_evaluated: Option<i64>,
+    pub inputs: Vec<Option<Value>>,
+    pub last: Vec<Option<Value>>,
+    pub targets: Vec<Option<i64>>,
+}
+
 /// State access for [`crate::snapshot`], the only code besides this file that depends on the
-/// layout of the fields. [`crate::snapshot::RawState`] is per node (`last`, `targets` indexed by
-/// node id) whatever the monitor stores: this converts from and to the slot layout
+/// layout of the fields: this converts [`RawState`] from and to the slot layout
 /// ([`Program::last_slot`], [`Program::delays`]).
 impl Monitor {
-    pub(crate) fn raw_state(&self) -> crate::snapshot::RawState {
+    pub(crate) fn raw_state(&self) -> RawState {
         let program = &self.program;
         let n = program.nodes.len();
         let mut last = vec![None; n];
@@ -581,7 +592,7 @@ impl Monitor {
                 *dst = *t;
             }
         }
-        crate::snapshot::RawState {
+        RawState {
             t0: self.t0,
             pending: self.pending,
             last_evaluated: self.last_evaluated,
@@ -593,7 +604,7 @@ impl Monitor {
 
     /// A monitor of `program` in state `raw` (per-node vectors of another length are cut or
     /// padded; values of nodes without a slot are not kept).
-    pub(crate) fn from_raw_state(program: Arc<Program>, raw: crate::snapshot::RawState) -> Monitor {
+    pub(crate) fn from_raw_state(program: Arc<Program>, raw: RawState) -> Monitor {
         let mut m = Monitor::starting_at(program, raw.t0);
         m.pending = raw.pending;
         m.last_evaluated = raw.last_evaluated;

@@ -29,22 +29,12 @@
 
 use crate::ir::print::{Render, code, lift_fn};
 use crate::ir::{Node, NodeId, Program, SArg};
-use crate::monitor::Monitor;
+use crate::monitor::{Monitor, RawState};
 use crate::value::{Coll, RuntimeError, Value};
 use serde::{Deserialize, Serialize};
 use std::collections::{HashMap, HashSet};
 use std::hash::Hasher;
 use std::sync::Arc;
-
-/// The evaluator's state fields, as [`Monitor`] exposes them to this module.
-pub(crate) struct RawState {
-    pub t0: i64,
-    pub pending: Option<i64>,
-    pub last_evaluated: Option<i64>,
-    pub inputs: Vec<Option<Value>>,
-    pub last: Vec<Option<Value>>,
-    pub targets: Vec<Option<i64>>,
-}
 
 /// FNV-1a 64 of `s` (stable).
 pub fn text_hash(s: &str) -> u64 {
