@@ -17,7 +17,7 @@
 
 use crate::collections;
 use crate::ir::code::{Callee, Code, FnId, LiftFn, Prim};
-use crate::ir::{Node, Program};
+use crate::ir::{self, Node};
 use crate::natives::NativeFn;
 use crate::ops::{self, scalar_op};
 use crate::value::{Callable, RuntimeError, Value};
@@ -124,8 +124,50 @@ fn context_with(
     })
 }
 
+/// A program ready to run, shared (in an `Arc`) by every monitor instance: the IR as the
+/// lowering made it ([`ir::Program`], all data; this reads as it) and its code compiled into
+/// closures, made once by the first monitor created and shared by every monitor of the program.
+/// The compiled code lives here, not in the IR, so the IR never refers to the evaluator.
+#[derive(Debug)]
+pub struct Program {
+    ir: ir::Program,
+    exec: OnceLock<Arc<Ctx>>,
+}
+
+impl Program {
+    /// The IR, its code not compiled yet.
+    pub fn new(ir: ir::Program) -> Program {
+        Program {
+            ir,
+            exec: OnceLock::new(),
+        }
+    }
+
+    /// The program's code compiled into closures: built once, by the first monitor created,
+    /// and shared by every monitor of the program.
+    #[inline]
+    pub fn exec(&self) -> &Arc<Ctx> {
+        self.exec.get_or_init(|| compile_program(&self.ir))
+    }
+}
+
+impl From<ir::Program> for Program {
+    fn from(ir: ir::Program) -> Program {
+        Program::new(ir)
+    }
+}
+
+impl std::ops::Deref for Program {
+    type Target = ir::Program;
+
+    #[inline]
+    fn deref(&self) -> &ir::Program {
+        &self.ir
+    }
+}
+
 /// Compile a program's function table and node functions.
-pub fn compile_program(p: &Program) -> Arc<Ctx> {
+pub fn compile_program(p: &ir::Program) -> Arc<Ctx> {
     let fns = p
         .functions
         .iter()

@@ -25,7 +25,8 @@ pub mod snapshot;
 pub mod typeck;
 pub mod value;
 
-pub use ir::{Annotation, InputInfo, OutputInfo, Program, Type};
+pub use exec::Program;
+pub use ir::{Annotation, InputInfo, OutputInfo, Type};
 pub use load::{LoadError, LoadOptions, Loaded, load_file, load_with};
 pub use monitor::{InputError, Monitor, OutputEvent};
 pub use value::{Callable, RuntimeError, Value};

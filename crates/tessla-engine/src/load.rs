@@ -5,7 +5,7 @@
 //! monitors), the options that affect compilation (base time, `--set` overrides) and the error
 //! type carrying rendered-ready diagnostics.
 
-use crate::ir::Program;
+use crate::exec::Program;
 use crate::lower;
 use std::path::Path;
 use std::sync::Arc;
@@ -167,7 +167,7 @@ pub fn load_with(
         .program(&options.overrides);
     match result {
         Ok((program, warnings)) => Ok(Loaded {
-            program: Arc::new(program),
+            program: Arc::new(Program::new(program)),
             sources,
             warnings,
         }),

@@ -26,8 +26,8 @@
 //! - Runtime errors (division by zero, overflow, `getSome(None)`) are values: an output whose value
 //!   is [`Value::Error`] reaches the sink like any other event; the caller reports it.
 
-use crate::exec::{Ctx, Exec};
-use crate::ir::{NO_SLOT, Node, NodeId, Program, SArg};
+use crate::exec::{Ctx, Exec, Program};
+use crate::ir::{NO_SLOT, Node, NodeId, SArg};
 use crate::value::{RuntimeError, Value};
 
 use std::cell::RefCell;

@@ -27,6 +27,7 @@
 //! What is not saved: function values (closures) held as stream values; such a stream starts
 //! afresh after a restore ([`Snapshot::unsaved`] counts them).
 
+use crate::exec;
 use crate::ir::print::{Render, code, lift_fn};
 use crate::ir::{Node, NodeId, Program, SArg};
 use crate::monitor::{Monitor, RawState};
@@ -522,13 +523,13 @@ pub fn snapshot_with_keys(monitor: &Monitor, keys: &[u64]) -> Snapshot {
 /// A monitor of `program` continuing from `snap`. Nodes whose key `snap` lacks start afresh:
 /// after the first step, a constant, a `default` or a `fold` holds its initial value (as if
 /// its only event were the one at TeSSLa time 0), every other stream has no value yet.
-pub fn restore(program: Arc<Program>, snap: &Snapshot) -> Monitor {
+pub fn restore(program: Arc<exec::Program>, snap: &Snapshot) -> Monitor {
     let keys = node_keys(&program);
     restore_with_keys(program, snap, &keys)
 }
 
 /// [`restore`] with the program's keys computed once by the caller (many instances).
-pub fn restore_with_keys(program: Arc<Program>, snap: &Snapshot, keys: &[u64]) -> Monitor {
+pub fn restore_with_keys(program: Arc<exec::Program>, snap: &Snapshot, keys: &[u64]) -> Monitor {
     let by_key: HashMap<u64, &NodeState> = snap.nodes.iter().map(|s| (s.key, s)).collect();
     let started = snap.last_evaluated.is_some();
     let n = program.nodes.len();

@@ -7,7 +7,6 @@
 //! first monitor of a program is created.
 
 use crate::value::Value;
-use std::sync::{Arc, OnceLock};
 
 pub mod code;
 pub(crate) mod print;
@@ -304,7 +303,8 @@ pub(crate) fn stream_args(args: &[&SArg]) -> Vec<NodeId> {
         .collect()
 }
 
-/// A compiled specification, shared (in an `Arc`) by every monitor instance.
+/// A specification lowered to the IR: all data, as the lowering made it. The runtime wraps it
+/// with its compiled code (`crate::exec::Program`, what monitors run).
 #[derive(Debug)]
 pub struct Program {
     pub inputs: Vec<InputInfo>,
@@ -327,20 +327,12 @@ pub struct Program {
     /// The function table: named functions and lambdas that value code calls by index
     /// ([`Callee::Fn`], [`Code::Closure`]).
     pub functions: Vec<Function>,
-    /// The compiled code, made when the first monitor is created (see [`Program::exec`]).
-    pub(crate) exec: OnceLock<Arc<crate::exec::Ctx>>,
 }
 
 /// `last_slot` of a node whose earlier values nobody reads.
 pub const NO_SLOT: u32 = u32::MAX;
 
 impl Program {
-    /// The program's code compiled into closures: built once, by the first monitor created,
-    /// and shared by every monitor of the program.
-    pub fn exec(&self) -> &Arc<crate::exec::Ctx> {
-        self.exec.get_or_init(|| crate::exec::compile_program(self))
-    }
-
     pub fn input_index(&self, name: &str) -> Option<usize> {
         self.inputs.iter().position(|i| i.name == name)
     }

@@ -443,7 +443,6 @@ impl<'a> Compiler<'a> {
         Ok((
             Program {
                 functions: std::mem::take(&mut self.functions),
-                exec: std::sync::OnceLock::new(),
                 last_slot,
                 n_last_slots,
                 inputs: self.inputs,
