@@ -13,9 +13,9 @@
 //! `lift`, `slift`, `merge` (with or without an arity suffix) and `log` take a varying number
 //! of arguments: their signature is [`Sig::Variadic`] and the checker builds it per call.
 
-use crate::collections;
-use crate::natives::{self, NativeFn, core};
-use crate::ops;
+use crate::runtime::collections;
+use crate::runtime::natives::{self, NativeFn, core};
+use crate::runtime::ops;
 use crate::value::Value;
 use std::collections::HashMap;
 use std::sync::OnceLock;

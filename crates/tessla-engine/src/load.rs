@@ -5,8 +5,8 @@
 //! monitors), the options that affect compilation (base time, `--set` overrides) and the error
 //! type carrying rendered-ready diagnostics.
 
-use crate::exec::Program;
 use crate::lower;
+use crate::runtime::exec::Program;
 use std::path::Path;
 use std::sync::Arc;
 use tessla_syntax::diag::Category;

@@ -1,4 +1,9 @@
-//! Runtime values of TeSSLa streams and functions.
+//! Values of TeSSLa streams and functions.
+//!
+//! Shared data, beside the IR rather than in `crate::runtime`: IR constants, annotation
+//! arguments and folded constants are values, so the front end builds them as the runtime
+//! does. This module imports nothing from the crate; the semantics of values (operators,
+//! natives) are the runtime's.
 //!
 //! Owns: [`Value`] (what an event carries), [`RuntimeError`] (errors as values), and the
 //! TeSSLa output format of a value (`Display`: `()`, `Some(3)`, `List(1, 2)`, strings unquoted).
@@ -134,7 +139,7 @@ pub fn java_float(f: f64) -> String {
 /// The elements of a set or the entries of a map, in the order TeSSLa prints and folds them:
 /// Scala 2.13's immutable collections keep insertion order up to four elements; a fifth makes
 /// them hashed (`HashSet`, `HashMap`), iterated in the order of their hash trie, and they stay
-/// hashed when they shrink again. `crate::collections` keeps the order; this type only holds
+/// hashed when they shrink again. `runtime::collections` keeps the order; this type only holds
 /// it. Dereferences to the elements.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Coll<T> {

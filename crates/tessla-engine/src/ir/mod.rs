@@ -3,7 +3,7 @@
 //! Owns: [`Program`] (what the front end produces and the evaluator runs), the metadata the
 //! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s; its
 //! listing (`print`, `tessla-telegraf check --ir`). The value code inside nodes and the
-//! function table are data too (`code`); `crate::exec` compiles them into closures when the
+//! function table are data too (`code`); `runtime::exec` compiles them into closures when the
 //! first monitor of a program is created.
 
 use crate::value::Value;
@@ -107,7 +107,7 @@ pub enum SArg {
 }
 
 /// Operators with an inline fast path in the evaluator (see [`Node::Bin`]); their semantics are
-/// in [`crate::ops`].
+/// in [`crate::runtime::ops`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ScalarOp {
     FAdd,
@@ -304,14 +304,14 @@ pub(crate) fn stream_args(args: &[&SArg]) -> Vec<NodeId> {
 }
 
 /// A specification lowered to the IR: all data, as the lowering made it. The runtime wraps it
-/// with its compiled code (`crate::exec::Program`, what monitors run).
+/// with its compiled code (`crate::runtime::exec::Program`, what monitors run).
 #[derive(Debug)]
 pub struct Program {
     pub inputs: Vec<InputInfo>,
     pub outputs: Vec<OutputInfo>,
     pub nodes: Vec<Node>,
     /// Per node: its owner, a hash of the name of the definition or output whose lowering made
-    /// it (see [`crate::snapshot`]).
+    /// it (see [`crate::runtime::snapshot`]).
     pub node_owners: Vec<u64>,
     /// Evaluation order of the nodes within a step (strict dependencies first).
     pub order: Vec<NodeId>,

@@ -3,7 +3,7 @@
 //! and the slots kept across steps.
 //!
 //! Owns: [`Program::ir`] and the text form of value code ([`Render`], [`code`], [`lift_fn`]),
-//! which `crate::snapshot` also hashes (with functions named by their structural key instead
+//! which `runtime::snapshot` also hashes (with functions named by their structural key instead
 //! of their index). In code, `$i` is slot `i` of the frame (a node's argument `i`, or a
 //! function's captured slots then parameters), `fK` is function `K` of the table, natives are
 //! named as the builtins table names them; lazy arguments (read from earlier steps) are marked

@@ -6,7 +6,7 @@
 //! Owns: `Compiler::compile_fn` (a named function, once per definition; a recursive call refers
 //! to the function by its index, so nothing is closed through a cell), `func_value`,
 //! `apply_value_fn`, `as_code`, `param_frame`, constant folding (`fold`, through
-//! `crate::exec`) and the name of a native callee.
+//! `crate::runtime::exec`) and the name of a native callee.
 
 use super::*;
 
@@ -105,15 +105,15 @@ impl Compiler<'_> {
                 self.fold_fns.resize(self.functions.len(), None);
                 for (i, f) in self.functions.iter().enumerate() {
                     if let (Some(slot @ None), Some(body)) = (self.fold_fns.get_mut(i), &f.body) {
-                        *slot = Some(crate::exec::compile(body));
+                        *slot = Some(crate::runtime::exec::compile(body));
                     }
                 }
-                let c = crate::exec::context(self.fold_fns.clone(), Vec::new(), true);
+                let c = crate::runtime::exec::context(self.fold_fns.clone(), Vec::new(), true);
                 self.fold_ctx = Some(c.clone());
                 c
             }
         };
-        crate::exec::eval(&ctx, code)
+        crate::runtime::exec::eval(&ctx, code)
     }
 
     /// A new entry of the function table, its body still to come.
@@ -138,7 +138,7 @@ impl Compiler<'_> {
     pub(super) fn func_value(&mut self, ft: &Rc<FuncTerm>, span: Span) -> R<Term> {
         match &**ft {
             FuncTerm::Native(n) => Ok(Term::Const(Value::Closure(Arc::new(
-                crate::exec::NativeClosure(*n),
+                crate::runtime::exec::NativeClosure(*n),
             )))),
             FuncTerm::User { def, env } => {
                 let (fun, _) = self.compile_fn(def, env, span)?;

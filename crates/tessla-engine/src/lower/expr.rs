@@ -3,7 +3,7 @@
 //! blocks).
 //!
 //! Owns: `Compiler::expr` and the inline nodes of operators (`inline_op`, `slift_node`). Value
-//! operations become [`Prim`]itive applications (semantics in `crate::exec` and `crate::ops`).
+//! operations become [`Prim`]itive applications (semantics in `runtime::exec` and `runtime::ops`).
 
 use super::*;
 
@@ -169,7 +169,7 @@ impl Compiler<'_> {
                 let a = self.expr(lhs, env)?;
                 let b = self.expr(rhs, env)?;
                 let op = *op;
-                let int_op = crate::ops::integer_op(op);
+                let int_op = crate::runtime::ops::integer_op(op);
                 let is_float = |c: &Compiler<'_>, t: &Term| match t {
                     Term::Const(Value::Float(_)) => true,
                     Term::Stream(n) => c.stream_type(*n) == Type::Float,

@@ -5,7 +5,7 @@
 //! applied to stream arguments are expanded in place (TeSSLa's macros); operators and liftable
 //! functions on streams become signal lifts; value-level functions are lowered once into the
 //! program's function table ([`Program::functions`]) and called by index. Nothing here builds a
-//! closure: `crate::exec` compiles the code when a monitor is created (and, here, to fold
+//! closure: `crate::runtime::exec` compiles the code when a monitor is created (and, here, to fold
 //! constants). Recursion is allowed only through the lazy arguments of the builtins table
 //! (`last`, `delay`).
 //!
@@ -17,8 +17,8 @@
 //! `expr` (each expression form, operators), `call` (calls and arguments), `closure`
 //! (value-level functions into the function table, function values, constant folding), `stream` (the stream operators), `types` (element types
 //! of nodes), `time` (base time and time units), `overrides` (`--set`). Names and signatures of
-//! builtins are `crate::builtins`, operator semantics `crate::ops`, format strings
-//! `crate::format`, evaluation order and cross-step slots `crate::schedule`.
+//! builtins are `crate::builtins`, operator semantics `crate::runtime::ops`, format strings
+//! `crate::runtime::format`, evaluation order and cross-step slots `crate::schedule`.
 
 use crate::builtins::{self, Builtin, Kind, StreamOp};
 use crate::resolve::Resolved;
@@ -36,13 +36,13 @@ mod stream;
 pub mod time;
 mod types;
 
-use crate::exec::Exec;
 use crate::ir::{
     Annotation, Callee, Code, FnId, Function, InputInfo, LiftFn, Node, NodeId, OutputInfo, Prim,
     Program, SArg, Type,
 };
-use crate::natives;
-use crate::ops::scalar_op;
+use crate::runtime::exec::Exec;
+use crate::runtime::natives;
+use crate::runtime::ops::scalar_op;
 use crate::value::{RuntimeError, Value};
 use std::cell::RefCell;
 use std::collections::{HashMap, HashSet};
@@ -177,7 +177,7 @@ pub struct Compiler<'a> {
     /// Functions compiled for constant folding, and the context folding uses (rebuilt when a
     /// function is finished).
     fold_fns: Vec<Option<Exec>>,
-    fold_ctx: Option<Arc<crate::exec::Ctx>>,
+    fold_ctx: Option<Arc<crate::runtime::exec::Ctx>>,
     unit_node: Option<NodeId>,
     /// Element types of stream nodes known from operators and declarations.
     node_types: HashMap<NodeId, Type>,
@@ -185,7 +185,7 @@ pub struct Compiler<'a> {
     base_unit: Option<i128>,
     /// Time literals are allowed (a base time is set, or 1 ns is assumed).
     time_units: bool,
-    /// The owner of the nodes created now (see [`crate::snapshot::owner_key`]): the name of
+    /// The owner of the nodes created now (see [`crate::runtime::snapshot::owner_key`]): the name of
     /// the definition or output being lowered.
     owner: u64,
     /// The owner of each node (`Program::node_owners`).
@@ -355,7 +355,7 @@ impl<'a> Compiler<'a> {
                 .alias
                 .as_ref()
                 .map_or_else(|| o.source_text.clone(), |a| a.name.clone());
-            self.owner = crate::snapshot::owner_key(&name);
+            self.owner = crate::runtime::snapshot::owner_key(&name);
             // An object (a record with stream members): one output per member, as TeSSLa.
             match self.object_output(&o.expr, &env) {
                 Some(Ok(members)) => {

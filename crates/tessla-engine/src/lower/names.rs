@@ -60,7 +60,8 @@ impl Compiler<'_> {
                 let saved = self.lazy_depth;
                 self.lazy_depth = 0;
                 let saved_owner = self.owner;
-                self.owner = crate::snapshot::owner_key(self.sources.text(e.def.name.span));
+                self.owner =
+                    crate::runtime::snapshot::owner_key(self.sources.text(e.def.name.span));
                 let r = self.body(&e.def, &env);
                 self.owner = saved_owner;
                 let r = match (r, &e.def.result_type) {

@@ -15,11 +15,11 @@
 //! node's arguments as they come (`f(slot 0, slot 1)`) passes the argument slice through
 //! without copying, so a step costs what a hand-written closure would.
 
-use crate::collections;
 use crate::ir::code::{Callee, Code, FnId, LiftFn, Prim};
 use crate::ir::{self, Node};
-use crate::natives::NativeFn;
-use crate::ops::{self, scalar_op};
+use crate::runtime::collections;
+use crate::runtime::natives::NativeFn;
+use crate::runtime::ops::{self, scalar_op};
 use crate::value::{Callable, RuntimeError, Value};
 use std::sync::{Arc, OnceLock, Weak};
 use tessla_syntax::ast::{BinOp, UnaryOp};
@@ -434,7 +434,9 @@ pub fn prim(p: &Prim, a: &[Value]) -> Value {
         ),
         Prim::Member(fname) => member(fname, a.first()),
         Prim::Format(spec) => match (spec, a.first()) {
-            (Some(spec), Some(v)) => Value::Str(crate::format::format_value(spec, v).into()),
+            (Some(spec), Some(v)) => {
+                Value::Str(crate::runtime::format::format_value(spec, v).into())
+            }
             (None, Some(v)) => Value::Str(v.to_string().into()),
             _ => Value::Unit,
         },
@@ -696,7 +698,7 @@ mod tests {
             Code::apply(
                 Callee::Native {
                     name: "intToFloat",
-                    f: crate::natives::core::int_to_float,
+                    f: crate::runtime::natives::core::int_to_float,
                 },
                 vec![Code::Slot(0)],
             ),

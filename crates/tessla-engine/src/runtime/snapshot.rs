@@ -27,10 +27,10 @@
 //! What is not saved: function values (closures) held as stream values; such a stream starts
 //! afresh after a restore ([`Snapshot::unsaved`] counts them).
 
-use crate::exec;
 use crate::ir::print::{Render, code, lift_fn};
 use crate::ir::{Node, NodeId, Program, SArg};
-use crate::monitor::{Monitor, RawState};
+use crate::runtime::exec;
+use crate::runtime::monitor::{Monitor, RawState};
 use crate::value::{Coll, RuntimeError, Value};
 use serde::{Deserialize, Serialize};
 use std::collections::{HashMap, HashSet};

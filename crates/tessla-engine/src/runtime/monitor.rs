@@ -4,7 +4,7 @@
 //! at the origin, `last`/`delay` timing, error values). Data flows one way: `crate::lower`
 //! lowers a checked spec into a [`Program`]; callers (the trace runner, the Telegraf binding)
 //! create one [`Monitor`] per instance, push input events and receive output events through a
-//! sink callback. The nodes' value code runs as closures compiled by `crate::exec` when the
+//! sink callback. The nodes' value code runs as closures compiled by `runtime::exec` when the
 //! program's first monitor is created ([`Program::exec`], shared by every instance). This
 //! module never parses text and never does I/O.
 //!
@@ -26,8 +26,8 @@
 //! - Runtime errors (division by zero, overflow, `getSome(None)`) are values: an output whose value
 //!   is [`Value::Error`] reaches the sink like any other event; the caller reports it.
 
-use crate::exec::{Ctx, Exec, Program};
 use crate::ir::{NO_SLOT, Node, NodeId, SArg};
+use crate::runtime::exec::{Ctx, Exec, Program};
 use crate::value::{RuntimeError, Value};
 
 use std::cell::RefCell;
@@ -319,7 +319,7 @@ impl Monitor {
                     if args.iter().any(|a| cur[*a].is_some()) {
                         let vals: Vec<Option<Value>> =
                             args.iter().map(|a| cur[*a].clone()).collect();
-                        crate::exec::lift(cx, f, cx.node(i), &vals)
+                        crate::runtime::exec::lift(cx, f, cx.node(i), &vals)
                     } else {
                         None
                     }
@@ -340,7 +340,7 @@ impl Monitor {
                         }
                         continue;
                     }
-                    Some(crate::exec::binary(*bop, x, y))
+                    Some(crate::runtime::exec::binary(*bop, x, y))
                 }
                 Node::Ite { cond, then, other } => {
                     if !has_event(cur, cond) && !has_event(cur, then) && !has_event(cur, other) {
@@ -560,8 +560,8 @@ fn slift(
 }
 
 /// The evaluator's state fields, per node (`last`, `targets` indexed by node id) whatever the
-/// monitor stores: what [`crate::snapshot`] saves and restores. Defined here, beside the fields
-/// it mirrors, so the snapshot module reads the monitor and never the other way round.
+/// monitor stores: what [`snapshot`](super::snapshot) saves and restores. Defined here, beside
+/// the fields it mirrors, so the snapshot module reads the monitor and never the other way round.
 pub(crate) struct RawState {
     pub t0: i64,
     pub pending: Option<i64>,
@@ -571,8 +571,8 @@ pub(crate) struct RawState {
     pub targets: Vec<Option<i64>>,
 }
 
-/// State access for [`crate::snapshot`], the only code besides this file that depends on the
-/// layout of the fields: this converts [`RawState`] from and to the slot layout
+/// State access for [`snapshot`](super::snapshot), the only code besides this file that depends
+/// on the layout of the fields: this converts [`RawState`] from and to the slot layout
 /// ([`Program::last_slot`], [`Program::delays`]).
 impl Monitor {
     pub(crate) fn raw_state(&self) -> RawState {
