@@ -5,7 +5,8 @@
 //! does. This module imports nothing from the crate; the semantics of values (operators,
 //! natives) are the runtime's.
 //!
-//! Owns: [`Value`] (what an event carries), [`RuntimeError`] (errors as values), and the
+//! Owns: [`Value`] (what an event carries), [`RuntimeError`] (errors as values), the types of
+//! function values ([`Callable`]) and natives ([`NativeFn`]), and the
 //! TeSSLa output format of a value (`Display`: `()`, `Some(3)`, `List(1, 2)`, strings unquoted).
 //! Scalars are inline (no heap allocation); compound values share their payload with `Arc`.
 //!
@@ -93,6 +94,11 @@ pub enum RuntimeError {
     NonPositiveDelay,
     Other(Arc<str>),
 }
+
+/// A native implementation: well-typed, error-free arguments in, a value (maybe an error) out.
+/// Data as much as code: the IR names natives by these pointers (`ir::Callee::Native`), the
+/// builtins table lists them, and `runtime::natives` implements them.
+pub type NativeFn = fn(&[Value]) -> Value;
 
 /// A function value. Implemented by the evaluator for compiled lambdas; natives that take
 /// functions (`List.fold`, `Map.map` ...) call them through this trait.

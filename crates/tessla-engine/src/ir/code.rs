@@ -7,10 +7,9 @@
 //! [`crate::ir::Program::functions`], or a function value), [`LiftFn`] (the functions of `lift`
 //! nodes, which see absent events) and [`Function`] (one entry of the function table). The
 //! lowering builds these; `runtime::exec` compiles them into closures when a monitor is created;
-//! `print` lists them and `crate::runtime::snapshot` hashes them. Nothing here evaluates.
+//! `print` lists them and `runtime::snapshot` hashes them. Nothing here evaluates.
 
-use crate::runtime::natives::NativeFn;
-use crate::value::Value;
+use crate::value::{NativeFn, Value};
 use std::sync::Arc;
 use tessla_syntax::ast::{BinOp, UnaryOp};
 

@@ -1,12 +1,17 @@
 //! The flat core IR: stream nodes in dependency order with typed value slots.
 //!
-//! Owns: [`Program`] (what the front end produces and the evaluator runs), the metadata the
-//! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s; its
+//! Owns: [`Program`] (what the front end produces; the runtime runs it with its code compiled),
+//! the metadata the
+//! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s; which
+//! operators have a fast-path node ([`scalar_op`]); the stable hashes node identities are made
+//! of ([`text_hash`], [`mix`], and [`owner_key`], the owner the lowering records per node); its
 //! listing (`print`, `tessla-telegraf check --ir`). The value code inside nodes and the
 //! function table are data too (`code`); `runtime::exec` compiles them into closures when the
 //! first monitor of a program is created.
 
 use crate::value::Value;
+use std::hash::Hasher;
+use tessla_syntax::ast::BinOp;
 
 pub mod code;
 pub(crate) mod print;
@@ -128,6 +133,30 @@ pub enum ScalarOp {
     Or,
 }
 
+/// The operators with an inline scalar fast path, and the operator each one stands for (which
+/// syntax operator the lowering may build a [`Node::Bin`] for).
+pub fn scalar_op(op: BinOp) -> Option<ScalarOp> {
+    Some(match op {
+        BinOp::FAdd => ScalarOp::FAdd,
+        BinOp::FSub => ScalarOp::FSub,
+        BinOp::FMul => ScalarOp::FMul,
+        BinOp::FDiv => ScalarOp::FDiv,
+        BinOp::FLt => ScalarOp::FLt,
+        BinOp::FGt => ScalarOp::FGt,
+        BinOp::FLe => ScalarOp::FLe,
+        BinOp::FGe => ScalarOp::FGe,
+        BinOp::Add => ScalarOp::IAdd,
+        BinOp::Sub => ScalarOp::ISub,
+        BinOp::Lt => ScalarOp::ILt,
+        BinOp::Gt => ScalarOp::IGt,
+        BinOp::Le => ScalarOp::ILe,
+        BinOp::Ge => ScalarOp::IGe,
+        BinOp::And => ScalarOp::And,
+        BinOp::Or => ScalarOp::Or,
+        _ => return None,
+    })
+}
+
 /// A scalar operand or result of a [`ScalarOp`], copied out of a [`Value`] so the evaluator
 /// can compute in registers and write the result straight into its slot.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -205,7 +234,7 @@ pub enum Node {
         op: ScalarOp,
         a: SArg,
         b: SArg,
-        bop: tessla_syntax::ast::BinOp,
+        bop: BinOp,
     },
     /// A signal lift of `if cond then then else other`.
     Ite {
@@ -311,7 +340,7 @@ pub struct Program {
     pub outputs: Vec<OutputInfo>,
     pub nodes: Vec<Node>,
     /// Per node: its owner, a hash of the name of the definition or output whose lowering made
-    /// it (see [`crate::runtime::snapshot`]).
+    /// it ([`owner_key`]; part of a node's identity in `runtime::snapshot`).
     pub node_owners: Vec<u64>,
     /// Evaluation order of the nodes within a step (strict dependencies first).
     pub order: Vec<NodeId>,
@@ -336,4 +365,25 @@ impl Program {
     pub fn input_index(&self, name: &str) -> Option<usize> {
         self.inputs.iter().position(|i| i.name == name)
     }
+}
+
+/// FNV-1a 64 of `s` (stable across runs and platforms, unlike std's `RandomState`).
+pub fn text_hash(s: &str) -> u64 {
+    let mut h = fnv::FnvHasher::default();
+    h.write(s.as_bytes());
+    h.finish()
+}
+
+/// Combine two hashes (order matters).
+pub fn mix(a: u64, b: u64) -> u64 {
+    let mut h = fnv::FnvHasher::default();
+    h.write(&a.to_le_bytes());
+    h.write(&b.to_le_bytes());
+    h.finish()
+}
+
+/// The owner key of the nodes made while lowering the definition or output `name`
+/// ([`Program::node_owners`]).
+pub fn owner_key(name: &str) -> u64 {
+    mix(text_hash("owner"), text_hash(name))
 }

@@ -169,7 +169,7 @@ impl Compiler<'_> {
                 let a = self.expr(lhs, env)?;
                 let b = self.expr(rhs, env)?;
                 let op = *op;
-                let int_op = crate::runtime::ops::integer_op(op);
+                let int_op = builtins::integer_op(op);
                 let is_float = |c: &Compiler<'_>, t: &Term| match t {
                     Term::Const(Value::Float(_)) => true,
                     Term::Stream(n) => c.stream_type(*n) == Type::Float,

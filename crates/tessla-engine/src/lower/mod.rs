@@ -20,7 +20,7 @@
 //! builtins are `crate::builtins`, operator semantics `crate::runtime::ops`, format strings
 //! `crate::runtime::format`, evaluation order and cross-step slots `crate::schedule`.
 
-use crate::builtins::{self, Builtin, Kind, StreamOp};
+use crate::builtins::{self, Builtin, Folder, Kind, StreamOp};
 use crate::resolve::Resolved;
 use crate::schedule;
 use time::unit_factor;
@@ -40,10 +40,8 @@ use crate::ir::{
     Annotation, Callee, Code, FnId, Function, InputInfo, LiftFn, Node, NodeId, OutputInfo, Prim,
     Program, SArg, Type,
 };
-use crate::runtime::exec::Exec;
-use crate::runtime::natives;
-use crate::runtime::ops::scalar_op;
-use crate::value::{RuntimeError, Value};
+use crate::ir::{owner_key, scalar_op};
+use crate::value::{NativeFn, RuntimeError, Value};
 use std::cell::RefCell;
 use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
@@ -64,7 +62,7 @@ enum Term {
 enum FuncTerm {
     /// A stream operator of the builtins table (`last`, `merge` ...).
     Builtin(&'static Builtin, StreamOp),
-    Native(natives::NativeFn),
+    Native(NativeFn),
     User {
         def: Rc<Def>,
         env: Env,
@@ -174,10 +172,8 @@ pub struct Compiler<'a> {
     not_value_fns: HashSet<Span>,
     /// The function table (`Program::functions`).
     functions: Vec<Function>,
-    /// Functions compiled for constant folding, and the context folding uses (rebuilt when a
-    /// function is finished).
-    fold_fns: Vec<Option<Exec>>,
-    fold_ctx: Option<Arc<crate::runtime::exec::Ctx>>,
+    /// Constant folding: the functions finished so far, compiled (see `closure::fold`).
+    folder: Folder,
     unit_node: Option<NodeId>,
     /// Element types of stream nodes known from operators and declarations.
     node_types: HashMap<NodeId, Type>,
@@ -185,7 +181,7 @@ pub struct Compiler<'a> {
     base_unit: Option<i128>,
     /// Time literals are allowed (a base time is set, or 1 ns is assumed).
     time_units: bool,
-    /// The owner of the nodes created now (see [`crate::runtime::snapshot::owner_key`]): the name of
+    /// The owner of the nodes created now (see [`crate::ir::owner_key`]): the name of
     /// the definition or output being lowered.
     owner: u64,
     /// The owner of each node (`Program::node_owners`).
@@ -224,8 +220,7 @@ impl<'a> Compiler<'a> {
             compiled_fns: HashMap::new(),
             not_value_fns: HashSet::new(),
             functions: Vec::new(),
-            fold_fns: Vec::new(),
-            fold_ctx: None,
+            folder: Folder::default(),
             unit_node: None,
             base_unit: None,
             time_units: true,
@@ -355,7 +350,7 @@ impl<'a> Compiler<'a> {
                 .alias
                 .as_ref()
                 .map_or_else(|| o.source_text.clone(), |a| a.name.clone());
-            self.owner = crate::runtime::snapshot::owner_key(&name);
+            self.owner = owner_key(&name);
             // An object (a record with stream members): one output per member, as TeSSLa.
             match self.object_output(&o.expr, &env) {
                 Some(Ok(members)) => {

@@ -16,11 +16,11 @@
 //! without copying, so a step costs what a hand-written closure would.
 
 use crate::ir::code::{Callee, Code, FnId, LiftFn, Prim};
+use crate::ir::scalar_op;
 use crate::ir::{self, Node};
 use crate::runtime::collections;
-use crate::runtime::natives::NativeFn;
-use crate::runtime::ops::{self, scalar_op};
-use crate::value::{Callable, RuntimeError, Value};
+use crate::runtime::ops;
+use crate::value::{Callable, NativeFn, RuntimeError, Value};
 use std::sync::{Arc, OnceLock, Weak};
 use tessla_syntax::ast::{BinOp, UnaryOp};
 
@@ -380,6 +380,51 @@ pub fn apply(cx: &Ctx, callee: &Callee, a: &[Value]) -> Value {
             )),
         },
     }
+}
+
+/// Constant folding for the lowering: evaluates closed code now, with the program functions
+/// finished so far compiled into a context of their own (built on the first fold after a
+/// function is finished, each function compiled once). The lowering reaches it through the
+/// builtins table.
+#[derive(Default)]
+pub struct Folder {
+    /// Per function: its compiled body (`None`: not finished when last compiled).
+    fns: Vec<Option<Exec>>,
+    /// The context of the last fold, until a function is finished.
+    ctx: Option<Arc<Ctx>>,
+}
+
+impl Folder {
+    /// The value of closed code `code`, calling the functions of `functions` that have a body.
+    pub fn fold(&mut self, functions: &[ir::Function], code: &Code) -> Value {
+        let ctx = match &self.ctx {
+            Some(c) => c.clone(),
+            None => {
+                self.fns.resize(functions.len(), None);
+                for (slot, f) in self.fns.iter_mut().zip(functions) {
+                    if slot.is_none()
+                        && let Some(body) = &f.body
+                    {
+                        *slot = Some(compile(body));
+                    }
+                }
+                let c = context(self.fns.clone(), Vec::new(), true);
+                self.ctx = Some(c.clone());
+                c
+            }
+        };
+        eval(&ctx, code)
+    }
+
+    /// A function got its body: the next fold compiles it.
+    pub fn function_finished(&mut self) {
+        self.ctx = None;
+    }
+}
+
+/// A native as a function value.
+pub fn native_value(f: NativeFn) -> Value {
+    Value::Closure(Arc::new(NativeClosure(f)))
 }
 
 /// Evaluate closed code (no frame) now: constant folding during lowering.

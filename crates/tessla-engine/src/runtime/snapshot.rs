@@ -29,33 +29,14 @@
 
 use crate::ir::print::{Render, code, lift_fn};
 use crate::ir::{Node, NodeId, Program, SArg};
+/// The stable hashes keys are made of (defined with the IR, whose node owners use them too).
+pub use crate::ir::{mix, text_hash};
 use crate::runtime::exec;
 use crate::runtime::monitor::{Monitor, RawState};
 use crate::value::{Coll, RuntimeError, Value};
 use serde::{Deserialize, Serialize};
 use std::collections::{HashMap, HashSet};
-use std::hash::Hasher;
 use std::sync::Arc;
-
-/// FNV-1a 64 of `s` (stable).
-pub fn text_hash(s: &str) -> u64 {
-    let mut h = fnv::FnvHasher::default();
-    h.write(s.as_bytes());
-    h.finish()
-}
-
-/// The owner key of the nodes made while lowering the definition or output `name`.
-pub fn owner_key(name: &str) -> u64 {
-    mix(text_hash("owner"), text_hash(name))
-}
-
-/// Combine two hashes (order matters).
-pub fn mix(a: u64, b: u64) -> u64 {
-    let mut h = fnv::FnvHasher::default();
-    h.write(&a.to_le_bytes());
-    h.write(&b.to_le_bytes());
-    h.finish()
-}
 
 /// A value as plain data.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
