@@ -1,11 +1,13 @@
 //! The closure compiler: value code ([`Code`], data in the IR) compiled into Rust closures, once
 //! per program, when its first monitor is created (and, during lowering, to fold constants).
 //!
-//! Owns: [`Exec`] (compiled code: a context and a frame in, a value out), [`Ctx`] (the compiled
+//! Owns: [`Program`] (what monitors run: the IR with its compiled code, made once and shared),
+//! [`Exec`] (compiled code: a context and a frame in, a value out), [`Ctx`] (the compiled
 //! function table and node functions of one program), [`compile`], [`compile_program`], the
-//! semantics of [`Prim`]itives and [`LiftFn`]s, function values ([`FnClosure`]), and the
-//! [`Fast`] forms of node functions that are one operator or native on the node's arguments
-//! (run by the monitor on its arguments by reference).
+//! semantics of [`Prim`]itives and [`LiftFn`]s, function values ([`FnClosure`],
+//! [`native_value`]), the [`Fast`] forms of node functions that are one operator or native on
+//! the node's arguments (run by the monitor on its arguments by reference), and the lowering's
+//! constant [`Folder`] (handed to it by the builtins table).
 //!
 //! Calls between program functions go through the context passed to every closure (an index
 //! into [`Ctx`]'s table), so compiled functions never refer to each other and recursion makes
