@@ -134,7 +134,9 @@ pub enum ScalarOp {
 }
 
 /// The operators with an inline scalar fast path, and the operator each one stands for (which
-/// syntax operator the lowering may build a [`Node::Bin`] for).
+/// syntax operator the lowering may build a [`Node::Bin`] for). Inline: the evaluator asks it
+/// for every operator it applies (`runtime::exec::binary`).
+#[inline]
 pub fn scalar_op(op: BinOp) -> Option<ScalarOp> {
     Some(match op {
         BinOp::FAdd => ScalarOp::FAdd,

@@ -34,6 +34,8 @@ use std::cell::RefCell;
 use std::sync::Arc;
 
 /// One output event: output `output` (index into [`Program::outputs`]) has `value` at `ts`.
+///
+/// [`Program::outputs`]: crate::ir::Program::outputs
 #[derive(Debug, Clone, Copy)]
 pub struct OutputEvent<'a> {
     pub ts: i64,
@@ -76,6 +78,9 @@ impl std::error::Error for InputError {}
 /// Layout: `inputs` (one slot per input, filled between steps), `last` (one slot per node read
 /// across steps, indexed by [`Program::last_slot`]), `targets` (one armed target per `delay`
 /// node, in the order of [`Program::delays`]).
+///
+/// [`Program::last_slot`]: crate::ir::Program::last_slot
+/// [`Program::delays`]: crate::ir::Program::delays
 #[derive(Debug, Clone)]
 pub struct Monitor {
     program: Arc<Program>,
@@ -86,6 +91,8 @@ pub struct Monitor {
     /// The latest value from earlier steps of each node that is read across steps.
     last: Box<[Option<Value>]>,
     /// Armed target of each `Delay` node (parallel to [`Program::delays`]).
+    ///
+    /// [`Program::delays`]: crate::ir::Program::delays
     targets: Box<[Option<i64>]>,
 }
 
@@ -574,6 +581,9 @@ pub(crate) struct RawState {
 /// State access for [`snapshot`](super::snapshot), the only code besides this file that depends
 /// on the layout of the fields: this converts [`RawState`] from and to the slot layout
 /// ([`Program::last_slot`], [`Program::delays`]).
+///
+/// [`Program::last_slot`]: crate::ir::Program::last_slot
+/// [`Program::delays`]: crate::ir::Program::delays
 impl Monitor {
     pub(crate) fn raw_state(&self) -> RawState {
         let program = &self.program;
