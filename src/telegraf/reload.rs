@@ -3,14 +3,15 @@
 //! Owns: where the spec comes from ([`SpecSource`]: a file, or the bundled robot monitors, which
 //! never change while running, so their reload keeps everything) and the reload itself: a spec
 //! that fails to check is reported with its full diagnostic and the running one stays; a good
-//! one replaces it for every instance, each stream whose key (see `tessla_engine::snapshot`)
-//! is unchanged keeping its state, and the streams that start afresh are logged.
+//! one replaces it for every instance, each stream whose key (see
+//! `tessla_engine::runtime::snapshot`) is unchanged keeping its state, and the streams that start
+//! afresh are logged.
 
 use crate::log::{self, Level};
 use crate::telegraf::processor::Processor;
 use std::path::PathBuf;
 use std::sync::Arc;
-use tessla_engine::snapshot;
+use tessla_engine::runtime::snapshot;
 use tessla_engine::{LoadError, LoadOptions, Loaded};
 
 /// The spec `run` loads at start and on every SIGHUP.

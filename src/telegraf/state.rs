@@ -24,11 +24,11 @@ use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tessla_engine::Program;
-use tessla_engine::snapshot::{self, Snapshot};
+use tessla_engine::runtime::snapshot::{self, Snapshot};
 
 pub const MAGIC: &str = "tessla-telegraf-state";
 /// Format version; bumped on any incompatible change of the layout below or of node keys
-/// (2: structural node keys, see `tessla_engine::snapshot`).
+/// (2: structural node keys, see `tessla_engine::runtime::snapshot`).
 pub const VERSION: u32 = 2;
 
 /// Where `--state` keeps the state.

@@ -1,6 +1,10 @@
 //! Every builtin name of the language, once: stream operators, value functions, constants,
 //! `Operators.*` and the natives reached through `extern("name")`.
 //!
+//! The one door from the front end (`resolve`, `typeck`, `lower`, `schedule`) into the runtime:
+//! the natives' function pointers are in the table, and the few other runtime entry points the
+//! lowering needs (constant folding, function values of natives) are re-exported here.
+//!
 //! Owns: [`BUILTINS`], each entry with its name, [`Kind`] (what the lowering does with it),
 //! TeSSLa signature (what the checker types a use with; `None`: any type, checked at lowering)
 //! and which arguments are lazy (read from earlier steps, so they may refer forward). The
@@ -13,12 +17,17 @@
 //! `lift`, `slift`, `merge` (with or without an arity suffix) and `log` take a varying number
 //! of arguments: their signature is a [`Sig::Variadic`] shape and the checker builds it per call.
 
-use crate::collections;
-use crate::natives::{self, NativeFn, core};
-use crate::ops;
-use crate::value::Value;
+use crate::runtime::collections;
+use crate::runtime::natives::{self, core};
+use crate::runtime::ops;
+use crate::value::{NativeFn, Value};
 use std::collections::HashMap;
 use std::sync::OnceLock;
+
+/// The rest of the runtime the front end uses, besides the natives listed in [`BUILTINS`]:
+/// constant folding and function values of natives (the lowering). A pass imports runtime code
+/// through this table only.
+pub use crate::runtime::exec::{Folder, native_value};
 
 /// A stream operator the lowering builds nodes for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -527,6 +536,14 @@ mod tests {
         let n = names.len();
         names.dedup();
         assert_eq!(n, names.len(), "a builtin name is listed twice");
+    }
+
+    #[test]
+    fn the_natives_the_lowering_names_are_listed() {
+        // `maximum` and `minimum` reduce with these (`lower::closure::named_native`).
+        let args = [Value::Int(1), Value::Int(3)];
+        assert_eq!(extern_native("max").map(|f| f(&args)), Some(Value::Int(3)));
+        assert_eq!(extern_native("min").map(|f| f(&args)), Some(Value::Int(1)));
     }
 
     #[test]

@@ -1,31 +1,34 @@
 //! tessla-engine: checks a parsed TeSSLa spec, lowers it to a flat core IR and evaluates it.
 //!
-//! A spec flows text -> syntax (`tessla_syntax`) -> resolved (`resolve`) -> checked (`typeck`,
-//! reading `builtins`) -> IR (`lower`, then `schedule`; the IR is `ir`, all data: stream nodes,
-//! value code and a function table, listed by `ir::print`) -> closures (`exec`, compiled from the
-//! IR's code when a program's first monitor is created) -> monitor (`monitor`, with `snapshot`,
-//! whose stream identities hash the IR's structure). `load` runs the pipeline up to the IR.
-//! Semantics used on the way: `ops` (operators), `natives` and
-//! `collections` (value functions), `format` (format strings), `value` (what events carry).
+//! The road a spec takes, front end first, then the runtime:
+//!
+//! 1. text -> syntax: `tessla_syntax` (parser, includes, diagnostics);
+//! 2. syntax -> resolved: `resolve` (which definition, input or member each name means);
+//! 3. resolved -> typed: `typeck` (reading `builtins` and the bundled `prelude`);
+//! 4. typed -> IR: `lower`, then `schedule` (evaluation order, cross-step slots). The IR (`ir`)
+//!    is all data: stream nodes, value code and a function table, listed by `ir::print`;
+//! 5. IR -> monitor: `runtime` (`exec` compiles the IR's code into closures once per program,
+//!    `monitor` runs instances, `snapshot` saves and restores their state; the semantics they
+//!    call: `ops`, `natives`, `collections`, `format`).
+//!
+//! `load` drives steps 1 to 4 and hands the IR to the runtime ([`Program`]). Shared by both
+//! sides: `ir` and `value` (what events and IR constants carry). The front end reaches the
+//! runtime only through the builtins table (`builtins`); no runtime module imports the front
+//! end, and no two modules import each other.
 
 pub mod builtins;
-pub mod collections;
-pub mod exec;
-pub mod format;
 pub mod ir;
 pub mod load;
 pub mod lower;
-pub mod monitor;
-pub mod natives;
-pub mod ops;
 pub mod prelude;
 pub mod resolve;
+pub mod runtime;
 pub mod schedule;
-pub mod snapshot;
 pub mod typeck;
 pub mod value;
 
-pub use ir::{Annotation, InputInfo, OutputInfo, Program, Type};
+pub use ir::{Annotation, InputInfo, OutputInfo, Type};
 pub use load::{LoadError, LoadOptions, Loaded, load_file, load_with};
-pub use monitor::{InputError, Monitor, OutputEvent};
+pub use runtime::exec::Program;
+pub use runtime::monitor::{InputError, Monitor, OutputEvent};
 pub use value::{Callable, RuntimeError, Value};

@@ -5,8 +5,8 @@
 //! monitors), the options that affect compilation (base time, `--set` overrides) and the error
 //! type carrying rendered-ready diagnostics.
 
-use crate::ir::Program;
 use crate::lower;
+use crate::runtime::exec::Program;
 use std::path::Path;
 use std::sync::Arc;
 use tessla_syntax::diag::Category;
@@ -167,7 +167,7 @@ pub fn load_with(
         .program(&options.overrides);
     match result {
         Ok((program, warnings)) => Ok(Loaded {
-            program: Arc::new(program),
+            program: Arc::new(Program::new(program)),
             sources,
             warnings,
         }),

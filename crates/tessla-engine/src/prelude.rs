@@ -201,7 +201,7 @@ pub fn declaration(builtin: &str) -> Option<&'static Def> {
 
 /// The parameter names of the value function a native implements (`String.format` ->
 /// `formatString`, `value`), found through the builtins table.
-pub fn native_param_names(f: crate::natives::NativeFn) -> Option<Vec<String>> {
+pub fn native_param_names(f: crate::value::NativeFn) -> Option<Vec<String>> {
     builtins::BUILTINS
         .iter()
         .filter(

@@ -1,6 +1,12 @@
-//! Runtime values of TeSSLa streams and functions.
+//! Values of TeSSLa streams and functions.
 //!
-//! Owns: [`Value`] (what an event carries), [`RuntimeError`] (errors as values), and the
+//! Shared data, beside the IR rather than in `crate::runtime`: IR constants, annotation
+//! arguments and folded constants are values, so the front end builds them as the runtime
+//! does. This module imports nothing from the crate; the semantics of values (operators,
+//! natives) are the runtime's.
+//!
+//! Owns: [`Value`] (what an event carries), [`RuntimeError`] (errors as values), the types of
+//! function values ([`Callable`]) and natives ([`NativeFn`]), and the
 //! TeSSLa output format of a value (`Display`: `()`, `Some(3)`, `List(1, 2)`, strings unquoted).
 //! Scalars are inline (no heap allocation); compound values share their payload with `Arc`.
 //!
@@ -89,6 +95,11 @@ pub enum RuntimeError {
     Other(Arc<str>),
 }
 
+/// A native implementation: well-typed, error-free arguments in, a value (maybe an error) out.
+/// Data as much as code: the IR names natives by these pointers (`ir::Callee::Native`), the
+/// builtins table lists them, and `runtime::natives` implements them.
+pub type NativeFn = fn(&[Value]) -> Value;
+
 /// A function value. Implemented by the evaluator for compiled lambdas; natives that take
 /// functions (`List.fold`, `Map.map` ...) call them through this trait.
 pub trait Callable: fmt::Debug + Send + Sync {
@@ -134,7 +145,7 @@ pub fn java_float(f: f64) -> String {
 /// The elements of a set or the entries of a map, in the order TeSSLa prints and folds them:
 /// Scala 2.13's immutable collections keep insertion order up to four elements; a fifth makes
 /// them hashed (`HashSet`, `HashMap`), iterated in the order of their hash trie, and they stay
-/// hashed when they shrink again. `crate::collections` keeps the order; this type only holds
+/// hashed when they shrink again. `runtime::collections` keeps the order; this type only holds
 /// it. Dereferences to the elements.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Coll<T> {

@@ -439,10 +439,10 @@ pub(crate) mod tests {
         is_error::<tessla_engine::LoadError>();
         is_error::<tessla_engine::InputError>();
         is_error::<tessla_engine::RuntimeError>();
-        is_error::<tessla_engine::ops::OpError>();
-        is_error::<tessla_engine::snapshot::SError>();
+        is_error::<tessla_engine::runtime::ops::OpError>();
+        is_error::<tessla_engine::runtime::snapshot::SError>();
         is_error::<tessla_engine::schedule::Cycle>();
-        is_error::<tessla_engine::format::FormatError>();
+        is_error::<tessla_engine::runtime::format::FormatError>();
         is_error::<tessla_engine::lower::time::BaseTimeError>();
         is_error::<tessla_syntax::include::ResolveError>();
 
@@ -451,7 +451,7 @@ pub(crate) mod tests {
         assert_eq!(e.to_string(), "no bundled spec named `x`");
         let e = tessla_engine::lower::time::parse_base_time("0 s").unwrap_err();
         assert_eq!(e.to_string(), "base time `0 s` must be positive");
-        let e = tessla_engine::format::java_format("%", &Value::Int(1)).unwrap_err();
+        let e = tessla_engine::runtime::format::java_format("%", &Value::Int(1)).unwrap_err();
         assert_eq!(e.to_string(), "`%` lacks a conversion character");
     }
 }

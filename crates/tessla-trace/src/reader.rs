@@ -9,7 +9,7 @@
 //! record `{_1 = a, _2 = b}` is a tuple, as TeSSLa treats tuples as records). `Set(...)` and
 //! `Map(k -> v, ...)` build set and map values (`->` only occurs in maps, so it is read as a
 //! comma and the arguments are paired). Integers are unbounded, as TeSSLa's `Int`.
-//! Operators mean what they mean in a spec: their semantics are `tessla_engine::ops` (so a
+//! Operators mean what they mean in a spec: their semantics are `tessla_engine::runtime::ops` (so a
 //! negative shift shifts the other way, as TeSSLa's unbounded integers do).
 //!
 //! The evaluator is the trace reader's own, not the engine's constant folding: the engine folds
@@ -21,7 +21,7 @@
 //! (`Type`'s `Display`).
 
 use std::sync::Arc;
-use tessla_engine::ops::{self, OpError};
+use tessla_engine::runtime::ops::{self, OpError};
 use tessla_engine::{Program, Type, Value};
 use tessla_syntax::ast::{BinOp, Expr, ExprKind, StrPart, UnaryOp};
 use tessla_syntax::source::FileId;
@@ -453,7 +453,7 @@ fn eval(e: &Expr) -> Result<Value, String> {
                     vals.into_iter().next().unwrap_or(Value::Unit),
                 ))),
                 ("List", _) => Ok(Value::List(Arc::new(vals))),
-                ("Set", _) => Ok(tessla_engine::collections::set_of(vals)),
+                ("Set", _) => Ok(tessla_engine::runtime::collections::set_of(vals)),
                 ("Map", n) if n % 2 == 0 => {
                     let mut map: Vec<(Value, Value)> = Vec::with_capacity(n / 2);
                     let mut it = vals.into_iter();
@@ -461,7 +461,7 @@ fn eval(e: &Expr) -> Result<Value, String> {
                         map.push((k, v));
                     }
                     // A repeated key keeps the last value, as Scala's `toMap` does.
-                    Ok(tessla_engine::collections::map_of(map))
+                    Ok(tessla_engine::runtime::collections::map_of(map))
                 }
                 (other, n) => Err(format!("`{other}` with {n} arguments is not a trace value")),
             }
@@ -504,8 +504,8 @@ fn bool_of(v: Value) -> Result<Value, String> {
     }
 }
 
-/// An operator's semantics are the engine's ([`tessla_engine::ops`]); only the messages are
-/// the trace reader's.
+/// An operator's semantics are the engine's ([`tessla_engine::runtime::ops`]); only the messages
+/// are the trace reader's.
 fn op_error(e: OpError, undefined: impl FnOnce() -> String) -> String {
     match e {
         OpError::Overflow => "Int overflow".into(),
@@ -719,7 +719,7 @@ mod tests {
         let spec = "in s: Events[Set[Int]]\nin m: Events[Map[Int, String]]\nout s\nout m";
         assert_eq!(
             read(spec, "1: s = Set(1, 2, 1)").unwrap(),
-            tessla_engine::collections::set_of(vec![Value::Int(1), Value::Int(2)])
+            tessla_engine::runtime::collections::set_of(vec![Value::Int(1), Value::Int(2)])
         );
         assert_eq!(
             read(spec, r#"1: m = Map(1 -> "a->b", 2 -> "c", 1 -> "d")"#).unwrap(),

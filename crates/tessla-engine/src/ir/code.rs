@@ -6,11 +6,10 @@
 //! slots), [`Callee`] (a [`Prim`]itive, a native by name, a program function by index into
 //! [`crate::ir::Program::functions`], or a function value), [`LiftFn`] (the functions of `lift`
 //! nodes, which see absent events) and [`Function`] (one entry of the function table). The
-//! lowering builds these; `crate::exec` compiles them into closures when a monitor is created;
-//! `print` lists them and `crate::snapshot` hashes them. Nothing here evaluates.
+//! lowering builds these; `runtime::exec` compiles them into closures when a monitor is created;
+//! `print` lists them and `runtime::snapshot` hashes them. Nothing here evaluates.
 
-use crate::natives::NativeFn;
-use crate::value::Value;
+use crate::value::{NativeFn, Value};
 use std::sync::Arc;
 use tessla_syntax::ast::{BinOp, UnaryOp};
 
@@ -59,7 +58,7 @@ pub enum Callee {
 }
 
 /// Value operations built into the language (operators, tuples, records, format strings) and
-/// the step functions of stream builtins. Semantics: `crate::exec`.
+/// the step functions of stream builtins. Semantics: `crate::runtime::exec`.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Prim {
     Binary(BinOp),

@@ -1,13 +1,17 @@
 //! The flat core IR: stream nodes in dependency order with typed value slots.
 //!
-//! Owns: [`Program`] (what the front end produces and the evaluator runs), the metadata the
-//! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s; its
+//! Owns: [`Program`] (what the front end produces; the runtime runs it with its code compiled),
+//! the metadata the
+//! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s; which
+//! operators have a fast-path node ([`scalar_op`]); the stable hashes node identities are made
+//! of ([`text_hash`], [`mix`], and [`owner_key`], the owner the lowering records per node); its
 //! listing (`print`, `tessla-telegraf check --ir`). The value code inside nodes and the
-//! function table are data too (`code`); `crate::exec` compiles them into closures when the
+//! function table are data too (`code`); `runtime::exec` compiles them into closures when the
 //! first monitor of a program is created.
 
 use crate::value::Value;
-use std::sync::{Arc, OnceLock};
+use std::hash::Hasher;
+use tessla_syntax::ast::BinOp;
 
 pub mod code;
 pub(crate) mod print;
@@ -108,7 +112,7 @@ pub enum SArg {
 }
 
 /// Operators with an inline fast path in the evaluator (see [`Node::Bin`]); their semantics are
-/// in [`crate::ops`].
+/// in [`crate::runtime::ops`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ScalarOp {
     FAdd,
@@ -127,6 +131,32 @@ pub enum ScalarOp {
     IGe,
     And,
     Or,
+}
+
+/// The operators with an inline scalar fast path, and the operator each one stands for (which
+/// syntax operator the lowering may build a [`Node::Bin`] for). Inline: the evaluator asks it
+/// for every operator it applies (`runtime::exec::binary`).
+#[inline]
+pub fn scalar_op(op: BinOp) -> Option<ScalarOp> {
+    Some(match op {
+        BinOp::FAdd => ScalarOp::FAdd,
+        BinOp::FSub => ScalarOp::FSub,
+        BinOp::FMul => ScalarOp::FMul,
+        BinOp::FDiv => ScalarOp::FDiv,
+        BinOp::FLt => ScalarOp::FLt,
+        BinOp::FGt => ScalarOp::FGt,
+        BinOp::FLe => ScalarOp::FLe,
+        BinOp::FGe => ScalarOp::FGe,
+        BinOp::Add => ScalarOp::IAdd,
+        BinOp::Sub => ScalarOp::ISub,
+        BinOp::Lt => ScalarOp::ILt,
+        BinOp::Gt => ScalarOp::IGt,
+        BinOp::Le => ScalarOp::ILe,
+        BinOp::Ge => ScalarOp::IGe,
+        BinOp::And => ScalarOp::And,
+        BinOp::Or => ScalarOp::Or,
+        _ => return None,
+    })
 }
 
 /// A scalar operand or result of a [`ScalarOp`], copied out of a [`Value`] so the evaluator
@@ -206,7 +236,7 @@ pub enum Node {
         op: ScalarOp,
         a: SArg,
         b: SArg,
-        bop: tessla_syntax::ast::BinOp,
+        bop: BinOp,
     },
     /// A signal lift of `if cond then then else other`.
     Ite {
@@ -304,14 +334,15 @@ pub(crate) fn stream_args(args: &[&SArg]) -> Vec<NodeId> {
         .collect()
 }
 
-/// A compiled specification, shared (in an `Arc`) by every monitor instance.
+/// A specification lowered to the IR: all data, as the lowering made it. The runtime wraps it
+/// with its compiled code (`crate::runtime::exec::Program`, what monitors run).
 #[derive(Debug)]
 pub struct Program {
     pub inputs: Vec<InputInfo>,
     pub outputs: Vec<OutputInfo>,
     pub nodes: Vec<Node>,
     /// Per node: its owner, a hash of the name of the definition or output whose lowering made
-    /// it (see [`crate::snapshot`]).
+    /// it ([`owner_key`]; part of a node's identity in `runtime::snapshot`).
     pub node_owners: Vec<u64>,
     /// Evaluation order of the nodes within a step (strict dependencies first).
     pub order: Vec<NodeId>,
@@ -327,21 +358,34 @@ pub struct Program {
     /// The function table: named functions and lambdas that value code calls by index
     /// ([`Callee::Fn`], [`Code::Closure`]).
     pub functions: Vec<Function>,
-    /// The compiled code, made when the first monitor is created (see [`Program::exec`]).
-    pub(crate) exec: OnceLock<Arc<crate::exec::Ctx>>,
 }
 
 /// `last_slot` of a node whose earlier values nobody reads.
 pub const NO_SLOT: u32 = u32::MAX;
 
 impl Program {
-    /// The program's code compiled into closures: built once, by the first monitor created,
-    /// and shared by every monitor of the program.
-    pub fn exec(&self) -> &Arc<crate::exec::Ctx> {
-        self.exec.get_or_init(|| crate::exec::compile_program(self))
-    }
-
     pub fn input_index(&self, name: &str) -> Option<usize> {
         self.inputs.iter().position(|i| i.name == name)
     }
+}
+
+/// FNV-1a 64 of `s` (stable across runs and platforms, unlike std's `RandomState`).
+pub fn text_hash(s: &str) -> u64 {
+    let mut h = fnv::FnvHasher::default();
+    h.write(s.as_bytes());
+    h.finish()
+}
+
+/// Combine two hashes (order matters).
+pub fn mix(a: u64, b: u64) -> u64 {
+    let mut h = fnv::FnvHasher::default();
+    h.write(&a.to_le_bytes());
+    h.write(&b.to_le_bytes());
+    h.finish()
+}
+
+/// The owner key of the nodes made while lowering the definition or output `name`
+/// ([`Program::node_owners`]).
+pub fn owner_key(name: &str) -> u64 {
+    mix(text_hash("owner"), text_hash(name))
 }

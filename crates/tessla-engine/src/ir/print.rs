@@ -3,7 +3,7 @@
 //! and the slots kept across steps.
 //!
 //! Owns: [`Program::ir`] and the text form of value code ([`Render`], [`code`], [`lift_fn`]),
-//! which `crate::snapshot` also hashes (with functions named by their structural key instead
+//! which `runtime::snapshot` also hashes (with functions named by their structural key instead
 //! of their index). In code, `$i` is slot `i` of the frame (a node's argument `i`, or a
 //! function's captured slots then parameters), `fK` is function `K` of the table, natives are
 //! named as the builtins table names them; lazy arguments (read from earlier steps) are marked
@@ -227,53 +227,5 @@ impl fmt::Display for IrListing<'_> {
             writeln!(f, "out {}: Events[{}] = n{n}", o.name, o.ty)?;
         }
         Ok(())
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    fn listing(spec: &str) -> String {
-        let loaded = crate::load_with(
-            "spec.tessla",
-            &tessla_syntax::include::MemResolver {
-                files: [("spec.tessla".to_string(), spec.to_string())].into(),
-            },
-            &crate::LoadOptions::default(),
-        );
-        let Ok(loaded) = loaded else {
-            panic!("spec does not load");
-        };
-        loaded.program.ir().to_string()
-    }
-
-    #[test]
-    fn a_program_lists_its_nodes_in_order() {
-        let text = listing("in x: Events[Int]\ndef c = x + 1\ndef l = last(c, x)\nout c\nout l");
-        assert!(text.starts_with("in  x: Events[Int]\n"), "{text}");
-        assert!(text.contains("= input x"), "{text}");
-        assert!(text.contains("last(n"), "{text}");
-        assert!(text.contains("out c: Events[Int] = n"), "{text}");
-    }
-
-    #[test]
-    fn value_code_and_the_function_table_are_listed() {
-        let text = listing(
-            "in x: Events[Int]\ndef f(a: Int): Int = if a > 0 then f(a - 1) + 2 else 0\n\
-             def y = slift1(x, f)\ndef s = fold(x, 0, (acc: Int, v: Int) => acc + v * 2)\nout y\nout s",
-        );
-        // The recursive function calls itself by index; the lambda is a function too.
-        assert!(
-            text.contains(
-                "f0 f/1 = (if ($0 > Int(0)) then (f0(($0 - Int(1))) + Int(2)) else Int(0))"
-            ),
-            "{text}"
-        );
-        assert!(
-            text.contains("f1 lambda/2 = ($0 + ($1 * Int(2)))"),
-            "{text}"
-        );
-        assert!(text.contains("slift(n0) { f0($0) }"), "{text}");
-        assert!(text.contains("fold(n0, Int(0)) { f1($0, $1) }"), "{text}");
-        assert!(!text.contains("<fn>"), "{text}");
     }
 }

@@ -5,8 +5,8 @@
 //!
 //! Owns: `Compiler::compile_fn` (a named function, once per definition; a recursive call refers
 //! to the function by its index, so nothing is closed through a cell), `func_value`,
-//! `apply_value_fn`, `as_code`, `param_frame`, constant folding (`fold`, through
-//! `crate::exec`) and the name of a native callee.
+//! `apply_value_fn`, `as_code`, `param_frame`, constant folding (`fold`, through the runtime's
+//! folder, which the builtins table hands over) and the name of a native callee.
 
 use super::*;
 
@@ -99,21 +99,7 @@ impl Compiler<'_> {
 
     /// Evaluate closed code now (constant folding), with the functions finished so far.
     pub(super) fn fold(&mut self, code: &Code) -> Value {
-        let ctx = match &self.fold_ctx {
-            Some(c) => c.clone(),
-            None => {
-                self.fold_fns.resize(self.functions.len(), None);
-                for (i, f) in self.functions.iter().enumerate() {
-                    if let (Some(slot @ None), Some(body)) = (self.fold_fns.get_mut(i), &f.body) {
-                        *slot = Some(crate::exec::compile(body));
-                    }
-                }
-                let c = crate::exec::context(self.fold_fns.clone(), Vec::new(), true);
-                self.fold_ctx = Some(c.clone());
-                c
-            }
-        };
-        crate::exec::eval(&ctx, code)
+        self.folder.fold(&self.functions, code)
     }
 
     /// A new entry of the function table, its body still to come.
@@ -131,15 +117,13 @@ impl Compiler<'_> {
         if let Some(f) = self.functions.get_mut(id) {
             f.body = Some(body);
         }
-        self.fold_ctx = None;
+        self.folder.function_finished();
     }
 
     /// A function term as a runtime value: a constant (natives) or closure code.
     pub(super) fn func_value(&mut self, ft: &Rc<FuncTerm>, span: Span) -> R<Term> {
         match &**ft {
-            FuncTerm::Native(n) => Ok(Term::Const(Value::Closure(Arc::new(
-                crate::exec::NativeClosure(*n),
-            )))),
+            FuncTerm::Native(n) => Ok(Term::Const(builtins::native_value(*n))),
             FuncTerm::User { def, env } => {
                 let (fun, _) = self.compile_fn(def, env, span)?;
                 // Defined inside a function body: the closure captures the enclosing frame.
@@ -239,7 +223,7 @@ impl Compiler<'_> {
 }
 
 /// A native as a callee, named as the builtins table names it (for listings and identities).
-pub(super) fn native_callee(f: natives::NativeFn) -> Callee {
+pub(super) fn native_callee(f: NativeFn) -> Callee {
     static NAMES: std::sync::OnceLock<HashMap<usize, &'static str>> = std::sync::OnceLock::new();
     let names = NAMES.get_or_init(|| {
         let mut m = HashMap::new();
@@ -248,10 +232,17 @@ pub(super) fn native_callee(f: natives::NativeFn) -> Callee {
                 m.entry(g as usize).or_insert(b.name);
             }
         }
-        m.entry(unknown_extern as natives::NativeFn as usize)
+        m.entry(unknown_extern as NativeFn as usize)
             .or_insert("unknown extern");
         m
     });
     let name = names.get(&(f as usize)).copied().unwrap_or("native");
     Callee::Native { name, f }
+}
+
+/// The native the builtins table lists as `name`, as a callee (the lowering's own uses of a
+/// native: `maximum` and `minimum` reduce with `max` and `min`). A name the table lacks is an
+/// error when evaluated (a test checks the names used are there).
+pub(super) fn named_native(name: &str) -> Callee {
+    native_callee(builtins::extern_native(name).unwrap_or(unknown_extern))
 }

@@ -3,7 +3,7 @@
 //! blocks).
 //!
 //! Owns: `Compiler::expr` and the inline nodes of operators (`inline_op`, `slift_node`). Value
-//! operations become [`Prim`]itive applications (semantics in `crate::exec` and `crate::ops`).
+//! operations become [`Prim`]itive applications (semantics in `runtime::exec` and `runtime::ops`).
 
 use super::*;
 

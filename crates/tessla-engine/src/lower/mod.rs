@@ -5,7 +5,7 @@
 //! applied to stream arguments are expanded in place (TeSSLa's macros); operators and liftable
 //! functions on streams become signal lifts; value-level functions are lowered once into the
 //! program's function table ([`Program::functions`]) and called by index. Nothing here builds a
-//! closure: `crate::exec` compiles the code when a monitor is created (and, here, to fold
+//! closure: `crate::runtime::exec` compiles the code when a monitor is created (and, here, to fold
 //! constants). Recursion is allowed only through the lazy arguments of the builtins table
 //! (`last`, `delay`).
 //!
@@ -18,10 +18,10 @@
 //! (local scopes over the resolved globals, definitions on first use, externs),
 //! `expr` (each expression form, operators), `call` (calls and arguments), `closure`
 //! (value-level functions into the function table, function values, constant folding), `stream` (the stream operators), `time` (base time and time units), `overrides` (`--set`). Names and signatures of
-//! builtins are `crate::builtins`, operator semantics `crate::ops`, format strings
-//! `crate::format`, evaluation order and cross-step slots `crate::schedule`.
+//! builtins are `crate::builtins`, operator semantics `crate::runtime::ops`, format strings
+//! `crate::runtime::format`, evaluation order and cross-step slots `crate::schedule`.
 
-use crate::builtins::{self, Builtin, Kind, StreamOp};
+use crate::builtins::{self, Builtin, Folder, Kind, StreamOp};
 use crate::resolve::Resolved;
 use crate::schedule;
 use time::unit_factor;
@@ -35,14 +35,12 @@ mod overrides;
 mod stream;
 pub mod time;
 
-use crate::exec::Exec;
 use crate::ir::{
     Annotation, Callee, Code, FnId, Function, InputInfo, LiftFn, Node, NodeId, OutputInfo, Prim,
     Program, SArg, Type,
 };
-use crate::natives;
-use crate::ops::scalar_op;
-use crate::value::{RuntimeError, Value};
+use crate::ir::{owner_key, scalar_op};
+use crate::value::{NativeFn, RuntimeError, Value};
 use std::cell::RefCell;
 use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
@@ -63,7 +61,7 @@ enum Term {
 enum FuncTerm {
     /// A stream operator of the builtins table (`last`, `merge` ...).
     Builtin(&'static Builtin, StreamOp),
-    Native(natives::NativeFn),
+    Native(NativeFn),
     User {
         def: Rc<Def>,
         env: Env,
@@ -173,16 +171,14 @@ pub struct Compiler<'a> {
     not_value_fns: HashSet<Span>,
     /// The function table (`Program::functions`).
     functions: Vec<Function>,
-    /// Functions compiled for constant folding, and the context folding uses (rebuilt when a
-    /// function is finished).
-    fold_fns: Vec<Option<Exec>>,
-    fold_ctx: Option<Arc<crate::exec::Ctx>>,
+    /// Constant folding: the functions finished so far, compiled (see `closure::fold`).
+    folder: Folder,
     unit_node: Option<NodeId>,
     /// The unit of the base time in femtoseconds (`µs` in `33333 µs`); `None`: `base_ns`.
     base_unit: Option<i128>,
     /// Time literals are allowed (a base time is set, or 1 ns is assumed).
     time_units: bool,
-    /// The owner of the nodes created now (see [`crate::snapshot::owner_key`]): the name of
+    /// The owner of the nodes created now (see [`crate::ir::owner_key`]): the name of
     /// the definition or output being lowered.
     owner: u64,
     /// The owner of each node (`Program::node_owners`).
@@ -221,8 +217,7 @@ impl<'a> Compiler<'a> {
             compiled_fns: HashMap::new(),
             not_value_fns: HashSet::new(),
             functions: Vec::new(),
-            fold_fns: Vec::new(),
-            fold_ctx: None,
+            folder: Folder::default(),
             unit_node: None,
             base_unit: None,
             time_units: true,
@@ -332,7 +327,7 @@ impl<'a> Compiler<'a> {
                 .alias
                 .as_ref()
                 .map_or_else(|| o.source_text.clone(), |a| a.name.clone());
-            self.owner = crate::snapshot::owner_key(&name);
+            self.owner = owner_key(&name);
             // An object (a record with stream members): one output per member, as TeSSLa.
             match self.object_output(&o.expr, &env) {
                 Some(Ok(members)) => {
@@ -411,7 +406,6 @@ impl<'a> Compiler<'a> {
         Ok((
             Program {
                 functions: std::mem::take(&mut self.functions),
-                exec: std::sync::OnceLock::new(),
                 last_slot,
                 n_last_slots,
                 inputs: self.inputs,

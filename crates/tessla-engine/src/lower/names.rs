@@ -60,7 +60,7 @@ impl Compiler<'_> {
                 let saved = self.lazy_depth;
                 self.lazy_depth = 0;
                 let saved_owner = self.owner;
-                self.owner = crate::snapshot::owner_key(self.sources.text(e.def.name.span));
+                self.owner = owner_key(self.sources.text(e.def.name.span));
                 let r = self.body(&e.def, &env);
                 self.owner = saved_owner;
                 self.lazy_depth = saved;
@@ -152,7 +152,7 @@ impl Compiler<'_> {
                 Some(f) => Ok(Term::Func(Rc::new(FuncTerm::Native(f)))),
                 // As in TeSSLa, an unknown extern is an error when it is evaluated.
                 None if d.params.is_some() => {
-                    let f: natives::NativeFn = unknown_extern;
+                    let f: NativeFn = unknown_extern;
                     Ok(Term::Func(Rc::new(FuncTerm::Native(f))))
                 }
                 None => {

@@ -100,11 +100,11 @@ impl Compiler<'_> {
             },
             StreamOp::Maximum => Node::Reduce {
                 stream: self.stream_arg(&args, 0, span)?,
-                f: Code::apply(closure::native_callee(natives::core::max), Code::slots(2)),
+                f: Code::apply(closure::named_native("max"), Code::slots(2)),
             },
             StreamOp::Minimum => Node::Reduce {
                 stream: self.stream_arg(&args, 0, span)?,
-                f: Code::apply(closure::native_callee(natives::core::min), Code::slots(2)),
+                f: Code::apply(closure::named_native("min"), Code::slots(2)),
             },
             StreamOp::Lift | StreamOp::SLift => {
                 let Some(ft) = args.last().cloned() else {

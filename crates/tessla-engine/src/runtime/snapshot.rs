@@ -29,42 +29,14 @@
 
 use crate::ir::print::{Render, code, lift_fn};
 use crate::ir::{Node, NodeId, Program, SArg};
-use crate::monitor::Monitor;
+/// The stable hashes keys are made of (defined with the IR, whose node owners use them too).
+pub use crate::ir::{mix, text_hash};
+use crate::runtime::exec;
+use crate::runtime::monitor::{Monitor, RawState};
 use crate::value::{Coll, RuntimeError, Value};
 use serde::{Deserialize, Serialize};
 use std::collections::{HashMap, HashSet};
-use std::hash::Hasher;
 use std::sync::Arc;
-
-/// The evaluator's state fields, as [`Monitor`] exposes them to this module.
-pub(crate) struct RawState {
-    pub t0: i64,
-    pub pending: Option<i64>,
-    pub last_evaluated: Option<i64>,
-    pub inputs: Vec<Option<Value>>,
-    pub last: Vec<Option<Value>>,
-    pub targets: Vec<Option<i64>>,
-}
-
-/// FNV-1a 64 of `s` (stable).
-pub fn text_hash(s: &str) -> u64 {
-    let mut h = fnv::FnvHasher::default();
-    h.write(s.as_bytes());
-    h.finish()
-}
-
-/// The owner key of the nodes made while lowering the definition or output `name`.
-pub fn owner_key(name: &str) -> u64 {
-    mix(text_hash("owner"), text_hash(name))
-}
-
-/// Combine two hashes (order matters).
-pub fn mix(a: u64, b: u64) -> u64 {
-    let mut h = fnv::FnvHasher::default();
-    h.write(&a.to_le_bytes());
-    h.write(&b.to_le_bytes());
-    h.finish()
-}
 
 /// A value as plain data.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -532,13 +504,13 @@ pub fn snapshot_with_keys(monitor: &Monitor, keys: &[u64]) -> Snapshot {
 /// A monitor of `program` continuing from `snap`. Nodes whose key `snap` lacks start afresh:
 /// after the first step, a constant, a `default` or a `fold` holds its initial value (as if
 /// its only event were the one at TeSSLa time 0), every other stream has no value yet.
-pub fn restore(program: Arc<Program>, snap: &Snapshot) -> Monitor {
+pub fn restore(program: Arc<exec::Program>, snap: &Snapshot) -> Monitor {
     let keys = node_keys(&program);
     restore_with_keys(program, snap, &keys)
 }
 
 /// [`restore`] with the program's keys computed once by the caller (many instances).
-pub fn restore_with_keys(program: Arc<Program>, snap: &Snapshot, keys: &[u64]) -> Monitor {
+pub fn restore_with_keys(program: Arc<exec::Program>, snap: &Snapshot, keys: &[u64]) -> Monitor {
     let by_key: HashMap<u64, &NodeState> = snap.nodes.iter().map(|s| (s.key, s)).collect();
     let started = snap.last_evaluated.is_some();
     let n = program.nodes.len();

@@ -166,11 +166,11 @@ pub fn concat(a: &[Value]) -> Value {
     }
 }
 
-/// `String.format(formatString, value)`: Java's `String.format` of one value (`crate::format`);
+/// `String.format(formatString, value)`: Java's `String.format` of one value (`runtime::format`);
 /// a format Java rejects (a missing argument, `%d` of a Float, ...) is a run-time error.
 pub fn string_format(a: &[Value]) -> Value {
     match a {
-        [Value::Str(f), v] => match crate::format::java_format(f, v) {
+        [Value::Str(f), v] => match crate::runtime::format::java_format(f, v) {
             Ok(s) => Value::Str(s.into()),
             Err(e) => err(RuntimeError::Other(
                 format!("String.format(\"{f}\", {v}): {e}").into(),

@@ -285,29 +285,6 @@ fn shift_big(x: i64, s: i64) -> Option<Value> {
     }
 }
 
-/// The operators with an inline scalar fast path, and the operator each one stands for.
-pub fn scalar_op(op: BinOp) -> Option<ScalarOp> {
-    Some(match op {
-        BinOp::FAdd => ScalarOp::FAdd,
-        BinOp::FSub => ScalarOp::FSub,
-        BinOp::FMul => ScalarOp::FMul,
-        BinOp::FDiv => ScalarOp::FDiv,
-        BinOp::FLt => ScalarOp::FLt,
-        BinOp::FGt => ScalarOp::FGt,
-        BinOp::FLe => ScalarOp::FLe,
-        BinOp::FGe => ScalarOp::FGe,
-        BinOp::Add => ScalarOp::IAdd,
-        BinOp::Sub => ScalarOp::ISub,
-        BinOp::Lt => ScalarOp::ILt,
-        BinOp::Gt => ScalarOp::IGt,
-        BinOp::Le => ScalarOp::ILe,
-        BinOp::Ge => ScalarOp::IGe,
-        BinOp::And => ScalarOp::And,
-        BinOp::Or => ScalarOp::Or,
-        _ => return None,
-    })
-}
-
 impl ScalarOp {
     /// The result on scalar operands of the operator's types, or `None` otherwise (the general
     /// path, [`binary`], then decides: overflow is an error value, other types are errors).
@@ -375,6 +352,7 @@ impl ScalarOp {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::ir::scalar_op;
 
     #[test]
     fn integers_are_unbounded_and_come_back_to_64_bits() {

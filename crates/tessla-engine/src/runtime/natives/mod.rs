@@ -6,12 +6,7 @@
 //! spec (`def f(a: Int): Int = extern("f")`), and the checker types calls from that declaration. Natives are strict: the evaluator passes no
 //! `Value::Error` argument to a native (it propagates the first error itself), so an
 //! implementation only handles well-typed, error-free values. Natives that take functions call
-//! them through [`crate::value::Callable`].
+//! them through [`crate::value::Callable`]; their type is [`crate::value::NativeFn`].
 
 pub mod core;
 pub mod lidar;
-
-use crate::value::Value;
-
-/// A native implementation: well-typed, error-free arguments in, a value (maybe an error) out.
-pub type NativeFn = fn(&[Value]) -> Value;

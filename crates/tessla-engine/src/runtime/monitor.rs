@@ -4,7 +4,7 @@
 //! at the origin, `last`/`delay` timing, error values). Data flows one way: `crate::lower`
 //! lowers a checked spec into a [`Program`]; callers (the trace runner, the Telegraf binding)
 //! create one [`Monitor`] per instance, push input events and receive output events through a
-//! sink callback. The nodes' value code runs as closures compiled by `crate::exec` when the
+//! sink callback. The nodes' value code runs as closures compiled by `runtime::exec` when the
 //! program's first monitor is created ([`Program::exec`], shared by every instance). This
 //! module never parses text and never does I/O.
 //!
@@ -26,14 +26,16 @@
 //! - Runtime errors (division by zero, overflow, `getSome(None)`) are values: an output whose value
 //!   is [`Value::Error`] reaches the sink like any other event; the caller reports it.
 
-use crate::exec::{Ctx, Exec};
-use crate::ir::{NO_SLOT, Node, NodeId, Program, SArg};
+use crate::ir::{NO_SLOT, Node, NodeId, SArg};
+use crate::runtime::exec::{Ctx, Exec, Program};
 use crate::value::{RuntimeError, Value};
 
 use std::cell::RefCell;
 use std::sync::Arc;
 
 /// One output event: output `output` (index into [`Program::outputs`]) has `value` at `ts`.
+///
+/// [`Program::outputs`]: crate::ir::Program::outputs
 #[derive(Debug, Clone, Copy)]
 pub struct OutputEvent<'a> {
     pub ts: i64,
@@ -76,6 +78,9 @@ impl std::error::Error for InputError {}
 /// Layout: `inputs` (one slot per input, filled between steps), `last` (one slot per node read
 /// across steps, indexed by [`Program::last_slot`]), `targets` (one armed target per `delay`
 /// node, in the order of [`Program::delays`]).
+///
+/// [`Program::last_slot`]: crate::ir::Program::last_slot
+/// [`Program::delays`]: crate::ir::Program::delays
 #[derive(Debug, Clone)]
 pub struct Monitor {
     program: Arc<Program>,
@@ -86,6 +91,8 @@ pub struct Monitor {
     /// The latest value from earlier steps of each node that is read across steps.
     last: Box<[Option<Value>]>,
     /// Armed target of each `Delay` node (parallel to [`Program::delays`]).
+    ///
+    /// [`Program::delays`]: crate::ir::Program::delays
     targets: Box<[Option<i64>]>,
 }
 
@@ -319,7 +326,7 @@ impl Monitor {
                     if args.iter().any(|a| cur[*a].is_some()) {
                         let vals: Vec<Option<Value>> =
                             args.iter().map(|a| cur[*a].clone()).collect();
-                        crate::exec::lift(cx, f, cx.node(i), &vals)
+                        crate::runtime::exec::lift(cx, f, cx.node(i), &vals)
                     } else {
                         None
                     }
@@ -340,7 +347,7 @@ impl Monitor {
                         }
                         continue;
                     }
-                    Some(crate::exec::binary(*bop, x, y))
+                    Some(crate::runtime::exec::binary(*bop, x, y))
                 }
                 Node::Ite { cond, then, other } => {
                     if !has_event(cur, cond) && !has_event(cur, then) && !has_event(cur, other) {
@@ -559,12 +566,26 @@ fn slift(
     Some(r)
 }
 
-/// State access for [`crate::snapshot`], the only code besides this file that depends on the
-/// layout of the fields. [`crate::snapshot::RawState`] is per node (`last`, `targets` indexed by
-/// node id) whatever the monitor stores: this converts from and to the slot layout
+/// The evaluator's state fields, per node (`last`, `targets` indexed by node id) whatever the
+/// monitor stores: what [`snapshot`](super::snapshot) saves and restores. Defined here, beside
+/// the fields it mirrors, so the snapshot module reads the monitor and never the other way round.
+pub(crate) struct RawState {
+    pub t0: i64,
+    pub pending: Option<i64>,
+    pub last_evaluated: Option<i64>,
+    pub inputs: Vec<Option<Value>>,
+    pub last: Vec<Option<Value>>,
+    pub targets: Vec<Option<i64>>,
+}
+
+/// State access for [`snapshot`](super::snapshot), the only code besides this file that depends
+/// on the layout of the fields: this converts [`RawState`] from and to the slot layout
 /// ([`Program::last_slot`], [`Program::delays`]).
+///
+/// [`Program::last_slot`]: crate::ir::Program::last_slot
+/// [`Program::delays`]: crate::ir::Program::delays
 impl Monitor {
-    pub(crate) fn raw_state(&self) -> crate::snapshot::RawState {
+    pub(crate) fn raw_state(&self) -> RawState {
         let program = &self.program;
         let n = program.nodes.len();
         let mut last = vec![None; n];
@@ -581,7 +602,7 @@ impl Monitor {
                 *dst = *t;
             }
         }
-        crate::snapshot::RawState {
+        RawState {
             t0: self.t0,
             pending: self.pending,
             last_evaluated: self.last_evaluated,
@@ -593,7 +614,7 @@ impl Monitor {
 
     /// A monitor of `program` in state `raw` (per-node vectors of another length are cut or
     /// padded; values of nodes without a slot are not kept).
-    pub(crate) fn from_raw_state(program: Arc<Program>, raw: crate::snapshot::RawState) -> Monitor {
+    pub(crate) fn from_raw_state(program: Arc<Program>, raw: RawState) -> Monitor {
         let mut m = Monitor::starting_at(program, raw.t0);
         m.pending = raw.pending;
         m.last_evaluated = raw.last_evaluated;

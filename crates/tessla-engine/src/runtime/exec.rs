@@ -1,11 +1,13 @@
 //! The closure compiler: value code ([`Code`], data in the IR) compiled into Rust closures, once
 //! per program, when its first monitor is created (and, during lowering, to fold constants).
 //!
-//! Owns: [`Exec`] (compiled code: a context and a frame in, a value out), [`Ctx`] (the compiled
+//! Owns: [`Program`] (what monitors run: the IR with its compiled code, made once and shared),
+//! [`Exec`] (compiled code: a context and a frame in, a value out), [`Ctx`] (the compiled
 //! function table and node functions of one program), [`compile`], [`compile_program`], the
-//! semantics of [`Prim`]itives and [`LiftFn`]s, function values ([`FnClosure`]), and the
-//! [`Fast`] forms of node functions that are one operator or native on the node's arguments
-//! (run by the monitor on its arguments by reference).
+//! semantics of [`Prim`]itives and [`LiftFn`]s, function values ([`FnClosure`],
+//! [`native_value`]), the [`Fast`] forms of node functions that are one operator or native on
+//! the node's arguments (run by the monitor on its arguments by reference), and the lowering's
+//! constant [`Folder`] (handed to it by the builtins table).
 //!
 //! Calls between program functions go through the context passed to every closure (an index
 //! into [`Ctx`]'s table), so compiled functions never refer to each other and recursion makes
@@ -15,12 +17,12 @@
 //! node's arguments as they come (`f(slot 0, slot 1)`) passes the argument slice through
 //! without copying, so a step costs what a hand-written closure would.
 
-use crate::collections;
 use crate::ir::code::{Callee, Code, FnId, LiftFn, Prim};
-use crate::ir::{Node, Program};
-use crate::natives::NativeFn;
-use crate::ops::{self, scalar_op};
-use crate::value::{Callable, RuntimeError, Value};
+use crate::ir::scalar_op;
+use crate::ir::{self, Node};
+use crate::runtime::collections;
+use crate::runtime::ops;
+use crate::value::{Callable, NativeFn, RuntimeError, Value};
 use std::sync::{Arc, OnceLock, Weak};
 use tessla_syntax::ast::{BinOp, UnaryOp};
 
@@ -124,8 +126,50 @@ fn context_with(
     })
 }
 
+/// A program ready to run, shared (in an `Arc`) by every monitor instance: the IR as the
+/// lowering made it ([`ir::Program`], all data; this reads as it) and its code compiled into
+/// closures, made once by the first monitor created and shared by every monitor of the program.
+/// The compiled code lives here, not in the IR, so the IR never refers to the evaluator.
+#[derive(Debug)]
+pub struct Program {
+    ir: ir::Program,
+    exec: OnceLock<Arc<Ctx>>,
+}
+
+impl Program {
+    /// The IR, its code not compiled yet.
+    pub fn new(ir: ir::Program) -> Program {
+        Program {
+            ir,
+            exec: OnceLock::new(),
+        }
+    }
+
+    /// The program's code compiled into closures: built once, by the first monitor created,
+    /// and shared by every monitor of the program.
+    #[inline]
+    pub fn exec(&self) -> &Arc<Ctx> {
+        self.exec.get_or_init(|| compile_program(&self.ir))
+    }
+}
+
+impl From<ir::Program> for Program {
+    fn from(ir: ir::Program) -> Program {
+        Program::new(ir)
+    }
+}
+
+impl std::ops::Deref for Program {
+    type Target = ir::Program;
+
+    #[inline]
+    fn deref(&self) -> &ir::Program {
+        &self.ir
+    }
+}
+
 /// Compile a program's function table and node functions.
-pub fn compile_program(p: &Program) -> Arc<Ctx> {
+pub fn compile_program(p: &ir::Program) -> Arc<Ctx> {
     let fns = p
         .functions
         .iter()
@@ -340,6 +384,51 @@ pub fn apply(cx: &Ctx, callee: &Callee, a: &[Value]) -> Value {
     }
 }
 
+/// Constant folding for the lowering: evaluates closed code now, with the program functions
+/// finished so far compiled into a context of their own (built on the first fold after a
+/// function is finished, each function compiled once). The lowering reaches it through the
+/// builtins table.
+#[derive(Default)]
+pub struct Folder {
+    /// Per function: its compiled body (`None`: not finished when last compiled).
+    fns: Vec<Option<Exec>>,
+    /// The context of the last fold, until a function is finished.
+    ctx: Option<Arc<Ctx>>,
+}
+
+impl Folder {
+    /// The value of closed code `code`, calling the functions of `functions` that have a body.
+    pub fn fold(&mut self, functions: &[ir::Function], code: &Code) -> Value {
+        let ctx = match &self.ctx {
+            Some(c) => c.clone(),
+            None => {
+                self.fns.resize(functions.len(), None);
+                for (slot, f) in self.fns.iter_mut().zip(functions) {
+                    if slot.is_none()
+                        && let Some(body) = &f.body
+                    {
+                        *slot = Some(compile(body));
+                    }
+                }
+                let c = context(self.fns.clone(), Vec::new(), true);
+                self.ctx = Some(c.clone());
+                c
+            }
+        };
+        eval(&ctx, code)
+    }
+
+    /// A function got its body: the next fold compiles it.
+    pub fn function_finished(&mut self) {
+        self.ctx = None;
+    }
+}
+
+/// A native as a function value.
+pub fn native_value(f: NativeFn) -> Value {
+    Value::Closure(Arc::new(NativeClosure(f)))
+}
+
 /// Evaluate closed code (no frame) now: constant folding during lowering.
 pub fn eval(cx: &Ctx, code: &Code) -> Value {
     match code {
@@ -392,7 +481,9 @@ pub fn prim(p: &Prim, a: &[Value]) -> Value {
         ),
         Prim::Member(fname) => member(fname, a.first()),
         Prim::Format(spec) => match (spec, a.first()) {
-            (Some(spec), Some(v)) => Value::Str(crate::format::format_value(spec, v).into()),
+            (Some(spec), Some(v)) => {
+                Value::Str(crate::runtime::format::format_value(spec, v).into())
+            }
             (None, Some(v)) => Value::Str(v.to_string().into()),
             _ => Value::Unit,
         },
@@ -654,7 +745,7 @@ mod tests {
             Code::apply(
                 Callee::Native {
                     name: "intToFloat",
-                    f: crate::natives::core::int_to_float,
+                    f: crate::runtime::natives::core::int_to_float,
                 },
                 vec![Code::Slot(0)],
             ),

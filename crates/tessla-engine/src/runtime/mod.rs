@@ -1,0 +1,24 @@
+//! The runtime: what runs a lowered program ([`exec::Program`]) over events. Nothing here reads
+//! syntax, names or types; everything starts from the IR (`crate::ir`) and values
+//! (`crate::value`), the data the front end hands over.
+//!
+//! In the order a program meets them: `exec` (the IR's value code compiled into closures, once
+//! per program: [`exec::Program`] is the IR with its compiled code), `monitor` (one instance's
+//! state and the step semantics), `snapshot` (a monitor's state as data, keyed by stable stream
+//! identities, for restarts and reloads). The semantics they call: `ops` (operators), `natives`
+//! and `collections` (value functions, which the builtins table names), `format` (Java's format
+//! strings).
+//!
+//! Imports run one way: `snapshot` reads `monitor`, `monitor` runs `exec`, and all of them read
+//! `ops`, `natives`, `collections` and `format`, which read only values (and `ops` the IR's
+//! scalar operators). The front end reaches the runtime only through the builtins table
+//! (`crate::builtins`: the natives' function pointers, constant folding), and `load` hands the
+//! finished IR over as an [`exec::Program`].
+
+pub mod collections;
+pub mod exec;
+pub mod format;
+pub mod monitor;
+pub mod natives;
+pub mod ops;
+pub mod snapshot;
