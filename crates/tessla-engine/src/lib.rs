@@ -3,10 +3,11 @@
 //! The road a spec takes, front end first, then the runtime:
 //!
 //! 1. text -> syntax: `tessla_syntax` (parser, includes, diagnostics);
-//! 2. syntax -> resolved: `resolve` (which definition, input or member each name means);
-//! 3. resolved -> typed: `typeck` (reading `builtins` and the bundled `prelude`);
-//! 4. typed -> IR: `lower`, then `schedule` (evaluation order, cross-step slots). The IR (`ir`)
-//!    is all data: stream nodes, value code and a function table, listed by `ir::print`;
+//! 2. syntax -> resolved: `front::resolve` (which definition, input or member each name means);
+//! 3. resolved -> typed: `front::typeck` (reading `builtins` and the bundled `front::prelude`);
+//! 4. typed -> IR: `front::lower`, then `front::schedule` (evaluation order, cross-step slots).
+//!    The IR (`ir`) is all data: stream nodes, value code and a function table, listed by
+//!    `ir::print`;
 //! 5. IR -> monitor: `runtime` (`exec` compiles the IR's code into closures once per program,
 //!    `monitor` runs instances, `snapshot` saves and restores their state; the semantics they
 //!    call: `ops`, `natives`, `collections`, `format`).
@@ -17,14 +18,10 @@
 //! end, and no two modules import each other.
 
 pub mod builtins;
+pub mod front;
 pub mod ir;
 pub mod load;
-pub mod lower;
-pub mod prelude;
-pub mod resolve;
 pub mod runtime;
-pub mod schedule;
-pub mod typeck;
 pub mod value;
 
 pub use ir::{Annotation, InputInfo, OutputInfo, Type};

@@ -5,7 +5,7 @@
 //! monitors), the options that affect compilation (base time, `--set` overrides) and the error
 //! type carrying rendered-ready diagnostics.
 
-use crate::lower;
+use crate::front::lower;
 use crate::runtime::exec::Program;
 use std::path::Path;
 use std::sync::Arc;
@@ -140,7 +140,7 @@ pub fn load_with(
     let mut asts: Vec<_> = files.into_iter().map(|(_, f)| f).collect();
     let mut library = None;
     // The bundled prelude's definitions the spec refers to (none for a spec of builtins only).
-    if let Some(text) = crate::prelude::needed(&asts) {
+    if let Some(text) = crate::front::prelude::needed(&asts) {
         let id = sources.add("<prelude>", None, text.clone());
         library = Some(id);
         let (file, diagnostics) = tessla_syntax::parser::parse(&text, id);
@@ -152,8 +152,8 @@ pub fn load_with(
         }
         asts.push(file);
     }
-    let resolved = crate::resolve::Resolved::with_library(&asts, library);
-    let (type_errors, types) = crate::typeck::check_resolved(&resolved);
+    let resolved = crate::front::resolve::Resolved::with_library(&asts, library);
+    let (type_errors, types) = crate::front::typeck::check_resolved(&resolved);
     if !type_errors.is_empty() {
         return Err(LoadError {
             sources,

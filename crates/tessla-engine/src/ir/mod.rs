@@ -351,7 +351,7 @@ pub struct Program {
     /// The `Delay` nodes (the monitor arms and fires only these).
     pub delays: Vec<NodeId>,
     /// Per node: its slot among the values a monitor keeps from earlier steps, or [`NO_SLOT`]
-    /// when no node reads it across steps (see [`crate::schedule::last_slots`]).
+    /// when no node reads it across steps (see [`crate::front::schedule::last_slots`]).
     pub last_slot: Vec<u32>,
     /// Number of slots in use in `last_slot`.
     pub n_last_slots: usize,

@@ -1,7 +1,7 @@
 //! Monitor instances: runs a compiled specification ([`Program`]) over timestamped input events.
 //!
 //! Owns: monitor state and the step semantics (synchronous steps per timestamp, the implicit step
-//! at the origin, `last`/`delay` timing, error values). Data flows one way: `crate::lower`
+//! at the origin, `last`/`delay` timing, error values). Data flows one way: `crate::front::lower`
 //! lowers a checked spec into a [`Program`]; callers (the trace runner, the Telegraf binding)
 //! create one [`Monitor`] per instance, push input events and receive output events through a
 //! sink callback. The nodes' value code runs as closures compiled by `runtime::exec` when the

@@ -210,9 +210,10 @@ impl<'a> Checker<'a> {
                         ),
                         // A builtin takes the type arguments its library declaration names.
                         None if !type_args.is_empty() => {
-                            let name = crate::prelude::builtin_alias(&id.name).unwrap_or(&id.name);
+                            let name =
+                                crate::front::prelude::builtin_alias(&id.name).unwrap_or(&id.name);
                             if let Some(d) = builtins::get(name)
-                                .and_then(|b| crate::prelude::declaration(b.name))
+                                .and_then(|b| crate::front::prelude::declaration(b.name))
                             {
                                 self.type_arguments(d, type_args, false, function.span, e.span);
                             }

@@ -1,6 +1,6 @@
 //! Annotations: each use checked against its definition (arity, named arguments, argument
 //! types, constant arguments). That `@` stands on an `in`/`out` and `@@` on its own is a name
-//! rule of `crate::resolve`.
+//! rule of `crate::front::resolve`.
 
 use super::*;
 

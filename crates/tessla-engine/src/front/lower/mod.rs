@@ -10,20 +10,20 @@
 //! (`last`, `delay`).
 //!
 //! Owns: the [`Compiler`] and `program` (inputs, outputs, `out *` and their annotations) here.
-//! It reads the resolved spec (`crate::resolve`): which definition, input or imported member a
+//! It reads the resolved spec (`crate::front::resolve`): which definition, input or imported member a
 //! global name means is decided there once, for the checker and the lowering; lowering keeps
 //! only its local scopes (parameters, blocks and `where`, macro arguments). Types come from the
-//! checker (`crate::typeck::Types`: inputs, outputs, `out *` defs); lowering has no type rules.
+//! checker (`crate::front::typeck::Types`: inputs, outputs, `out *` defs); lowering has no type rules.
 //! By concern: `names`
 //! (local scopes over the resolved globals, definitions on first use, externs),
 //! `expr` (each expression form, operators), `call` (calls and arguments), `closure`
 //! (value-level functions into the function table, function values, constant folding), `stream` (the stream operators), `time` (base time and time units), `overrides` (`--set`). Names and signatures of
 //! builtins are `crate::builtins`, operator semantics `crate::runtime::ops`, format strings
-//! `crate::runtime::format`, evaluation order and cross-step slots `crate::schedule`.
+//! `crate::runtime::format`, evaluation order and cross-step slots `crate::front::schedule`.
 
 use crate::builtins::{self, Builtin, Folder, Kind, StreamOp};
-use crate::resolve::Resolved;
-use crate::schedule;
+use crate::front::resolve::Resolved;
+use crate::front::schedule;
 use time::unit_factor;
 
 mod call;
@@ -150,9 +150,9 @@ type R<T> = Result<T, Fail>;
 
 pub struct Compiler<'a> {
     sources: &'a SourceMap,
-    /// The resolve pass's result: what every global name means (`crate::resolve`).
+    /// The resolve pass's result: what every global name means (`crate::front::resolve`).
     resolved: &'a Resolved<'a>,
-    /// The lowering state of each global definition, by [`DefId`](crate::resolve::DefId),
+    /// The lowering state of each global definition, by [`DefId`](crate::front::resolve::DefId),
     /// made on first use (or by a `--set` override).
     globals: Vec<Option<Entry>>,
     pub diags: Vec<Diagnostic>,
@@ -188,8 +188,8 @@ pub struct Compiler<'a> {
     /// compile leaked the whole name table (found by cargo fuzz's leak checker).
     scopes: Vec<Rc<RefCell<Option<Env>>>>,
     states: Vec<Rc<RefCell<DefState>>>,
-    /// The checker's types of inputs, outputs and top-level defs (see [`crate::typeck::Types`]).
-    types: crate::typeck::Types,
+    /// The checker's types of inputs, outputs and top-level defs (see [`crate::front::typeck::Types`]).
+    types: crate::front::typeck::Types,
 }
 
 /// The native of an `extern` no builtin provides: an error when evaluated.
@@ -225,7 +225,7 @@ impl<'a> Compiler<'a> {
             owners: Vec::new(),
             scopes: Vec::new(),
             states: Vec::new(),
-            types: crate::typeck::Types::default(),
+            types: crate::front::typeck::Types::default(),
         }
     }
 
@@ -264,7 +264,7 @@ impl<'a> Compiler<'a> {
     }
 
     /// The checker's types of inputs, outputs and `out *` defs (the only types lowering uses).
-    pub fn with_types(mut self, types: crate::typeck::Types) -> Self {
+    pub fn with_types(mut self, types: crate::front::typeck::Types) -> Self {
         self.types = types;
         self
     }

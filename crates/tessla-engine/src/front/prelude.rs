@@ -21,27 +21,27 @@ use tessla_syntax::source::{FileId, Span};
 
 /// The prelude files, in the order their modules are emitted.
 const FILES: &[&str] = &[
-    include_str!("../prelude/Types.tessla"),
-    include_str!("../prelude/PrimitiveFunctions.tessla"),
-    include_str!("../prelude/Operators.tessla"),
-    include_str!("../prelude/Option.tessla"),
-    include_str!("../prelude/StreamFunctions.tessla"),
-    include_str!("../prelude/OptionUtils.tessla"),
-    include_str!("../prelude/List.tessla"),
-    include_str!("../prelude/Set.tessla"),
-    include_str!("../prelude/Map.tessla"),
-    include_str!("../prelude/String.tessla"),
-    include_str!("../prelude/LTL.tessla"),
-    include_str!("../prelude/MITL.tessla"),
-    include_str!("../prelude/CTF.tessla"),
-    include_str!("../prelude/Tessla.tessla"),
+    include_str!("../../prelude/Types.tessla"),
+    include_str!("../../prelude/PrimitiveFunctions.tessla"),
+    include_str!("../../prelude/Operators.tessla"),
+    include_str!("../../prelude/Option.tessla"),
+    include_str!("../../prelude/StreamFunctions.tessla"),
+    include_str!("../../prelude/OptionUtils.tessla"),
+    include_str!("../../prelude/List.tessla"),
+    include_str!("../../prelude/Set.tessla"),
+    include_str!("../../prelude/Map.tessla"),
+    include_str!("../../prelude/String.tessla"),
+    include_str!("../../prelude/LTL.tessla"),
+    include_str!("../../prelude/MITL.tessla"),
+    include_str!("../../prelude/CTF.tessla"),
+    include_str!("../../prelude/Tessla.tessla"),
 ];
 
 /// The library's annotation declarations (top-level `def @Name(...)`, as in TeSSLa): emitted
 /// into a spec that uses one and does not declare it itself.
 const ANNOTATION_FILES: &[&str] = &[
-    include_str!("../prelude/InstrumentationAnnotations.tessla"),
-    include_str!("../prelude/VisualizationAnnotations.tessla"),
+    include_str!("../../prelude/InstrumentationAnnotations.tessla"),
+    include_str!("../../prelude/VisualizationAnnotations.tessla"),
 ];
 
 /// Each library annotation's name and declaration text.

@@ -11,7 +11,7 @@
 //! `local_defs`, `unknown_name`.
 
 use super::*;
-use crate::resolve::{DefId, Global};
+use crate::front::resolve::{DefId, Global};
 
 impl Compiler<'_> {
     pub(super) fn def_term(&mut self, e: &Entry, span: Span) -> R<Term> {
@@ -225,7 +225,7 @@ impl Compiler<'_> {
             Some(Binding::Term(t)) => Ok(t),
             Some(Binding::Def(e)) => self.def_term(&e, span),
             None => {
-                let name = crate::prelude::builtin_alias(name).unwrap_or(name);
+                let name = crate::front::prelude::builtin_alias(name).unwrap_or(name);
                 if name == "true" {
                     return Ok(Term::Const(Value::Bool(true)));
                 }
@@ -260,7 +260,7 @@ impl Compiler<'_> {
                 env.all_names(&mut known);
                 known.extend(self.resolved.visible_names(&env.prefix).map(str::to_string));
                 known.extend(builtins::names().map(str::to_string));
-                known.extend(crate::prelude::names());
+                known.extend(crate::front::prelude::names());
                 self.diags.push(tessla_syntax::diag::unknown_name(
                     name,
                     span,

@@ -71,7 +71,7 @@ impl<'a> Checker<'a> {
             known.extend(r.visible_names(&scope.prefix).map(str::to_string));
         }
         known.extend(builtins::names().map(str::to_string));
-        known.extend(crate::prelude::names());
+        known.extend(crate::front::prelude::names());
         self.report(tessla_syntax::diag::unknown_name(
             &id.name,
             id.span,

@@ -38,8 +38,8 @@
 //! `signatures` (builtins from the table, prelude declarations), `annotations`, `liftable`.
 
 use crate::builtins::{self, Builtin, Sig, Variadic};
+use crate::front::resolve::{Global, Resolved, at};
 use crate::ir::Type;
-use crate::resolve::{Global, Resolved, at};
 use std::cell::RefCell;
 use std::collections::HashMap;
 use std::rc::Rc;
@@ -256,7 +256,7 @@ struct Checker<'a> {
     diags: Vec<Diagnostic>,
     /// The resolved spec: statements, global definitions, imports, inputs, declared types.
     resolved: Option<&'a Resolved<'a>>,
-    /// The global definitions, by [`DefId`](crate::resolve::DefId).
+    /// The global definitions, by [`DefId`](crate::front::resolve::DefId).
     globals: Vec<Rc<DefInfo<'a>>>,
     /// The types of the inputs, by their index in [`Resolved::inputs`].
     inputs: Vec<Ty>,

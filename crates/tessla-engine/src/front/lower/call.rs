@@ -9,7 +9,7 @@ use super::*;
 
 impl Compiler<'_> {
     /// Put named arguments (`f(b = 1, a = x)`) in the order of the function's parameters, by
-    /// TeSSLa's rule ([`crate::typeck::order_named`]).
+    /// TeSSLa's rule ([`crate::front::typeck::order_named`]).
     pub(super) fn order_named_args(
         &mut self,
         f: &Term,
@@ -30,11 +30,11 @@ impl Compiler<'_> {
                     params.iter().map(|p| p.name.name.clone()).collect()
                 }
                 // A builtin takes TeSSLa's parameter names, as the prelude declares them.
-                FuncTerm::Builtin(b, _) if crate::prelude::param_names(b.name).is_some() => {
-                    crate::prelude::param_names(b.name).unwrap_or_default()
+                FuncTerm::Builtin(b, _) if crate::front::prelude::param_names(b.name).is_some() => {
+                    crate::front::prelude::param_names(b.name).unwrap_or_default()
                 }
-                FuncTerm::Native(f) if crate::prelude::native_param_names(*f).is_some() => {
-                    crate::prelude::native_param_names(*f).unwrap_or_default()
+                FuncTerm::Native(f) if crate::front::prelude::native_param_names(*f).is_some() => {
+                    crate::front::prelude::native_param_names(*f).unwrap_or_default()
                 }
                 _ => {
                     return self.error(
@@ -47,7 +47,7 @@ impl Compiler<'_> {
             _ => return self.error(Category::Type, span, "named arguments need a function"),
         };
         let names: Vec<&str> = params.iter().map(String::as_str).collect();
-        let positions = match crate::typeck::order_named(args, &names, callee) {
+        let positions = match crate::front::typeck::order_named(args, &names, callee) {
             Ok(p) => p,
             Err(d) => {
                 self.diags.push(d);

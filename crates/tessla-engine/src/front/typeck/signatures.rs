@@ -28,7 +28,7 @@ pub(super) fn library_hint(name: &str) -> Option<&'static str> {
 /// Is `name` a builtin a spec may name (directly or by its prelude alias)? `extern`-only
 /// natives are not.
 pub(super) fn is_builtin_name(name: &str) -> bool {
-    let name = crate::prelude::builtin_alias(name).unwrap_or(name);
+    let name = crate::front::prelude::builtin_alias(name).unwrap_or(name);
     builtins::get(name).is_some_and(|b| !matches!(b.kind, builtins::Kind::Extern(_)))
 }
 
@@ -192,12 +192,12 @@ impl<'a> Checker<'a> {
     pub(super) fn builtin(&mut self, name: &str) -> Option<Ty> {
         // Two variables per use, `A`/`K` and `B`/`V`, whether the signature uses them or not.
         let vars = [self.fresh(), self.fresh()];
-        let name = crate::prelude::builtin_alias(name).unwrap_or(name);
+        let name = crate::front::prelude::builtin_alias(name).unwrap_or(name);
         let b = builtins::get(name)?;
         // A builtin without a signature of its own has the one its library function declares
         // (`sum(x: Events[Int]): Events[Int]`).
         if b.sig == Sig::Any
-            && let Some(d) = crate::prelude::declaration(b.name)
+            && let Some(d) = crate::front::prelude::declaration(b.name)
         {
             return Some(self.declared_signature(d));
         }
