@@ -44,6 +44,8 @@ impl Compiler<'_> {
                     );
                 }
             },
+            // The one place of this rule: the checker orders named arguments only for user
+            // functions with parameters (`typeck::calls`) and leaves other callees open.
             _ => return self.error(Category::Type, span, "named arguments need a function"),
         };
         let names: Vec<&str> = params.iter().map(String::as_str).collect();
@@ -54,6 +56,9 @@ impl Compiler<'_> {
                 return Err(Fail);
             }
         };
+        // The one place of the rule that named arguments fill each parameter exactly once: the
+        // checker leaves such calls open (a parameter without an argument could be a default
+        // value, not modelled there), and builtins, natives and lambdas are resolved here only.
         let mut slots: Vec<Option<Term>> = vec![None; params.len()];
         for (idx, t) in positions.into_iter().zip(terms) {
             match slots.get_mut(idx) {
@@ -82,7 +87,7 @@ impl Compiler<'_> {
                 all.extend(args);
                 return self.apply_value_fn(Callee::Value, all, span);
             }
-            return self.error(Category::Type, span, "this is not a function");
+            return self.unchecked(span, "a call of something that is not a function");
         };
         match &*ft {
             FuncTerm::Builtin(b, op) => self.stream_builtin(b.name, *op, args, span),
@@ -97,16 +102,7 @@ impl Compiler<'_> {
                     return Ok(r);
                 }
                 if params.len() != args.len() {
-                    return self.error(
-                        Category::Type,
-                        span,
-                        format!(
-                            "`{}` takes {} arguments, {} given",
-                            def.name.name,
-                            params.len(),
-                            args.len()
-                        ),
-                    );
+                    return self.unchecked(span, "a call with the wrong number of arguments");
                 }
                 let has_func = args.iter().any(|a| matches!(a, Term::Func(_)));
                 let has_stream = args.iter().any(|a| matches!(a, Term::Stream(_)));
@@ -124,8 +120,8 @@ impl Compiler<'_> {
                         Ok(t) => return Ok(t),
                         // A body that makes streams from its parameters (`static if`, `const`
                         // ...) cannot be a value function: expand it like a macro instead.
-                        // An unknown name is wrong in either form: expanding would only
-                        // find it again, once per call site of every enclosing expansion
+                        // A name error (a named argument that is no parameter) is wrong in
+                        // either form: expanding would only find it again, once per call site of every enclosing expansion
                         // (exponential in mutually recursive nested functions).
                         Err(Fail)
                             if !lift
@@ -171,15 +167,7 @@ impl Compiler<'_> {
                 env: lenv,
             } => {
                 if params.len() != args.len() {
-                    return self.error(
-                        Category::Type,
-                        span,
-                        format!(
-                            "the function takes {} arguments, {} given",
-                            params.len(),
-                            args.len()
-                        ),
-                    );
+                    return self.unchecked(span, "a call with the wrong number of arguments");
                 }
                 let names: HashMap<String, Binding> = params
                     .iter()
@@ -219,7 +207,7 @@ impl Compiler<'_> {
     pub(super) fn stream_arg(&mut self, args: &[Term], i: usize, span: Span) -> R<NodeId> {
         match args.get(i) {
             Some(t) => self.stream_of(t.clone(), span),
-            None => self.error(Category::Type, span, format!("missing argument {}", i + 1)),
+            None => self.unchecked(span, "a call with the wrong number of arguments"),
         }
     }
 
@@ -232,32 +220,33 @@ impl Compiler<'_> {
         span: Span,
     ) -> R<Code> {
         match args.get(i) {
-            Some(Term::Func(ft)) if matches!(&**ft, FuncTerm::Native(_)) => match &**ft {
+            Some(Term::Func(ft)) => match &**ft {
                 FuncTerm::Native(n) => {
                     Ok(Code::apply(closure::native_callee(*n), Code::slots(arity)))
                 }
-                _ => self.error(Category::Type, span, "not a native"),
-            },
-            Some(Term::Func(ft)) => match self.func_value(ft, span)? {
-                Term::Const(Value::Closure(c)) => {
-                    let mut all = vec![Code::Const(Value::Closure(c))];
-                    all.extend(Code::slots(arity));
-                    Ok(Code::apply(Callee::Value, all))
-                }
-                Term::Code(Code::Closure { fun, captured: 0 }) => {
-                    Ok(Code::apply(Callee::Fn(fun), Code::slots(arity)))
-                }
-                _ => self.error(
-                    Category::Unsupported,
-                    span,
-                    "this function cannot be compiled to a value",
-                ),
+                _ => match self.func_value(ft, span)? {
+                    Term::Const(Value::Closure(c)) => {
+                        let mut all = vec![Code::Const(Value::Closure(c))];
+                        all.extend(Code::slots(arity));
+                        Ok(Code::apply(Callee::Value, all))
+                    }
+                    Term::Code(Code::Closure { fun, captured: 0 }) => {
+                        Ok(Code::apply(Callee::Fn(fun), Code::slots(arity)))
+                    }
+                    _ => self.error(
+                        Category::Unsupported,
+                        span,
+                        "this function cannot be compiled to a value",
+                    ),
+                },
             },
             Some(Term::Const(Value::Closure(c))) => {
                 let mut all = vec![Code::Const(Value::Closure(c.clone()))];
                 all.extend(Code::slots(arity));
                 Ok(Code::apply(Callee::Value, all))
             }
+            // The one place of this rule where the checker leaves the argument's type open
+            // (`reduce(x, nil)`: `nil` and the other `Sig::Any` builtins of `crate::builtins`).
             _ => self.error(
                 Category::Type,
                 span,
@@ -269,6 +258,9 @@ impl Compiler<'_> {
     pub(super) fn const_arg(&mut self, args: &[Term], i: usize, span: Span) -> R<Value> {
         match args.get(i) {
             Some(Term::Const(v)) => Ok(v.clone()),
+            // The one place of this rule: the checker's types do not tell a constant from the
+            // stream a signal lift makes of it (`default(x, x)`, `period(x)`). Also a signal
+            // for `call` to expand a function as a macro instead of compiling it to a value.
             _ => self.error(
                 Category::Type,
                 span,

@@ -206,6 +206,9 @@ impl Compiler<'_> {
                     }
                 },
             },
+            // Not a type rule: the lowering's signal that this function cannot be a value
+            // function (`call` then expands it as a macro; kept when a liftable function
+            // makes streams).
             Term::Stream(_) => {
                 return self.error(
                     Category::Type,

@@ -84,6 +84,7 @@ impl Compiler<'_> {
                         r
                     }
                 };
+                // The one place of this rule (the checker does not evaluate literals).
                 match i64::try_from(v) {
                     Ok(i) => Ok(Term::Const(Value::Int(i))),
                     Err(_) => self.error(
@@ -201,6 +202,9 @@ impl Compiler<'_> {
                     return match v {
                         Value::Bool(true) => self.expr(then_branch, env),
                         Value::Bool(false) => self.expr(else_branch, env),
+                        // The checker owns "the condition is a Bool"; a constant of another
+                        // value here is the value of an `extern` this engine does not know (an
+                        // error value), whose declared type the checker trusts.
                         _ => self.error(
                             Category::Type,
                             cond.span,

@@ -13,7 +13,9 @@
 //! It reads the resolved spec (`crate::front::resolve`): which definition, input or imported member a
 //! global name means is decided there once, for the checker and the lowering; lowering keeps
 //! only its local scopes (parameters, blocks and `where`, macro arguments). Types come from the
-//! checker (`crate::front::typeck::Types`: inputs, outputs, `out *` defs); lowering has no type rules.
+//! checker (`crate::front::typeck::Types`: inputs, outputs, `out *` defs). The lowering keeps
+//! only the rules the checker leaves open (each marked "the one place" where it is written); a
+//! case the checker or name resolution rules out is `Compiler::unchecked`, an internal error.
 //! By concern: `names`
 //! (local scopes over the resolved globals, definitions on first use, externs),
 //! `expr` (each expression form, operators), `call` (calls and arguments), `closure`
@@ -134,13 +136,6 @@ impl Env {
             parent: Some(Rc::new(self.clone())),
             frame,
             prefix: self.prefix.clone(),
-        }
-    }
-
-    fn all_names(&self, out: &mut Vec<String>) {
-        out.extend(self.names.keys().cloned());
-        if let Some(p) = &self.parent {
-            p.all_names(out);
         }
     }
 }
@@ -277,6 +272,18 @@ impl<'a> Compiler<'a> {
 
     fn error<T>(&mut self, cat: Category, span: Span, msg: impl Into<String>) -> R<T> {
         self.diags.push(Diagnostic::error(cat, Some(span), msg));
+        Err(Fail)
+    }
+
+    /// The one path for a case the checker (`crate::front::typeck`) or name resolution rules
+    /// out before lowering starts: `what` names what got through. No rule is written here
+    /// again; reaching this is a bug of the checker, reported as such.
+    fn unchecked<T>(&mut self, span: Span, what: &str) -> R<T> {
+        self.diags.push(Diagnostic::error(
+            Category::Other,
+            Some(span),
+            format!("internal error: the checker let through {what}; please report this spec"),
+        ));
         Err(Fail)
     }
 
@@ -463,10 +470,12 @@ impl<'a> Compiler<'a> {
                     .unwrap_or_else(|| format!("_{i}"));
                 match self.expr(&arg.value, env) {
                     Ok(Term::Const(v)) => args.push((name, v)),
+                    // For an annotation declared nowhere, the one place of this rule (the
+                    // checker checks the arguments of declared annotations, with the same text).
                     Ok(_) => self.diags.push(Diagnostic::error(
                         Category::Type,
                         Some(arg.value.span),
-                        "annotation arguments must be constants",
+                        crate::front::typeck::ANNOTATION_ARGS_CONSTANT,
                     )),
                     Err(Fail) => {}
                 }
@@ -492,6 +501,8 @@ impl<'a> Compiler<'a> {
         match t {
             Term::Stream(n) => Ok(n),
             Term::Const(v) => Ok(self.node(Node::Const(v))),
+            // Not a type rule: the lowering's signal that a function body cannot be compiled
+            // to a value function (`call` then expands it as a macro).
             Term::Code(_) => self.error(
                 Category::Type,
                 span,
@@ -505,6 +516,8 @@ impl<'a> Compiler<'a> {
                     let t = self.call(Term::Func(ft.clone()), Vec::new(), span, &Env::default())?;
                     return self.stream_of(t, span);
                 }
+                // The one place of this rule: the checker lets a function value stand for a
+                // constant stream (`last(f, x)`, `count(Operators.add)`).
                 self.error(
                     Category::Type,
                     span,

@@ -2,13 +2,14 @@
 //! argument: lowering's own scopes, [`Env`]) or else a global that `Resolved::global` finds from
 //! the module the code stands in (a definition, by its `DefId`, or an input). Each global
 //! definition has one lowering state, made on first use; definitions are compiled on first use;
-//! also `extern` bodies and the unknown-name diagnostic. A stream definition used while it is compiled becomes an alias
+//! also `extern` bodies. Unknown names are the checker's rule: here they are an internal
+//! error. A stream definition used while it is compiled becomes an alias
 //! filled in when it is done; a use outside the lazy argument of `last`/`delay` is then checked
 //! for a strict cycle on the lowered graph, so recursion is allowed wherever TeSSLa allows it
 //! (through `last`/`delay` inside function bodies, helpers and lifted calls too).
 //!
 //! Owns: `Compiler::binding` (local, else global), `global_entry`, `lookup`, `def_term`, `body`,
-//! `local_defs`, `unknown_name`.
+//! `local_defs`.
 
 use super::*;
 use crate::front::resolve::{DefId, Global};
@@ -140,6 +141,7 @@ impl Compiler<'_> {
 
     pub(super) fn body(&mut self, d: &Def, env: &Env) -> R<Term> {
         match &d.body {
+            // The one place of this rule (the checker leaves an unannotated extern's type open).
             Body::Extern { span, .. } if d.result_type.is_none() => self.error(
                 Category::Type,
                 *span,
@@ -245,28 +247,11 @@ impl Compiler<'_> {
                             Term::Func(Rc::new(FuncTerm::Native(f)))
                         }
                         // Only through `extern("name")`.
-                        Kind::Extern(_) => return self.unknown_name(name, span, env),
+                        Kind::Extern(_) => return self.unchecked(span, "an unknown name"),
                     });
                 }
-                self.unknown_name(name, span, env)
-            }
-        }
-    }
-
-    pub(super) fn unknown_name<T>(&mut self, name: &str, span: Span, env: &Env) -> R<T> {
-        {
-            {
-                let mut known = Vec::new();
-                env.all_names(&mut known);
-                known.extend(self.resolved.visible_names(&env.prefix).map(str::to_string));
-                known.extend(builtins::names().map(str::to_string));
-                known.extend(crate::front::prelude::names());
-                self.diags.push(tessla_syntax::diag::unknown_name(
-                    name,
-                    span,
-                    known.iter().map(String::as_str),
-                ));
-                Err(Fail)
+                // Unknown names are the checker's (`crate::front::typeck`, its `unknown_name`).
+                self.unchecked(span, "an unknown name")
             }
         }
     }

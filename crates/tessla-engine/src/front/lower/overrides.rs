@@ -69,7 +69,8 @@ impl Compiler<'_> {
                     continue;
                 }
             };
-            // Type check: the new value must be a constant of the old value's type.
+            // Type check: the new value must be a constant of the old value's type. The one
+            // place of this rule: `--set` values come from the command line, after the check.
             let old_ty = const_type_of(&entry.def);
             let new_ty = const_type_of(&new_def);
             if old_ty != new_ty || new_ty.is_none() {

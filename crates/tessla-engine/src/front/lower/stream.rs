@@ -107,24 +107,13 @@ impl Compiler<'_> {
                 f: Code::apply(closure::named_native("min"), Code::slots(2)),
             },
             StreamOp::Lift | StreamOp::SLift => {
+                // The checker types `lift`/`slift` from their variadic signature: the function
+                // comes last and takes one argument per stream.
                 let Some(ft) = args.last().cloned() else {
-                    return self.error(
-                        Category::Type,
-                        span,
-                        format!("`{name}` needs a function as its last argument"),
-                    );
+                    return self.unchecked(span, "a call with the wrong number of arguments");
                 };
-                if let Some(arity) = fn_arity(&ft)
-                    && arity != n - 1
-                {
-                    return self.error(
-                        Category::Type,
-                        span,
-                        format!(
-                            "`{name}` is given {} streams but its function takes {arity} arguments",
-                            n - 1
-                        ),
-                    );
+                if fn_arity(&ft).is_some_and(|arity| arity != n - 1) {
+                    return self.unchecked(span, "a function of the wrong arity");
                 }
                 let f = self.value_fn_arg(&[ft], 0, n - 1, span)?;
                 let streams = (0..n - 1)

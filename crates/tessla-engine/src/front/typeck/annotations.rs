@@ -4,6 +4,10 @@
 
 use super::*;
 
+/// The message when an annotation's argument is not a constant: the checker's for declared
+/// annotations, the lowering's for those declared nowhere.
+pub const ANNOTATION_ARGS_CONSTANT: &str = "annotation arguments must be constants";
+
 impl<'a> Checker<'a> {
     /// Check one use of an annotation against its definition: declared with the same kind
     /// (`@` on an `in`/`out`, `@@` on its own), arity, argument types, constant arguments. An
@@ -46,7 +50,7 @@ impl<'a> Checker<'a> {
                     Diagnostic::error(
                         Category::Type,
                         Some(arg.value.span),
-                        "annotation arguments must be constants",
+                        ANNOTATION_ARGS_CONSTANT,
                     )
                     .with_label("this is a stream")
                     .with_help("write a literal or a constant definition"),

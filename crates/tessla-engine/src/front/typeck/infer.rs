@@ -82,10 +82,14 @@ impl<'a> Checker<'a> {
                         return match self.find(&q, scope) {
                             Some(Found::Mono(t)) => t,
                             Some(Found::Def(d)) => self.def_type(&d),
+                            // Neither a value, nor a builtin, nor a library alias of a
+                            // literal (`Types.true`, `Option.None`): unknown (`Foo.bar`,
+                            // `Operators.zzz`), as `lookup` finds for plain names.
                             None if !is_builtin_name(&q)
-                                && self
-                                    .resolved
-                                    .is_some_and(|r| r.is_module(head, &scope.prefix)) =>
+                                && !matches!(
+                                    crate::front::prelude::builtin_alias(&q),
+                                    Some("true" | "false" | "None")
+                                ) =>
                             {
                                 let id = ast::Ident {
                                     name: q,

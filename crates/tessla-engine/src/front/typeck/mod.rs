@@ -58,6 +58,7 @@ mod operators;
 mod signatures;
 mod ty;
 
+pub use annotations::ANNOTATION_ARGS_CONSTANT;
 pub use calls::order_named;
 use names::*;
 use signatures::*;
@@ -315,6 +316,78 @@ impl<'a> Checker<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The diagnostics of loading `spec` (empty when it loads), each as "category: message".
+    fn load_messages(spec: &str) -> Vec<String> {
+        let resolver = tessla_syntax::include::MemResolver {
+            files: [("spec.tessla".to_string(), spec.to_string())].into(),
+        };
+        match crate::load_with("spec.tessla", &resolver, &crate::LoadOptions::default()) {
+            Ok(_) => Vec::new(),
+            Err(e) => e
+                .diagnostics
+                .iter()
+                .map(|d| format!("{:?}: {}", d.category, d.message))
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn unknown_dotted_names_are_the_checkers_and_library_literals_load() {
+        for (name, spec_name) in [
+            ("Foo.bar", "Foo.bar"),
+            ("Math.zzz", "Math.zzz"),
+            ("Operators.zzz", "Operators.zzz(x)"),
+            ("Operators.add.zzz", "Operators.add.zzz"),
+        ] {
+            let spec = format!("in x: Events[Int]\nout {spec_name} as y\n");
+            assert_eq!(
+                load_messages(&spec),
+                [format!("Name: unknown name `{name}`")],
+                "{spec}"
+            );
+        }
+        let spec = "in x: Events[Int]\nout const(Types.true, x) as a\n\
+                    out const(Option.None[Int], x) as b\n";
+        assert_eq!(load_messages(spec), Vec::<String>::new());
+    }
+
+    #[test]
+    fn the_rules_the_checker_leaves_open_are_reported_by_the_lowering_not_as_internal_errors() {
+        for (spec, want) in [
+            (
+                "def f(a: Int, b: Int) = a + b\nout f(a = 1, a = 2) as y",
+                "Type: an argument is given twice or there are too many arguments",
+            ),
+            (
+                "def f(a: Int, b: Int) = a + b\ndef y = f(b = 1)\nout y",
+                "Type: missing arguments",
+            ),
+            (
+                "def g = 5\nout g(a = 1) as y",
+                "Type: named arguments need a function",
+            ),
+            (
+                "out default(x, x) as y",
+                "Type: argument 2 must be a constant",
+            ),
+            (
+                "out reduce(x, nil) as y",
+                "Type: argument 2 must be a function",
+            ),
+            (
+                "out count(Operators.add) as y",
+                "Type: a function is used where a stream is needed",
+            ),
+            (
+                "def f = extern(\"foo\")\nout f as y",
+                "Type: extern definition `f` needs a type annotation",
+            ),
+        ] {
+            let spec = format!("in x: Events[Int]\n{spec}\n");
+            assert_eq!(load_messages(&spec), [want.to_string()], "{spec}");
+        }
+    }
 
     #[test]
     fn every_builtin_signature_parses() {
