@@ -161,6 +161,7 @@ impl Monitor {
         self.last_evaluated
     }
 
+    #[inline]
     pub fn push<S: FnMut(OutputEvent<'_>)>(
         &mut self,
         ts: i64,
@@ -210,6 +211,7 @@ impl Monitor {
     }
 
     /// Evaluate the pending step now.
+    #[inline]
     pub fn flush<S: FnMut(OutputEvent<'_>)>(&mut self, sink: &mut S) {
         if let Some(p) = self.pending.take() {
             self.step(p, sink);
@@ -220,6 +222,7 @@ impl Monitor {
 
     /// Evaluate the pending step (if before `ts`), the first step at t0 if none ran yet, and
     /// every delay firing strictly before `ts`.
+    #[inline]
     pub fn advance_to<S: FnMut(OutputEvent<'_>)>(&mut self, ts: i64, sink: &mut S) {
         if let Some(p) = self.pending
             && p < ts
