@@ -245,14 +245,7 @@ pub fn run_stream_with(
             }
             let message = match pushed {
                 Ok(()) => continue,
-                Err(InputError::Decreasing { last, got }) => {
-                    format!("Decreasing time stamps: first = {last}, second = {got}")
-                }
-                Err(InputError::Multiple { input, ts }) => {
-                    let name = program.inputs.get(input).map_or("?", |i| i.name.as_str());
-                    format!("Multiple events \"{name}\" at timestamp {ts}")
-                }
-                Err(InputError::UnknownInput(i)) => format!("unknown input {i}"),
+                Err(e) => input_error_message(program, &e),
             };
             return Err(RunError {
                 kind: ErrorKind::Runtime,
@@ -262,6 +255,20 @@ pub fn run_stream_with(
     }
     monitor.flush(&mut |e| printer.event(e));
     finish(printer)
+}
+
+/// An event the monitor refused, in the words of TeSSLa's interpreter (text and CTF traces).
+pub(crate) fn input_error_message(program: &Program, e: &InputError) -> String {
+    match *e {
+        InputError::Decreasing { last, got } => {
+            format!("Decreasing time stamps: first = {last}, second = {got}")
+        }
+        InputError::Multiple { input, ts } => {
+            let name = program.inputs.get(input).map_or("?", |i| i.name.as_str());
+            format!("Multiple events \"{name}\" at timestamp {ts}")
+        }
+        InputError::UnknownInput(i) => format!("unknown input {i}"),
+    }
 }
 
 fn finish<W: Write>(mut printer: Printer<'_, W>) -> Result<(), RunError> {

@@ -71,6 +71,19 @@ pub struct Resolved<'a> {
 }
 
 impl<'a> Resolved<'a> {
+    /// The annotations used in the spec, statement by statement: those of an `in`, `out` or
+    /// `out *` (false), and each global `@@` annotation (true).
+    pub fn annotation_uses(&self) -> impl Iterator<Item = (&'a [ast::Annotation], bool)> + '_ {
+        self.statements.iter().filter_map(|&(_, s)| match s {
+            Statement::In { annotations, .. } | Statement::OutAll { annotations, .. } => {
+                Some((annotations.as_slice(), false))
+            }
+            Statement::Out(o) => Some((o.annotations.as_slice(), false)),
+            Statement::GlobalAnnotation(a) => Some((std::slice::from_ref(a), true)),
+            _ => None,
+        })
+    }
+
     /// Flatten and resolve the statements of `files`.
     pub fn new(files: &'a [ast::File]) -> Self {
         Self::with_library(files, None)
@@ -194,15 +207,7 @@ impl<'a> Resolved<'a> {
     /// one defined by `def @@A` stands on its own; a use of the other kind is reported.
     fn annotation_kinds(&mut self) {
         let mut found = Vec::new();
-        for (_, s) in &self.statements {
-            let (anns, global): (&[ast::Annotation], bool) = match s {
-                Statement::In { annotations, .. } | Statement::OutAll { annotations, .. } => {
-                    (annotations, false)
-                }
-                Statement::Out(o) => (&o.annotations, false),
-                Statement::GlobalAnnotation(a) => (std::slice::from_ref(a), true),
-                _ => continue,
-            };
+        for (anns, global) in self.annotation_uses() {
             for a in anns {
                 let name = &a.name.name;
                 if self.annotations.contains_key(&(name.clone(), global))

@@ -35,7 +35,7 @@ use decode::{Field, RawEvent, StreamDecoder};
 use std::io::Write;
 use std::path::Path;
 use std::sync::Arc;
-use tessla_engine::{InputError, Monitor, Program, Value};
+use tessla_engine::{Monitor, Program, Value};
 
 /// The marker field of a `CTF` value (no TeSSLa record can have it: not an identifier).
 pub const CTF_MARKER: &str = tessla_engine::runtime::natives::core::CTF_MARKER;
@@ -353,14 +353,7 @@ pub fn run_dir(
         }
         let message = match pushed {
             Ok(()) => return true,
-            Err(InputError::Decreasing { last, got }) => {
-                format!("Decreasing time stamps: first = {last}, second = {got}")
-            }
-            Err(InputError::Multiple { input, ts }) => {
-                let name = program.inputs.get(input).map_or("?", |i| i.name.as_str());
-                format!("Multiple events \"{name}\" at timestamp {ts}")
-            }
-            Err(InputError::UnknownInput(i)) => format!("unknown input {i}"),
+            Err(e) => crate::input_error_message(program, &e),
         };
         failure = Some(RunError {
             kind: ErrorKind::Runtime,

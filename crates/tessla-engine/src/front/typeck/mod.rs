@@ -44,7 +44,7 @@ use std::cell::RefCell;
 use std::collections::HashMap;
 use std::rc::Rc;
 use std::sync::OnceLock;
-use tessla_syntax::ast::{self, BinOp, Body, Def, Expr, ExprKind, Statement, StrPart, UnaryOp};
+use tessla_syntax::ast::{self, BinOp, Body, Def, Expr, ExprKind, StrPart, UnaryOp};
 use tessla_syntax::diag::{Category, Diagnostic};
 use tessla_syntax::source::Span;
 
@@ -204,15 +204,7 @@ pub fn check_resolved(resolved: &Resolved<'_>) -> (Vec<Diagnostic>, Types) {
     for g in c.globals.clone() {
         c.def_scheme(&g);
     }
-    for (_, s) in &resolved.statements {
-        let (anns, global): (&[ast::Annotation], bool) = match s {
-            Statement::In { annotations, .. } | Statement::OutAll { annotations, .. } => {
-                (annotations, false)
-            }
-            Statement::Out(o) => (&o.annotations, false),
-            Statement::GlobalAnnotation(a) => (std::slice::from_ref(a), true),
-            _ => continue,
-        };
+    for (anns, global) in resolved.annotation_uses() {
         for a in anns {
             c.annotation(a, global);
         }
