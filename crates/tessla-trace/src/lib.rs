@@ -111,7 +111,18 @@ struct Printer<'a, W: Write> {
     stopped: bool,
 }
 
-impl<W: Write> Printer<'_, W> {
+impl<'a, W: Write> Printer<'a, W> {
+    /// A printer of `program`'s outputs to `out`, stopping at `-S`'s stream if one is given.
+    fn new(program: &'a Program, out: &'a mut W, options: &Options) -> Result<Self, RunError> {
+        Ok(Printer {
+            program,
+            out,
+            error: None,
+            stop_on: stop_on_index(program, options)?,
+            stopped: false,
+        })
+    }
+
     fn event(&mut self, e: OutputEvent<'_>) {
         if self.error.is_some() || self.stopped {
             return;
@@ -147,7 +158,10 @@ fn io_error(what: &str, err: &io::Error) -> RunError {
 }
 
 /// The output index of `-S`'s stream; an output the spec lacks is a usage error.
-fn stop_on_index(program: &Program, options: &Options) -> Result<Option<usize>, RunError> {
+pub(crate) fn stop_on_index(
+    program: &Program,
+    options: &Options,
+) -> Result<Option<usize>, RunError> {
     Ok(match &options.stop_on {
         None => None,
         Some(name) => match program.outputs.iter().position(|o| o.name == *name) {
@@ -192,15 +206,8 @@ pub fn run_stream_with(
     out: &mut impl Write,
     options: &Options,
 ) -> Result<(), RunError> {
-    let stop_on = stop_on_index(program, options)?;
+    let mut printer = Printer::new(program, out, options)?;
     let mut monitor = Monitor::new(program.clone());
-    let mut printer = Printer {
-        program,
-        out,
-        error: None,
-        stop_on,
-        stopped: false,
-    };
     let at = |line: usize, msg: &str| format!("{source}:{line}: {msg}");
     let read_error = |e: reader::ReadError| RunError {
         kind: match e.kind {

@@ -278,16 +278,9 @@ pub fn run_dir(
     out: &mut impl Write,
     options: &Options,
 ) -> Result<(), RunError> {
-    let stop_on = crate::stop_on_index(program, options)?;
+    let mut printer = Printer::new(program, out, options)?;
     let (md, files) = open(dir)?;
     let mut monitor = Monitor::new(program.clone());
-    let mut printer = Printer {
-        program,
-        out,
-        error: None,
-        stop_on,
-        stopped: false,
-    };
     let mut failure: Option<RunError> = None;
     let mut events_read: u64 = 0;
     let source = dir.display().to_string();
