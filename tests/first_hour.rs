@@ -482,6 +482,22 @@ fn make_test_says_loudly_what_it_skipped() {
         said.contains("TESSLA_SUITE=/path/to/tessla-suite make test"),
         "{said}"
     );
+    assert!(!said.contains("tools/setup.sh"), "{said}");
+    // A missing server or tool (tests/support/servers.rs leaves `needs-<program>`) says how to
+    // install it.
+    write(dir.path(), "needs-babeltrace2", "`babeltrace2` not found\n");
+    let out = Command::new("bash")
+        .arg(&script)
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let said = text(&out.stdout);
+    assert!(said.contains("SKIPPED, NOT PASSED: 3 suite(s)"), "{said}");
+    assert!(
+        said.contains("  - needs-babeltrace2: `babeltrace2` not found"),
+        "{said}"
+    );
+    assert!(said.contains("bash tools/setup.sh"), "{said}");
     let makefile = std::fs::read_to_string(root().join("Makefile")).unwrap();
     assert!(makefile.contains("bash tools/test-skips.sh $(SKIP_DIR); exit $$status"));
 }
