@@ -453,11 +453,14 @@ fn make_run_fits_one_screen_and_the_readme_shows_it() {
 fn make_test_says_loudly_what_it_skipped() {
     let dir = tempfile::tempdir().unwrap();
     let script = root().join("tools/test-skips.sh");
-    let out = Command::new("bash")
-        .arg(&script)
-        .arg(dir.path())
-        .output()
-        .unwrap();
+    let banner = || {
+        Command::new("bash")
+            .arg(&script)
+            .arg(dir.path())
+            .output()
+            .unwrap()
+    };
+    let out = banner();
     assert_eq!(out.status.code(), Some(0));
     assert_eq!(text(&out.stdout), "make test: no suite was skipped\n");
     write(
@@ -466,11 +469,7 @@ fn make_test_says_loudly_what_it_skipped() {
         "TeSSLa suite not found at /x (set TESSLA_SUITE)\n",
     );
     write(dir.path(), "suite_parse", "TeSSLa suite not found\n");
-    let out = Command::new("bash")
-        .arg(&script)
-        .arg(dir.path())
-        .output()
-        .unwrap();
+    let out = banner();
     let said = text(&out.stdout);
     assert_eq!(out.status.code(), Some(0), "a skip alone does not fail");
     assert!(said.contains("SKIPPED, NOT PASSED: 2 suite(s)"), "{said}");
@@ -486,11 +485,7 @@ fn make_test_says_loudly_what_it_skipped() {
     // A missing server or tool (tests/support/servers.rs leaves `needs-<program>`) says how to
     // install it.
     write(dir.path(), "needs-babeltrace2", "`babeltrace2` not found\n");
-    let out = Command::new("bash")
-        .arg(&script)
-        .arg(dir.path())
-        .output()
-        .unwrap();
+    let out = banner();
     let said = text(&out.stdout);
     assert!(said.contains("SKIPPED, NOT PASSED: 3 suite(s)"), "{said}");
     assert!(
