@@ -29,7 +29,7 @@
 //! be used at several types.
 //!
 //! The result is the typed program the lowering consumes ([`Types`]: element types of inputs,
-//! outputs by [`ExprId`], `out *` defs); the lowering has no type rules of its own.
+//! outputs by [`ExprId`], `out *` defs); the lowering writes no type rule the checker owns.
 //!
 //! This file is the driver (`check_resolved`: inputs, definitions, annotations, outputs), the
 //! [`Checker`] state and its scopes. Each rule lives in one file, by concern: `ty` (types,
@@ -129,7 +129,8 @@ impl ExprId {
 /// index in [`Resolved::inputs`]), of each output (by the id of its expression; an object
 /// output's members are fields of it) and of each top-level parameterless def (by dotted
 /// name, for `out *`). Types the checker leaves open are [`Type::Unknown`] inside. The
-/// lowering takes its types from here only: it has no type rules of its own.
+/// lowering takes its types from here only; the few rules the checker leaves open (named
+/// arguments of builtins, constant arguments, ...) are marked in `lower/` as their one place.
 #[derive(Debug, Default)]
 pub struct Types {
     pub inputs: Vec<Type>,
