@@ -3,9 +3,25 @@
 # (rustup), the MQTT broker, InfluxDB 1.x and nats-server (the fleet tests' 3-node cluster) come
 # from Debian packages, and the openssl command line (the security tests make their TEST-ONLY
 # certificates with telegraf/fleet-nats/make-test-certs.sh) and babeltrace2 (the reference CTF reader
-# that tests/trace_ctf.rs checks `trace --ctf` against). Idempotent: does nothing when
-# everything is present. Needs root (or sudo) only when something is missing.
+# that tests/trace_ctf.rs checks `trace --ctf` against). Then Telegraf itself, built from its Go
+# module at the two pinned versions the tests run under (tools/build-telegraf.sh; cached, so a
+# second run costs nothing). Idempotent: does nothing when everything is present. Needs root (or
+# sudo) only when a Debian package is missing. Without Go, or without the Go module proxy, the
+# Telegraf tests skip with the loud banner at the end of `make test`; with REQUIRE_SERVERS=1 (CI)
+# a Telegraf that cannot be built fails the set-up.
 set -euo pipefail
+cd "$(dirname "$0")/.."
+
+build_telegraf() {
+    if bash tools/build-telegraf.sh; then
+        return 0
+    fi
+    if [ "${REQUIRE_SERVERS:-}" = 1 ]; then
+        echo "setup: REQUIRE_SERVERS=1 and Telegraf could not be built (above)" >&2
+        exit 1
+    fi
+    echo "setup: Telegraf not built; the tests under the real Telegraf will skip (make test says so)" >&2
+}
 
 need=()
 command -v mosquitto >/dev/null 2>&1 || [ -x /usr/sbin/mosquitto ] || need+=(mosquitto)
@@ -16,6 +32,7 @@ command -v openssl >/dev/null 2>&1 || need+=(openssl)
 command -v babeltrace2 >/dev/null 2>&1 || need+=(babeltrace2)
 
 if [ ${#need[@]} -eq 0 ]; then
+    build_telegraf
     exit 0
 fi
 
@@ -34,3 +51,4 @@ $sudo apt-get install -y -qq "${need[@]}"
 for svc in mosquitto influxdb nats-server; do
     $sudo systemctl stop "$svc" >/dev/null 2>&1 || $sudo service "$svc" stop >/dev/null 2>&1 || true
 done
+build_telegraf

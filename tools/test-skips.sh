@@ -29,7 +29,9 @@ fi
 if ls "$dir" | grep -q '^needs-'; then
 cat <<'TXT'
 Suites named needs-<program> need that server or tool: `bash tools/setup.sh` installs them
-(Debian packages). REQUIRE_SERVERS=1 (as CI sets) turns a missing one into a failure.
+(Debian packages; needs-telegraf-<version>: Telegraf built from its Go module by
+tools/build-telegraf.sh, which needs Go 1.26 and the Go module proxy). REQUIRE_SERVERS=1 (as CI
+sets) turns a missing one into a failure.
 TXT
 fi
 echo "$bar"

@@ -180,6 +180,11 @@ impl Mosquitto {
     pub fn url(&self) -> String {
         format!("mqtt://127.0.0.1:{}", self.port)
     }
+
+    /// What the broker has logged so far.
+    pub fn log(&self) -> String {
+        self._server.log()
+    }
 }
 
 /// A running InfluxDB 1.x server.

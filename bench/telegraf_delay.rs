@@ -1,0 +1,317 @@
+//! The robot-to-twin delay (`make bench-telegraf`, BENCHMARKS.md "Robot to action through
+//! Telegraf"): the time from a robot's MQTT publish to its action arriving on the robot's
+//! `action` topic, through a real Mosquitto, the real Telegraf (built by
+//! `tools/build-telegraf.sh`) running a shipped conf with only its endpoints rewritten, and the
+//! release binary as its `processors.execd` child. InfluxDB runs too, as the conf ships it.
+//!
+//! Each robot publishes the recorded run's messages (the robot's JSON, 360 lidar beams, QoS 1)
+//! at `--hz` (5), the robots spread evenly over the period; actions are matched to publishes
+//! in order, per robot. One robot runs `telegraf/telegraf.conf`, several run
+//! `telegraf/telegraf-fleet.conf` (one topic per robot, one monitor instance each).
+//!
+//! Run: `cargo build --release && cargo run --release --example telegraf_delay --
+//!       [--robots 1] [--seconds 20] [--warmup 3] [--hz 5] [--telegraf v1.39.3] [--set KEY=VALUE]`
+//! `--set agent.flush_interval=1s` (a key of the conf: `section.key`, the first table of that
+//! section) tries a setting. Prints one line: `robots=.. sent=.. answered=.. lost=..
+//! p50_ms=.. p90_ms=.. p99_ms=.. max_ms=..` (the first `--warmup` seconds not counted).
+
+#[path = "../tests/support/real_telegraf.rs"]
+mod real_telegraf;
+#[path = "../tests/support/servers.rs"]
+mod servers;
+
+use rumqttc::{Client, Event, MqttOptions, Packet, QoS};
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use tessla_telegraf::replay::message::{MessageOptions, to_json};
+
+/// The binary the conf runs (real_telegraf's rewrite names it).
+pub const BIN: &str = "target/release/tessla-telegraf";
+
+struct Args {
+    robots: usize,
+    seconds: f64,
+    warmup: f64,
+    hz: f64,
+    version: String,
+    sets: Vec<(String, String)>,
+}
+
+fn parse_args() -> Result<Args, String> {
+    let mut a = Args {
+        robots: 1,
+        seconds: 20.0,
+        warmup: 3.0,
+        hz: 5.0,
+        version: "v1.39.3".into(),
+        sets: Vec::new(),
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(arg) = it.next() {
+        let mut val = |name: &str| it.next().ok_or(format!("{name} needs a value"));
+        match arg.as_str() {
+            "--robots" => a.robots = val("--robots")?.parse().map_err(|e| format!("--robots: {e}"))?,
+            "--seconds" => {
+                a.seconds = val("--seconds")?.parse().map_err(|e| format!("--seconds: {e}"))?
+            }
+            "--warmup" => a.warmup = val("--warmup")?.parse().map_err(|e| format!("--warmup: {e}"))?,
+            "--hz" => a.hz = val("--hz")?.parse().map_err(|e| format!("--hz: {e}"))?,
+            "--telegraf" => a.version = val("--telegraf")?,
+            "--set" => {
+                let kv = val("--set")?;
+                let (k, v) = kv
+                    .split_once('=')
+                    .ok_or(format!("--set {kv}: expected section.key=value"))?;
+                a.sets.push((k.to_string(), v.to_string()));
+            }
+            "--bench" => {}
+            other => return Err(format!("unknown argument `{other}`")),
+        }
+    }
+    if a.robots == 0 || a.hz <= 0.0 || a.seconds <= a.warmup {
+        return Err("--robots and --hz must be positive, --seconds above --warmup".into());
+    }
+    Ok(a)
+}
+
+/// Set `section.key = value` in the conf text: replaces the key's line in the first table of
+/// that section, or adds it after the table's header.
+fn set_key(conf: &str, dotted: &str, value: &str) -> Result<String, String> {
+    let (section, key) = dotted
+        .rsplit_once('.')
+        .ok_or(format!("{dotted}: expected section.key"))?;
+    let headers = [format!("[{section}]"), format!("[[{section}]]")];
+    let mut out = Vec::new();
+    let mut in_section = false;
+    let mut done = false;
+    for line in conf.lines() {
+        let t = line.trim();
+        if t.starts_with('[') {
+            if in_section && !done {
+                return Err(format!("{dotted}: not set"));
+            }
+            in_section = !done && headers.iter().any(|h| t == h);
+            out.push(line.to_string());
+            if in_section {
+                out.push(format!("  {key} = {value}"));
+                done = true;
+            }
+            continue;
+        }
+        if in_section && t.split('=').next().is_some_and(|k| k.trim() == key) {
+            continue;
+        }
+        out.push(line.to_string());
+    }
+    if !done {
+        return Err(format!("{dotted}: no section [{section}] in the conf"));
+    }
+    Ok(out.join("\n") + "\n")
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let i = ((sorted.len() as f64 - 1.0) * p).round() as usize;
+    sorted[i.min(sorted.len() - 1)]
+}
+
+fn main() {
+    let args = match parse_args() {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("telegraf_delay: {e}");
+            std::process::exit(2);
+        }
+    };
+    if let Err(e) = run(&args) {
+        eprintln!("telegraf_delay: {e}");
+        std::process::exit(1);
+    }
+}
+
+fn run(args: &Args) -> Result<(), String> {
+    if !std::path::Path::new(BIN).is_file() {
+        return Err(format!("{BIN} not built: run `cargo build --release` first"));
+    }
+    let telegraf_bin = real_telegraf::binary(&args.version)
+        .ok_or(format!("Telegraf {} not built", args.version))?;
+    let broker = servers::Mosquitto::start_with(
+        "log_type error\nlog_type warning\nlog_type notice\nlog_type information\nlog_type subscribe\nmax_queued_messages 100000\n",
+    )
+    .ok_or("mosquitto missing")?;
+    let influx = servers::Influxd::start().ok_or("influxd missing")?;
+    let fleet = args.robots > 1;
+    let (conf_path, client_id, subscription) = if fleet {
+        ("telegraf/telegraf-fleet.conf", "telegraf-tessla-fleet-in", "tessla/+")
+    } else {
+        ("telegraf/telegraf.conf", "telegraf-tessla-in", "tessla")
+    };
+    let state = tempfile::tempdir().map_err(|e| e.to_string())?;
+    let text = real_telegraf::shipped(conf_path);
+    let mut rewrite = real_telegraf::Rewrite::robot(broker.port, Some(&influx.url("")));
+    if text.contains("/var/lib/tessla-telegraf") {
+        rewrite = rewrite.replace("/var/lib/tessla-telegraf", state.path().display().to_string());
+    }
+    let mut conf = rewrite.apply(&text);
+    for (k, v) in &args.sets {
+        conf = set_key(&conf, k, v)?;
+    }
+    let topics: Vec<String> = if fleet {
+        (0..args.robots).map(|i| format!("tessla/r{i}")).collect()
+    } else {
+        vec!["tessla".to_string()]
+    };
+
+    // The messages: the recorded run's, as the robot's JSON.
+    let recorded = std::fs::read_to_string("tests/fixtures/robot/recorded_run.lp")
+        .map_err(|e| format!("tests/fixtures/robot/recorded_run.lp: {e}"))?;
+    let recording = tessla_telegraf::replay::read_lp::read(&recorded, None);
+    let options = MessageOptions {
+        string_fields: vec!["actualSpeed".into()],
+        time_key: None,
+    };
+    let payloads: Vec<Vec<u8>> = recording
+        .samples
+        .iter()
+        .map(|s| serde_json::to_vec(&to_json(s, &options)).unwrap_or_default())
+        .collect();
+
+    // Publish instants per robot, matched in order by the actions' arrivals.
+    let sent: Arc<Vec<Mutex<VecDeque<Instant>>>> =
+        Arc::new((0..args.robots).map(|_| Mutex::new(VecDeque::new())).collect());
+    let delays: Arc<Mutex<Vec<(Instant, f64)>>> = Arc::new(Mutex::new(Vec::new()));
+
+    let sub_filter = if fleet { "tessla/+/action".to_string() } else { "action".to_string() };
+    let mut sub_opts = MqttOptions::new("delay-robots", "127.0.0.1", broker.port);
+    sub_opts.set_max_packet_size(1 << 20, 1 << 20);
+    let (sub, mut sub_conn) = Client::new(sub_opts, 65536);
+    sub.subscribe(&sub_filter, QoS::AtLeastOnce).map_err(|e| e.to_string())?;
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    {
+        let sent = sent.clone();
+        let delays = delays.clone();
+        let fleet_topics = fleet;
+        std::thread::spawn(move || {
+            let _sub = sub;
+            for event in sub_conn.iter() {
+                match event {
+                    Ok(Event::Incoming(Packet::SubAck(_))) => {
+                        let _ = ready_tx.send(());
+                    }
+                    Ok(Event::Incoming(Packet::Publish(p))) => {
+                        let now = Instant::now();
+                        let robot = if fleet_topics {
+                            p.topic
+                                .strip_prefix("tessla/r")
+                                .and_then(|r| r.strip_suffix("/action"))
+                                .and_then(|r| r.parse::<usize>().ok())
+                        } else {
+                            Some(0)
+                        };
+                        let Some(robot) = robot else { continue };
+                        let Some(queue) = sent.get(robot) else { continue };
+                        let at = queue.lock().ok().and_then(|mut q| q.pop_front());
+                        if let Some(at) = at
+                            && let Ok(mut d) = delays.lock()
+                        {
+                            d.push((at, now.duration_since(at).as_secs_f64() * 1e3));
+                        }
+                    }
+                    Ok(_) => {}
+                    Err(_) => return,
+                }
+            }
+        });
+    }
+    ready_rx
+        .recv_timeout(Duration::from_secs(10))
+        .map_err(|_| "no SUBACK for the action subscriber")?;
+
+    let telegraf = real_telegraf::Telegraf::start(&args.version, &telegraf_bin, &conf, &[]);
+    wait_subscribed(&broker, client_id, subscription)?;
+
+    let mut pub_opts = MqttOptions::new("delay-publisher", "127.0.0.1", broker.port);
+    pub_opts.set_max_packet_size(1 << 20, 1 << 20);
+    pub_opts.set_inflight(u16::MAX);
+    let (publisher, mut pub_conn) = Client::new(pub_opts, 65536);
+    std::thread::spawn(move || for _ in pub_conn.iter() {});
+
+    let period = Duration::from_secs_f64(1.0 / args.hz);
+    let start = Instant::now();
+    let end = start + Duration::from_secs_f64(args.seconds);
+    let counted_from = start + Duration::from_secs_f64(args.warmup);
+    let mut tick = 0u64;
+    let mut published = 0usize;
+    'outer: loop {
+        for (robot, topic) in topics.iter().enumerate() {
+            let due = start
+                + period.mul_f64(tick as f64)
+                + period.mul_f64(robot as f64 / args.robots as f64);
+            if due >= end {
+                break 'outer;
+            }
+            let now = Instant::now();
+            if due > now {
+                std::thread::sleep(due - now);
+            }
+            let payload = payloads[(tick as usize) % payloads.len()].clone();
+            if let Ok(mut q) = sent[robot].lock() {
+                q.push_back(Instant::now());
+            }
+            publisher
+                .publish(topic, QoS::AtLeastOnce, false, payload)
+                .map_err(|e| e.to_string())?;
+            published += 1;
+        }
+        tick += 1;
+    }
+    // Let the last actions arrive.
+    std::thread::sleep(Duration::from_secs(2));
+    let log = telegraf.stop();
+    let got = delays.lock().map_err(|e| e.to_string())?.clone();
+    let answered = got.len();
+    let mut counted: Vec<f64> = got
+        .iter()
+        .filter(|(at, _)| *at >= counted_from)
+        .map(|(_, d)| *d)
+        .collect();
+    counted.sort_by(f64::total_cmp);
+    let errors = log.lines().filter(|l| l.contains(" E! ")).count();
+    println!(
+        "telegraf={} robots={} hz={} sent={} answered={} lost={} counted={} p50_ms={:.2} p90_ms={:.2} p99_ms={:.2} max_ms={:.2} telegraf_errors={}",
+        args.version,
+        args.robots,
+        args.hz,
+        published,
+        answered,
+        published.saturating_sub(answered),
+        counted.len(),
+        percentile(&counted, 0.5),
+        percentile(&counted, 0.9),
+        percentile(&counted, 0.99),
+        counted.last().copied().unwrap_or(f64::NAN),
+        errors,
+    );
+    if errors > 0 {
+        eprintln!("Telegraf's errors:");
+        for l in log.lines().filter(|l| l.contains(" E! ")).take(10) {
+            eprintln!("  {l}");
+        }
+    }
+    Ok(())
+}
+
+fn wait_subscribed(broker: &servers::Mosquitto, id: &str, topic: &str) -> Result<(), String> {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let needle = format!(" {id} 1 {topic}");
+    while !broker.log().lines().any(|l| l.ends_with(&needle)) {
+        if Instant::now() > deadline {
+            return Err(format!("{id} never subscribed to {topic}"));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Ok(())
+}

@@ -1,0 +1,440 @@
+//! Every shipped conf run by the real Telegraf (both pinned versions, built by
+//! `tools/build-telegraf.sh`), against a real Mosquitto and InfluxDB 1.x, with the real binary
+//! as its `processors.execd` child (or, for the UDP conf, beside it): the recorded robot run goes
+//! in over MQTT as the robot's JSON, the actions come out on the robot's `action` topic and the
+//! verdicts land in InfluxDB, and both match, value for value, an offline `run` over the very
+//! records Telegraf fed the monitor (read back from InfluxDB, where the conf stores them too).
+//! Also `telegraf --test` on each conf.
+
+#[path = "support/mqtt_client.rs"]
+mod mqtt_client;
+#[path = "support/real_telegraf.rs"]
+mod real_telegraf;
+#[path = "support/recorded.rs"]
+mod recorded;
+#[path = "support/servers.rs"]
+mod servers;
+
+use real_telegraf::{Rewrite, Row, Telegraf};
+use recorded::BIN;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// Records of the recorded run each conf test sends.
+const RECORDS: usize = 40;
+
+/// A broker that logs subscriptions, so a test can wait until Telegraf has subscribed: its
+/// "Connected" comes before the SUBSCRIBE (`mqtt_consumer.go` `connect`).
+pub fn broker() -> Option<servers::Mosquitto> {
+    servers::Mosquitto::start_with(
+        "log_type error\nlog_type warning\nlog_type notice\nlog_type information\nlog_type subscribe\n",
+    )
+}
+
+/// Wait until a client whose id starts with `id` has subscribed to `topic` on `broker` (the
+/// broker logs `<time>: <client> <qos> <topic>`).
+pub fn wait_subscribed(broker: &servers::Mosquitto, id: &str, topic: &str) {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let subscribed = |log: &str| {
+        log.lines().any(|l| {
+            let t: Vec<&str> = l.split_whitespace().collect();
+            t.len() == 4 && t[1].starts_with(id) && t[2].len() == 1 && t[3] == topic
+        })
+    };
+    while !subscribed(&broker.log()) {
+        assert!(
+            Instant::now() < deadline,
+            "{id} never subscribed to {topic}; broker log:\n{}",
+            broker.log()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The first `n` records of the recorded run, as a file `replay` reads.
+fn head(dir: &tempfile::TempDir, n: usize) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(recorded::recorded_run_path()).unwrap();
+    let lines: Vec<&str> = text
+        .lines()
+        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'))
+        .take(n)
+        .collect();
+    let path = dir.path().join("head.lp");
+    std::fs::write(&path, lines.join("\n") + "\n").unwrap();
+    path
+}
+
+/// Publish the file's records as the robot's JSON messages on `topic`, as fast as possible.
+fn replay(path: &std::path::Path, port: u16, topic: &str) {
+    let out = Command::new(BIN)
+        .args(["replay", path.to_str().unwrap()])
+        .args(["--broker", &format!("mqtt://127.0.0.1:{port}")])
+        .args(["--topic", topic, "--speed", "0"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "replay: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// The arguments after `run` of the conf's `processors.execd` command.
+fn execd_args(conf: &str) -> Vec<String> {
+    let v: toml::Value = toml::from_str(conf).unwrap();
+    let command = v["processors"]["execd"][0]["command"].as_array().unwrap();
+    let args: Vec<String> = command
+        .iter()
+        .map(|a| a.as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(args[1], "run", "{args:?}");
+    args[2..].to_vec()
+}
+
+/// An offline `run` with `args` over `input` (no echo, no state, no wall clock): its output.
+fn offline(args: &[String], input: &str) -> String {
+    let mut args: Vec<String> = args.to_vec();
+    // Offline the state file is not wanted: the run starts from nothing, as Telegraf's did.
+    if let Some(i) = args.iter().position(|a| a == "--state") {
+        args.drain(i..i + 2);
+    }
+    if let Some(i) = args.iter().position(|a| a == "--state-interval") {
+        args.drain(i..i + 2);
+    }
+    let mut child = Command::new(BIN)
+        .arg("run")
+        .args(&args)
+        .args(["--no-passthrough", "--log-level", "warn"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let input = input.to_string();
+    let writer = std::thread::spawn(move || {
+        use std::io::Write;
+        stdin.write_all(input.as_bytes()).unwrap();
+    });
+    let out = child.wait_with_output().unwrap();
+    writer.join().unwrap();
+    assert!(
+        out.status.success(),
+        "offline run: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// `got` (through Telegraf) and `want` (offline) hold the same points: same times (after
+/// `time_div`), tags and field values. Timer-made rows (a `delay` firing on the wall clock while
+/// the robot is silent, after the last record) are Telegraf's alone and left out of `got`.
+fn assert_same(what: &str, got: &[Row], want: &[Row], time_div: i64, last_record: i64) {
+    let got: Vec<&Row> = got
+        .iter()
+        .filter(|r| r.time * time_div <= last_record)
+        .collect();
+    assert_eq!(
+        got.len(),
+        want.len(),
+        "{what}: {} points through Telegraf, {} offline",
+        got.len(),
+        want.len()
+    );
+    for (i, (g, w)) in got.iter().zip(want).enumerate() {
+        assert_eq!(g.time, w.time / time_div, "{what} #{i}: time");
+        assert_eq!(g.tags, w.tags, "{what} #{i}: tags");
+        assert_eq!(
+            g.fields.keys().collect::<Vec<_>>(),
+            w.fields.keys().collect::<Vec<_>>(),
+            "{what} #{i}: fields"
+        );
+        for (k, gv) in &g.fields {
+            assert!(
+                real_telegraf::same_value(gv, &w.fields[k]),
+                "{what} #{i} field {k}: {gv:?} through Telegraf, {:?} offline",
+                w.fields[k]
+            );
+        }
+    }
+}
+
+/// Order rows by (tags, time), the order in which each instance saw them.
+fn by_instance(mut rows: Vec<Row>) -> Vec<Row> {
+    rows.sort_by(|a, b| (&a.tags, a.time).cmp(&(&b.tags, b.time)));
+    rows
+}
+
+/// What a shipped robot conf (MQTT in, execd, MQTT actions and InfluxDB out) did under the real
+/// Telegraf, compared with the offline run: `topics` are the robots' topics, `action_topic` maps
+/// one to where its actions go.
+fn robot_conf_matches_offline(
+    conf_path: &str,
+    client_id: &str,
+    subscription: &str,
+    topics: &[&str],
+    action_topic: impl Fn(&str) -> String,
+) {
+    for (version, bin) in real_telegraf::versions() {
+        let Some(broker) = broker() else { return };
+        let Some(influx) = servers::Influxd::start() else {
+            return;
+        };
+        let state = tempfile::tempdir().unwrap();
+        let text = real_telegraf::shipped(conf_path);
+        let mut rewrite = Rewrite::robot(broker.port, Some(&influx.url("")));
+        if text.contains("/var/lib/tessla-telegraf") {
+            rewrite = rewrite.replace(
+                "/var/lib/tessla-telegraf",
+                state.path().display().to_string(),
+            );
+        }
+        let conf = rewrite.apply(&text);
+        let inboxes: Vec<_> = topics
+            .iter()
+            .map(|t| mqtt_client::subscribe(broker.port, &action_topic(t), &format!("robot-{t}")))
+            .collect();
+        let telegraf = Telegraf::start(version, &bin, &conf, &[]);
+        wait_subscribed(&broker, client_id, subscription);
+        let dir = tempfile::tempdir().unwrap();
+        let file = head(&dir, RECORDS);
+        for t in topics {
+            replay(&file, broker.port, t);
+        }
+        let mut actions = Vec::new();
+        for (t, inbox) in topics.iter().zip(&inboxes) {
+            let got = mqtt_client::collect(inbox, RECORDS, Duration::from_secs(60));
+            assert_eq!(
+                got.len(),
+                RECORDS,
+                "Telegraf {version}: actions on {}; log:\n{}",
+                action_topic(t),
+                telegraf.log()
+            );
+            actions.extend(got.iter().map(|(_, p)| real_telegraf::action_row(p)));
+        }
+        let log = telegraf.stop();
+        // Our stderr reaches Telegraf's log: at the default level only the summary, which
+        // Telegraf >= 1.37 logs at I!, older ones at E!.
+        let ours: Vec<&str> = log
+            .lines()
+            .filter(|l| l.contains("[processors.execd]") && l.contains("summary:"))
+            .collect();
+        assert_eq!(ours.len(), 1, "{log}");
+        let total = RECORDS * topics.len();
+        assert!(
+            ours[0].contains(&format!("summary: {total} records,"))
+                && ours[0].contains(" 0 parse errors, 0 late records,"),
+            "{log}"
+        );
+        if version >= "v1.37.0" {
+            assert!(ours[0].contains(" I! [processors.execd]"), "{}", ours[0]);
+        }
+        assert!(
+            !log.lines().any(|l| l.contains(" E! ")),
+            "Telegraf {version} logged an error:\n{log}"
+        );
+
+        // What Telegraf fed the monitor, as InfluxDB keeps it (the conf stores it too).
+        let records = real_telegraf::influx_rows(&influx, "telegraf", "mqtt_consumer");
+        assert_eq!(records.len(), total, "robot records in InfluxDB");
+        let last_record = records.iter().map(|r| r.time).max().unwrap();
+        let input = real_telegraf::to_lines("mqtt_consumer", &records);
+        let want = offline(&execd_args(&conf), &input);
+
+        let want_actions = by_instance(real_telegraf::parse_lines(&want, "action"));
+        assert_eq!(want_actions.len(), total);
+        assert_same(
+            &format!("Telegraf {version}: actions on MQTT"),
+            &by_instance(actions),
+            &want_actions,
+            1_000_000,
+            last_record,
+        );
+        assert_same(
+            &format!("Telegraf {version}: actions in InfluxDB"),
+            &by_instance(real_telegraf::influx_rows(&influx, "telegraf", "action")),
+            &want_actions,
+            1,
+            last_record,
+        );
+        let want_verdicts = by_instance(real_telegraf::parse_lines(&want, "tessla"));
+        assert_eq!(want_verdicts.len(), total);
+        assert_same(
+            &format!("Telegraf {version}: verdicts in InfluxDB"),
+            &by_instance(real_telegraf::influx_rows(&influx, "telegraf", "tessla")),
+            &want_verdicts,
+            1,
+            last_record,
+        );
+        eprintln!("Telegraf {version}: {conf_path}: {total} records, actions and verdicts as offline");
+    }
+}
+
+#[test]
+fn main_conf_under_real_telegraf_matches_an_offline_run() {
+    robot_conf_matches_offline(
+        "telegraf/telegraf.conf",
+        "telegraf-tessla-in",
+        "tessla",
+        &["tessla"],
+        |_| "action".to_string(),
+    );
+}
+
+#[test]
+fn fleet_conf_under_real_telegraf_matches_an_offline_run() {
+    robot_conf_matches_offline(
+        "telegraf/telegraf-fleet.conf",
+        "telegraf-tessla-fleet-in",
+        "tessla/+",
+        &["tessla/r1", "tessla/r2", "tessla/r3"],
+        |t| format!("{t}/action"),
+    );
+}
+
+#[test]
+fn udp_conf_under_real_telegraf_matches_an_offline_run() {
+    let text = real_telegraf::shipped("telegraf/telegraf-udp.conf");
+    // The monitor runs beside Telegraf, as the conf's header says.
+    let header = text
+        .lines()
+        .find_map(|l| l.trim_start_matches('#').trim().strip_prefix("tessla-telegraf run "))
+        .expect("the conf's header gives the monitor's command")
+        .to_string();
+    for (version, bin) in real_telegraf::versions() {
+        let Some(broker) = broker() else { return };
+        let Some(influx) = servers::Influxd::start() else {
+            return;
+        };
+        let monitor_addr = format!("127.0.0.1:{}", servers::free_port());
+        let telegraf_addr = format!("127.0.0.1:{}", servers::free_port());
+        let state = tempfile::tempdir().unwrap();
+        let args: Vec<String> = header
+            .replace("127.0.0.1:1653", &monitor_addr)
+            .replace("127.0.0.1:1654", &telegraf_addr)
+            .replace("/var/lib/tessla-telegraf", &state.path().display().to_string())
+            .split_whitespace()
+            .map(String::from)
+            .collect();
+        let mut monitor = Monitor(
+            Command::new(BIN)
+                .arg("run")
+                .args(&args)
+                .stderr(Stdio::piped())
+                .spawn()
+                .unwrap(),
+        );
+        let conf = Rewrite::robot_without_binary(broker.port, Some(&influx.url("")))
+            .replace("udp://127.0.0.1:1653", format!("udp://{monitor_addr}"))
+            .replace("udp://127.0.0.1:1654", format!("udp://{telegraf_addr}"))
+            .apply(&text);
+        let robot = mqtt_client::subscribe(broker.port, "action", "robot");
+        let telegraf = Telegraf::start(version, &bin, &conf, &[]);
+        wait_subscribed(&broker, "telegraf-tessla-udp-in", "tessla");
+        let dir = tempfile::tempdir().unwrap();
+        replay(&head(&dir, RECORDS), broker.port, "tessla");
+        let got = mqtt_client::collect(&robot, RECORDS, Duration::from_secs(60));
+        assert_eq!(got.len(), RECORDS, "Telegraf {version}: {}", telegraf.log());
+        let actions: Vec<Row> = got.iter().map(|(_, p)| real_telegraf::action_row(p)).collect();
+        let log = telegraf.stop();
+        assert!(!log.lines().any(|l| l.contains(" E! ")), "{log}");
+        // The monitor's own end: stdin is not its input in UDP mode; SIGTERM stops it.
+        let _ = Command::new("kill")
+            .args(["-TERM", &monitor.0.id().to_string()])
+            .status();
+        let status = monitor.0.wait().unwrap();
+        assert!(status.success(), "the UDP monitor: {status}");
+
+        let records = real_telegraf::influx_rows(&influx, "telegraf", "mqtt_consumer");
+        assert_eq!(records.len(), RECORDS, "no record came back into the loop");
+        let last_record = records.iter().map(|r| r.time).max().unwrap();
+        let want = offline(
+            &args
+                .iter()
+                .filter(|a| !a.starts_with("--udp") && !a.starts_with("127.0.0.1:"))
+                .cloned()
+                .collect::<Vec<_>>(),
+            &real_telegraf::to_lines("mqtt_consumer", &records),
+        );
+        let want_actions = real_telegraf::parse_lines(&want, "action");
+        assert_same(
+            &format!("Telegraf {version} UDP: actions on MQTT"),
+            &actions,
+            &want_actions,
+            1_000_000,
+            last_record,
+        );
+        assert_same(
+            &format!("Telegraf {version} UDP: verdicts in InfluxDB"),
+            &real_telegraf::influx_rows(&influx, "telegraf", "tessla"),
+            &real_telegraf::parse_lines(&want, "tessla"),
+            1,
+            last_record,
+        );
+    }
+}
+
+/// The UDP-mode monitor, killed if the test fails before it stops it.
+struct Monitor(std::process::Child);
+
+impl Drop for Monitor {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+#[test]
+fn first_spec_example_conf_under_real_telegraf_matches_an_offline_run() {
+    let text = real_telegraf::shipped("examples/first-spec/telegraf.conf");
+    let bin_dir = std::path::Path::new(BIN).parent().unwrap().to_path_buf();
+    let path = format!(
+        "{}:{}",
+        bin_dir.display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    for (version, bin) in real_telegraf::versions() {
+        let Some(broker) = broker() else { return };
+        let conf = Rewrite::new()
+            .replace("tcp://127.0.0.1:1883", format!("tcp://127.0.0.1:{}", broker.port))
+            .apply(&text);
+        // As the README runs it: from the repository's folder, `tessla-telegraf` on PATH.
+        let telegraf = Telegraf::start(version, &bin, &conf, &[("PATH", &path)]);
+        wait_subscribed(&broker, "", "tessla");
+        let battery = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("examples/first-spec/battery.lp");
+        let sent = std::fs::read_to_string(&battery)
+            .unwrap()
+            .lines()
+            .filter(|l| !l.trim().is_empty() && !l.starts_with('#'))
+            .count();
+        replay(&battery, broker.port, "tessla");
+        telegraf.wait_for(
+            |_| telegraf.stdout().lines().filter(|l| l.starts_with("mqtt_consumer")).count() >= sent,
+            Duration::from_secs(30),
+            "every message on its stdout",
+        );
+        let log = telegraf.log();
+        let out = telegraf.stdout();
+        let log = log + &telegraf.stop();
+        assert!(!log.lines().any(|l| l.contains(" E! ")), "{log}");
+        let records: Vec<&str> = out.lines().filter(|l| l.starts_with("mqtt_consumer")).collect();
+        assert_eq!(records.len(), sent);
+        let last_record = real_telegraf::parse_lines(&out, "mqtt_consumer")
+            .iter()
+            .map(|r| r.time)
+            .max()
+            .unwrap();
+        let want = offline(&execd_args(&conf), &(records.join("\n") + "\n"));
+        let want_checks = real_telegraf::parse_lines(&want, "battery_check");
+        assert!(!want_checks.is_empty());
+        assert_same(
+            &format!("Telegraf {version}: battery_check on stdout"),
+            &real_telegraf::parse_lines(&out, "battery_check"),
+            &want_checks,
+            1,
+            last_record,
+        );
+    }
+}
