@@ -51,11 +51,21 @@ fn parse_args() -> Result<Args, String> {
     while let Some(arg) = it.next() {
         let mut val = |name: &str| it.next().ok_or(format!("{name} needs a value"));
         match arg.as_str() {
-            "--robots" => a.robots = val("--robots")?.parse().map_err(|e| format!("--robots: {e}"))?,
-            "--seconds" => {
-                a.seconds = val("--seconds")?.parse().map_err(|e| format!("--seconds: {e}"))?
+            "--robots" => {
+                a.robots = val("--robots")?
+                    .parse()
+                    .map_err(|e| format!("--robots: {e}"))?
             }
-            "--warmup" => a.warmup = val("--warmup")?.parse().map_err(|e| format!("--warmup: {e}"))?,
+            "--seconds" => {
+                a.seconds = val("--seconds")?
+                    .parse()
+                    .map_err(|e| format!("--seconds: {e}"))?
+            }
+            "--warmup" => {
+                a.warmup = val("--warmup")?
+                    .parse()
+                    .map_err(|e| format!("--warmup: {e}"))?
+            }
             "--hz" => a.hz = val("--hz")?.parse().map_err(|e| format!("--hz: {e}"))?,
             "--telegraf" => a.version = val("--telegraf")?,
             "--set" => {
@@ -134,18 +144,24 @@ fn main() {
 
 fn run(args: &Args) -> Result<(), String> {
     if !std::path::Path::new(BIN).is_file() {
-        return Err(format!("{BIN} not built: run `cargo build --release` first"));
+        return Err(format!(
+            "{BIN} not built: run `cargo build --release` first"
+        ));
     }
     let telegraf_bin = real_telegraf::binary(&args.version)
         .ok_or(format!("Telegraf {} not built", args.version))?;
     let broker = servers::Mosquitto::start_with(
-        "log_type error\nlog_type warning\nlog_type notice\nlog_type information\nlog_type subscribe\nmax_queued_messages 100000\n",
+        "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\nlog_type information\nlog_type subscribe\nmax_queued_messages 100000\n",
     )
     .ok_or("mosquitto missing")?;
     let influx = servers::Influxd::start().ok_or("influxd missing")?;
     let fleet = args.robots > 1;
     let (conf_path, client_id, subscription) = if fleet {
-        ("telegraf/telegraf-fleet.conf", "telegraf-tessla-fleet-in", "tessla/+")
+        (
+            "telegraf/telegraf-fleet.conf",
+            "telegraf-tessla-fleet-in",
+            "tessla/+",
+        )
     } else {
         ("telegraf/telegraf.conf", "telegraf-tessla-in", "tessla")
     };
@@ -153,7 +169,10 @@ fn run(args: &Args) -> Result<(), String> {
     let text = real_telegraf::shipped(conf_path);
     let mut rewrite = real_telegraf::Rewrite::robot(broker.port, Some(&influx.url("")));
     if text.contains("/var/lib/tessla-telegraf") {
-        rewrite = rewrite.replace("/var/lib/tessla-telegraf", state.path().display().to_string());
+        rewrite = rewrite.replace(
+            "/var/lib/tessla-telegraf",
+            state.path().display().to_string(),
+        );
     }
     let mut conf = rewrite.apply(&text);
     for (k, v) in &args.sets {
@@ -180,15 +199,23 @@ fn run(args: &Args) -> Result<(), String> {
         .collect();
 
     // Publish instants per robot, matched in order by the actions' arrivals.
-    let sent: Arc<Vec<Mutex<VecDeque<Instant>>>> =
-        Arc::new((0..args.robots).map(|_| Mutex::new(VecDeque::new())).collect());
+    let sent: Arc<Vec<Mutex<VecDeque<Instant>>>> = Arc::new(
+        (0..args.robots)
+            .map(|_| Mutex::new(VecDeque::new()))
+            .collect(),
+    );
     let delays: Arc<Mutex<Vec<(Instant, f64)>>> = Arc::new(Mutex::new(Vec::new()));
 
-    let sub_filter = if fleet { "tessla/+/action".to_string() } else { "action".to_string() };
+    let sub_filter = if fleet {
+        "tessla/+/action".to_string()
+    } else {
+        "action".to_string()
+    };
     let mut sub_opts = MqttOptions::new("delay-robots", "127.0.0.1", broker.port);
     sub_opts.set_max_packet_size(1 << 20, 1 << 20);
     let (sub, mut sub_conn) = Client::new(sub_opts, 65536);
-    sub.subscribe(&sub_filter, QoS::AtLeastOnce).map_err(|e| e.to_string())?;
+    sub.subscribe(&sub_filter, QoS::AtLeastOnce)
+        .map_err(|e| e.to_string())?;
     let (ready_tx, ready_rx) = std::sync::mpsc::channel();
     {
         let sent = sent.clone();
@@ -212,7 +239,9 @@ fn run(args: &Args) -> Result<(), String> {
                             Some(0)
                         };
                         let Some(robot) = robot else { continue };
-                        let Some(queue) = sent.get(robot) else { continue };
+                        let Some(queue) = sent.get(robot) else {
+                            continue;
+                        };
                         let at = queue.lock().ok().and_then(|mut q| q.pop_front());
                         if let Some(at) = at
                             && let Ok(mut d) = delays.lock()

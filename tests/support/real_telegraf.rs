@@ -57,7 +57,10 @@ pub fn binary(version: &str) -> Option<PathBuf> {
     if let Some(tmp) = option_env!("CARGO_TARGET_TMPDIR") {
         let dir = Path::new(tmp).join("skipped-suites");
         let _ = std::fs::create_dir_all(&dir);
-        let _ = std::fs::write(dir.join(format!("needs-telegraf-{version}")), format!("{hint}\n"));
+        let _ = std::fs::write(
+            dir.join(format!("needs-telegraf-{version}")),
+            format!("{hint}\n"),
+        );
     }
     None
 }
@@ -100,8 +103,10 @@ impl Rewrite {
 
     /// The broker and InfluxDB only (a conf that runs no child, the UDP wiring).
     pub fn robot_without_binary(mqtt_port: u16, influx_url: Option<&str>) -> Rewrite {
-        let mut r = Rewrite::new()
-            .replace("tcp://127.0.0.1:1883", format!("tcp://127.0.0.1:{mqtt_port}"));
+        let mut r = Rewrite::new().replace(
+            "tcp://127.0.0.1:1883",
+            format!("tcp://127.0.0.1:{mqtt_port}"),
+        );
         if let Some(url) = influx_url {
             r = r.replace("http://127.0.0.1:8086", url);
         }
@@ -111,7 +116,10 @@ impl Rewrite {
     pub fn apply(&self, conf: &str) -> String {
         let mut text = conf.to_string();
         for (from, to) in &self.0 {
-            assert!(text.contains(from.as_str()), "the conf no longer names {from:?}");
+            assert!(
+                text.contains(from.as_str()),
+                "the conf no longer names {from:?}"
+            );
             text = text.replace(from.as_str(), to);
         }
         text
@@ -170,7 +178,8 @@ impl Telegraf {
             |log| {
                 log.lines()
                     .filter(|l| {
-                        (l.contains("[inputs.mqtt_consumer]") || l.contains("[inputs.nats_consumer]"))
+                        (l.contains("[inputs.mqtt_consumer]")
+                            || l.contains("[inputs.nats_consumer]"))
                             && l.contains("Connected")
                     })
                     .count()
@@ -294,7 +303,10 @@ impl Drop for Telegraf {
             let _ = child.kill();
             let _ = child.wait();
             for pid in kids {
-                let _ = Command::new("kill").arg("-KILL").arg(pid.to_string()).status();
+                let _ = Command::new("kill")
+                    .arg("-KILL")
+                    .arg(pid.to_string())
+                    .status();
             }
         }
     }
@@ -308,7 +320,10 @@ pub fn children_of(pid: u32) -> Vec<u32> {
     };
     for task in tasks.flatten() {
         if let Ok(text) = std::fs::read_to_string(task.path().join("children")) {
-            out.extend(text.split_whitespace().filter_map(|p| p.parse::<u32>().ok()));
+            out.extend(
+                text.split_whitespace()
+                    .filter_map(|p| p.parse::<u32>().ok()),
+            );
         }
     }
     out.sort_unstable();
@@ -350,7 +365,11 @@ pub fn influx_rows(influx: &crate::servers::Influxd, db: &str, measurement: &str
     let (_, keys) = influx.query(Some(db), &format!("SHOW TAG KEYS FROM \"{measurement}\""));
     let tag_keys: Vec<String> = keys["results"][0]["series"][0]["values"]
         .as_array()
-        .map(|v| v.iter().filter_map(|r| r[0].as_str().map(String::from)).collect())
+        .map(|v| {
+            v.iter()
+                .filter_map(|r| r[0].as_str().map(String::from))
+                .collect()
+        })
         .unwrap_or_default();
     let (_, fkeys) = influx.query(Some(db), &format!("SHOW FIELD KEYS FROM \"{measurement}\""));
     let field_types: BTreeMap<String, String> = fkeys["results"][0]["series"][0]["values"]
@@ -361,7 +380,11 @@ pub fn influx_rows(influx: &crate::servers::Influxd, db: &str, measurement: &str
                 .collect()
         })
         .unwrap_or_default();
-    let group = if tag_keys.is_empty() { String::new() } else { " GROUP BY *".to_string() };
+    let group = if tag_keys.is_empty() {
+        String::new()
+    } else {
+        " GROUP BY *".to_string()
+    };
     let (status, v) = influx.query(
         Some(db),
         &format!("SELECT * FROM \"{measurement}\"{group} ORDER BY time"),
@@ -434,7 +457,9 @@ pub fn to_lines(measurement: &str, rows: &[Row]) -> String {
                     Field::Float(f) => format!("{f:?}"),
                     Field::Int(i) => format!("{i}i"),
                     Field::Bool(b) => b.to_string(),
-                    Field::Str(s) => format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\"")),
+                    Field::Str(s) => {
+                        format!("\"{}\"", s.replace('\\', "\\\\").replace('"', "\\\""))
+                    }
                 };
                 format!("{}={value}", escape_key(k))
             })

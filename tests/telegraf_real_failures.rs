@@ -1,0 +1,413 @@
+//! The README's guarantee table, measured on the real Telegraf (both pinned versions) with the
+//! shipped `telegraf/telegraf.conf`, a real Mosquitto and InfluxDB, and the real binary as its
+//! child. Each robot message carries a sequence number (`seq`, a field the monitors ignore and
+//! echo), so what was lost, answered or processed twice is counted from what reached InfluxDB:
+//! the echo of every record the monitor answered lands there (measurement `mqtt_consumer`).
+//!
+//! - a child killed mid-run: the records lost while Telegraf restarts it (`restart_delay`);
+//! - Telegraf stopped (SIGTERM) and crashed (SIGKILL, with and without its child, as systemd's
+//!   `KillMode=mixed` kills it): whether `--state` is saved, what is lost and resent;
+//! - the last output lines at a stop: none lost;
+//! - a child that cannot start (a broken spec): Telegraf restarts it every `restart_delay` for
+//!   as long as it runs, dropping and acknowledging every record meanwhile.
+
+#[path = "support/mqtt_client.rs"]
+mod mqtt_client;
+#[path = "support/real_telegraf.rs"]
+mod real_telegraf;
+#[path = "support/recorded.rs"]
+mod recorded;
+#[path = "support/servers.rs"]
+mod servers;
+
+use real_telegraf::{Rewrite, Telegraf};
+use recorded::BIN;
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+use tessla_telegraf::replay::message::{MessageOptions, to_json};
+
+/// A broker that logs subscriptions (see `telegraf_real.rs`).
+fn broker() -> Option<servers::Mosquitto> {
+    servers::Mosquitto::start_with(
+        "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\nlog_type information\nlog_type subscribe\n",
+    )
+}
+
+fn wait_subscribed(broker: &servers::Mosquitto, id: &str, topic: &str, since: usize) {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let subscribed = |log: &str| {
+        log.lines().skip(since).any(|l| {
+            let t: Vec<&str> = l.split_whitespace().collect();
+            t.len() == 4 && t[1].starts_with(id) && t[2].len() == 1 && t[3] == topic
+        })
+    };
+    while !subscribed(&broker.log()) {
+        assert!(
+            Instant::now() < deadline,
+            "{id} never subscribed to {topic}; broker log:\n{}",
+            broker.log()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The recorded run's messages as the robot's JSON, each with `"seq": k` added.
+fn messages(n: usize) -> Vec<Vec<u8>> {
+    let text = std::fs::read_to_string(recorded::recorded_run_path()).unwrap();
+    let recording = tessla_telegraf::replay::read_lp::read(&text, None);
+    let options = MessageOptions {
+        string_fields: vec!["actualSpeed".into()],
+        time_key: None,
+    };
+    (0..n)
+        .map(|k| {
+            let sample = &recording.samples[k % recording.samples.len()];
+            let mut json = to_json(sample, &options);
+            json["seq"] = serde_json::json!(k);
+            serde_json::to_vec(&json).unwrap()
+        })
+        .collect()
+}
+
+/// The `seq` of every record the monitor echoed into InfluxDB, with how often.
+fn echoed(influx: &servers::Influxd) -> BTreeMap<i64, usize> {
+    let (status, v) = influx.query(Some("telegraf"), "SELECT seq FROM mqtt_consumer");
+    assert_eq!(status, 200, "{v}");
+    let mut out = BTreeMap::new();
+    for row in v["results"][0]["series"][0]["values"]
+        .as_array()
+        .into_iter()
+        .flatten()
+    {
+        *out.entry(row[1].as_f64().unwrap() as i64).or_insert(0) += 1;
+    }
+    out
+}
+
+fn count(influx: &servers::Influxd, q: &str) -> i64 {
+    let (_, v) = influx.query(Some("telegraf"), q);
+    v["results"][0]["series"][0]["values"][0][1]
+        .as_i64()
+        .unwrap_or(0)
+}
+
+/// Wait until InfluxDB holds `n` echoed records (Telegraf flushes every 100 ms).
+fn wait_echoed(influx: &servers::Influxd, n: usize, log: impl Fn() -> String) {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while echoed(influx).values().sum::<usize>() < n {
+        assert!(
+            Instant::now() < deadline,
+            "only {} of {n} records reached InfluxDB; Telegraf's log:\n{}",
+            echoed(influx).values().sum::<usize>(),
+            log()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+struct Setup {
+    broker: servers::Mosquitto,
+    influx: servers::Influxd,
+    state: tempfile::TempDir,
+    conf: String,
+}
+
+fn setup(edit: impl Fn(String) -> String) -> Option<Setup> {
+    let broker = broker()?;
+    let influx = servers::Influxd::start()?;
+    let state = tempfile::tempdir().unwrap();
+    let text = real_telegraf::shipped("telegraf/telegraf.conf");
+    let mut rewrite = Rewrite::robot(broker.port, Some(&influx.url("")));
+    if text.contains("/var/lib/tessla-telegraf") {
+        rewrite = rewrite.replace(
+            "/var/lib/tessla-telegraf",
+            state.path().display().to_string(),
+        );
+    }
+    let conf = edit(rewrite.apply(&text));
+    Some(Setup {
+        broker,
+        influx,
+        state,
+        conf,
+    })
+}
+
+/// Publish `payloads` at `hz` on `tessla`, calling `at(k)` before message k.
+fn publish_at(port: u16, payloads: &[Vec<u8>], hz: f64, mut at: impl FnMut(usize)) {
+    let publisher = mqtt_client::Publisher::connect(port, "robot");
+    let start = Instant::now();
+    let period = Duration::from_secs_f64(1.0 / hz);
+    for (k, p) in payloads.iter().enumerate() {
+        at(k);
+        let due = start + period.mul_f64(k as f64);
+        if let Some(wait) = due.checked_duration_since(Instant::now()) {
+            std::thread::sleep(wait);
+        }
+        publisher.publish("tessla", p.clone());
+    }
+}
+
+#[test]
+fn a_child_killed_mid_run_loses_about_restart_delay_of_records_all_acknowledged() {
+    for (version, bin) in real_telegraf::versions() {
+        let Some(s) = setup(|c| c) else { return };
+        let telegraf = Telegraf::start(version, &bin, &s.conf, &[]);
+        wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", 0);
+        let first = telegraf.wait_child(&[], Duration::from_secs(10));
+        let n = 60;
+        let kill_at = 20;
+        publish_at(s.broker.port, &messages(n), 5.0, |k| {
+            if k == kill_at {
+                let _ = std::process::Command::new("kill")
+                    .args(["-KILL", &first.to_string()])
+                    .status();
+            }
+        });
+        let second = telegraf.wait_child(&[first], Duration::from_secs(10));
+        assert_ne!(first, second);
+        // Everything after the gap is answered.
+        let deadline = Instant::now() + Duration::from_secs(30);
+        while !echoed(&s.influx).contains_key(&(n as i64 - 1)) {
+            assert!(Instant::now() < deadline, "{}", telegraf.log());
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        let log = telegraf.stop();
+        let seen = echoed(&s.influx);
+        let lost: Vec<i64> = (0..n as i64).filter(|k| !seen.contains_key(k)).collect();
+        assert!(
+            seen.values().all(|&c| c == 1),
+            "none processed twice: {seen:?}"
+        );
+        // One stretch: from the kill until the new child ran (restart_delay = 1 s at 5 Hz),
+        // plus at most the message written just before the kill.
+        assert!(
+            !lost.is_empty() && lost.len() <= 8,
+            "Telegraf {version}: lost {lost:?}\n{log}"
+        );
+        assert!(
+            lost.windows(2).all(|w| w[1] == w[0] + 1),
+            "one stretch: {lost:?}"
+        );
+        assert!(lost[0] >= kill_at as i64 - 1, "{lost:?}");
+        assert!(log.contains("Restarting in 1s"), "{log}");
+        // All acknowledged: a Telegraf started again on the same session gets nothing resent.
+        let again = Telegraf::start(version, &bin, &s.conf, &[]);
+        std::thread::sleep(Duration::from_secs(2));
+        let log2 = again.stop();
+        assert_eq!(echoed(&s.influx), seen, "nothing resent:\n{log2}");
+        eprintln!(
+            "Telegraf {version}: child killed at message {kill_at} of {n} at 5 Hz, restart_delay 1s: lost {} ({:?}..={:?})",
+            lost.len(),
+            lost.first(),
+            lost.last()
+        );
+    }
+}
+
+#[test]
+fn a_stop_loses_no_output_line_and_resends_only_what_was_not_acknowledged() {
+    for (version, bin) in real_telegraf::versions() {
+        let Some(s) = setup(|c| c) else { return };
+        let telegraf = Telegraf::start(version, &bin, &s.conf, &[]);
+        wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", 0);
+        let n = 300;
+        // A burst, and Telegraf stopped while it is still being processed.
+        let payloads = messages(n);
+        let publisher = mqtt_client::Publisher::connect(s.broker.port, "robot");
+        for p in &payloads {
+            publisher.publish("tessla", p.clone());
+        }
+        let deadline = Instant::now() + Duration::from_secs(30);
+        while echoed(&s.influx).len() < 20 {
+            assert!(Instant::now() < deadline, "{}", telegraf.log());
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let log = telegraf.stop();
+        let first_run = echoed(&s.influx);
+        // Our summary (stderr, written last) reached Telegraf's log.
+        let summaries: Vec<&str> = log.lines().filter(|l| l.contains("summary:")).collect();
+        assert_eq!(summaries.len(), 1, "Telegraf {version}:\n{log}");
+        // Every record the monitor answered has its verdict and action too: no last line lost.
+        let records = first_run.values().sum::<usize>() as i64;
+        assert_eq!(
+            count(&s.influx, "SELECT count(p2_violated) FROM tessla"),
+            records,
+            "Telegraf {version}: verdicts of the records answered\n{log}"
+        );
+        assert_eq!(
+            count(&s.influx, "SELECT count(speed) FROM action"),
+            records,
+            "Telegraf {version}: actions of the records answered\n{log}"
+        );
+        // Started again on the same session: the rest arrives, nothing is lost.
+        let broker_log_len = s.broker.log().lines().count();
+        let again = Telegraf::start(version, &bin, &s.conf, &[]);
+        wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", broker_log_len);
+        wait_echoed(&s.influx, n, || again.log());
+        let log2 = again.stop();
+        let both = echoed(&s.influx);
+        let lost: Vec<i64> = (0..n as i64).filter(|k| !both.contains_key(k)).collect();
+        assert!(
+            lost.is_empty(),
+            "Telegraf {version}: lost {lost:?}\n{log}\n{log2}"
+        );
+        let twice = both.values().filter(|&&c| c > 1).count();
+        eprintln!(
+            "Telegraf {version}: stopped during a burst of {n}: {} answered before the stop, {twice} processed again after it, 0 lost",
+            first_run.len()
+        );
+    }
+}
+
+#[test]
+fn a_broken_spec_is_restarted_every_restart_delay_and_its_records_are_acknowledged_and_lost() {
+    for (version, bin) in real_telegraf::versions() {
+        let dir = tempfile::tempdir().unwrap();
+        let spec = dir.path().join("broken.tessla");
+        std::fs::write(&spec, "in x: Events[Int]\nout y = x +\n").unwrap();
+        let spec_arg = format!("{:?}", spec.display().to_string());
+        let Some(s) =
+            setup(|c| c.replacen("\"run\"", &format!("\"run\", \"--spec\", {spec_arg}"), 1))
+        else {
+            return;
+        };
+        let telegraf = Telegraf::start(version, &bin, &s.conf, &[]);
+        wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", 0);
+        publish_at(s.broker.port, &messages(15), 5.0, |_| {});
+        std::thread::sleep(Duration::from_secs(1));
+        let log = telegraf.stop();
+        let restarts = log.matches("Restarting in 1s").count();
+        assert!(restarts >= 3, "Telegraf {version} restarts it:\n{log}");
+        // Our diagnostic reaches Telegraf's log, with the file, line and column.
+        assert!(log.contains("broken.tessla:2:"), "{log}");
+        assert!(echoed(&s.influx).is_empty());
+        // Acknowledged: a Telegraf with a good spec on the same session gets none of them.
+        let good = s.conf.replace(&format!(", \"--spec\", {spec_arg}"), "");
+        let again = Telegraf::start(version, &bin, &good, &[]);
+        std::thread::sleep(Duration::from_secs(2));
+        let _ = again.stop();
+        assert!(
+            echoed(&s.influx).is_empty(),
+            "Telegraf {version}: dropped records were acknowledged"
+        );
+        eprintln!(
+            "Telegraf {version}: broken spec restarted {restarts} times in about 4 s, 15 records acknowledged and lost"
+        );
+    }
+}
+
+/// The state file the conf's `--state` names, in the test's state folder.
+fn state_file(s: &Setup) -> std::path::PathBuf {
+    let v: toml::Value = toml::from_str(&s.conf).unwrap();
+    let command: Vec<String> = v["processors"]["execd"][0]["command"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|a| a.as_str().unwrap().to_string())
+        .collect();
+    let i = command
+        .iter()
+        .position(|a| a == "--state")
+        .expect("the shipped conf keeps the monitors' state (--state)");
+    let path = std::path::PathBuf::from(&command[i + 1]);
+    assert!(path.starts_with(s.state.path()), "{}", path.display());
+    path
+}
+
+fn modified(path: &std::path::Path) -> Option<std::time::SystemTime> {
+    std::fs::metadata(path).and_then(|m| m.modified()).ok()
+}
+
+/// Publish a burst of `n` records and wait until the monitor has answered them all.
+fn feed(s: &Setup, telegraf: &Telegraf, n: usize) {
+    let before = echoed(&s.influx).values().sum::<usize>();
+    let publisher = mqtt_client::Publisher::connect(s.broker.port, "robot");
+    for p in messages(n) {
+        publisher.publish("tessla", p);
+    }
+    wait_echoed(&s.influx, before + n, || telegraf.log());
+}
+
+/// How the next Telegraf's monitor starts: the `state:` line it logs.
+fn next_start(s: &Setup, version: &str, bin: &std::path::Path) -> String {
+    let since = s.broker.log().lines().count();
+    let t = Telegraf::start(version, bin, &s.conf, &[]);
+    wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", since);
+    t.wait_for(
+        |l| l.contains("state: "),
+        Duration::from_secs(30),
+        "the monitor's state line",
+    );
+    let log = t.stop();
+    log.lines()
+        .find(|l| l.contains("state: "))
+        .unwrap_or_default()
+        .to_string()
+}
+
+#[test]
+fn telegraf_stopped_or_crashed_and_the_state_it_leaves() {
+    for (version, bin) in real_telegraf::versions() {
+        // Stopped (systemctl stop: SIGTERM to Telegraf, which closes our stdin): saved.
+        let Some(s) = setup(|c| c) else { return };
+        let path = state_file(&s);
+        let telegraf = Telegraf::start(version, &bin, &s.conf, &[]);
+        wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", 0);
+        feed(&s, &telegraf, 20);
+        let log = telegraf.stop();
+        assert!(
+            path.is_file(),
+            "Telegraf {version}: SIGTERM: no state saved\n{log}"
+        );
+        let line = next_start(&s, version, &bin);
+        assert!(line.contains("restored 1 monitor instances"), "{line}");
+
+        // Crashed alone (SIGKILL to Telegraf; without systemd the child lives on): the child
+        // reads EOF on its stdin, saves and exits by itself.
+        let Some(s) = setup(|c| c) else { return };
+        let path = state_file(&s);
+        let telegraf = Telegraf::start(version, &bin, &s.conf, &[]);
+        wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", 0);
+        feed(&s, &telegraf, 20);
+        let child = telegraf.wait_child(&[], Duration::from_secs(5));
+        let _ = telegraf.crash();
+        let deadline = Instant::now() + Duration::from_secs(20);
+        while real_telegraf::alive(child) {
+            assert!(Instant::now() < deadline, "the orphaned child never exited");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        assert!(
+            path.is_file(),
+            "Telegraf {version}: SIGKILL alone: no state saved"
+        );
+        let line = next_start(&s, version, &bin);
+        assert!(line.contains("restored 1 monitor instances"), "{line}");
+
+        // Crashed under systemd (KillMode=mixed: when Telegraf dies, the rest of its cgroup,
+        // our child, is SIGKILLed at once): only the last --state-interval save is there.
+        let Some(s) = setup(|c| c) else { return };
+        let path = state_file(&s);
+        let telegraf = Telegraf::start(version, &bin, &s.conf, &[]);
+        wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", 0);
+        feed(&s, &telegraf, 20);
+        let child = telegraf.wait_child(&[], Duration::from_secs(5));
+        let _ = std::process::Command::new("kill")
+            .args(["-KILL", &child.to_string()])
+            .status();
+        let _ = telegraf.crash();
+        let saved = modified(&path);
+        let line = next_start(&s, version, &bin);
+        eprintln!(
+            "Telegraf {version}: SIGTERM: saved; SIGKILL alone: saved by the orphaned child; SIGKILL with the child (KillMode=mixed): {} -> next start: {line}",
+            if saved.is_some() {
+                "the last periodic save"
+            } else {
+                "nothing saved (run shorter than --state-interval)"
+            }
+        );
+        if saved.is_none() {
+            assert!(line.contains("starting fresh"), "{line}");
+        }
+    }
+}
