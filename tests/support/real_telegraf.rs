@@ -178,9 +178,12 @@ impl Telegraf {
             |log| {
                 log.lines()
                     .filter(|l| {
-                        (l.contains("[inputs.mqtt_consumer]")
-                            || l.contains("[inputs.nats_consumer]"))
-                            && l.contains("Connected")
+                        // mqtt_consumer logs "Connected [...]" (then subscribes: wait for the
+                        // broker's SUBSCRIBE too), nats_consumer "Started the NATS consumer
+                        // service" once subscribed.
+                        (l.contains("[inputs.mqtt_consumer]") && l.contains("Connected"))
+                            || (l.contains("[inputs.nats_consumer]")
+                                && l.contains("Started the NATS consumer service"))
                     })
                     .count()
                     >= inputs
