@@ -494,9 +494,7 @@ fn first_spec_example_conf_under_real_telegraf_matches_an_offline_run() {
             Duration::from_secs(30),
             "every message on its stdout",
         );
-        let log = telegraf.log();
-        let out = telegraf.stdout();
-        let log = log + &telegraf.stop();
+        let (log, out) = telegraf.stop_with_stdout();
         assert_no_error(version, &log);
         let records: Vec<&str> = out
             .lines()
@@ -513,5 +511,141 @@ fn first_spec_example_conf_under_real_telegraf_matches_an_offline_run() {
             1,
             &["silent"],
         );
+    }
+}
+
+#[test]
+fn main_conf_with_the_robots_time_rounds_as_telegraf_and_drops_a_redelivery() {
+    for (version, bin) in real_telegraf::versions() {
+        let Some(broker) = broker() else { return };
+        let Some(influx) = servers::Influxd::start() else {
+            return;
+        };
+        let state = tempfile::tempdir().unwrap();
+        let text = real_telegraf::shipped("telegraf/telegraf.conf");
+        let mut rewrite = Rewrite::robot(broker.port, Some(&influx.url("")))
+            // The variant the conf's comment describes.
+            .replace(
+                "  json_string_fields = [\"actualSpeed\"]\n",
+                "  json_string_fields = [\"actualSpeed\"]\n  json_time_key = \"time\"\n  json_time_format = \"unix_ns\"\n",
+            );
+        if text.contains("/var/lib/tessla-telegraf") {
+            rewrite = rewrite.replace(
+                "/var/lib/tessla-telegraf",
+                state.path().display().to_string(),
+            );
+        }
+        let conf = rewrite.apply(&text);
+        let robot = mqtt_client::subscribe(broker.port, "action", "robot");
+        let telegraf = Telegraf::start(version, &bin, &conf, &[]);
+        wait_subscribed(&broker, "telegraf-tessla-in", "tessla");
+        let publisher = mqtt_client::Publisher::connect(broker.port, "robot-pub");
+        // 129 ns past a multiple of 256: float64 rounds it up to the next multiple.
+        let message = |i: usize, ns: i64| {
+            format!(
+                r#"{{"expectedSpeed":0.{i}5,"actualSpeed":"0.{i}4","lidar":[1,2,3],"time":{ns}}}"#
+            )
+            .into_bytes()
+        };
+        publisher.publish("tessla", message(0, 1_700_000_000_000_000_129));
+        publisher.publish("tessla", message(1, 1_700_000_000_200_000_001));
+        // The second message again, as a QoS 1 redelivery: Telegraf parses it again (another
+        // field order), the monitor drops the exact duplicate.
+        publisher.publish("tessla", message(1, 1_700_000_000_200_000_001));
+        let got = mqtt_client::collect(&robot, 2, Duration::from_secs(30));
+        assert_eq!(got.len(), 2, "{}", telegraf.log());
+        assert!(
+            robot.recv_timeout(Duration::from_secs(1)).is_err(),
+            "Telegraf {version}: no action for the duplicate"
+        );
+        let log = telegraf.stop();
+        let actions: Vec<Row> = got
+            .iter()
+            .map(|(_, p)| real_telegraf::action_row(p))
+            .collect();
+        assert_eq!(actions[0].time, 1_700_000_000_000);
+        assert_eq!(actions[1].time, 1_700_000_000_200);
+        let summary = log
+            .lines()
+            .find(|l| l.contains("summary:"))
+            .unwrap_or_else(|| panic!("Telegraf {version}: no summary\n{log}"));
+        assert!(
+            summary.contains("summary: 3 records,") && summary.contains(" 1 duplicates"),
+            "{summary}"
+        );
+        let times: Vec<i64> = real_telegraf::influx_rows(&influx, "telegraf", "mqtt_consumer")
+            .iter()
+            .map(|r| r.time)
+            .collect();
+        assert_eq!(
+            times,
+            vec![1_700_000_000_000_000_256, 1_700_000_000_200_000_000],
+            "Telegraf {version}: the robot's ns times as float64"
+        );
+    }
+}
+
+#[test]
+fn every_mqtt_conf_passes_telegraf_test() {
+    for (version, bin) in real_telegraf::versions() {
+        let Some(broker) = broker() else { return };
+        let state = tempfile::tempdir().unwrap();
+        for path in [
+            "telegraf/telegraf.conf",
+            "telegraf/telegraf-fleet.conf",
+            "telegraf/telegraf-udp.conf",
+            "examples/first-spec/telegraf.conf",
+        ] {
+            let text = real_telegraf::shipped(path);
+            let mut r = Rewrite::new().replace(
+                "tcp://127.0.0.1:1883",
+                format!("tcp://127.0.0.1:{}", broker.port),
+            );
+            for (from, to) in [
+                ("\"/usr/bin/tessla-telegraf\"", format!("{BIN:?}")),
+                (
+                    "/var/lib/tessla-telegraf",
+                    state.path().display().to_string(),
+                ),
+                (
+                    "udp://127.0.0.1:1654",
+                    format!("udp://127.0.0.1:{}", servers::free_port()),
+                ),
+            ] {
+                if text.contains(from) {
+                    r = r.replace(from, to);
+                }
+            }
+            let dir = tempfile::tempdir().unwrap();
+            let conf = dir.path().join("telegraf.conf");
+            std::fs::write(&conf, r.apply(&text)).unwrap();
+            let bin_dir = std::path::Path::new(BIN).parent().unwrap();
+            let out = Command::new(&bin)
+                .arg("--config")
+                .arg(&conf)
+                .args(["--test", "--test-wait", "2"])
+                .current_dir(env!("CARGO_MANIFEST_DIR"))
+                .env(
+                    "PATH",
+                    format!(
+                        "{}:{}",
+                        bin_dir.display(),
+                        std::env::var("PATH").unwrap_or_default()
+                    ),
+                )
+                .output()
+                .unwrap();
+            let log = String::from_utf8_lossy(&out.stderr);
+            assert!(
+                out.status.success(),
+                "Telegraf {version} --test {path}:\n{log}"
+            );
+            // --test exits 0 even when an input fails to start: its log must not say so.
+            assert!(
+                !log.contains("E! [agent] Starting input") && !log.contains("Error running agent"),
+                "Telegraf {version} --test {path}:\n{log}"
+            );
+            assert!(log.contains("Loaded inputs:"), "{log}");
+        }
     }
 }

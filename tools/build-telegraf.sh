@@ -12,7 +12,7 @@
 # Needs Go (>= the version Telegraf's go.mod names: 1.26 for v1.39.3) and the Go module proxy.
 set -euo pipefail
 
-VERSIONS_DEFAULT="v1.33.3 v1.39.3"
+VERSIONS_DEFAULT="v1.33.2 v1.33.3 v1.39.3"
 # Every plugin a shipped conf or a test names, plus the parsers and serializers their
 # data_format options select.
 TAGS="custom"

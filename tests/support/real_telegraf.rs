@@ -260,6 +260,14 @@ impl Telegraf {
         self.log()
     }
 
+    /// As [`Telegraf::stop`], also returning what Telegraf wrote to its stdout (`outputs.file`
+    /// flushes at the stop).
+    pub fn stop_with_stdout(mut self) -> (String, String) {
+        self.signal("TERM");
+        self.wait_exit(Duration::from_secs(30));
+        (self.log(), self.stdout())
+    }
+
     /// SIGKILL Telegraf alone (a crash): its child is not signalled.
     pub fn crash(mut self) -> String {
         self.signal("KILL");
