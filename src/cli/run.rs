@@ -8,7 +8,9 @@ use crate::telegraf::binding::parse_tags;
 use crate::telegraf::processor::{Options, Processor};
 use crate::telegraf::reload::{self, SpecSource};
 use crate::telegraf::state;
+use crate::transport::watchdog::{self, Watch};
 use crate::transport::{self, Ending};
+use std::sync::Arc;
 
 pub fn run(args: RunArgs) -> CliResult {
     log::set_level(args.log_level);
@@ -67,8 +69,12 @@ pub fn run(args: RunArgs) -> CliResult {
     let fleet_opts = opts.clone();
     let mut proc =
         Processor::new(loaded.program, opts).map_err(|e| CliError::spec(format!("spec: {e}")))?;
+    let watch = Arc::new(Watch::default());
+    proc.watch_with(watch.lane());
+    watchdog::spawn(watch.clone(), Some(args.step_timeout))
+        .map_err(|e| CliError::io(format!("cannot start the step watchdog: {e}")))?;
     if let Some(state::Target::Nats(url)) = &args.state {
-        return super::run_fleet::run(&args, url, proc, fleet_opts, &source, &state_ctx);
+        return super::run_fleet::run(&args, url, proc, fleet_opts, &source, &state_ctx, watch);
     }
     let state_file = match &args.state {
         Some(state::Target::File(path)) => Some(path.clone()),
@@ -90,6 +96,7 @@ pub fn run(args: RunArgs) -> CliResult {
         periodic: args
             .state_interval
             .map(|d| (d, &mut save_now as &mut dyn FnMut(&Processor))),
+        watch,
     };
     // Threads spread instances (default: the machine's cores). The state file holds one
     // processor's instances and UDP mode reads datagrams one at a time, so both keep one thread.
