@@ -2,7 +2,9 @@
 //! (split record in, parse, bind, engine step, output formatting, pass-through) for the P2
 //! workload's record with bench/p2.tessla, and a full robot message (360 beams) with the bundled
 //! robot spec, its fields sorted and in Telegraf's random order (`*_unordered`). The timestamp
-//! advances every iteration, as in a real run.
+//! advances every iteration, as in a real run. `p2_spec_p2_record_watched` is the P2 case with the
+//! step watchdog's marks on, as `run` always has them (`--step-timeout`): its difference from
+//! `p2_spec_p2_record` is what the watchdog costs a record.
 //! Run with `make bench` (or `cargo bench --bench record_path`).
 
 #[path = "../crates/lineproto/benches/support/workload.rs"]
@@ -57,9 +59,13 @@ fn benches(c: &mut Criterion) {
     run(
         c,
         "p2_spec_p2_record",
-        Processor::new(p2, Options::default()).unwrap(),
+        Processor::new(p2.clone(), Options::default()).unwrap(),
         P2_LINE,
     );
+    let mut watched = Processor::new(p2, Options::default()).unwrap();
+    let watch = tessla_telegraf::transport::watchdog::Watch::default();
+    watched.watch_with(watch.lane());
+    run(c, "p2_spec_p2_record_watched", watched, P2_LINE);
     let robot = tessla_telegraf::bundled::load(&LoadOptions::default())
         .unwrap()
         .program;

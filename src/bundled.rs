@@ -32,6 +32,10 @@ pub const FILES: &[(&str, &str)] = &[
         include_str!("../specs/lib/p3_lidar.tessla"),
     ),
     ("lib/link.tessla", include_str!("../specs/lib/link.tessla")),
+    (
+        "lib/action.tessla",
+        include_str!("../specs/lib/action.tessla"),
+    ),
     ("robot.tessla", include_str!("../specs/robot.tessla")),
 ];
 

@@ -161,11 +161,27 @@ fn shipped_conf_command_runs_as_telegraf_would() {
         .collect();
     assert_eq!(cmd[0], "/usr/bin/tessla-telegraf");
     assert_eq!(execd["namepass"][0].as_str(), Some("mqtt_consumer"));
-    let args: Vec<&str> = cmd[1..].iter().map(String::as_str).collect();
-    let input = fixture_lines(3).concat();
-    let (out, err, code) = run_all(&args, &input);
+    // The monitors' state is kept in the systemd drop-in's StateDirectory; here in a temp dir.
+    let state = "/var/lib/tessla-telegraf/telegraf.state";
+    assert!(cmd.iter().any(|a| a == state), "{cmd:?}");
+    assert!(cmd.windows(2).any(|w| w[0] == "--state-interval"), "{cmd:?}");
+    let dir = tempfile::tempdir().unwrap();
+    let here = dir.path().join("telegraf.state");
+    let args: Vec<&str> = cmd[1..]
+        .iter()
+        .map(|a| if a == state { here.to_str().unwrap() } else { a })
+        .collect();
+    let lines = fixture_lines(6);
+    let (out, err, code) = run_all(&args, &lines[..3].concat());
     assert_eq!(code, 0, "{err}");
     assert_eq!(out.lines().filter(|l| l.starts_with("action ")).count(), 3);
+    assert!(here.exists(), "the state was saved: {err}");
+    // A restart (Telegraf's reload) continues the monitors: the next action is the 4th.
+    let (out, err, code) = run_all(&args, &lines[3..].concat());
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("state: restored 1 monitor instances"), "{err}");
+    let first = out.lines().find(|l| l.starts_with("action ")).unwrap();
+    assert!(first.contains(",seq=4i,"), "{first}");
     // The action metric is what outputs.mqtt's namepass selects.
     let mqtt = &v["outputs"]["mqtt"][0];
     assert_eq!(mqtt["namepass"][0].as_str(), Some("action"));

@@ -292,9 +292,22 @@ fn shipped_fleet_conf_command_keeps_robots_apart() {
         topic.contains(&format!("{{{{ .Tag \"{by}\" }}}}")),
         "{topic}"
     );
-    let (out, err, code) = run(&cmd[1..], &fleet(&[0, 1, 2]));
+    // The monitors' state is kept in the systemd drop-in's StateDirectory; here in a temp dir.
+    let state = "/var/lib/tessla-telegraf/telegraf-fleet.state";
+    assert!(cmd.contains(&state), "{cmd:?}");
+    let dir = tempfile::tempdir().unwrap();
+    let here = dir.path().join("telegraf-fleet.state");
+    let args: Vec<&str> = cmd[1..]
+        .iter()
+        .map(|a| if *a == state { here.to_str().unwrap() } else { a })
+        .collect();
+    let (out, err, code) = run(&args, &fleet(&[0, 1, 2]));
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("3 instances"), "{err}");
+    assert!(
+        err.contains("state: saved 3 monitor instances"),
+        "{err}"
+    );
     for k in 0..ROBOTS {
         let actions = out
             .lines()

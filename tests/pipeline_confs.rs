@@ -33,6 +33,20 @@ fn conf_text(name: &str) -> String {
     .unwrap()
 }
 
+/// The shipped conf `name` as a test runs it: the monitors' `--state` files in `dir` instead of
+/// the systemd drop-in's StateDirectory (each test its own, as tests run at once).
+fn runnable(name: &str, dir: &tempfile::TempDir) -> String {
+    let text = conf_text(name);
+    assert!(
+        text.contains("\"--state\", \"/var/lib/tessla-telegraf/"),
+        "{name} keeps the monitors' state"
+    );
+    text.replace(
+        "/var/lib/tessla-telegraf/",
+        &format!("{}/", dir.path().display()),
+    )
+}
+
 fn endpoints(port: u16, influx: Option<&servers::Influxd>) -> Endpoints {
     Endpoints {
         mqtt_port: port,
@@ -103,10 +117,24 @@ fn actions(rx: &std::sync::mpsc::Receiver<(std::time::Instant, Vec<u8>)>, n: usi
         .collect()
 }
 
-/// Telegraf >= 1.37 logs our stderr at the levels we give; a clean run says only the summary.
+/// Telegraf >= 1.37 logs our stderr at the levels we give; a clean run says only where its
+/// `--state` started from (a fresh start or the instances restored), its save at the end, and
+/// the summary.
 fn assert_quiet(stats: &Stats, records: usize) {
-    assert_eq!(stats.stderr.len(), 1, "{:?}", stats.stderr);
+    assert_eq!(stats.stderr.len(), 3, "{:?}", stats.stderr);
     let (level, msg) = &stats.stderr[0];
+    assert_eq!(*level, 'I');
+    assert!(
+        msg.starts_with("state: ")
+            && (msg.ends_with(" does not exist yet; starting fresh")
+                || msg.contains(": restored ")
+                || msg.starts_with("state: restored ")),
+        "{msg}"
+    );
+    let (level, msg) = &stats.stderr[1];
+    assert_eq!(*level, 'I');
+    assert!(msg.starts_with("state: saved "), "{msg}");
+    let (level, msg) = &stats.stderr[2];
     assert_eq!(*level, 'I');
     assert!(
         msg.starts_with(&format!("summary: {records} records,")),
@@ -124,10 +152,10 @@ fn main_conf_as_shipped_end_to_end() {
         return;
     };
     let env = endpoints(broker.port, Some(&influx));
-    let conf = Conf::read(&conf_text("telegraf.conf"), &env);
+    let dir = tempfile::tempdir().unwrap();
+    let conf = Conf::read(&runnable("telegraf.conf", &dir), &env);
     let robot = mqtt_client::subscribe(broker.port, "action", "robot");
     let telegraf = Telegraf::start(&conf, &env);
-    let dir = tempfile::tempdir().unwrap();
     let t0 = now_ns();
     replay(&head(&dir, RECORDS), broker.port, "tessla");
     let got = actions(&robot, RECORDS);
@@ -145,6 +173,17 @@ fn main_conf_as_shipped_end_to_end() {
             "{ms} not in [{t0}, {t1}] ns"
         );
         assert!(a["fields"]["speed"].is_number() && a["fields"]["augmented"].is_boolean());
+    }
+    // What a robot needs to refuse a stale or repeated action: its sequence number in order,
+    // and the time it is valid until, 400 ms after the action's (ns; the timestamp is in ms).
+    for (i, a) in got.iter().enumerate() {
+        assert_eq!(a["fields"]["seq"], i + 1, "{a}");
+        let until = a["fields"]["valid_until"].as_i64().unwrap();
+        let ms = a["timestamp"].as_i64().unwrap();
+        assert!(
+            (0..MS).contains(&(until - 400_000_000 - ms * MS)),
+            "{until} vs {ms} ms: {a}"
+        );
     }
     let distinct: std::collections::BTreeSet<i64> = got
         .iter()
@@ -172,7 +211,8 @@ fn main_conf_with_the_robots_time_rounds_as_telegraf() {
     };
     let env = endpoints(broker.port, Some(&influx));
     // The variant the conf's comment describes.
-    let text = conf_text("telegraf.conf").replace(
+    let dir = tempfile::tempdir().unwrap();
+    let text = runnable("telegraf.conf", &dir).replace(
         "  json_string_fields = [\"actualSpeed\"]\n",
         "  json_string_fields = [\"actualSpeed\"]\n  json_time_key = \"time\"\n  json_time_format = \"unix_ns\"\n",
     );
@@ -228,7 +268,8 @@ fn fleet_conf_as_shipped_end_to_end() {
         return;
     };
     let env = endpoints(broker.port, Some(&influx));
-    let conf = Conf::read(&conf_text("telegraf-fleet.conf"), &env);
+    let dir = tempfile::tempdir().unwrap();
+    let conf = Conf::read(&runnable("telegraf-fleet.conf", &dir), &env);
     let robots = ["tessla/r1", "tessla/r2", "tessla/r3"];
     let inboxes: Vec<_> = robots
         .iter()
@@ -237,7 +278,6 @@ fn fleet_conf_as_shipped_end_to_end() {
     // Anything on the wrong topic would land here.
     let stray = mqtt_client::subscribe(broker.port, "#", "watcher");
     let telegraf = Telegraf::start(&conf, &env);
-    let dir = tempfile::tempdir().unwrap();
     let file = head(&dir, 10);
     for r in robots {
         replay(&file, broker.port, r);
@@ -251,7 +291,16 @@ fn fleet_conf_as_shipped_end_to_end() {
     }
     let stats = telegraf.stop();
     assert_quiet(&stats, 30);
-    assert!(stats.stderr[0].1.ends_with(", 3 instances, 0 evicted"));
+    assert!(
+        stats.stderr[2].1.ends_with(", 3 instances, 0 evicted"),
+        "{:?}",
+        stats.stderr
+    );
+    assert!(
+        stats.stderr[1].1.starts_with("state: saved 3 monitor instances"),
+        "{:?}",
+        stats.stderr
+    );
     let topics: std::collections::BTreeSet<String> = std::iter::from_fn(|| {
         stray
             .recv_timeout(Duration::from_millis(300))
@@ -311,21 +360,26 @@ fn udp_conf_as_shipped_end_to_end_and_loop_free() {
         ("udp://127.0.0.1:1654".into(), telegraf_addr.clone()),
     ];
     let text = conf_text("telegraf-udp.conf");
-    // The command the conf's header gives, on the test's ports.
-    let header = "tessla-telegraf run --udp-listen 127.0.0.1:1653 --udp-send 127.0.0.1:1654";
+    // The command the conf's header gives, on the test's ports and with its state in a temp dir.
+    let header = "tessla-telegraf run --udp-listen 127.0.0.1:1653 --udp-send 127.0.0.1:1654 \
+                  --state /var/lib/tessla-telegraf/telegraf-udp.state --state-interval 30s";
     assert!(text.contains(header));
     let conf = Conf::read(&text, &env);
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("telegraf-udp.state");
     let mut monitor = Monitor(
         Command::new(BIN)
             .args(["run", "--udp-listen", &monitor_addr])
             .args(["--udp-send", &telegraf_addr])
+            .arg("--state")
+            .arg(&state)
+            .args(["--state-interval", "30s"])
             .stderr(Stdio::piped())
             .spawn()
             .unwrap(),
     );
     let robot = mqtt_client::subscribe(broker.port, "action", "robot");
     let telegraf = Telegraf::start(&conf, &env);
-    let dir = tempfile::tempdir().unwrap();
     replay(&head(&dir, RECORDS), broker.port, "tessla");
     let got = actions(&robot, RECORDS);
     assert_eq!(got.len(), RECORDS);
@@ -376,6 +430,8 @@ fn udp_conf_as_shipped_end_to_end_and_loop_free() {
     let mut err = String::new();
     std::io::Read::read_to_string(&mut monitor.0.stderr.take().unwrap(), &mut err).unwrap();
     assert!(status.success(), "{err}");
+    assert!(err.contains("I! state: saved 1 monitor instances"), "{err}");
+    assert!(state.exists());
     assert!(
         err.contains(&format!("summary: {RECORDS} records,")),
         "{err}"
@@ -685,9 +741,9 @@ fn main_conf_gets_what_the_robot_sent_while_telegraf_was_away() {
         return;
     };
     let env = endpoints(broker.port, None);
-    let conf = Conf::read(&conf_text("telegraf.conf"), &env);
-    let robot = mqtt_client::subscribe(broker.port, "action", "robot");
     let dir = tempfile::tempdir().unwrap();
+    let conf = Conf::read(&runnable("telegraf.conf", &dir), &env);
+    let robot = mqtt_client::subscribe(broker.port, "action", "robot");
     let file = head(&dir, 5);
     // The first start makes the session; then Telegraf goes away.
     Telegraf::start(&conf, &env).stop();
@@ -698,7 +754,7 @@ fn main_conf_gets_what_the_robot_sent_while_telegraf_was_away() {
     assert_eq!(got.len(), 5, "every message sent while Telegraf was away");
     assert_quiet(&stats, 5);
     // Without the persistent session (Telegraf's default) they are lost.
-    let text = conf_text("telegraf.conf")
+    let text = runnable("telegraf.conf", &dir)
         .replace("persistent_session = true", "persistent_session = false");
     let conf = Conf::read(&text, &env);
     Telegraf::start(&conf, &env).stop();

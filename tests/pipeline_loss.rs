@@ -24,11 +24,17 @@ use telegraf_standin::*;
 /// The robot's rate (5 Hz).
 const PERIOD: Duration = Duration::from_millis(200);
 
-fn conf_text() -> String {
+/// `telegraf.conf` as shipped, its monitors' `--state` file in `dir` instead of the systemd
+/// drop-in's StateDirectory.
+fn conf_text(dir: &tempfile::TempDir) -> String {
     std::fs::read_to_string(
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("telegraf/telegraf.conf"),
     )
     .unwrap()
+    .replace(
+        "/var/lib/tessla-telegraf/",
+        &format!("{}/", dir.path().display()),
+    )
 }
 
 fn endpoints(port: u16) -> Endpoints {
@@ -98,7 +104,8 @@ fn a_killed_child_loses_the_restart_delay_and_nothing_is_resent() {
         return;
     };
     let env = endpoints(broker.port);
-    let text = conf_text();
+    let state_dir = tempfile::tempdir().unwrap();
+    let text = conf_text(&state_dir);
     let conf = Conf::read(&text, &env);
     let delay: f64 = text
         .lines()
@@ -176,7 +183,8 @@ fn a_telegraf_stop_loses_nothing_and_resends_the_unacknowledged() {
         return;
     };
     let env = endpoints(broker.port);
-    let conf = Conf::read(&conf_text(), &env);
+    let state_dir = tempfile::tempdir().unwrap();
+    let conf = Conf::read(&conf_text(&state_dir), &env);
     let first = Telegraf::start(&conf, &env);
     // A burst, as after the robot reconnects: many messages in flight at the stop.
     const N: usize = 600;
@@ -240,7 +248,8 @@ fn the_broker_keeps_the_oldest_max_queued_messages_while_telegraf_is_away() {
         return;
     };
     let env = endpoints(broker.port);
-    let conf = Conf::read(&conf_text(), &env);
+    let state_dir = tempfile::tempdir().unwrap();
+    let conf = Conf::read(&conf_text(&state_dir), &env);
     // The first start makes the session; then Telegraf goes away.
     Telegraf::start(&conf, &env).stop();
     const N: usize = 50;

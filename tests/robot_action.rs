@@ -2,8 +2,8 @@
 //! from the robot's command, `reason` (`p1`, `p2`, `p1,p2`), the `unknown_speed_cap` while P1 is
 //! `unknown` (margin and safe speed absent then), the lidar's known beam count (missing beams
 //! filled as dropouts, odd counts), speeds sent as strings, each property spec running alone,
-//! the paper's P2 listing through `trace` on the P2 spec, a spec without outputs, and `check`'s
-//! parameter list.
+//! the paper's P2 listing through `trace` on the P2 spec, a spec without outputs, `check`'s
+//! parameter list, and each action's `seq` and `valid_until`.
 
 #[path = "support/live_child.rs"]
 mod live_child;
@@ -192,7 +192,8 @@ fn a_robot_sequence_reports_every_augmented_action() {
         .collect();
     let (ms, err) = metrics(&["--no-passthrough"], &input, "action");
     assert_eq!(ms.len(), steps.len(), "{err}");
-    for (m, (e, _, _, aug, why)) in ms.iter().zip(&steps) {
+    for (i, (m, (e, _, _, aug, why))) in ms.iter().zip(&steps).enumerate() {
+        assert_eq!(int(m, "seq"), i as i64 + 1, "{m:?}");
         assert_eq!(boolean(m, "augmented"), *aug, "{m:?}");
         assert_eq!(boolean(m, "augmented"), float(m, "speed") != *e, "{m:?}");
         assert_eq!(string(m, "reason").as_deref(), *why, "{m:?}");
@@ -285,6 +286,72 @@ fn a_scan_longer_than_the_beam_count_is_warned_about_and_kept() {
     assert!(err.contains("at most 180 elements"), "{err}");
     assert_eq!(string(&ms[0], "p1_status").as_deref(), Some("violated"));
     assert_eq!(ms[0].field("p3_dropouts"), Some(&FieldValue::Int(0)));
+}
+
+fn int(m: &Metric, f: &str) -> i64 {
+    match m.field(f) {
+        Some(FieldValue::Int(x)) => *x,
+        other => panic!("field {f}: {other:?} in {m:?}"),
+    }
+}
+
+/// Every action carries what a robot needs to refuse a stale or repeated one (README, "What a
+/// robot must do with an action"): `seq`, counting the actions of its robot's monitor instance
+/// from 1, and `valid_until`, its timestamp plus `action_validity` (400 ms, `--set`-able).
+#[test]
+fn every_action_carries_its_robots_sequence_number_and_validity() {
+    // Two robots, interleaved, each with its own monitor instance and its own count.
+    let beams = scan(360, 2.0, 2.0);
+    let mut input = String::new();
+    for i in 0..3i64 {
+        for robot in ["tessla/a", "tessla/b"] {
+            let ts = TS + i * 200_000_000 + i64::from(robot == "tessla/b");
+            input.push_str(
+                &message(0.1, 0.1, &beams, ts).replace("topic=tessla", &format!("topic={robot}")),
+            );
+        }
+    }
+    let (ms, err) = metrics(
+        &["--no-passthrough", "--instance-by", "topic", "--threads", "1"],
+        &input,
+        "action",
+    );
+    assert_eq!(ms.len(), 6, "{err}");
+    for (k, m) in ms.iter().enumerate() {
+        let i = (k / 2) as i64;
+        let ts = m.timestamp.unwrap();
+        assert_eq!(int(m, "seq"), i + 1, "{m:?}");
+        assert_eq!(int(m, "valid_until"), ts + 400_000_000, "{m:?}");
+        let robot = if k % 2 == 0 { "tessla/a" } else { "tessla/b" };
+        assert_eq!(m.tag("topic"), Some(robot), "{m:?}");
+    }
+    // The validity is a parameter of the spec.
+    let one = message(0.1, 0.1, &beams, TS);
+    let a = action(&["--set", "action_validity=1000000000"], &one);
+    assert_eq!(int(&a, "valid_until"), TS + 1_000_000_000);
+    let (out, err, code) = run_all(&["check", &spec("robot.tessla")], "");
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("  action_validity = 400000000"), "{out}");
+    // Every property spec's action carries both as well.
+    for s in ["p1_braking.tessla", "p2_tolerance.tessla", "p3_lidar.tessla"] {
+        let a = action(&["--spec", &spec(s)], &one);
+        assert_eq!(int(&a, "seq"), 1, "{s}: {a:?}");
+        assert_eq!(int(&a, "valid_until"), TS + 400_000_000, "{s}: {a:?}");
+    }
+    // A monitor restarted without --state counts from 1 again (the robot tells it by the newer
+    // timestamp); with --state it continues.
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("state.json");
+    let state = state.to_str().unwrap();
+    let first: String = (0..2).map(|i| message(0.1, 0.1, &beams, TS + i * 200_000_000)).collect();
+    let later = message(0.1, 0.1, &beams, TS + 400_000_000);
+    let (ms, err) = metrics(&["--no-passthrough", "--state", state], &first, "action");
+    assert_eq!(ms.len(), 2, "{err}");
+    let a = action(&["--state", state], &later);
+    assert_eq!(int(&a, "seq"), 3, "continued from the saved state");
+    let a = action(&[], &later);
+    assert_eq!(int(&a, "seq"), 1, "a fresh monitor");
+    assert_eq!(int(&a, "valid_until"), TS + 800_000_000);
 }
 
 #[test]
@@ -458,10 +525,11 @@ fn check_lists_only_parameters_under_set() {
         "min_valid_fraction",
         "unknown_speed_cap",
         "max_silence",
+        "action_validity",
     ] {
         assert!(names.contains(&p), "{p} missing: {names:?}");
     }
-    assert_eq!(names.len(), 14, "only parameters: {names:?}");
+    assert_eq!(names.len(), 15, "only parameters: {names:?}");
     assert!(
         params
             .iter()

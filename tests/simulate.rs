@@ -118,6 +118,48 @@ fn monitor_on_lowers_the_mse_on_the_bundled_scenario() {
     assert!((mse - f(&a["mse"])).abs() < 1e-9, "{mse} vs {}", a["mse"]);
 }
 
+/// The robot refuses an action that arrives after its `valid_until` (README, "What a robot must
+/// do with an action"): with a twin delay beyond the spec's `action_validity` (400 ms) every
+/// action is stale, so the augmented robot drives exactly as the default one; a longer
+/// validity makes them count again. At the shipped 0.2 s none is refused.
+#[test]
+fn a_twin_slower_than_the_actions_validity_has_every_action_refused() {
+    let common = ["--duration", "60", "--seed", "2"];
+    let s = summary(&common);
+    let a = &s["augmented"];
+    assert_eq!(a["messages"], 121);
+    for key in ["refused_stale", "refused_repeated", "monitor_restarts"] {
+        assert_eq!(a[key], 0, "{key}: {a}");
+        assert_eq!(s["default"][key], 0, "{key}: {s}");
+    }
+    assert!(f(&a["mse"]) < f(&s["default"]["mse"]));
+
+    let mut slow = common.to_vec();
+    slow.extend(["--delay", "0.5"]);
+    let s = summary(&slow);
+    let (d, a) = (&s["default"], &s["augmented"]);
+    assert_eq!(a["refused_stale"], 121, "{a}");
+    assert_eq!(a["refused_repeated"], 0);
+    assert_eq!(a["distance"], d["distance"], "no action executed");
+    assert_eq!(a["mse"], d["mse"]);
+
+    slow.extend(["--set", "action_validity=600000000"]);
+    let s = summary(&slow);
+    assert_eq!(s["augmented"]["refused_stale"], 0, "{s}");
+    assert!(f(&s["augmented"]["mse"]) < f(&s["default"]["mse"]));
+
+    // The table says it too.
+    let out = simulate(&["--duration", "10", "--delay", "0.5"]);
+    assert!(out.status.success());
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        table.contains(
+            "actions the robot refused: 21 stale (past valid_until), 0 repeated (seq); monitor restarts seen: 0"
+        ),
+        "{table}"
+    );
+}
+
 fn run_to(path: &Path, args: &[&str]) -> Vec<u8> {
     let mut all = vec!["--duration", "60", "--output", path.to_str().unwrap()];
     all.extend_from_slice(args);

@@ -115,6 +115,72 @@ fn simulated_robot_drives_the_pipeline_through_mosquitto() {
     );
 }
 
+/// The MQTT twin judges each action as a robot must (README, "What a robot must do with an
+/// action"): a stand-in monitor answers the robot's five messages with a fresh action, a
+/// redelivery of it, a stale one, a restarted monitor's (seq 1 again, newer) and its next; the
+/// twin executes three and counts one refused as repeated, one as stale and one restart.
+#[test]
+fn the_mqtt_twin_refuses_stale_and_repeated_actions_and_follows_a_restart() {
+    let Some(broker) = servers::Mosquitto::start() else {
+        return;
+    };
+    let messages = mqtt_client::subscribe(broker.port, "tessla", "monitor-sub");
+    let answers = std::thread::spawn({
+        let port = broker.port;
+        move || {
+            let publisher = mqtt_client::Publisher::connect(port, "monitor-pub");
+            let mut first_until = 0i64;
+            for k in 0..5 {
+                let Ok((_, payload)) = messages.recv_timeout(std::time::Duration::from_secs(20))
+                else {
+                    return k;
+                };
+                let msg: Value = serde_json::from_slice(&payload).unwrap();
+                let t = msg["time"].as_i64().unwrap();
+                // Valid for 2 s, so that the redelivery 0.5 s later is still valid (a repeat,
+                // not a stale action).
+                let fresh = t + 2_000_000_000;
+                let (seq, until) = match k {
+                    0 => {
+                        first_until = fresh;
+                        (1, fresh)
+                    }
+                    1 => (1, first_until), // the first action again
+                    2 => (3, t - 1),       // already past its validity
+                    3 => (1, fresh),       // a restarted monitor: seq 1, newer
+                    _ => (2, fresh),
+                };
+                let action = serde_json::json!({
+                    "name": "action",
+                    "tags": {"topic": "tessla"},
+                    "fields": {"speed": 0.05, "augmented": true, "seq": seq, "valid_until": until},
+                    "timestamp": t / 1_000_000,
+                });
+                publisher.publish("action", action.to_string().into_bytes());
+            }
+            5
+        }
+    });
+    let out = Command::new(BIN)
+        .args(["simulate", "--duration", "2", "--json", "--action-timeout", "10"])
+        .args(["--broker", &broker.url(), "--time-key", "time"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "simulate --broker: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(answers.join().unwrap(), 5, "the stand-in monitor answered every message");
+    let summary: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let a = &summary["augmented"];
+    assert_eq!(a["messages"], 5, "{a}");
+    assert_eq!(a["actions"], 5, "{a}");
+    assert_eq!(a["refused_stale"], 1, "{a}");
+    assert_eq!(a["refused_repeated"], 1, "{a}");
+    assert_eq!(a["monitor_restarts"], 1, "{a}");
+}
+
 #[test]
 fn unreachable_broker_exits_3() {
     let port = servers::free_port();

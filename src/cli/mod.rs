@@ -6,6 +6,7 @@
 //! - 1: a runtime error in `trace` mode (decreasing timestamps, multiple events, error values)
 //! - 2: a spec error (parse, type, include ...) or a bad command line
 //! - 3: an I/O error that stops the run (input file unreadable, UDP address not bindable)
+//! - 4: `run`'s step watchdog: a step made no progress for `--step-timeout`
 
 pub mod check;
 pub mod run;
@@ -93,12 +94,22 @@ pub const VERSION: &str = concat!(
     "; implements TeSSLa 1.2)"
 );
 
+/// The exit codes, as `--help` and the man page list them (README, "Exit codes").
+pub const EXIT_CODES: &str = "Exit codes:
+  0: success: input ended (EOF), SIGTERM/SIGINT after flushing, or stdout closed by the reader
+  1: a runtime error in `trace` mode
+  2: a spec error or a bad command line, reported before any input is read
+  3: an I/O error that stops the run
+  4: `run`'s step watchdog: one step made no progress for --step-timeout (an evaluation that does
+     not end, or a stdout nobody reads); Telegraf restarts the child";
+
 #[derive(Debug, Parser)]
 #[command(
     name = "tessla-telegraf",
     version = VERSION,
     about = "Runtime verification of TeSSLa specifications as a Telegraf processors.execd plugin",
-    args_conflicts_with_subcommands = true
+    args_conflicts_with_subcommands = true,
+    after_help = EXIT_CODES
 )]
 pub struct Cli {
     #[command(subcommand)]
@@ -279,6 +290,11 @@ pub struct RunArgs {
     /// loses at most this much. Needs --state.
     #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration, requires = "state")]
     pub state_interval: Option<std::time::Duration>,
+    /// Exit with code 4 when one step (evaluating a record or a fallen-due delay, and writing its
+    /// outputs) makes no progress for this long, so that Telegraf restarts the monitor: Telegraf
+    /// never restarts a child that is alive, and blocks on its full stdin pipe. `0` disables.
+    #[arg(long, value_name = "DURATION", default_value = "10s", value_parser = humantime::parse_duration)]
+    pub step_timeout: std::time::Duration,
 }
 
 /// A duration, or `off`.

@@ -8,7 +8,10 @@ use crate::telegraf::binding::parse_tags;
 use crate::telegraf::processor::{Options, Processor};
 use crate::telegraf::reload::{self, SpecSource};
 use crate::telegraf::state;
+use crate::transport::watchdog::{self, Watch};
 use crate::transport::{self, Ending};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 pub fn run(args: RunArgs) -> CliResult {
     log::set_level(args.log_level);
@@ -67,8 +70,12 @@ pub fn run(args: RunArgs) -> CliResult {
     let fleet_opts = opts.clone();
     let mut proc =
         Processor::new(loaded.program, opts).map_err(|e| CliError::spec(format!("spec: {e}")))?;
+    let watch = Arc::new(Watch::default());
+    proc.watch_with(watch.lane());
+    watchdog::spawn(watch.clone(), Some(args.step_timeout))
+        .map_err(|e| CliError::io(format!("cannot start the step watchdog: {e}")))?;
     if let Some(state::Target::Nats(url)) = &args.state {
-        return super::run_fleet::run(&args, url, proc, fleet_opts, &source, &state_ctx);
+        return super::run_fleet::run(&args, url, proc, fleet_opts, &source, &state_ctx, watch);
     }
     let state_file = match &args.state {
         Some(state::Target::File(path)) => Some(path.clone()),
@@ -90,6 +97,7 @@ pub fn run(args: RunArgs) -> CliResult {
         periodic: args
             .state_interval
             .map(|d| (d, &mut save_now as &mut dyn FnMut(&Processor))),
+        watch,
     };
     // Threads spread instances (default: the machine's cores). The state file holds one
     // processor's instances and UDP mode reads datagrams one at a time, so both keep one thread.
@@ -164,11 +172,54 @@ pub(super) fn finish(
         log::log(Level::Info, "stdout was closed by its reader; stopping");
     }
     log::log(Level::Info, &proc.summary());
+    if matches!(result, Ok(Ending::Eof | Ending::Signal)) {
+        wait_until_read(DRAIN_BOUND);
+    }
     // The blocking stdin reader thread may still wait for input: leave without joining it.
     rt.shutdown_background();
     result
         .map(|_| ())
         .map_err(|e| CliError::io(format!("I/O error: {e}")))
+}
+
+/// The longest wait at the end for the reader of our stdout pipe ([`wait_until_read`]): well
+/// inside the 5 s Telegraf waits after closing our stdin before it sends SIGTERM.
+const DRAIN_BOUND: Duration = Duration::from_secs(2);
+
+/// At a normal end, wait (at most `bound`) until the reader has read everything we wrote to
+/// a pipe on stdout. Telegraf's `processors.execd` closes its end of the pipe once the child
+/// has exited (`Cmd.Wait`), so lines still unread when we exit would be lost. Polls the bytes
+/// unread in the pipe (`FIONREAD`), first every 0.2 ms, backing off to every 10 ms; a stdout that is no pipe, or whose
+/// count cannot be read, is not waited for.
+pub(super) fn wait_until_read(bound: Duration) {
+    use rustix::fs::FileType;
+    let stdout = std::io::stdout();
+    let is_pipe = rustix::fs::fstat(&stdout)
+        .is_ok_and(|st| FileType::from_raw_mode(st.st_mode) == FileType::Fifo);
+    if !is_pipe {
+        return;
+    }
+    let start = Instant::now();
+    let mut pause = Duration::from_micros(200);
+    loop {
+        match rustix::io::ioctl_fionread(&stdout) {
+            Ok(0) | Err(_) => return,
+            Ok(unread) => {
+                if start.elapsed() >= bound {
+                    log::log(
+                        Level::Warn,
+                        &format!(
+                            "stdout: {unread} bytes still unread by the reader after {} s; exiting anyway",
+                            bound.as_secs_f64()
+                        ),
+                    );
+                    return;
+                }
+            }
+        }
+        std::thread::sleep(pause);
+        pause = (pause * 2).min(Duration::from_millis(10));
+    }
 }
 
 /// Save the state, logging success at `level` and failure as an error (never fatal).

@@ -16,6 +16,7 @@ pub fn run(
     opts: Options,
     source: &SpecSource,
     ctx: &state::Context,
+    watch: std::sync::Arc<crate::transport::watchdog::Watch>,
 ) -> CliResult {
     if args.udp_listen.is_some() {
         return Err(CliError::spec(
@@ -46,6 +47,7 @@ pub fn run(
             window,
             fresh: &fresh,
             on_hangup: &mut on_hangup,
+            watch,
         },
     ));
     super::run::finish(rt, result, &proc)

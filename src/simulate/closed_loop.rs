@@ -10,6 +10,7 @@
 //! own speed has not changed since the action's message was sent; otherwise (and always with the
 //! monitor off) the program's speed.
 
+use super::gate::Gate;
 use super::lidar::{LidarParams, Map};
 use super::program::Program;
 use super::robot::{Params, Robot};
@@ -113,6 +114,12 @@ pub struct Action {
     pub augmented: bool,
     /// The spec's running MSE, when the action carried it.
     pub speed_mse: Option<f64>,
+    /// Its number in its monitor instance (`seq`), when it carried one.
+    pub seq: Option<i64>,
+    /// ns: until when it may be applied (`valid_until`), when it carried it.
+    pub valid_until: Option<i64>,
+    /// ns: its timestamp, when the twin knows it.
+    pub time_ns: Option<i64>,
 }
 
 #[derive(Debug, Default)]
@@ -120,6 +127,10 @@ pub struct Reply {
     /// Line protocol to record: the message as the pipeline saw it, then the monitors' outputs.
     pub lines: Vec<u8>,
     pub action: Option<Action>,
+    /// ns: the robot's clock when the action arrived, when the twin measured it (an MQTT twin
+    /// whose actions carry Telegraf's wall-clock time); otherwise the message's time plus the
+    /// scenario's delay.
+    pub received_ns: Option<i64>,
 }
 
 /// The monitors, in-process or behind a broker.
@@ -146,6 +157,12 @@ pub struct Outcome {
     pub spec_mse: Option<f64>,
     /// m driven.
     pub distance: f64,
+    /// Actions refused because the robot's clock had passed their `valid_until`.
+    pub refused_stale: usize,
+    /// Actions refused as repeated: `seq` not above the last accepted one and not newer.
+    pub refused_repeated: usize,
+    /// Actions accepted from a restarted monitor: a lower `seq` with a newer timestamp.
+    pub monitor_restarts: usize,
 }
 
 /// Run `scenario` against `twin`; `monitor_on` decides whether actions are executed. Every
@@ -190,7 +207,12 @@ pub fn run(
         actions: 0,
         spec_mse: None,
         distance: 0.0,
+        refused_stale: 0,
+        refused_repeated: 0,
+        monitor_restarts: 0,
     };
+    let mut gate = Gate::default();
+    let delay_ns = (s.delay * 1e9).round() as i64;
     let mut sum_sq = 0.0;
     for k in 0..=periods {
         let t = k as f64 * s.period;
@@ -225,7 +247,13 @@ pub fn run(
             if a.speed_mse.is_some() {
                 outcome.spec_mse = a.speed_mse;
             }
-            if monitor_on && a.speed.is_finite() {
+            // The robot judges the action when it arrives (README, "What a robot must do with
+            // an action"); with the monitor off it would not execute it anyway.
+            let clock = reply
+                .received_ns
+                .unwrap_or_else(|| message.time_ns.saturating_add(delay_ns));
+            let accepted = gate.judge(&a, clock).accepted();
+            if monitor_on && accepted && a.speed.is_finite() {
                 pending.push_back((t + s.delay, expected, a.speed));
             }
         }
@@ -256,6 +284,9 @@ pub fn run(
     // Summed in 5 ms steps: keep the millisecond, drop the rounding noise.
     outcome.stuck_seconds = (outcome.stuck_seconds * 1000.0).round() / 1000.0;
     outcome.distance = robot.x;
+    outcome.refused_stale = gate.refused_stale;
+    outcome.refused_repeated = gate.refused_repeated;
+    outcome.monitor_restarts = gate.monitor_restarts;
     Ok(outcome)
 }
 
@@ -280,7 +311,11 @@ mod tests {
                     speed: self.speed,
                     augmented: self.speed != message.expected_speed,
                     speed_mse: None,
+                    seq: None,
+                    valid_until: None,
+                    time_ns: None,
                 }),
+                received_ns: None,
             })
         }
     }

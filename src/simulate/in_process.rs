@@ -41,7 +41,11 @@ impl Twin for InProcess {
             .iter()
             .filter(|m| m.measurement == "action")
             .find_map(action_of);
-        Ok(Reply { lines, action })
+        Ok(Reply {
+            lines,
+            action,
+            received_ns: None,
+        })
     }
 }
 
@@ -70,7 +74,19 @@ fn number(v: &FieldValue) -> Option<f64> {
     }
 }
 
-/// The action in an `action` metric: its `speed` (required), `augmented`, `speed_mse`.
+/// An integer field: an Int or UInt, or a whole Float (Telegraf's JSON does not keep the type).
+fn integer(v: &FieldValue) -> Option<i64> {
+    match v {
+        FieldValue::Int(i) => Some(*i),
+        FieldValue::UInt(u) => i64::try_from(*u).ok(),
+        FieldValue::Float(f) if f.fract() == 0.0 && f.abs() < 9.2e18 => Some(*f as i64),
+        FieldValue::Str(s) => s.trim().parse().ok(),
+        _ => None,
+    }
+}
+
+/// The action in an `action` metric: its `speed` (required), `augmented`, `speed_mse`, `seq`,
+/// `valid_until` and timestamp.
 pub fn action_of(metric: &Metric) -> Option<Action> {
     let speed = metric.field("speed").and_then(number)?;
     let augmented = matches!(metric.field("augmented"), Some(FieldValue::Bool(true)));
@@ -79,5 +95,8 @@ pub fn action_of(metric: &Metric) -> Option<Action> {
         speed,
         augmented,
         speed_mse,
+        seq: metric.field("seq").and_then(integer),
+        valid_until: metric.field("valid_until").and_then(integer),
+        time_ns: metric.timestamp,
     })
 }

@@ -9,6 +9,7 @@
 //! where its parameters come from are documented in docs/simulation.md.
 
 pub mod closed_loop;
+pub mod gate;
 pub mod in_process;
 pub mod lidar;
 pub mod mqtt_twin;

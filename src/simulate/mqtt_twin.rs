@@ -165,7 +165,11 @@ fn metric_of(json: &Value) -> Option<Metric> {
             let value = match v {
                 Value::Bool(b) => FieldValue::Bool(*b),
                 Value::String(s) => FieldValue::Str(s.clone()),
-                Value::Number(n) => FieldValue::Float(n.as_f64()?),
+                // An integer beyond a float's 53 bits (`valid_until`, in ns) stays exact.
+                Value::Number(n) => match n.as_i64() {
+                    Some(i) if i.unsigned_abs() > 1 << 53 => FieldValue::Int(i),
+                    _ => FieldValue::Float(n.as_f64()?),
+                },
                 _ => return None,
             };
             Some((k.clone(), value))
@@ -195,11 +199,22 @@ impl Twin for MqttTwin {
             .ok_or_else(|| "MQTT publisher already closed".to_string())?;
         publisher.publish(&self.topic, payload.into_bytes())?;
         let mut lines = line.as_bytes().to_vec();
+        let mut received_ns = None;
         let metric = match self.actions.recv_timeout(self.timeout) {
-            Ok(payload) => serde_json::from_slice::<Value>(&payload)
+            Ok(payload) => {
+                // Without the robot's time in the message, Telegraf stamps it (and so the action
+                // and its `valid_until`) with its own clock: judge it by the wall clock here.
+                if self.time_key.is_none() {
+                    received_ns = std::time::SystemTime::now()
+                        .duration_since(std::time::UNIX_EPOCH)
+                        .ok()
+                        .and_then(|d| i64::try_from(d.as_nanos()).ok());
+                }
+                serde_json::from_slice::<Value>(&payload)
                 .ok()
-                .as_ref()
-                .and_then(metric_of),
+                    .as_ref()
+                    .and_then(metric_of)
+            }
             Err(_) => {
                 self.unanswered += 1;
                 log::warn_limited("no action", || {
@@ -225,6 +240,10 @@ impl Twin for MqttTwin {
                 lines.extend_from_slice(l.as_bytes());
             }
         }
-        Ok(Reply { lines, action })
+        Ok(Reply {
+            lines,
+            action,
+            received_ns,
+        })
     }
 }

@@ -73,6 +73,12 @@ impl Summary {
             ));
         }
         s.push_str("interventions: actions that changed the robot's command (proposed only, with the monitor off)\n");
+        if let Some(a) = &self.augmented {
+            s.push_str(&format!(
+                "actions the robot refused: {} stale (past valid_until), {} repeated (seq); monitor restarts seen: {}\n",
+                a.refused_stale, a.refused_repeated, a.monitor_restarts
+            ));
+        }
         s
     }
 }

@@ -134,6 +134,16 @@ impl<T> Table<T> {
     }
 
     /// Remove slot `i`, returning its key and value.
+    /// The key of the instance in slot `i`.
+    pub fn key(&self, i: usize) -> Option<&Key> {
+        self.slots.get(i)?.as_ref().map(|s| &s.key)
+    }
+
+    /// Every instance's key and slot.
+    pub fn keys(&self) -> impl Iterator<Item = (&Key, &usize)> {
+        self.index.iter()
+    }
+
     pub fn remove(&mut self, i: usize) -> Option<(Key, T)> {
         let s = self.slots.get_mut(i)?.take()?;
         self.lru.remove(&s.seq);

@@ -17,6 +17,7 @@ use super::clock::{self, Anchor, Deadlines, Wall};
 use super::encode::{self, Encoding};
 use super::instances::{Key, Table};
 use crate::log;
+use crate::transport::watchdog::Lane;
 use lineproto::{Metric, Record, RecordRef, parse_record_into};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -173,6 +174,9 @@ pub struct Processor {
     /// Whether the program has a `delay` at all (without one, no deadline is ever computed).
     has_delays: bool,
     next_id: u64,
+    /// The step watchdog's marks for this processor (`run --step-timeout`; see
+    /// [`crate::transport::watchdog`]).
+    lane: Option<Arc<Lane>>,
 }
 
 fn describe(instance_by: &[String], key: &Key) -> String {
@@ -232,12 +236,23 @@ impl Processor {
             wall: Wall::now(),
             deadlines: Deadlines::default(),
             next_id: 0,
+            lane: None,
         })
     }
 
     /// A processor with this one's program and options and no instances (a `--threads` worker).
     pub fn sibling(&self) -> Result<Processor, String> {
         Processor::new(self.program.clone(), self.opts.clone())
+    }
+
+    /// Leave the step watchdog's marks in `lane` (every record, every new instance).
+    pub fn watch_with(&mut self, lane: Arc<Lane>) {
+        for (key, &slot) in self.instances.keys() {
+            if !self.opts.instance_by.is_empty() {
+                lane.name(slot, describe(&self.opts.instance_by, key));
+            }
+        }
+        self.lane = Some(lane);
     }
 
     /// `--max-instances`: the most instances kept over all threads.
@@ -330,6 +345,12 @@ impl Processor {
         if self.opts.instance_by.is_empty() && self.opts.instance_idle.is_none() {
             self.single = Some(i);
         }
+        if let Some(l) = &self.lane
+            && let Some(key) = self.instances.key(i)
+            && !self.opts.instance_by.is_empty()
+        {
+            l.name(i, describe(&self.opts.instance_by, key));
+        }
         i
     }
 
@@ -344,6 +365,9 @@ impl Processor {
             let Some((key, _)) = self.instances.remove(i) else {
                 break;
             };
+            if let Some(l) = &self.lane {
+                l.forget(i);
+            }
             self.counters.evicted += 1;
             let by = &self.opts.instance_by;
             log::warn_limited("instance evicted", || {
@@ -373,6 +397,9 @@ impl Processor {
     /// [`Processor::record`] on a borrowed record (the stdio loop's records point into its read
     /// buffer; pass-through copies them from there).
     pub fn record_ref(&mut self, rec: RecordRef<'_>, out: &mut Vec<u8>) {
+        if let Some(l) = &self.lane {
+            l.begin(rec.line);
+        }
         self.counters.records += 1;
         if rec.oversized {
             self.counters.parse_errors += 1;
@@ -466,6 +493,9 @@ impl Processor {
         }
         let now = self.now();
         let slot = self.instance_for(metric, ts, now);
+        if let Some(l) = &self.lane {
+            l.instance(slot);
+        }
         let Some(inst) = self.instances.get_mut(slot) else {
             return;
         };

@@ -13,6 +13,7 @@ use crate::telegraf::processor::Processor;
 pub mod nats_fleet;
 pub mod stdio;
 pub mod udp;
+pub mod watchdog;
 
 /// A periodic task: how often, and what.
 pub type Periodic<'a> = (std::time::Duration, &'a mut dyn FnMut(&Processor));
@@ -26,18 +27,21 @@ pub struct Hooks<'a> {
     pub on_hangup: OnHangup<'a>,
     /// Every this long (`--state-interval`: save the state).
     pub periodic: Option<Periodic<'a>>,
+    /// Where the loop marks what it is doing, for the step watchdog (`--step-timeout`).
+    pub watch: std::sync::Arc<watchdog::Watch>,
 }
 
 impl<'a> Hooks<'a> {
-    /// The SIGHUP hook, and the periodic task with its timer (the timer starts now).
-    pub(crate) fn split(self) -> (OnHangup<'a>, Ticker<'a>) {
+    /// The SIGHUP hook, the periodic task with its timer (the timer starts now), and the
+    /// watchdog's marks.
+    pub(crate) fn split(self) -> (OnHangup<'a>, Ticker<'a>, std::sync::Arc<watchdog::Watch>) {
         let ticker = Ticker(self.periodic.map(|periodic| {
             let d = periodic.0.max(std::time::Duration::from_millis(1));
             let mut i = tokio::time::interval_at(tokio::time::Instant::now() + d, d);
             i.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
             (i, periodic)
         }));
-        (self.on_hangup, ticker)
+        (self.on_hangup, ticker, self.watch)
     }
 }
 

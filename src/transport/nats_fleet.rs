@@ -9,6 +9,7 @@
 //! losing it, dropping every instance; the save points (`--state-interval`, every ending while
 //! holding the lease, then releasing it). Signals and SIGHUP as in the stdio transport.
 
+use crate::transport::watchdog::{Phase, Watch};
 use crate::log::{self, Level};
 use crate::telegraf::clock::Wall;
 use crate::telegraf::instances::Key;
@@ -40,6 +41,8 @@ pub struct Fleet<'a> {
     pub fresh: &'a dyn Fn() -> Option<Processor>,
     /// SIGHUP.
     pub on_hangup: &'a mut dyn FnMut(&mut Processor, &mut Vec<u8>),
+    /// Where the loop marks what it is doing, for the step watchdog (`--step-timeout`).
+    pub watch: std::sync::Arc<Watch>,
 }
 
 struct Loop<'a, 'b> {
@@ -144,7 +147,8 @@ impl Loop<'_, '_> {
             );
         }
         if lost {
-            if let Some(p) = (self.f.fresh)() {
+            if let Some(mut p) = (self.f.fresh)() {
+                p.watch_with(self.f.watch.lane());
                 *proc = p;
             }
             self.f.backend.forget();
@@ -237,6 +241,7 @@ pub async fn run(proc: &mut Processor, mut fleet: Fleet<'_>) -> std::io::Result<
     saves.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     let mut lease_poll = tokio::time::interval(Duration::from_millis(20));
     lease_poll.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let watch = l.f.watch.clone();
     let ending = loop {
         // A standby holds no instances: only the process stepping a partition advances clocks.
         // A record partly read is input arriving, not silence.
@@ -252,6 +257,7 @@ pub async fn run(proc: &mut Processor, mut fleet: Fleet<'_>) -> std::io::Result<
             _ = signals.int.recv() => break Ending::Signal,
             _ = signals.hup.recv() => {
                 (l.f.on_hangup)(proc, &mut out);
+                let _busy = watch.enter(Phase::Reload);
                 if write_out(&mut out).is_err() {
                     return Ok(finish(l, proc, Ending::OutputClosed));
                 }
@@ -270,7 +276,9 @@ pub async fn run(proc: &mut Processor, mut fleet: Fleet<'_>) -> std::io::Result<
             }
             r = stdin.read(&mut buf) => r?,
             _ = crate::transport::sleep_until(deadline) => {
+                let _busy = watch.enter(Phase::Delays);
                 crate::transport::advance_silent(proc, Wall::now(), &mut out);
+                watch.set(Phase::Writing);
                 if write_out(&mut out).is_err() {
                     return Ok(finish(l, proc, Ending::OutputClosed));
                 }
@@ -281,6 +289,7 @@ pub async fn run(proc: &mut Processor, mut fleet: Fleet<'_>) -> std::io::Result<
             break Ending::Eof;
         }
         l.follow_lease(proc, &mut out);
+        let _busy = watch.enter(Phase::Records);
         proc.set_wall(Wall::now());
         splitter.push(buf.get(..n).unwrap_or_default());
         while let Some(rec) = splitter.next_record() {
@@ -293,10 +302,12 @@ pub async fn run(proc: &mut Processor, mut fleet: Fleet<'_>) -> std::io::Result<
         if n < BUF && l.active {
             proc.flush(&mut out);
         }
+        watch.set(Phase::Writing);
         if write_out(&mut out).is_err() {
             return Ok(finish(l, proc, Ending::OutputClosed));
         }
     };
+    let busy = watch.enter(Phase::Records);
     while let Some(rec) = splitter.finish() {
         if l.active {
             l.step(proc, &rec, &mut out);
@@ -305,7 +316,9 @@ pub async fn run(proc: &mut Processor, mut fleet: Fleet<'_>) -> std::io::Result<
     if l.active {
         proc.flush(&mut out);
     }
+    watch.set(Phase::Writing);
     let closed = write_out(&mut out).is_err();
+    drop(busy);
     Ok(finish(
         l,
         proc,

@@ -23,6 +23,7 @@
 //! stdin, which reads on a helper thread and hands each read over (two thread wake-ups per
 //! read: most of the answer latency of a single record on a busy machine).
 
+use super::watchdog::{Phase, Watch};
 use super::{Ending, Hooks};
 use crate::telegraf::clock::Wall;
 use crate::telegraf::instances::shard_of;
@@ -144,7 +145,7 @@ struct Shards {
 impl Shards {
     /// `--max-instances` stays the total: each shard keeps its even part of it (so never more
     /// threads than that total).
-    fn new(proc: &mut Processor, threads: usize) -> Result<Shards, String> {
+    fn new(proc: &mut Processor, threads: usize, watch: &Watch) -> Result<Shards, String> {
         let total = proc.max_instances().max(1);
         let threads = if proc.instance_by().is_empty() {
             1
@@ -178,6 +179,7 @@ impl Shards {
                 .map_err(|e| format!("cannot start a worker thread: {e}"))?;
             let mut sibling = proc.sibling()?;
             sibling.keep_instances(share(shard));
+            sibling.watch_with(watch.lane());
             // The wiring diagnostics watch the first thread's records only: closed before a
             // record is seen, a worker's check reports nothing (its first 1,000 records would
             // cost it 239k instructions each, and every thread would warn about the same input).
@@ -328,7 +330,7 @@ pub async fn run(
     hooks: Hooks<'_>,
     threads: usize,
 ) -> std::io::Result<Ending> {
-    let mut shards = Shards::new(proc, threads).map_err(std::io::Error::other)?;
+    let mut shards = Shards::new(proc, threads, &hooks.watch).map_err(std::io::Error::other)?;
     let r = run_shards(proc, hooks, &mut shards).await;
     shards.finish(proc);
     r
@@ -349,7 +351,7 @@ async fn run_shards(
     let mut buf = vec![0u8; size];
     let mut out = Vec::with_capacity(BUF);
     let mut signals = super::Signals::new()?;
-    let (on_hangup, mut ticker) = hooks.split();
+    let (on_hangup, mut ticker, watch) = hooks.split();
     let ending = loop {
         // A record partly read is input arriving, not silence.
         let deadline = shards
@@ -365,6 +367,7 @@ async fn run_shards(
             _ = signals.hup.recv() => {
                 on_hangup(proc, &mut out);
                 shards.each(|p| on_hangup(p, &mut out));
+                let _busy = watch.enter(Phase::Reload);
                 if write_out(&mut out, &mut shards.outs).is_err() {
                     return Ok(Ending::OutputClosed);
                 }
@@ -377,9 +380,11 @@ async fn run_shards(
             r = stdin.read(&mut buf) => r?,
             _ = super::sleep_until(deadline) => {
                 // Silent input: the instances whose delays fell due move on by the wall clock.
+                let _busy = watch.enter(Phase::Delays);
                 let wall = Wall::now();
                 super::advance_silent(proc, wall, &mut out);
                 shards.each(|p| super::advance_silent(p, wall, &mut out));
+                watch.set(Phase::Writing);
                 if write_out(&mut out, &mut shards.outs).is_err() {
                     return Ok(Ending::OutputClosed);
                 }
@@ -389,6 +394,7 @@ async fn run_shards(
         if n == 0 {
             break Ending::Eof;
         }
+        let _busy = watch.enter(Phase::Records);
         let wall = Wall::now();
         let bytes = buf.get(..n).unwrap_or_default();
         if shards.workers.is_empty() {
@@ -402,14 +408,17 @@ async fn run_shards(
             splitter.push_with(bytes, |rec| shards.route(rec));
             shards.process(proc, n < size, wall, &mut out)?;
         }
+        watch.set(Phase::Writing);
         if write_out(&mut out, &mut shards.outs).is_err() {
             return Ok(Ending::OutputClosed);
         }
     };
+    let _busy = watch.enter(Phase::Records);
     while let Some(rec) = splitter.finish() {
         shards.route(rec.view());
     }
     shards.process(proc, true, Wall::now(), &mut out)?;
+    watch.set(Phase::Writing);
     if write_out(&mut out, &mut shards.outs).is_err() {
         return Ok(Ending::OutputClosed);
     }

@@ -7,6 +7,7 @@
 //! never echoed in this mode (see `run`'s options): Telegraf already sends the robot metric to
 //! its other outputs.
 
+use super::watchdog::Phase;
 use super::{Ending, Hooks};
 use crate::telegraf::clock::Wall;
 use crate::telegraf::processor::Processor;
@@ -39,7 +40,7 @@ pub async fn run(
     let mut buf = vec![0u8; 65_536];
     let mut out = Vec::new();
     let mut signals = super::Signals::new()?;
-    let (on_hangup, mut ticker) = hooks.split();
+    let (on_hangup, mut ticker, watch) = hooks.split();
     loop {
         let deadline = proc.next_deadline();
         let n = tokio::select! {
@@ -51,6 +52,7 @@ pub async fn run(
             _ = signals.int.recv() => break,
             _ = signals.hup.recv() => {
                 on_hangup(proc, &mut out);
+                let _busy = watch.enter(Phase::Reload);
                 send_packed(&out_sock, &out, max_datagram).await;
                 out.clear();
                 continue;
@@ -61,12 +63,14 @@ pub async fn run(
             }
             r = sock.recv(&mut buf) => r?,
             _ = super::sleep_until(deadline) => {
+                let _busy = watch.enter(Phase::Delays);
                 super::advance_silent(proc, Wall::now(), &mut out);
                 send_packed(&out_sock, &out, max_datagram).await;
                 out.clear();
                 continue;
             }
         };
+        let _busy = watch.enter(Phase::Records);
         proc.set_wall(Wall::now());
         let mut splitter = RecordSplitter::default();
         splitter.push(buf.get(..n).unwrap_or_default());
