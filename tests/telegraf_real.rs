@@ -465,10 +465,15 @@ fn first_spec_example_conf_under_real_telegraf_matches_an_offline_run() {
     );
     for (version, bin) in real_telegraf::versions() {
         let Some(broker) = broker() else { return };
+        let state = tempfile::tempdir().unwrap();
         let conf = Rewrite::new()
             .replace(
                 "tcp://127.0.0.1:1883",
                 format!("tcp://127.0.0.1:{}", broker.port),
+            )
+            .replace(
+                "/var/lib/tessla-telegraf",
+                state.path().display().to_string(),
             )
             .apply(&text);
         // As the README runs it: from the repository's folder, `tessla-telegraf` on PATH.
