@@ -1,36 +1,136 @@
-//! The MQTT round trip with real Mosquitto: `replay` publishes the recorded run on `tessla`; a
-//! stand-in for Telegraf's mqtt_consumer turns each message into the line Telegraf would make
-//! and pipes it into `tessla-telegraf run`; the `action` metrics go back out as outputs.mqtt
-//! would publish them; the test, subscribed to `action`, gets every corrective action, in
-//! order, with the values our binary computes for the recorded run directly.
+//! The MQTT round trip through the real Telegraf (both pinned versions, built by
+//! `tools/build-telegraf.sh`) and a real Mosquitto: `replay` publishes the recorded run on
+//! `tessla` as the robot's JSON, with the robot's time in it; Telegraf runs the shipped
+//! `telegraf/telegraf.conf` (its `json_time_key` variant, so that each record keeps its recorded
+//! time) with our binary as its `processors.execd` child, and its `outputs.mqtt` publishes the
+//! actions on `action`; the test, subscribed to `action`, gets every corrective action, once, in
+//! order, with the tags and values our binary computes for the recorded run directly.
 
 #[path = "support/mqtt_client.rs"]
 mod mqtt_client;
+#[path = "support/real_telegraf.rs"]
+mod real_telegraf;
 #[path = "support/recorded.rs"]
 mod recorded;
 #[path = "support/servers.rs"]
 mod servers;
-#[path = "support/telegraf_standin.rs"]
-mod telegraf_standin;
 
-use serde_json::Value;
+use real_telegraf::{Field, Rewrite, Row, Telegraf};
+use recorded::BIN;
 use std::process::Command;
-use std::time::Duration;
-use telegraf_standin::{ConsumerConfig, MS, StandIn, line_to_message};
+use std::time::{Duration, Instant};
 
-fn action_messages(output: &str) -> Vec<Value> {
-    output
+/// A broker that logs subscriptions, so the test can wait until Telegraf has subscribed: its
+/// "Connected" comes before the SUBSCRIBE (`mqtt_consumer.go` `connect`).
+fn broker() -> Option<servers::Mosquitto> {
+    servers::Mosquitto::start_with(
+        "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\nlog_type information\nlog_type subscribe\n",
+    )
+}
+
+/// Wait until a client whose id starts with `id` has subscribed to `topic` on `broker` (the
+/// broker logs `<time>: <client> <qos> <topic>`).
+fn wait_subscribed(broker: &servers::Mosquitto, telegraf: &Telegraf, id: &str, topic: &str) {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let subscribed = |log: &str| {
+        log.lines().any(|l| {
+            let t: Vec<&str> = l.split_whitespace().collect();
+            t.len() == 4 && t[1].starts_with(id) && t[2].len() == 1 && t[3] == topic
+        })
+    };
+    while !subscribed(&broker.log()) {
+        assert!(
+            Instant::now() < deadline,
+            "Telegraf {}: {id} never subscribed to {topic}; broker log:\n{}\nTelegraf log:\n{}",
+            telegraf.version,
+            broker.log(),
+            telegraf.log()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The conf without its `[[outputs.influxdb]]` table (up to the next table or the end): what
+/// this test checks is the MQTT round trip, which needs no InfluxDB. (A local helper:
+/// `real_telegraf` has no way to drop a table.)
+fn without_influxdb(conf: &str) -> String {
+    let mut out = String::new();
+    let mut skipping = false;
+    let mut dropped = false;
+    for line in conf.lines() {
+        let trimmed = line.trim_start();
+        if trimmed.starts_with('[') {
+            skipping = trimmed.starts_with("[[outputs.influxdb]]");
+            dropped |= skipping;
+        }
+        if !skipping {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    assert!(
+        dropped,
+        "the conf no longer has an [[outputs.influxdb]] table"
+    );
+    out
+}
+
+/// Telegraf logged no error of its own. Before 1.37.0 it logs every stderr line of ours as an
+/// error (`E! [processors.execd] stderr: "I! summary: ..."`): those are ours, at our level.
+/// Telegraf's "file already closed" at the stop (its execd reads the child's pipes after
+/// `Cmd.Wait` closed them) is counted and said, not failed: the number is returned.
+fn assert_no_error(version: &str, log: &str) -> usize {
+    let closed = log
         .lines()
-        .filter(|l| l.starts_with("action ") || l.starts_with("action,"))
-        .map(|l| line_to_message(l, MS).unwrap())
-        .collect()
+        .filter(|l| l.contains(" E! ") && l.contains("file already closed"))
+        .count();
+    let errors: Vec<&str> = log
+        .lines()
+        .filter(|l| l.contains(" E! ") && !l.contains("file already closed"))
+        .filter(|l| !(version < "v1.37.0" && l.contains("[processors.execd] stderr: \"I! ")))
+        .collect();
+    assert!(
+        errors.is_empty(),
+        "Telegraf {version} logged errors:\n{}\nits log:\n{log}",
+        errors.join("\n")
+    );
+    if closed > 0 {
+        eprintln!(
+            "Telegraf {version}: {closed} \"file already closed\" error(s) at the stop \
+             (Telegraf's execd read the child's pipes after Cmd.Wait closed them)"
+        );
+    }
+    closed
+}
+
+/// The monitor's summary in Telegraf's log: one (the child ran once and ended at the stop),
+/// saying `records` records, no parse error, no late record, no duplicate. It may be missing
+/// only when Telegraf said "file already closed" at the stop (it read the child's stderr after
+/// closing it), which is said.
+fn assert_summary(version: &str, log: &str, records: usize, closed: usize) {
+    let summaries: Vec<&str> = log.lines().filter(|l| l.contains("summary:")).collect();
+    if summaries.is_empty() && closed > 0 {
+        eprintln!(
+            "Telegraf {version}: the monitor's summary line is missing from Telegraf's log \
+             (\"file already closed\" at the stop)"
+        );
+        return;
+    }
+    assert_eq!(
+        summaries.len(),
+        1,
+        "Telegraf {version}: one monitor, run once to its end; its log:\n{log}"
+    );
+    assert!(
+        summaries[0].contains(&format!("summary: {records} records,"))
+            && summaries[0].contains(" 0 parse errors, 0 late records,")
+            && summaries[0].contains(" 0 duplicates"),
+        "Telegraf {version}: all {records} records reached the monitor, once; its log:\n{log}"
+    );
 }
 
 #[test]
 fn replayed_run_comes_back_as_the_same_actions() {
-    let Some(broker) = servers::Mosquitto::start() else {
-        return;
-    };
     let fixture = recorded::recorded_run_path();
     let input = std::fs::read_to_string(&fixture).unwrap();
     let records = input
@@ -38,11 +138,22 @@ fn replayed_run_comes_back_as_the_same_actions() {
         .filter(|l| !l.trim().is_empty() && !l.starts_with('#'))
         .count();
     // What our binary answers when fed the recorded run directly.
-    let expected = action_messages(&recorded::run_binary(&input));
-    assert!(!expected.is_empty(), "the recorded run causes actions");
+    let expected: Vec<Row> = real_telegraf::parse_lines(&recorded::run_binary(&input), "action");
+    // One action a record: so every action arriving means every record reached the monitor.
+    assert_eq!(
+        expected.len(),
+        records,
+        "an action for every recorded message"
+    );
+    assert!(
+        expected
+            .iter()
+            .any(|e| e.fields.get("augmented") == Some(&Field::Bool(true))),
+        "the recorded run has corrective actions"
+    );
 
-    // Publish on the topic the recording came from, and let the stand-in add the same host
-    // tag, so the binding sees the tags it saw in the direct run.
+    // Publish on the topic the recording came from, and let Telegraf add the same host tag
+    // (the agent's `hostname`), so the monitor sees the tags it saw in the direct run.
     let tag_of_first = |key: &str| {
         influxdb_line_protocol::parse_lines(&input)
             .flatten()
@@ -58,51 +169,95 @@ fn replayed_run_comes_back_as_the_same_actions() {
     let topic = tag_of_first("topic").unwrap_or_else(|| "tessla".to_string());
     let host = tag_of_first("host").unwrap_or_else(|| "robot-pc".to_string());
 
-    // The test's own subscriber to the robot's action topic.
-    let actions = mqtt_client::subscribe(broker.port, "action", "robot");
+    let text = real_telegraf::shipped("telegraf/telegraf.conf");
+    let versions = real_telegraf::versions();
+    for (version, bin) in versions {
+        let started = Instant::now();
+        let Some(broker) = broker() else { return };
+        let state = tempfile::tempdir().unwrap();
+        // The shipped conf on the test's broker, its --state in a temporary folder, with:
+        // - the robot's own time (the variant the conf's comment describes), as the recording
+        //   has it: the recorded times (multiples of 200 ms) are exact as Telegraf's float64;
+        // - the recording's host and topic;
+        // - no InfluxDB (see `without_influxdb`).
+        let conf = without_influxdb(
+            &Rewrite::robot(broker.port, None)
+                .replace(
+                    "/var/lib/tessla-telegraf",
+                    state.path().display().to_string(),
+                )
+                .replace(
+                    "  json_string_fields = [\"actualSpeed\"]\n",
+                    "  json_string_fields = [\"actualSpeed\"]\n  json_time_key = \"time\"\n  json_time_format = \"unix_ns\"\n",
+                )
+                .replace("[agent]\n", format!("[agent]\n  hostname = {host:?}\n"))
+                .replace("  topics = [\"tessla\"]\n", format!("  topics = [{topic:?}]\n"))
+                .apply(&text),
+        );
 
-    // Stand-in Telegraf: mqtt_consumer -> processors.execd (our binary) -> outputs.mqtt.
-    let cfg = ConsumerConfig {
-        host,
-        json_string_fields: vec!["actualSpeed".into()],
-        json_time_key: Some("time".into()),
-    };
-    let standin = StandIn::start(recorded::BIN, broker.port, &topic, cfg, records);
+        // The test's own subscriber to the robot's action topic.
+        let actions = mqtt_client::subscribe(broker.port, "action", "robot");
+        let telegraf = Telegraf::start(version, &bin, &conf, &[]);
+        wait_subscribed(&broker, &telegraf, "telegraf-tessla-in", &topic);
 
-    let out = Command::new(recorded::BIN)
-        .args([
-            "replay",
-            fixture.to_str().unwrap(),
-            "--broker",
-            &broker.url(),
-        ])
-        .args(["--topic", &topic, "--speed", "0", "--time-key", "time"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "replay: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+        let out = Command::new(BIN)
+            .args(["replay", fixture.to_str().unwrap()])
+            .args(["--broker", &broker.url()])
+            .args(["--topic", &topic, "--speed", "0", "--time-key", "time"])
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "replay: {}\nTelegraf {version} log:\n{}",
+            String::from_utf8_lossy(&out.stderr),
+            telegraf.log()
+        );
 
-    let (fed, status, published) = standin.finish();
-    assert_eq!(fed, records, "every recorded message reached the stand-in");
-    assert!(status.success(), "run exited with {status}");
-    assert_eq!(published, expected.len());
+        let got = mqtt_client::collect(&actions, expected.len(), Duration::from_secs(60));
+        assert_eq!(
+            got.len(),
+            expected.len(),
+            "Telegraf {version}: every action arrived; its log:\n{}",
+            telegraf.log()
+        );
+        // Each action once: nothing more comes (a resent or doubled action would).
+        if let Ok((_, extra)) = actions.recv_timeout(Duration::from_secs(2)) {
+            panic!(
+                "Telegraf {version}: an action beyond the {} expected: {}\nits log:\n{}",
+                expected.len(),
+                String::from_utf8_lossy(&extra),
+                telegraf.log()
+            );
+        }
+        let log = telegraf.stop();
+        let closed = assert_no_error(version, &log);
+        assert_summary(version, &log, records, closed);
 
-    let got: Vec<Value> = mqtt_client::collect(&actions, expected.len(), Duration::from_secs(20))
-        .into_iter()
-        .map(|(_, p)| serde_json::from_slice(&p).unwrap())
-        .collect();
-    assert_eq!(got.len(), expected.len(), "every action arrived");
-    for (i, (g, e)) in got.iter().zip(&expected).enumerate() {
-        assert_eq!(g["name"], "action");
-        assert_eq!(g["fields"], e["fields"], "action {i}: fields");
-        assert_eq!(g["timestamp"], e["timestamp"], "action {i}: time");
+        for (i, ((_, payload), e)) in got.iter().zip(&expected).enumerate() {
+            let g = real_telegraf::action_row(payload);
+            assert_eq!(
+                g.time,
+                e.time / 1_000_000,
+                "Telegraf {version}: action {i}: time"
+            );
+            assert_eq!(g.tags, e.tags, "Telegraf {version}: action {i}: tags");
+            assert_eq!(
+                g.fields.keys().collect::<Vec<_>>(),
+                e.fields.keys().collect::<Vec<_>>(),
+                "Telegraf {version}: action {i}: fields"
+            );
+            for (k, gv) in &g.fields {
+                assert!(
+                    real_telegraf::same_value(gv, &e.fields[k]),
+                    "Telegraf {version}: action {i} field {k}: {gv:?} through Telegraf, {:?} directly",
+                    e.fields[k]
+                );
+            }
+        }
+        eprintln!(
+            "Telegraf {version}: {records} records replayed, {} actions as the direct run, in {:.1?}",
+            expected.len(),
+            started.elapsed()
+        );
     }
-    let augmented = got
-        .iter()
-        .filter(|m| m["fields"]["augmented"] == true)
-        .count();
-    assert!(augmented > 0, "the recorded run has corrective actions");
 }

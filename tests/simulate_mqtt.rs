@@ -1,87 +1,198 @@
-//! `simulate --broker` through a real Mosquitto: the simulated robot publishes its messages on
-//! `tessla`; the Telegraf stand-in (mqtt_consumer JSON -> `tessla-telegraf run` -> outputs.mqtt
-//! JSON) answers on `action`; the robot executes those actions. With the message time carried
-//! in the JSON (`--time-key`), the run through the broker must equal the in-process run.
+//! `simulate --broker` through a real Mosquitto and the real Telegraf (both pinned versions,
+//! built by `tools/build-telegraf.sh`): the simulated robot publishes its messages on `tessla`
+//! as the robot's JSON, with its time in them (`--time-key`); Telegraf runs the shipped
+//! `telegraf/telegraf.conf` (its `json_time_key` variant) with our binary as its
+//! `processors.execd` child and answers on `action`; the robot executes those actions. The run
+//! through the broker must equal the in-process run.
 
 #[path = "support/mqtt_client.rs"]
 mod mqtt_client;
+#[path = "support/real_telegraf.rs"]
+mod real_telegraf;
 #[path = "support/recorded.rs"]
 mod recorded;
 #[path = "support/servers.rs"]
 mod servers;
-#[path = "support/telegraf_standin.rs"]
-mod telegraf_standin;
 
+use real_telegraf::{Field, Rewrite, Telegraf};
 use recorded::BIN;
 use serde_json::Value;
-use std::process::Command;
-use telegraf_standin::{ConsumerConfig, StandIn, line_to_message};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
 
 /// (speed, augmented) of every `action` line in a run's output.
 fn actions(path: &std::path::Path) -> Vec<(f64, bool)> {
-    std::fs::read_to_string(path)
-        .unwrap()
-        .lines()
-        .filter(|l| l.starts_with("action ") || l.starts_with("action,"))
-        .map(|l| {
-            let m = line_to_message(l, 1).unwrap();
-            (
-                m["fields"]["speed"].as_f64().unwrap(),
-                m["fields"]["augmented"] == true,
-            )
+    real_telegraf::parse_lines(&std::fs::read_to_string(path).unwrap(), "action")
+        .iter()
+        .map(|a| {
+            let speed = match &a.fields["speed"] {
+                Field::Float(f) => *f,
+                Field::Int(i) => *i as f64,
+                other => panic!("speed: {other:?}"),
+            };
+            (speed, a.fields.get("augmented") == Some(&Field::Bool(true)))
         })
         .collect()
 }
 
+/// A broker that logs subscriptions, so the test can wait until Telegraf has subscribed: its
+/// "Connected" comes before the SUBSCRIBE (`mqtt_consumer.go` `connect`).
+fn broker() -> Option<servers::Mosquitto> {
+    servers::Mosquitto::start_with(
+        "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\nlog_type information\nlog_type subscribe\n",
+    )
+}
+
+/// Wait until a client whose id starts with `id` has subscribed to `topic` on `broker` (the
+/// broker logs `<time>: <client> <qos> <topic>`).
+fn wait_subscribed(broker: &servers::Mosquitto, telegraf: &Telegraf, id: &str, topic: &str) {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let subscribed = |log: &str| {
+        log.lines().any(|l| {
+            let t: Vec<&str> = l.split_whitespace().collect();
+            t.len() == 4 && t[1].starts_with(id) && t[2].len() == 1 && t[3] == topic
+        })
+    };
+    while !subscribed(&broker.log()) {
+        assert!(
+            Instant::now() < deadline,
+            "Telegraf {}: {id} never subscribed to {topic}; broker log:\n{}\nTelegraf log:\n{}",
+            telegraf.version,
+            broker.log(),
+            telegraf.log()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The conf without its `[[outputs.influxdb]]` table (up to the next table or the end): what
+/// this test checks is the closed loop over MQTT, which needs no InfluxDB. (A local helper:
+/// `real_telegraf` has no way to drop a table.)
+fn without_influxdb(conf: &str) -> String {
+    let mut out = String::new();
+    let mut skipping = false;
+    let mut dropped = false;
+    for line in conf.lines() {
+        let trimmed = line.trim_start();
+        if trimmed.starts_with('[') {
+            skipping = trimmed.starts_with("[[outputs.influxdb]]");
+            dropped |= skipping;
+        }
+        if !skipping {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    assert!(
+        dropped,
+        "the conf no longer has an [[outputs.influxdb]] table"
+    );
+    out
+}
+
+/// Telegraf logged no error of its own. Before 1.37.0 it logs every stderr line of ours as an
+/// error (`E! [processors.execd] stderr: "I! summary: ..."`): those are ours, at our level.
+/// Telegraf's "file already closed" at the stop (its execd reads the child's pipes after
+/// `Cmd.Wait` closed them) is counted and said, not failed: the number is returned.
+fn assert_no_error(version: &str, log: &str) -> usize {
+    let closed = log
+        .lines()
+        .filter(|l| l.contains(" E! ") && l.contains("file already closed"))
+        .count();
+    let errors: Vec<&str> = log
+        .lines()
+        .filter(|l| l.contains(" E! ") && !l.contains("file already closed"))
+        .filter(|l| !(version < "v1.37.0" && l.contains("[processors.execd] stderr: \"I! ")))
+        .collect();
+    assert!(
+        errors.is_empty(),
+        "Telegraf {version} logged errors:\n{}\nits log:\n{log}",
+        errors.join("\n")
+    );
+    if closed > 0 {
+        eprintln!(
+            "Telegraf {version}: {closed} \"file already closed\" error(s) at the stop \
+             (Telegraf's execd read the child's pipes after Cmd.Wait closed them)"
+        );
+    }
+    closed
+}
+
+/// The monitor's summary in Telegraf's log: one (the child ran once and ended at the stop),
+/// saying `records` records, no parse error, no late record, no duplicate. It may be missing
+/// only when Telegraf said "file already closed" at the stop (it read the child's stderr after
+/// closing it), which is said.
+fn assert_summary(version: &str, log: &str, records: usize, closed: usize) {
+    let summaries: Vec<&str> = log.lines().filter(|l| l.contains("summary:")).collect();
+    if summaries.is_empty() && closed > 0 {
+        eprintln!(
+            "Telegraf {version}: the monitor's summary line is missing from Telegraf's log \
+             (\"file already closed\" at the stop)"
+        );
+        return;
+    }
+    assert_eq!(
+        summaries.len(),
+        1,
+        "Telegraf {version}: one monitor, run once to its end; its log:\n{log}"
+    );
+    assert!(
+        summaries[0].contains(&format!("summary: {records} records,"))
+            && summaries[0].contains(" 0 parse errors, 0 late records,")
+            && summaries[0].contains(" 0 duplicates"),
+        "Telegraf {version}: all {records} records reached the monitor, once; its log:\n{log}"
+    );
+}
+
+/// Run `cmd` to its end, killed (and the test failed, with Telegraf's log) after `timeout`.
+fn output_within(cmd: &mut Command, timeout: Duration, telegraf: &Telegraf) -> Output {
+    let mut child = cmd
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let read = |mut r: Box<dyn std::io::Read + Send>| {
+        std::thread::spawn(move || {
+            let mut buf = Vec::new();
+            let _ = r.read_to_end(&mut buf);
+            buf
+        })
+    };
+    let stdout = read(Box::new(child.stdout.take().unwrap()));
+    let stderr = read(Box::new(child.stderr.take().unwrap()));
+    let deadline = Instant::now() + timeout;
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!(
+                "{cmd:?} still running after {timeout:?}: {}\nTelegraf {} log:\n{}",
+                String::from_utf8_lossy(&stderr.join().unwrap()),
+                telegraf.version,
+                telegraf.log()
+            );
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    Output {
+        status,
+        stdout: stdout.join().unwrap(),
+        stderr: stderr.join().unwrap(),
+    }
+}
+
 #[test]
 fn simulated_robot_drives_the_pipeline_through_mosquitto() {
-    let Some(broker) = servers::Mosquitto::start() else {
-        return;
-    };
     // 60 s of the bundled program: 121 messages.
     let messages = 121usize;
     let common = ["--duration", "60", "--json", "--seed", "3"];
 
-    // Stand-in Telegraf: mqtt_consumer -> processors.execd (our binary) -> outputs.mqtt.
-    let cfg = ConsumerConfig {
-        host: "sim".into(),
-        json_string_fields: vec!["actualSpeed".into()],
-        json_time_key: Some("time".into()),
-    };
-    let standin = StandIn::start(BIN, broker.port, "tessla", cfg, messages);
-
+    // The same run in-process, for each version to equal.
     let dir = tempfile::tempdir().unwrap();
-    let via_broker = dir.path().join("broker.lp");
-    let out = Command::new(BIN)
-        .arg("simulate")
-        .args(common)
-        .args(["--broker", &broker.url(), "--time-key", "time", "--output"])
-        .arg(&via_broker)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "simulate --broker: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let (fed, status, published) = standin.finish();
-    assert_eq!(
-        fed, messages,
-        "every simulated message reached the stand-in"
-    );
-    assert!(status.success(), "run exited with {status}");
-    assert_eq!(published, messages);
-
-    let broker_summary: Value = serde_json::from_slice(&out.stdout).unwrap();
-    let b = &broker_summary["augmented"];
-    assert_eq!(b["messages"], messages);
-    assert_eq!(b["actions"], messages, "every message was answered");
-    assert!(
-        broker_summary["default"].is_null(),
-        "one run through the broker"
-    );
-
-    // The same run in-process.
     let in_process = dir.path().join("in-process.lp");
     let out = Command::new(BIN)
         .arg("simulate")
@@ -90,35 +201,132 @@ fn simulated_robot_drives_the_pipeline_through_mosquitto() {
         .arg(&in_process)
         .output()
         .unwrap();
-    assert!(out.status.success());
+    assert!(
+        out.status.success(),
+        "simulate: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let local: Value = serde_json::from_slice(&out.stdout).unwrap();
     let l = &local["augmented"];
-    for key in [
-        "mse",
-        "interventions",
-        "stuck_seconds",
-        "distance",
-        "spec_mse",
-    ] {
-        assert_eq!(
-            b[key], l[key],
-            "{key}: broker {} in-process {}",
-            b[key], l[key]
-        );
-    }
-    let (ab, al) = (actions(&via_broker), actions(&in_process));
-    assert_eq!(ab.len(), messages);
-    assert_eq!(ab, al, "the same actions, in order");
+    let al = actions(&in_process);
     assert!(
-        ab.iter().any(|a| a.1),
+        al.iter().any(|a| a.1),
         "the monitor intervened in the first 60 s"
     );
+
+    let text = real_telegraf::shipped("telegraf/telegraf.conf");
+    for (version, bin) in real_telegraf::versions() {
+        let started = Instant::now();
+        let Some(broker) = broker() else { return };
+        let state = tempfile::tempdir().unwrap();
+        // The shipped conf on the test's broker, its --state in a temporary folder, with:
+        // - the robot's own time (the variant the conf's comment describes): the simulated
+        //   times (multiples of 500 ms) are exact as Telegraf's float64;
+        // - the simulated robot's host, `sim` (the agent's `hostname`);
+        // - no InfluxDB (see `without_influxdb`).
+        let conf = without_influxdb(
+            &Rewrite::robot(broker.port, None)
+                .replace(
+                    "/var/lib/tessla-telegraf",
+                    state.path().display().to_string(),
+                )
+                .replace(
+                    "  json_string_fields = [\"actualSpeed\"]\n",
+                    "  json_string_fields = [\"actualSpeed\"]\n  json_time_key = \"time\"\n  json_time_format = \"unix_ns\"\n",
+                )
+                .replace("[agent]\n", "[agent]\n  hostname = \"sim\"\n")
+                .apply(&text),
+        );
+        // The test's own subscriber to `action`: how many Telegraf published.
+        let published = mqtt_client::subscribe(broker.port, "action", "watch");
+        let telegraf = Telegraf::start(version, &bin, &conf, &[]);
+        wait_subscribed(&broker, &telegraf, "telegraf-tessla-in", "tessla");
+
+        let via_broker = dir.path().join(format!("broker-{version}.lp"));
+        // Lock-step: each message waits for its action (at most --action-timeout); the whole
+        // run is bounded too.
+        let out = output_within(
+            Command::new(BIN)
+                .arg("simulate")
+                .args(common)
+                .args(["--broker", &broker.url(), "--time-key", "time"])
+                .args(["--action-timeout", "20", "--output"])
+                .arg(&via_broker),
+            Duration::from_secs(300),
+            &telegraf,
+        );
+        assert!(
+            out.status.success(),
+            "simulate --broker: {}\nTelegraf {version} log:\n{}",
+            String::from_utf8_lossy(&out.stderr),
+            telegraf.log()
+        );
+        let got = mqtt_client::collect(&published, messages, Duration::from_secs(30));
+        assert_eq!(
+            got.len(),
+            messages,
+            "Telegraf {version}: an action for every message; its log:\n{}",
+            telegraf.log()
+        );
+        if let Ok((_, extra)) = published.recv_timeout(Duration::from_secs(2)) {
+            panic!(
+                "Telegraf {version}: an action beyond the {messages} expected: {}\nits log:\n{}",
+                String::from_utf8_lossy(&extra),
+                telegraf.log()
+            );
+        }
+        let log = telegraf.stop();
+        let closed = assert_no_error(version, &log);
+        assert_summary(version, &log, messages, closed);
+
+        let broker_summary: Value = serde_json::from_slice(&out.stdout).unwrap();
+        let b = &broker_summary["augmented"];
+        assert_eq!(b["messages"], messages, "Telegraf {version}: {b}");
+        assert_eq!(
+            b["actions"], messages,
+            "Telegraf {version}: every message was answered: {b}"
+        );
+        assert!(
+            broker_summary["default"].is_null(),
+            "one run through the broker"
+        );
+        // The same outcome as in-process; through the real pipeline, too, no action reached
+        // the robot stale or twice (the robot refuses those, `src/simulate/gate.rs`).
+        for key in [
+            "mse",
+            "interventions",
+            "stuck_seconds",
+            "distance",
+            "spec_mse",
+            "refused_stale",
+            "refused_repeated",
+            "monitor_restarts",
+        ] {
+            assert_eq!(
+                b[key], l[key],
+                "Telegraf {version}: {key}: broker {} in-process {}",
+                b[key], l[key]
+            );
+        }
+        for key in ["refused_stale", "refused_repeated", "monitor_restarts"] {
+            assert_eq!(b[key], 0, "Telegraf {version}: {key}: {b}");
+        }
+        let ab = actions(&via_broker);
+        assert_eq!(ab.len(), messages, "Telegraf {version}");
+        assert_eq!(ab, al, "Telegraf {version}: the same actions, in order");
+        eprintln!(
+            "Telegraf {version}: {messages} simulated messages, the in-process run's outcome, in {:.1?}",
+            started.elapsed()
+        );
+    }
 }
 
 /// The MQTT twin judges each action as a robot must (README, "What a robot must do with an
-/// action"): a stand-in monitor answers the robot's five messages with a fresh action, a
+/// action"): the test, as the monitor, answers the robot's five messages with a fresh action, a
 /// redelivery of it, a stale one, a restarted monitor's (seq 1 again, newer) and its next; the
 /// twin executes three and counts one refused as repeated, one as stale and one restart.
+/// No Telegraf here: the real pipeline makes such a sequence only under failures (a broker down,
+/// a monitor restarted without `--state`); what is tested is the twin's judgement of it.
 #[test]
 fn the_mqtt_twin_refuses_stale_and_repeated_actions_and_follows_a_restart() {
     let Some(broker) = servers::Mosquitto::start() else {
@@ -181,7 +389,7 @@ fn the_mqtt_twin_refuses_stale_and_repeated_actions_and_follows_a_restart() {
     assert_eq!(
         answers.join().unwrap(),
         5,
-        "the stand-in monitor answered every message"
+        "the test's monitor answered every message"
     );
     let summary: Value = serde_json::from_slice(&out.stdout).unwrap();
     let a = &summary["augmented"];

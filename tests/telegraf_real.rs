@@ -249,7 +249,30 @@ fn robot_conf_matches_offline(
                 action_topic(t),
                 telegraf.log()
             );
-            actions.extend(got.iter().map(|(_, p)| real_telegraf::action_row(p)));
+            let rows: Vec<Row> = got
+                .iter()
+                .map(|(_, p)| real_telegraf::action_row(p))
+                .collect();
+            // What the robot needs to refuse a stale or repeated action, as it receives it:
+            // its own sequence 1, 2, 3 ... in order, and a validity of 400 ms past the record
+            // (the action's JSON timestamp is the record's, cut to ms).
+            for (k, a) in rows.iter().enumerate() {
+                assert_eq!(
+                    a.fields.get("seq"),
+                    Some(&real_telegraf::Field::Int(k as i64 + 1)),
+                    "{t}: {a:?}"
+                );
+                let Some(real_telegraf::Field::Int(until)) = a.fields.get("valid_until") else {
+                    panic!("{t}: no valid_until: {a:?}");
+                };
+                let from = until - 400_000_000;
+                assert!(
+                    from >= a.time * 1_000_000 && from < (a.time + 1) * 1_000_000,
+                    "{t}: valid_until {until} for a record at {} ms",
+                    a.time
+                );
+            }
+            actions.extend(rows);
         }
         let log = telegraf.stop();
         // Our stderr reaches Telegraf's log: at the default level only the summary, which
@@ -652,5 +675,101 @@ fn every_mqtt_conf_passes_telegraf_test() {
             );
             assert!(log.contains("Loaded inputs:"), "{log}");
         }
+    }
+}
+
+#[test]
+fn the_udp_conf_without_its_namedrop_loops_as_the_connector_wiring_did() {
+    // The control for the UDP test: the UDP conf without its namedrop, and a peer that echoes
+    // what it gets (what the connector's pass-through did): one robot message circulates.
+    let text = real_telegraf::shipped("telegraf/telegraf-udp.conf");
+    let looped = text.replace("  namedrop = [\"mqtt_consumer\"]\n", "");
+    assert_ne!(looped, text, "the conf's namedrop");
+    for (version, bin) in real_telegraf::versions() {
+        let Some(broker) = broker() else { return };
+        let echo = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let telegraf_addr = format!("127.0.0.1:{}", servers::free_port());
+        let conf = Rewrite::new()
+            .replace(
+                "tcp://127.0.0.1:1883",
+                format!("tcp://127.0.0.1:{}", broker.port),
+            )
+            .replace(
+                "udp://127.0.0.1:1653",
+                format!("udp://{}", echo.local_addr().unwrap()),
+            )
+            .replace("udp://127.0.0.1:1654", format!("udp://{telegraf_addr}"))
+            .replace("[[outputs.influxdb]]", "[[outputs.discard]]")
+            .replace("  urls = [\"http://127.0.0.1:8086\"]\n", "")
+            .replace("  database = \"telegraf\"\n", "")
+            .apply(&looped);
+        let telegraf = Telegraf::start(version, &bin, &conf, &[]);
+        wait_subscribed(&broker, "telegraf-tessla-udp-in", "tessla");
+        echo.set_read_timeout(Some(Duration::from_millis(50)))
+            .unwrap();
+        let publisher = mqtt_client::Publisher::connect(broker.port, "robot-pub");
+        publisher.publish("tessla", br#"{"expectedSpeed":0.1}"#.to_vec());
+        let mut buf = vec![0u8; 65_536];
+        let mut sent = 0;
+        let until = Instant::now() + Duration::from_secs(2);
+        while Instant::now() < until {
+            if let Ok(n) = echo.recv(&mut buf) {
+                sent += 1;
+                let _ = echo.send_to(&buf[..n], &telegraf_addr);
+            }
+        }
+        let _ = telegraf.stop();
+        // One lap per flush of socket_writer (flush_interval 100 ms): 20 laps in 2 s.
+        assert!(
+            sent >= 5,
+            "Telegraf {version}: one message sent {sent} times: the loop"
+        );
+    }
+}
+
+#[test]
+fn our_longest_stderr_line_passes_telegrafs_reader() {
+    // Telegraf reads the child's stderr line by line with a bufio.Scanner (64 KiB a line; a
+    // longer one stops the reader for good). A bad --tag of 100 KB is quoted in our message:
+    // it is cut below the limit, and what follows still reaches Telegraf's log.
+    let long = "v".repeat(100_000);
+    for (version, bin) in real_telegraf::versions() {
+        let Some(broker) = broker() else { return };
+        let conf = Rewrite::robot(broker.port, None)
+            .replace("/var/lib/tessla-telegraf", "/tmp")
+            .replace("\"run\"", format!("\"run\", \"--tag\", \"{long}\""))
+            .replace("[[outputs.influxdb]]", "[[outputs.discard]]")
+            .replace("  urls = [\"http://127.0.0.1:8086\"]\n", "")
+            .replace("  database = \"telegraf\"\n", "")
+            .apply(&real_telegraf::shipped("telegraf/telegraf.conf"));
+        let telegraf = Telegraf::start(version, &bin, &conf, &[]);
+        // The child exits with code 2 at once, and is restarted every second.
+        telegraf.wait_for(
+            |log| log.matches("Restarting in 1s").count() >= 2,
+            Duration::from_secs(30),
+            "two restarts",
+        );
+        let log = telegraf.stop();
+        assert!(
+            !log.contains("token too long"),
+            "Telegraf {version}:\n{log}"
+        );
+        let ours: Vec<&str> = log
+            .lines()
+            .filter(|l| {
+                l.contains("[processors.execd]")
+                    && l.contains("--tag")
+                    && !l.contains("Starting process")
+            })
+            .collect();
+        assert!(
+            ours.len() >= 2,
+            "Telegraf {version}: our message at each start:\n{log}"
+        );
+        assert!(
+            ours.iter().all(|l| l.len() < 65_536 + 200),
+            "{}",
+            ours[0].len()
+        );
     }
 }

@@ -430,3 +430,135 @@ fn telegraf_stopped_or_crashed_and_the_state_it_leaves() {
         }
     }
 }
+
+#[test]
+fn while_telegraf_is_away_the_broker_keeps_the_oldest_max_queued_messages() {
+    const QUEUE: usize = 10;
+    const N: usize = 50;
+    for (version, bin) in real_telegraf::versions() {
+        // The broker as the test servers run it (`persistence false`) with a small queue.
+        let Some(broker) = servers::Mosquitto::start_with(&format!(
+            "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\nlog_type information\nlog_type subscribe\nmax_queued_messages {QUEUE}\n"
+        )) else {
+            return;
+        };
+        let Some(influx) = servers::Influxd::start() else {
+            return;
+        };
+        let state = tempfile::tempdir().unwrap();
+        let conf = Rewrite::robot(broker.port, Some(&influx.url("")))
+            .replace(
+                "/var/lib/tessla-telegraf",
+                state.path().display().to_string(),
+            )
+            .apply(&real_telegraf::shipped("telegraf/telegraf.conf"));
+        let s = Setup {
+            broker,
+            influx,
+            state,
+            conf,
+        };
+        // The first start makes the persistent session; then Telegraf goes away.
+        let first = Telegraf::start(version, &bin, &s.conf, &[]);
+        wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", 0);
+        let _ = first.stop();
+        let publisher = mqtt_client::Publisher::connect(s.broker.port, "robot");
+        for p in messages(N) {
+            publisher.publish("tessla", p);
+        }
+        std::thread::sleep(Duration::from_millis(500));
+        let since = s.broker.log().lines().count();
+        let again = Telegraf::start(version, &bin, &s.conf, &[]);
+        wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", since);
+        wait_echoed(&s.influx, QUEUE, || again.log());
+        std::thread::sleep(Duration::from_secs(1));
+        let log = again.stop();
+        let seen: Vec<i64> = echoed(&s.influx).keys().copied().collect();
+        assert_eq!(
+            seen,
+            (0..QUEUE as i64).collect::<Vec<_>>(),
+            "Telegraf {version}: the oldest {QUEUE} kept, the newer dropped\n{log}"
+        );
+        assert!(
+            s.broker
+                .log()
+                .contains("Outgoing messages are being dropped"),
+            "the broker says so"
+        );
+    }
+}
+
+/// A spec whose step for `n = 60` makes 2^60 calls (centuries), for `n = 3` eight.
+const ENDLESS: &str = "in n: Events[Int]\n\
+    def work(k: Int): Int = if k == 0 then 1 else work(k - 1) + work(k - 1)\n\
+    @TelegrafField(\"work\", \"r\") out slift1(n, (k: Int) => work(k)) as r\n";
+
+#[test]
+fn a_hung_child_ends_itself_by_its_watchdog_and_telegraf_restarts_it() {
+    for (version, bin) in real_telegraf::versions() {
+        let dir = tempfile::tempdir().unwrap();
+        let spec = dir.path().join("endless.tessla");
+        std::fs::write(&spec, format!("include \"telegraf.tessla\"\n{ENDLESS}")).unwrap();
+        let spec_arg = format!("{:?}", spec.display().to_string());
+        let with = |timeout: &str| {
+            let timeout = timeout.to_string();
+            let spec_arg = spec_arg.clone();
+            move |c: String| {
+                c.replacen(
+                    "\"run\"",
+                    &format!("\"run\", \"--spec\", {spec_arg}, \"--step-timeout\", \"{timeout}\""),
+                    1,
+                )
+            }
+        };
+        // With the watchdog (3 s here, 10 s by default): the child exits with code 4 and
+        // Telegraf starts a new one, which answers the next record.
+        let Some(s) = setup(with("3s")) else { return };
+        let telegraf = Telegraf::start(version, &bin, &s.conf, &[]);
+        wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", 0);
+        let first = telegraf.wait_child(&[], Duration::from_secs(10));
+        let publisher = mqtt_client::Publisher::connect(s.broker.port, "robot");
+        let hung_at = Instant::now();
+        publisher.publish("tessla", br#"{"n": 60}"#.to_vec());
+        let second = telegraf.wait_child(&[first], Duration::from_secs(60));
+        let restarted_after = hung_at.elapsed();
+        assert!(!real_telegraf::alive(first));
+        publisher.publish("tessla", br#"{"n": 3}"#.to_vec());
+        let deadline = Instant::now() + Duration::from_secs(30);
+        while count(&s.influx, "SELECT count(r) FROM work") < 1 {
+            assert!(Instant::now() < deadline, "{}", telegraf.log());
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        let log = telegraf.stop();
+        assert!(log.contains("exit status 4"), "Telegraf {version}:\n{log}");
+        assert!(
+            log.contains("step-timeout") || log.contains("no progress"),
+            "{log}"
+        );
+        assert!(second != first);
+        eprintln!(
+            "Telegraf {version}: a hung step (watchdog 3 s): new child after {restarted_after:?}"
+        );
+
+        // Without it (--step-timeout 0): Telegraf never restarts a live child; the next
+        // records wait in the pipe, unanswered.
+        let Some(s) = setup(with("0")) else { return };
+        let telegraf = Telegraf::start(version, &bin, &s.conf, &[]);
+        wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", 0);
+        let child = telegraf.wait_child(&[], Duration::from_secs(10));
+        let publisher = mqtt_client::Publisher::connect(s.broker.port, "robot");
+        publisher.publish("tessla", br#"{"n": 60}"#.to_vec());
+        for _ in 0..5 {
+            publisher.publish("tessla", br#"{"n": 3}"#.to_vec());
+        }
+        std::thread::sleep(Duration::from_secs(8));
+        assert_eq!(
+            telegraf.children(),
+            vec![child],
+            "Telegraf {version}: the same child"
+        );
+        assert_eq!(count(&s.influx, "SELECT count(r) FROM work"), 0);
+        // Telegraf's stop closes our stdin and SIGKILLs us 10 s later.
+        let _ = telegraf.stop();
+    }
+}
