@@ -562,3 +562,157 @@ fn a_hung_child_ends_itself_by_its_watchdog_and_telegraf_restarts_it() {
         let _ = telegraf.stop();
     }
 }
+
+/// A client of the test's own that survives the broker going away: it connects again and again
+/// (a robot's client does), subscribing anew each time when `subscribe` names a topic. Every
+/// message received is sent with its arrival (ns since the epoch).
+fn robust_client(
+    port: u16,
+    id: &str,
+    subscribe: Option<&str>,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+) -> (rumqttc::Client, std::sync::mpsc::Receiver<(i64, Vec<u8>)>) {
+    use rumqttc::{Event, MqttOptions, Packet, QoS};
+    let mut o = MqttOptions::new(id, "127.0.0.1", port);
+    o.set_max_packet_size(1 << 20, 1 << 20);
+    o.set_keep_alive(Duration::from_secs(5));
+    let (client, mut connection) = rumqttc::Client::new(o, 4096);
+    let (tx, rx) = std::sync::mpsc::channel();
+    let topic = subscribe.map(String::from);
+    let sub = client.clone();
+    std::thread::spawn(move || {
+        while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+            match connection.recv_timeout(Duration::from_millis(200)) {
+                Ok(Ok(Event::Incoming(Packet::ConnAck(_)))) => {
+                    if let Some(t) = &topic {
+                        let _ = sub.try_subscribe(t, QoS::AtLeastOnce);
+                    }
+                }
+                Ok(Ok(Event::Incoming(Packet::Publish(p)))) => {
+                    let _ = tx.send((real_telegraf_now(), p.payload.to_vec()));
+                }
+                Ok(Ok(_)) => {}
+                Ok(Err(_)) => std::thread::sleep(Duration::from_millis(200)),
+                Err(_) => {}
+            }
+        }
+    });
+    (client, rx)
+}
+
+fn real_telegraf_now() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos() as i64)
+        .unwrap_or(0)
+}
+
+fn mosquitto_on(port: u16) -> servers::Server {
+    let binary = servers::require("mosquitto", "mosquitto").expect("mosquitto");
+    servers::Server::start(
+        &binary,
+        &["-c"],
+        tempfile::tempdir().unwrap(),
+        port,
+        "mosquitto.conf",
+        &format!(
+            "listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\nlog_dest stderr\n"
+        ),
+    )
+}
+
+#[test]
+fn the_broker_down_for_30_s_makes_late_and_repeated_actions_the_robot_refuses() {
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use tessla_telegraf::simulate::closed_loop::Action;
+    use tessla_telegraf::simulate::gate::{Gate, Verdict};
+    for (version, bin) in real_telegraf::versions() {
+        if servers::require("mosquitto", "mosquitto").is_none() {
+            return;
+        }
+        let Some(influx) = servers::Influxd::start() else {
+            return;
+        };
+        let port = servers::free_port();
+        let broker = mosquitto_on(port);
+        let state = tempfile::tempdir().unwrap();
+        let conf = Rewrite::robot(port, Some(&influx.url("")))
+            .replace(
+                "/var/lib/tessla-telegraf",
+                state.path().display().to_string(),
+            )
+            .apply(&real_telegraf::shipped("telegraf/telegraf.conf"));
+        let stop = Arc::new(AtomicBool::new(false));
+        let (_robot_in, actions) = robust_client(port, "robot-in", Some("action"), stop.clone());
+        let telegraf = Telegraf::start(version, &bin, &conf, &[]);
+        std::thread::sleep(Duration::from_secs(1));
+        let (robot_out, _) = robust_client(port, "robot-out", None, stop.clone());
+        let payloads = messages(45 * 5);
+        let start = Instant::now();
+        let mut broker = Some(broker);
+        let mut back_at = i64::MAX;
+        for (k, p) in payloads.iter().enumerate() {
+            let due = start + Duration::from_millis(200 * k as u64);
+            if let Some(wait) = due.checked_duration_since(Instant::now()) {
+                std::thread::sleep(wait);
+            }
+            if k == 5 * 5 {
+                drop(broker.take()); // the broker dies (killed)
+            }
+            if k == 35 * 5 {
+                broker = Some(mosquitto_on(port)); // back, 30 s later, without the sessions
+                back_at = real_telegraf_now();
+            }
+            // The robot's client queues what it publishes while it reconnects.
+            let _ = robot_out.try_publish("tessla", rumqttc::QoS::AtLeastOnce, false, p.clone());
+        }
+        std::thread::sleep(Duration::from_secs(5));
+        let log = telegraf.stop();
+        stop.store(true, Ordering::Relaxed);
+        let mut gate = Gate::default();
+        let (mut late, mut seen, mut twice) = (0, std::collections::BTreeSet::new(), 0);
+        let (mut received, mut after) = (0, 0);
+        while let Ok((at, payload)) = actions.try_recv() {
+            received += 1;
+            if at > back_at {
+                after += 1;
+            }
+            let row = real_telegraf::action_row(&payload);
+            let int = |k: &str| match row.fields.get(k) {
+                Some(real_telegraf::Field::Int(i)) => Some(*i),
+                _ => None,
+            };
+            let (seq, until) = (int("seq"), int("valid_until"));
+            if until.is_some_and(|u| at > u) {
+                late += 1;
+            }
+            if let Some(s) = seq
+                && !seen.insert(s)
+            {
+                twice += 1;
+            }
+            let action = Action {
+                speed: 0.0,
+                augmented: false,
+                speed_mse: None,
+                seq,
+                valid_until: until,
+                time_ns: Some(row.time * 1_000_000),
+            };
+            let verdict = gate.judge(&action, at);
+            if until.is_some_and(|u| at > u) {
+                assert_eq!(verdict, Verdict::RefusedStale);
+            }
+        }
+        assert!(
+            after > 0,
+            "Telegraf {version}: no action after the broker came back\n{log}"
+        );
+        assert_eq!(gate.refused_stale, late, "every late action is refused");
+        eprintln!(
+            "Telegraf {version}: broker down 30 s at 5 Hz: {received} actions reached the robot ({after} after it came back), {late} late (refused as stale), {twice} repeated, {} refused as repeated, {} monitor restarts",
+            gate.refused_repeated, gate.monitor_restarts
+        );
+    }
+}
