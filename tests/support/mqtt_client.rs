@@ -1,5 +1,5 @@
 //! Test-side MQTT clients (rumqttc): a subscriber that collects messages of one topic into a
-//! channel, and a publisher for the stand-in's `outputs.mqtt`.
+//! channel, and a publisher (a robot).
 //!
 //! Include with `#[path = "support/mqtt_client.rs"] mod mqtt_client;`.
 #![allow(dead_code)]
