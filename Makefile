@@ -1,5 +1,5 @@
 # Every command the README mentions lives here. `make run` and `make test` are the README's first two.
-.PHONY: run test setup build install deb profiling readme-run bench bench-criterion bench-process bench-nats shutdown-save soak fmt lint ci fixtures conformance fuzz reproduce
+.PHONY: run test setup build install deb profiling readme-run bench bench-criterion bench-process bench-nats bench-telegraf shutdown-save soak fmt lint ci fixtures conformance fuzz reproduce
 
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
@@ -85,6 +85,20 @@ bench-process:
 # standby's takeover time, on a 3-node nats-server cluster started on free loopback ports.
 bench-nats: build
 	$(CARGO) run --release --example fleet_nats -- --robots 64 --reps 3
+
+# Robot to action through the real Telegraf (BENCHMARKS.md, "Robot to action through Telegraf"):
+# the delay from a robot's MQTT publish to its action on its topic, through Mosquitto, Telegraf
+# (tools/build-telegraf.sh) running the shipped conf and the release binary, p50/p90/p99 at 5 Hz
+# for 1 robot (telegraf.conf) and 1,000 (telegraf-fleet.conf), with and without the lidar.
+DELAY_ROBOTS ?= 1 1000
+DELAY_SECONDS ?= 30
+bench-telegraf: build
+	bash tools/build-telegraf.sh
+	$(CARGO) build --release --example telegraf_delay
+	for r in $(DELAY_ROBOTS); do \
+	  ./target/release/examples/telegraf_delay --robots $$r --seconds $(DELAY_SECONDS) --warmup 5; \
+	  ./target/release/examples/telegraf_delay --robots $$r --seconds $(DELAY_SECONDS) --warmup 5 --no-lidar; \
+	done
 
 # Shutdown with --state (README, "Restarts and reloads"): from stdin closed (how Telegraf stops
 # the child) to exit with N robot instances to save, 5 runs each, medians; Telegraf's budget is

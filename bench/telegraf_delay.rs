@@ -10,9 +10,11 @@
 //! `telegraf/telegraf-fleet.conf` (one topic per robot, one monitor instance each).
 //!
 //! Run: `cargo build --release && cargo run --release --example telegraf_delay --
-//!       [--robots 1] [--seconds 20] [--warmup 3] [--hz 5] [--telegraf v1.39.3] [--set KEY=VALUE]`
+//!       [--robots 1] [--seconds 20] [--warmup 3] [--hz 5] [--telegraf v1.39.3] [--set KEY=VALUE]
+//!       [--no-lidar]`
 //! `--set agent.flush_interval=1s` (a key of the conf: `section.key`, the first table of that
-//! section) tries a setting. Prints one line: `robots=.. sent=.. answered=.. lost=..
+//! section) tries a setting; `--no-lidar` sends the messages without their 360 beams (P1 and
+//! P3 then judge an empty scan), to see what the lidar costs Telegraf. Prints one line: `robots=.. sent=.. answered=.. lost=..
 //! p50_ms=.. p90_ms=.. p99_ms=.. max_ms=..` (the first `--warmup` seconds not counted).
 
 #[path = "../tests/support/real_telegraf.rs"]
@@ -36,6 +38,8 @@ struct Args {
     hz: f64,
     version: String,
     sets: Vec<(String, String)>,
+    /// Leave the 360 lidar beams out of the robot's messages (`--no-lidar`).
+    no_lidar: bool,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -46,6 +50,7 @@ fn parse_args() -> Result<Args, String> {
         hz: 5.0,
         version: "v1.39.3".into(),
         sets: Vec::new(),
+        no_lidar: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -75,6 +80,7 @@ fn parse_args() -> Result<Args, String> {
                     .ok_or(format!("--set {kv}: expected section.key=value"))?;
                 a.sets.push((k.to_string(), v.to_string()));
             }
+            "--no-lidar" => a.no_lidar = true,
             "--bench" => {}
             other => return Err(format!("unknown argument `{other}`")),
         }
@@ -195,7 +201,13 @@ fn run(args: &Args) -> Result<(), String> {
     let payloads: Vec<Vec<u8>> = recording
         .samples
         .iter()
-        .map(|s| serde_json::to_vec(&to_json(s, &options)).unwrap_or_default())
+        .map(|s| {
+            let mut s = s.clone();
+            if args.no_lidar {
+                s.fields.retain(|(name, _)| !name.starts_with("lidar_"));
+            }
+            serde_json::to_vec(&to_json(&s, &options)).unwrap_or_default()
+        })
         .collect();
 
     // Publish instants per robot, matched in order by the actions' arrivals.
@@ -310,10 +322,11 @@ fn run(args: &Args) -> Result<(), String> {
     counted.sort_by(f64::total_cmp);
     let errors = log.lines().filter(|l| l.contains(" E! ")).count();
     println!(
-        "telegraf={} robots={} hz={} sent={} answered={} lost={} counted={} p50_ms={:.2} p90_ms={:.2} p99_ms={:.2} max_ms={:.2} telegraf_errors={}",
+        "telegraf={} robots={} hz={} lidar={} sent={} answered={} lost={} counted={} p50_ms={:.2} p90_ms={:.2} p99_ms={:.2} max_ms={:.2} telegraf_errors={}",
         args.version,
         args.robots,
         args.hz,
+        !args.no_lidar,
         published,
         answered,
         published.saturating_sub(answered),
