@@ -164,12 +164,21 @@ fn shipped_conf_command_runs_as_telegraf_would() {
     // The monitors' state is kept in the systemd drop-in's StateDirectory; here in a temp dir.
     let state = "/var/lib/tessla-telegraf/telegraf.state";
     assert!(cmd.iter().any(|a| a == state), "{cmd:?}");
-    assert!(cmd.windows(2).any(|w| w[0] == "--state-interval"), "{cmd:?}");
+    assert!(
+        cmd.windows(2).any(|w| w[0] == "--state-interval"),
+        "{cmd:?}"
+    );
     let dir = tempfile::tempdir().unwrap();
     let here = dir.path().join("telegraf.state");
     let args: Vec<&str> = cmd[1..]
         .iter()
-        .map(|a| if a == state { here.to_str().unwrap() } else { a })
+        .map(|a| {
+            if a == state {
+                here.to_str().unwrap()
+            } else {
+                a
+            }
+        })
         .collect();
     let lines = fixture_lines(6);
     let (out, err, code) = run_all(&args, &lines[..3].concat());

@@ -299,15 +299,18 @@ fn shipped_fleet_conf_command_keeps_robots_apart() {
     let here = dir.path().join("telegraf-fleet.state");
     let args: Vec<&str> = cmd[1..]
         .iter()
-        .map(|a| if *a == state { here.to_str().unwrap() } else { a })
+        .map(|a| {
+            if *a == state {
+                here.to_str().unwrap()
+            } else {
+                a
+            }
+        })
         .collect();
     let (out, err, code) = run(&args, &fleet(&[0, 1, 2]));
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("3 instances"), "{err}");
-    assert!(
-        err.contains("state: saved 3 monitor instances"),
-        "{err}"
-    );
+    assert!(err.contains("state: saved 3 monitor instances"), "{err}");
     for k in 0..ROBOTS {
         let actions = out
             .lines()

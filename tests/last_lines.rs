@@ -98,7 +98,10 @@ fn a_slow_reader_gets_every_line_written_before_the_end() {
         .unwrap();
     let expected = String::from_utf8(all.stdout).unwrap();
     assert_eq!(
-        expected.lines().filter(|l| l.starts_with("action ")).count(),
+        expected
+            .lines()
+            .filter(|l| l.starts_with("action "))
+            .count(),
         40
     );
     assert!(expected.len() < 60_000, "fits the pipe: {}", expected.len());
@@ -131,7 +134,8 @@ fn a_reader_that_stops_reading_costs_at_most_two_seconds() {
         "{took:?}"
     );
     assert!(
-        err.contains("W! stdout: ") && err.contains(" bytes still unread by the reader after 2 s; exiting anyway"),
+        err.contains("W! stdout: ")
+            && err.contains(" bytes still unread by the reader after 2 s; exiting anyway"),
         "{err}"
     );
 }

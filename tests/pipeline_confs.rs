@@ -297,7 +297,9 @@ fn fleet_conf_as_shipped_end_to_end() {
         stats.stderr
     );
     assert!(
-        stats.stderr[1].1.starts_with("state: saved 3 monitor instances"),
+        stats.stderr[1]
+            .1
+            .starts_with("state: saved 3 monitor instances"),
         "{:?}",
         stats.stderr
     );

@@ -312,7 +312,13 @@ fn every_action_carries_its_robots_sequence_number_and_validity() {
         }
     }
     let (ms, err) = metrics(
-        &["--no-passthrough", "--instance-by", "topic", "--threads", "1"],
+        &[
+            "--no-passthrough",
+            "--instance-by",
+            "topic",
+            "--threads",
+            "1",
+        ],
         &input,
         "action",
     );
@@ -333,7 +339,11 @@ fn every_action_carries_its_robots_sequence_number_and_validity() {
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("  action_validity = 400000000"), "{out}");
     // Every property spec's action carries both as well.
-    for s in ["p1_braking.tessla", "p2_tolerance.tessla", "p3_lidar.tessla"] {
+    for s in [
+        "p1_braking.tessla",
+        "p2_tolerance.tessla",
+        "p3_lidar.tessla",
+    ] {
         let a = action(&["--spec", &spec(s)], &one);
         assert_eq!(int(&a, "seq"), 1, "{s}: {a:?}");
         assert_eq!(int(&a, "valid_until"), TS + 400_000_000, "{s}: {a:?}");
@@ -343,7 +353,9 @@ fn every_action_carries_its_robots_sequence_number_and_validity() {
     let dir = tempfile::tempdir().unwrap();
     let state = dir.path().join("state.json");
     let state = state.to_str().unwrap();
-    let first: String = (0..2).map(|i| message(0.1, 0.1, &beams, TS + i * 200_000_000)).collect();
+    let first: String = (0..2)
+        .map(|i| message(0.1, 0.1, &beams, TS + i * 200_000_000))
+        .collect();
     let later = message(0.1, 0.1, &beams, TS + 400_000_000);
     let (ms, err) = metrics(&["--no-passthrough", "--state", state], &first, "action");
     assert_eq!(ms.len(), 2, "{err}");

@@ -162,7 +162,14 @@ fn the_mqtt_twin_refuses_stale_and_repeated_actions_and_follows_a_restart() {
         }
     });
     let out = Command::new(BIN)
-        .args(["simulate", "--duration", "2", "--json", "--action-timeout", "10"])
+        .args([
+            "simulate",
+            "--duration",
+            "2",
+            "--json",
+            "--action-timeout",
+            "10",
+        ])
         .args(["--broker", &broker.url(), "--time-key", "time"])
         .output()
         .unwrap();
@@ -171,7 +178,11 @@ fn the_mqtt_twin_refuses_stale_and_repeated_actions_and_follows_a_restart() {
         "simulate --broker: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    assert_eq!(answers.join().unwrap(), 5, "the stand-in monitor answered every message");
+    assert_eq!(
+        answers.join().unwrap(),
+        5,
+        "the stand-in monitor answered every message"
+    );
     let summary: Value = serde_json::from_slice(&out.stdout).unwrap();
     let a = &summary["augmented"];
     assert_eq!(a["messages"], 5, "{a}");

@@ -90,13 +90,20 @@ fn a_step_that_never_ends_exits_with_code_4_naming_the_record_and_instance() {
     let (code, took) = wait_at_most(&mut child, started, BOUND + SLACK);
     drop(stdin);
     let err = stderr_of(&mut child);
-    assert_eq!(code, Some(4), "exit code 4 within the bound and slack: {err}");
+    assert_eq!(
+        code,
+        Some(4),
+        "exit code 4 within the bound and slack: {err}"
+    );
     assert!(took >= BOUND, "not before the bound: {took:?}");
     let line = err
         .lines()
         .find(|l| l.starts_with("E! step watchdog: no progress for "))
         .unwrap_or_else(|| panic!("no watchdog line: {err}"));
-    assert!(line.contains("(--step-timeout 3s) while stepping records"), "{line}");
+    assert!(
+        line.contains("(--step-timeout 3s) while stepping records"),
+        "{line}"
+    );
     assert!(
         line.contains("last record: line 2 (instance robot=b)"),
         "{line}"
@@ -113,9 +120,13 @@ fn a_stdout_nobody_reads_exits_with_code_4() {
     let mut stdin = child.stdin.take().unwrap();
     let started = Instant::now();
     let writer = std::thread::spawn(move || {
-        let line = "mqtt_consumer,topic=tessla expectedSpeed=0.1,actualSpeed=0.1 1700000000000000000\n";
+        let line =
+            "mqtt_consumer,topic=tessla expectedSpeed=0.1,actualSpeed=0.1 1700000000000000000\n";
         for i in 0..100_000i64 {
-            let l = line.replace("1700000000000000000", &(1_700_000_000_000_000_000 + i).to_string());
+            let l = line.replace(
+                "1700000000000000000",
+                &(1_700_000_000_000_000_000 + i).to_string(),
+            );
             // Fails once the child has exited.
             if stdin.write_all(l.as_bytes()).is_err() {
                 return;
@@ -198,7 +209,13 @@ fn the_help_and_the_man_page_name_the_option_and_the_exit_code() {
     assert!(help.contains("[default: 10s]"), "{help}");
     let man = Command::new(BIN).arg("manpage").output().unwrap();
     let man = String::from_utf8_lossy(&man.stdout);
-    assert!(man.contains("step\\-timeout"), "the man page lists the option");
-    assert!(man.contains("EXIT CODES") || man.contains("Exit codes"), "{man}");
+    assert!(
+        man.contains("step\\-timeout"),
+        "the man page lists the option"
+    );
+    assert!(
+        man.contains("EXIT CODES") || man.contains("Exit codes"),
+        "{man}"
+    );
     assert!(man.contains("4: "), "the man page lists exit code 4");
 }

@@ -211,7 +211,7 @@ impl Twin for MqttTwin {
                         .and_then(|d| i64::try_from(d.as_nanos()).ok());
                 }
                 serde_json::from_slice::<Value>(&payload)
-                .ok()
+                    .ok()
                     .as_ref()
                     .and_then(metric_of)
             }

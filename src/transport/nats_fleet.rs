@@ -9,7 +9,6 @@
 //! losing it, dropping every instance; the save points (`--state-interval`, every ending while
 //! holding the lease, then releasing it). Signals and SIGHUP as in the stdio transport.
 
-use crate::transport::watchdog::{Phase, Watch};
 use crate::log::{self, Level};
 use crate::telegraf::clock::Wall;
 use crate::telegraf::instances::Key;
@@ -17,6 +16,7 @@ use crate::telegraf::processor::Processor;
 use crate::telegraf::state::Backend;
 use crate::telegraf::state_nats::Lease;
 use crate::transport::Ending;
+use crate::transport::watchdog::{Phase, Watch};
 use lineproto::{Metric, Record, RecordSplitter, parse_record_into};
 use std::collections::{HashMap, VecDeque};
 use std::io::Write;
