@@ -1,5 +1,5 @@
 # Every command the README mentions lives here. `make run` and `make test` are the README's first two.
-.PHONY: run test setup build install deb profiling readme-run bench bench-criterion bench-process bench-nats bench-telegraf shutdown-save soak fmt lint ci fixtures conformance fuzz reproduce
+.PHONY: run test setup build install install-files deb profiling readme-run bench bench-criterion bench-process bench-nats bench-telegraf shutdown-save soak fmt lint ci fixtures conformance fuzz reproduce
 
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
@@ -36,22 +36,34 @@ test: setup
 	$(CARGO) test --workspace; status=$$?; bash tools/test-skips.sh $(SKIP_DIR); exit $$status
 
 # Install the release binary, its man page and shell completions under PREFIX (DESTDIR for
-# staging): PREFIX/bin, PREFIX/share/man/man1, PREFIX/share/{bash-completion,zsh,fish}.
+# staging): PREFIX/bin, PREFIX/share/man/man1, PREFIX/share/{bash-completion,zsh,fish}, and the
+# Telegraf systemd drop-in (telegraf/systemd/tessla-telegraf.conf) with the binary's path under
+# PREFIX written in, to SYSTEMDDIR/telegraf.service.d (PREFIX/lib/systemd/system: systemd reads
+# /usr/lib and /usr/local/lib; for another PREFIX, SYSTEMDDIR=/etc/systemd/system). Then
+# `systemctl daemon-reload`. `install-files` does the same without building first (BIN=...).
 PREFIX ?= /usr/local
+SYSTEMDDIR ?= $(PREFIX)/lib/systemd/system
 BIN = ./target/release/tessla-telegraf
 
 install: build
+	$(MAKE) install-files
+
+install-files:
 	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/man/man1 \
 	  $(DESTDIR)$(PREFIX)/share/bash-completion/completions \
 	  $(DESTDIR)$(PREFIX)/share/zsh/site-functions \
 	  $(DESTDIR)$(PREFIX)/share/fish/vendor_completions.d \
-	  $(DESTDIR)$(PREFIX)/share/tessla-telegraf
+	  $(DESTDIR)$(PREFIX)/share/tessla-telegraf \
+	  $(DESTDIR)$(SYSTEMDDIR)/telegraf.service.d
 	install -m 755 $(BIN) $(DESTDIR)$(PREFIX)/bin/tessla-telegraf
 	$(BIN) manpage > $(DESTDIR)$(PREFIX)/share/man/man1/tessla-telegraf.1
 	$(BIN) completions bash > $(DESTDIR)$(PREFIX)/share/bash-completion/completions/tessla-telegraf
 	$(BIN) completions zsh > $(DESTDIR)$(PREFIX)/share/zsh/site-functions/_tessla-telegraf
 	$(BIN) completions fish > $(DESTDIR)$(PREFIX)/share/fish/vendor_completions.d/tessla-telegraf.fish
 	install -m 644 specs/telegraf.tessla $(DESTDIR)$(PREFIX)/share/tessla-telegraf/telegraf.tessla
+	sed 's|/usr/bin/tessla-telegraf|$(PREFIX)/bin/tessla-telegraf|g' telegraf/systemd/tessla-telegraf.conf \
+	  > $(DESTDIR)$(SYSTEMDDIR)/telegraf.service.d/tessla-telegraf.conf
+	@echo "installed; with systemd: systemctl daemon-reload"
 
 # The Debian package (cargo-deb; `cargo install cargo-deb` once): the binary, man page, shell
 # completions, telegraf.tessla, the sample confs, dashboards, examples and docs, and any

@@ -20,7 +20,8 @@ pub fn require_outputs(program: &tessla_engine::Program, spec: &str) -> Result<(
     }
 }
 
-pub fn run(args: CheckArgs) -> CliResult {
+pub fn run(mut args: CheckArgs) -> CliResult {
+    args.spec_options.set_from_env();
     let options = super::load_options(&args.spec_options)
         .map_err(|e| CliError::spec(format!("error: {e}")))?;
     let loaded =

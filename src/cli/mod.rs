@@ -157,9 +157,43 @@ pub struct SpecOptions {
     /// as TeSSLa's interpreter does.
     #[arg(short = 't', long, value_name = "UNIT")]
     pub base_time: Option<String>,
-    /// Override a top-level constant of the spec: `--set delta=0.05` (repeatable).
+    /// Override a top-level constant of the spec: `--set delta=0.05` (repeatable). `run` and
+    /// `check` without any --set read the environment variable TESSLA_SET instead:
+    /// NAME=VALUE assignments separated by spaces (`TESSLA_SET="delta=0.05 gain=1.0"`).
     #[arg(long = "set", value_name = "NAME=VALUE")]
     pub set: Vec<String>,
+}
+
+/// The environment variable [`SpecOptions::set_from_env`] reads.
+pub const SET_ENV: &str = "TESSLA_SET";
+
+/// The environment variable `run` takes its spec from without `--spec`.
+pub const SPEC_ENV: &str = "TESSLA_SPEC";
+
+impl RunArgs {
+    /// Without `--spec`, the spec [`SPEC_ENV`] names (when set and not empty); without `--set`,
+    /// the assignments of [`SET_ENV`].
+    pub fn from_env(&mut self) {
+        if self.spec.is_none()
+            && let Some(path) = std::env::var_os(SPEC_ENV).filter(|p| !p.is_empty())
+        {
+            self.spec = Some(PathBuf::from(path));
+        }
+        self.spec_options.set_from_env();
+    }
+}
+
+impl SpecOptions {
+    /// Without `--set` on the command line, take the assignments from [`SET_ENV`] (`run` and
+    /// `check`: Telegraf's child and the systemd drop-in's check read the same variable, so
+    /// the overrides are written once, in /etc/default/tessla-telegraf).
+    pub fn set_from_env(&mut self) {
+        if self.set.is_empty()
+            && let Ok(v) = std::env::var(SET_ENV)
+        {
+            self.set = v.split_whitespace().map(str::to_string).collect();
+        }
+    }
 }
 
 #[derive(Debug, Args, Clone, Default)]
@@ -217,7 +251,10 @@ pub struct TraceArgs {
 
 #[derive(Debug, Args, Clone, Default)]
 pub struct RunArgs {
-    /// The `.tessla` file; without it the bundled robot monitors run.
+    /// The `.tessla` file; without it the bundled robot monitors run. Without --spec, the
+    /// environment variable TESSLA_SPEC names it when set and not empty (Telegraf's child
+    /// inherits it from the systemd drop-in's EnvironmentFile, /etc/default/tessla-telegraf,
+    /// which the drop-in's check reads too: the path is written in one place).
     #[arg(long)]
     pub spec: Option<PathBuf>,
     #[command(flatten)]

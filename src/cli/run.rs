@@ -13,8 +13,26 @@ use crate::transport::{self, Ending};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-pub fn run(args: RunArgs) -> CliResult {
+pub fn run(mut args: RunArgs) -> CliResult {
     log::set_level(args.log_level);
+    let (had_spec, had_set) = (args.spec.is_some(), !args.spec_options.set.is_empty());
+    args.from_env();
+    if let Some(p) = args.spec.as_ref().filter(|_| !had_spec) {
+        log::log(
+            Level::Info,
+            &format!("spec from {}: {}", super::SPEC_ENV, p.display()),
+        );
+    }
+    if !had_set && !args.spec_options.set.is_empty() {
+        log::log(
+            Level::Info,
+            &format!(
+                "--set from {}: {}",
+                super::SET_ENV,
+                args.spec_options.set.join(" ")
+            ),
+        );
+    }
     let options = super::load_options(&args.spec_options).map_err(CliError::spec)?;
     let source = SpecSource {
         path: args.spec.clone(),
