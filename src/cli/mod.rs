@@ -381,7 +381,12 @@ pub fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             match style {
-                Style::Log => crate::log::log(crate::log::Level::Error, &e.message),
+                Style::Log => {
+                    crate::log::log(crate::log::Level::Error, &e.message);
+                    // Under Telegraf the message must reach its log before `Cmd.Wait` closes
+                    // the pipes (a broken spec's diagnostic, at every restart).
+                    run::wait_until_read(std::time::Duration::from_secs(1));
+                }
                 Style::Plain => {
                     let mut text = crate::telegraf::state_nats::mask(&e.message);
                     if !text.ends_with('\n') {
