@@ -13,7 +13,7 @@
 //!
 //! Cost on the record path: a processor with a lane does four relaxed atomic stores per record
 //! (its progress count, the line, the instance slot cleared and then set) on cache lines only its
-//! own thread writes (18 instructions of a P2 record's 10,221: BENCHMARKS.md);
+//! own thread writes (26 instructions of a P2 record's 10,221: BENCHMARKS.md);
 //! no clock is read (the watching thread samples the marks every [`tick`] and times a stall by
 //! its own clock). A new instance's name is written under a lock, once per instance.
 
@@ -63,8 +63,10 @@ impl Phase {
     }
 }
 
-/// One processor's marks (each `--threads` worker has its own, so no two threads write one).
+/// One processor's marks (each `--threads` worker has its own, so no two threads write one;
+/// aligned to 128 bytes, so no two lanes share a cache line or an adjacent-line prefetch pair).
 #[derive(Debug)]
+#[repr(align(128))]
 pub struct Lane {
     /// Bumped at every record: any change is progress.
     progress: AtomicU64,
