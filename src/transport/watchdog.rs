@@ -11,8 +11,9 @@
 //! watching thread ([`spawn`]) that logs what was stuck (the phase, the record's line, the
 //! instance, for how long) and exits with [`EXIT_CODE`].
 //!
-//! Cost on the record path: a processor with a lane does three relaxed atomic stores per record
-//! (its progress count, the line, the instance slot) on a cache line only its own thread writes;
+//! Cost on the record path: a processor with a lane does four relaxed atomic stores per record
+//! (its progress count, the line, the instance slot cleared and then set) on cache lines only its
+//! own thread writes (26 instructions of a P2 record's 10,221: BENCHMARKS.md);
 //! no clock is read (the watching thread samples the marks every [`tick`] and times a stall by
 //! its own clock). A new instance's name is written under a lock, once per instance.
 
@@ -62,8 +63,10 @@ impl Phase {
     }
 }
 
-/// One processor's marks (each `--threads` worker has its own, so no two threads write one).
+/// One processor's marks (each `--threads` worker has its own, so no two threads write one;
+/// aligned to 128 bytes, so no two lanes share a cache line or an adjacent-line prefetch pair).
 #[derive(Debug)]
+#[repr(align(128))]
 pub struct Lane {
     /// Bumped at every record: any change is progress.
     progress: AtomicU64,
