@@ -221,9 +221,13 @@ pub fn events<'a>(
 
 /// `s.trim()`, without its Unicode scan when spaces are all there is to trim (as nearly always).
 fn trim(s: &str) -> &str {
-    let t = s.trim_matches(' ');
-    match (t.as_bytes().first(), t.as_bytes().last()) {
-        (Some(a), Some(b)) if a.is_ascii_graphic() && b.is_ascii_graphic() => t,
+    let b = s.as_bytes();
+    let start = b.iter().position(|&c| c != b' ').unwrap_or(b.len());
+    let end = b.iter().rposition(|&c| c != b' ').map_or(start, |e| e + 1);
+    match (b.get(start), end.checked_sub(1).and_then(|e| b.get(e))) {
+        (Some(x), Some(y)) if x.is_ascii_graphic() && y.is_ascii_graphic() => {
+            s.get(start..end).unwrap_or(s)
+        }
         _ => s.trim(),
     }
 }
@@ -268,7 +272,12 @@ fn parse_event(l: &str, line: usize, program: &Program) -> Result<Read, ReadErro
 }
 
 fn parse_ts(ts: &str, line: usize) -> Result<i64, ReadError> {
-    let ts: i64 = trim(ts).parse().map_err(|_| {
+    let ts = trim(ts);
+    // Plain digits (at most 18: no overflow) without `str::parse`.
+    if (1..=18).contains(&ts.len()) && ts.bytes().all(|c| c.is_ascii_digit()) {
+        return Ok(ts.bytes().fold(0, |n, d| n * 10 + i64::from(d - b'0')));
+    }
+    let ts: i64 = ts.parse().map_err(|_| {
         ReadError::malformed(
             line,
             format!("`{}` is not a non-negative integer timestamp", ts.trim()),
@@ -397,6 +406,22 @@ impl Lit<'_> {
         }
     }
 
+    /// A `,` (after spaces), or `None`.
+    fn comma(&mut self) -> Option<()> {
+        self.spaces();
+        (self.peek() == Some(b',')).then(|| self.i += 1)
+    }
+
+    /// Whether a `)` follows (after spaces); it is consumed.
+    fn close(&mut self) -> bool {
+        self.spaces();
+        let close = self.peek() == Some(b')');
+        if close {
+            self.i += 1;
+        }
+        close
+    }
+
     fn digits(&mut self) -> usize {
         let start = self.i;
         while self.peek().is_some_and(|c| c.is_ascii_digit()) {
@@ -445,22 +470,22 @@ impl Lit<'_> {
                     self.i += 1;
                     return Some(Value::Unit);
                 }
-                // Up to four elements, gathered on the stack.
-                let mut items = [const { Value::Unit }; 4];
-                let mut n = 0;
-                loop {
-                    *items.get_mut(n)? = self.value(depth + 1)?;
-                    n += 1;
-                    self.spaces();
-                    match self.peek()? {
-                        b',' => self.i += 1,
-                        b')' => break,
-                        _ => return None,
-                    }
+                // Two to four elements: `(x)` is `x` in parentheses and `(x,)` a tuple, both
+                // left to the parser, as are longer tuples.
+                let a = self.value(depth + 1)?;
+                self.comma()?;
+                let b = self.value(depth + 1)?;
+                if self.close() {
+                    return Some(Value::Tuple(Arc::new([a, b])));
                 }
-                self.i += 1;
-                // `(x)` is `x` in parentheses and `(x,)` a tuple: both left to the parser.
-                (n >= 2).then(|| Value::Tuple(items.into_iter().take(n).collect()))
+                self.comma()?;
+                let c = self.value(depth + 1)?;
+                if self.close() {
+                    return Some(Value::Tuple(Arc::new([a, b, c])));
+                }
+                self.comma()?;
+                let d = self.value(depth + 1)?;
+                self.close().then(|| Value::Tuple(Arc::new([a, b, c, d])))
             }
             _ => None,
         }
