@@ -173,6 +173,6 @@ reproduce: build
 # `trace` on the conformance suite and fixtures, `check`/`check --ir` of every shipped spec),
 # compared byte for byte with an older binary: make outputs-compare BASE=path/to/old/binary
 outputs-compare: build
-	bash tools/outputs.sh $(BASE) target/outputs-base
-	bash tools/outputs.sh target/release/tessla-telegraf target/outputs-new
+	bash tools/outputs.sh $(BASE) $(CURDIR)/target/outputs-base
+	bash tools/outputs.sh target/release/tessla-telegraf $(CURDIR)/target/outputs-new
 	diff -r target/outputs-base target/outputs-new && echo "outputs-compare: identical"

@@ -13,11 +13,19 @@ tables show medians. Rows:
                    `--threads 1`, `--threads 2` and the default (the machine's cores)
   python P2      bench/p2_processor.py (the paper's DT language, standard library only), P2 only
   rtlola-cli     `rtlola-cli monitor` on bench/p2.lola over the same events as CSV, P2 only
+Two `trace` yardsticks from public data in ../shared/corpora (skipped with a note without it):
+  primes         VAMOS primes.tessla over its 80k-event trace x10 (timestamps shifted), against
+                 the monitor TeSSLa 1.2.3's Rust back end compiled from the same spec (built
+                 apart, see BENCHMARKS.md; its path in $TESSLA_PRIMES_MONITOR, else left out)
+  auction        bench/auction.tessla (CRV 2016 Auction, one Map) over the three 84,780-event
+                 traces, and on the first --auction-prefix events of the first trace beside
+                 rtlola-cli on bench/auction.lola (far slower, so a prefix)
 Also: spec load (start-up of `run` on empty input), answer latency at 1k and 10k lines/s
 (bench/latency.rs), and a check that the Python baseline writes exactly what tessla-telegraf writes.
 
 Usage: python3 bench/run.py [--reps N] [--no-build] [--no-rtlola] [--latency-reps N] [--latency-only]
-                           [--out target/bench-results.md]
+                           [--only p2,lidar,fleet,startup,latency,primes,auction]
+                           [--auction-prefix N] [--out target/bench-results.md]
 """
 import argparse
 import os
@@ -35,6 +43,12 @@ BIN = ROOT / "target/release/tessla-telegraf"
 EXAMPLES = ROOT / "target/release/examples"
 P2_SPEC = ROOT / "bench/p2.tessla"
 P2_LOLA = ROOT / "bench/p2.lola"
+AUCTION_SPEC = ROOT / "bench/auction.tessla"
+AUCTION_LOLA = ROOT / "bench/auction.lola"
+CORPORA = ROOT.parent / "shared/corpora"
+PRIMES_DIR = CORPORA / "tessla-wild2/vamos-shamon/930b14d/experiments/tessla_compare"
+AUCTION_DIR = CORPORA / "perf-anchors/PRECISE-SMEDL/b0096d1/tests/monitors/auction"
+SECTIONS = ["p2", "lidar", "fleet", "startup", "latency", "primes", "auction"]
 TIME = "/usr/bin/time"
 
 
@@ -194,6 +208,88 @@ def latency_section(reps):
     return "\n".join(lines) + "\n"
 
 
+def primes_section(reps):
+    """VAMOS primes x10 through `trace`, beside TeSSLa's compiled monitor when it is given."""
+    spec, src = PRIMES_DIR / "primes.tessla", PRIMES_DIR / "gen_tessla_input/primes.in"
+    title = "### Trace: VAMOS primes.tessla, its 80,000-event trace x10 (timestamps shifted)\n"
+    if not src.exists():
+        log(f"== primes: SKIPPED ({src} not found)")
+        return f"{title}\nSkipped: {src} not found (../shared/corpora).\n"
+    data = ROOT / "target/bench-data/primes_x10.in"
+    if not data.exists():
+        data.parent.mkdir(parents=True, exist_ok=True)
+        lines = src.read_text().splitlines()
+        with open(data, "w") as f:
+            for k in range(10):
+                for line in lines:
+                    ts, rest = line.split(":", 1)
+                    f.write(f"{int(ts) + 40000 * k}:{rest}\n")
+    n = count_lines(data)
+    log(f"== primes: {n:,} events")
+    ours = measure("tessla-telegraf trace primes.tessla (stdin)", [str(BIN), "trace", str(spec)], data, n, reps)
+    rows = [measure("cat (pipe floor)", ["cat"], data, n, reps), ours]
+    peer = os.environ.get("TESSLA_PRIMES_MONITOR")
+    note = ""
+    if peer and Path(peer).exists():
+        rows.append(measure("TeSSLa 1.2.3 compiled monitor (Rust back end)", [peer], data, n, reps))
+        mine = subprocess.run([str(BIN), "trace", str(spec), str(data)], capture_output=True).stdout
+        with open(data, "rb") as f:
+            theirs = subprocess.run([peer], stdin=f, capture_output=True).stdout
+        same = "yes" if mine == theirs else "NO"
+        note = f"Outputs byte-identical: {same} ({len(mine.splitlines()):,} lines).\n"
+    else:
+        log("   TeSSLa's compiled monitor: SKIPPED (set TESSLA_PRIMES_MONITOR to its binary)")
+        note = ("TeSSLa's compiled monitor left out: set TESSLA_PRIMES_MONITOR to the binary built from "
+                "ista-vamos/shamon experiments/tessla_compare/primes_tessla (BENCHMARKS.md).\n")
+    return table(title[4:].strip(), "events", rows, ours) + note
+
+
+def auction_section(reps, rtlola, prefix):
+    """bench/auction.tessla on the CRV traces; rtlola-cli on a prefix, beside ours on it."""
+    title = "### Auction (CRV 2016, one Map of item states): bench/auction.tessla, bench/auction.lola\n"
+    traces = [AUCTION_DIR / f"auction_trace_invalid{i}" for i in (1, 2, 3)]
+    if not traces[0].exists():
+        log(f"== auction: SKIPPED ({AUCTION_DIR} not found)")
+        return f"{title}\nSkipped: {AUCTION_DIR} not found (../shared/corpora).\n"
+    data = ROOT / "target/bench-data"
+    data.mkdir(parents=True, exist_ok=True)
+    conv = []
+    for t in traces:
+        tin, tcsv = data / f"{t.name}.input", data / f"{t.name}.csv"
+        subprocess.run([sys.executable, str(ROOT / "bench/auction_trace.py"), str(t), str(tin), str(tcsv)],
+                       check=True)
+        conv.append((t.name, tin, tcsv))
+    # The prefix: the first `prefix` events in both formats (the CSV keeps its header).
+    name, tin, tcsv = conv[0]
+    pin, pcsv = data / f"{name}_{prefix}.input", data / f"{name}_{prefix}.csv"
+    with open(tin) as f:
+        pin.write_text("".join(line for _, line in zip(range(prefix), f)))
+    with open(tcsv) as f:
+        pcsv.write_text("".join(line for _, line in zip(range(prefix + 1), f)))
+    out = []
+    rows = []
+    for name, tin, _ in conv:
+        n = count_lines(tin)
+        log(f"== auction: {name}, {n:,} events")
+        rows.append(measure(f"tessla-telegraf trace auction.tessla, {name}", [str(BIN), "trace", str(AUCTION_SPEC)],
+                            tin, n, reps))
+    out.append(table(title[4:].strip() + ", whole traces", "events", rows, rows[0]))
+    log(f"== auction: the first {prefix:,} events of {conv[0][0]}")
+    ours = measure(f"tessla-telegraf trace auction.tessla, first {prefix:,}", [str(BIN), "trace", str(AUCTION_SPEC)],
+                   pin, prefix, reps)
+    rows = [ours]
+    if rtlola:
+        cmd = [rtlola, "monitor", "--offline", "relative", "--stdin", "--verbosity", "violations", str(AUCTION_LOLA)]
+        try:
+            rows.append(measure(f"rtlola-cli monitor bench/auction.lola, first {prefix:,}", cmd, pcsv, prefix,
+                                max(1, min(reps, 3))))
+        except RuntimeError as e:
+            log(f"rtlola-cli failed: {e}")
+    out.append(table(f"Auction, the first {prefix:,} events of {conv[0][0]} (rtlola-cli on all of it would "
+                     f"take minutes)", "events", rows, ours))
+    return "\n".join(out)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--reps", type=int, default=5)
@@ -202,7 +298,13 @@ def main():
     ap.add_argument("--out", default=str(ROOT / "target/bench-results.md"))
     ap.add_argument("--latency-reps", type=int, default=3, help="runs of each latency row (median shown)")
     ap.add_argument("--latency-only", action="store_true", help="only the latency table (after the build)")
+    ap.add_argument("--only", default=",".join(SECTIONS), help="comma-separated sections: " + ",".join(SECTIONS))
+    ap.add_argument("--auction-prefix", type=int, default=10_000,
+                    help="events of the first Auction trace that rtlola-cli and ours both run")
     a = ap.parse_args()
+    only = set(a.only.split(","))
+    if only - set(SECTIONS):
+        ap.error(f"unknown sections {sorted(only - set(SECTIONS))}")
     if not a.no_build:
         build()
     if a.latency_only:
@@ -226,73 +328,82 @@ def main():
               f"output to /dev/null; pass-through on. Fields in Telegraf's random order unless a row says "
               f"sorted.", ""]
 
-    log(f"== P2: {p2_lp.name}")
-    n = count_lines(p2_lp)
-    rows = [measure("cat (pipe floor)", ["cat"], p2_lp, n, a.reps),
-            measure("parse-only (lineproto)", parse_only, p2_lp, n, a.reps)]
-    ours_p2 = measure("tessla-telegraf run --spec bench/p2.tessla", [*ours, "--spec", str(P2_SPEC)], p2_lp, n,
-                      a.reps)
-    rows.append(ours_p2)
-    rows.append(measure("same, fields sorted", [*ours, "--spec", str(P2_SPEC)], p2_sorted, n, a.reps))
-    rows.append(measure("tessla-telegraf run (robot spec)", ours, p2_lp, n, a.reps))
-    rows.append(measure("python3 bench/p2_processor.py", [sys.executable, str(ROOT / "bench/p2_processor.py")],
-                        p2_lp, n, a.reps))
-    if rtlola:
-        for verbosity in ["outputs", "silent"]:
+    if "p2" in only:
+        log(f"== P2: {p2_lp.name}")
+        n = count_lines(p2_lp)
+        rows = [measure("cat (pipe floor)", ["cat"], p2_lp, n, a.reps),
+                measure("parse-only (lineproto)", parse_only, p2_lp, n, a.reps)]
+        ours_p2 = measure("tessla-telegraf run --spec bench/p2.tessla", [*ours, "--spec", str(P2_SPEC)], p2_lp, n,
+                          a.reps)
+        rows.append(ours_p2)
+        rows.append(measure("same, fields sorted", [*ours, "--spec", str(P2_SPEC)], p2_sorted, n, a.reps))
+        rows.append(measure("tessla-telegraf run (robot spec)", ours, p2_lp, n, a.reps))
+        rows.append(measure("python3 bench/p2_processor.py", [sys.executable, str(ROOT / "bench/p2_processor.py")],
+                            p2_lp, n, a.reps))
+        if rtlola:
+            for verbosity in ["outputs", "silent"]:
+                try:
+                    rows.append(measure(f"rtlola-cli monitor bench/p2.lola, CSV, --verbosity {verbosity}",
+                                        rtlola_cmd(rtlola, verbosity), p2_csv, n, a.reps))
+                except RuntimeError as e:
+                    log(f"rtlola-cli failed: {e}")
+        report.append(table(f"P2: {n:,} records (expectedSpeed, actualSpeed)", "records", rows, ours_p2))
+        report.append(f"Python baseline output byte-identical to tessla-telegraf's on the first 20,000 records: "
+                      f"{'yes' if same_output(p2_lp) else 'NO'}\n")
+
+    if "lidar" in only:
+        log(f"== lidar: {lidar_lp.name}")
+        n = count_lines(lidar_lp)
+        rows = [measure("cat (pipe floor)", ["cat"], lidar_lp, n, a.reps),
+                measure("parse-only (lineproto)", parse_only, lidar_lp, n, a.reps)]
+        ours_l = measure("tessla-telegraf run (robot spec: P1, P2, P3)", ours, lidar_lp, n, a.reps)
+        rows.append(ours_l)
+        rows.append(measure("same, fields sorted", ours, lidar_sorted, n, a.reps))
+        report.append(table(f"Lidar: {n:,} robot messages with 360 beams", "scans", rows, ours_l))
+
+    if "fleet" in only:
+        log(f"== fleet: {fleet_lp.name}")
+        n = count_lines(fleet_lp)
+        rows = [measure("cat (pipe floor)", ["cat"], fleet_lp, n, a.reps),
+                measure("parse-only (lineproto)", parse_only, fleet_lp, n, a.reps)]
+        one = [*ours, "--instance-by", "robot", "--threads", "1"]
+        ours_f = measure("tessla-telegraf run --instance-by robot --threads 1", one, fleet_lp, n, a.reps)
+        rows.append(ours_f)
+        rows.append(measure("same, fields sorted", one, fleet_sorted, n, a.reps))
+        rows.append(measure("same, --threads 2", [*ours, "--instance-by", "robot", "--threads", "2"], fleet_lp, n,
+                            a.reps))
+        rows.append(measure(f"same, default --threads (the machine's {os.cpu_count()} cores)",
+                            [*ours, "--instance-by", "robot"], fleet_lp, n, a.reps))
+        report.append(table(f"Fleet: {n:,} records from 10,000 robots interleaved (robot spec)", "records", rows,
+                            ours_f))
+
+    if "startup" in only:
+        log("== spec load (start-up on empty input)")
+        lines = ["### Spec load: start-up of the whole process on empty input (median of 21)", "",
+                 "| command | ms |", "|---|---|"]
+        for name, cmd in [("tessla-telegraf run --spec bench/p2.tessla", [*ours, "--spec", str(P2_SPEC)]),
+                          ("tessla-telegraf run (bundled robot spec)", ours), ("true (process floor)", ["true"])]:
+            ms = startup(cmd)
+            log(f"   {name:<44} {ms:.2f} ms")
+            lines.append(f"| {name} | {ms:.2f} |")
+        if rtlola:
+            empty = Path(tempfile.gettempdir()) / "p2_empty.csv"
+            empty.write_text("time,expectedSpeed,actualSpeed\n")
+            cmd = [rtlola, "monitor", "--offline", "relative", "--csv-in", str(empty), "--verbosity", "silent",
+                   str(P2_LOLA)]
             try:
-                rows.append(measure(f"rtlola-cli monitor bench/p2.lola, CSV, --verbosity {verbosity}",
-                                    rtlola_cmd(rtlola, verbosity), p2_csv, n, a.reps))
-            except RuntimeError as e:
-                log(f"rtlola-cli failed: {e}")
-    report.append(table(f"P2: {n:,} records (expectedSpeed, actualSpeed)", "records", rows, ours_p2))
-    report.append(f"Python baseline output byte-identical to tessla-telegraf's on the first 20,000 records: "
-                  f"{'yes' if same_output(p2_lp) else 'NO'}\n")
+                ms = startup(cmd, 5)
+                lines.append(f"| rtlola-cli monitor bench/p2.lola | {ms:.2f} |")
+            except subprocess.CalledProcessError as e:
+                log(f"rtlola start-up failed: {e}")
+        report.append("\n".join(lines) + "\n")
 
-    log(f"== lidar: {lidar_lp.name}")
-    n = count_lines(lidar_lp)
-    rows = [measure("cat (pipe floor)", ["cat"], lidar_lp, n, a.reps),
-            measure("parse-only (lineproto)", parse_only, lidar_lp, n, a.reps)]
-    ours_l = measure("tessla-telegraf run (robot spec: P1, P2, P3)", ours, lidar_lp, n, a.reps)
-    rows.append(ours_l)
-    rows.append(measure("same, fields sorted", ours, lidar_sorted, n, a.reps))
-    report.append(table(f"Lidar: {n:,} robot messages with 360 beams", "scans", rows, ours_l))
-
-    log(f"== fleet: {fleet_lp.name}")
-    n = count_lines(fleet_lp)
-    rows = [measure("cat (pipe floor)", ["cat"], fleet_lp, n, a.reps),
-            measure("parse-only (lineproto)", parse_only, fleet_lp, n, a.reps)]
-    one = [*ours, "--instance-by", "robot", "--threads", "1"]
-    ours_f = measure("tessla-telegraf run --instance-by robot --threads 1", one, fleet_lp, n, a.reps)
-    rows.append(ours_f)
-    rows.append(measure("same, fields sorted", one, fleet_sorted, n, a.reps))
-    rows.append(measure("same, --threads 2", [*ours, "--instance-by", "robot", "--threads", "2"], fleet_lp, n,
-                        a.reps))
-    rows.append(measure(f"same, default --threads (the machine's {os.cpu_count()} cores)",
-                        [*ours, "--instance-by", "robot"], fleet_lp, n, a.reps))
-    report.append(table(f"Fleet: {n:,} records from 10,000 robots interleaved (robot spec)", "records", rows,
-                        ours_f))
-
-    log("== spec load (start-up on empty input)")
-    lines = ["### Spec load: start-up of the whole process on empty input (median of 21)", "",
-             "| command | ms |", "|---|---|"]
-    for name, cmd in [("tessla-telegraf run --spec bench/p2.tessla", [*ours, "--spec", str(P2_SPEC)]),
-                      ("tessla-telegraf run (bundled robot spec)", ours), ("true (process floor)", ["true"])]:
-        ms = startup(cmd)
-        log(f"   {name:<44} {ms:.2f} ms")
-        lines.append(f"| {name} | {ms:.2f} |")
-    if rtlola:
-        empty = Path(tempfile.gettempdir()) / "p2_empty.csv"
-        empty.write_text("time,expectedSpeed,actualSpeed\n")
-        cmd = [rtlola, "monitor", "--offline", "relative", "--csv-in", str(empty), "--verbosity", "silent",
-               str(P2_LOLA)]
-        try:
-            ms = startup(cmd, 5)
-            lines.append(f"| rtlola-cli monitor bench/p2.lola | {ms:.2f} |")
-        except subprocess.CalledProcessError as e:
-            log(f"rtlola start-up failed: {e}")
-    report.append("\n".join(lines) + "\n")
-
-    report.append(latency_section(a.latency_reps))
+    if "primes" in only:
+        report.append(primes_section(a.reps))
+    if "auction" in only:
+        report.append(auction_section(a.reps, rtlola, a.auction_prefix))
+    if "latency" in only:
+        report.append(latency_section(a.latency_reps))
 
     text = "\n".join(report)
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)

@@ -147,52 +147,244 @@ pub fn java_float(f: f64) -> String {
 /// them hashed (`HashSet`, `HashMap`), iterated in the order of their hash trie, and they stay
 /// hashed when they shrink again. `runtime::collections` keeps the order; this type only holds
 /// it. Dereferences to the elements.
-#[derive(Debug, Clone, PartialEq)]
+///
+/// A hashed collection may be held as a [`Trie`] (Scala's hash trie itself, built by
+/// `runtime::collections`): then looking up, adding and replacing take a path of the trie, not
+/// the whole collection, and the elements in order are made from it once, when first asked for.
+#[derive(Clone)]
 pub struct Coll<T> {
-    items: Vec<T>,
+    items: std::sync::OnceLock<Vec<T>>,
+    trie: Option<Trie<T>>,
     /// Grown past four elements once (Scala's hashed representation).
     pub hashed: bool,
 }
 
-impl<T> Coll<T> {
+impl<T: Clone> Coll<T> {
     /// `items`, already in their order, hashed or not.
     pub fn new(items: Vec<T>, hashed: bool) -> Self {
-        Coll { items, hashed }
+        Coll {
+            items: items.into(),
+            trie: None,
+            hashed,
+        }
+    }
+
+    /// A hashed collection held as its trie.
+    pub fn from_trie(trie: Trie<T>) -> Self {
+        Coll {
+            items: std::sync::OnceLock::new(),
+            trie: Some(trie),
+            hashed: true,
+        }
+    }
+
+    /// The trie, when the collection is held as one.
+    pub fn trie(&self) -> Option<&Trie<T>> {
+        self.trie.as_ref()
     }
 
     pub fn into_items(self) -> Vec<T> {
-        self.items
-    }
-}
-
-impl<T> Default for Coll<T> {
-    fn default() -> Self {
-        Coll {
-            items: Vec::new(),
-            hashed: false,
+        let Coll { items, trie, .. } = self;
+        match (items.into_inner(), trie) {
+            (Some(v), _) => v,
+            (None, Some(t)) => t.items(),
+            (None, None) => Vec::new(),
         }
     }
+
+    pub fn len(&self) -> usize {
+        match (&self.trie, self.items.get()) {
+            (Some(t), _) => t.len,
+            (None, Some(v)) => v.len(),
+            (None, None) => 0,
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
 }
 
-impl<T> std::ops::Deref for Coll<T> {
+impl<T: Clone + PartialEq> PartialEq for Coll<T> {
+    fn eq(&self, other: &Self) -> bool {
+        self.hashed == other.hashed && **self == **other
+    }
+}
+
+impl<T: Clone + fmt::Debug> fmt::Debug for Coll<T> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Coll")
+            .field("items", &**self)
+            .field("hashed", &self.hashed)
+            .finish()
+    }
+}
+
+impl<T: Clone> Default for Coll<T> {
+    fn default() -> Self {
+        Coll::new(Vec::new(), false)
+    }
+}
+
+impl<T: Clone> std::ops::Deref for Coll<T> {
     type Target = Vec<T>;
     fn deref(&self) -> &Vec<T> {
-        &self.items
+        self.items.get_or_init(|| match &self.trie {
+            Some(t) => t.items(),
+            None => Vec::new(),
+        })
     }
 }
 
 /// Elements already in order; more than four make a hashed collection.
-impl<T> From<Vec<T>> for Coll<T> {
+impl<T: Clone> From<Vec<T>> for Coll<T> {
     fn from(items: Vec<T>) -> Self {
         let hashed = items.len() > 4;
-        Coll { items, hashed }
+        Coll::new(items, hashed)
     }
 }
 
-impl<T> FromIterator<T> for Coll<T> {
+impl<T: Clone> FromIterator<T> for Coll<T> {
     fn from_iter<I: IntoIterator<Item = T>>(iter: I) -> Self {
         iter.into_iter().collect::<Vec<T>>().into()
     }
+}
+
+/// A persistent hash trie in Scala 2.13's layout (CHAMP): at each level, 5 bits of the
+/// (improved) hash choose a slot; an element alone in its slot is held in the node, slots
+/// shared by several elements hold a child node for the next 5 bits; past 32 bits, elements
+/// with equal hashes are kept in insertion order. In order, a node's own elements come first,
+/// by slot, then its children's, by slot: the order Scala iterates `HashSet` and `HashMap` in.
+/// Updates copy one path (at most seven nodes of at most 32 entries). Elements are never
+/// removed (a removal leaves the trie for a plain list, see `runtime::collections`), so a
+/// trie is exactly the one Scala builds by adding its elements one by one.
+#[derive(Clone)]
+pub struct Trie<T> {
+    root: Arc<TrieNode<T>>,
+    len: usize,
+}
+
+#[derive(Clone)]
+struct TrieNode<T> {
+    /// Elements alone in their slot, by slot, with their hashes (past 32 bits: all elements,
+    /// in insertion order).
+    data: Vec<(u32, T)>,
+    /// Shared slots, by slot.
+    children: Vec<(u32, Arc<TrieNode<T>>)>,
+}
+
+const TRIE_BITS: u32 = 32;
+
+fn slot(hash: u32, shift: u32) -> u32 {
+    (hash >> shift) & 31
+}
+
+impl<T: Clone> Default for Trie<T> {
+    fn default() -> Self {
+        Trie {
+            root: Arc::new(TrieNode {
+                data: Vec::new(),
+                children: Vec::new(),
+            }),
+            len: 0,
+        }
+    }
+}
+
+impl<T: Clone> Trie<T> {
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The element whose key (`key`) equals `k`, hashed `hash`.
+    pub fn get(&self, hash: u32, k: &Value, key: impl Fn(&T) -> &Value) -> Option<&T> {
+        let mut node = &*self.root;
+        let mut shift = 0;
+        loop {
+            if shift >= TRIE_BITS {
+                return node.data.iter().map(|(_, x)| x).find(|x| key(x) == k);
+            }
+            let s = slot(hash, shift);
+            if let Some((_, x)) = node.data.iter().find(|(h, _)| slot(*h, shift) == s) {
+                return (key(x) == k).then_some(x);
+            }
+            node = &node.children.iter().find(|(cs, _)| *cs == s)?.1;
+            shift += 5;
+        }
+    }
+
+    /// The trie with `x` (hashed `hash`): an element with an equal key is replaced in place.
+    pub fn insert(&self, hash: u32, x: T, key: impl Fn(&T) -> &Value) -> Trie<T> {
+        let (root, added) = insert_at(&self.root, hash, x, 0, &key);
+        Trie {
+            root: Arc::new(root),
+            len: self.len + usize::from(added),
+        }
+    }
+
+    /// The elements in Scala's order.
+    pub fn items(&self) -> Vec<T> {
+        fn walk<T: Clone>(n: &TrieNode<T>, out: &mut Vec<T>) {
+            out.extend(n.data.iter().map(|(_, x)| x.clone()));
+            for (_, c) in &n.children {
+                walk(c, out);
+            }
+        }
+        let mut out = Vec::with_capacity(self.len);
+        walk(&self.root, &mut out);
+        out
+    }
+}
+
+/// `node` with `x` at `shift`, and whether it was added (not a replacement).
+fn insert_at<T: Clone>(
+    node: &TrieNode<T>,
+    hash: u32,
+    x: T,
+    shift: u32,
+    key: &impl Fn(&T) -> &Value,
+) -> (TrieNode<T>, bool) {
+    let mut n = node.clone();
+    if shift >= TRIE_BITS {
+        match n.data.iter_mut().find(|(_, y)| key(y) == key(&x)) {
+            Some(e) => e.1 = x,
+            None => {
+                n.data.push((hash, x));
+                return (n, true);
+            }
+        }
+        return (n, false);
+    }
+    let s = slot(hash, shift);
+    if let Some(i) = n.data.iter().position(|(h, _)| slot(*h, shift) == s) {
+        if key(&n.data[i].1) == key(&x) {
+            n.data[i] = (hash, x);
+            return (n, false);
+        }
+        // Two elements share the slot now: a child holds both, the older first.
+        let (oh, old) = n.data.remove(i);
+        let empty = TrieNode {
+            data: Vec::new(),
+            children: Vec::new(),
+        };
+        let (c, _) = insert_at(&empty, oh, old, shift + 5, key);
+        let (c, _) = insert_at(&c, hash, x, shift + 5, key);
+        let at = n.children.partition_point(|(cs, _)| *cs < s);
+        n.children.insert(at, (s, Arc::new(c)));
+        return (n, true);
+    }
+    if let Some(i) = n.children.iter().position(|(cs, _)| *cs == s) {
+        let (c, added) = insert_at(&n.children[i].1, hash, x, shift + 5, key);
+        n.children[i].1 = Arc::new(c);
+        return (n, added);
+    }
+    let at = n.data.partition_point(|(h, _)| slot(*h, shift) < s);
+    n.data.insert(at, (hash, x));
+    (n, true)
 }
 
 impl fmt::Display for Value {

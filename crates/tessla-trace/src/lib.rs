@@ -218,17 +218,35 @@ pub fn run_stream_with(
     };
     let mut csv = reader::CsvReader::default();
     let mut events_read: u64 = 0;
-    'lines: for (i, raw) in input.lines().enumerate() {
-        let line = i + 1;
-        let raw = raw.map_err(|e| io_error(&format!("reading {source}"), &e))?;
-        let reads = match options.format {
+    let mut input = input;
+    // One buffer for every line (`BufRead::lines` would allocate one per line).
+    let mut raw = String::new();
+    let mut reads = Vec::new();
+    let mut line = 0;
+    'lines: loop {
+        raw.clear();
+        let n = input
+            .read_line(&mut raw)
+            .map_err(|e| io_error(&format!("reading {source}"), &e))?;
+        if n == 0 {
+            break;
+        }
+        line += 1;
+        // As `lines()`: without the `\n` or `\r\n` ending.
+        if raw.ends_with('\n') {
+            raw.pop();
+            if raw.ends_with('\r') {
+                raw.pop();
+            }
+        }
+        match options.format {
             Format::Tessla => match reader::parse_line_any(&raw, line, program) {
                 None => continue,
-                Some(r) => vec![r.map_err(read_error)?],
+                Some(r) => reads.push(r.map_err(read_error)?),
             },
-            Format::Csv => csv.parse_line(&raw, line, program).map_err(read_error)?,
-        };
-        for read in reads {
+            Format::Csv => reads.extend(csv.parse_line(&raw, line, program).map_err(read_error)?),
+        }
+        for read in reads.drain(..) {
             if options.abort_at.is_some_and(|n| events_read > n) {
                 break 'lines;
             }

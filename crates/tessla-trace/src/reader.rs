@@ -8,9 +8,12 @@
 //! of the trace grammar) and evaluated here, then checked against the input's declared type (a
 //! record `{_1 = a, _2 = b}` is a tuple, as TeSSLa treats tuples as records). `Set(...)` and
 //! `Map(k -> v, ...)` build set and map values (`->` only occurs in maps, so it is read as a
-//! comma and the arguments are paired). Integers are unbounded, as TeSSLa's `Int`.
-//! Operators mean what they mean in a spec: their semantics are `tessla_engine::runtime::ops` (so a
-//! negative shift shifts the other way, as TeSSLa's unbounded integers do).
+//! comma and the arguments are paired). Plain literals and tuples of them, what most traces
+//! hold, are read by a fast path first (`literal`); it takes only what the parser reads the
+//! same way, and leaves everything else (and every message) to it. Integers are unbounded, as
+//! TeSSLa's `Int`. Operators mean what they mean in a spec: their semantics are
+//! `tessla_engine::runtime::ops` (so a negative shift shifts the other way, as TeSSLa's
+//! unbounded integers do).
 //!
 //! The evaluator is the trace reader's own, not the engine's constant folding: the engine folds
 //! typed IR code after type checking and lowering, while a trace value is typed by its value
@@ -98,7 +101,7 @@ pub fn parse_line_any(
     line: usize,
     program: &Program,
 ) -> Option<Result<Read, ReadError>> {
-    let l = strip_comment(raw).trim();
+    let l = trim(strip_comment(raw));
     if l.is_empty() {
         return None;
     }
@@ -216,8 +219,25 @@ pub fn events<'a>(
         .filter_map(move |(i, raw)| parse_line(raw, i + 1, program))
 }
 
+/// `s.trim()`, without its Unicode scan when spaces are all there is to trim (as nearly always).
+fn trim(s: &str) -> &str {
+    let b = s.as_bytes();
+    let start = b.iter().position(|&c| c != b' ').unwrap_or(b.len());
+    let end = b.iter().rposition(|&c| c != b' ').map_or(start, |e| e + 1);
+    match (b.get(start), end.checked_sub(1).and_then(|e| b.get(e))) {
+        (Some(x), Some(y)) if x.is_ascii_graphic() && y.is_ascii_graphic() => {
+            s.get(start..end).unwrap_or(s)
+        }
+        _ => s.trim(),
+    }
+}
+
 /// The line without a trailing `#` or `--` comment (outside string literals).
 fn strip_comment(line: &str) -> &str {
+    // Most lines hold no string and no comment: one quick pass over the bytes finds out.
+    if !line.bytes().any(|b| matches!(b, b'#' | b'-' | b'"')) {
+        return line;
+    }
     let mut in_str = false;
     let mut escape = false;
     let bytes = line.as_bytes();
@@ -245,14 +265,19 @@ fn parse_event(l: &str, line: usize, program: &Program) -> Result<Read, ReadErro
         .ok_or_else(|| ReadError::malformed(line, "expected `TIMESTAMP: name = value`"))?;
     let ts = parse_ts(ts, line)?;
     let (name, value) = match rest.split_once('=') {
-        Some((n, v)) => (n.trim(), Some(v.trim())),
-        None => (rest.trim(), None),
+        Some((n, v)) => (trim(n), Some(trim(v))),
+        None => (trim(rest), None),
     };
     event(ts, name, value, line, program)
 }
 
 fn parse_ts(ts: &str, line: usize) -> Result<i64, ReadError> {
-    let ts: i64 = ts.trim().parse().map_err(|_| {
+    let ts = trim(ts);
+    // Plain digits (at most 18: no overflow) without `str::parse`.
+    if (1..=18).contains(&ts.len()) && ts.bytes().all(|c| c.is_ascii_digit()) {
+        return Ok(ts.bytes().fold(0, |n, d| n * 10 + i64::from(d - b'0')));
+    }
+    let ts: i64 = ts.parse().map_err(|_| {
         ReadError::malformed(
             line,
             format!("`{}` is not a non-negative integer timestamp", ts.trim()),
@@ -290,15 +315,12 @@ fn event(
             name: name.to_string(),
         });
     };
-    let ty = program
-        .inputs
-        .get(input)
-        .map_or(Type::Unknown, |i| i.ty.clone());
+    let ty = program.inputs.get(input).map_or(&Type::Unknown, |i| &i.ty);
     let value = match value {
         None => Value::Unit,
         Some(v) => read_value(v, line)?,
     };
-    let value = coerce(value, &ty)
+    let value = coerce(value, ty)
         .map_err(|why| ReadError::malformed(line, format!("input {name}: {why}")))?;
     Ok(Read::Event(Event {
         line,
@@ -310,6 +332,15 @@ fn event(
 
 /// Parse and evaluate the value text of one event.
 fn read_value(text: &str, line: usize) -> Result<Value, ReadError> {
+    match literal(text) {
+        Some(v) => Ok(v),
+        None => read_expression(text, line),
+    }
+}
+
+/// [`read_value`] by the general parser: any constant expression, and the messages for text
+/// that is none.
+fn read_expression(text: &str, line: usize) -> Result<Value, ReadError> {
     check_escapes(text).map_err(|m| ReadError::malformed(line, m))?;
     let unsupported = |feature: &str| ReadError {
         kind: ReadErrorKind::Unsupported,
@@ -341,6 +372,172 @@ fn read_value(text: &str, line: usize) -> Result<Value, ReadError> {
         }
     };
     eval(&expr).map_err(|m| ReadError::malformed(line, format!("in the value `{text}`: {m}")))
+}
+
+/// The value of `text` when it is a plain literal or a tuple of them (what most traces hold):
+/// a decimal `Int` within 18 digits, a decimal `Float`, `true`, `false`, `()`, a string without
+/// escapes or `$`/`%`, each maybe negated (`-`) and surrounded by spaces. `None` for anything
+/// else, which the general parser then reads (and reports, when it is not a value): the fast
+/// path accepts nothing the parser would read differently or refuse.
+fn literal(text: &str) -> Option<Value> {
+    let mut p = Lit {
+        b: text.as_bytes(),
+        i: 0,
+    };
+    let v = p.value(0)?;
+    p.spaces();
+    (p.i == p.b.len()).then_some(v)
+}
+
+/// The cursor of [`literal`].
+struct Lit<'a> {
+    b: &'a [u8],
+    i: usize,
+}
+
+impl Lit<'_> {
+    fn peek(&self) -> Option<u8> {
+        self.b.get(self.i).copied()
+    }
+
+    fn spaces(&mut self) {
+        while matches!(self.peek(), Some(b' ' | b'\t')) {
+            self.i += 1;
+        }
+    }
+
+    /// A `,` (after spaces), or `None`.
+    fn comma(&mut self) -> Option<()> {
+        self.spaces();
+        (self.peek() == Some(b',')).then(|| self.i += 1)
+    }
+
+    /// Whether a `)` follows (after spaces); it is consumed.
+    fn close(&mut self) -> bool {
+        self.spaces();
+        let close = self.peek() == Some(b')');
+        if close {
+            self.i += 1;
+        }
+        close
+    }
+
+    fn digits(&mut self) -> usize {
+        let start = self.i;
+        while self.peek().is_some_and(|c| c.is_ascii_digit()) {
+            self.i += 1;
+        }
+        self.i - start
+    }
+
+    fn value(&mut self, depth: usize) -> Option<Value> {
+        self.spaces();
+        match self.peek()? {
+            b'-' | b'0'..=b'9' => self.number(),
+            b'"' => {
+                let start = self.i + 1;
+                let len = self.b.get(start..)?.iter().position(|&c| c == b'"')?;
+                let body = self.b.get(start..start + len)?;
+                if body.iter().any(|&c| matches!(c, b'\\' | b'$' | b'%')) {
+                    return None;
+                }
+                self.i = start + len + 1;
+                Some(Value::Str(std::str::from_utf8(body).ok()?.into()))
+            }
+            b't' | b'f' => {
+                let rest = self.b.get(self.i..)?;
+                let (word, v) = if rest.starts_with(b"true") {
+                    (4, true)
+                } else if rest.starts_with(b"false") {
+                    (5, false)
+                } else {
+                    return None;
+                };
+                // `trueish` is a name, not `true`.
+                if rest
+                    .get(word)
+                    .is_some_and(|&c| c.is_ascii_alphanumeric() || c == b'_')
+                {
+                    return None;
+                }
+                self.i += word;
+                Some(Value::Bool(v))
+            }
+            b'(' if depth < 8 => {
+                self.i += 1;
+                self.spaces();
+                if self.peek() == Some(b')') {
+                    self.i += 1;
+                    return Some(Value::Unit);
+                }
+                // Two to four elements: `(x)` is `x` in parentheses and `(x,)` a tuple, both
+                // left to the parser, as are longer tuples.
+                let a = self.value(depth + 1)?;
+                self.comma()?;
+                let b = self.value(depth + 1)?;
+                if self.close() {
+                    return Some(Value::Tuple(Arc::new([a, b])));
+                }
+                self.comma()?;
+                let c = self.value(depth + 1)?;
+                if self.close() {
+                    return Some(Value::Tuple(Arc::new([a, b, c])));
+                }
+                self.comma()?;
+                let d = self.value(depth + 1)?;
+                self.close().then(|| Value::Tuple(Arc::new([a, b, c, d])))
+            }
+            _ => None,
+        }
+    }
+
+    /// `-`? digits, then `.` digits and/or an exponent for a float; the lexer's forms only.
+    fn number(&mut self) -> Option<Value> {
+        let neg = self.peek() == Some(b'-');
+        if neg {
+            self.i += 1;
+        }
+        let digits_at = self.i;
+        let n = self.digits();
+        // No hex, no leading zeros (`0x1f`, `007`): left to the parser.
+        if n == 0 || n > 18 || (n > 1 && self.b.get(digits_at) == Some(&b'0')) {
+            return None;
+        }
+        let mut float = false;
+        if self.peek() == Some(b'.') {
+            self.i += 1;
+            if self.digits() == 0 {
+                return None;
+            }
+            float = true;
+        }
+        if self.peek() == Some(b'e') {
+            self.i += 1;
+            if matches!(self.peek(), Some(b'+' | b'-')) {
+                self.i += 1;
+            }
+            if self.digits() == 0 {
+                return None;
+            }
+            float = true;
+        }
+        // A literal followed by a name or a `.` (`1x`, `1.e`) is not a plain literal.
+        if self
+            .peek()
+            .is_some_and(|c| c.is_ascii_alphanumeric() || c == b'_' || c == b'.')
+        {
+            return None;
+        }
+        let text = self.b.get(digits_at..self.i)?;
+        if float {
+            let f: f64 = std::str::from_utf8(text).ok()?.parse().ok()?;
+            Some(Value::Float(if neg { -f } else { f }))
+        } else {
+            // At most 18 digits: no overflow.
+            let i = text.iter().fold(0i64, |n, d| n * 10 + i64::from(d - b'0'));
+            Some(Value::Int(if neg { -i } else { i }))
+        }
+    }
 }
 
 /// `->` (outside string literals) replaced by `,`: in TeSSLa's trace grammar it only separates
@@ -561,9 +758,28 @@ fn show(v: &Value) -> String {
     }
 }
 
+/// Whether `v` is a value of type `t` as it is (scalars and tuples of them: what [`coerce`]
+/// would give back unchanged).
+fn fits(v: &Value, t: &Type) -> bool {
+    match (v, t) {
+        (Value::Unit, Type::Unit)
+        | (Value::Bool(_), Type::Bool)
+        | (Value::Int(_) | Value::BigInt(_), Type::Int)
+        | (Value::Float(_), Type::Float)
+        | (Value::Str(_), Type::String) => true,
+        (Value::Tuple(xs), Type::Tuple(ts)) => {
+            xs.len() == ts.len() && xs.iter().zip(ts).all(|(x, t)| fits(x, t))
+        }
+        _ => false,
+    }
+}
+
 /// `v` as a value of type `t`, or why it is not one (TeSSLa's wording; types in the engine's
 /// notation, `tessla_engine::Type`'s `Display`).
 fn coerce(v: Value, t: &Type) -> Result<Value, String> {
+    if fits(&v, t) {
+        return Ok(v);
+    }
     let mismatch = |v: &Value| format!("{} is not of type {t}.", show(v));
     match (v, t) {
         (v, Type::Unknown) => Ok(v),
@@ -760,6 +976,82 @@ mod tests {
         let s = "in s: Events[String]\nout s";
         let e = read(s, r#"1: s = "\d""#).unwrap_err();
         assert_eq!(e.message, "Invalid escape sequence '\\d' in string");
+    }
+
+    /// The fast path reads what the general parser reads, and leaves everything else to it.
+    #[test]
+    fn plain_literals_read_as_the_parser_reads_them() {
+        let same = [
+            "0",
+            "7",
+            "-7",
+            "-0",
+            "42",
+            "123456789012345678",
+            "-123456789012345678",
+            "1.5",
+            "-1.5",
+            "0.25",
+            "1e5",
+            "1e-3",
+            "1.5e+300",
+            "-0.0",
+            "3.0e-2",
+            "true",
+            "false",
+            "()",
+            "( )",
+            r#""""#,
+            r#""a b, c""#,
+            r#""µ ü""#,
+            "(1, 2)",
+            "( 1 , -2 )",
+            r#"(1, "x", true, 2.5)"#,
+            "((1, 2), (3, (4, 5)))",
+            "(1,2)",
+            "\t5",
+        ];
+        for text in same {
+            let fast = literal(text.trim());
+            let general = read_expression(text.trim(), 1);
+            assert_eq!(fast.as_ref(), general.as_ref().ok(), "{text}");
+            assert!(fast.is_some(), "{text} should take the fast path");
+        }
+        // Left to the parser: other forms, and everything that is not a value.
+        let general = [
+            "007",
+            "0x1f",
+            "1234567890123456789",
+            "1.",
+            "1.e5",
+            "1e",
+            "1x",
+            "- 1",
+            "--1",
+            "(1)",
+            "(1,)",
+            "(1, 2,)",
+            "(1, 2",
+            "(1 2)",
+            r#""a\nb""#,
+            r#""${1}""#,
+            r#""50%""#,
+            "trueish",
+            "true1",
+            "True",
+            "1 + 2",
+            "(1, 2, 3, 4, 5)",
+            r#""open"#,
+            "Some(1)",
+            "None",
+            "",
+            "1.5.2",
+            "2.5E3",
+            "((((((((((1, 2), 3), 4), 5), 6), 7), 8), 9), 10), 11)",
+        ];
+        for text in general {
+            assert_eq!(literal(text), None, "{text}");
+        }
     }
 
     #[test]

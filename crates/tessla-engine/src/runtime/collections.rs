@@ -6,11 +6,15 @@
 //! elements; from the fifth, hashed, iterated in the order of Scala's hash trie over Scala's
 //! hash of each element, `##`, and hashed for good). The hash is known for Int, Float, Bool,
 //! String and Unit elements; a hashed collection holding other values keeps insertion order.
-//! Membership is a linear scan (values have no total order); sets in monitors are small. Errors
+//! A hashed collection whose elements' hashes are all known is held as that hash trie
+//! ([`Trie`]): membership, `Map.get` and adding or replacing an element walk one path of it,
+//! so a map of thousands of items (one state per item) costs per event what a small one does.
+//! Other collections are lists, where membership is a linear scan (values have no total
+//! order), and a removal turns a trie into the list of its elements, order kept. Errors
 //! in arguments are handled by the caller (the compiler never passes an error value into a
 //! value function).
 
-use crate::value::{Coll, RuntimeError, Value};
+use crate::value::{Coll, RuntimeError, Trie, Value};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
@@ -97,6 +101,38 @@ fn hash_ordered<T: Clone>(items: &[T], key: impl Fn(&T) -> &Value) -> Vec<T> {
     }
 }
 
+/// The improved Scala hash of `v`, when known (the key of a [`Trie`]).
+fn trie_hash(v: &Value) -> Option<u32> {
+    scala_hash(v).map(improve)
+}
+
+/// A hashed collection of `items` (already in their order): as a trie when every key's hash is
+/// known (the trie's order is [`hash_ordered`]'s), else as the list, in the order given.
+fn hashed_coll<T: Clone>(items: Vec<T>, key: impl Fn(&T) -> &Value) -> Coll<T> {
+    let mut t = Trie::default();
+    for x in &items {
+        match trie_hash(key(x)) {
+            Some(h) => t = t.insert(h, x.clone(), &key),
+            None => return Coll::new(items, true),
+        }
+    }
+    Coll::from_trie(t)
+}
+
+/// Whether `c` holds an element whose key is `k`.
+fn has_key<T: Clone>(c: &Coll<T>, k: &Value, key: impl Fn(&T) -> &Value) -> bool {
+    find_key(c, k, key).is_some()
+}
+
+/// The element of `c` whose key is `k`.
+fn find_key<'a, T: Clone>(c: &'a Coll<T>, k: &Value, key: impl Fn(&T) -> &Value) -> Option<&'a T> {
+    match c.trie() {
+        // Every key of a trie has a known hash; a key without one is none of them.
+        Some(t) => t.get(trie_hash(k)?, k, key),
+        None => c.iter().find(|x| key(x) == k),
+    }
+}
+
 /// The set of `items` (duplicates dropped) as Scala builds it by adding them one by one.
 pub fn set_of(items: Vec<Value>) -> Value {
     let mut s = Arc::new(Coll::default());
@@ -149,13 +185,16 @@ pub fn empty_map() -> Value {
 /// `s` with `x` (Scala's `incl`): appended while the set stays at four elements or fewer,
 /// otherwise hashed.
 fn with(s: &Arc<Coll<Value>>, x: &Value) -> Arc<Coll<Value>> {
-    if s.contains(x) {
+    if has_key(s, x, |x| x) {
         return s.clone();
+    }
+    if let (Some(t), Some(h)) = (s.trie(), trie_hash(x)) {
+        return Arc::new(Coll::from_trie(t.insert(h, x.clone(), |x| x)));
     }
     let mut v: Vec<Value> = s.to_vec();
     v.push(x.clone());
     if s.hashed || v.len() > 4 {
-        Arc::new(Coll::new(hash_ordered(&v, |x| x), true))
+        Arc::new(hashed_coll(hash_ordered(&v, |x| x), |x| x))
     } else {
         Arc::new(Coll::new(v, false))
     }
@@ -176,14 +215,14 @@ pub fn set_add(a: &[Value]) -> Value {
 
 pub fn set_contains(a: &[Value]) -> Value {
     match a {
-        [Value::Set(s), x] => Value::Bool(s.contains(x)),
+        [Value::Set(s), x] => Value::Bool(has_key(s, x, |x| x)),
         _ => bad("Set.contains", a),
     }
 }
 
 pub fn set_remove(a: &[Value]) -> Value {
     match a {
-        [Value::Set(s), x] if !s.contains(x) => Value::Set(s.clone()),
+        [Value::Set(s), x] if !has_key(s, x, |x| x) => Value::Set(s.clone()),
         [Value::Set(s), x] => filtered(s, |e| e != x),
         _ => bad("Set.remove", a),
     }
@@ -255,6 +294,10 @@ pub fn set_map(a: &[Value]) -> Value {
 /// `m` with `k` bound to `v` (Scala's `updated`): an existing key keeps its place; a new one
 /// is appended while the map stays at four entries or fewer, otherwise the map is hashed.
 fn map_with(m: &Coll<(Value, Value)>, k: &Value, v: &Value) -> Value {
+    if let (Some(t), Some(h)) = (m.trie(), trie_hash(k)) {
+        let t = t.insert(h, (k.clone(), v.clone()), |(k, _)| k);
+        return Value::Map(Arc::new(Coll::from_trie(t)));
+    }
     let mut out: Vec<(Value, Value)> = m.to_vec();
     match out.iter_mut().find(|(key, _)| key == k) {
         Some(entry) => {
@@ -264,7 +307,10 @@ fn map_with(m: &Coll<(Value, Value)>, k: &Value, v: &Value) -> Value {
         None => out.push((k.clone(), v.clone())),
     }
     if m.hashed || out.len() > 4 {
-        Value::Map(Arc::new(Coll::new(hash_ordered(&out, |(k, _)| k), true)))
+        Value::Map(Arc::new(hashed_coll(
+            hash_ordered(&out, |(k, _)| k),
+            |(k, _)| k,
+        )))
     } else {
         Value::Map(Arc::new(Coll::new(out, false)))
     }
@@ -279,16 +325,14 @@ pub fn map_add(a: &[Value]) -> Value {
 
 pub fn map_contains(a: &[Value]) -> Value {
     match a {
-        [Value::Map(m), k] => Value::Bool(m.iter().any(|(key, _)| key == k)),
+        [Value::Map(m), k] => Value::Bool(has_key(m, k, |(k, _)| k)),
         _ => bad("Map.contains", a),
     }
 }
 
 pub fn map_get(a: &[Value]) -> Value {
     match a {
-        [Value::Map(m), k] => m
-            .iter()
-            .find(|(key, _)| key == k)
+        [Value::Map(m), k] => find_key(m, k, |(k, _)| k)
             .map(|(_, v)| v.clone())
             .unwrap_or_else(|| {
                 Value::Error(RuntimeError::Other(format!("Map.get: no key {k}").into()))
@@ -299,10 +343,9 @@ pub fn map_get(a: &[Value]) -> Value {
 
 pub fn map_get_or_else(a: &[Value]) -> Value {
     match a {
-        [Value::Map(m), k, d] => m
-            .iter()
-            .find(|(key, _)| key == k)
-            .map_or_else(|| d.clone(), |(_, v)| v.clone()),
+        [Value::Map(m), k, d] => {
+            find_key(m, k, |(k, _)| k).map_or_else(|| d.clone(), |(_, v)| v.clone())
+        }
         _ => bad("Map.getOrElse", a),
     }
 }
@@ -443,6 +486,88 @@ mod tests {
             set_intersection(&[set(&[1, 2, 3]), set(&[3, 2, 9])]),
             set(&[2, 3])
         );
+    }
+
+    /// Sets and maps held as tries keep the order the list representation gives (Scala's):
+    /// the order of `hash_ordered` over the elements in insertion order, equal hashes included.
+    #[test]
+    fn tries_keep_scalas_order() {
+        // Int(0) and 2^32 + 1 have the same hash (Java's Long.hashCode); so do "Aa" and "BB".
+        let mut keys: Vec<Value> = vec![
+            Value::Int(0),
+            Value::Int((1 << 32) + 1),
+            Value::Str("Aa".into()),
+            Value::Str("BB".into()),
+            Value::Float(2.5),
+            Value::Bool(true),
+            Value::Unit,
+        ];
+        let mut x: u64 = 0x9e37_79b9_7f4a_7c15;
+        for _ in 0..600 {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            keys.push(match x % 3 {
+                0 => Value::Int((x >> 8) as i64 % 5000),
+                1 => Value::Str(format!("item{}", (x >> 8) % 700).into()),
+                _ => Value::Int((x >> 4) as i64),
+            });
+        }
+        let (mut set, mut map) = (empty_set(), empty_map());
+        let mut order: Vec<Value> = Vec::new();
+        for (n, k) in keys.iter().enumerate() {
+            set = set_add(&[set, k.clone()]);
+            map = map_add(&[map, k.clone(), Value::Int(n as i64)]);
+            if !order.contains(k) {
+                order.push(k.clone());
+            }
+            let expected = if order.len() > 4 {
+                hash_ordered(&order, |x| x)
+            } else {
+                order.clone()
+            };
+            let (Value::Set(s), Value::Map(m)) = (&set, &map) else {
+                panic!("not a set and a map");
+            };
+            assert_eq!(***s, expected, "after {n} additions");
+            let got: Vec<Value> = m.iter().map(|(k, _)| k.clone()).collect();
+            assert_eq!(got, expected, "after {n} additions");
+            assert_eq!((s.len(), m.len()), (expected.len(), expected.len()));
+            assert!(order.len() <= 4 || s.trie().is_some() && m.trie().is_some());
+        }
+        for (n, k) in keys.iter().enumerate() {
+            assert_eq!(set_contains(&[set.clone(), k.clone()]), Value::Bool(true));
+            let last = keys.iter().rposition(|x| x == k).unwrap_or(n);
+            assert_eq!(map_get(&[map.clone(), k.clone()]), Value::Int(last as i64));
+        }
+        assert_eq!(
+            map_get_or_else(&[map.clone(), Value::Str("none".into()), Value::Int(-1)]),
+            Value::Int(-1)
+        );
+        // A value without a known hash leaves the trie for the list, in the order so far.
+        let t = Value::Tuple(vec![Value::Int(1)].into());
+        let Value::Map(before) = &map else {
+            panic!("not a map")
+        };
+        let before: Vec<Value> = before.iter().map(|(k, _)| k.clone()).collect();
+        let with_t = map_add(&[map.clone(), t.clone(), Value::Unit]);
+        let Value::Map(m) = &with_t else {
+            panic!("not a map")
+        };
+        assert!(m.trie().is_none() && m.hashed);
+        let got: Vec<Value> = m.iter().map(|(k, _)| k.clone()).collect();
+        assert_eq!(got[..got.len() - 1], before[..]);
+        assert_eq!(got.last(), Some(&t));
+        // A removal keeps the order (and the hashed form), as before tries.
+        let removed = map_remove(&[map.clone(), keys[0].clone()]);
+        let Value::Map(r) = &removed else {
+            panic!("not a map")
+        };
+        let got: Vec<Value> = r.iter().map(|(k, _)| k.clone()).collect();
+        let mut want = before.clone();
+        want.retain(|k| *k != keys[0]);
+        assert_eq!(got, want);
+        assert!(r.hashed);
     }
 
     #[test]

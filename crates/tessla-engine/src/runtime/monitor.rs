@@ -327,9 +327,16 @@ impl Monitor {
                 }),
                 Node::Lift { args, f } => {
                     if args.iter().any(|a| cur[*a].is_some()) {
-                        let vals: Vec<Option<Value>> =
-                            args.iter().map(|a| cur[*a].clone()).collect();
-                        crate::runtime::exec::lift(cx, f, cx.node(i), &vals)
+                        let lift = |vals: &[Option<Value>]| {
+                            crate::runtime::exec::lift(cx, f, cx.node(i), vals)
+                        };
+                        // Up to three arguments on the stack, not in a new vector.
+                        match args[..] {
+                            [a] => lift(&[cur[a].clone()]),
+                            [a, b] => lift(&[cur[a].clone(), cur[b].clone()]),
+                            [a, b, c] => lift(&[cur[a].clone(), cur[b].clone(), cur[c].clone()]),
+                            _ => lift(&args.iter().map(|a| cur[*a].clone()).collect::<Vec<_>>()),
+                        }
                     } else {
                         None
                     }
