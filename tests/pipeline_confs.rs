@@ -26,7 +26,14 @@ fn every_shipped_conf_is_read_whole_and_sets_the_guarantees() {
             );
         }
         for o in v["outputs"]["mqtt"].as_array().unwrap() {
-            assert_eq!(o["qos"].as_integer(), Some(1), "{name}");
+            // Actions at QoS 1, except the fleet's: one PUBACK round trip per action cannot
+            // keep up with 1,000 robots (the conf's comment, BENCHMARKS.md).
+            let qos = if name.to_string().ends_with("telegraf-fleet.conf") {
+                0
+            } else {
+                1
+            };
+            assert_eq!(o["qos"].as_integer(), Some(qos), "{name}");
             assert_eq!(o["json_timestamp_units"].as_str(), Some("1ms"), "{name}");
         }
         if let Some(execd) = v.get("processors").and_then(|p| p.get("execd")) {
