@@ -156,10 +156,8 @@ fn run(args: &Args) -> Result<(), String> {
     }
     let telegraf_bin = real_telegraf::binary(&args.version)
         .ok_or(format!("Telegraf {} not built", args.version))?;
-    let broker = servers::Mosquitto::start_with(
-        "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\nlog_type information\nlog_type subscribe\nmax_queued_messages 100000\n",
-    )
-    .ok_or("mosquitto missing")?;
+    let broker =
+        real_telegraf::broker_with("max_queued_messages 100000\n").ok_or("mosquitto missing")?;
     let influx = servers::Influxd::start().ok_or("influxd missing")?;
     let fleet = args.robots > 1;
     let (conf_path, client_id, subscription) = if fleet {
@@ -272,7 +270,7 @@ fn run(args: &Args) -> Result<(), String> {
         .map_err(|_| "no SUBACK for the action subscriber")?;
 
     let telegraf = real_telegraf::Telegraf::start(&args.version, &telegraf_bin, &conf, &[]);
-    wait_subscribed(&broker, client_id, subscription)?;
+    real_telegraf::wait_subscribed(&broker, client_id, subscription, 0);
 
     let mut pub_opts = MqttOptions::new("delay-publisher", "127.0.0.1", broker.port);
     pub_opts.set_max_packet_size(1 << 20, 1 << 20);
@@ -342,18 +340,6 @@ fn run(args: &Args) -> Result<(), String> {
         for l in log.lines().filter(|l| l.contains(" E! ")).take(10) {
             eprintln!("  {l}");
         }
-    }
-    Ok(())
-}
-
-fn wait_subscribed(broker: &servers::Mosquitto, id: &str, topic: &str) -> Result<(), String> {
-    let deadline = Instant::now() + Duration::from_secs(30);
-    let needle = format!(" {id} 1 {topic}");
-    while !broker.log().lines().any(|l| l.ends_with(&needle)) {
-        if Instant::now() > deadline {
-            return Err(format!("{id} never subscribed to {topic}"));
-        }
-        std::thread::sleep(Duration::from_millis(20));
     }
     Ok(())
 }

@@ -14,7 +14,9 @@ mod recorded;
 #[path = "support/servers.rs"]
 mod servers;
 
-use real_telegraf::{Field, Rewrite, Telegraf};
+use real_telegraf::{
+    Field, Rewrite, Telegraf, assert_no_error, broker, wait_subscribed, without_table,
+};
 use recorded::BIN;
 use serde_json::Value;
 use std::process::{Command, Output, Stdio};
@@ -33,115 +35,6 @@ fn actions(path: &std::path::Path) -> Vec<(f64, bool)> {
             (speed, a.fields.get("augmented") == Some(&Field::Bool(true)))
         })
         .collect()
-}
-
-/// A broker that logs subscriptions, so the test can wait until Telegraf has subscribed: its
-/// "Connected" comes before the SUBSCRIBE (`mqtt_consumer.go` `connect`).
-fn broker() -> Option<servers::Mosquitto> {
-    servers::Mosquitto::start_with(
-        "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\nlog_type information\nlog_type subscribe\n",
-    )
-}
-
-/// Wait until a client whose id starts with `id` has subscribed to `topic` on `broker` (the
-/// broker logs `<time>: <client> <qos> <topic>`).
-fn wait_subscribed(broker: &servers::Mosquitto, telegraf: &Telegraf, id: &str, topic: &str) {
-    let deadline = Instant::now() + Duration::from_secs(60);
-    let subscribed = |log: &str| {
-        log.lines().any(|l| {
-            let t: Vec<&str> = l.split_whitespace().collect();
-            t.len() == 4 && t[1].starts_with(id) && t[2].len() == 1 && t[3] == topic
-        })
-    };
-    while !subscribed(&broker.log()) {
-        assert!(
-            Instant::now() < deadline,
-            "Telegraf {}: {id} never subscribed to {topic}; broker log:\n{}\nTelegraf log:\n{}",
-            telegraf.version,
-            broker.log(),
-            telegraf.log()
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
-/// The conf without its `[[outputs.influxdb]]` table (up to the next table or the end): what
-/// this test checks is the closed loop over MQTT, which needs no InfluxDB. (A local helper:
-/// `real_telegraf` has no way to drop a table.)
-fn without_influxdb(conf: &str) -> String {
-    let mut out = String::new();
-    let mut skipping = false;
-    let mut dropped = false;
-    for line in conf.lines() {
-        let trimmed = line.trim_start();
-        if trimmed.starts_with('[') {
-            skipping = trimmed.starts_with("[[outputs.influxdb]]");
-            dropped |= skipping;
-        }
-        if !skipping {
-            out.push_str(line);
-            out.push('\n');
-        }
-    }
-    assert!(
-        dropped,
-        "the conf no longer has an [[outputs.influxdb]] table"
-    );
-    out
-}
-
-/// Telegraf logged no error of its own. Before 1.37.0 it logs every stderr line of ours as an
-/// error (`E! [processors.execd] stderr: "I! summary: ..."`): those are ours, at our level.
-/// Telegraf's "file already closed" at the stop (its execd reads the child's pipes after
-/// `Cmd.Wait` closed them) is counted and said, not failed: the number is returned.
-fn assert_no_error(version: &str, log: &str) -> usize {
-    let closed = log
-        .lines()
-        .filter(|l| l.contains(" E! ") && l.contains("file already closed"))
-        .count();
-    let errors: Vec<&str> = log
-        .lines()
-        .filter(|l| l.contains(" E! ") && !l.contains("file already closed"))
-        .filter(|l| !(version < "v1.37.0" && l.contains("[processors.execd] stderr: \"I! ")))
-        .collect();
-    assert!(
-        errors.is_empty(),
-        "Telegraf {version} logged errors:\n{}\nits log:\n{log}",
-        errors.join("\n")
-    );
-    if closed > 0 {
-        eprintln!(
-            "Telegraf {version}: {closed} \"file already closed\" error(s) at the stop \
-             (Telegraf's execd read the child's pipes after Cmd.Wait closed them)"
-        );
-    }
-    closed
-}
-
-/// The monitor's summary in Telegraf's log: one (the child ran once and ended at the stop),
-/// saying `records` records, no parse error, no late record, no duplicate. It may be missing
-/// only when Telegraf said "file already closed" at the stop (it read the child's stderr after
-/// closing it), which is said.
-fn assert_summary(version: &str, log: &str, records: usize, closed: usize) {
-    let summaries: Vec<&str> = log.lines().filter(|l| l.contains("summary:")).collect();
-    if summaries.is_empty() && closed > 0 {
-        eprintln!(
-            "Telegraf {version}: the monitor's summary line is missing from Telegraf's log \
-             (\"file already closed\" at the stop)"
-        );
-        return;
-    }
-    assert_eq!(
-        summaries.len(),
-        1,
-        "Telegraf {version}: one monitor, run once to its end; its log:\n{log}"
-    );
-    assert!(
-        summaries[0].contains(&format!("summary: {records} records,"))
-            && summaries[0].contains(" 0 parse errors, 0 late records,")
-            && summaries[0].contains(" 0 duplicates"),
-        "Telegraf {version}: all {records} records reached the monitor, once; its log:\n{log}"
-    );
 }
 
 /// Run `cmd` to its end, killed (and the test failed, with Telegraf's log) after `timeout`.
@@ -223,8 +116,8 @@ fn simulated_robot_drives_the_pipeline_through_mosquitto() {
         // - the robot's own time (the variant the conf's comment describes): the simulated
         //   times (multiples of 500 ms) are exact as Telegraf's float64;
         // - the simulated robot's host, `sim` (the agent's `hostname`);
-        // - no InfluxDB (see `without_influxdb`).
-        let conf = without_influxdb(
+        // - no InfluxDB (the table left out: this checks the MQTT round trip).
+        let conf = without_table(
             &Rewrite::robot(broker.port, None)
                 .replace(
                     "/var/lib/tessla-telegraf",
@@ -236,11 +129,12 @@ fn simulated_robot_drives_the_pipeline_through_mosquitto() {
                 )
                 .replace("[agent]\n", "[agent]\n  hostname = \"sim\"\n")
                 .apply(&text),
+            "[[outputs.influxdb]]",
         );
         // The test's own subscriber to `action`: how many Telegraf published.
         let published = mqtt_client::subscribe(broker.port, "action", "watch");
         let telegraf = Telegraf::start(version, &bin, &conf, &[]);
-        wait_subscribed(&broker, &telegraf, "telegraf-tessla-in", "tessla");
+        wait_subscribed(&broker, "telegraf-tessla-in", "tessla", 0);
 
         let via_broker = dir.path().join(format!("broker-{version}.lp"));
         // Lock-step: each message waits for its action (at most --action-timeout); the whole
@@ -276,8 +170,14 @@ fn simulated_robot_drives_the_pipeline_through_mosquitto() {
             );
         }
         let log = telegraf.stop();
-        let closed = assert_no_error(version, &log);
-        assert_summary(version, &log, messages, closed);
+        assert_no_error(version, &log);
+        let summary = real_telegraf::summary(version, &log);
+        assert!(
+            summary.contains(&format!("summary: {messages} records,"))
+                && summary.contains(" 0 parse errors, 0 late records,")
+                && summary.contains(" 0 duplicates"),
+            "Telegraf {version}: all {messages} records reached the monitor, once: {summary}"
+        );
 
         let broker_summary: Value = serde_json::from_slice(&out.stdout).unwrap();
         let b = &broker_summary["augmented"];

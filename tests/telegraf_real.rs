@@ -15,7 +15,9 @@ mod recorded;
 #[path = "support/servers.rs"]
 mod servers;
 
-use real_telegraf::{Rewrite, Row, Telegraf};
+use real_telegraf::{
+    Rewrite, Row, Telegraf, assert_no_error, broker, execd_args, offline, wait_subscribed,
+};
 use recorded::BIN;
 use std::collections::BTreeMap;
 use std::process::{Command, Stdio};
@@ -24,48 +26,6 @@ use std::time::{Duration, Instant};
 /// Records of the recorded run the UDP test sends (a burst: UDP drops what a full socket
 /// buffer cannot take, so it stays well inside it).
 const UDP_RECORDS: usize = 100;
-
-/// A broker that logs subscriptions, so a test can wait until Telegraf has subscribed: its
-/// "Connected" comes before the SUBSCRIBE (`mqtt_consumer.go` `connect`).
-pub fn broker() -> Option<servers::Mosquitto> {
-    servers::Mosquitto::start_with(
-        "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\nlog_type information\nlog_type subscribe\n",
-    )
-}
-
-/// Wait until a client whose id starts with `id` has subscribed to `topic` on `broker` (the
-/// broker logs `<time>: <client> <qos> <topic>`).
-pub fn wait_subscribed(broker: &servers::Mosquitto, id: &str, topic: &str) {
-    let deadline = Instant::now() + Duration::from_secs(30);
-    let subscribed = |log: &str| {
-        log.lines().any(|l| {
-            let t: Vec<&str> = l.split_whitespace().collect();
-            t.len() == 4 && t[1].starts_with(id) && t[2].len() == 1 && t[3] == topic
-        })
-    };
-    while !subscribed(&broker.log()) {
-        assert!(
-            Instant::now() < deadline,
-            "{id} never subscribed to {topic}; broker log:\n{}",
-            broker.log()
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
-/// Telegraf logged no error of its own. Before 1.37.0 it logs every stderr line of ours as an
-/// error (`E! [processors.execd] stderr: "I! summary: ..."`): those are ours, at our level.
-fn assert_no_error(version: &str, log: &str) {
-    let errors: Vec<&str> = log
-        .lines()
-        .filter(|l| l.contains(" E! "))
-        .filter(|l| !(version < "v1.37.0" && l.contains("[processors.execd] stderr: \"I! ")))
-        .collect();
-    assert!(
-        errors.is_empty(),
-        "Telegraf {version} logged errors:\n{log}"
-    );
-}
 
 /// The first `n` records of the recorded run, as a file `replay` reads.
 fn head(dir: &tempfile::TempDir, n: usize) -> std::path::PathBuf {
@@ -98,53 +58,6 @@ fn replay_at(path: &std::path::Path, port: u16, topic: &str, speed: &str) {
         "replay: {}",
         String::from_utf8_lossy(&out.stderr)
     );
-}
-
-/// The arguments after `run` of the conf's `processors.execd` command.
-fn execd_args(conf: &str) -> Vec<String> {
-    let v: toml::Value = toml::from_str(conf).unwrap();
-    let command = v["processors"]["execd"][0]["command"].as_array().unwrap();
-    let args: Vec<String> = command
-        .iter()
-        .map(|a| a.as_str().unwrap().to_string())
-        .collect();
-    assert_eq!(args[1], "run", "{args:?}");
-    args[2..].to_vec()
-}
-
-/// An offline `run` with `args` over `input` (no echo, no state, no wall clock): its output.
-fn offline(args: &[String], input: &str) -> String {
-    let mut args: Vec<String> = args.to_vec();
-    // Offline the state file is not wanted: the run starts from nothing, as Telegraf's did.
-    if let Some(i) = args.iter().position(|a| a == "--state") {
-        args.drain(i..i + 2);
-    }
-    if let Some(i) = args.iter().position(|a| a == "--state-interval") {
-        args.drain(i..i + 2);
-    }
-    let mut child = Command::new(BIN)
-        .arg("run")
-        .args(&args)
-        .args(["--no-passthrough", "--log-level", "warn"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
-    let input = input.to_string();
-    let writer = std::thread::spawn(move || {
-        use std::io::Write;
-        stdin.write_all(input.as_bytes()).unwrap();
-    });
-    let out = child.wait_with_output().unwrap();
-    writer.join().unwrap();
-    assert!(
-        out.status.success(),
-        "offline run: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
 }
 
 /// `got` (through Telegraf) and `want` (offline) hold the same points: same times (after
@@ -233,7 +146,7 @@ fn robot_conf_matches_offline(
             .map(|t| mqtt_client::subscribe(broker.port, &action_topic(t), &format!("robot-{t}")))
             .collect();
         let telegraf = Telegraf::start(version, &bin, &conf, &[]);
-        wait_subscribed(&broker, client_id, subscription);
+        wait_subscribed(&broker, client_id, subscription, 0);
         let dir = tempfile::tempdir().unwrap();
         let file = head(&dir, records_per_robot);
         for t in topics {
@@ -399,7 +312,7 @@ fn udp_conf_under_real_telegraf_matches_an_offline_run() {
             .apply(&text);
         let robot = mqtt_client::subscribe(broker.port, "action", "robot");
         let telegraf = Telegraf::start(version, &bin, &conf, &[]);
-        wait_subscribed(&broker, "telegraf-tessla-udp-in", "tessla");
+        wait_subscribed(&broker, "telegraf-tessla-udp-in", "tessla", 0);
         let dir = tempfile::tempdir().unwrap();
         // At 5 times the robot's pace (25 Hz): a burst would overflow the socket buffers,
         // and UDP drops what they cannot take, unnoticed (README, the guarantee table).
@@ -501,7 +414,7 @@ fn first_spec_example_conf_under_real_telegraf_matches_an_offline_run() {
             .apply(&text);
         // As the README runs it: from the repository's folder, `tessla-telegraf` on PATH.
         let telegraf = Telegraf::start(version, &bin, &conf, &[("PATH", &path)]);
-        wait_subscribed(&broker, "", "tessla");
+        wait_subscribed(&broker, "", "tessla", 0);
         let battery =
             std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/first-spec/battery.lp");
         let sent = std::fs::read_to_string(&battery)
@@ -566,7 +479,7 @@ fn main_conf_with_the_robots_time_rounds_as_telegraf_and_drops_a_redelivery() {
         let conf = rewrite.apply(&text);
         let robot = mqtt_client::subscribe(broker.port, "action", "robot");
         let telegraf = Telegraf::start(version, &bin, &conf, &[]);
-        wait_subscribed(&broker, "telegraf-tessla-in", "tessla");
+        wait_subscribed(&broker, "telegraf-tessla-in", "tessla", 0);
         let publisher = mqtt_client::Publisher::connect(broker.port, "robot-pub");
         // 129 ns past a multiple of 256: float64 rounds it up to the next multiple.
         let message = |i: usize, ns: i64| {
@@ -704,7 +617,7 @@ fn the_udp_conf_without_its_namedrop_loops_as_the_connector_wiring_did() {
             .replace("  database = \"telegraf\"\n", "")
             .apply(&looped);
         let telegraf = Telegraf::start(version, &bin, &conf, &[]);
-        wait_subscribed(&broker, "telegraf-tessla-udp-in", "tessla");
+        wait_subscribed(&broker, "telegraf-tessla-udp-in", "tessla", 0);
         echo.set_read_timeout(Some(Duration::from_millis(50)))
             .unwrap();
         let publisher = mqtt_client::Publisher::connect(broker.port, "robot-pub");

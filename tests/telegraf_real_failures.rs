@@ -20,41 +20,11 @@ mod recorded;
 #[path = "support/servers.rs"]
 mod servers;
 
-use real_telegraf::{Rewrite, Telegraf};
+use real_telegraf::{Rewrite, Telegraf, broker, wait_subscribed};
 use recorded::BIN;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 use tessla_telegraf::replay::message::{MessageOptions, to_json};
-
-/// A broker that logs subscriptions (see `telegraf_real.rs`).
-fn broker() -> Option<servers::Mosquitto> {
-    servers::Mosquitto::start_with(
-        "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\nlog_type information\nlog_type subscribe\n",
-    )
-}
-
-/// Wait until client `id` is subscribed to `topic`, looking at the broker's log after its
-/// first `since` lines: a SUBSCRIBE, or a connection that finds its persistent session (the
-/// subscription is kept by the broker, and mqtt_consumer does not subscribe again when the
-/// session is present).
-fn wait_subscribed(broker: &servers::Mosquitto, id: &str, topic: &str, since: usize) {
-    let deadline = Instant::now() + Duration::from_secs(30);
-    let subscribed = |log: &str| {
-        log.lines().skip(since).any(|l| {
-            let t: Vec<&str> = l.split_whitespace().collect();
-            (t.len() == 4 && t[1].starts_with(id) && t[2].len() == 1 && t[3] == topic)
-                || (since > 0 && l.contains(&format!(" as {id} (")) && l.contains(", c0,"))
-        })
-    };
-    while !subscribed(&broker.log()) {
-        assert!(
-            Instant::now() < deadline,
-            "{id} never subscribed to {topic}; broker log:\n{}",
-            broker.log()
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
 
 /// The recorded run's messages as the robot's JSON, each with `"seq": k` added.
 fn messages(n: usize) -> Vec<Vec<u8>> {
@@ -437,9 +407,8 @@ fn while_telegraf_is_away_the_broker_keeps_the_oldest_max_queued_messages() {
     const N: usize = 50;
     for (version, bin) in real_telegraf::versions() {
         // The broker as the test servers run it (`persistence false`) with a small queue.
-        let Some(broker) = servers::Mosquitto::start_with(&format!(
-            "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\nlog_type information\nlog_type subscribe\nmax_queued_messages {QUEUE}\n"
-        )) else {
+        let Some(broker) = real_telegraf::broker_with(&format!("max_queued_messages {QUEUE}\n"))
+        else {
             return;
         };
         let Some(influx) = servers::Influxd::start() else {

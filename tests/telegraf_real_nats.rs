@@ -44,7 +44,7 @@ mod recorded;
 mod servers;
 
 use nats_cluster::{Cluster, Login};
-use real_telegraf::{Rewrite, Row};
+use real_telegraf::{Rewrite, Row, execd_args, offline};
 use recorded::BIN;
 use rumqttc::{Client, Event, MqttOptions, Packet, QoS, TlsConfiguration, Transport};
 use std::collections::BTreeMap;
@@ -151,52 +151,6 @@ fn rewritten(p: usize, cluster: &Cluster) -> String {
         "a host of the shipped conf is left:\n{conf}"
     );
     conf
-}
-
-/// The arguments after `run` of the conf's `processors.execd` command.
-fn execd_args(conf: &str) -> Vec<String> {
-    let v: toml::Value = toml::from_str(conf).unwrap();
-    let command = v["processors"]["execd"][0]["command"].as_array().unwrap();
-    let args: Vec<String> = command
-        .iter()
-        .map(|a| a.as_str().unwrap().to_string())
-        .collect();
-    assert_eq!(args[1], "run", "{args:?}");
-    args[2..].to_vec()
-}
-
-/// The offline `run` with `args` (less `--state` and `--state-interval`: the run starts from
-/// nothing, as the fleet's did) over `input`: its output.
-fn offline(args: &[String], input: &str) -> String {
-    let mut args = args.to_vec();
-    for flag in ["--state", "--state-interval"] {
-        if let Some(i) = args.iter().position(|a| a == flag) {
-            args.drain(i..i + 2);
-        }
-    }
-    let mut child = Command::new(BIN)
-        .arg("run")
-        .args(&args)
-        .args(["--no-passthrough", "--log-level", "warn"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
-    let input = input.to_string();
-    let writer = std::thread::spawn(move || {
-        use std::io::Write;
-        stdin.write_all(input.as_bytes()).unwrap();
-    });
-    let out = child.wait_with_output().unwrap();
-    writer.join().unwrap();
-    assert!(
-        out.status.success(),
-        "offline run: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
 }
 
 /// One Telegraf of a partition: `telegraf --config FILE` in a temporary folder, its log

@@ -21,7 +21,7 @@ mod recorded;
 #[path = "support/servers.rs"]
 mod servers;
 
-use real_telegraf::Telegraf;
+use real_telegraf::{Telegraf, broker, wait_subscribed};
 use recorded::BIN;
 use std::time::{Duration, Instant};
 
@@ -55,24 +55,6 @@ fn conf(port: u16, format: &str) -> String {
     )
 }
 
-fn broker() -> Option<servers::Mosquitto> {
-    servers::Mosquitto::start_with(
-        "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\nlog_type information\nlog_type subscribe\n",
-    )
-}
-
-fn wait_subscribed(broker: &servers::Mosquitto) {
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while !broker
-        .log()
-        .lines()
-        .any(|l| l.ends_with(" versions-in 1 tessla/#"))
-    {
-        assert!(Instant::now() < deadline, "{}", broker.log());
-        std::thread::sleep(Duration::from_millis(20));
-    }
-}
-
 fn message(speed: f64, note: &str) -> Vec<u8> {
     serde_json::to_vec(&serde_json::json!({
         "expectedSpeed": speed,
@@ -89,7 +71,7 @@ fn message(speed: f64, note: &str) -> Vec<u8> {
 fn run(version: &str, bin: &std::path::Path) -> Option<(usize, usize, String)> {
     let broker = broker()?;
     let telegraf = Telegraf::start(version, bin, &conf(broker.port, "influx"), &[]);
-    wait_subscribed(&broker);
+    wait_subscribed(&broker, "versions-in", "tessla/#", 0);
     let publisher = mqtt_client::Publisher::connect(broker.port, "robot");
     publisher.publish("tessla/r1", message(0.1, "first line\nsecond line"));
     publisher.publish("tessla/r1", message(0.2, &"x".repeat(300 * 1024)));
@@ -155,7 +137,7 @@ fn tag_escapes_telegraf_writes_but_does_not_read_back() {
     for (version, bin) in real_telegraf::versions() {
         let Some(broker) = broker() else { return };
         let telegraf = Telegraf::start(version, &bin, &conf(broker.port, "json"), &[]);
-        wait_subscribed(&broker);
+        wait_subscribed(&broker, "versions-in", "tessla/#", 0);
         let publisher = mqtt_client::Publisher::connect(broker.port, "robot");
         // Mosquitto refuses a topic with a control character (MQTT 3.1.1 4.7.3: it drops the
         // client), so the tab comes in a JSON value the parser makes a tag of (`tag_keys`).

@@ -563,3 +563,131 @@ pub fn same_value(json: &Field, ours: &Field) -> bool {
         (a, b) => a == b,
     }
 }
+
+/// A Mosquitto that logs subscriptions, so a test can wait until Telegraf has subscribed:
+/// `mqtt_consumer` logs "Connected" before it sends its SUBSCRIBE (`mqtt_consumer.go`
+/// `connect`). Its log goes to stderr, which Mosquitto does not buffer.
+pub fn broker() -> Option<crate::servers::Mosquitto> {
+    broker_with("")
+}
+
+/// As [`broker`], with `extra` lines in the broker's conf.
+pub fn broker_with(extra: &str) -> Option<crate::servers::Mosquitto> {
+    crate::servers::Mosquitto::start_with(&format!(
+        "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\n\
+         log_type information\nlog_type subscribe\n{extra}"
+    ))
+}
+
+/// Wait until a client whose id starts with `id` is subscribed to `topic`, looking at the
+/// broker's log after its first `since` lines: a SUBSCRIBE (`<time>: <client> <qos> <topic>`),
+/// or, when `since > 0`, a connection that finds its persistent session (the broker keeps the
+/// subscription, and `mqtt_consumer` does not subscribe again when the session is present).
+pub fn wait_subscribed(broker: &crate::servers::Mosquitto, id: &str, topic: &str, since: usize) {
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let subscribed = |log: &str| {
+        log.lines().skip(since).any(|l| {
+            let t: Vec<&str> = l.split_whitespace().collect();
+            (t.len() == 4 && t[1].starts_with(id) && t[2].len() == 1 && t[3] == topic)
+                || (since > 0 && l.contains(&format!(" as {id} (")) && l.contains(", c0,"))
+        })
+    };
+    while !subscribed(&broker.log()) {
+        assert!(
+            Instant::now() < deadline,
+            "{id} never subscribed to {topic}; broker log:\n{}",
+            broker.log()
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The conf without its `table` (e.g. `[[outputs.influxdb]]`, up to the next table): for a test
+/// that does not need that output. Fails if the conf has no such table.
+pub fn without_table(conf: &str, table: &str) -> String {
+    let mut out = String::new();
+    let (mut skipping, mut dropped) = (false, false);
+    for line in conf.lines() {
+        let trimmed = line.trim_start();
+        if trimmed.starts_with('[') {
+            skipping = trimmed.starts_with(table);
+            dropped |= skipping;
+        }
+        if !skipping {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    assert!(dropped, "the conf no longer has a {table} table");
+    out
+}
+
+/// Telegraf logged no error of its own. Before 1.37.0 it logs every stderr line of ours as an
+/// error (`E! [processors.execd] stderr: "I! summary: ..."`): those are ours, at our level.
+pub fn assert_no_error(version: &str, log: &str) {
+    let errors: Vec<&str> = log
+        .lines()
+        .filter(|l| l.contains(" E! "))
+        .filter(|l| !(version < "v1.37.0" && l.contains("[processors.execd] stderr: \"I! ")))
+        .collect();
+    assert!(
+        errors.is_empty(),
+        "Telegraf {version} logged errors:\n{}\nits log:\n{log}",
+        errors.join("\n")
+    );
+}
+
+/// Our end-of-run summary as Telegraf logged it (`summary: N records, ...`): exactly one.
+pub fn summary(version: &str, log: &str) -> String {
+    let lines: Vec<&str> = log.lines().filter(|l| l.contains("summary: ")).collect();
+    assert_eq!(
+        lines.len(),
+        1,
+        "Telegraf {version}: our summary, once:\n{log}"
+    );
+    lines[0].to_string()
+}
+
+/// The arguments after `run` of the conf's `processors.execd` command.
+pub fn execd_args(conf: &str) -> Vec<String> {
+    let v: toml::Value = toml::from_str(conf).unwrap();
+    let command = v["processors"]["execd"][0]["command"].as_array().unwrap();
+    let args: Vec<String> = command
+        .iter()
+        .map(|a| a.as_str().unwrap().to_string())
+        .collect();
+    assert_eq!(args[1], "run", "{args:?}");
+    args[2..].to_vec()
+}
+
+/// An offline `run` with `args` (less `--state` and `--state-interval`: it starts from nothing,
+/// as the monitor under Telegraf did) over `input`, no echo: its output.
+pub fn offline(args: &[String], input: &str) -> String {
+    use std::io::Write;
+    let mut args = args.to_vec();
+    for flag in ["--state", "--state-interval"] {
+        if let Some(i) = args.iter().position(|a| a == flag) {
+            args.drain(i..i + 2);
+        }
+    }
+    let mut child = Command::new(crate::BIN)
+        .arg("run")
+        .args(&args)
+        .args(["--no-passthrough", "--log-level", "warn"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    let input = input.to_string();
+    let writer = std::thread::spawn(move || stdin.write_all(input.as_bytes()));
+    let out = child.wait_with_output().unwrap();
+    writer.join().unwrap().unwrap();
+    assert!(
+        out.status.success(),
+        "offline run: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
