@@ -171,13 +171,8 @@ fn run(args: &Args) -> Result<(), String> {
     };
     let state = tempfile::tempdir().map_err(|e| e.to_string())?;
     let text = real_telegraf::shipped(conf_path);
-    let mut rewrite = real_telegraf::Rewrite::robot(broker.port, Some(&influx.url("")));
-    if text.contains("/var/lib/tessla-telegraf") {
-        rewrite = rewrite.replace(
-            "/var/lib/tessla-telegraf",
-            state.path().display().to_string(),
-        );
-    }
+    let rewrite =
+        real_telegraf::Rewrite::robot(broker.port, Some(&influx.url(""))).state_in(state.path());
     let mut conf = rewrite.apply(&text);
     for (k, v) in &args.sets {
         conf = set_key(&conf, k, v)?;

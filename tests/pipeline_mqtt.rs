@@ -75,16 +75,13 @@ fn replayed_run_comes_back_as_the_same_actions() {
         // - no InfluxDB (the table left out: this checks the MQTT round trip).
         let conf = without_table(
             &Rewrite::robot(broker.port, None)
-                .replace(
-                    "/var/lib/tessla-telegraf",
-                    state.path().display().to_string(),
-                )
-                .replace(
-                    "  json_string_fields = [\"actualSpeed\"]\n",
-                    "  json_string_fields = [\"actualSpeed\"]\n  json_time_key = \"time\"\n  json_time_format = \"unix_ns\"\n",
-                )
+                .state_in(state.path())
+                .robots_time()
                 .replace("[agent]\n", format!("[agent]\n  hostname = {host:?}\n"))
-                .replace("  topics = [\"tessla\"]\n", format!("  topics = [{topic:?}]\n"))
+                .replace(
+                    "  topics = [\"tessla\"]\n",
+                    format!("  topics = [{topic:?}]\n"),
+                )
                 .apply(&text),
             "[[outputs.influxdb]]",
         );

@@ -119,14 +119,8 @@ fn simulated_robot_drives_the_pipeline_through_mosquitto() {
         // - no InfluxDB (the table left out: this checks the MQTT round trip).
         let conf = without_table(
             &Rewrite::robot(broker.port, None)
-                .replace(
-                    "/var/lib/tessla-telegraf",
-                    state.path().display().to_string(),
-                )
-                .replace(
-                    "  json_string_fields = [\"actualSpeed\"]\n",
-                    "  json_string_fields = [\"actualSpeed\"]\n  json_time_key = \"time\"\n  json_time_format = \"unix_ns\"\n",
-                )
+                .state_in(state.path())
+                .robots_time()
                 .replace("[agent]\n", "[agent]\n  hostname = \"sim\"\n")
                 .apply(&text),
             "[[outputs.influxdb]]",

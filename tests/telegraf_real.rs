@@ -133,13 +133,7 @@ fn robot_conf_matches_offline(
         };
         let state = tempfile::tempdir().unwrap();
         let text = real_telegraf::shipped(conf_path);
-        let mut rewrite = Rewrite::robot(broker.port, Some(&influx.url("")));
-        if text.contains("/var/lib/tessla-telegraf") {
-            rewrite = rewrite.replace(
-                "/var/lib/tessla-telegraf",
-                state.path().display().to_string(),
-            );
-        }
+        let rewrite = Rewrite::robot(broker.port, Some(&influx.url(""))).state_in(state.path());
         let conf = rewrite.apply(&text);
         let inboxes: Vec<_> = topics
             .iter()
@@ -407,10 +401,7 @@ fn first_spec_example_conf_under_real_telegraf_matches_an_offline_run() {
                 "tcp://127.0.0.1:1883",
                 format!("tcp://127.0.0.1:{}", broker.port),
             )
-            .replace(
-                "/var/lib/tessla-telegraf",
-                state.path().display().to_string(),
-            )
+            .state_in(state.path())
             .apply(&text);
         // As the README runs it: from the repository's folder, `tessla-telegraf` on PATH.
         let telegraf = Telegraf::start(version, &bin, &conf, &[("PATH", &path)]);
@@ -464,18 +455,10 @@ fn main_conf_with_the_robots_time_rounds_as_telegraf_and_drops_a_redelivery() {
         };
         let state = tempfile::tempdir().unwrap();
         let text = real_telegraf::shipped("telegraf/telegraf.conf");
-        let mut rewrite = Rewrite::robot(broker.port, Some(&influx.url("")))
+        let rewrite = Rewrite::robot(broker.port, Some(&influx.url("")))
             // The variant the conf's comment describes.
-            .replace(
-                "  json_string_fields = [\"actualSpeed\"]\n",
-                "  json_string_fields = [\"actualSpeed\"]\n  json_time_key = \"time\"\n  json_time_format = \"unix_ns\"\n",
-            );
-        if text.contains("/var/lib/tessla-telegraf") {
-            rewrite = rewrite.replace(
-                "/var/lib/tessla-telegraf",
-                state.path().display().to_string(),
-            );
-        }
+            .robots_time()
+            .state_in(state.path());
         let conf = rewrite.apply(&text);
         let robot = mqtt_client::subscribe(broker.port, "action", "robot");
         let telegraf = Telegraf::start(version, &bin, &conf, &[]);

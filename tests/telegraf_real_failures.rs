@@ -92,13 +92,7 @@ fn setup(edit: impl Fn(String) -> String) -> Option<Setup> {
     let influx = servers::Influxd::start()?;
     let state = tempfile::tempdir().unwrap();
     let text = real_telegraf::shipped("telegraf/telegraf.conf");
-    let mut rewrite = Rewrite::robot(broker.port, Some(&influx.url("")));
-    if text.contains("/var/lib/tessla-telegraf") {
-        rewrite = rewrite.replace(
-            "/var/lib/tessla-telegraf",
-            state.path().display().to_string(),
-        );
-    }
+    let rewrite = Rewrite::robot(broker.port, Some(&influx.url(""))).state_in(state.path());
     let conf = edit(rewrite.apply(&text));
     Some(Setup {
         broker,
@@ -416,10 +410,7 @@ fn while_telegraf_is_away_the_broker_keeps_the_oldest_max_queued_messages() {
         };
         let state = tempfile::tempdir().unwrap();
         let conf = Rewrite::robot(broker.port, Some(&influx.url("")))
-            .replace(
-                "/var/lib/tessla-telegraf",
-                state.path().display().to_string(),
-            )
+            .state_in(state.path())
             .apply(&real_telegraf::shipped("telegraf/telegraf.conf"));
         let s = Setup {
             broker,
@@ -607,10 +598,7 @@ fn the_broker_down_for_30_s_makes_late_and_repeated_actions_the_robot_refuses() 
         let broker = mosquitto_on(port);
         let state = tempfile::tempdir().unwrap();
         let conf = Rewrite::robot(port, Some(&influx.url("")))
-            .replace(
-                "/var/lib/tessla-telegraf",
-                state.path().display().to_string(),
-            )
+            .state_in(state.path())
             .apply(&real_telegraf::shipped("telegraf/telegraf.conf"));
         let stop = Arc::new(AtomicBool::new(false));
         let (_robot_in, actions) = robust_client(port, "robot-in", Some("action"), stop.clone());

@@ -113,6 +113,21 @@ impl Rewrite {
         r
     }
 
+    /// The monitors' `--state` files in `dir` instead of the systemd drop-in's StateDirectory
+    /// (each test its own, as tests run at once).
+    pub fn state_in(self, dir: &Path) -> Rewrite {
+        self.replace("/var/lib/tessla-telegraf", dir.display().to_string())
+    }
+
+    /// The variant `telegraf.conf`'s comment describes: the robot's own time in each message
+    /// (`json_time_key = "time"`, nanoseconds) instead of the time Telegraf parsed it.
+    pub fn robots_time(self) -> Rewrite {
+        self.replace(
+            "  json_string_fields = [\"actualSpeed\"]\n",
+            "  json_string_fields = [\"actualSpeed\"]\n  json_time_key = \"time\"\n  json_time_format = \"unix_ns\"\n",
+        )
+    }
+
     pub fn apply(&self, conf: &str) -> String {
         let mut text = conf.to_string();
         for (from, to) in &self.0 {
