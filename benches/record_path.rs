@@ -63,7 +63,7 @@ fn benches(c: &mut Criterion) {
         P2_LINE,
     );
     let mut watched = Processor::new(p2, Options::default()).unwrap();
-    let watch = tessla_telegraf::transport::watchdog::Watch::default();
+    let watch = tessla_telegraf::watchdog::Watch::default();
     watched.watch_with(watch.lane());
     run(c, "p2_spec_p2_record_watched", watched, P2_LINE);
     let robot = tessla_telegraf::bundled::load(&LoadOptions::default())

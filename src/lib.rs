@@ -20,3 +20,4 @@ pub mod telegraf;
 /// TeSSLa's trace formats (crate `tessla-trace`), re-exported where the CLI and tests use them.
 pub use tessla_trace as trace;
 pub mod transport;
+pub mod watchdog;

@@ -329,15 +329,24 @@ fn next_start(s: &Setup, version: &str, bin: &std::path::Path) -> String {
         .to_string()
 }
 
+/// The shipped conf under Telegraf `version`, its monitor fed 20 records: the set-up, the path
+/// of its state file, the running Telegraf.
+fn fed(version: &str, bin: &std::path::Path) -> Option<(Setup, std::path::PathBuf, Telegraf)> {
+    let s = setup(|c| c)?;
+    let path = state_file(&s);
+    let telegraf = Telegraf::start(version, bin, &s.conf, &[]);
+    wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", 0);
+    feed(&s, &telegraf, 20);
+    Some((s, path, telegraf))
+}
+
 #[test]
 fn telegraf_stopped_or_crashed_and_the_state_it_leaves() {
     for (version, bin) in real_telegraf::versions() {
         // Stopped (systemctl stop: SIGTERM to Telegraf, which closes our stdin): saved.
-        let Some(s) = setup(|c| c) else { return };
-        let path = state_file(&s);
-        let telegraf = Telegraf::start(version, &bin, &s.conf, &[]);
-        wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", 0);
-        feed(&s, &telegraf, 20);
+        let Some((s, path, telegraf)) = fed(version, &bin) else {
+            return;
+        };
         let log = telegraf.stop();
         assert!(
             path.is_file(),
@@ -348,11 +357,9 @@ fn telegraf_stopped_or_crashed_and_the_state_it_leaves() {
 
         // Crashed alone (SIGKILL to Telegraf; without systemd the child lives on): the child
         // reads EOF on its stdin, saves and exits by itself.
-        let Some(s) = setup(|c| c) else { return };
-        let path = state_file(&s);
-        let telegraf = Telegraf::start(version, &bin, &s.conf, &[]);
-        wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", 0);
-        feed(&s, &telegraf, 20);
+        let Some((s, path, telegraf)) = fed(version, &bin) else {
+            return;
+        };
         let child = telegraf.wait_child(&[], Duration::from_secs(5));
         let _ = telegraf.crash();
         let deadline = Instant::now() + Duration::from_secs(20);
@@ -369,11 +376,9 @@ fn telegraf_stopped_or_crashed_and_the_state_it_leaves() {
 
         // Crashed under systemd (KillMode=mixed: when Telegraf dies, the rest of its cgroup,
         // our child, is SIGKILLed at once): only the last --state-interval save is there.
-        let Some(s) = setup(|c| c) else { return };
-        let path = state_file(&s);
-        let telegraf = Telegraf::start(version, &bin, &s.conf, &[]);
-        wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", 0);
-        feed(&s, &telegraf, 20);
+        let Some((s, path, telegraf)) = fed(version, &bin) else {
+            return;
+        };
         let child = telegraf.wait_child(&[], Duration::from_secs(5));
         let _ = std::process::Command::new("kill")
             .args(["-KILL", &child.to_string()])

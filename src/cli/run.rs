@@ -8,8 +8,8 @@ use crate::telegraf::binding::parse_tags;
 use crate::telegraf::processor::{Options, Processor};
 use crate::telegraf::reload::{self, SpecSource};
 use crate::telegraf::state;
-use crate::transport::watchdog::{self, Watch};
 use crate::transport::{self, Ending};
+use crate::watchdog::{self, Watch};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 

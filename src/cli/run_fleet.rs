@@ -16,7 +16,7 @@ pub fn run(
     opts: Options,
     source: &SpecSource,
     ctx: &state::Context,
-    watch: std::sync::Arc<crate::transport::watchdog::Watch>,
+    watch: std::sync::Arc<crate::watchdog::Watch>,
 ) -> CliResult {
     if args.udp_listen.is_some() {
         return Err(CliError::spec(

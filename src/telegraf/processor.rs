@@ -17,7 +17,7 @@ use super::clock::{self, Anchor, Deadlines, Wall};
 use super::encode::{self, Encoding};
 use super::instances::{Key, Table};
 use crate::log;
-use crate::transport::watchdog::Lane;
+use crate::watchdog::Lane;
 use lineproto::{Metric, Record, RecordRef, parse_record_into};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -175,7 +175,7 @@ pub struct Processor {
     has_delays: bool,
     next_id: u64,
     /// The step watchdog's marks for this processor (`run --step-timeout`; see
-    /// [`crate::transport::watchdog`]).
+    /// [`crate::watchdog`]).
     lane: Option<Arc<Lane>>,
 }
 

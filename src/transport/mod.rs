@@ -13,7 +13,6 @@ use crate::telegraf::processor::Processor;
 pub mod nats_fleet;
 pub mod stdio;
 pub mod udp;
-pub mod watchdog;
 
 /// A periodic task: how often, and what.
 pub type Periodic<'a> = (std::time::Duration, &'a mut dyn FnMut(&Processor));
@@ -28,13 +27,19 @@ pub struct Hooks<'a> {
     /// Every this long (`--state-interval`: save the state).
     pub periodic: Option<Periodic<'a>>,
     /// Where the loop marks what it is doing, for the step watchdog (`--step-timeout`).
-    pub watch: std::sync::Arc<watchdog::Watch>,
+    pub watch: std::sync::Arc<crate::watchdog::Watch>,
 }
 
 impl<'a> Hooks<'a> {
     /// The SIGHUP hook, the periodic task with its timer (the timer starts now), and the
     /// watchdog's marks.
-    pub(crate) fn split(self) -> (OnHangup<'a>, Ticker<'a>, std::sync::Arc<watchdog::Watch>) {
+    pub(crate) fn split(
+        self,
+    ) -> (
+        OnHangup<'a>,
+        Ticker<'a>,
+        std::sync::Arc<crate::watchdog::Watch>,
+    ) {
         let ticker = Ticker(self.periodic.map(|periodic| {
             let d = periodic.0.max(std::time::Duration::from_millis(1));
             let mut i = tokio::time::interval_at(tokio::time::Instant::now() + d, d);

@@ -16,7 +16,7 @@ use crate::telegraf::processor::Processor;
 use crate::telegraf::state::Backend;
 use crate::telegraf::state_nats::Lease;
 use crate::transport::Ending;
-use crate::transport::watchdog::{Phase, Watch};
+use crate::watchdog::{Phase, Watch};
 use lineproto::{Metric, Record, RecordSplitter, parse_record_into};
 use std::collections::{HashMap, VecDeque};
 use std::io::Write;

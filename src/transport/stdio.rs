@@ -23,11 +23,11 @@
 //! stdin, which reads on a helper thread and hands each read over (two thread wake-ups per
 //! read: most of the answer latency of a single record on a busy machine).
 
-use super::watchdog::{Phase, Watch};
 use super::{Ending, Hooks};
 use crate::telegraf::clock::Wall;
 use crate::telegraf::instances::shard_of;
 use crate::telegraf::processor::Processor;
+use crate::watchdog::{Phase, Watch};
 use lineproto::{RecordRef, RecordSplitter};
 use std::io::Write;
 use std::sync::mpsc;

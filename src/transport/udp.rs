@@ -7,10 +7,10 @@
 //! never echoed in this mode (see `run`'s options): Telegraf already sends the robot metric to
 //! its other outputs.
 
-use super::watchdog::Phase;
 use super::{Ending, Hooks};
 use crate::telegraf::clock::Wall;
 use crate::telegraf::processor::Processor;
+use crate::watchdog::Phase;
 use lineproto::RecordSplitter;
 use tokio::net::UdpSocket;
 
