@@ -115,6 +115,39 @@ fn a_10_mb_line_costs_only_itself_and_memory_stays_bounded() {
     assert!(peak < 256 * 1024, "peak RSS {peak} KiB for a 20 MiB line");
 }
 
+/// A line past the record limit that arrives slowly: skipping it is reading input, not silence.
+/// Before, the wall clock took the pauses inside the skipped line for a silent robot, so
+/// `robot_silent` fired (its 1 s max_silence passed) and the next record came in late.
+#[test]
+fn a_20_mib_line_arriving_over_2_s_is_input_not_silence() {
+    const CHUNKS: usize = 40;
+    const CHUNK: usize = (20 << 20) / CHUNKS;
+    let f = run_with(&["run", "--no-passthrough"], DEADLINE, |stdin| {
+        // The first record and the start of the long line in one write: no pause between them.
+        let mut first = robot(1000).into_bytes();
+        first.extend(std::iter::repeat_n(b'y', CHUNK));
+        let _ = stdin.write_all(&first);
+        let _ = stdin.flush();
+        for _ in 1..CHUNKS {
+            std::thread::sleep(Duration::from_millis(55));
+            let _ = stdin.write_all(&[b'y'; CHUNK]);
+            let _ = stdin.flush();
+        }
+        std::thread::sleep(Duration::from_millis(55));
+        let mut last = b"\n".to_vec();
+        last.extend_from_slice(robot(3000).as_bytes());
+        let _ = stdin.write_all(&last);
+    });
+    assert_survived(&f, 2, &[1000, 3000]);
+    assert!(f.stderr.contains("longer than the limit"), "{}", f.stderr);
+    let out = f.stdout_text();
+    assert!(
+        !out.lines().any(|l| l.contains("robot_silent=true")),
+        "the link counted as silent while a line was arriving:\n{out}"
+    );
+    assert!(f.stderr.contains(" 0 late records"), "{}", f.stderr);
+}
+
 #[test]
 fn invalid_utf8_is_reported_with_its_line() {
     // In a measurement, a tag and a string field.

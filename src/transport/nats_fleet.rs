@@ -247,7 +247,7 @@ pub async fn run(proc: &mut Processor, mut fleet: Fleet<'_>) -> std::io::Result<
         // A record partly read is input arriving, not silence.
         let deadline = proc
             .next_deadline()
-            .filter(|_| l.active && splitter.buffered() == 0);
+            .filter(|_| l.active && !splitter.in_record());
         let n = tokio::select! {
             // Biased, in this order (see `Signals`): a signal is never starved by input, and a
             // delay falls due by the wall clock only when no input is waiting (input not read yet

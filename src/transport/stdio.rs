@@ -354,9 +354,7 @@ async fn run_shards(
     let (on_hangup, mut ticker, watch) = hooks.split();
     let ending = loop {
         // A record partly read is input arriving, not silence.
-        let deadline = shards
-            .next_deadline(proc)
-            .filter(|_| splitter.buffered() == 0);
+        let deadline = shards.next_deadline(proc).filter(|_| !splitter.in_record());
         let n = tokio::select! {
             // Biased, in this order (see `Signals`): a signal is never starved by input, and a
             // delay falls due by the wall clock only when no input is waiting (input not read yet

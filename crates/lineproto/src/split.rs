@@ -415,6 +415,13 @@ impl RecordSplitter {
     pub fn buffered(&self) -> usize {
         self.buf.len()
     }
+
+    /// True while a record has begun and not yet ended: bytes of it are held, or it passed the
+    /// limit and its rest is being skipped (nothing held, but input is still arriving). A step
+    /// loop must not take this for silence.
+    pub fn in_record(&self) -> bool {
+        !self.buf.is_empty() || self.discarding
+    }
 }
 
 #[cfg(test)]
@@ -634,6 +641,26 @@ mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn a_record_being_skipped_is_still_a_record_in_progress() {
+        let mut s = RecordSplitter::new(OVERSIZED_HEAD);
+        assert!(!s.in_record());
+        s.push(b"m v=1 1\n");
+        assert!(!s.in_record());
+        s.push(&[b'x'; 300]);
+        // Past the limit: cut and reported, its rest skipped as it arrives; nothing is held.
+        assert_eq!(s.buffered(), 0);
+        assert!(s.in_record());
+        s.push(&[b'x'; 300]);
+        assert!(s.in_record());
+        s.push(b"x\nm v=2 2\n");
+        assert!(!s.in_record());
+        let rs: Vec<_> = std::iter::from_fn(|| s.next_record()).collect();
+        assert_eq!(rs.len(), 3);
+        assert!(rs[1].oversized);
+        assert_eq!(rs[2].bytes, b"m v=2 2\n");
     }
 
     #[test]
