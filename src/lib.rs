@@ -10,12 +10,14 @@
 pub mod bundled;
 pub mod cli;
 pub mod log;
+pub mod processor;
 #[cfg(feature = "tools")]
 pub mod replay;
 #[cfg(feature = "tools")]
 pub mod report;
 #[cfg(feature = "tools")]
 pub mod simulate;
+pub mod state;
 pub mod telegraf;
 /// TeSSLa's trace formats (crate `tessla-trace`), re-exported where the CLI and tests use them.
 pub use tessla_trace as trace;

@@ -3,7 +3,7 @@
 //! Owns: the level prefixes (`E! `, `W! `, `I! `, `D! `: `processors.execd` maps them to its log
 //! levels since Telegraf 1.37.0; older versions log every stderr line, the summary included, as an
 //! error `stderr: "<line>"`), the `--log-level` filter (a default run writes only the summary),
-//! the line cap, and rate limiting of repeated warnings: each kind of warning is printed the
+//! the line cap, masking the login of any URL in a line ([`mask`]: no secret reaches a log), and rate limiting of repeated warnings: each kind of warning is printed the
 //! first 10 times, then once per 1000 occurrences with the running count.
 //!
 //! The cap: Telegraf reads the child's stderr with a `bufio.Scanner` of the default 64 KiB
@@ -49,7 +49,7 @@ pub fn log(level: Level, msg: &str) {
     // A URL in a message never shows its password (README, "Security").
     let masked;
     let msg = if msg.contains(":/") && msg.contains('@') {
-        masked = crate::telegraf::state_nats::mask(msg);
+        masked = crate::log::mask(msg);
         masked.as_str()
     } else {
         msg
@@ -114,6 +114,50 @@ pub fn warn_limited(kind: &'static str, msg: impl FnOnce() -> String) -> bool {
     }
 }
 
+/// `text` with the user-info of every `scheme://USERINFO@` (or `scheme:/USERINFO@`) replaced: `USER:***@`, or `***@`
+/// for a token. For anything shown to a person (messages, logs) that may hold a URL.
+pub fn mask(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    // `scheme:/` too: a path that went through normalisation loses one of the two slashes.
+    while let Some(i) = rest.find(":/") {
+        let slashes = rest[i + 1..].bytes().take_while(|&b| b == b'/').count();
+        let (head, tail) = rest.split_at(i + 1 + slashes);
+        out.push_str(head);
+        // The authority ends at the first `/`, `?`, `#` or white space; its user-info at its
+        // last `@`.
+        let end = tail
+            .find(|c: char| {
+                c == '/'
+                    || c == '?'
+                    || c == '#'
+                    || c.is_whitespace()
+                    || c == '\''
+                    || c == '"'
+                    || c == '`'
+            })
+            .unwrap_or(tail.len());
+        let authority = &tail[..end];
+        match authority.rfind('@') {
+            Some(at) => {
+                let info = &authority[..at];
+                match info.split_once(':') {
+                    Some((user, _)) => {
+                        out.push_str(user);
+                        out.push_str(":***");
+                    }
+                    None => out.push_str("***"),
+                }
+                out.push_str(&authority[at..]);
+            }
+            None => out.push_str(authority),
+        }
+        rest = &tail[end..];
+    }
+    out.push_str(rest);
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -156,5 +200,16 @@ mod tests {
         assert!(
             Level::Error < Level::Warn && Level::Warn < Level::Info && Level::Info < Level::Debug
         );
+    }
+
+    #[test]
+    fn mask_hides_user_info_in_any_text() {
+        assert_eq!(
+            mask("x 'nats://u:pw@h:1,h:2/b?lease=p0' and mqtt://tok@h/ and nats://h/b"),
+            "x 'nats://u:***@h:1,h:2/b?lease=p0' and mqtt://***@h/ and nats://h/b"
+        );
+        assert_eq!(mask("nats://u:p@ss@h/b"), "nats://u:***@h/b");
+        assert_eq!(mask("`nats:/u:pw@h:1/b`"), "`nats:/u:***@h:1/b`");
+        assert_eq!(mask("a: /x and 12:30"), "a: /x and 12:30");
     }
 }

@@ -267,7 +267,7 @@ pub struct RunArgs {
     /// step of its own 1 ns after it, or dropped. A record with the same timestamp as the last
     /// step is always stepped 1 ns after it.
     #[arg(long, value_enum, default_value_t)]
-    pub late: crate::telegraf::processor::LateMode,
+    pub late: crate::processor::LateMode,
     /// Refuse a record stamped more than this ahead of the wall clock (warned, counted, passed
     /// through, not evaluated), so one wrong timestamp cannot move a monitor's clock; `off` for
     /// simulated data stamped in the future.
@@ -302,7 +302,7 @@ pub struct RunArgs {
     #[arg(long, value_name = "TAG[,TAG]", value_delimiter = ',')]
     pub instance_by: Vec<String>,
     /// Most monitor instances kept; past it the least recently used is evicted (counted, warned).
-    #[arg(long, value_name = "N", default_value_t = crate::telegraf::processor::DEFAULT_MAX_INSTANCES,
+    #[arg(long, value_name = "N", default_value_t = crate::processor::DEFAULT_MAX_INSTANCES,
           value_parser = clap::builder::RangedU64ValueParser::<usize>::new().range(1..))]
     pub max_instances: usize,
     /// With --instance-by, on stdin: spread the instances over this many threads (default: the
@@ -321,8 +321,8 @@ pub struct RunArgs {
     /// continue from it at start, so a Telegraf restart or reload keeps the monitors' state.
     /// `nats://HOST:PORT[,...]/BUCKET[?lease=NAME&ttl=3s&replicas=3]`: a JetStream key-value
     /// bucket shared by a fleet's processes (docs/state-and-reload.md).
-    #[arg(long, value_name = "FILE|nats://HOST:PORT/BUCKET", value_parser = crate::telegraf::state::parse_target)]
-    pub state: Option<crate::telegraf::state::Target>,
+    #[arg(long, value_name = "FILE|nats://HOST:PORT/BUCKET", value_parser = crate::state::parse_target)]
+    pub state: Option<crate::state::Target>,
     /// Also save the state this often while running (`30s`, `5m`), so a crash or SIGKILL
     /// loses at most this much. Needs --state.
     #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration, requires = "state")]
@@ -353,7 +353,7 @@ pub fn main() -> ExitCode {
         Ok(cli) => cli,
         Err(e) => {
             // clap quotes a rejected value; a URL in it may carry a password.
-            let text = crate::telegraf::state_nats::mask(&e.to_string());
+            let text = crate::log::mask(&e.to_string());
             let written = if e.use_stderr() {
                 std::io::stderr().lock().write_all(text.as_bytes())
             } else {
@@ -388,7 +388,7 @@ pub fn main() -> ExitCode {
                     run::wait_until_read(std::time::Duration::from_secs(1));
                 }
                 Style::Plain => {
-                    let mut text = crate::telegraf::state_nats::mask(&e.message);
+                    let mut text = crate::log::mask(&e.message);
                     if !text.ends_with('\n') {
                         text.push('\n');
                     }

@@ -4,10 +4,10 @@
 
 use super::{CliError, CliResult, RunArgs};
 use crate::log::{self, Level};
+use crate::processor::reload::{self, SpecSource};
+use crate::processor::{Options, Processor};
+use crate::state;
 use crate::telegraf::binding::parse_tags;
-use crate::telegraf::processor::{Options, Processor};
-use crate::telegraf::reload::{self, SpecSource};
-use crate::telegraf::state;
 use crate::transport::{self, Ending};
 use crate::watchdog::{self, Watch};
 use std::sync::Arc;
@@ -100,7 +100,7 @@ pub fn run(mut args: RunArgs) -> CliResult {
         _ => None,
     };
     if let Some(path) = &state_file {
-        state::load(path, &mut proc, &state_ctx);
+        state::file::load(path, &mut proc, &state_ctx);
     }
     let mut on_hangup = |p: &mut Processor, out: &mut Vec<u8>| {
         reload::reload(&source, p, out);
@@ -282,7 +282,7 @@ fn hand_over_pipes(out_pipe: bool, err_pipe: bool) {
 /// Save the state, logging success at `level` and failure as an error (never fatal).
 fn save_state(path: &std::path::Path, proc: &Processor, ctx: &state::Context, level: Level) {
     let start = std::time::Instant::now();
-    match state::save(path, proc, ctx) {
+    match state::file::save(path, proc, ctx) {
         Ok(n) => log::log(
             level,
             &format!(

@@ -2,10 +2,12 @@
 //! `?lease=NAME`, a partition lease), driving [`crate::transport::nats_fleet`] on stdin/stdout.
 
 use super::{CliError, CliResult, RunArgs};
-use crate::telegraf::processor::{Options, Processor};
-use crate::telegraf::reload::{self, SpecSource};
-use crate::telegraf::state::{self, Backend};
-use crate::telegraf::state_nats::{Failure, NatsBackend, Url};
+use crate::processor::reload::{self, SpecSource};
+use crate::processor::{Options, Processor};
+use crate::state::nats::NatsBackend;
+use crate::state::nats_conn::Failure;
+use crate::state::url::Url;
+use crate::state::{self, Backend};
 use crate::transport::nats_fleet::{self, Fleet};
 use std::time::Duration;
 

@@ -6,6 +6,7 @@
 
 use super::{CliError, CliResult, SpecOptions};
 use crate::log::{self, Level};
+use crate::processor::{Options, Processor};
 use crate::replay::mqtt::Broker;
 use crate::simulate::closed_loop::{self, Outcome, Scenario};
 use crate::simulate::in_process::InProcess;
@@ -14,7 +15,6 @@ use crate::simulate::program::Program;
 use crate::simulate::scenario::{self, TerrainChoice};
 use crate::simulate::summary::Summary;
 use crate::simulate::terrain::Terrain;
-use crate::telegraf::processor::{Options, Processor};
 use clap::Args;
 use std::io::Write;
 use std::path::PathBuf;

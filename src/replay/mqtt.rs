@@ -62,7 +62,7 @@ impl FromStr for Broker {
     type Err = String;
 
     fn from_str(text: &str) -> Result<Self, String> {
-        let shown = crate::telegraf::state_nats::mask(text);
+        let shown = crate::log::mask(text);
         let bad = |why: &str| {
             format!(
                 "bad broker address {shown:?}: {why} (expected mqtt://HOST:PORT or mqtts://HOST:PORT)"

@@ -7,7 +7,7 @@
 //! [`Action`] ([`action_of`], shared with the MQTT twin).
 
 use super::closed_loop::{Action, Message, Reply, Twin};
-use crate::telegraf::processor::Processor;
+use crate::processor::Processor;
 use lineproto::{FieldValue, Metric, Record, RecordSplitter, parse_record};
 
 pub struct InProcess {

@@ -1,4 +1,4 @@
-//! Transports: moving bytes between the outside world and a [`crate::telegraf::processor::Processor`].
+//! Transports: moving bytes between the outside world and a [`crate::processor::Processor`].
 //!
 //! Owns: stdin/stdout for Telegraf's `processors.execd` ([`stdio`]), the same with a shared NATS
 //! state backend and partition lease for a fleet ([`nats_fleet`]) and the TeSSLa Telegraf
@@ -7,8 +7,8 @@
 //! selects in), the periodic task with its timer (`Ticker`), the wall-clock deadline and the
 //! silent-input step (`advance_silent`).
 
-use crate::telegraf::clock::Wall;
-use crate::telegraf::processor::Processor;
+use crate::processor::Processor;
+use crate::processor::clock::Wall;
 
 pub mod nats_fleet;
 pub mod stdio;

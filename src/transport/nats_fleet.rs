@@ -10,11 +10,11 @@
 //! holding the lease, then releasing it). Signals and SIGHUP as in the stdio transport.
 
 use crate::log::{self, Level};
-use crate::telegraf::clock::Wall;
-use crate::telegraf::instances::Key;
-use crate::telegraf::processor::Processor;
-use crate::telegraf::state::Backend;
-use crate::telegraf::state_nats::Lease;
+use crate::processor::Processor;
+use crate::processor::clock::Wall;
+use crate::processor::instances::Key;
+use crate::state::Backend;
+use crate::state::lease::Lease;
 use crate::transport::Ending;
 use crate::watchdog::{Phase, Watch};
 use lineproto::{Metric, Record, RecordSplitter, parse_record_into};

@@ -24,9 +24,9 @@
 //! read: most of the answer latency of a single record on a busy machine).
 
 use super::{Ending, Hooks};
-use crate::telegraf::clock::Wall;
-use crate::telegraf::instances::shard_of;
-use crate::telegraf::processor::Processor;
+use crate::processor::Processor;
+use crate::processor::clock::Wall;
+use crate::processor::instances::shard_of;
 use crate::watchdog::{Phase, Watch};
 use lineproto::{RecordRef, RecordSplitter};
 use std::io::Write;

@@ -8,8 +8,8 @@
 //! its other outputs.
 
 use super::{Ending, Hooks};
-use crate::telegraf::clock::Wall;
-use crate::telegraf::processor::Processor;
+use crate::processor::Processor;
+use crate::processor::clock::Wall;
 use crate::watchdog::Phase;
 use lineproto::RecordSplitter;
 use tokio::net::UdpSocket;

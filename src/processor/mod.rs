@@ -1,4 +1,4 @@
-//! The step loop: records in, pass-through and verdict lines out.
+//! The processor: one record in, its pass-through and verdict lines out.
 //!
 //! Owns: routing each metric to its monitor instance (one, or one per value of the
 //! `--instance-by` tags, each with its own state, timestamps and late-record rule; evicted past
@@ -7,17 +7,27 @@
 //! input was split into reads; a record not after its instance's last step is stepped 1 ns after
 //! it (`--late shift`) or dropped (`--late drop`, only when it is earlier); a record stamped
 //! beyond `--max-ahead` of the wall clock is refused; and while an instance's input is silent,
-//! its armed `delay`s fire by the wall clock ([`Processor::advance_wall`], with [`super::clock`]).
+//! its armed `delay`s fire by the wall clock ([`Processor::advance_wall`], with [`clock`]).
 //! Also: records without a timestamp (wall clock, as Telegraf), pass-through of each record's
 //! exact bytes before the outputs it causes, and the counters of the summary line. Bad records
 //! are reported with their line number and skipped.
+//!
+//! Its rooms: the instances and their eviction ([`instances`]), the live clock ([`clock`]),
+//! exact duplicates ([`dedup`]), SIGHUP spec reloads ([`reload`]) and warnings about inputs no
+//! metric feeds ([`wiring`]).
 
-use super::binding::{self, InputBinding};
-use super::clock::{self, Anchor, Deadlines, Wall};
-use super::encode::{self, Encoding};
-use super::instances::{Key, Table};
+pub mod clock;
+pub mod dedup;
+pub mod instances;
+pub mod reload;
+pub mod wiring;
+
+use self::instances::{Key, Table};
 use crate::log;
+use crate::telegraf::binding::{self, InputBinding};
+use crate::telegraf::encode::{self, Encoding};
 use crate::watchdog::Lane;
+use clock::{Anchor, Deadlines, Wall};
 use lineproto::{Metric, Record, RecordRef, parse_record_into};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -93,7 +103,7 @@ pub struct Counters {
     pub instances: u64,
     /// Monitor instances evicted (LRU or idle).
     pub evicted: u64,
-    /// Exact repeats of a recent record, dropped ([`super::dedup`]).
+    /// Exact repeats of a recent record, dropped ([`self::dedup`]).
     pub duplicates: u64,
 }
 
@@ -130,7 +140,7 @@ impl Counters {
 struct Instance {
     monitor: Monitor,
     tags: Vec<(String, String)>,
-    recent: super::dedup::Recent,
+    recent: self::dedup::Recent,
     /// Never reused: tells this instance's queued deadlines from a former occupant's of its slot.
     id: u64,
     /// The instance's last record (or its restore): where its silent time is measured from.
@@ -165,8 +175,8 @@ pub struct Processor {
     single: Option<usize>,
     /// Reused for every record's parse (keeps its strings' and vectors' capacity).
     scratch: Metric,
-    /// Warns about inputs the first records never feed (see [`super::wiring`]).
-    wiring: super::wiring::WiringCheck,
+    /// Warns about inputs the first records never feed (see [`self::wiring`]).
+    wiring: self::wiring::WiringCheck,
     /// The wall clock of the current read ([`Processor::set_wall`]).
     wall: Wall,
     /// Instances' next `delay` firings by the wall clock.
@@ -214,7 +224,7 @@ impl Processor {
     pub fn new(program: Arc<Program>, opts: Options) -> Result<Processor, String> {
         let bindings = binding::bindings(&program)?;
         let encodings = encode::encodings(&program);
-        let wiring = super::wiring::WiringCheck::new(&bindings);
+        let wiring = self::wiring::WiringCheck::new(&bindings);
         Ok(Processor {
             has_delays: !program.delays.is_empty() && opts.allowed_lateness.is_some(),
             program,
@@ -775,7 +785,7 @@ impl Processor {
         }
         self.emitter.encodings = encode::encodings(&program);
         self.emitter.encode = encode::Scratch::default();
-        self.wiring = super::wiring::WiringCheck::new(&bindings);
+        self.wiring = self::wiring::WiringCheck::new(&bindings);
         self.bindings = bindings;
         self.has_delays = !program.delays.is_empty() && self.opts.allowed_lateness.is_some();
         self.program = program;

@@ -13,8 +13,8 @@
 //! After the window it costs one branch per record. The processor calls [`WiringCheck::observe`]
 //! for each record and [`WiringCheck::finish`] when the input ends.
 
-use super::binding::{FieldPattern, InputBinding, show_field};
 use crate::log::{self, Level};
+use crate::telegraf::binding::{FieldPattern, InputBinding, show_field};
 use lineproto::{FieldValue, Metric};
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};

@@ -8,7 +8,7 @@
 //! afresh are logged.
 
 use crate::log::{self, Level};
-use crate::telegraf::processor::Processor;
+use crate::processor::Processor;
 use std::path::PathBuf;
 use std::sync::Arc;
 use tessla_engine::runtime::snapshot;

@@ -1,0 +1,368 @@
+//! The partition lease ([`Lease`]): one key per partition in the state bucket, held by one
+//! process at a time (created if absent, renewed by compare-and-set on its revision, taken over
+//! by compare-and-set when it has not changed for the lease TTL, deleted on a clean stop), with
+//! the operator mistakes caught: a lease live in another bucket refuses the start, a long
+//! standby reports partitions nobody holds.
+
+use super::kv_keys::{kv_key_part_of, partition_of};
+use super::nats_conn::{Conn, REQUEST_TIMEOUT, hostname};
+use crate::log::{self, Level};
+use async_nats::jetstream::{self, kv};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// Another KV bucket of the account where `key` (a lease) is live: present and renewed within
+/// the TTL (its revision changes while watched). `None` also when the account may not list
+/// streams (the shipped permissions allow one bucket only, which rules the mistake out).
+pub(super) async fn lease_elsewhere(
+    js: jetstream::Context,
+    own: String,
+    key: String,
+    ttl: Duration,
+) -> Option<(String, String)> {
+    use futures_util::StreamExt;
+    let names: Vec<String> = tokio::time::timeout(REQUEST_TIMEOUT * 2, async {
+        js.stream_names()
+            .filter_map(|n| async move { n.ok() })
+            .collect::<Vec<String>>()
+            .await
+    })
+    .await
+    .ok()?;
+    for bucket in names
+        .iter()
+        .filter_map(|n| n.strip_prefix("KV_"))
+        .filter(|b| *b != own)
+    {
+        let Ok(store) = js.get_key_value(bucket).await else {
+            continue;
+        };
+        let Ok(Some(first)) = store.entry(&key).await else {
+            continue;
+        };
+        if first.operation != kv::Operation::Put {
+            continue;
+        }
+        // A holder renews every TTL/4: a live lease changes within half a TTL.
+        tokio::time::sleep(ttl / 2).await;
+        if let Ok(Some(second)) = store.entry(&key).await
+            && second.operation == kv::Operation::Put
+            && second.revision != first.revision
+        {
+            return Some((
+                bucket.to_string(),
+                String::from_utf8_lossy(&second.value).into_owned(),
+            ));
+        }
+    }
+    None
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Mode {
+    /// Waiting for the lease.
+    Standby,
+    /// Holding it at `revision`; the last renewal that succeeded was sent at `renewed`.
+    Active { revision: u64, renewed: Instant },
+}
+
+struct LeaseState {
+    mode: Mode,
+    /// The lease went to another process since the last [`Lease::take_lost`].
+    lost: bool,
+    /// Released on a clean stop: the task ends.
+    released: bool,
+}
+
+/// A partition lease: at most one process of the partition's group steps its monitors.
+pub struct Lease {
+    shared: Arc<Mutex<LeaseState>>,
+    pub name: String,
+    ttl: Duration,
+    store: kv::Store,
+    handle: tokio::runtime::Handle,
+}
+
+impl Lease {
+    /// Start holding (or waiting for) the lease of partition `name` in the bucket `store`: one
+    /// attempt now (a lone process starts active), then a task on the connection's thread
+    /// renews or waits for it.
+    pub(super) fn start(conn: &Conn, store: &kv::Store, name: String, ttl: Duration) -> Lease {
+        let key = format!("lease.{}", kv_key_part_of(&name));
+        let shared = Arc::new(Mutex::new(LeaseState {
+            mode: Mode::Standby,
+            lost: false,
+            released: false,
+        }));
+        let lease = Lease {
+            shared: Arc::clone(&shared),
+            name: name.clone(),
+            ttl,
+            store: store.clone(),
+            handle: conn.handle.clone(),
+        };
+        let holder = format!("{}:{}", hostname(), std::process::id());
+        // The first attempt before any record is read: a lone process starts active.
+        let (first_store, k, h) = (store.clone(), key.clone(), holder.clone());
+        let sent = Instant::now();
+        let first = conn.call(async move {
+            let mut seen = None;
+            let taken = try_take(&first_store, &k, &h, ttl, &mut seen).await;
+            (taken, seen)
+        });
+        let (taken, seen) = first.unwrap_or((None, None));
+        let holding = taken.is_some();
+        if let (Some(revision), Ok(mut s)) = (taken, shared.lock()) {
+            s.mode = Mode::Active {
+                revision,
+                renewed: sent,
+            };
+        }
+        log::log(
+            Level::Info,
+            &format!(
+                "lease: partition {name}: {}",
+                if holding {
+                    format!("held by this process ({holder})")
+                } else {
+                    format!(
+                        "held by another process; standing by until it is released or lapses for {}",
+                        humantime::format_duration(ttl)
+                    )
+                }
+            ),
+        );
+        conn.handle
+            .spawn(lease_task(store.clone(), key, holder, ttl, shared, seen));
+        lease
+    }
+
+    /// Whether this process may step its monitors now: it holds the lease and its last successful
+    /// renewal was *sent* less than half the TTL ago. A standby takes over only when the
+    /// lease revision it sees has not changed for a whole TTL, so the two never overlap while
+    /// both clocks run at the same rate (see the docs for pauses).
+    pub fn holding(&self) -> bool {
+        let Ok(s) = self.shared.lock() else {
+            return false;
+        };
+        match s.mode {
+            Mode::Active { renewed, .. } => renewed.elapsed() < self.ttl / 2,
+            Mode::Standby => false,
+        }
+    }
+
+    /// Whether the lease went to another process since the last call.
+    pub fn take_lost(&self) -> bool {
+        self.shared
+            .lock()
+            .map(|mut s| std::mem::take(&mut s.lost))
+            .unwrap_or(false)
+    }
+
+    /// Give the lease up (after the last save), so a standby takes over at once.
+    pub fn release(&self) {
+        let revision = match self.shared.lock() {
+            Ok(mut s) => {
+                s.released = true;
+                match s.mode {
+                    Mode::Active { revision, .. } => Some(revision),
+                    Mode::Standby => None,
+                }
+            }
+            Err(_) => None,
+        };
+        let Some(revision) = revision else {
+            return;
+        };
+        let store = self.store.clone();
+        let key = format!("lease.{}", kv_key_part_of(&self.name));
+        let (tx, rx) = std::sync::mpsc::channel();
+        self.handle.spawn(async move {
+            let _ = tx.send(store.delete_expect_revision(key, Some(revision)).await);
+        });
+        match rx.recv_timeout(REQUEST_TIMEOUT * 2) {
+            Ok(Ok(())) => log::log(
+                Level::Info,
+                &format!("lease: released partition {}", self.name),
+            ),
+            Ok(Err(e)) => log::log(
+                Level::Warn,
+                &format!(
+                    "lease: cannot release partition {}: {e}; the standby takes over after the TTL",
+                    self.name
+                ),
+            ),
+            Err(_) => {}
+        }
+    }
+}
+
+/// One attempt of a standby to take the lease: when absent or deleted, or when its revision
+/// has not changed for `ttl` since `seen` noted it. Returns the new revision when taken.
+async fn try_take(
+    store: &kv::Store,
+    key: &str,
+    holder: &str,
+    ttl: Duration,
+    seen: &mut Option<(u64, Instant)>,
+) -> Option<u64> {
+    let value = || bytes::Bytes::from(holder.to_string());
+    match store.entry(key).await {
+        Ok(None) => store.create(key, value()).await.ok(),
+        Ok(Some(e)) if e.operation != kv::Operation::Put => {
+            store.update(key, value(), e.revision).await.ok()
+        }
+        Ok(Some(e)) => match *seen {
+            Some((r, since)) if r == e.revision && since.elapsed() >= ttl => {
+                store.update(key, value(), e.revision).await.ok()
+            }
+            Some((r, _)) if r == e.revision => None,
+            _ => {
+                *seen = Some((e.revision, Instant::now()));
+                None
+            }
+        },
+        Err(_) => None,
+    }
+}
+
+/// Every lease of the bucket: key -> (revision, whether it is live: a put, not a delete).
+async fn leases(store: &kv::Store) -> Option<std::collections::HashMap<String, (u64, bool)>> {
+    use futures_util::StreamExt;
+    let mut watch = store.watch_with_history("lease.>").await.ok()?;
+    let mut out = std::collections::HashMap::new();
+    // The bucket keeps one entry per key: the history is the current entries, then the watch
+    // waits for changes (`delta` 0 marks the last one pending; none at all: no lease yet).
+    while let Ok(Some(Ok(e))) = tokio::time::timeout(REQUEST_TIMEOUT, watch.next()).await {
+        out.insert(
+            e.key.clone(),
+            (e.revision, e.operation == kv::Operation::Put),
+        );
+        if e.delta == 0 {
+            break;
+        }
+    }
+    Some(out)
+}
+
+/// For a process standing by a long time: the partitions whose lease nobody holds (released,
+/// or not renewed for a TTL). Such a partition next to a long standby is the sign of a process
+/// given another partition's lease name: its own partition's robots get no actions.
+async fn report_standby(store: kv::Store, own: String, ttl: Duration, since: Instant) {
+    let Some(before) = leases(&store).await else {
+        return;
+    };
+    tokio::time::sleep(ttl).await;
+    let Some(after) = leases(&store).await else {
+        return;
+    };
+    let mut free: Vec<String> = after
+        .iter()
+        .filter(|(k, (revision, live))| {
+            **k != own && (!*live || before.get(*k).is_some_and(|(r, _)| r == revision))
+        })
+        .map(|(k, _)| partition_of(k))
+        .collect();
+    free.sort();
+    let waited = humantime::format_duration(Duration::from_secs(since.elapsed().as_secs()));
+    let own_name = partition_of(&own);
+    if free.is_empty() {
+        log::log(
+            Level::Info,
+            &format!(
+                "lease: partition {own_name}: standing by for {waited}; its holder renews the lease"
+            ),
+        );
+    } else {
+        log::log(
+            Level::Warn,
+            &format!(
+                "lease: partition {own_name}: standing by for {waited}, while nobody holds partition(s) {}: \
+                 their robots get no actions. If this Telegraf reads one of those partitions (the N in its \
+                 nats_consumer subjects fleet.N.robots.*), its --state has the wrong ?lease= name",
+                free.join(", ")
+            ),
+        );
+    }
+}
+
+/// Keep the lease: renew it while held, watch it while not, take it when free or lapsed.
+async fn lease_task(
+    store: kv::Store,
+    key: String,
+    holder: String,
+    ttl: Duration,
+    shared: Arc<Mutex<LeaseState>>,
+    // The revision a standby saw last, and since when.
+    mut seen: Option<(u64, Instant)>,
+) {
+    let renew_every = ttl / 4;
+    let poll_every = (ttl / 4).min(Duration::from_millis(100));
+    // A long standby is reported (with the partitions nobody holds) after 3 TTLs, then every
+    // minute (at least 20 TTLs).
+    let first_report = ttl * 3;
+    let report_every = (ttl * 20).max(Duration::from_secs(60));
+    let mut standby_since: Option<Instant> = None;
+    let mut next_report = Instant::now() + first_report;
+    loop {
+        let mode = match shared.lock() {
+            Ok(s) if s.released => return,
+            Ok(s) => s.mode,
+            Err(_) => return,
+        };
+        match mode {
+            Mode::Active { revision, .. } => {
+                tokio::time::sleep(renew_every).await;
+                let sent = Instant::now();
+                let r = store.update(&key, holder.clone().into(), revision).await;
+                let Ok(mut s) = shared.lock() else { return };
+                if s.released {
+                    return;
+                }
+                match r {
+                    Ok(revision) => {
+                        s.mode = Mode::Active {
+                            revision,
+                            renewed: sent,
+                        }
+                    }
+                    Err(e) if e.kind() == kv::UpdateErrorKind::WrongLastRevision => {
+                        log::log(
+                            Level::Warn,
+                            &format!("lease: {key} was taken over by another process; standing by"),
+                        );
+                        s.mode = Mode::Standby;
+                        s.lost = true;
+                        seen = None;
+                    }
+                    Err(e) => log::log(
+                        Level::Warn,
+                        &format!("lease: cannot renew {key}: {e}; retrying"),
+                    ),
+                }
+            }
+            Mode::Standby => {
+                let since = *standby_since.get_or_insert_with(|| {
+                    next_report = Instant::now() + first_report;
+                    Instant::now()
+                });
+                if Instant::now() >= next_report {
+                    next_report = Instant::now() + report_every;
+                    tokio::spawn(report_standby(store.clone(), key.clone(), ttl, since));
+                }
+                tokio::time::sleep(poll_every).await;
+                let sent = Instant::now();
+                let taken = try_take(&store, &key, &holder, ttl, &mut seen).await;
+                if let Some(revision) = taken {
+                    standby_since = None;
+                    let Ok(mut s) = shared.lock() else { return };
+                    s.mode = Mode::Active {
+                        revision,
+                        renewed: sent,
+                    };
+                    log::log(Level::Info, &format!("lease: {key} taken by {holder}"));
+                }
+            }
+        }
+    }
+}

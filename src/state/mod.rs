@@ -1,0 +1,89 @@
+//! Where monitor state is kept between runs and across a fleet: `--state FILE` ([`file`]) or a
+//! shared NATS key-value bucket ([`nats`], with the partition [`lease`]), outside the Telegraf
+//! binding. Both store the same entry format ([`entry`]: magic, format version, and the
+//! fingerprint of what the state is valid for).
+//!
+//! Owns what `--state` names ([`Target`]), what besides the program decides whether saved
+//! state fits a run ([`Context`], [`fingerprint`]), and what the step loop calls at its save
+//! points ([`Backend`]).
+
+pub mod entry;
+pub mod file;
+pub mod kv_keys;
+pub mod lease;
+pub mod nats;
+pub mod nats_conn;
+pub mod secrets;
+pub mod url;
+
+use crate::processor::Processor;
+use crate::processor::instances::Key;
+use std::io;
+use std::path::PathBuf;
+use tessla_engine::Program;
+use tessla_engine::runtime::snapshot;
+
+/// Where `--state` keeps the state.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Target {
+    /// `--state FILE`: one file, this module.
+    File(PathBuf),
+    /// `--state nats://HOST:PORT[,HOST:PORT...]/BUCKET[?options]`: a JetStream key-value bucket.
+    Nats(Box<url::Url>),
+}
+
+/// Parse `--state`: `nats://...` is a bucket, anything else a file path. Anything that looks
+/// like a URL (`SCHEME://`, or `nats:` without `//`) is parsed as one, so a mistyped bucket URL
+/// is refused rather than taken as a file name.
+pub fn parse_target(s: &str) -> Result<Target, String> {
+    let lower = s.to_ascii_lowercase();
+    if s.contains("://") || lower.starts_with("nats:") || lower.starts_with("tls:") {
+        url::Url::parse(s).map(|u| Target::Nats(Box::new(u)))
+    } else if s.is_empty() {
+        Err("empty path".into())
+    } else {
+        Ok(Target::File(PathBuf::from(s)))
+    }
+}
+
+/// What, besides the program, decides whether saved state fits this run.
+#[derive(Debug, Clone, Default)]
+pub struct Context {
+    /// `--set NAME=VALUE`, as given.
+    pub set: Vec<String>,
+    pub base_time: String,
+    pub instance_by: Vec<String>,
+}
+
+/// The fingerprint of `program` run with `ctx`, as written in the file (hex).
+pub fn fingerprint(program: &Program, ctx: &Context) -> String {
+    let mut h = snapshot::fingerprint(program);
+    for s in &ctx.set {
+        h = snapshot::mix(h, snapshot::text_hash(&format!("--set {s}")));
+    }
+    h = snapshot::mix(
+        h,
+        snapshot::text_hash(&format!("--base-time {}", ctx.base_time)),
+    );
+    for t in &ctx.instance_by {
+        h = snapshot::mix(h, snapshot::text_hash(&format!("--instance-by {t}")));
+    }
+    format!("{h:016x}")
+}
+
+/// Where the state of a run is kept: a file ([`FileBackend`]) or a shared bucket
+/// ([`nats::NatsBackend`]). The step loop calls these at its save points.
+pub trait Backend {
+    /// What to name in messages (the file's path, the bucket's URL).
+    fn describe(&self) -> String;
+    /// At start, before the first record: restore what the backend restores up front.
+    fn load(&mut self, proc: &mut Processor);
+    /// Before the first record of instance `key` in this process is stepped (a shared backend
+    /// restores that instance here).
+    fn arriving(&mut self, _key: &Key, _proc: &mut Processor) {}
+    /// Save every instance of `proc`; returns how many.
+    fn save(&mut self, proc: &Processor) -> io::Result<usize>;
+    /// The process dropped all its instances (its partition went to another process): look
+    /// each one up again when it next arrives.
+    fn forget(&mut self) {}
+}

@@ -1,0 +1,344 @@
+//! What `--state nats://HOST:PORT[,HOST:PORT...]/BUCKET[?options]` says: servers, bucket,
+//! partition lease and its TTL, replicas, the login ([`Auth`]: user and password, token, NKey
+//! seed, `.creds` file) and TLS files, each option checked with a message that names it and
+//! never shows a secret.
+
+use super::secrets::{Secret, SecretSource};
+use crate::log::mask;
+use std::time::Duration;
+
+/// Default lease TTL: a standby takes over this long after the holder's last renewal.
+pub const DEFAULT_TTL: Duration = Duration::from_secs(3);
+
+/// How the process authenticates to NATS (the client crate does the protocol).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Auth {
+    None,
+    /// `nats://USER:PASSWORD@...`, or `?user=USER&password-env=VAR` / `password-file=PATH`.
+    UserPassword {
+        user: String,
+        password: SecretSource,
+    },
+    /// `nats://TOKEN@...`, or `?token-env=VAR` / `token-file=PATH`.
+    Token(SecretSource),
+    /// `?nkey-file=PATH`: a file holding an NKey seed (`SU...`).
+    NKey(std::path::PathBuf),
+    /// `?creds=PATH`: a `.creds` file (user JWT and NKey seed, as `nsc` writes it).
+    Creds(std::path::PathBuf),
+}
+
+/// TLS settings: `?tls=1` (require TLS), `tls-ca=PATH`, `tls-cert=PATH` and `tls-key=PATH`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Tls {
+    pub required: bool,
+    pub ca: Option<std::path::PathBuf>,
+    pub cert: Option<std::path::PathBuf>,
+    pub key: Option<std::path::PathBuf>,
+}
+
+/// The expected form of `--state nats://...`, for error messages.
+pub const FORM: &str =
+    "nats://HOST:PORT[,HOST:PORT...]/BUCKET[?lease=NAME&user=NAME&password-env=VAR&tls-ca=PATH...]";
+
+/// A user name or password as written in the URL, `%XX` escapes decoded.
+fn percent_decode(s: &str) -> Result<String, String> {
+    percent_encoding::percent_decode_str(s)
+        .decode_utf8()
+        .map(|d| d.into_owned())
+        .map_err(|_| "the user or password is not UTF-8 once decoded".to_string())
+}
+
+/// A parsed `--state nats://...` value.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Url {
+    /// `host:port`, tried in order (the client reconnects to any of them).
+    pub servers: Vec<String>,
+    pub bucket: String,
+    /// `?lease=NAME`: the partition this process serves; one process at a time holds it.
+    pub lease: Option<String>,
+    /// `?ttl=3s`: the lease TTL.
+    pub ttl: Duration,
+    /// `?replicas=3`: replicas of the bucket when this process creates it.
+    pub replicas: usize,
+    pub auth: Auth,
+    pub tls: Tls,
+}
+
+impl Url {
+    pub fn parse(s: &str) -> Result<Url, String> {
+        let shown = mask(s);
+        let form = |why: String| format!("`{shown}`: {why} (expected {FORM})");
+        let rest = match s.split_once("://") {
+            Some((scheme, rest)) if scheme.eq_ignore_ascii_case("nats") => rest,
+            Some((scheme, _)) => {
+                return Err(form(format!(
+                    "scheme `{scheme}://` is not a state store (a file: give its path; NATS over TLS: \
+                     nats://...?tls-ca=PATH)"
+                )));
+            }
+            None => {
+                return Err(form(
+                    "not a URL: `nats:` must be followed by `//` (to name a file called so, write ./nats:...)"
+                        .into(),
+                ));
+            }
+        };
+        let (rest, query) = rest.split_once('?').unwrap_or((rest, ""));
+        // The user-info ends at the last `@` (a bucket name has none).
+        let (userinfo, rest) = match rest.rsplit_once('@') {
+            Some((info, rest)) => (Some(info), rest),
+            None => (None, rest),
+        };
+        let (hosts, bucket) = rest
+            .split_once('/')
+            .ok_or_else(|| form("no bucket".into()))?;
+        let servers: Vec<String> = hosts
+            .split(',')
+            .map(str::trim)
+            .filter(|h| !h.is_empty())
+            .map(|h| {
+                if h.contains(':') {
+                    h.to_string()
+                } else {
+                    format!("{h}:4222")
+                }
+            })
+            .collect();
+        if servers.is_empty() {
+            return Err(form("no server".into()));
+        }
+        if bucket.is_empty()
+            || !bucket
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+        {
+            return Err(format!(
+                "`{shown}`: bucket `{bucket}` must be letters, digits, `_` or `-`"
+            ));
+        }
+        let mut auth = match userinfo {
+            None => Auth::None,
+            Some(info) => match info.split_once(':') {
+                Some((user, password)) => Auth::UserPassword {
+                    user: percent_decode(user).map_err(&form)?,
+                    password: SecretSource::Given(Secret::new(
+                        percent_decode(password).map_err(&form)?,
+                    )),
+                },
+                None => Auth::Token(SecretSource::Given(Secret::new(
+                    percent_decode(info).map_err(&form)?,
+                ))),
+            },
+        };
+        let mut url = Url {
+            servers,
+            bucket: bucket.to_string(),
+            lease: None,
+            ttl: DEFAULT_TTL,
+            replicas: 1,
+            auth: Auth::None,
+            tls: Tls::default(),
+        };
+        let mut user: Option<String> = None;
+        let mut password: Option<SecretSource> = None;
+        let set_auth = |a: Auth, auth: &mut Auth| -> Result<(), String> {
+            if *auth != Auth::None {
+                return Err(format!(
+                    "`{shown}`: more than one way to authenticate (user and password, token, nkey-file, creds: pick one)"
+                ));
+            }
+            *auth = a;
+            Ok(())
+        };
+        for pair in query.split('&').filter(|p| !p.is_empty()) {
+            let (k, v) = pair.split_once('=').unwrap_or((pair, ""));
+            let path = || -> Result<std::path::PathBuf, String> {
+                if v.is_empty() {
+                    Err(format!("`{shown}`: `{k}` needs a value"))
+                } else {
+                    Ok(std::path::PathBuf::from(v))
+                }
+            };
+            match k {
+                "lease" if !v.is_empty() => url.lease = Some(v.to_string()),
+                "ttl" => {
+                    url.ttl = humantime::parse_duration(v)
+                        .map_err(|e| format!("`{shown}`: ttl `{v}`: {e}"))?;
+                    if url.ttl < Duration::from_millis(200) {
+                        return Err(format!("`{shown}`: ttl must be at least 200ms"));
+                    }
+                }
+                "replicas" => {
+                    url.replicas = v
+                        .parse()
+                        .ok()
+                        .filter(|n| (1..=5).contains(n))
+                        .ok_or_else(|| format!("`{shown}`: replicas must be 1 to 5"))?;
+                }
+                "user" if !v.is_empty() => user = Some(v.to_string()),
+                "password-env" if !v.is_empty() => password = Some(SecretSource::Env(v.into())),
+                "password-file" => password = Some(SecretSource::File(path()?)),
+                "token-env" if !v.is_empty() => {
+                    set_auth(Auth::Token(SecretSource::Env(v.into())), &mut auth)?
+                }
+                "token-file" => set_auth(Auth::Token(SecretSource::File(path()?)), &mut auth)?,
+                "nkey-file" => set_auth(Auth::NKey(path()?), &mut auth)?,
+                "creds" => set_auth(Auth::Creds(path()?), &mut auth)?,
+                "tls" => {
+                    url.tls.required = match v {
+                        "1" | "true" | "yes" | "" => true,
+                        "0" | "false" | "no" => false,
+                        _ => return Err(format!("`{shown}`: tls must be 1 or 0")),
+                    }
+                }
+                "tls-ca" => url.tls.ca = Some(path()?),
+                "tls-cert" => url.tls.cert = Some(path()?),
+                "tls-key" => url.tls.key = Some(path()?),
+                _ => {
+                    let shown_pair = if k.contains("password") || k.contains("token") {
+                        format!("{k}=***")
+                    } else {
+                        pair.to_string()
+                    };
+                    return Err(format!(
+                        "`{shown}`: unknown option `{shown_pair}` (known: lease=NAME, ttl=DURATION, replicas=N, \
+                         user=NAME, password-env=VAR, password-file=PATH, token-env=VAR, token-file=PATH, \
+                         nkey-file=PATH, creds=PATH, tls=1, tls-ca=PATH, tls-cert=PATH, tls-key=PATH)"
+                    ));
+                }
+            }
+        }
+        match (user, password) {
+            (Some(user), Some(password)) => {
+                set_auth(Auth::UserPassword { user, password }, &mut auth)?
+            }
+            (Some(user), None) => match &mut auth {
+                Auth::UserPassword { user: u, .. } => *u = user,
+                _ => {
+                    return Err(format!(
+                        "`{shown}`: user={user} needs a password: password-env=VAR or password-file=PATH"
+                    ));
+                }
+            },
+            (None, Some(password)) => match &mut auth {
+                Auth::UserPassword { password: p, .. } => *p = password,
+                _ => {
+                    return Err(format!(
+                        "`{shown}`: a password needs a user: user=NAME (or nats://USER@...)"
+                    ));
+                }
+            },
+            (None, None) => {}
+        }
+        if url.tls.cert.is_some() != url.tls.key.is_some() {
+            return Err(format!(
+                "`{shown}`: a client certificate needs both tls-cert=PATH and tls-key=PATH"
+            ));
+        }
+        if url.tls.ca.is_some() || url.tls.cert.is_some() {
+            url.tls.required = true;
+        }
+        url.auth = auth;
+        Ok(url)
+    }
+
+    /// The URL as shown in messages: servers and bucket, the user name, never a secret.
+    pub fn shown(&self) -> String {
+        let who = match &self.auth {
+            Auth::UserPassword { user, .. } => format!("{user}:***@"),
+            Auth::Token(_) => "***@".into(),
+            _ => String::new(),
+        };
+        format!("nats://{who}{}/{}", self.servers.join(","), self.bucket)
+    }
+
+    /// Who this process connects as, for messages.
+    pub(super) fn identity(&self) -> String {
+        match &self.auth {
+            Auth::None => "without credentials".into(),
+            Auth::UserPassword { user, password } => {
+                format!("as user `{user}` (password from {})", password.origin())
+            }
+            Auth::Token(t) => format!("with a token (from {})", t.origin()),
+            Auth::NKey(p) => format!("with the NKey seed in {}", p.display()),
+            Auth::Creds(p) => format!("with the credentials file {}", p.display()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::state::secrets::{Secret, SecretSource};
+
+    #[test]
+    fn urls_parse_with_their_options() {
+        let u = Url::parse("nats://a:1,b:2/state?lease=p0&ttl=2s&replicas=3").unwrap();
+        assert_eq!(u.servers, ["a:1", "b:2"]);
+        assert_eq!(u.bucket, "state");
+        assert_eq!(u.lease.as_deref(), Some("p0"));
+        assert_eq!(u.ttl, Duration::from_secs(2));
+        assert_eq!(u.replicas, 3);
+        let u = Url::parse("nats://host/b").unwrap();
+        assert_eq!(u.servers, ["host:4222"]);
+        assert_eq!((u.lease, u.ttl, u.replicas), (None, DEFAULT_TTL, 1));
+        for bad in [
+            "nats://a:1",
+            "nats:///b",
+            "nats://a/b.c",
+            "nats://a/b?x=1",
+            "nats://a/b?ttl=1ms",
+            "nats://a/b?replicas=9",
+        ] {
+            assert!(Url::parse(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn credentials_and_tls_parse_and_are_never_shown() {
+        let u = Url::parse("nats://monitor:S%40cret@a:1/b?lease=p0").unwrap();
+        assert_eq!(
+            u.auth,
+            Auth::UserPassword {
+                user: "monitor".into(),
+                password: SecretSource::Given(Secret::new("S@cret"))
+            }
+        );
+        assert_eq!(u.shown(), "nats://monitor:***@a:1/b");
+        assert!(!format!("{u:?}").contains("S@cret"));
+        let u = Url::parse("nats://a:1/b?user=m&password-env=PW&tls-ca=/ca.pem").unwrap();
+        assert_eq!(
+            u.auth,
+            Auth::UserPassword {
+                user: "m".into(),
+                password: SecretSource::Env("PW".into())
+            }
+        );
+        assert!(u.tls.required);
+        let u = Url::parse("nats://Tok3n@a/b").unwrap();
+        assert_eq!(
+            u.auth,
+            Auth::Token(SecretSource::Given(Secret::new("Tok3n")))
+        );
+        assert_eq!(u.shown(), "nats://***@a:4222/b");
+        let u = Url::parse("nats://a/b?creds=/x.creds&tls-cert=/c&tls-key=/k").unwrap();
+        assert_eq!(u.auth, Auth::Creds("/x.creds".into()));
+        assert_eq!(
+            Url::parse("nats://a/b?nkey-file=/s.nk").unwrap().auth,
+            Auth::NKey("/s.nk".into())
+        );
+        for bad in [
+            "nats://u:p@a/b?creds=/x",
+            "nats://a/b?user=u",
+            "nats://a/b?password-env=X",
+            "nats://a/b?tls-cert=/c",
+            "nats:/a:1/b",
+            "tls://a:1/b",
+        ] {
+            let e = Url::parse(bad).unwrap_err();
+            assert!(e.contains("nats://"), "{bad}: {e}");
+        }
+        let e = Url::parse("nats://u:Sup3rSecret@a/b?x=1").unwrap_err();
+        assert!(!e.contains("Sup3rSecret") && e.contains("u:***@a/b"), "{e}");
+    }
+}
