@@ -16,7 +16,7 @@ use lineproto::Record;
 use std::hint::black_box;
 use std::path::Path;
 use tessla_engine::LoadOptions;
-use tessla_telegraf::telegraf::processor::{Options, Processor};
+use tessla_telegraf::processor::{Options, Processor};
 
 /// Overwrite the record's 19-digit timestamp (just before its newline) with `ts`.
 fn set_ts(bytes: &mut [u8], ts: u64) {

@@ -18,6 +18,7 @@ pub mod report;
 #[cfg(feature = "tools")]
 pub mod simulate;
 pub mod state;
+pub mod step_loop;
 pub mod telegraf;
 /// TeSSLa's trace formats (crate `tessla-trace`), re-exported where the CLI and tests use them.
 pub use tessla_trace as trace;

@@ -35,7 +35,7 @@ pub enum Phase {
     Records = 1,
     /// Evaluating `delay`s that fell due while the input was silent, and writing their outputs.
     Delays = 2,
-    /// Writing the outputs of a spec reload (SIGHUP).
+    /// Reloading the spec (SIGHUP).
     Reload = 3,
     /// Writing outputs to stdout (blocks while the reader does not read).
     Writing = 4,
@@ -57,7 +57,7 @@ impl Phase {
             Phase::Idle => "waiting",
             Phase::Records => "stepping records",
             Phase::Delays => "firing delays while the input was silent",
-            Phase::Reload => "writing the outputs of a spec reload",
+            Phase::Reload => "reloading the spec (SIGHUP)",
             Phase::Writing => "writing outputs to stdout (its reader is not reading)",
         }
     }

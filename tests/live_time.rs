@@ -19,8 +19,8 @@ use rand_chacha::ChaCha8Rng;
 use std::io::Write;
 use std::time::{Duration, Instant};
 use tessla_syntax::include::MemResolver;
-use tessla_telegraf::telegraf::clock::{Wall, unix_ns};
-use tessla_telegraf::telegraf::processor::{Options, Processor};
+use tessla_telegraf::processor::clock::{Wall, unix_ns};
+use tessla_telegraf::processor::{Options, Processor};
 
 fn fixture() -> String {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -99,13 +99,13 @@ fn feed_in_reads(mut p: Processor, input: &[u8], cuts: &[usize]) -> Vec<u8> {
     for &end in cuts.iter().chain(std::iter::once(&input.len())) {
         p.set_wall(Wall::now());
         splitter.push_with(&input[start..end], |rec| p.record_ref(rec, &mut out));
-        p.flush(&mut out);
+        p.end_of_read();
         start = end;
     }
     while let Some(rec) = splitter.finish() {
         p.record(&rec, &mut out);
     }
-    p.flush(&mut out);
+    p.end_of_read();
     out
 }
 

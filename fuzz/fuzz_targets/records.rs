@@ -10,7 +10,7 @@ use libfuzzer_sys::fuzz_target;
 use lineproto::{RecordSplitter, parse_record};
 use std::sync::{Arc, OnceLock};
 use tessla_engine::Program;
-use tessla_telegraf::telegraf::processor::{LateMode, Options, Processor};
+use tessla_telegraf::processor::{LateMode, Options, Processor};
 
 fn program() -> Arc<Program> {
     static P: OnceLock<Arc<Program>> = OnceLock::new();
@@ -57,12 +57,12 @@ fuzz_target!(|data: &[u8]| {
         while let Some(r) = s.next_record() {
             p.record(&r, &mut out);
         }
-        p.flush(&mut out);
+        p.end_of_read();
     }
     while let Some(r) = s.finish() {
         p.record(&r, &mut out);
     }
-    p.flush(&mut out);
+    p.end_of_read();
     if !passthrough {
         for line in out.split(|&b| b == b'\n').filter(|l| !l.is_empty()) {
             match parse_record(line) {

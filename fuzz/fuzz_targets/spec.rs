@@ -6,7 +6,7 @@
 
 use libfuzzer_sys::fuzz_target;
 use tessla_syntax::include::MemResolver;
-use tessla_telegraf::telegraf::processor::{Options, Processor};
+use tessla_telegraf::processor::{Options, Processor};
 
 fuzz_target!(|data: &[u8]| {
     let Ok(text) = std::str::from_utf8(data) else {

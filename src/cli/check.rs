@@ -4,26 +4,15 @@
 //! `--library`: a file of definitions other specs include). `--list-in-streams` and
 //! `--list-out-streams` print only the streams' names, as TeSSLa's `compile-core` does.
 
-use super::{CheckArgs, CliError, CliResult};
+use super::args::CheckArgs;
+use super::error::{CliError, CliResult};
+use super::spec::{load_options, require_outputs};
 use std::io::Write;
-
-/// A spec without outputs checks nothing and writes nothing: a spec error for `check` and `run`.
-pub fn require_outputs(program: &tessla_engine::Program, spec: &str) -> Result<(), String> {
-    if program.outputs.is_empty() {
-        Err(format!(
-            "{spec}: the spec has no outputs, so it would check nothing and write nothing; \
-             add `out NAME` for each stream to report (or `out *`); for a library of \
-             definitions that other specs include, use `check --library`"
-        ))
-    } else {
-        Ok(())
-    }
-}
 
 pub fn run(mut args: CheckArgs) -> CliResult {
     args.spec_options.set_from_env();
-    let options = super::load_options(&args.spec_options)
-        .map_err(|e| CliError::spec(format!("error: {e}")))?;
+    let options =
+        load_options(&args.spec_options).map_err(|e| CliError::spec(format!("error: {e}")))?;
     let loaded =
         tessla_engine::load_file(&args.spec, &options).map_err(|e| CliError::spec(e.render()))?;
     if !loaded.warnings.is_empty() {

@@ -4,7 +4,7 @@
 //! (an unreachable broker is an error naming it, exit 3), then publishes each message when it is
 //! due, with a progress bar on a terminal, and prints one summary line.
 
-use crate::cli::{CliError, CliResult};
+use super::error::{CliError, CliResult};
 use crate::replay::message::{MessageOptions, to_json};
 use crate::replay::mqtt::{Broker, Login, Publisher, parse_qos};
 use crate::replay::{Recording, pacing, read_csv, read_lp};

@@ -1,7 +1,7 @@
 //! `tessla-telegraf report`: render a run's line protocol (our output with pass-through) as an
 //! HTML page with SVG plots, an MSE table and violation counts.
 
-use crate::cli::{CliError, CliResult};
+use super::error::{CliError, CliResult};
 use clap::Args;
 use std::path::PathBuf;
 

@@ -4,7 +4,8 @@
 //! robot) and on (the augmented robot), and the summary compares them; the output file holds
 //! the run `--monitor` chooses. With `--broker` the one chosen run drives the real pipeline.
 
-use super::{CliError, CliResult, SpecOptions};
+use super::error::{CliError, CliResult};
+use super::spec::{SpecOptions, load_options};
 use crate::log::{self, Level};
 use crate::processor::{Options, Processor};
 use crate::replay::mqtt::Broker;
@@ -85,7 +86,7 @@ pub struct SimulateArgs {
     pub json: bool,
     /// Least severe messages written to stderr.
     #[arg(long, value_enum, default_value_t)]
-    pub log_level: crate::log::Level,
+    pub log_level: super::args::LogLevel,
 }
 
 fn bad(msg: &str) -> CliError {
@@ -150,7 +151,7 @@ fn scenario_of(args: &SimulateArgs) -> Result<Scenario, CliError> {
 
 /// The monitors' program from `--spec` (or the bundled one) and `--set`/`--base-time`.
 fn load(args: &SimulateArgs) -> Result<Arc<tessla_engine::Program>, String> {
-    let options = super::load_options(&args.spec_options)?;
+    let options = load_options(&args.spec_options)?;
     let loaded = match &args.spec {
         Some(path) => tessla_engine::load_file(path, &options),
         None => crate::bundled::load(&options),
@@ -166,7 +167,7 @@ fn load(args: &SimulateArgs) -> Result<Arc<tessla_engine::Program>, String> {
 }
 
 pub fn run(args: SimulateArgs) -> CliResult {
-    log::set_level(args.log_level);
+    log::set_level(args.log_level.level());
     let scenario = scenario_of(&args)?;
     let broker = match args.broker.as_deref().map(str::parse::<Broker>) {
         None => None,

@@ -5,7 +5,9 @@
 //! when stdout is closed by the reader. The options are TeSSLa's `interpreter` command's; with
 //! `--ctf` the trace is a CTF trace directory (see `tessla_trace::ctf`).
 
-use super::{CliError, CliResult, TraceArgs};
+use super::args::TraceArgs;
+use super::error::{CliError, CliResult};
+use super::spec::{load_options, require_outputs};
 use crate::trace::{ErrorKind, Format, Options, run_stream_with};
 use std::cell::RefCell;
 use std::io::{BufReader, BufWriter, IsTerminal, Read, StdoutLock, Write};
@@ -42,8 +44,8 @@ impl Read for FlushBeforeRead {
 }
 
 pub fn run(args: TraceArgs) -> CliResult {
-    let mut options = super::load_options(&args.spec_options)
-        .map_err(|e| CliError::spec(format!("error: {e}")))?;
+    let mut options =
+        load_options(&args.spec_options).map_err(|e| CliError::spec(format!("error: {e}")))?;
     // As TeSSLa's interpreter: without a base time, a time literal (`2 s`) is an error.
     if args.spec_options.base_time.is_none() {
         options.base_time = None;
@@ -58,7 +60,7 @@ pub fn run(args: TraceArgs) -> CliResult {
             tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, color)
         );
     }
-    super::check::require_outputs(&loaded.program, &args.spec.display().to_string())
+    require_outputs(&loaded.program, &args.spec.display().to_string())
         .map_err(|e| CliError::spec(format!("error: {e}")))?;
     let options = Options {
         format: if args.csv {

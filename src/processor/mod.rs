@@ -33,7 +33,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tessla_engine::{InputError, Monitor, OutputEvent, Program, Value};
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum LateMode {
     /// Evaluate a late record as a step of its own, 1 ns after its instance's last step.
     #[default]
@@ -693,7 +693,7 @@ impl Processor {
 
     /// No more input right now (the end of a read): evict idle instances. Every record has
     /// been evaluated already.
-    pub fn flush(&mut self, _out: &mut Vec<u8>) {
+    pub fn end_of_read(&mut self) {
         let now = self.now();
         self.evict(now);
     }
@@ -775,11 +775,10 @@ impl Processor {
     pub fn replace_program(
         &mut self,
         program: Arc<Program>,
-        out: &mut Vec<u8>,
         mut carry: impl FnMut(&Monitor) -> Monitor,
     ) -> Result<(), String> {
         let bindings = binding::bindings(&program)?;
-        self.flush(out);
+        self.end_of_read();
         for inst in self.instances.values_mut() {
             inst.monitor = carry(&inst.monitor);
         }
@@ -894,7 +893,7 @@ mod tests {
         while let Some(r) = s.finish() {
             p.record(&r, &mut out);
         }
-        p.flush(&mut out);
+        p.end_of_read();
         String::from_utf8(out).unwrap()
     }
 

@@ -51,9 +51,9 @@ pub enum Reloaded {
     },
 }
 
-/// Reload `src` into `proc`, writing the outputs of steps still open (evaluated with the old
-/// spec) to `out`. Logs the outcome.
-pub fn reload(src: &SpecSource, proc: &mut Processor, out: &mut Vec<u8>) -> Reloaded {
+/// Reload `src` into `proc` (every record before it was evaluated with the old spec, so no
+/// step is open). Logs the outcome.
+pub fn reload(src: &SpecSource, proc: &mut Processor) -> Reloaded {
     log::log(
         Level::Info,
         &format!("SIGHUP: reloading {}", src.describe()),
@@ -96,7 +96,7 @@ pub fn reload(src: &SpecSource, proc: &mut Processor, out: &mut Vec<u8>) -> Relo
     let changed = snapshot::changed_nodes(&old, &new);
     let old_keys = snapshot::node_keys(&old);
     let new_keys = snapshot::node_keys(&new);
-    let result = proc.replace_program(Arc::clone(&new), out, |m| {
+    let result = proc.replace_program(Arc::clone(&new), |m| {
         let snap = snapshot::snapshot_with_keys(m, &old_keys);
         snapshot::restore_with_keys(Arc::clone(&new), &snap, &new_keys)
     });

@@ -36,7 +36,7 @@ impl Twin for InProcess {
         };
         let mut lines = Vec::new();
         self.processor.record(&record, &mut lines);
-        self.processor.flush(&mut lines);
+        self.processor.end_of_read();
         let action = metrics(&lines)
             .iter()
             .filter(|m| m.measurement == "action")

@@ -35,14 +35,16 @@ pub enum Target {
 /// Parse `--state`: `nats://...` is a bucket, anything else a file path. Anything that looks
 /// like a URL (`SCHEME://`, or `nats:` without `//`) is parsed as one, so a mistyped bucket URL
 /// is refused rather than taken as a file name.
-pub fn parse_target(s: &str) -> Result<Target, String> {
-    let lower = s.to_ascii_lowercase();
-    if s.contains("://") || lower.starts_with("nats:") || lower.starts_with("tls:") {
-        url::Url::parse(s).map(|u| Target::Nats(Box::new(u)))
-    } else if s.is_empty() {
-        Err("empty path".into())
-    } else {
-        Ok(Target::File(PathBuf::from(s)))
+impl Target {
+    pub fn parse(s: &str) -> Result<Target, String> {
+        let lower = s.to_ascii_lowercase();
+        if s.contains("://") || lower.starts_with("nats:") || lower.starts_with("tls:") {
+            url::Url::parse(s).map(|u| Target::Nats(Box::new(u)))
+        } else if s.is_empty() {
+            Err("empty path".into())
+        } else {
+            Ok(Target::File(PathBuf::from(s)))
+        }
     }
 }
 

@@ -1,26 +1,24 @@
-//! The TeSSLa Telegraf Connector's transport: line protocol over UDP.
+//! The TeSSLa Telegraf Connector's transport: line protocol over UDP, a [`Source`] and a
+//! [`Sink`] for the [`crate::step_loop`].
 //!
-//! Owns: receiving datagrams (several lines each; every line parsed alone, so one bad line costs
-//! only itself; each record evaluated at once, as on stdin), the wall clock of each datagram and
-//! waking for `delay`s that fall due while no datagram arrives, and sending outputs packed
-//! into datagrams of at most `max_datagram` bytes without splitting a line. Input records are
-//! never echoed in this mode (see `run`'s options): Telegraf already sends the robot metric to
-//! its other outputs.
+//! Owns: receiving datagrams (several lines each; a datagram's last line ends with it, so one
+//! bad line costs only itself), and sending outputs packed into datagrams of at most
+//! `max_datagram` bytes without splitting a line. Input records are never echoed in this mode
+//! (see `run`'s options): Telegraf already sends the robot metric to its other outputs. The run
+//! ends on SIGTERM/SIGINT only.
 
-use super::{Ending, Hooks};
 use crate::processor::Processor;
-use crate::processor::clock::Wall;
-use crate::watchdog::Phase;
-use lineproto::RecordSplitter;
+use crate::step_loop::{self, Ending, Setup, Sink, Source};
 use tokio::net::UdpSocket;
 
-/// Run until SIGTERM/SIGINT. `listen`/`send`: socket addresses such as `127.0.0.1:1653`.
+/// Run `proc` on UDP until SIGTERM/SIGINT. `listen`/`send`: socket addresses such as
+/// `127.0.0.1:1653`.
 pub async fn run(
     proc: &mut Processor,
     listen: &str,
     send: &str,
     max_datagram: usize,
-    hooks: Hooks<'_>,
+    setup: Setup<'_>,
 ) -> std::io::Result<Ending> {
     let sock = UdpSocket::bind(listen).await?;
     let out_sock = UdpSocket::bind(if send.starts_with('[') {
@@ -37,56 +35,42 @@ pub async fn run(
             sock.local_addr()?
         ),
     );
-    let mut buf = vec![0u8; 65_536];
-    let mut out = Vec::new();
-    let mut signals = super::Signals::new()?;
-    let (on_hangup, mut ticker, watch) = hooks.split();
-    loop {
-        let deadline = proc.next_deadline();
-        let n = tokio::select! {
-            // Biased, in this order (see `Signals`): a signal is never starved by input, and a
-            // delay falls due by the wall clock only when no input is waiting (input not read yet
-            // is not silence).
-            biased;
-            _ = signals.term.recv() => break,
-            _ = signals.int.recv() => break,
-            _ = signals.hup.recv() => {
-                on_hangup(proc, &mut out);
-                let _busy = watch.enter(Phase::Reload);
-                send_packed(&out_sock, &out, max_datagram).await;
-                out.clear();
-                continue;
-            }
-            _ = ticker.tick() => {
-                ticker.run(proc);
-                continue;
-            }
-            r = sock.recv(&mut buf) => r?,
-            _ = super::sleep_until(deadline) => {
-                let _busy = watch.enter(Phase::Delays);
-                super::advance_silent(proc, Wall::now(), &mut out);
-                send_packed(&out_sock, &out, max_datagram).await;
-                out.clear();
-                continue;
-            }
-        };
-        let _busy = watch.enter(Phase::Records);
-        proc.set_wall(Wall::now());
-        let mut splitter = RecordSplitter::default();
-        splitter.push(buf.get(..n).unwrap_or_default());
-        while let Some(rec) = splitter.next_record() {
-            proc.record(&rec, &mut out);
-        }
-        while let Some(rec) = splitter.finish() {
-            proc.record(&rec, &mut out);
-        }
-        proc.flush(&mut out);
-        send_packed(&out_sock, &out, max_datagram).await;
-        out.clear();
+    let mut sink = Datagrams {
+        sock: out_sock,
+        max: max_datagram,
+    };
+    step_loop::run(proc, &mut Received(sock), &mut sink, setup).await
+}
+
+/// The datagrams received.
+struct Received(UdpSocket);
+
+impl Source for Received {
+    async fn read(&mut self, buf: &mut [u8]) -> std::io::Result<Option<usize>> {
+        self.0.recv(buf).await.map(Some)
     }
-    proc.flush(&mut out);
-    send_packed(&out_sock, &out, max_datagram).await;
-    Ok(Ending::Signal)
+
+    fn whole_reads(&self) -> bool {
+        true
+    }
+}
+
+/// The datagrams sent.
+struct Datagrams {
+    sock: UdpSocket,
+    max: usize,
+}
+
+impl Sink for Datagrams {
+    async fn write(&mut self, out: &mut Vec<u8>, more: &mut [Vec<u8>]) -> std::io::Result<()> {
+        send_packed(&self.sock, out, self.max).await;
+        out.clear();
+        for o in more {
+            send_packed(&self.sock, o, self.max).await;
+            o.clear();
+        }
+        Ok(())
+    }
 }
 
 /// Send whole lines, packing as many as fit into one datagram. A single line longer than the

@@ -1,0 +1,62 @@
+//! The one error type every subcommand returns ([`CliError`]: the exit code and the message
+//! for stderr).
+//!
+//! Exit codes (documented in the README):
+//! - 0: success (also: stdin EOF, SIGTERM/SIGINT after flushing, stdout closed by the reader)
+//! - 1: a runtime error in `trace` mode (decreasing timestamps, multiple events, error values)
+//! - 2: a spec error (parse, type, include ...) or a bad command line
+//! - 3: an I/O error that stops the run (input file unreadable, UDP address not bindable)
+//! - 4: `run`'s step watchdog: a step made no progress for `--step-timeout`
+
+use std::fmt;
+
+/// Why a subcommand failed, as its exit code says (README "Exit codes"); success is 0.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Code {
+    /// 1: a runtime error in `trace` mode.
+    Runtime = 1,
+    /// 2: a spec error or a bad command line.
+    Spec = 2,
+    /// 3: an I/O error that stops the run.
+    Io = 3,
+}
+
+/// A subcommand's failure: the exit code and what to tell the user (written to stderr by
+/// [`main`], in the subcommand's style: `E! ` lines or plain text).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CliError {
+    pub code: Code,
+    pub message: String,
+}
+
+impl CliError {
+    pub fn new(code: Code, message: impl Into<String>) -> Self {
+        CliError {
+            code,
+            message: message.into(),
+        }
+    }
+
+    pub fn spec(message: impl Into<String>) -> Self {
+        Self::new(Code::Spec, message)
+    }
+
+    pub fn io(message: impl Into<String>) -> Self {
+        Self::new(Code::Io, message)
+    }
+
+    pub fn runtime(message: impl Into<String>) -> Self {
+        Self::new(Code::Runtime, message)
+    }
+}
+
+impl fmt::Display for CliError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for CliError {}
+
+/// What every subcommand returns.
+pub type CliResult = Result<(), CliError>;

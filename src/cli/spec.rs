@@ -1,0 +1,81 @@
+//! The spec every subcommand loads: the options that shape it (`--base-time`, `--set`, and
+//! `TESSLA_SET` without `--set`: [`SpecOptions`]), the engine's load options made from them
+//! ([`load_options`]), and the rule that a spec without outputs checks nothing
+//! ([`require_outputs`]).
+
+use clap::Args;
+
+/// Options shared by every subcommand that loads a spec.
+#[derive(Debug, Args, Clone, Default)]
+pub struct SpecOptions {
+    /// Base time unit of time literals, in TeSSLa's form (`1 ns`, `1 ms`, `33333 µs`); `run`
+    /// and `check` default to `1 ns` (Telegraf's unit); `trace` without it rejects time literals,
+    /// as TeSSLa's interpreter does.
+    #[arg(short = 't', long, value_name = "UNIT")]
+    pub base_time: Option<String>,
+    /// Override a top-level constant of the spec: `--set delta=0.05` (repeatable). `run` and
+    /// `check` without any --set read the environment variable TESSLA_SET instead:
+    /// NAME=VALUE assignments separated by spaces (`TESSLA_SET="delta=0.05 gain=1.0"`).
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    pub set: Vec<String>,
+}
+
+/// The environment variable [`SpecOptions::set_from_env`] reads.
+pub const SET_ENV: &str = "TESSLA_SET";
+
+impl SpecOptions {
+    /// Without `--set` on the command line, take the assignments from [`SET_ENV`] (`run` and
+    /// `check`: Telegraf's child and the systemd drop-in's check read the same variable, so
+    /// the overrides are written once, in /etc/default/tessla-telegraf).
+    pub fn set_from_env(&mut self) {
+        if self.set.is_empty()
+            && let Ok(v) = std::env::var(SET_ENV)
+        {
+            self.set = v.split_whitespace().map(str::to_string).collect();
+        }
+    }
+}
+
+impl SpecOptions {
+    /// `--base-time`, or `1 ns` (Telegraf's unit) when not given.
+    pub fn base_time_or_default(&self) -> String {
+        self.base_time.clone().unwrap_or_else(|| "1 ns".to_string())
+    }
+}
+
+/// The engine's load options from the command line (`--base-time`, `--set NAME=VALUE`).
+pub fn load_options(o: &SpecOptions) -> Result<tessla_engine::LoadOptions, String> {
+    let overrides = o
+        .set
+        .iter()
+        .map(|s| {
+            s.split_once('=')
+                .map(|(k, v)| (k.trim().to_string(), v.trim().to_string()))
+                .ok_or_else(|| format!("--set {s}: expected NAME=VALUE"))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(tessla_engine::LoadOptions {
+        base_time: Some(o.base_time_or_default()),
+        overrides,
+        time_units_need_base: false,
+        bundled_includes: crate::bundled::LIBRARIES
+            .iter()
+            .map(|(n, t)| (n.to_string(), t.to_string()))
+            .collect(),
+        on_bundled_include: Some(crate::bundled::say_bundled_include),
+    })
+}
+
+/// A spec without outputs checks nothing and writes nothing: a spec error for `check`, `run`
+/// and `trace`.
+pub fn require_outputs(program: &tessla_engine::Program, spec: &str) -> Result<(), String> {
+    if program.outputs.is_empty() {
+        Err(format!(
+            "{spec}: the spec has no outputs, so it would check nothing and write nothing; \
+             add `out NAME` for each stream to report (or `out *`); for a library of \
+             definitions that other specs include, use `check --library`"
+        ))
+    } else {
+        Ok(())
+    }
+}

@@ -1,0 +1,403 @@
+//! The one step loop every transport plugs into: bytes from a [`Source`], split into records
+//! and stepped on the processor, outputs to a [`Sink`], until the input ends, a signal comes or
+//! the reader of the outputs goes away. Pending steps are always evaluated and written.
+//!
+//! Owns, for every transport alike: every record answered within the read that brought it;
+//! the wall clock of each read; waking when an instance's `delay` falls due while the input is
+//! silent ([`Processor::advance_wall`]); the signals (SIGTERM and SIGINT end the run, SIGHUP
+//! reloads the spec); the save points of a state store (`--state-interval`, and every ending)
+//! with its [`crate::state::Backend`]; the marks of the step watchdog. Stepping itself is on one
+//! thread or spread over several ([`shards`]), or with a store shared by a fleet ([`shared`]:
+//! instances restored as they arrive, the partition lease followed).
+//!
+//! Each loop iteration selects, `biased`, in this order: SIGTERM, SIGINT, SIGHUP (a signal is
+//! never starved by input), the periodic save, the lease poll, the input, and last the
+//! wall-clock deadline: a delay falls due by the wall clock only when no input is waiting, and
+//! a record partly read (or being skipped past the size limit) is input arriving, not silence.
+
+pub mod shards;
+pub mod shared;
+
+use crate::log::{self, Level};
+use crate::processor::Processor;
+use crate::processor::clock::Wall;
+use crate::state::Backend;
+use crate::state::lease::Lease;
+use crate::watchdog::{Phase, Watch};
+use lineproto::{RecordRef, RecordSplitter};
+use shards::Shards;
+use shared::Shared;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// Where the bytes come from (stdin, a UDP socket).
+pub trait Source {
+    /// Read the next bytes into `buf`: `None` at the end of the input.
+    fn read(&mut self, buf: &mut [u8]) -> impl Future<Output = std::io::Result<Option<usize>>>;
+
+    /// How much to read at a time when stepping on `threads` threads (a source may make room
+    /// for it, such as a pipe enlarged). A read that fills it means more input is waiting.
+    fn read_size(&mut self, _threads: usize) -> usize {
+        64 * 1024
+    }
+
+    /// Whether each read is a whole message (a datagram): its last record ends with it.
+    fn whole_reads(&self) -> bool {
+        false
+    }
+}
+
+/// Where the outputs go (stdout, UDP datagrams).
+pub trait Sink {
+    /// Write `out` and then each of `more` (the worker threads' outputs), in that order, and
+    /// empty them all. An error means the reader went away.
+    fn write(
+        &mut self,
+        out: &mut Vec<u8>,
+        more: &mut [Vec<u8>],
+    ) -> impl Future<Output = std::io::Result<()>>;
+}
+
+/// On SIGHUP: the spec reload, on every thread's processor.
+pub type OnHangup<'a> = &'a mut dyn FnMut(&mut Processor);
+
+/// Where the state is kept, and when it is saved.
+pub struct Store<'a> {
+    pub backend: &'a mut dyn Backend,
+    /// `--state-interval`: save this often as well as at every ending.
+    pub interval: Option<Duration>,
+    /// A store shared by a fleet (NATS): instances restored as they arrive.
+    pub shared: Option<SharedStore>,
+}
+
+/// What a store shared by a fleet adds.
+pub struct SharedStore {
+    /// `?lease=NAME`: the partition lease; `None` steps everything read.
+    pub lease: Option<Lease>,
+    /// How long a standby keeps records for replay.
+    pub window: Duration,
+}
+
+/// What the loop runs with besides its processor, source and sink.
+pub struct Setup<'a> {
+    /// Threads to spread `--instance-by` instances over (1: the calling thread only).
+    pub threads: usize,
+    pub on_hangup: OnHangup<'a>,
+    pub store: Option<Store<'a>>,
+    /// Where the loop marks what it is doing, for the step watchdog (`--step-timeout`).
+    pub watch: Arc<Watch>,
+}
+
+/// How a run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Ending {
+    /// End of input.
+    Eof,
+    /// SIGTERM or SIGINT.
+    Signal,
+    /// The reader of our output went away.
+    OutputClosed,
+}
+
+/// Run `proc` on `source` and `sink` until the input ends, a signal or a closed output. A store
+/// is loaded first and saved at the end, whatever the ending.
+pub async fn run<S: Source, K: Sink>(
+    proc: &mut Processor,
+    source: &mut S,
+    sink: &mut K,
+    setup: Setup<'_>,
+) -> std::io::Result<Ending> {
+    let Setup {
+        threads,
+        on_hangup,
+        mut store,
+        watch,
+    } = setup;
+    let mut shared = store.as_mut().and_then(|s| {
+        let sh = s.shared.take()?;
+        Some(Shared::new(
+            proc.instance_by().to_vec(),
+            sh.lease,
+            sh.window,
+            watch.clone(),
+        ))
+    });
+    if let Some(s) = store.as_mut() {
+        s.backend.load(proc);
+    }
+    let threads = if store.is_some() { 1 } else { threads };
+    let interval = store.as_ref().and_then(|s| s.interval);
+    let mut shards = Shards::new(proc, threads, &watch).map_err(std::io::Error::other)?;
+    let mut l = Loop {
+        proc,
+        shards: &mut shards,
+        shared: shared.as_mut(),
+        backend: store.as_mut().map(|s| &mut *s.backend),
+        out: Vec::with_capacity(64 * 1024),
+        watch: &watch,
+    };
+    let r = l.run(source, sink, on_hangup, interval).await;
+    // Every ending (EOF, signal, closed output, I/O error) has evaluated what it could: save.
+    l.save(Level::Info);
+    if let Some(s) = &l.shared {
+        if !s.active {
+            log::log(
+                Level::Info,
+                &format!(
+                    "state: standing by at the end; nothing saved ({} records buffered, not stepped)",
+                    s.buffered()
+                ),
+            );
+        }
+        if let Some(lease) = &s.lease {
+            lease.release();
+        }
+    }
+    shards.finish(proc);
+    r
+}
+
+/// One run's moving parts.
+struct Loop<'p, 'b> {
+    proc: &'p mut Processor,
+    shards: &'p mut Shards,
+    shared: Option<&'p mut Shared>,
+    backend: Option<&'p mut (dyn Backend + 'b)>,
+    out: Vec<u8>,
+    watch: &'p Watch,
+}
+
+impl Loop<'_, '_> {
+    async fn run<S: Source, K: Sink>(
+        &mut self,
+        source: &mut S,
+        sink: &mut K,
+        on_hangup: OnHangup<'_>,
+        interval: Option<Duration>,
+    ) -> std::io::Result<Ending> {
+        let watch = self.watch;
+        let mut signals = Signals::new()?;
+        let mut saves = every(interval);
+        let lease_poll = self
+            .shared
+            .as_ref()
+            .and_then(|s| s.lease.as_ref())
+            .is_some();
+        let mut lease_ticks = every(lease_poll.then_some(Duration::from_millis(20)));
+        let size = source.read_size(self.shards.threads());
+        let mut buf = vec![0u8; size];
+        let mut splitter = RecordSplitter::default();
+        let ending = loop {
+            // A standby holds no instances: only the process stepping a partition advances
+            // clocks. A record partly read is input arriving, not silence.
+            let deadline = self
+                .shards
+                .next_deadline(self.proc)
+                .filter(|_| self.active() && !splitter.in_record());
+            let n = tokio::select! {
+                biased;
+                _ = signals.term.recv() => break Ending::Signal,
+                _ = signals.int.recv() => break Ending::Signal,
+                _ = signals.hup.recv() => {
+                    let _busy = watch.enter(Phase::Reload);
+                    on_hangup(self.proc);
+                    self.shards.each(|p| on_hangup(p));
+                    continue;
+                }
+                _ = tick(&mut saves) => {
+                    self.save(Level::Debug);
+                    continue;
+                }
+                _ = tick(&mut lease_ticks) => {
+                    self.follow_lease();
+                    if self.write(sink).await.is_err() {
+                        return Ok(Ending::OutputClosed);
+                    }
+                    continue;
+                }
+                r = source.read(&mut buf) => r?,
+                _ = sleep_until(deadline) => {
+                    // Silent input: the instances whose delays fell due move on by the wall clock.
+                    let _busy = watch.enter(Phase::Delays);
+                    let wall = Wall::now();
+                    advance_silent(self.proc, wall, &mut self.out);
+                    let out = &mut self.out;
+                    self.shards.each(|p| advance_silent(p, wall, out));
+                    watch.set(Phase::Writing);
+                    if self.write(sink).await.is_err() {
+                        return Ok(Ending::OutputClosed);
+                    }
+                    continue;
+                }
+            };
+            let Some(n) = n else {
+                break Ending::Eof;
+            };
+            self.follow_lease();
+            let _busy = watch.enter(Phase::Records);
+            let bytes = buf.get(..n).unwrap_or_default();
+            let whole = source.whole_reads();
+            self.records(&mut splitter, bytes, whole || n < size, whole)?;
+            if whole {
+                // Each message on its own: its lines are numbered from 1.
+                splitter = RecordSplitter::default();
+            }
+            watch.set(Phase::Writing);
+            if self.write(sink).await.is_err() {
+                return Ok(Ending::OutputClosed);
+            }
+        };
+        let _busy = watch.enter(Phase::Records);
+        self.records(&mut splitter, &[], true, true)?;
+        watch.set(Phase::Writing);
+        if self.write(sink).await.is_err() {
+            return Ok(Ending::OutputClosed);
+        }
+        Ok(ending)
+    }
+
+    /// Stepping now: without a lease, or holding it.
+    fn active(&self) -> bool {
+        self.shared.as_ref().is_none_or(|s| s.active)
+    }
+
+    /// Step the records of one read (`bytes`) as the splitter finds them; `end_read`: no more
+    /// input is waiting; `last`: the input or the message ended, so a last line without its
+    /// newline is a record too.
+    fn records(
+        &mut self,
+        splitter: &mut RecordSplitter,
+        bytes: &[u8],
+        end_read: bool,
+        last: bool,
+    ) -> std::io::Result<()> {
+        let wall = Wall::now();
+        if self.shards.threads() > 1 {
+            splitter.push_with(bytes, |rec| self.shards.route(rec));
+            if last {
+                while let Some(rec) = splitter.finish() {
+                    self.shards.route(rec.view());
+                }
+            }
+            return self
+                .shards
+                .process(self.proc, end_read, wall, &mut self.out);
+        }
+        let Loop {
+            proc,
+            shared,
+            backend,
+            out,
+            ..
+        } = self;
+        proc.set_wall(wall);
+        let mut step = |rec: RecordRef<'_>| match (shared.as_deref_mut(), backend.as_deref_mut()) {
+            (Some(s), Some(b)) => s.step(proc, b, rec, out),
+            _ => proc.record_ref(rec, out),
+        };
+        // Each record straight from the read buffer (no copy per record).
+        splitter.push_with(bytes, &mut step);
+        if last {
+            while let Some(rec) = splitter.finish() {
+                step(rec.view());
+            }
+        }
+        if end_read && self.active() {
+            self.proc.end_of_read();
+        }
+        Ok(())
+    }
+
+    /// Follow the partition lease, if any: take over (restore, replay) or stand by.
+    fn follow_lease(&mut self) {
+        if let (Some(s), Some(b)) = (&mut self.shared, &mut self.backend) {
+            s.follow_lease(self.proc, &mut **b, &mut self.out);
+        }
+    }
+
+    /// Save to the store, if any and if this process steps; success logged at `level`, failure
+    /// as an error (never fatal).
+    fn save(&mut self, level: Level) {
+        if self.shared.as_ref().is_some_and(|s| !s.may_save()) {
+            return;
+        }
+        let Some(backend) = self.backend.as_mut() else {
+            return;
+        };
+        let start = Instant::now();
+        match backend.save(self.proc) {
+            Ok(n) => log::log(
+                level,
+                &format!(
+                    "state: saved {n} monitor instances to {} in {} ms",
+                    backend.describe(),
+                    start.elapsed().as_millis()
+                ),
+            ),
+            Err(e) => log::log(
+                Level::Error,
+                &format!("state: cannot save to {}: {e}", backend.describe()),
+            ),
+        }
+    }
+
+    async fn write<K: Sink>(&mut self, sink: &mut K) -> std::io::Result<()> {
+        sink.write(&mut self.out, self.shards.outs_mut()).await
+    }
+}
+
+/// A timer firing every `period` (the first one period from now; ticks missed while busy are
+/// not made up), or never.
+fn every(period: Option<Duration>) -> Option<tokio::time::Interval> {
+    period.map(|d| {
+        let d = d.max(Duration::from_millis(1));
+        let mut i = tokio::time::interval_at(tokio::time::Instant::now() + d, d);
+        i.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        i
+    })
+}
+
+/// The next tick of [`every`]'s timer (forever without one).
+async fn tick(timer: &mut Option<tokio::time::Interval>) {
+    match timer {
+        Some(t) => {
+            t.tick().await;
+        }
+        None => std::future::pending().await,
+    }
+}
+
+/// Sleep until `deadline` (forever without one): a processor's next `delay` by the wall clock.
+async fn sleep_until(deadline: Option<Instant>) {
+    match deadline {
+        Some(d) => tokio::time::sleep_until(tokio::time::Instant::from_std(d)).await,
+        None => std::future::pending().await,
+    }
+}
+
+/// The signals the loop answers: SIGTERM and SIGINT end the run, SIGHUP reloads the spec.
+struct Signals {
+    term: tokio::signal::unix::Signal,
+    int: tokio::signal::unix::Signal,
+    hup: tokio::signal::unix::Signal,
+}
+
+impl Signals {
+    /// Install the handlers (before the first read, so no signal is missed).
+    fn new() -> std::io::Result<Self> {
+        use tokio::signal::unix::{SignalKind, signal};
+        Ok(Self {
+            term: signal(SignalKind::terminate())?,
+            int: signal(SignalKind::interrupt())?,
+            hup: signal(SignalKind::hangup())?,
+        })
+    }
+}
+
+/// The silent input: the deadline passed with no input waiting, so `proc` moves on to `wall`
+/// (read once per wake-up, the same for every processor of the loop) and the delays that fell
+/// due are evaluated, outputs appended to `out`.
+fn advance_silent(proc: &mut Processor, wall: Wall, out: &mut Vec<u8>) {
+    proc.set_wall(wall);
+    proc.advance_wall(wall.at, out);
+}
