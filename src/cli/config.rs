@@ -18,6 +18,7 @@ use crate::processor::reload::SpecSource;
 use crate::processor::{self, LateMode};
 use crate::state::{self, Target};
 use crate::telegraf::binding::parse_tags;
+use crate::transport::Transport;
 use std::path::PathBuf;
 use std::time::Duration;
 
@@ -30,18 +31,6 @@ pub struct RunConfig {
     pub state: Option<StateConfig>,
     /// `--step-timeout` (zero: no watchdog).
     pub step_timeout: Duration,
-}
-
-/// Where records come from and outputs go.
-pub enum Transport {
-    /// stdin/stdout, instances spread over `threads` threads.
-    Stdio { threads: usize },
-    /// The connector's UDP wiring.
-    Udp {
-        listen: String,
-        send: String,
-        max_datagram: usize,
-    },
 }
 
 /// `--state` and what decides whether saved state fits this run.

@@ -4,7 +4,7 @@
 //! ending; SIGHUP reloads.
 
 use super::args::RunArgs;
-use super::config::{RunConfig, StateConfig, Transport};
+use super::config::{RunConfig, StateConfig};
 use super::ending::{finish, runtime};
 use super::error::{CliError, CliResult};
 use super::spec::require_outputs;
@@ -52,27 +52,14 @@ pub fn run(args: RunArgs) -> CliResult {
         interval: config.state.as_ref().and_then(|s| s.interval),
         shared,
     });
-    let threads = match &config.transport {
-        Transport::Stdio { threads } => *threads,
-        Transport::Udp { .. } => 1,
-    };
     let setup = Setup {
-        threads,
+        threads: config.transport.threads(),
         on_hangup: &mut on_hangup,
         store,
         watch,
     };
     let rt = runtime()?;
-    let result = rt.block_on(async {
-        match &config.transport {
-            Transport::Udp {
-                listen,
-                send,
-                max_datagram,
-            } => transport::udp::run(&mut proc, listen, send, *max_datagram, setup).await,
-            Transport::Stdio { .. } => transport::stdio::run(&mut proc, setup).await,
-        }
-    });
+    let result = rt.block_on(transport::run(&config.transport, &mut proc, setup));
     proc.finish_wiring();
     finish(rt, result, &proc)
 }

@@ -11,8 +11,9 @@ use std::time::Duration;
 pub const DEFAULT_TTL: Duration = Duration::from_secs(3);
 
 /// How the process authenticates to NATS (the client crate does the protocol).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub enum Auth {
+    #[default]
     None,
     /// `nats://USER:PASSWORD@...`, or `?user=USER&password-env=VAR` / `password-file=PATH`.
     UserPassword {
@@ -48,6 +49,83 @@ fn percent_decode(s: &str) -> Result<String, String> {
         .map_err(|_| "the user or password is not UTF-8 once decoded".to_string())
 }
 
+/// `host:port` of each server in `hosts` (comma-separated; the port defaults to 4222).
+fn servers(hosts: &str) -> Vec<String> {
+    hosts
+        .split(',')
+        .map(str::trim)
+        .filter(|h| !h.is_empty())
+        .map(|h| {
+            if h.contains(':') {
+                h.to_string()
+            } else {
+                format!("{h}:4222")
+            }
+        })
+        .collect()
+}
+
+/// The login written before the `@`: `USER:PASSWORD`, or a token.
+fn userinfo_auth(userinfo: Option<&str>) -> Result<Auth, String> {
+    Ok(match userinfo {
+        None => Auth::None,
+        Some(info) => match info.split_once(':') {
+            Some((user, password)) => Auth::UserPassword {
+                user: percent_decode(user)?,
+                password: SecretSource::Given(Secret::new(percent_decode(password)?)),
+            },
+            None => Auth::Token(SecretSource::Given(Secret::new(percent_decode(info)?))),
+        },
+    })
+}
+
+/// The login options as the URL gives them, before they are checked to make one way in.
+#[derive(Default)]
+struct Login {
+    /// From the user-info, or a token, NKey or creds option.
+    auth: Auth,
+    /// `user=NAME`.
+    user: Option<String>,
+    /// `password-env=VAR` or `password-file=PATH`.
+    password: Option<SecretSource>,
+}
+
+impl Login {
+    /// Take `a` as the way in, unless there is one already.
+    fn set(&mut self, a: Auth) -> Result<(), String> {
+        if self.auth != Auth::None {
+            return Err(
+                "more than one way to authenticate (user and password, token, nkey-file, creds: pick one)"
+                    .into(),
+            );
+        }
+        self.auth = a;
+        Ok(())
+    }
+
+    /// The one way in: `user=` and a password option make a user and password, or complete the
+    /// user-info's.
+    fn resolve(mut self) -> Result<Auth, String> {
+        match (self.user.take(), self.password.take()) {
+            (Some(user), Some(password)) => self.set(Auth::UserPassword { user, password })?,
+            (Some(user), None) => match &mut self.auth {
+                Auth::UserPassword { user: u, .. } => *u = user,
+                _ => {
+                    return Err(format!(
+                        "user={user} needs a password: password-env=VAR or password-file=PATH"
+                    ));
+                }
+            },
+            (None, Some(password)) => match &mut self.auth {
+                Auth::UserPassword { password: p, .. } => *p = password,
+                _ => return Err("a password needs a user: user=NAME (or nats://USER@...)".into()),
+            },
+            (None, None) => {}
+        }
+        Ok(self.auth)
+    }
+}
+
 /// A parsed `--state nats://...` value.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Url {
@@ -65,6 +143,8 @@ pub struct Url {
 }
 
 impl Url {
+    /// Parse `--state nats://...`. Every message names the option at fault and shows the URL
+    /// with its secrets masked.
     pub fn parse(s: &str) -> Result<Url, String> {
         let shown = mask(s);
         let form = |why: String| format!("`{shown}`: {why} (expected {FORM})");
@@ -92,18 +172,7 @@ impl Url {
         let (hosts, bucket) = rest
             .split_once('/')
             .ok_or_else(|| form("no bucket".into()))?;
-        let servers: Vec<String> = hosts
-            .split(',')
-            .map(str::trim)
-            .filter(|h| !h.is_empty())
-            .map(|h| {
-                if h.contains(':') {
-                    h.to_string()
-                } else {
-                    format!("{h}:4222")
-                }
-            })
-            .collect();
+        let servers = servers(hosts);
         if servers.is_empty() {
             return Err(form("no server".into()));
         }
@@ -116,20 +185,6 @@ impl Url {
                 "`{shown}`: bucket `{bucket}` must be letters, digits, `_` or `-`"
             ));
         }
-        let mut auth = match userinfo {
-            None => Auth::None,
-            Some(info) => match info.split_once(':') {
-                Some((user, password)) => Auth::UserPassword {
-                    user: percent_decode(user).map_err(&form)?,
-                    password: SecretSource::Given(Secret::new(
-                        percent_decode(password).map_err(&form)?,
-                    )),
-                },
-                None => Auth::Token(SecretSource::Given(Secret::new(
-                    percent_decode(info).map_err(&form)?,
-                ))),
-            },
-        };
         let mut url = Url {
             servers,
             bucket: bucket.to_string(),
@@ -139,97 +194,15 @@ impl Url {
             auth: Auth::None,
             tls: Tls::default(),
         };
-        let mut user: Option<String> = None;
-        let mut password: Option<SecretSource> = None;
-        let set_auth = |a: Auth, auth: &mut Auth| -> Result<(), String> {
-            if *auth != Auth::None {
-                return Err(format!(
-                    "`{shown}`: more than one way to authenticate (user and password, token, nkey-file, creds: pick one)"
-                ));
-            }
-            *auth = a;
-            Ok(())
+        let mut login = Login {
+            auth: userinfo_auth(userinfo).map_err(&form)?,
+            ..Login::default()
         };
         for pair in query.split('&').filter(|p| !p.is_empty()) {
-            let (k, v) = pair.split_once('=').unwrap_or((pair, ""));
-            let path = || -> Result<std::path::PathBuf, String> {
-                if v.is_empty() {
-                    Err(format!("`{shown}`: `{k}` needs a value"))
-                } else {
-                    Ok(std::path::PathBuf::from(v))
-                }
-            };
-            match k {
-                "lease" if !v.is_empty() => url.lease = Some(v.to_string()),
-                "ttl" => {
-                    url.ttl = humantime::parse_duration(v)
-                        .map_err(|e| format!("`{shown}`: ttl `{v}`: {e}"))?;
-                    if url.ttl < Duration::from_millis(200) {
-                        return Err(format!("`{shown}`: ttl must be at least 200ms"));
-                    }
-                }
-                "replicas" => {
-                    url.replicas = v
-                        .parse()
-                        .ok()
-                        .filter(|n| (1..=5).contains(n))
-                        .ok_or_else(|| format!("`{shown}`: replicas must be 1 to 5"))?;
-                }
-                "user" if !v.is_empty() => user = Some(v.to_string()),
-                "password-env" if !v.is_empty() => password = Some(SecretSource::Env(v.into())),
-                "password-file" => password = Some(SecretSource::File(path()?)),
-                "token-env" if !v.is_empty() => {
-                    set_auth(Auth::Token(SecretSource::Env(v.into())), &mut auth)?
-                }
-                "token-file" => set_auth(Auth::Token(SecretSource::File(path()?)), &mut auth)?,
-                "nkey-file" => set_auth(Auth::NKey(path()?), &mut auth)?,
-                "creds" => set_auth(Auth::Creds(path()?), &mut auth)?,
-                "tls" => {
-                    url.tls.required = match v {
-                        "1" | "true" | "yes" | "" => true,
-                        "0" | "false" | "no" => false,
-                        _ => return Err(format!("`{shown}`: tls must be 1 or 0")),
-                    }
-                }
-                "tls-ca" => url.tls.ca = Some(path()?),
-                "tls-cert" => url.tls.cert = Some(path()?),
-                "tls-key" => url.tls.key = Some(path()?),
-                _ => {
-                    let shown_pair = if k.contains("password") || k.contains("token") {
-                        format!("{k}=***")
-                    } else {
-                        pair.to_string()
-                    };
-                    return Err(format!(
-                        "`{shown}`: unknown option `{shown_pair}` (known: lease=NAME, ttl=DURATION, replicas=N, \
-                         user=NAME, password-env=VAR, password-file=PATH, token-env=VAR, token-file=PATH, \
-                         nkey-file=PATH, creds=PATH, tls=1, tls-ca=PATH, tls-cert=PATH, tls-key=PATH)"
-                    ));
-                }
-            }
+            url.option(pair, &mut login)
+                .map_err(|why| format!("`{shown}`: {why}"))?;
         }
-        match (user, password) {
-            (Some(user), Some(password)) => {
-                set_auth(Auth::UserPassword { user, password }, &mut auth)?
-            }
-            (Some(user), None) => match &mut auth {
-                Auth::UserPassword { user: u, .. } => *u = user,
-                _ => {
-                    return Err(format!(
-                        "`{shown}`: user={user} needs a password: password-env=VAR or password-file=PATH"
-                    ));
-                }
-            },
-            (None, Some(password)) => match &mut auth {
-                Auth::UserPassword { password: p, .. } => *p = password,
-                _ => {
-                    return Err(format!(
-                        "`{shown}`: a password needs a user: user=NAME (or nats://USER@...)"
-                    ));
-                }
-            },
-            (None, None) => {}
-        }
+        url.auth = login.resolve().map_err(|why| format!("`{shown}`: {why}"))?;
         if url.tls.cert.is_some() != url.tls.key.is_some() {
             return Err(format!(
                 "`{shown}`: a client certificate needs both tls-cert=PATH and tls-key=PATH"
@@ -238,8 +211,65 @@ impl Url {
         if url.tls.ca.is_some() || url.tls.cert.is_some() {
             url.tls.required = true;
         }
-        url.auth = auth;
         Ok(url)
+    }
+
+    /// Apply one `KEY=VALUE` of the query; the login options are gathered in `login`.
+    fn option(&mut self, pair: &str, login: &mut Login) -> Result<(), String> {
+        let (k, v) = pair.split_once('=').unwrap_or((pair, ""));
+        let path = || -> Result<std::path::PathBuf, String> {
+            if v.is_empty() {
+                Err(format!("`{k}` needs a value"))
+            } else {
+                Ok(std::path::PathBuf::from(v))
+            }
+        };
+        match k {
+            "lease" if !v.is_empty() => self.lease = Some(v.to_string()),
+            "ttl" => {
+                self.ttl = humantime::parse_duration(v).map_err(|e| format!("ttl `{v}`: {e}"))?;
+                if self.ttl < Duration::from_millis(200) {
+                    return Err("ttl must be at least 200ms".into());
+                }
+            }
+            "replicas" => {
+                self.replicas = v
+                    .parse()
+                    .ok()
+                    .filter(|n| (1..=5).contains(n))
+                    .ok_or("replicas must be 1 to 5")?;
+            }
+            "user" if !v.is_empty() => login.user = Some(v.to_string()),
+            "password-env" if !v.is_empty() => login.password = Some(SecretSource::Env(v.into())),
+            "password-file" => login.password = Some(SecretSource::File(path()?)),
+            "token-env" if !v.is_empty() => login.set(Auth::Token(SecretSource::Env(v.into())))?,
+            "token-file" => login.set(Auth::Token(SecretSource::File(path()?)))?,
+            "nkey-file" => login.set(Auth::NKey(path()?))?,
+            "creds" => login.set(Auth::Creds(path()?))?,
+            "tls" => {
+                self.tls.required = match v {
+                    "1" | "true" | "yes" | "" => true,
+                    "0" | "false" | "no" => false,
+                    _ => return Err("tls must be 1 or 0".into()),
+                }
+            }
+            "tls-ca" => self.tls.ca = Some(path()?),
+            "tls-cert" => self.tls.cert = Some(path()?),
+            "tls-key" => self.tls.key = Some(path()?),
+            _ => {
+                let shown_pair = if k.contains("password") || k.contains("token") {
+                    format!("{k}=***")
+                } else {
+                    pair.to_string()
+                };
+                return Err(format!(
+                    "unknown option `{shown_pair}` (known: lease=NAME, ttl=DURATION, replicas=N, \
+                     user=NAME, password-env=VAR, password-file=PATH, token-env=VAR, token-file=PATH, \
+                     nkey-file=PATH, creds=PATH, tls=1, tls-ca=PATH, tls-cert=PATH, tls-key=PATH)"
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// The URL as shown in messages: servers and bucket, the user name, never a secret.

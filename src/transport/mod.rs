@@ -3,7 +3,51 @@
 //!
 //! Owns: stdin/stdout for Telegraf's `processors.execd` ([`stdio`]; also the fleet's, whose
 //! shared state lives in [`crate::state`]) and the TeSSLa Telegraf Connector's UDP wiring
-//! ([`udp`]). A new transport is one file here.
+//! ([`udp`]), and which one a run uses ([`Transport`], [`run`]). A new transport is a file here,
+//! a variant and an arm below, and its option in `cli/args.rs` and `cli/config.rs`.
 
 pub mod stdio;
 pub mod udp;
+
+use crate::processor::Processor;
+use crate::step_loop::{Ending, Setup};
+
+/// Where records come from and outputs go.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Transport {
+    /// stdin/stdout, instances spread over `threads` threads.
+    Stdio { threads: usize },
+    /// The connector's UDP wiring: datagrams in on `listen`, out to `send`, at most
+    /// `max_datagram` bytes each.
+    Udp {
+        listen: String,
+        send: String,
+        max_datagram: usize,
+    },
+}
+
+impl Transport {
+    /// How many threads may step records (UDP answers datagram by datagram: one).
+    pub fn threads(&self) -> usize {
+        match self {
+            Transport::Stdio { threads } => *threads,
+            Transport::Udp { .. } => 1,
+        }
+    }
+}
+
+/// Run `proc` on `transport` until its input ends, a signal, or a closed output.
+pub async fn run(
+    transport: &Transport,
+    proc: &mut Processor,
+    setup: Setup<'_>,
+) -> std::io::Result<Ending> {
+    match transport {
+        Transport::Stdio { .. } => stdio::run(proc, setup).await,
+        Transport::Udp {
+            listen,
+            send,
+            max_datagram,
+        } => udp::run(proc, listen, send, *max_datagram, setup).await,
+    }
+}
