@@ -12,26 +12,31 @@
 //! exact bytes before the outputs it causes, and the counters of the summary line. Bad records
 //! are reported with their line number and skipped.
 //!
-//! Its rooms: the instances and their eviction ([`instances`]), the live clock ([`clock`]),
+//! Its rooms: the instances ([`instances`]: the table, and the pool that routes to it, creates
+//! and evicts), writing a step's outputs (`emit`), the live clock ([`clock`]),
 //! exact duplicates ([`dedup`]), SIGHUP spec reloads ([`reload`]) and warnings about inputs no
 //! metric feeds ([`wiring`]).
 
 pub mod clock;
 pub mod dedup;
+mod emit;
 pub mod instances;
+mod pool;
 pub mod reload;
 pub mod wiring;
 
-use self::instances::{Key, Table};
+use self::instances::Key;
 use crate::log;
 use crate::telegraf::binding::{self, InputBinding};
-use crate::telegraf::encode::{self, Encoding};
+use crate::telegraf::encode;
 use crate::watchdog::Lane;
 use clock::{Anchor, Deadlines, Wall};
+use emit::Emitter;
 use lineproto::{Metric, Record, RecordRef, parse_record_into};
+use pool::{Instance, Pool, describe, instance_note};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use tessla_engine::{InputError, Monitor, OutputEvent, Program, Value};
+use tessla_engine::{InputError, Monitor, OutputEvent, Program};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum LateMode {
@@ -136,43 +141,14 @@ impl Counters {
     }
 }
 
-/// One monitor and the tags its output lines carry (static tags and instance tags).
-struct Instance {
-    monitor: Monitor,
-    tags: Vec<(String, String)>,
-    recent: self::dedup::Recent,
-    /// Never reused: tells this instance's queued deadlines from a former occupant's of its slot.
-    id: u64,
-    /// The instance's last record (or its restore): where its silent time is measured from.
-    anchor: Option<Anchor>,
-    /// When its next `delay` firing falls due by the wall clock.
-    deadline: Option<Instant>,
-    /// The deadline of its entry in the queue, if it has one.
-    queued: Option<Instant>,
-}
-
-/// What writing a step's outputs needs, apart from the instance.
-struct Emitter {
-    encodings: Vec<Encoding>,
-    measurement: String,
-    events: Vec<(i64, usize, Value)>,
-    /// Scratch: the encoder's buffers.
-    encode: encode::Scratch,
-}
-
 pub struct Processor {
     program: Arc<Program>,
     bindings: Vec<InputBinding>,
     emitter: Emitter,
     opts: Options,
-    /// Most instances kept here: `--max-instances`, or this thread's share of it.
-    keep: usize,
     pub counters: Counters,
-    instances: Table<Instance>,
-    /// Stands in for "now" when no idle limit needs the clock.
-    epoch: Instant,
-    /// The slot of the only instance, when there is one that is never evicted.
-    single: Option<usize>,
+    /// The monitor instances ([`pool`]).
+    pool: Pool,
     /// Reused for every record's parse (keeps its strings' and vectors' capacity).
     scratch: Metric,
     /// Warns about inputs the first records never feed (see [`self::wiring`]).
@@ -183,40 +159,9 @@ pub struct Processor {
     deadlines: Deadlines,
     /// Whether the program has a `delay` at all (without one, no deadline is ever computed).
     has_delays: bool,
-    next_id: u64,
     /// The step watchdog's marks for this processor (`run --step-timeout`; see
     /// [`crate::watchdog`]).
     lane: Option<Arc<Lane>>,
-}
-
-fn describe(instance_by: &[String], key: &Key) -> String {
-    instance_by
-        .iter()
-        .zip(key)
-        .map(|(k, v)| format!("{k}={}", v.as_deref().unwrap_or("(absent)")))
-        .collect::<Vec<_>>()
-        .join(",")
-}
-
-/// The values of the `instance_by` tags in `m`.
-fn key_of(instance_by: &[String], m: &Metric) -> Key {
-    instance_by
-        .iter()
-        .map(|t| m.tag(t).map(str::to_string))
-        .collect()
-}
-
-/// " (instance robot=a)" for the instance of `m`, or nothing without `--instance-by`. Built
-/// only inside a warning's closure: a rate-limited warning costs no allocation.
-fn instance_note(instance_by: &[String], m: &Metric) -> String {
-    if instance_by.is_empty() {
-        String::new()
-    } else {
-        format!(
-            " (instance {})",
-            describe(instance_by, &key_of(instance_by, m))
-        )
-    }
 }
 
 impl Processor {
@@ -235,17 +180,13 @@ impl Processor {
                 events: Vec::new(),
                 encode: encode::Scratch::default(),
             },
-            keep: opts.max_instances.max(1),
+            pool: Pool::new(&opts),
             opts,
             counters: Counters::default(),
-            instances: Table::default(),
-            epoch: Instant::now(),
-            single: None,
             scratch: Metric::default(),
             wiring,
             wall: Wall::now(),
             deadlines: Deadlines::default(),
-            next_id: 0,
             lane: None,
         })
     }
@@ -257,11 +198,7 @@ impl Processor {
 
     /// Leave the step watchdog's marks in `lane` (every record, every new instance).
     pub fn watch_with(&mut self, lane: Arc<Lane>) {
-        for (key, &slot) in self.instances.keys() {
-            if !self.opts.instance_by.is_empty() {
-                lane.name(slot, describe(&self.opts.instance_by, key));
-            }
-        }
+        self.pool.name_all(&lane);
         self.lane = Some(lane);
     }
 
@@ -272,7 +209,7 @@ impl Processor {
 
     /// Keep at most `n` instances here (at least 1): a `--threads` shard's share of the total.
     pub fn keep_instances(&mut self, n: usize) {
-        self.keep = n.max(1);
+        self.pool.keep = n.max(1);
     }
 
     /// The tags that select an instance (`--instance-by`).
@@ -282,121 +219,13 @@ impl Processor {
 
     /// Monitor instances alive now.
     pub fn instance_count(&self) -> usize {
-        self.instances.len()
+        self.pool.table.len()
     }
 
     /// The wall clock for the records that follow: a transport sets it once per read (the
     /// records of one read arrived together), a replay to when each record arrived.
     pub fn set_wall(&mut self, wall: Wall) {
         self.wall = wall;
-    }
-
-    fn now(&self) -> Instant {
-        if self.opts.instance_idle.is_some() {
-            Instant::now()
-        } else {
-            self.epoch
-        }
-    }
-
-    fn key(&self, m: &Metric) -> Key {
-        key_of(&self.opts.instance_by, m)
-    }
-
-    /// The instance for `m`, created (starting at `ts`) when new.
-    fn instance_for(&mut self, m: &Metric, ts: i64, now: Instant) -> usize {
-        // One instance that is never evicted: skip the lookup.
-        if self.opts.instance_by.is_empty()
-            && self.opts.instance_idle.is_none()
-            && let Some(i) = self.single
-        {
-            return i;
-        }
-        let key = self.key(m);
-        if let Some(i) = self.instances.find(&key, now) {
-            return i;
-        }
-        self.counters.instances += 1;
-        let monitor = Monitor::starting_at(self.program.clone(), ts);
-        self.insert_instance(key, monitor, now)
-    }
-
-    /// Add instance `key` (absent from the table) running `monitor`; returns its slot.
-    fn insert_instance(&mut self, key: Key, monitor: Monitor, now: Instant) -> usize {
-        let mut tags: Vec<(String, String)> = self
-            .opts
-            .tags
-            .iter()
-            .filter(|(k, _)| !self.opts.instance_by.contains(k))
-            .cloned()
-            .collect();
-        for (k, v) in self.opts.instance_by.iter().zip(&key) {
-            if let Some(v) = v {
-                tags.push((k.clone(), v.clone()));
-            }
-        }
-        if !self.opts.instance_by.is_empty() {
-            tags.sort();
-        }
-        self.next_id += 1;
-        let i = self.instances.insert(
-            key,
-            Instance {
-                monitor,
-                tags,
-                recent: Default::default(),
-                id: self.next_id,
-                anchor: None,
-                deadline: None,
-                queued: None,
-            },
-            now,
-        );
-        if self.opts.instance_by.is_empty() && self.opts.instance_idle.is_none() {
-            self.single = Some(i);
-        }
-        if let Some(l) = &self.lane
-            && let Some(key) = self.instances.key(i)
-            && !self.opts.instance_by.is_empty()
-        {
-            l.name(i, describe(&self.opts.instance_by, key));
-        }
-        i
-    }
-
-    /// Evict instances past `--max-instances` or idle too long. Nothing is pending in an
-    /// instance between records (each record is evaluated at once); its armed `delay`s are
-    /// dropped with it (their queue entries go stale).
-    fn evict(&mut self, now: Instant) {
-        let max = self.keep;
-        let total = self.opts.max_instances;
-        while let Some(i) = self.instances.evictable(max, self.opts.instance_idle, now) {
-            let full = self.instances.len() > max;
-            let Some((key, _)) = self.instances.remove(i) else {
-                break;
-            };
-            if let Some(l) = &self.lane {
-                l.forget(i);
-            }
-            self.counters.evicted += 1;
-            let by = &self.opts.instance_by;
-            log::warn_limited("instance evicted", || {
-                let why = if full {
-                    format!("least recently used, --max-instances {total}")
-                } else {
-                    "idle longer than --instance-idle".to_string()
-                };
-                let share = if full && max != total {
-                    format!(" (the threads share the total: this one keeps {max})")
-                } else {
-                    String::new()
-                };
-                format!(
-                    "monitor instance {} evicted ({why}); its state starts afresh with its next record{share}",
-                    describe(by, &key)
-                )
-            });
-        }
     }
 
     /// Handle one record, appending pass-through and completed steps' outputs to `out`.
@@ -501,12 +330,19 @@ impl Processor {
             self.passthrough(rec, out);
             return;
         }
-        let now = self.now();
-        let slot = self.instance_for(metric, ts, now);
+        let now = self.pool.now();
+        let slot = self.pool.slot_for(
+            metric,
+            ts,
+            now,
+            &self.program,
+            &mut self.counters,
+            self.lane.as_deref(),
+        );
         if let Some(l) = &self.lane {
             l.instance(slot);
         }
-        let Some(inst) = self.instances.get_mut(slot) else {
+        let Some(inst) = self.pool.table.get_mut(slot) else {
             return;
         };
         if let Some(t) = metric.timestamp
@@ -561,7 +397,8 @@ impl Processor {
             self.push_fields(metric, rec.line, ts, slot, out);
         }
         self.schedule(slot, ts);
-        self.evict(now);
+        self.pool
+            .evict(now, &mut self.counters, self.lane.as_deref());
     }
 
     /// Note instance `slot`'s last record at `ts` and queue its next `delay` firing by the wall
@@ -571,7 +408,7 @@ impl Processor {
             return;
         }
         let (at, lateness) = (self.wall.at, self.lateness());
-        if let Some(inst) = self.instances.get_mut(slot) {
+        if let Some(inst) = self.pool.table.get_mut(slot) {
             let anchor = Anchor { ts, at };
             inst.anchor = Some(anchor);
             Self::queue(&mut self.deadlines, inst, slot, lateness);
@@ -611,7 +448,7 @@ impl Processor {
     pub fn advance_wall(&mut self, now: Instant, out: &mut Vec<u8>) {
         let lateness = self.lateness();
         while let Some((due, id, slot)) = self.deadlines.pop_due(now) {
-            let Some(inst) = self.instances.get_mut(slot) else {
+            let Some(inst) = self.pool.table.get_mut(slot) else {
                 continue;
             };
             if inst.id != id || inst.queued != Some(due) {
@@ -645,7 +482,7 @@ impl Processor {
     /// and write its outputs.
     fn push_fields(&mut self, metric: &Metric, line: u64, ts: i64, slot: usize, out: &mut Vec<u8>) {
         self.wiring.observe(metric, &self.bindings);
-        let Some(inst) = self.instances.get_mut(slot) else {
+        let Some(inst) = self.pool.table.get_mut(slot) else {
             return;
         };
         let events = &mut self.emitter.events;
@@ -694,8 +531,9 @@ impl Processor {
     /// No more input right now (the end of a read): evict idle instances. Every record has
     /// been evaluated already.
     pub fn end_of_read(&mut self) {
-        let now = self.now();
-        self.evict(now);
+        let now = self.pool.now();
+        self.pool
+            .evict(now, &mut self.counters, self.lane.as_deref());
     }
 
     /// The input ended: warn about inputs that what was seen never fed (once).
@@ -719,7 +557,8 @@ impl Processor {
     /// whose clock is beyond `--max-ahead` of the wall clock is left out: a wrong clock is
     /// never saved.
     pub fn monitors(&self) -> impl Iterator<Item = (&Key, &Monitor)> {
-        self.instances
+        self.pool
+            .table
             .iter_lru()
             .map(|(k, i)| (k, &i.monitor))
             .filter(|(k, m)| match self.clock_ahead(m) {
@@ -760,10 +599,10 @@ impl Processor {
             );
             return;
         }
-        let now = self.now();
-        if self.instances.find(&key, now).is_none() {
+        let now = self.pool.now();
+        if self.pool.table.find(&key, now).is_none() {
             let ts = monitor.clock();
-            let slot = self.insert_instance(key, monitor, now);
+            let slot = self.pool.insert(key, monitor, now, self.lane.as_deref());
             self.schedule(slot, ts);
         }
     }
@@ -779,7 +618,7 @@ impl Processor {
     ) -> Result<(), String> {
         let bindings = binding::bindings(&program)?;
         self.end_of_read();
-        for inst in self.instances.values_mut() {
+        for inst in self.pool.table.values_mut() {
             inst.monitor = carry(&inst.monitor);
         }
         self.emitter.encodings = encode::encodings(&program);
@@ -791,7 +630,7 @@ impl Processor {
         // The new program's delays: queue every instance afresh (a reload is rare).
         self.deadlines.clear();
         let (at, lateness) = (Wall::now().at, self.lateness());
-        for (slot, inst) in self.instances.slots_mut() {
+        for (slot, inst) in self.pool.table.slots_mut() {
             inst.queued = None;
             if inst.anchor.is_none() {
                 let ts = inst.monitor.clock();
@@ -825,40 +664,6 @@ impl Processor {
             ));
         }
         s
-    }
-}
-
-impl Emitter {
-    /// Write the collected events as metrics, one group per timestamp.
-    fn emit(&mut self, tags: &[(String, String)], counters: &mut Counters, out: &mut Vec<u8>) {
-        if self.events.is_empty() {
-            return;
-        }
-        let mut rest = &self.events[..];
-        while let Some(&(ts, _, _)) = rest.first() {
-            // One timestamp's events, encoded in place.
-            let n = rest.iter().take_while(|e| e.0 == ts).count();
-            let (step, tail) = rest.split_at(n);
-            rest = tail;
-            counters.outputs += step.len() as u64;
-            let dropped = encode::encode_step_with(
-                &mut self.encode,
-                ts,
-                step,
-                &self.encodings,
-                &self.measurement,
-                tags,
-                out,
-            );
-            for d in dropped {
-                counters.dropped_values += 1;
-                log::warn_limited("output value", || {
-                    format!("output `{}` at {ts}: {}; field dropped", d.output, d.reason)
-                });
-            }
-        }
-        // Keep the buffer's capacity for the next step.
-        self.events.clear();
     }
 }
 

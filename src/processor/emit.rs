@@ -1,0 +1,55 @@
+//! Writing a step's outputs: the events an instance's monitor produced in one step, collected
+//! and encoded as metrics, one group per timestamp, with the instance's tags.
+
+use super::Counters;
+use crate::log;
+use crate::telegraf::encode::{self, Encoding};
+use tessla_engine::Value;
+
+/// What writing a step's outputs needs, apart from the instance.
+pub(super) struct Emitter {
+    pub(super) encodings: Vec<Encoding>,
+    pub(super) measurement: String,
+    pub(super) events: Vec<(i64, usize, Value)>,
+    /// Scratch: the encoder's buffers.
+    pub(super) encode: encode::Scratch,
+}
+
+impl Emitter {
+    /// Write the collected events as metrics, one group per timestamp.
+    pub(super) fn emit(
+        &mut self,
+        tags: &[(String, String)],
+        counters: &mut Counters,
+        out: &mut Vec<u8>,
+    ) {
+        if self.events.is_empty() {
+            return;
+        }
+        let mut rest = &self.events[..];
+        while let Some(&(ts, _, _)) = rest.first() {
+            // One timestamp's events, encoded in place.
+            let n = rest.iter().take_while(|e| e.0 == ts).count();
+            let (step, tail) = rest.split_at(n);
+            rest = tail;
+            counters.outputs += step.len() as u64;
+            let dropped = encode::encode_step_with(
+                &mut self.encode,
+                ts,
+                step,
+                &self.encodings,
+                &self.measurement,
+                tags,
+                out,
+            );
+            for d in dropped {
+                counters.dropped_values += 1;
+                log::warn_limited("output value", || {
+                    format!("output `{}` at {ts}: {}; field dropped", d.output, d.reason)
+                });
+            }
+        }
+        // Keep the buffer's capacity for the next step.
+        self.events.clear();
+    }
+}

@@ -1,0 +1,221 @@
+//! The processor's monitor instances: which instance a record belongs to (one, or one per value
+//! of the `--instance-by` tags), creating it with the tags its output lines carry (the static
+//! `--tag`s and its instance tags), and evicting past `--max-instances` (this thread's share)
+//! or after `--instance-idle`. The step watchdog learns each instance's name here.
+
+use super::clock::Anchor;
+use super::instances::{Key, Table};
+use super::{Counters, Options};
+use crate::log;
+use crate::watchdog::Lane;
+use lineproto::Metric;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tessla_engine::{Monitor, Program};
+
+/// One monitor and the tags its output lines carry (static tags and instance tags).
+pub(super) struct Instance {
+    pub(super) monitor: Monitor,
+    pub(super) tags: Vec<(String, String)>,
+    pub(super) recent: super::dedup::Recent,
+    /// Never reused: tells this instance's queued deadlines from a former occupant's of its slot.
+    pub(super) id: u64,
+    /// The instance's last record (or its restore): where its silent time is measured from.
+    pub(super) anchor: Option<Anchor>,
+    /// When its next `delay` firing falls due by the wall clock.
+    pub(super) deadline: Option<Instant>,
+    /// The deadline of its entry in the queue, if it has one.
+    pub(super) queued: Option<Instant>,
+}
+
+/// The instances and the rules they live by.
+pub(super) struct Pool {
+    pub(super) table: Table<Instance>,
+    /// `--instance-by`.
+    pub(super) by: Vec<String>,
+    /// `--tag`s.
+    tags: Vec<(String, String)>,
+    /// `--instance-idle`.
+    idle: Option<Duration>,
+    /// `--max-instances`: the most kept over all threads.
+    pub(super) total: usize,
+    /// Most instances kept here: the total, or this thread's share of it.
+    pub(super) keep: usize,
+    /// The slot of the only instance, when there is one that is never evicted.
+    single: Option<usize>,
+    /// Stands in for "now" when no idle limit needs the clock.
+    epoch: Instant,
+    next_id: u64,
+}
+
+impl Pool {
+    pub(super) fn new(opts: &Options) -> Pool {
+        Pool {
+            table: Table::default(),
+            by: opts.instance_by.clone(),
+            tags: opts.tags.clone(),
+            idle: opts.instance_idle,
+            total: opts.max_instances,
+            keep: opts.max_instances.max(1),
+            single: None,
+            epoch: Instant::now(),
+            next_id: 0,
+        }
+    }
+
+    /// The time instances are used at: the wall clock with `--instance-idle`, a constant
+    /// without (no clock read per record).
+    pub(super) fn now(&self) -> Instant {
+        if self.idle.is_some() {
+            Instant::now()
+        } else {
+            self.epoch
+        }
+    }
+
+    /// Name every instance in `lane` (the watchdog's, set after instances were restored).
+    pub(super) fn name_all(&self, lane: &Lane) {
+        if self.by.is_empty() {
+            return;
+        }
+        for (key, &slot) in self.table.keys() {
+            lane.name(slot, describe(&self.by, key));
+        }
+    }
+
+    /// The instance for `m`, created (starting at `ts`) when new.
+    pub(super) fn slot_for(
+        &mut self,
+        m: &Metric,
+        ts: i64,
+        now: Instant,
+        program: &Arc<Program>,
+        counters: &mut Counters,
+        lane: Option<&Lane>,
+    ) -> usize {
+        // One instance that is never evicted: skip the lookup.
+        if let Some(i) = self.single {
+            return i;
+        }
+        let key = key_of(&self.by, m);
+        if let Some(i) = self.table.find(&key, now) {
+            return i;
+        }
+        counters.instances += 1;
+        let monitor = Monitor::starting_at(program.clone(), ts);
+        self.insert(key, monitor, now, lane)
+    }
+
+    /// Add instance `key` (absent from the table) running `monitor`; returns its slot.
+    pub(super) fn insert(
+        &mut self,
+        key: Key,
+        monitor: Monitor,
+        now: Instant,
+        lane: Option<&Lane>,
+    ) -> usize {
+        let mut tags: Vec<(String, String)> = self
+            .tags
+            .iter()
+            .filter(|(k, _)| !self.by.contains(k))
+            .cloned()
+            .collect();
+        for (k, v) in self.by.iter().zip(&key) {
+            if let Some(v) = v {
+                tags.push((k.clone(), v.clone()));
+            }
+        }
+        if !self.by.is_empty() {
+            tags.sort();
+        }
+        self.next_id += 1;
+        let i = self.table.insert(
+            key,
+            Instance {
+                monitor,
+                tags,
+                recent: Default::default(),
+                id: self.next_id,
+                anchor: None,
+                deadline: None,
+                queued: None,
+            },
+            now,
+        );
+        if self.by.is_empty() && self.idle.is_none() {
+            self.single = Some(i);
+        }
+        if let Some(l) = lane
+            && let Some(key) = self.table.key(i)
+            && !self.by.is_empty()
+        {
+            l.name(i, describe(&self.by, key));
+        }
+        i
+    }
+
+    /// Evict instances past `--max-instances` or idle too long. Nothing is pending in an
+    /// instance between records (each record is evaluated at once); its armed `delay`s are
+    /// dropped with it (their queue entries go stale).
+    pub(super) fn evict(&mut self, now: Instant, counters: &mut Counters, lane: Option<&Lane>) {
+        let max = self.keep;
+        let total = self.total;
+        while let Some(i) = self.table.evictable(max, self.idle, now) {
+            let full = self.table.len() > max;
+            let Some((key, _)) = self.table.remove(i) else {
+                break;
+            };
+            if let Some(l) = lane {
+                l.forget(i);
+            }
+            counters.evicted += 1;
+            let by = &self.by;
+            log::warn_limited("instance evicted", || {
+                let why = if full {
+                    format!("least recently used, --max-instances {total}")
+                } else {
+                    "idle longer than --instance-idle".to_string()
+                };
+                let share = if full && max != total {
+                    format!(" (the threads share the total: this one keeps {max})")
+                } else {
+                    String::new()
+                };
+                format!(
+                    "monitor instance {} evicted ({why}); its state starts afresh with its next record{share}",
+                    describe(by, &key)
+                )
+            });
+        }
+    }
+}
+
+pub(super) fn describe(instance_by: &[String], key: &Key) -> String {
+    instance_by
+        .iter()
+        .zip(key)
+        .map(|(k, v)| format!("{k}={}", v.as_deref().unwrap_or("(absent)")))
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+/// The values of the `instance_by` tags in `m`.
+pub(super) fn key_of(instance_by: &[String], m: &Metric) -> Key {
+    instance_by
+        .iter()
+        .map(|t| m.tag(t).map(str::to_string))
+        .collect()
+}
+
+/// " (instance robot=a)" for the instance of `m`, or nothing without `--instance-by`. Built
+/// only inside a warning's closure: a rate-limited warning costs no allocation.
+pub(super) fn instance_note(instance_by: &[String], m: &Metric) -> String {
+    if instance_by.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " (instance {})",
+            describe(instance_by, &key_of(instance_by, m))
+        )
+    }
+}
