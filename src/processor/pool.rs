@@ -65,6 +65,7 @@ impl Pool {
 
     /// The time instances are used at: the wall clock with `--instance-idle`, a constant
     /// without (no clock read per record).
+    #[inline]
     pub(super) fn now(&self) -> Instant {
         if self.idle.is_some() {
             Instant::now()
@@ -84,6 +85,7 @@ impl Pool {
     }
 
     /// The instance for `m`, created (starting at `ts`) when new.
+    #[inline]
     pub(super) fn slot_for(
         &mut self,
         m: &Metric,
@@ -157,7 +159,17 @@ impl Pool {
     /// Evict instances past `--max-instances` or idle too long. Nothing is pending in an
     /// instance between records (each record is evaluated at once); its armed `delay`s are
     /// dropped with it (their queue entries go stale).
+    #[inline]
     pub(super) fn evict(&mut self, now: Instant, counters: &mut Counters, lane: Option<&Lane>) {
+        // Most records: below the limit and no idle limit, nothing to look at.
+        if self.idle.is_none() && self.table.len() <= self.keep {
+            return;
+        }
+        self.evict_some(now, counters, lane);
+    }
+
+    #[inline(never)]
+    fn evict_some(&mut self, now: Instant, counters: &mut Counters, lane: Option<&Lane>) {
         let max = self.keep;
         let total = self.total;
         while let Some(i) = self.table.evictable(max, self.idle, now) {
