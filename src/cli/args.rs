@@ -134,6 +134,11 @@ pub struct RunArgs {
     pub spec: Option<PathBuf>,
     #[command(flatten)]
     pub spec_options: SpecOptions,
+    /// Exit with code 4 when one step (evaluating a record or a fallen-due delay, and writing its
+    /// outputs) makes no progress for this long, so that Telegraf restarts the monitor: Telegraf
+    /// never restarts a child that is alive, and blocks on its full stdin pipe. `0` disables.
+    #[arg(long, value_name = "DURATION", default_value = "10s", value_parser = humantime::parse_duration)]
+    pub step_timeout: std::time::Duration,
     #[command(flatten)]
     pub time: TimeArgs,
     #[command(flatten)]
@@ -144,15 +149,11 @@ pub struct RunArgs {
     pub state: StateArgs,
     #[command(flatten)]
     pub output: OutputArgs,
-    /// Exit with code 4 when one step (evaluating a record or a fallen-due delay, and writing its
-    /// outputs) makes no progress for this long, so that Telegraf restarts the monitor: Telegraf
-    /// never restarts a child that is alive, and blocks on its full stdin pipe. `0` disables.
-    #[arg(long, value_name = "DURATION", default_value = "10s", value_parser = humantime::parse_duration)]
-    pub step_timeout: std::time::Duration,
 }
 
 /// Time: late records, clocks ahead, and how far an instance's time follows the wall clock.
 #[derive(Debug, Args, Clone, Default)]
+#[command(next_help_heading = "Time")]
 pub struct TimeArgs {
     /// What to do with a record stamped before its instance's last step (README, "Time"): a
     /// step of its own 1 ns after it, or dropped. A record with the same timestamp as the last
@@ -174,6 +175,7 @@ pub struct TimeArgs {
 
 /// Instances: one monitor per robot, how many, for how long, on how many threads.
 #[derive(Debug, Args, Clone, Default)]
+#[command(next_help_heading = "Instances")]
 pub struct InstanceArgs {
     /// One monitor instance per distinct value of these tags (`--instance-by topic` or
     /// `--instance-by robot,site`); every output line carries them. Default: one instance.
@@ -199,6 +201,7 @@ pub struct InstanceArgs {
 
 /// Transport: stdin/stdout (Telegraf's execd) unless UDP mode is asked for.
 #[derive(Debug, Args, Clone, Default)]
+#[command(next_help_heading = "Transport (UDP)")]
 pub struct TransportArgs {
     /// UDP mode (the TeSSLa Telegraf Connector's wiring): receive line protocol on this address.
     #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:1653")]
@@ -213,6 +216,7 @@ pub struct TransportArgs {
 
 /// State: where the monitors' state is kept between runs, and how often it is saved.
 #[derive(Debug, Args, Clone, Default)]
+#[command(next_help_heading = "State")]
 pub struct StateArgs {
     /// Save every monitor instance's state to FILE on shutdown (EOF, SIGTERM, SIGINT) and
     /// continue from it at start, so a Telegraf restart or reload keeps the monitors' state.
@@ -228,6 +232,7 @@ pub struct StateArgs {
 
 /// Output: what is written besides the verdicts, and how they are named.
 #[derive(Debug, Args, Clone, Default)]
+#[command(next_help_heading = "Output")]
 pub struct OutputArgs {
     /// Do not echo input records (by default each is written back unchanged before its outputs;
     /// never in UDP mode).
