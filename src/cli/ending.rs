@@ -45,7 +45,7 @@ const DRAIN_BOUND: Duration = Duration::from_secs(2);
 /// once the child has exited (`Cmd.Wait`), so lines still unread when we exit would be lost:
 /// the last outputs, and the summary on stderr. Polls the bytes unread in each pipe
 /// (`FIONREAD`), first every 0.2 ms, backing off to every 10 ms; a stream that is no pipe, or
-/// whose count cannot be read, is not waited for. Once both are read, [`hand_over_pipes`].
+/// whose count cannot be read, is not waited for. Once both are read, the pipes are handed over (`hand_over_pipes`).
 pub fn wait_until_read(bound: Duration) {
     use rustix::fs::FileType;
     let is_pipe = |fd: &dyn std::os::fd::AsFd| {

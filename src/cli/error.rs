@@ -22,7 +22,7 @@ pub enum Code {
 }
 
 /// A subcommand's failure: the exit code and what to tell the user (written to stderr by
-/// [`main`], in the subcommand's style: `E! ` lines or plain text).
+/// `cli::main`, in the subcommand's style: `E! ` lines or plain text).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct CliError {
     pub code: Code,

@@ -65,7 +65,7 @@ pub struct ReplayArgs {
     /// MQTT quality of service: 0, 1 (default: every message acknowledged by the broker) or 2.
     #[arg(long, default_value_t = 1)]
     pub qos: u8,
-    /// MQTT client id (default: tessla-replay-<pid>).
+    /// MQTT client id (default: `tessla-replay-<pid>`).
     #[arg(long)]
     pub client_id: Option<String>,
     /// Log in to the broker as this user (its password: --password-env).

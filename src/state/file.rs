@@ -82,7 +82,7 @@ fn encode_instances(
 ///
 /// The instances are snapshotted and encoded on up to as many threads as the machine has cores
 /// (each a contiguous run of them, so the file lists them in the same order, least recently used
-/// first), then written in one pass: the bytes are those of [`StateFile`] serialised whole.
+/// first), then written in one pass: the bytes are those of `StateFile` serialised whole.
 pub fn save(path: &Path, proc: &Processor, ctx: &Context) -> io::Result<usize> {
     let program = proc.program();
     let keys = snapshot::node_keys(program);

@@ -1,4 +1,4 @@
-//! Where monitor state is kept between runs and across a fleet: `--state FILE` ([`file`]) or a
+//! Where monitor state is kept between runs and across a fleet: `--state FILE` ([`file`](mod@file)) or a
 //! shared NATS key-value bucket ([`nats`], with the partition [`lease`]), outside the Telegraf
 //! binding. Both store the same entry format ([`entry`]: magic, format version, and the
 //! fingerprint of what the state is valid for).
@@ -73,7 +73,7 @@ pub fn fingerprint(program: &Program, ctx: &Context) -> String {
     format!("{h:016x}")
 }
 
-/// Where the state of a run is kept: a file ([`FileBackend`]) or a shared bucket
+/// Where the state of a run is kept: a file ([`file::FileBackend`]) or a shared bucket
 /// ([`nats::NatsBackend`]). The step loop calls these at its save points.
 pub trait Backend {
     /// What to name in messages (the file's path, the bucket's URL).

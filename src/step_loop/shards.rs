@@ -1,4 +1,4 @@
-//! Stepping one read's records on one thread or spread over several ([`Shards`]).
+//! Stepping one read's records on one thread or spread over several (`Shards`).
 //!
 //! With `--threads N` and `--instance-by`, instances are spread over N threads: each read's
 //! records are routed by instance key (one instance always to the same thread), every thread
@@ -7,7 +7,7 @@
 //! before the next read. Each instance's outputs keep their order; the order between instances
 //! within one read follows the threads. The records are handed over in one reused byte buffer
 //! per thread (no allocation per record). A thread waiting for the other side spins briefly
-//! before it sleeps ([`SPIN`]): waking a sleeping thread costs more than the wait between two
+//! before it sleeps (`SPIN`): waking a sleeping thread costs more than the wait between two
 //! reads while records flow.
 
 use crate::processor::Processor;

@@ -65,7 +65,7 @@ impl Source for Input {
         Ok((n > 0).then_some(n))
     }
 
-    /// [`BUF`] on one thread (larger reads made it slower: the buffers leave the caches);
+    /// `BUF` on one thread (larger reads made it slower: the buffers leave the caches);
     /// with worker threads, a pipe enlarged to [`THREADS_BUF`] and read that much at a time:
     /// each read ends with every thread waiting for the slowest, and how many of the read's
     /// records each thread got varies from read to read, so fewer, larger reads lose less to
