@@ -70,31 +70,6 @@ pub struct Dropped {
     pub reason: String,
 }
 
-/// The leaves of a record or tuple value with their member paths (`a.b`, `_1`), in field order;
-/// any other value is its own leaf with the empty path.
-fn members<'v>(v: &'v Value, path: String, out: &mut Vec<(String, &'v Value)>) {
-    let join = |name: &str| {
-        if path.is_empty() {
-            name.to_string()
-        } else {
-            format!("{path}.{name}")
-        }
-    };
-    match v {
-        Value::Record(fs) if !fs.is_empty() => {
-            for (k, x) in fs.iter() {
-                members(x, join(k), out);
-            }
-        }
-        Value::Tuple(xs) if !xs.is_empty() => {
-            for (i, x) in xs.iter().enumerate() {
-                members(x, join(&format!("_{}", i + 1)), out);
-            }
-        }
-        _ => out.push((path, v)),
-    }
-}
-
 fn field_value(v: &Value) -> Result<Option<FieldValue>, String> {
     Ok(Some(match v {
         Value::Unit => FieldValue::Bool(true),
@@ -133,12 +108,13 @@ pub struct Scratch {
     /// The metric every output goes to, when there is one and its measurement is writable
     /// (the usual case: outputs without annotations).
     one_metric: Option<usize>,
-    /// Metrics in first-appearance order: (the encoding index that opened it, is a connector
-    /// metric); for a step of plain values, (its `metric` index, unused).
+    /// The step's metrics in first-appearance order: (its `metric` index, whether values
+    /// without a line-protocol form are reported while it is written: the one-metric case).
     groups: Vec<(usize, bool)>,
-    /// Every written field: (its metric's position in `groups`, its encoding index, its value,
-    /// the member path when it is a member of a record or tuple output).
-    fields: Vec<(usize, usize, FieldValue, Option<String>)>,
+    /// The path of the record or tuple member being written (`a.b`, `_1`).
+    path: String,
+    /// A member's field key before escaping: the output's field and the member's path.
+    name: String,
     line: String,
 }
 
@@ -239,30 +215,15 @@ pub fn encode_step_with<E: StepEvent>(
                 && scratch.prepared.get(g).is_some_and(|p| p.0.is_some())
         });
     }
-    if events
-        .iter()
-        .any(|e| matches!(e.value(), Value::Record(_) | Value::Tuple(_)))
-    {
-        encode_members(
-            scratch,
-            ts,
-            events,
-            encodings,
-            default_measurement,
-            tags,
-            out,
-        )
-    } else {
-        encode_leaves(
-            scratch,
-            ts,
-            events,
-            encodings,
-            default_measurement,
-            tags,
-            out,
-        )
-    }
+    encode(
+        scratch,
+        ts,
+        events,
+        encodings,
+        default_measurement,
+        tags,
+        out,
+    )
 }
 
 /// Per encoding, the first encoding index of the metric its fields go to.
@@ -311,9 +272,54 @@ fn write_leaf(line: &mut String, v: &Value) {
     }
 }
 
-/// [`encode_step_with`] for a step without record or tuple values (every value is one field):
-/// metrics told apart by index, values written straight into the line.
-fn encode_leaves<E: StepEvent>(
+/// Calls `f` with each leaf of `v` and its member path (`a.b`, `_1`; empty for a value that is
+/// not a record or tuple: the value is its own leaf), in field order. Scalars, the usual case,
+/// go straight to `f`; `path` is a buffer for the members' paths (empty on entry and on return).
+#[inline(always)]
+fn each_leaf<'v>(v: &'v Value, path: &mut String, f: &mut impl FnMut(&str, &'v Value)) {
+    match v {
+        Value::Record(fs) if !fs.is_empty() => each_member(v, path, f),
+        Value::Tuple(xs) if !xs.is_empty() => each_member(v, path, f),
+        _ => f("", v),
+    }
+}
+
+/// [`each_leaf`] for a record or tuple (rare): its members, depth first.
+#[inline(never)]
+fn each_member<'v>(v: &'v Value, path: &mut String, f: &mut impl FnMut(&str, &'v Value)) {
+    let at = path.len();
+    let mut member = |path: &mut String, name: std::fmt::Arguments<'_>, x: &'v Value| {
+        use std::fmt::Write as _;
+        if at > 0 {
+            path.push('.');
+        }
+        let _ = path.write_fmt(name);
+        match x {
+            Value::Record(fs) if !fs.is_empty() => each_member(x, path, f),
+            Value::Tuple(xs) if !xs.is_empty() => each_member(x, path, f),
+            _ => f(path, x),
+        }
+        path.truncate(at);
+    };
+    match v {
+        Value::Record(fs) => {
+            for (k, x) in fs.iter() {
+                member(path, format_args!("{k}"), x);
+            }
+        }
+        Value::Tuple(xs) => {
+            for (i, x) in xs.iter().enumerate() {
+                member(path, format_args!("_{}", i + 1), x);
+            }
+        }
+        _ => f(path, v),
+    }
+}
+
+/// [`encode_step_with`] once the encodings are prepared: metrics told apart by index, values
+/// written straight into the line. A value is one field; a record or tuple is one field per
+/// member, named by the output's field and the member's path (the path alone for a connector).
+fn encode<E: StepEvent>(
     scratch: &mut Scratch,
     ts: i64,
     events: &[E],
@@ -328,15 +334,21 @@ fn encode_leaves<E: StepEvent>(
         metric,
         one_metric,
         groups,
+        path,
+        name,
         line,
-        ..
     } = scratch;
-    // Why a value without a line-protocol form is dropped.
-    let drop_value = |dropped: &mut Vec<Dropped>, idx: usize, v: &Value| {
+    // Why a value (or a member, named by its path) without a line-protocol form is dropped.
+    let drop_value = |dropped: &mut Vec<Dropped>, idx: usize, path: &str, v: &Value| {
         if let (Err(reason), Some(enc)) = (field_value(v), encodings.get(idx)) {
             let (measurement, field, connector) = target(enc, default_measurement);
+            let output = if connector { measurement } else { field };
             dropped.push(Dropped {
-                output: (if connector { measurement } else { field }).to_string(),
+                output: if path.is_empty() {
+                    output.to_string()
+                } else {
+                    format!("{output}.{path}")
+                },
                 reason,
             });
         }
@@ -352,14 +364,13 @@ fn encode_leaves<E: StepEvent>(
             let Some(&g) = metric.get(idx) else {
                 continue;
             };
-            let v = e.value();
-            if writable_leaf(v).is_none() {
-                drop_value(&mut dropped, idx, v);
-                continue;
-            }
-            if !groups.iter().any(|&(m, _)| m == g) {
-                groups.push((g, false));
-            }
+            each_leaf(e.value(), path, &mut |p, v| {
+                if writable_leaf(v).is_none() {
+                    drop_value(&mut dropped, idx, p, v);
+                } else if !groups.iter().any(|&(m, _)| m == g) {
+                    groups.push((g, false));
+                }
+            });
         }
     }
     for &(g, report) in groups.iter() {
@@ -373,136 +384,38 @@ fn encode_leaves<E: StepEvent>(
             if metric.get(idx) != Some(&g) {
                 continue;
             }
-            match (writable_leaf(e.value()), prepared.get(idx)) {
-                (Some(v), Some((_, Some(key)))) => {
-                    line.push(sep);
-                    line.push_str(key);
-                    write_leaf(line, v);
-                    sep = ',';
-                }
-                (None, _) if report => drop_value(&mut dropped, idx, e.value()),
-                _ => {}
-            }
-        }
-        if sep == ',' {
-            end_line(line, ts, out);
-        }
-    }
-    dropped
-}
-
-/// [`encode_step_with`] for a step with record or tuple values (one field per member).
-fn encode_members<E: StepEvent>(
-    scratch: &mut Scratch,
-    ts: i64,
-    events: &[E],
-    encodings: &[Encoding],
-    default_measurement: &str,
-    tags: &[(String, String)],
-    out: &mut Vec<u8>,
-) -> Vec<Dropped> {
-    let mut dropped = Vec::new();
-    let Scratch {
-        prepared,
-        groups,
-        fields,
-        line,
-        ..
-    } = scratch;
-    groups.clear();
-    fields.clear();
-    for e in events {
-        let (idx, v) = (&e.output(), e.value());
-        let Some(enc) = encodings.get(*idx) else {
-            continue;
-        };
-        let (measurement, field, connector) = target(enc, default_measurement);
-        // Records and tuples (rare) are split into members; other values are one leaf, without
-        // allocating on the hot path.
-        let mut compound = Vec::new();
-        if matches!(v, Value::Record(_) | Value::Tuple(_)) {
-            members(v, String::new(), &mut compound);
-        }
-        let single = [(String::new(), v)];
-        let leaves: &[(String, &Value)] = if compound.is_empty() {
-            &single
-        } else {
-            &compound
-        };
-        for (path, v) in leaves {
-            match field_value(v) {
-                Ok(None) => {}
-                Ok(Some(fv)) => {
-                    let found = if connector {
-                        // One metric per output and step: a record's members share it.
-                        groups.iter().position(|&(g, c)| c && g == *idx)
+            let key = match prepared.get(idx) {
+                Some((_, Some(key))) => Some(key.as_str()),
+                _ => None,
+            };
+            each_leaf(e.value(), path, &mut |p, v| match (writable_leaf(v), key) {
+                (Some(v), Some(key)) => {
+                    if p.is_empty() {
+                        line.push(sep);
+                        line.push_str(key);
                     } else {
-                        groups.iter().position(|&(g, c)| {
-                            !c && encodings
-                                .get(g)
-                                .is_some_and(|e| target(e, default_measurement).0 == measurement)
-                        })
-                    };
-                    let g = found.unwrap_or_else(|| {
-                        groups.push((*idx, connector));
-                        groups.len() - 1
-                    });
-                    fields.push((g, *idx, fv, (!path.is_empty()).then(|| path.clone())));
-                }
-                Err(reason) => dropped.push(Dropped {
-                    output: format!(
-                        "{}{}{path}",
-                        if connector { measurement } else { field },
-                        if path.is_empty() { "" } else { "." }
-                    ),
-                    reason,
-                }),
-            }
-        }
-    }
-    for (g, &(first, _)) in groups.iter().enumerate() {
-        let Some((Some(measurement), _)) = prepared.get(first) else {
-            continue;
-        };
-        start_line(line, measurement, tags);
-        let mut sep = ' ';
-        for (_, i, v, path) in fields.iter().filter(|f| f.0 == g) {
-            if let Some((_, Some(key))) = prepared.get(*i) {
-                // A record member's key: the output's field and the member's path.
-                let member = match path {
-                    None => None,
-                    Some(path) => {
-                        let Some(enc) = encodings.get(*i) else {
-                            continue;
-                        };
-                        let (_, field, connector) = target(enc, default_measurement);
-                        let name = if connector {
-                            path.clone()
-                        } else {
-                            format!("{field}.{path}")
-                        };
-                        if !lineproto::name_is_writable(&name) {
-                            continue;
+                        // A member's key: the output's field and the member's path.
+                        name.clear();
+                        if let Some(Encoding::Field { field, .. } | Encoding::Default(field)) =
+                            encodings.get(idx)
+                        {
+                            name.push_str(field);
+                            name.push('.');
                         }
-                        Some(name)
-                    }
-                };
-                let start = line.len();
-                // Values are finite here (field_value refuses the others).
-                line.push(sep);
-                match &member {
-                    None => line.push_str(key),
-                    Some(name) => {
+                        name.push_str(p);
+                        if !lineproto::name_is_writable(name) {
+                            return;
+                        }
+                        line.push(sep);
                         lineproto::write_field_key(line, name);
                         line.push('=');
                     }
-                }
-                if lineproto::write_value(line, v).is_ok() {
+                    write_leaf(line, v);
                     sep = ',';
-                } else {
-                    line.truncate(start);
                 }
-            }
+                (None, _) if report => drop_value(&mut dropped, idx, p, v),
+                _ => {}
+            });
         }
         if sep == ',' {
             end_line(line, ts, out);
@@ -619,26 +532,38 @@ mod tests {
             (3, Value::None),
             (0, Value::Float(f64::NAN)),
         ];
-        let mut expected = Vec::new();
+        let (mut expected, mut expected_members) = (Vec::new(), Vec::new());
         let groups: [(&str, &[(usize, &str)]); 3] = [
             ("tessla", &[(0, "a b"), (1, "c,d=e"), (4, "\\\\")]),
             ("act ion", &[(2, "speed"), (6, "s=\\")]),
             ("verdict", &[(3, "value")]),
         ];
         for (m, fs) in groups {
-            let mut w = LineWriter::new(m);
-            for (k, v) in &tags {
-                w.tag(k, v);
-            }
-            for (i, f) in fs {
-                if let Some((_, v)) = events.iter().find(|e| e.0 == *i)
-                    && let Ok(Some(fv)) = field_value(v)
-                {
-                    w.field(f, &fv);
+            for wrapped in [false, true] {
+                let mut w = LineWriter::new(m);
+                for (k, v) in &tags {
+                    w.tag(k, v);
                 }
-            }
-            if let (Some(l), _) = w.finish(Some(42)) {
-                expected.extend_from_slice(l.as_bytes());
+                for (i, f) in fs {
+                    let key = match (wrapped, m) {
+                        (false, _) => f.to_string(),
+                        (true, "verdict") => "v".to_string(),
+                        (true, _) => format!("{f}.v"),
+                    };
+                    if let Some((_, v)) = events.iter().find(|e| e.0 == *i)
+                        && let Ok(Some(fv)) = field_value(v)
+                    {
+                        w.field(&key, &fv);
+                    }
+                }
+                if let (Some(l), _) = w.finish(Some(42)) {
+                    let to = if wrapped {
+                        &mut expected_members
+                    } else {
+                        &mut expected
+                    };
+                    to.extend_from_slice(l.as_bytes());
+                }
             }
         }
         let mut scratch = Scratch::default();
@@ -658,27 +583,38 @@ mod tests {
                 String::from_utf8_lossy(&expected)
             );
             assert_eq!(d.len(), 1, "{d:?}");
-            // The general path (records and tuples) writes the same for these plain values.
-            let mut general = Vec::new();
-            let dg = encode_members(
+            // Record-wrapped, each value is a one-member record: one field `field.v` (a
+            // connector's: `v`) with the same value, in the same metrics.
+            let wrapped: Vec<(usize, Value)> = events
+                .iter()
+                .map(|(i, v)| {
+                    (
+                        *i,
+                        Value::Record(Arc::from(vec![(Arc::from("v"), v.clone())])),
+                    )
+                })
+                .collect();
+            let mut members = Vec::new();
+            let dm = encode_step_with(
                 &mut scratch,
                 42,
-                &events,
+                &wrapped,
                 &encodings,
                 "tessla",
                 &tags,
-                &mut general,
+                &mut members,
             );
             assert_eq!(
-                String::from_utf8_lossy(&general),
-                String::from_utf8_lossy(&out)
+                String::from_utf8_lossy(&members),
+                String::from_utf8_lossy(&expected_members)
             );
-            assert_eq!(dg, d);
+            assert_eq!(dm.len(), 1, "{dm:?}");
+            assert_eq!(dm[0].output, format!("{}.v", d[0].output));
         }
     }
 
     /// Outputs that all go to one metric (no annotations): the line and the dropped values, in
-    /// event order, are those of the general path.
+    /// event order, are those of the general path (the metrics found first).
     #[test]
     fn one_metric_steps_match_the_general_path() {
         let encodings: Vec<Encoding> = ["a", "b", "c", "d", "e"]
@@ -702,7 +638,9 @@ mod tests {
         for events in &steps {
             let (mut fast, mut general) = (Vec::new(), Vec::new());
             let d = encode_step_with(&mut scratch, 5, events, &encodings, "m", &[], &mut fast);
-            let dg = encode_members(&mut scratch, 5, events, &encodings, "m", &[], &mut general);
+            let one_metric = scratch.one_metric.take();
+            let dg = encode_step_with(&mut scratch, 5, events, &encodings, "m", &[], &mut general);
+            scratch.one_metric = one_metric;
             assert_eq!(
                 String::from_utf8_lossy(&fast),
                 String::from_utf8_lossy(&general)
