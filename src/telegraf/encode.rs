@@ -101,7 +101,7 @@ fn field_value(v: &Value) -> Result<Option<FieldValue>, String> {
 pub struct Scratch {
     /// Per encoding: its measurement escaped (`None`: not writable) and `key=` escaped
     /// (`None`: not writable).
-    prepared: Vec<(Option<String>, Option<String>)>,
+    prepared: Vec<Prepared>,
     /// Per encoding: the metric its fields go to, as the first encoding index of that metric
     /// (a connector output is its own metric; the others share one per measurement).
     metric: Vec<usize>,
@@ -113,10 +113,13 @@ pub struct Scratch {
     groups: Vec<(usize, bool)>,
     /// The path of the record or tuple member being written (`a.b`, `_1`).
     path: String,
-    /// A member's field key before escaping: the output's field and the member's path.
+    /// A member's field key before escaping (see [`Writer`]).
     name: String,
     line: String,
 }
+
+/// An encoding's measurement escaped and its field key escaped with `=` (`None`: not writable).
+type Prepared = (Option<String>, Option<String>);
 
 /// Measurement, field key and whether it is a connector metric, for one encoding.
 fn target<'a>(enc: &'a Encoding, default_measurement: &'a str) -> (&'a str, &'a str, bool) {
@@ -127,7 +130,7 @@ fn target<'a>(enc: &'a Encoding, default_measurement: &'a str) -> (&'a str, &'a 
     }
 }
 
-fn prepare(enc: &Encoding, default_measurement: &str) -> (Option<String>, Option<String>) {
+fn prepare(enc: &Encoding, default_measurement: &str) -> Prepared {
     let (measurement, field, _) = target(enc, default_measurement);
     let m = lineproto::measurement_is_writable(measurement).then(|| {
         let mut s = String::new();
@@ -272,21 +275,19 @@ fn write_leaf(line: &mut String, v: &Value) {
     }
 }
 
-/// Calls `f` with each leaf of `v` and its member path (`a.b`, `_1`; empty for a value that is
-/// not a record or tuple: the value is its own leaf), in field order. Scalars, the usual case,
-/// go straight to `f`; `path` is a buffer for the members' paths (empty on entry and on return).
+/// Whether `v` is a record or tuple with members: written as one field per member.
 #[inline(always)]
-fn each_leaf<'v>(v: &'v Value, path: &mut String, f: &mut impl FnMut(&str, &'v Value)) {
+fn has_members(v: &Value) -> bool {
     match v {
-        Value::Record(fs) if !fs.is_empty() => each_member(v, path, f),
-        Value::Tuple(xs) if !xs.is_empty() => each_member(v, path, f),
-        _ => f("", v),
+        Value::Record(fs) => !fs.is_empty(),
+        Value::Tuple(xs) => !xs.is_empty(),
+        _ => false,
     }
 }
 
-/// [`each_leaf`] for a record or tuple (rare): its members, depth first.
-#[inline(never)]
-fn each_member<'v>(v: &'v Value, path: &mut String, f: &mut impl FnMut(&str, &'v Value)) {
+/// Calls `f` with each leaf member of `v` (see [`has_members`]) and its path (`a.b`, `_1`),
+/// depth first, in field order. `path` is a buffer, empty on entry and on return.
+fn each_member<'v>(v: &'v Value, path: &mut String, f: &mut dyn FnMut(&str, &'v Value)) {
     let at = path.len();
     let mut member = |path: &mut String, name: std::fmt::Arguments<'_>, x: &'v Value| {
         use std::fmt::Write as _;
@@ -294,10 +295,10 @@ fn each_member<'v>(v: &'v Value, path: &mut String, f: &mut impl FnMut(&str, &'v
             path.push('.');
         }
         let _ = path.write_fmt(name);
-        match x {
-            Value::Record(fs) if !fs.is_empty() => each_member(x, path, f),
-            Value::Tuple(xs) if !xs.is_empty() => each_member(x, path, f),
-            _ => f(path, x),
+        if has_members(x) {
+            each_member(x, path, &mut *f);
+        } else {
+            f(path, x);
         }
         path.truncate(at);
     };
@@ -316,9 +317,153 @@ fn each_member<'v>(v: &'v Value, path: &mut String, f: &mut impl FnMut(&str, &'v
     }
 }
 
+/// Writing one step: its encodings, the line of the metric being written, the dropped values.
+/// A leaf is an output's value, or a member of a record or tuple value (named by its path).
+/// The record path works on a [`Writer::reborrow`], so that this one never leaves the encoder
+/// and stays in registers.
+struct Writer<'a> {
+    encodings: &'a [Encoding],
+    default_measurement: &'a str,
+    line: &'a mut String,
+    /// A member's field key before escaping: the output's field and the member's path.
+    name: &'a mut String,
+    dropped: &'a mut Vec<Dropped>,
+    /// What goes before the next field: ' ' (none written yet) or ','.
+    sep: char,
+    /// Leaves without a line-protocol form are reported while the line is written (the
+    /// one-metric case; otherwise while the metrics are found).
+    report: bool,
+}
+
+impl Writer<'_> {
+    /// A writer on the same line and buffers; its `sep` goes back to this one after use.
+    #[inline(always)]
+    fn reborrow(&mut self) -> Writer<'_> {
+        Writer {
+            encodings: self.encodings,
+            default_measurement: self.default_measurement,
+            line: self.line,
+            name: self.name,
+            dropped: self.dropped,
+            sep: self.sep,
+            report: self.report,
+        }
+    }
+
+    /// Leaf `v` of output `idx` opens metric `g` (first appearance order) when it has a
+    /// line-protocol form (`leaf`: its [`writable_leaf`]), else it is dropped.
+    #[inline(always)]
+    fn open(
+        &mut self,
+        groups: &mut Vec<(usize, bool)>,
+        g: usize,
+        idx: usize,
+        path: &str,
+        v: &Value,
+        leaf: Option<&Value>,
+    ) {
+        if leaf.is_none() {
+            self.drop_value(idx, path, v);
+        } else if !groups.iter().any(|&(m, _)| m == g) {
+            groups.push((g, false));
+        }
+    }
+
+    /// Append leaf `v` of output `idx` (`leaf`: its [`writable_leaf`]) to the line; `key` is the
+    /// output's prepared names (the field key escaped, with `=`; `None`: not writable).
+    #[inline(always)]
+    fn put(
+        &mut self,
+        idx: usize,
+        key: Option<&Prepared>,
+        path: &str,
+        v: &Value,
+        leaf: Option<&Value>,
+    ) {
+        match (leaf, key) {
+            (Some(v), Some((_, Some(key)))) => {
+                if path.is_empty() {
+                    self.line.push(self.sep);
+                    self.line.push_str(key);
+                } else {
+                    let field = match self.encodings.get(idx) {
+                        Some(Encoding::Field { field, .. } | Encoding::Default(field)) => {
+                            Some(field)
+                        }
+                        _ => None,
+                    };
+                    if !member_key(self.line, self.name, self.sep, field, path) {
+                        return;
+                    }
+                }
+                write_leaf(self.line, v);
+                self.sep = ',';
+            }
+            (None, _) if self.report => self.drop_value(idx, path, v),
+            _ => {}
+        }
+    }
+
+    #[inline(always)]
+    fn drop_value(&mut self, idx: usize, path: &str, v: &Value) {
+        let enc = self.encodings.get(idx);
+        drop_value(self.dropped, enc, self.default_measurement, path, v);
+    }
+}
+
+/// Append `sep`, a member's field key and `=`: the output's field and the member's path (the
+/// path alone for a connector, which has no `field`). False, with nothing appended, when the
+/// name is not writable. `name` is a buffer.
+#[inline(never)]
+fn member_key(
+    line: &mut String,
+    name: &mut String,
+    sep: char,
+    field: Option<&String>,
+    path: &str,
+) -> bool {
+    name.clear();
+    if let Some(field) = field {
+        name.push_str(field);
+        name.push('.');
+    }
+    name.push_str(path);
+    if !lineproto::name_is_writable(name) {
+        return false;
+    }
+    line.push(sep);
+    lineproto::write_field_key(line, name);
+    line.push('=');
+    true
+}
+
+/// Why a leaf (of the output encoded as `enc`) has no line-protocol form, if it has none: the
+/// output named by its field (a connector's by its measurement), a member by its path after a dot.
+#[inline(never)]
+fn drop_value(
+    dropped: &mut Vec<Dropped>,
+    enc: Option<&Encoding>,
+    default_measurement: &str,
+    path: &str,
+    v: &Value,
+) {
+    if let (Err(reason), Some(enc)) = (field_value(v), enc) {
+        let (measurement, field, connector) = target(enc, default_measurement);
+        let output = if connector { measurement } else { field };
+        dropped.push(Dropped {
+            output: if path.is_empty() {
+                output.to_string()
+            } else {
+                format!("{output}.{path}")
+            },
+            reason,
+        });
+    }
+}
+
 /// [`encode_step_with`] once the encodings are prepared: metrics told apart by index, values
 /// written straight into the line. A value is one field; a record or tuple is one field per
-/// member, named by the output's field and the member's path (the path alone for a connector).
+/// member (the rare case, off the scalar path).
 fn encode<E: StepEvent>(
     scratch: &mut Scratch,
     ts: i64,
@@ -328,7 +473,6 @@ fn encode<E: StepEvent>(
     tags: &[(String, String)],
     out: &mut Vec<u8>,
 ) -> Vec<Dropped> {
-    let mut dropped = Vec::new();
     let Scratch {
         prepared,
         metric,
@@ -338,20 +482,15 @@ fn encode<E: StepEvent>(
         name,
         line,
     } = scratch;
-    // Why a value (or a member, named by its path) without a line-protocol form is dropped.
-    let drop_value = |dropped: &mut Vec<Dropped>, idx: usize, path: &str, v: &Value| {
-        if let (Err(reason), Some(enc)) = (field_value(v), encodings.get(idx)) {
-            let (measurement, field, connector) = target(enc, default_measurement);
-            let output = if connector { measurement } else { field };
-            dropped.push(Dropped {
-                output: if path.is_empty() {
-                    output.to_string()
-                } else {
-                    format!("{output}.{path}")
-                },
-                reason,
-            });
-        }
+    let mut dropped = Vec::new();
+    let mut w = Writer {
+        encodings,
+        default_measurement,
+        line,
+        name,
+        dropped: &mut dropped,
+        sep: ' ',
+        report: false,
     };
     groups.clear();
     if let Some(g) = *one_metric {
@@ -364,61 +503,46 @@ fn encode<E: StepEvent>(
             let Some(&g) = metric.get(idx) else {
                 continue;
             };
-            each_leaf(e.value(), path, &mut |p, v| {
-                if writable_leaf(v).is_none() {
-                    drop_value(&mut dropped, idx, p, v);
-                } else if !groups.iter().any(|&(m, _)| m == g) {
-                    groups.push((g, false));
+            let v = e.value();
+            // A scalar is its own leaf; a record or tuple (no line-protocol form itself) is
+            // its members.
+            match writable_leaf(v) {
+                None if has_members(v) => {
+                    let (mut m, gs) = (w.reborrow(), &mut *groups);
+                    each_member(v, path, &mut |p, x| {
+                        m.open(gs, g, idx, p, x, writable_leaf(x));
+                    });
                 }
-            });
+                leaf => w.open(groups, g, idx, "", v, leaf),
+            }
         }
     }
     for &(g, report) in groups.iter() {
         let Some((Some(measurement), _)) = prepared.get(g) else {
             continue;
         };
-        start_line(line, measurement, tags);
-        let mut sep = ' ';
+        start_line(w.line, measurement, tags);
+        w.sep = ' ';
+        w.report = report;
         for e in events {
             let idx = e.output();
             if metric.get(idx) != Some(&g) {
                 continue;
             }
-            let key = match prepared.get(idx) {
-                Some((_, Some(key))) => Some(key.as_str()),
-                _ => None,
-            };
-            each_leaf(e.value(), path, &mut |p, v| match (writable_leaf(v), key) {
-                (Some(v), Some(key)) => {
-                    if p.is_empty() {
-                        line.push(sep);
-                        line.push_str(key);
-                    } else {
-                        // A member's key: the output's field and the member's path.
-                        name.clear();
-                        if let Some(Encoding::Field { field, .. } | Encoding::Default(field)) =
-                            encodings.get(idx)
-                        {
-                            name.push_str(field);
-                            name.push('.');
-                        }
-                        name.push_str(p);
-                        if !lineproto::name_is_writable(name) {
-                            return;
-                        }
-                        line.push(sep);
-                        lineproto::write_field_key(line, name);
-                        line.push('=');
-                    }
-                    write_leaf(line, v);
-                    sep = ',';
+            let key = prepared.get(idx);
+            let v = e.value();
+            match writable_leaf(v) {
+                None if has_members(v) => {
+                    let mut m = w.reborrow();
+                    each_member(v, path, &mut |p, x| m.put(idx, key, p, x, writable_leaf(x)));
+                    let sep = m.sep;
+                    w.sep = sep;
                 }
-                (None, _) if report => drop_value(&mut dropped, idx, p, v),
-                _ => {}
-            });
+                leaf => w.put(idx, key, "", v, leaf),
+            }
         }
-        if sep == ',' {
-            end_line(line, ts, out);
+        if w.sep == ',' {
+            end_line(w.line, ts, out);
         }
     }
     dropped
@@ -547,6 +671,8 @@ mod tests {
                 for (i, f) in fs {
                     let key = match (wrapped, m) {
                         (false, _) => f.to_string(),
+                        // An output whose own field cannot be written has no members either.
+                        (true, _) if !lineproto::name_is_writable(f) => continue,
                         (true, "verdict") => "v".to_string(),
                         (true, _) => format!("{f}.v"),
                     };
