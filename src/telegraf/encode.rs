@@ -328,15 +328,16 @@ struct Writer<'a> {
     /// A member's field key before escaping: the output's field and the member's path.
     name: &'a mut String,
     dropped: &'a mut Vec<Dropped>,
-    /// What goes before the next field: ' ' (none written yet) or ','.
-    sep: char,
+    /// Whether the line has a field yet (what goes before the next one: ',' or ' '). A bool,
+    /// so that the separator is known to be one byte.
+    written: bool,
     /// Leaves without a line-protocol form are reported while the line is written (the
     /// one-metric case; otherwise while the metrics are found).
     report: bool,
 }
 
 impl Writer<'_> {
-    /// A writer on the same line and buffers; its `sep` goes back to this one after use.
+    /// A writer on the same line and buffers; its `written` goes back to this one after use.
     #[inline(always)]
     fn reborrow(&mut self) -> Writer<'_> {
         Writer {
@@ -345,7 +346,7 @@ impl Writer<'_> {
             line: self.line,
             name: self.name,
             dropped: self.dropped,
-            sep: self.sep,
+            written: self.written,
             report: self.report,
         }
     }
@@ -383,7 +384,7 @@ impl Writer<'_> {
         match (leaf, key) {
             (Some(v), Some((_, Some(key)))) => {
                 if path.is_empty() {
-                    self.line.push(self.sep);
+                    self.line.push(if self.written { ',' } else { ' ' });
                     self.line.push_str(key);
                 } else {
                     let field = match self.encodings.get(idx) {
@@ -392,12 +393,13 @@ impl Writer<'_> {
                         }
                         _ => None,
                     };
-                    if !member_key(self.line, self.name, self.sep, field, path) {
+                    let sep = if self.written { ',' } else { ' ' };
+                    if !member_key(self.line, self.name, sep, field, path) {
                         return;
                     }
                 }
                 write_leaf(self.line, v);
-                self.sep = ',';
+                self.written = true;
             }
             (None, _) if self.report => self.drop_value(idx, path, v),
             _ => {}
@@ -489,7 +491,7 @@ fn encode<E: StepEvent>(
         line,
         name,
         dropped: &mut dropped,
-        sep: ' ',
+        written: false,
         report: false,
     };
     groups.clear();
@@ -522,7 +524,7 @@ fn encode<E: StepEvent>(
             continue;
         };
         start_line(w.line, measurement, tags);
-        w.sep = ' ';
+        w.written = false;
         w.report = report;
         for e in events {
             let idx = e.output();
@@ -535,13 +537,13 @@ fn encode<E: StepEvent>(
                 None if has_members(v) => {
                     let mut m = w.reborrow();
                     each_member(v, path, &mut |p, x| m.put(idx, key, p, x, writable_leaf(x)));
-                    let sep = m.sep;
-                    w.sep = sep;
+                    let written = m.written;
+                    w.written = written;
                 }
                 leaf => w.put(idx, key, "", v, leaf),
             }
         }
-        if w.sep == ',' {
+        if w.written {
             end_line(w.line, ts, out);
         }
     }
