@@ -2,6 +2,7 @@
 //! groups (spec, time, instances, transport, state, output). Nothing here is used by the core:
 //! `run`'s arguments are converted once by [`super::config`].
 
+use super::log_level::LogLevel;
 use super::spec::SpecOptions;
 use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
@@ -257,29 +258,6 @@ pub enum Late {
     Shift,
     /// Drop a late record's events (it is still passed through).
     Drop,
-}
-
-/// `--log-level`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Default)]
-pub enum LogLevel {
-    Error,
-    Warn,
-    #[default]
-    Info,
-    Debug,
-}
-
-impl LogLevel {
-    /// The logger's level.
-    pub fn level(self) -> crate::log::Level {
-        use crate::log::Level;
-        match self {
-            LogLevel::Error => Level::Error,
-            LogLevel::Warn => Level::Warn,
-            LogLevel::Info => Level::Info,
-            LogLevel::Debug => Level::Debug,
-        }
-    }
 }
 
 /// A duration, or `off`.

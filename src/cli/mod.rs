@@ -8,6 +8,7 @@ pub mod check;
 pub mod config;
 pub mod ending;
 pub mod error;
+pub mod log_level;
 #[cfg(feature = "tools")]
 pub mod replay;
 #[cfg(feature = "tools")]

@@ -86,7 +86,7 @@ pub struct SimulateArgs {
     pub json: bool,
     /// Least severe messages written to stderr.
     #[arg(long, value_enum, default_value_t)]
-    pub log_level: super::args::LogLevel,
+    pub log_level: super::log_level::LogLevel,
 }
 
 fn bad(msg: &str) -> CliError {

@@ -65,6 +65,9 @@ impl Record {
     }
 }
 
+/// The measurement that carries the robot's telemetry by default (Telegraf's MQTT input).
+pub const TELEMETRY: &str = "mqtt_consumer";
+
 /// Every record of a run, in file order.
 #[derive(Debug, Clone, Default)]
 pub struct Run {
@@ -81,7 +84,7 @@ pub struct Run {
 impl Run {
     pub fn parse(text: &str) -> Run {
         let mut run = Run {
-            telemetry: vec![super::outputs::TELEMETRY.to_string()],
+            telemetry: vec![TELEMETRY.to_string()],
             ..Run::default()
         };
         let mut previous_t = 0.0;

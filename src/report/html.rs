@@ -105,7 +105,7 @@ pub fn page(source_name: &str, s: &Summary, plots: &[(&str, &str)], run: &Run) -
             "silent-total",
             "Time without the robot's messages [s]",
             Some(silence.total()),
-            super::outputs::short(silence.total()),
+            super::text::short(silence.total()),
         ));
         out.push_str("</table>\n");
     }
@@ -194,13 +194,13 @@ fn robot_rows(out: &mut String, s: &Summary) {
         "p3-spikes",
         "P3 lidar: spikes in all scans",
         Some(s.p3_spikes),
-        super::outputs::short(s.p3_spikes),
+        super::text::short(s.p3_spikes),
     ));
     out.push_str(&number_row(
         "p3-dropouts",
         "P3 lidar: dropouts in all scans",
         Some(s.p3_dropouts),
-        super::outputs::short(s.p3_dropouts),
+        super::text::short(s.p3_dropouts),
     ));
     out.push_str("</table>\n");
 }

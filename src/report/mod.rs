@@ -12,6 +12,7 @@ pub mod outputs;
 pub mod plots;
 pub mod series;
 pub mod stats;
+pub mod text;
 
 use std::path::{Path, PathBuf};
 

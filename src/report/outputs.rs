@@ -1,6 +1,7 @@
 //! Any spec's outputs, as the report shows them without knowing the spec: its numeric outputs
 //! over time, its verdicts (Bool fields and text fields such as a status) with the times each
-//! changed, the augmented actions in runs, and the robot's silent periods (`robot_silent`).
+//! changed, the augmented actions in runs, and the robot's silent periods (`robot_silent`, found by
+//! [`super::series::Silence`]).
 //!
 //! Telemetry passed through is left out: the measurement `mqtt_consumer` (Telegraf's MQTT
 //! input, what every shipped conf feeds the monitor), or those `report --telemetry` names.
@@ -11,9 +12,8 @@
 
 use super::data::{Run, Value};
 use super::series::Picked;
-
-/// The measurement that carries the robot's telemetry by default (Telegraf's MQTT input).
-pub const TELEMETRY: &str = "mqtt_consumer";
+// The text helpers, still reachable here (`report::outputs::short`, as the CLI uses them).
+pub use super::text::{short, wrap};
 
 /// One output of the spec over time.
 #[derive(Debug, Clone, PartialEq)]
@@ -120,87 +120,6 @@ fn push<T>(list: &mut Vec<Output<T>>, name: String, point: (f64, T)) {
             points: vec![point],
         }),
     }
-}
-
-/// The robot's silent periods from its `robot_silent` verdict: `true` when its messages
-/// stopped for longer than `max_silence`, `false` when they resumed.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Silence {
-    /// `(from, to)` in seconds since the run's start; `to` is the run's end for a period that
-    /// had not ended.
-    pub periods: Vec<(f64, f64)>,
-    /// Whether the last period was still open at the end of the run.
-    pub open_at_end: bool,
-}
-
-impl Silence {
-    /// `None` when the run has no `robot_silent` field.
-    pub fn from_run(run: &Run) -> Option<Silence> {
-        let series = super::series::pick(run, "robot_silent", Value::as_bool);
-        if series.is_empty() {
-            return None;
-        }
-        let end = run.records.iter().map(|r| r.t).fold(0.0, f64::max);
-        let mut s = Silence::default();
-        let mut since: Option<f64> = None;
-        for (t, silent) in &series.points {
-            match (since, silent) {
-                (None, true) => since = Some(*t),
-                (Some(from), false) => {
-                    s.periods.push((from, *t));
-                    since = None;
-                }
-                _ => {}
-            }
-        }
-        if let Some(from) = since {
-            s.periods.push((from, end.max(from)));
-            s.open_at_end = true;
-        }
-        Some(s)
-    }
-
-    pub fn total(&self) -> f64 {
-        self.periods.iter().map(|(a, b)| b - a).sum()
-    }
-
-    pub fn longest(&self) -> f64 {
-        self.periods.iter().map(|(a, b)| b - a).fold(0.0, f64::max)
-    }
-}
-
-/// A number for people: at most 4 significant digits, never `-0`.
-pub fn short(v: f64) -> String {
-    if v == 0.0 || !v.is_finite() {
-        return if v.is_finite() {
-            "0".into()
-        } else {
-            v.to_string()
-        };
-    }
-    let s = if v.abs() >= 1e-3 && v.abs() < 1e6 {
-        let text = format!("{v:.4}");
-        let text = text.trim_end_matches('0').trim_end_matches('.').to_string();
-        if v.abs() >= 100.0 {
-            format!("{v:.1}")
-                .trim_end_matches('0')
-                .trim_end_matches('.')
-                .to_string()
-        } else {
-            text
-        }
-    } else {
-        // `5.000e-4` as `5e-4`, `1.250e-5` as `1.25e-5`.
-        let text = format!("{v:.3e}");
-        match text.split_once('e') {
-            Some((mantissa, exp)) if mantissa.contains('.') => {
-                let mantissa = mantissa.trim_end_matches('0').trim_end_matches('.');
-                format!("{mantissa}e{exp}")
-            }
-            _ => text,
-        }
-    };
-    if s == "-0" { "0".into() } else { s }
 }
 
 /// The terminal view (`report --timeline`): when each verdict changed (changes at one time on
@@ -312,46 +231,13 @@ fn range(values: &[f64]) -> String {
     }
 }
 
-/// `head` then `text`, word-wrapped so no line is wider than `width` (unless one word is);
-/// continuation lines indented under the text, `extra_indent` further.
-pub fn wrap(head: &str, text: &str, width: usize, extra_indent: usize) -> String {
-    let indent = " ".repeat(head.chars().count() + extra_indent);
-    let mut out = String::new();
-    let mut line = head.to_string();
-    let mut empty = true;
-    for word in text.split(' ').filter(|w| !w.is_empty()) {
-        let len = line.chars().count() + usize::from(!empty) + word.chars().count();
-        if !empty && len > width {
-            out.push_str(&line);
-            out.push('\n');
-            line = indent.clone();
-            empty = true;
-        }
-        if !empty {
-            line.push(' ');
-        }
-        line.push_str(word);
-        empty = false;
-    }
-    out.push_str(&line);
-    out.push('\n');
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::report::series::Silence;
 
     #[test]
-    fn numbers_for_people_never_show_minus_zero() {
-        assert_eq!(short(-0.0), "0");
-        assert_eq!(short(-0.00001), "-1e-5");
-        assert_eq!(short(0.0005), "5e-4");
-        assert_eq!(short(0.0000125), "1.25e-5");
-        assert_eq!(short(0.0575), "0.0575");
-        assert_eq!(short(0.099999999), "0.1");
-        assert_eq!(short(-0.00004), "-4e-5");
-        assert_eq!(short(123.456), "123.5");
+    fn seconds_never_show_minus_zero() {
         assert_eq!(secs(-0.0), "0.0 s");
     }
 
@@ -393,18 +279,5 @@ mod tests {
             "{text}"
         );
         assert!(!text.contains("temp"), "{text}");
-    }
-
-    #[test]
-    fn wraps_at_commas() {
-        let w = wrap("   1.0 s ", "aaaa bbbb, cccc dddd, eeee", 22, 0);
-        assert_eq!(
-            w,
-            "   1.0 s aaaa bbbb,\n         cccc dddd,\n         eeee\n"
-        );
-        assert_eq!(wrap("  ", "a b c", 5, 2), "  a b\n    c\n");
-        for line in w.lines() {
-            assert!(line.chars().count() <= 22);
-        }
     }
 }

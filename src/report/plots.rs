@@ -12,8 +12,9 @@
 //! The robot's charts are drawn only when the run has their data; the robot's silent periods
 //! (`robot_silent`) are shaded on them. Legends sit right of the plotting area, never on the data.
 
-use super::outputs::{Outputs, short};
+use super::outputs::Outputs;
 use super::series::Picked;
+use super::text::short;
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;

@@ -4,6 +4,10 @@
 //! field) when the run has it (the connector style `q value=… ts`); otherwise from field `q` of
 //! whichever measurement carries it most often (the `action` metric's fields, the pass-through
 //! `mqtt_consumer` telemetry). So one quantity is never counted twice.
+//!
+//! Also owns the two quantities derived while picking: the robot's silent periods ([`Silence`],
+//! from its `robot_silent` verdict) and the running MSE between expected and actual speed
+//! ([`running_mse`]).
 
 use super::data::{Record, Run, Value};
 
@@ -50,7 +54,7 @@ pub struct Picked {
     pub p3_dropouts: Series<f64>,
     pub p3_ok: Series<bool>,
     /// The robot's silent periods (`robot_silent`), when the run has them.
-    pub silence: Option<super::outputs::Silence>,
+    pub silence: Option<Silence>,
     /// The time of the run's last record.
     pub end_t: Option<f64>,
 }
@@ -72,14 +76,14 @@ impl Picked {
             speed_mse: pick(run, "speed_mse", Value::as_f64),
             running_mse: Series {
                 source: None,
-                points: super::stats::running_mse(run),
+                points: running_mse(run),
             },
             p1_status: pick(run, "p1_status", |v| Some(v.as_text())),
             p1_margin: pick(run, "p1_margin", Value::as_f64),
             p3_spikes: pick(run, "p3_spikes", Value::as_f64),
             p3_dropouts: pick(run, "p3_dropouts", Value::as_f64),
             p3_ok: pick(run, "p3_ok", Value::as_bool),
-            silence: super::outputs::Silence::from_run(run),
+            silence: Silence::from_run(run),
             end_t: run.records.iter().map(|r| r.t).reduce(f64::max),
         }
     }
@@ -171,6 +175,70 @@ impl<T> Series<T> {
             source: None,
             points: Vec::new(),
         }
+    }
+}
+
+/// The running MSE after each pair, for the plot when the spec's `speed_mse` is absent.
+pub fn running_mse(run: &Run) -> Vec<(f64, f64)> {
+    let mut sum = 0.0;
+    let mut n = 0.0;
+    let mut out = Vec::new();
+    for r in &run.records {
+        let expected = r.field("expectedSpeed").and_then(|v| v.as_f64());
+        let actual = r.field("actualSpeed").and_then(|v| v.as_f64());
+        if let (Some(e), Some(a)) = (expected, actual) {
+            sum += (e - a) * (e - a);
+            n += 1.0;
+            out.push((r.t, sum / n));
+        }
+    }
+    out
+}
+
+/// The robot's silent periods from its `robot_silent` verdict: `true` when its messages
+/// stopped for longer than `max_silence`, `false` when they resumed.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Silence {
+    /// `(from, to)` in seconds since the run's start; `to` is the run's end for a period that
+    /// had not ended.
+    pub periods: Vec<(f64, f64)>,
+    /// Whether the last period was still open at the end of the run.
+    pub open_at_end: bool,
+}
+
+impl Silence {
+    /// `None` when the run has no `robot_silent` field.
+    pub fn from_run(run: &Run) -> Option<Silence> {
+        let series = pick(run, "robot_silent", Value::as_bool);
+        if series.is_empty() {
+            return None;
+        }
+        let end = run.records.iter().map(|r| r.t).fold(0.0, f64::max);
+        let mut s = Silence::default();
+        let mut since: Option<f64> = None;
+        for (t, silent) in &series.points {
+            match (since, silent) {
+                (None, true) => since = Some(*t),
+                (Some(from), false) => {
+                    s.periods.push((from, *t));
+                    since = None;
+                }
+                _ => {}
+            }
+        }
+        if let Some(from) = since {
+            s.periods.push((from, end.max(from)));
+            s.open_at_end = true;
+        }
+        Some(s)
+    }
+
+    pub fn total(&self) -> f64 {
+        self.periods.iter().map(|(a, b)| b - a).sum()
+    }
+
+    pub fn longest(&self) -> f64 {
+        self.periods.iter().map(|(a, b)| b - a).fold(0.0, f64::max)
     }
 }
 

@@ -41,7 +41,7 @@ pub struct Summary {
     /// The spec's other verdicts (any spec's): steps per value, most frequent first.
     pub verdicts: Vec<(String, Vec<(String, usize)>)>,
     /// The robot's silent periods, when the run has `robot_silent`.
-    pub silence: Option<super::outputs::Silence>,
+    pub silence: Option<super::series::Silence>,
     /// The robot spec's outputs this report looks for that the run does not have.
     pub missing_robot: Vec<&'static str>,
 }
@@ -92,7 +92,7 @@ impl Summary {
         .collect();
         Summary {
             verdicts,
-            silence: super::outputs::Silence::from_run(run),
+            silence: super::series::Silence::from_run(run),
             missing_robot,
             records: run.records.len(),
             skipped: run.skipped,
@@ -164,7 +164,7 @@ impl Summary {
     /// (the robot's lines only for the robot outputs the run has), the silent periods, and any
     /// other verdicts of the spec with their steps per value.
     pub fn text(&self, source: &str) -> String {
-        use super::outputs::{short, wrap};
+        use super::text::{short, wrap};
         let steps = self.actions.max(self.p2_steps).max(self.p3_scans).max(
             self.verdicts
                 .iter()
@@ -271,26 +271,10 @@ pub fn mse_of_records(run: &Run) -> (Option<f64>, usize) {
     ((n > 0).then(|| sum / n as f64), n)
 }
 
-/// The running MSE after each pair, for the plot when the spec's `speed_mse` is absent.
-pub fn running_mse(run: &Run) -> Vec<(f64, f64)> {
-    let mut sum = 0.0;
-    let mut n = 0.0;
-    let mut out = Vec::new();
-    for r in &run.records {
-        let expected = r.field("expectedSpeed").and_then(|v| v.as_f64());
-        let actual = r.field("actualSpeed").and_then(|v| v.as_f64());
-        if let (Some(e), Some(a)) = (expected, actual) {
-            sum += (e - a) * (e - a);
-            n += 1.0;
-            out.push((r.t, sum / n));
-        }
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::report::series::running_mse;
 
     #[test]
     fn mse_and_counts() {

@@ -10,6 +10,8 @@
 //! own speed has not changed since the action's message was sent; otherwise (and always with the
 //! monitor off) the program's speed.
 
+// The action type lives with the gate that judges it; here too, where it always was.
+pub use super::gate::Action;
 use super::gate::Gate;
 use super::lidar::{LidarParams, Map};
 use super::program::Program;
@@ -103,23 +105,6 @@ impl Message {
         }
         w.finish(Some(self.time_ns)).0.unwrap_or_default()
     }
-}
-
-/// What the twin answered to one message.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Action {
-    /// m/s: the speed to execute.
-    pub speed: f64,
-    /// The monitor changed the robot's own command.
-    pub augmented: bool,
-    /// The spec's running MSE, when the action carried it.
-    pub speed_mse: Option<f64>,
-    /// Its number in its monitor instance (`seq`), when it carried one.
-    pub seq: Option<i64>,
-    /// ns: until when it may be applied (`valid_until`), when it carried it.
-    pub valid_until: Option<i64>,
-    /// ns: its timestamp, when the twin knows it.
-    pub time_ns: Option<i64>,
 }
 
 #[derive(Debug, Default)]

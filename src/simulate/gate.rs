@@ -12,8 +12,24 @@
 //!   monitor restarted without `--state` and counts from 1 again): accepted, and counted.
 //!
 //! An action without these fields (a spec that does not send them) is accepted as it is.
+//! The [`Action`] type, as a twin returns it, is defined here with the rule that reads it.
 
-use super::closed_loop::Action;
+/// What the twin answered to one message.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Action {
+    /// m/s: the speed to execute.
+    pub speed: f64,
+    /// The monitor changed the robot's own command.
+    pub augmented: bool,
+    /// The spec's running MSE, when the action carried it.
+    pub speed_mse: Option<f64>,
+    /// Its number in its monitor instance (`seq`), when it carried one.
+    pub seq: Option<i64>,
+    /// ns: until when it may be applied (`valid_until`), when it carried it.
+    pub valid_until: Option<i64>,
+    /// ns: its timestamp, when the twin knows it.
+    pub time_ns: Option<i64>,
+}
 
 /// How the robot judged one action.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

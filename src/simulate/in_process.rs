@@ -6,7 +6,8 @@
 //! transport does when no more input is waiting), and reading an `action` metric into an
 //! [`Action`] ([`action_of`], shared with the MQTT twin).
 
-use super::closed_loop::{Action, Message, Reply, Twin};
+use super::closed_loop::{Message, Reply, Twin};
+use super::gate::Action;
 use crate::processor::Processor;
 use lineproto::{FieldValue, Metric, Record, RecordSplitter, parse_record};
 

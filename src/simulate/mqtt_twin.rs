@@ -8,7 +8,8 @@
 //! message builder; the subscription is a second rumqttc client here (the publisher's
 //! connection thread only counts acknowledgements).
 
-use super::closed_loop::{Action, Message, Reply, Twin};
+use super::closed_loop::{Message, Reply, Twin};
+use super::gate::Action;
 use super::in_process::action_of;
 use crate::log::{self, Level};
 use crate::replay::Sample;

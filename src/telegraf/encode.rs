@@ -70,31 +70,6 @@ pub struct Dropped {
     pub reason: String,
 }
 
-/// The leaves of a record or tuple value with their member paths (`a.b`, `_1`), in field order;
-/// any other value is its own leaf with the empty path.
-fn members<'v>(v: &'v Value, path: String, out: &mut Vec<(String, &'v Value)>) {
-    let join = |name: &str| {
-        if path.is_empty() {
-            name.to_string()
-        } else {
-            format!("{path}.{name}")
-        }
-    };
-    match v {
-        Value::Record(fs) if !fs.is_empty() => {
-            for (k, x) in fs.iter() {
-                members(x, join(k), out);
-            }
-        }
-        Value::Tuple(xs) if !xs.is_empty() => {
-            for (i, x) in xs.iter().enumerate() {
-                members(x, join(&format!("_{}", i + 1)), out);
-            }
-        }
-        _ => out.push((path, v)),
-    }
-}
-
 fn field_value(v: &Value) -> Result<Option<FieldValue>, String> {
     Ok(Some(match v {
         Value::Unit => FieldValue::Bool(true),
@@ -126,21 +101,25 @@ fn field_value(v: &Value) -> Result<Option<FieldValue>, String> {
 pub struct Scratch {
     /// Per encoding: its measurement escaped (`None`: not writable) and `key=` escaped
     /// (`None`: not writable).
-    prepared: Vec<(Option<String>, Option<String>)>,
+    prepared: Vec<Prepared>,
     /// Per encoding: the metric its fields go to, as the first encoding index of that metric
     /// (a connector output is its own metric; the others share one per measurement).
     metric: Vec<usize>,
     /// The metric every output goes to, when there is one and its measurement is writable
     /// (the usual case: outputs without annotations).
     one_metric: Option<usize>,
-    /// Metrics in first-appearance order: (the encoding index that opened it, is a connector
-    /// metric); for a step of plain values, (its `metric` index, unused).
+    /// The step's metrics in first-appearance order: (its `metric` index, whether values
+    /// without a line-protocol form are reported while it is written: the one-metric case).
     groups: Vec<(usize, bool)>,
-    /// Every written field: (its metric's position in `groups`, its encoding index, its value,
-    /// the member path when it is a member of a record or tuple output).
-    fields: Vec<(usize, usize, FieldValue, Option<String>)>,
+    /// The path of the record or tuple member being written (`a.b`, `_1`).
+    path: String,
+    /// A member's field key before escaping (see [`Writer`]).
+    name: String,
     line: String,
 }
+
+/// An encoding's measurement escaped and its field key escaped with `=` (`None`: not writable).
+type Prepared = (Option<String>, Option<String>);
 
 /// Measurement, field key and whether it is a connector metric, for one encoding.
 fn target<'a>(enc: &'a Encoding, default_measurement: &'a str) -> (&'a str, &'a str, bool) {
@@ -151,7 +130,7 @@ fn target<'a>(enc: &'a Encoding, default_measurement: &'a str) -> (&'a str, &'a 
     }
 }
 
-fn prepare(enc: &Encoding, default_measurement: &str) -> (Option<String>, Option<String>) {
+fn prepare(enc: &Encoding, default_measurement: &str) -> Prepared {
     let (measurement, field, _) = target(enc, default_measurement);
     let m = lineproto::measurement_is_writable(measurement).then(|| {
         let mut s = String::new();
@@ -239,30 +218,15 @@ pub fn encode_step_with<E: StepEvent>(
                 && scratch.prepared.get(g).is_some_and(|p| p.0.is_some())
         });
     }
-    if events
-        .iter()
-        .any(|e| matches!(e.value(), Value::Record(_) | Value::Tuple(_)))
-    {
-        encode_members(
-            scratch,
-            ts,
-            events,
-            encodings,
-            default_measurement,
-            tags,
-            out,
-        )
-    } else {
-        encode_leaves(
-            scratch,
-            ts,
-            events,
-            encodings,
-            default_measurement,
-            tags,
-            out,
-        )
-    }
+    encode(
+        scratch,
+        ts,
+        events,
+        encodings,
+        default_measurement,
+        tags,
+        out,
+    )
 }
 
 /// Per encoding, the first encoding index of the metric its fields go to.
@@ -311,9 +275,198 @@ fn write_leaf(line: &mut String, v: &Value) {
     }
 }
 
-/// [`encode_step_with`] for a step without record or tuple values (every value is one field):
-/// metrics told apart by index, values written straight into the line.
-fn encode_leaves<E: StepEvent>(
+/// Whether `v` is a record or tuple with members: written as one field per member.
+#[inline(always)]
+fn has_members(v: &Value) -> bool {
+    match v {
+        Value::Record(fs) => !fs.is_empty(),
+        Value::Tuple(xs) => !xs.is_empty(),
+        _ => false,
+    }
+}
+
+/// Calls `f` with each leaf member of `v` (see [`has_members`]) and its path (`a.b`, `_1`),
+/// depth first, in field order. `path` is a buffer, empty on entry and on return.
+fn each_member<'v>(v: &'v Value, path: &mut String, f: &mut dyn FnMut(&str, &'v Value)) {
+    let at = path.len();
+    let mut member = |path: &mut String, name: std::fmt::Arguments<'_>, x: &'v Value| {
+        use std::fmt::Write as _;
+        if at > 0 {
+            path.push('.');
+        }
+        let _ = path.write_fmt(name);
+        if has_members(x) {
+            each_member(x, path, &mut *f);
+        } else {
+            f(path, x);
+        }
+        path.truncate(at);
+    };
+    match v {
+        Value::Record(fs) => {
+            for (k, x) in fs.iter() {
+                member(path, format_args!("{k}"), x);
+            }
+        }
+        Value::Tuple(xs) => {
+            for (i, x) in xs.iter().enumerate() {
+                member(path, format_args!("_{}", i + 1), x);
+            }
+        }
+        _ => f(path, v),
+    }
+}
+
+/// Writing one step: its encodings, the line of the metric being written, the dropped values.
+/// A leaf is an output's value, or a member of a record or tuple value (named by its path).
+/// The record path works on a [`Writer::reborrow`], so that this one never leaves the encoder
+/// and stays in registers.
+struct Writer<'a> {
+    encodings: &'a [Encoding],
+    default_measurement: &'a str,
+    line: &'a mut String,
+    /// A member's field key before escaping: the output's field and the member's path.
+    name: &'a mut String,
+    dropped: &'a mut Vec<Dropped>,
+    /// Whether the line has a field yet (what goes before the next one: ',' or ' '). A bool,
+    /// so that the separator is known to be one byte.
+    written: bool,
+    /// Leaves without a line-protocol form are reported while the line is written (the
+    /// one-metric case; otherwise while the metrics are found).
+    report: bool,
+}
+
+impl Writer<'_> {
+    /// A writer on the same line and buffers; its `written` goes back to this one after use.
+    #[inline(always)]
+    fn reborrow(&mut self) -> Writer<'_> {
+        Writer {
+            encodings: self.encodings,
+            default_measurement: self.default_measurement,
+            line: self.line,
+            name: self.name,
+            dropped: self.dropped,
+            written: self.written,
+            report: self.report,
+        }
+    }
+
+    /// Leaf `v` of output `idx` opens metric `g` (first appearance order) when it has a
+    /// line-protocol form (`leaf`: its [`writable_leaf`]), else it is dropped.
+    #[inline(always)]
+    fn open(
+        &mut self,
+        groups: &mut Vec<(usize, bool)>,
+        g: usize,
+        idx: usize,
+        path: &str,
+        v: &Value,
+        leaf: Option<&Value>,
+    ) {
+        if leaf.is_none() {
+            self.drop_value(idx, path, v);
+        } else if !groups.iter().any(|&(m, _)| m == g) {
+            groups.push((g, false));
+        }
+    }
+
+    /// Append leaf `v` of output `idx` (`leaf`: its [`writable_leaf`]) to the line; `key` is the
+    /// output's prepared names (the field key escaped, with `=`; `None`: not writable).
+    #[inline(always)]
+    fn put(
+        &mut self,
+        idx: usize,
+        key: Option<&Prepared>,
+        path: &str,
+        v: &Value,
+        leaf: Option<&Value>,
+    ) {
+        match (leaf, key) {
+            (Some(v), Some((_, Some(key)))) => {
+                if path.is_empty() {
+                    self.line.push(if self.written { ',' } else { ' ' });
+                    self.line.push_str(key);
+                } else {
+                    let field = match self.encodings.get(idx) {
+                        Some(Encoding::Field { field, .. } | Encoding::Default(field)) => {
+                            Some(field)
+                        }
+                        _ => None,
+                    };
+                    let sep = if self.written { ',' } else { ' ' };
+                    if !member_key(self.line, self.name, sep, field, path) {
+                        return;
+                    }
+                }
+                write_leaf(self.line, v);
+                self.written = true;
+            }
+            (None, _) if self.report => self.drop_value(idx, path, v),
+            _ => {}
+        }
+    }
+
+    #[inline(always)]
+    fn drop_value(&mut self, idx: usize, path: &str, v: &Value) {
+        let enc = self.encodings.get(idx);
+        drop_value(self.dropped, enc, self.default_measurement, path, v);
+    }
+}
+
+/// Append `sep`, a member's field key and `=`: the output's field and the member's path (the
+/// path alone for a connector, which has no `field`). False, with nothing appended, when the
+/// name is not writable. `name` is a buffer.
+#[inline(never)]
+fn member_key(
+    line: &mut String,
+    name: &mut String,
+    sep: char,
+    field: Option<&String>,
+    path: &str,
+) -> bool {
+    name.clear();
+    if let Some(field) = field {
+        name.push_str(field);
+        name.push('.');
+    }
+    name.push_str(path);
+    if !lineproto::name_is_writable(name) {
+        return false;
+    }
+    line.push(sep);
+    lineproto::write_field_key(line, name);
+    line.push('=');
+    true
+}
+
+/// Why a leaf (of the output encoded as `enc`) has no line-protocol form, if it has none: the
+/// output named by its field (a connector's by its measurement), a member by its path after a dot.
+#[inline(never)]
+fn drop_value(
+    dropped: &mut Vec<Dropped>,
+    enc: Option<&Encoding>,
+    default_measurement: &str,
+    path: &str,
+    v: &Value,
+) {
+    if let (Err(reason), Some(enc)) = (field_value(v), enc) {
+        let (measurement, field, connector) = target(enc, default_measurement);
+        let output = if connector { measurement } else { field };
+        dropped.push(Dropped {
+            output: if path.is_empty() {
+                output.to_string()
+            } else {
+                format!("{output}.{path}")
+            },
+            reason,
+        });
+    }
+}
+
+/// [`encode_step_with`] once the encodings are prepared: metrics told apart by index, values
+/// written straight into the line. A value is one field; a record or tuple is one field per
+/// member (the rare case, off the scalar path).
+fn encode<E: StepEvent>(
     scratch: &mut Scratch,
     ts: i64,
     events: &[E],
@@ -322,24 +475,24 @@ fn encode_leaves<E: StepEvent>(
     tags: &[(String, String)],
     out: &mut Vec<u8>,
 ) -> Vec<Dropped> {
-    let mut dropped = Vec::new();
     let Scratch {
         prepared,
         metric,
         one_metric,
         groups,
+        path,
+        name,
         line,
-        ..
     } = scratch;
-    // Why a value without a line-protocol form is dropped.
-    let drop_value = |dropped: &mut Vec<Dropped>, idx: usize, v: &Value| {
-        if let (Err(reason), Some(enc)) = (field_value(v), encodings.get(idx)) {
-            let (measurement, field, connector) = target(enc, default_measurement);
-            dropped.push(Dropped {
-                output: (if connector { measurement } else { field }).to_string(),
-                reason,
-            });
-        }
+    let mut dropped = Vec::new();
+    let mut w = Writer {
+        encodings,
+        default_measurement,
+        line,
+        name,
+        dropped: &mut dropped,
+        written: false,
+        report: false,
     };
     groups.clear();
     if let Some(g) = *one_metric {
@@ -353,12 +506,16 @@ fn encode_leaves<E: StepEvent>(
                 continue;
             };
             let v = e.value();
-            if writable_leaf(v).is_none() {
-                drop_value(&mut dropped, idx, v);
-                continue;
-            }
-            if !groups.iter().any(|&(m, _)| m == g) {
-                groups.push((g, false));
+            // A scalar is its own leaf; a record or tuple (no line-protocol form itself) is
+            // its members.
+            match writable_leaf(v) {
+                None if has_members(v) => {
+                    let (mut m, gs) = (w.reborrow(), &mut *groups);
+                    each_member(v, path, &mut |p, x| {
+                        m.open(gs, g, idx, p, x, writable_leaf(x));
+                    });
+                }
+                leaf => w.open(groups, g, idx, "", v, leaf),
             }
         }
     }
@@ -366,146 +523,28 @@ fn encode_leaves<E: StepEvent>(
         let Some((Some(measurement), _)) = prepared.get(g) else {
             continue;
         };
-        start_line(line, measurement, tags);
-        let mut sep = ' ';
+        start_line(w.line, measurement, tags);
+        w.written = false;
+        w.report = report;
         for e in events {
             let idx = e.output();
             if metric.get(idx) != Some(&g) {
                 continue;
             }
-            match (writable_leaf(e.value()), prepared.get(idx)) {
-                (Some(v), Some((_, Some(key)))) => {
-                    line.push(sep);
-                    line.push_str(key);
-                    write_leaf(line, v);
-                    sep = ',';
+            let key = prepared.get(idx);
+            let v = e.value();
+            match writable_leaf(v) {
+                None if has_members(v) => {
+                    let mut m = w.reborrow();
+                    each_member(v, path, &mut |p, x| m.put(idx, key, p, x, writable_leaf(x)));
+                    let written = m.written;
+                    w.written = written;
                 }
-                (None, _) if report => drop_value(&mut dropped, idx, e.value()),
-                _ => {}
+                leaf => w.put(idx, key, "", v, leaf),
             }
         }
-        if sep == ',' {
-            end_line(line, ts, out);
-        }
-    }
-    dropped
-}
-
-/// [`encode_step_with`] for a step with record or tuple values (one field per member).
-fn encode_members<E: StepEvent>(
-    scratch: &mut Scratch,
-    ts: i64,
-    events: &[E],
-    encodings: &[Encoding],
-    default_measurement: &str,
-    tags: &[(String, String)],
-    out: &mut Vec<u8>,
-) -> Vec<Dropped> {
-    let mut dropped = Vec::new();
-    let Scratch {
-        prepared,
-        groups,
-        fields,
-        line,
-        ..
-    } = scratch;
-    groups.clear();
-    fields.clear();
-    for e in events {
-        let (idx, v) = (&e.output(), e.value());
-        let Some(enc) = encodings.get(*idx) else {
-            continue;
-        };
-        let (measurement, field, connector) = target(enc, default_measurement);
-        // Records and tuples (rare) are split into members; other values are one leaf, without
-        // allocating on the hot path.
-        let mut compound = Vec::new();
-        if matches!(v, Value::Record(_) | Value::Tuple(_)) {
-            members(v, String::new(), &mut compound);
-        }
-        let single = [(String::new(), v)];
-        let leaves: &[(String, &Value)] = if compound.is_empty() {
-            &single
-        } else {
-            &compound
-        };
-        for (path, v) in leaves {
-            match field_value(v) {
-                Ok(None) => {}
-                Ok(Some(fv)) => {
-                    let found = if connector {
-                        // One metric per output and step: a record's members share it.
-                        groups.iter().position(|&(g, c)| c && g == *idx)
-                    } else {
-                        groups.iter().position(|&(g, c)| {
-                            !c && encodings
-                                .get(g)
-                                .is_some_and(|e| target(e, default_measurement).0 == measurement)
-                        })
-                    };
-                    let g = found.unwrap_or_else(|| {
-                        groups.push((*idx, connector));
-                        groups.len() - 1
-                    });
-                    fields.push((g, *idx, fv, (!path.is_empty()).then(|| path.clone())));
-                }
-                Err(reason) => dropped.push(Dropped {
-                    output: format!(
-                        "{}{}{path}",
-                        if connector { measurement } else { field },
-                        if path.is_empty() { "" } else { "." }
-                    ),
-                    reason,
-                }),
-            }
-        }
-    }
-    for (g, &(first, _)) in groups.iter().enumerate() {
-        let Some((Some(measurement), _)) = prepared.get(first) else {
-            continue;
-        };
-        start_line(line, measurement, tags);
-        let mut sep = ' ';
-        for (_, i, v, path) in fields.iter().filter(|f| f.0 == g) {
-            if let Some((_, Some(key))) = prepared.get(*i) {
-                // A record member's key: the output's field and the member's path.
-                let member = match path {
-                    None => None,
-                    Some(path) => {
-                        let Some(enc) = encodings.get(*i) else {
-                            continue;
-                        };
-                        let (_, field, connector) = target(enc, default_measurement);
-                        let name = if connector {
-                            path.clone()
-                        } else {
-                            format!("{field}.{path}")
-                        };
-                        if !lineproto::name_is_writable(&name) {
-                            continue;
-                        }
-                        Some(name)
-                    }
-                };
-                let start = line.len();
-                // Values are finite here (field_value refuses the others).
-                line.push(sep);
-                match &member {
-                    None => line.push_str(key),
-                    Some(name) => {
-                        lineproto::write_field_key(line, name);
-                        line.push('=');
-                    }
-                }
-                if lineproto::write_value(line, v).is_ok() {
-                    sep = ',';
-                } else {
-                    line.truncate(start);
-                }
-            }
-        }
-        if sep == ',' {
-            end_line(line, ts, out);
+        if w.written {
+            end_line(w.line, ts, out);
         }
     }
     dropped
@@ -619,26 +658,40 @@ mod tests {
             (3, Value::None),
             (0, Value::Float(f64::NAN)),
         ];
-        let mut expected = Vec::new();
+        let (mut expected, mut expected_members) = (Vec::new(), Vec::new());
         let groups: [(&str, &[(usize, &str)]); 3] = [
             ("tessla", &[(0, "a b"), (1, "c,d=e"), (4, "\\\\")]),
             ("act ion", &[(2, "speed"), (6, "s=\\")]),
             ("verdict", &[(3, "value")]),
         ];
         for (m, fs) in groups {
-            let mut w = LineWriter::new(m);
-            for (k, v) in &tags {
-                w.tag(k, v);
-            }
-            for (i, f) in fs {
-                if let Some((_, v)) = events.iter().find(|e| e.0 == *i)
-                    && let Ok(Some(fv)) = field_value(v)
-                {
-                    w.field(f, &fv);
+            for wrapped in [false, true] {
+                let mut w = LineWriter::new(m);
+                for (k, v) in &tags {
+                    w.tag(k, v);
                 }
-            }
-            if let (Some(l), _) = w.finish(Some(42)) {
-                expected.extend_from_slice(l.as_bytes());
+                for (i, f) in fs {
+                    let key = match (wrapped, m) {
+                        (false, _) => f.to_string(),
+                        // An output whose own field cannot be written has no members either.
+                        (true, _) if !lineproto::name_is_writable(f) => continue,
+                        (true, "verdict") => "v".to_string(),
+                        (true, _) => format!("{f}.v"),
+                    };
+                    if let Some((_, v)) = events.iter().find(|e| e.0 == *i)
+                        && let Ok(Some(fv)) = field_value(v)
+                    {
+                        w.field(&key, &fv);
+                    }
+                }
+                if let (Some(l), _) = w.finish(Some(42)) {
+                    let to = if wrapped {
+                        &mut expected_members
+                    } else {
+                        &mut expected
+                    };
+                    to.extend_from_slice(l.as_bytes());
+                }
             }
         }
         let mut scratch = Scratch::default();
@@ -658,27 +711,38 @@ mod tests {
                 String::from_utf8_lossy(&expected)
             );
             assert_eq!(d.len(), 1, "{d:?}");
-            // The general path (records and tuples) writes the same for these plain values.
-            let mut general = Vec::new();
-            let dg = encode_members(
+            // Record-wrapped, each value is a one-member record: one field `field.v` (a
+            // connector's: `v`) with the same value, in the same metrics.
+            let wrapped: Vec<(usize, Value)> = events
+                .iter()
+                .map(|(i, v)| {
+                    (
+                        *i,
+                        Value::Record(Arc::from(vec![(Arc::from("v"), v.clone())])),
+                    )
+                })
+                .collect();
+            let mut members = Vec::new();
+            let dm = encode_step_with(
                 &mut scratch,
                 42,
-                &events,
+                &wrapped,
                 &encodings,
                 "tessla",
                 &tags,
-                &mut general,
+                &mut members,
             );
             assert_eq!(
-                String::from_utf8_lossy(&general),
-                String::from_utf8_lossy(&out)
+                String::from_utf8_lossy(&members),
+                String::from_utf8_lossy(&expected_members)
             );
-            assert_eq!(dg, d);
+            assert_eq!(dm.len(), 1, "{dm:?}");
+            assert_eq!(dm[0].output, format!("{}.v", d[0].output));
         }
     }
 
     /// Outputs that all go to one metric (no annotations): the line and the dropped values, in
-    /// event order, are those of the general path.
+    /// event order, are those of the general path (the metrics found first).
     #[test]
     fn one_metric_steps_match_the_general_path() {
         let encodings: Vec<Encoding> = ["a", "b", "c", "d", "e"]
@@ -702,7 +766,9 @@ mod tests {
         for events in &steps {
             let (mut fast, mut general) = (Vec::new(), Vec::new());
             let d = encode_step_with(&mut scratch, 5, events, &encodings, "m", &[], &mut fast);
-            let dg = encode_members(&mut scratch, 5, events, &encodings, "m", &[], &mut general);
+            let one_metric = scratch.one_metric.take();
+            let dg = encode_step_with(&mut scratch, 5, events, &encodings, "m", &[], &mut general);
+            scratch.one_metric = one_metric;
             assert_eq!(
                 String::from_utf8_lossy(&fast),
                 String::from_utf8_lossy(&general)

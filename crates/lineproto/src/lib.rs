@@ -1,17 +1,19 @@
 //! lineproto: InfluxDB line protocol as Telegraf reads and writes it.
 //!
 //! Owns: cutting a byte stream into records ([`split`], quote-aware: a string field may hold a raw
-//! newline), parsing one record into a [`Metric`] ([`parse`], on the `influxdb-line-protocol`
+//! newline), parsing one record into a [`Metric`] ([`parse`]; the record types in `metric`, on the `influxdb-line-protocol`
 //! crate with Telegraf's rules applied on top), and writing metrics back with Telegraf's escaping
 //! ([`write`]). No I/O happens here.
 
 mod fast;
+mod metric;
 pub mod parse;
 pub mod split;
 mod telegraf_rules;
 pub mod write;
 
-pub use parse::{FieldValue, Metric, ParseError, parse_record, parse_record_into};
+pub use metric::{FieldValue, Metric};
+pub use parse::{ParseError, parse_record, parse_record_into};
 pub use split::{DEFAULT_MAX_RECORD, OVERSIZED_HEAD, Record, RecordRef, RecordSplitter};
 pub use write::{
     LineWriter, NotFinite, measurement_is_writable, name_is_writable, write_field_key,

@@ -12,42 +12,10 @@
 //! check), because the crate parses `&str`; Telegraf's own serializer only writes valid UTF-8
 //! for JSON-derived metrics.
 
+// The parsed record's types, here too where they always were (`lineproto::parse::Metric`).
+pub use crate::metric::{FieldValue, Metric};
 use crate::telegraf_rules;
 use influxdb_line_protocol::FieldValue as CrateValue;
-
-#[derive(Debug, Clone, PartialEq)]
-pub enum FieldValue {
-    Float(f64),
-    Int(i64),
-    UInt(u64),
-    Bool(bool),
-    Str(String),
-}
-
-/// One parsed metric. Tags keep input order; fields keep input order (last value of a key wins).
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct Metric {
-    pub measurement: String,
-    pub tags: Vec<(String, String)>,
-    pub fields: Vec<(String, FieldValue)>,
-    /// Nanoseconds since the epoch, if the record had a timestamp.
-    pub timestamp: Option<i64>,
-    /// Field values overwritten by a later value of the same key (0 for a well-formed record).
-    pub overwritten: usize,
-}
-
-impl Metric {
-    pub fn tag(&self, key: &str) -> Option<&str> {
-        self.tags
-            .iter()
-            .find(|(k, _)| k == key)
-            .map(|(_, v)| v.as_str())
-    }
-
-    pub fn field(&self, key: &str) -> Option<&FieldValue> {
-        self.fields.iter().find(|(k, _)| k == key).map(|(_, v)| v)
-    }
-}
 
 /// Why a record is not a metric.
 #[derive(Debug, Clone, PartialEq)]

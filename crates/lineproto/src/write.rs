@@ -15,7 +15,7 @@
 //! character that gets escaped (or before `"`) gains one backslash, so that it cannot pair with
 //! the escape (Telegraf's own serializer writes a broken line there).
 
-use crate::parse::FieldValue;
+use crate::metric::FieldValue;
 use std::fmt::Write as _;
 
 /// A Float that is NaN or infinite cannot be written as line protocol.

@@ -1,0 +1,38 @@
+//! One parsed record: a [`Metric`] and its [`FieldValue`]s.
+//!
+//! Owns: the record types the parsers ([`crate::parse`] and its fast path) fill and the writer
+//! ([`crate::write`]) reads; they depend on nothing else in the crate.
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum FieldValue {
+    Float(f64),
+    Int(i64),
+    UInt(u64),
+    Bool(bool),
+    Str(String),
+}
+
+/// One parsed metric. Tags keep input order; fields keep input order (last value of a key wins).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Metric {
+    pub measurement: String,
+    pub tags: Vec<(String, String)>,
+    pub fields: Vec<(String, FieldValue)>,
+    /// Nanoseconds since the epoch, if the record had a timestamp.
+    pub timestamp: Option<i64>,
+    /// Field values overwritten by a later value of the same key (0 for a well-formed record).
+    pub overwritten: usize,
+}
+
+impl Metric {
+    pub fn tag(&self, key: &str) -> Option<&str> {
+        self.tags
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
+    }
+
+    pub fn field(&self, key: &str) -> Option<&FieldValue> {
+        self.fields.iter().find(|(k, _)| k == key).map(|(_, v)| v)
+    }
+}
