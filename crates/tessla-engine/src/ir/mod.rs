@@ -2,7 +2,8 @@
 //!
 //! Owns: [`Program`] (what the front end produces; the runtime runs it with its code compiled),
 //! the metadata the
-//! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s; which
+//! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s; its own
+//! operators (`op`: [`BinOp`], [`UnaryOp`], which the lowering maps the syntax's onto); which
 //! operators have a fast-path node ([`scalar_op`]); the stable hashes node identities are made
 //! of ([`text_hash`], [`mix`], and [`owner_key`], the owner the lowering records per node); its
 //! listing (`print`, `tessla-telegraf check --ir`). The value code inside nodes and the
@@ -11,11 +12,12 @@
 
 use crate::value::Value;
 use std::hash::Hasher;
-use tessla_syntax::ast::BinOp;
 
 pub mod code;
+pub mod op;
 pub(crate) mod print;
 pub use code::{Callee, Code, FnId, Function, LiftFn, Prim};
+pub use op::{BinOp, UnaryOp};
 pub use print::IrListing;
 
 /// A value type, as reported by `check` and used by bindings to convert inputs.
@@ -134,7 +136,7 @@ pub enum ScalarOp {
 }
 
 /// The operators with an inline scalar fast path, and the operator each one stands for (which
-/// syntax operator the lowering may build a [`Node::Bin`] for). Inline: the evaluator asks it
+/// operator the lowering may build a [`Node::Bin`] for). Inline: the evaluator asks it
 /// for every operator it applies (`runtime::exec::binary`).
 #[inline]
 pub fn scalar_op(op: BinOp) -> Option<ScalarOp> {

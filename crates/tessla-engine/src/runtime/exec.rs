@@ -20,11 +20,11 @@
 use crate::ir::code::{Callee, Code, FnId, LiftFn, Prim};
 use crate::ir::scalar_op;
 use crate::ir::{self, Node};
+use crate::ir::{BinOp, UnaryOp};
 use crate::runtime::collections;
 use crate::runtime::ops;
 use crate::value::{Callable, NativeFn, RuntimeError, Value};
 use std::sync::{Arc, OnceLock, Weak};
-use tessla_syntax::ast::{BinOp, UnaryOp};
 
 /// Compiled code: evaluates over a frame, calling program functions through the context.
 pub type Exec = Arc<dyn Fn(&Ctx, &[Value]) -> Value + Send + Sync>;

@@ -2,8 +2,10 @@
 //! operators with their inline scalar nodes, `if`, records, tuples, member access, lambdas,
 //! blocks).
 //!
-//! Owns: `Compiler::expr` and the inline nodes of operators (`inline_op`, `slift_node`). Value
-//! operations become [`Prim`]itive applications (semantics in `runtime::exec` and `runtime::ops`).
+//! Owns: `Compiler::expr`, the inline nodes of operators (`inline_op`, `slift_node`) and the one
+//! mapping of the syntax's operators onto the IR's ([`BinOp`], [`UnaryOp`]: `From` the
+//! `tessla_syntax::ast` ones, also what the trace reader converts with). Value operations become
+//! [`Prim`]itive applications (semantics in `runtime::exec` and `runtime::ops`).
 
 use super::*;
 
@@ -157,13 +159,14 @@ impl Compiler<'_> {
             }
             ExprKind::Unary { op, operand } => {
                 let t = self.expr(operand, env)?;
-                let r = self.apply_value_fn(Callee::Prim(Prim::Unary(*op)), vec![t], e.span)?;
+                let op = UnaryOp::from(*op);
+                let r = self.apply_value_fn(Callee::Prim(Prim::Unary(op)), vec![t], e.span)?;
                 Ok(r)
             }
             ExprKind::Binary { op, lhs, rhs } => {
                 let a = self.expr(lhs, env)?;
                 let b = self.expr(rhs, env)?;
-                let op = *op;
+                let op = BinOp::from(*op);
                 if matches!(op, BinOp::And | BinOp::Or) {
                     // Lazy: the right side is not evaluated when the left decides.
                     if let Term::Code(_) | Term::Const(_) = a
@@ -266,6 +269,53 @@ impl Compiler<'_> {
                 };
                 self.call(f, terms, e.span, env)
             }
+        }
+    }
+}
+
+impl From<ast::BinOp> for BinOp {
+    /// The IR's operator for the syntax's (the same operator: one variant each).
+    fn from(op: ast::BinOp) -> BinOp {
+        use ast::BinOp as S;
+        match op {
+            S::Mul => BinOp::Mul,
+            S::Div => BinOp::Div,
+            S::Mod => BinOp::Mod,
+            S::FMul => BinOp::FMul,
+            S::FDiv => BinOp::FDiv,
+            S::Add => BinOp::Add,
+            S::Sub => BinOp::Sub,
+            S::FAdd => BinOp::FAdd,
+            S::FSub => BinOp::FSub,
+            S::Shl => BinOp::Shl,
+            S::Shr => BinOp::Shr,
+            S::BitAnd => BinOp::BitAnd,
+            S::BitOr => BinOp::BitOr,
+            S::BitXor => BinOp::BitXor,
+            S::Eq => BinOp::Eq,
+            S::Ne => BinOp::Ne,
+            S::Lt => BinOp::Lt,
+            S::Gt => BinOp::Gt,
+            S::Le => BinOp::Le,
+            S::Ge => BinOp::Ge,
+            S::FLt => BinOp::FLt,
+            S::FGt => BinOp::FGt,
+            S::FLe => BinOp::FLe,
+            S::FGe => BinOp::FGe,
+            S::And => BinOp::And,
+            S::Or => BinOp::Or,
+        }
+    }
+}
+
+impl From<ast::UnaryOp> for UnaryOp {
+    /// The IR's operator for the syntax's.
+    fn from(op: ast::UnaryOp) -> UnaryOp {
+        match op {
+            ast::UnaryOp::Not => UnaryOp::Not,
+            ast::UnaryOp::BitNot => UnaryOp::BitNot,
+            ast::UnaryOp::Neg => UnaryOp::Neg,
+            ast::UnaryOp::FNeg => UnaryOp::FNeg,
         }
     }
 }

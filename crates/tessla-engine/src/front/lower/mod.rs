@@ -38,8 +38,8 @@ mod stream;
 pub mod time;
 
 use crate::ir::{
-    Annotation, Callee, Code, FnId, Function, InputInfo, LiftFn, Node, NodeId, OutputInfo, Prim,
-    Program, SArg, Type,
+    Annotation, BinOp, Callee, Code, FnId, Function, InputInfo, LiftFn, Node, NodeId, OutputInfo,
+    Prim, Program, SArg, Type, UnaryOp,
 };
 use crate::ir::{owner_key, scalar_op};
 use crate::value::{NativeFn, RuntimeError, Value};
@@ -47,7 +47,7 @@ use std::cell::RefCell;
 use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
 use std::sync::Arc;
-use tessla_syntax::ast::{self, BinOp, Body, Def, Expr, ExprKind, Statement, StrPart, UnaryOp};
+use tessla_syntax::ast::{self, Body, Def, Expr, ExprKind, Statement, StrPart};
 use tessla_syntax::diag::{Category, Diagnostic};
 use tessla_syntax::source::{SourceMap, Span};
 
