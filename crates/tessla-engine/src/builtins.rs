@@ -1,7 +1,7 @@
 //! Every builtin name of the language, once: stream operators, value functions, constants,
 //! `Operators.*` and the natives reached through `extern("name")`.
 //!
-//! The one door from the front end (`resolve`, `typeck`, `lower`, `schedule`) into the runtime:
+//! The one door from the front end (`resolve`, `typeck`, `lower`) into the runtime:
 //! the natives' function pointers are in the table, and the few other runtime entry points the
 //! lowering needs (constant folding, function values of natives) are re-exported here.
 //!

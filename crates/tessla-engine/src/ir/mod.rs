@@ -6,7 +6,8 @@
 //! operators (`op`: [`BinOp`], [`UnaryOp`], which the lowering maps the syntax's onto); which
 //! operators have a fast-path node ([`scalar_op`]); the stable hashes node identities are made
 //! of ([`text_hash`], [`mix`], and [`owner_key`], the owner the lowering records per node); its
-//! listing (`print`, `tessla-telegraf check --ir`). The value code inside nodes and the
+//! listing (`print`, `tessla-telegraf check --ir`); the pass that orders a lowered program's
+//! nodes and picks the values kept across steps (`schedule`). The value code inside nodes and the
 //! function table are data too (`code`); `runtime::exec` compiles them into closures when the
 //! first monitor of a program is created.
 
@@ -16,6 +17,7 @@ use std::hash::Hasher;
 pub mod code;
 pub mod op;
 pub(crate) mod print;
+pub mod schedule;
 pub use code::{Callee, Code, FnId, Function, LiftFn, Prim};
 pub use op::{BinOp, UnaryOp};
 pub use print::IrListing;
@@ -353,7 +355,7 @@ pub struct Program {
     /// The `Delay` nodes (the monitor arms and fires only these).
     pub delays: Vec<NodeId>,
     /// Per node: its slot among the values a monitor keeps from earlier steps, or [`NO_SLOT`]
-    /// when no node reads it across steps (see [`crate::front::schedule::last_slots`]).
+    /// when no node reads it across steps (see [`schedule::last_slots`]).
     pub last_slot: Vec<u32>,
     /// Number of slots in use in `last_slot`.
     pub n_last_slots: usize,

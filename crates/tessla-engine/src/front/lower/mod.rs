@@ -21,11 +21,10 @@
 //! `expr` (each expression form, operators), `call` (calls and arguments), `closure`
 //! (value-level functions into the function table, function values, constant folding), `stream` (the stream operators), `time` (base time and time units), `overrides` (`--set`). Names and signatures of
 //! builtins are `crate::builtins`, operator semantics `crate::runtime::ops`, format strings
-//! `crate::runtime::format`, evaluation order and cross-step slots `crate::front::schedule`.
+//! `crate::runtime::format`, evaluation order and cross-step slots `crate::ir::schedule`.
 
 use crate::builtins::{self, Builtin, Folder, Kind, StreamOp};
 use crate::front::resolve::Resolved;
-use crate::front::schedule;
 use time::unit_factor;
 
 mod call;
@@ -41,7 +40,7 @@ use crate::ir::{
     Annotation, BinOp, Callee, Code, FnId, Function, InputInfo, LiftFn, Node, NodeId, OutputInfo,
     Prim, Program, SArg, Type, UnaryOp,
 };
-use crate::ir::{owner_key, scalar_op};
+use crate::ir::{owner_key, scalar_op, schedule};
 use crate::value::{NativeFn, RuntimeError, Value};
 use std::cell::RefCell;
 use std::collections::{HashMap, HashSet};
@@ -404,7 +403,10 @@ impl<'a> Compiler<'a> {
         let order = match schedule::order(&self.nodes, &output_nodes) {
             Ok(o) => o,
             Err(cycle) => {
-                let d = cycle.diagnostic();
+                // No node of the cycle has a place in the source.
+                let d = Diagnostic::error(Category::Recursion, None, cycle.to_string()).with_help(
+                    "recursion is allowed only through the first argument of `last` or `delay`",
+                );
                 self.diags.push(d);
                 return Err(self.diags);
             }
