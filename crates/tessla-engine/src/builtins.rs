@@ -180,8 +180,15 @@ pub fn get(name: &str) -> Option<&'static Builtin> {
 
 /// The native `extern("name")` refers to, if any.
 pub fn extern_native(name: &str) -> Option<NativeFn> {
+    extern_named(name).map(|(_, f)| f)
+}
+
+/// The native `extern("name")` refers to, with its name in the table (the key natives are
+/// looked up by afterwards, never their address: the linker may merge two natives of the
+/// same body).
+pub fn extern_named(name: &str) -> Option<(&'static str, NativeFn)> {
     get(name).and_then(|b| match b.kind {
-        Kind::Value(f) | Kind::Extern(f) => Some(f),
+        Kind::Value(f) | Kind::Extern(f) => Some((b.name, f)),
         _ => None,
     })
 }

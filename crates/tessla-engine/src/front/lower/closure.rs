@@ -123,7 +123,7 @@ impl Compiler<'_> {
     /// A function term as a runtime value: a constant (natives) or closure code.
     pub(super) fn func_value(&mut self, ft: &Rc<FuncTerm>, span: Span) -> R<Term> {
         match &**ft {
-            FuncTerm::Native(n) => Ok(Term::Const(builtins::native_value(*n))),
+            FuncTerm::Native { f, .. } => Ok(Term::Const(builtins::native_value(*f))),
             FuncTerm::User { def, env } => {
                 let (fun, _) = self.compile_fn(def, env, span)?;
                 // Defined inside a function body: the closure captures the enclosing frame.
@@ -190,8 +190,8 @@ impl Compiler<'_> {
             Term::Code(c) => c,
             Term::Const(v) => Code::Const(v),
             Term::Func(ft) => match &*ft {
-                FuncTerm::Native(n) if matches!(def.body, Body::Extern { .. }) => {
-                    Code::apply(native_callee(*n), Code::slots(frame))
+                FuncTerm::Native { f, .. } if matches!(def.body, Body::Extern { .. }) => {
+                    Code::apply(native_callee(*f), Code::slots(frame))
                 }
                 // A function returning a function: the result is a function value.
                 _ => match self.func_value(&ft, span)? {

@@ -62,7 +62,12 @@ enum Term {
 enum FuncTerm {
     /// A stream operator of the builtins table (`last`, `merge` ...).
     Builtin(&'static Builtin, StreamOp),
-    Native(NativeFn),
+    /// A native value function, with its name in the builtins table (`unknown extern` for an
+    /// extern no builtin provides).
+    Native {
+        name: &'static str,
+        f: NativeFn,
+    },
     User {
         def: Rc<Def>,
         env: Env,

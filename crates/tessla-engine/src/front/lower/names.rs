@@ -150,12 +150,13 @@ impl Compiler<'_> {
                     d.name.name
                 ),
             ),
-            Body::Extern { name, .. } => match builtins::extern_native(name) {
-                Some(f) => Ok(Term::Func(Rc::new(FuncTerm::Native(f)))),
+            Body::Extern { name, .. } => match builtins::extern_named(name) {
+                Some((name, f)) => Ok(Term::Func(Rc::new(FuncTerm::Native { name, f }))),
                 // As in TeSSLa, an unknown extern is an error when it is evaluated.
                 None if d.params.is_some() => {
                     let f: NativeFn = unknown_extern;
-                    Ok(Term::Func(Rc::new(FuncTerm::Native(f))))
+                    let name = "unknown extern";
+                    Ok(Term::Func(Rc::new(FuncTerm::Native { name, f })))
                 }
                 None => {
                     let msg: Arc<str> = format!("unknown extern `{name}`").into();
@@ -244,7 +245,7 @@ impl Compiler<'_> {
                         Kind::Stream(op) => Term::Func(Rc::new(FuncTerm::Builtin(b, op))),
                         Kind::Constant(v) => Term::Const(v()),
                         Kind::Value(f) | Kind::Operator(f) => {
-                            Term::Func(Rc::new(FuncTerm::Native(f)))
+                            Term::Func(Rc::new(FuncTerm::Native { name: b.name, f }))
                         }
                         // Only through `extern("name")`.
                         Kind::Extern(_) => return self.unchecked(span, "an unknown name"),
