@@ -3,7 +3,8 @@
 //!
 //! The one door from the front end (`resolve`, `typeck`, `lower`) into the runtime:
 //! the natives' function pointers are in the table, and the few other runtime entry points the
-//! lowering needs (constant folding, function values of natives) are re-exported here.
+//! lowering needs (the semantics of primitives for constant folding, function values of
+//! natives) are re-exported here.
 //!
 //! Owns: [`BUILTINS`], each entry with its name, [`Kind`] (what the lowering does with it),
 //! TeSSLa signature (what the checker types a use with; `None`: any type, checked at lowering)
@@ -24,10 +25,10 @@ use crate::value::{NativeFn, Value};
 use std::collections::HashMap;
 use std::sync::OnceLock;
 
-/// The rest of the runtime the front end uses, besides the natives listed in [`BUILTINS`]:
-/// constant folding and function values of natives (the lowering). A pass imports runtime code
-/// through this table only.
-pub use crate::runtime::exec::{Folder, native_value};
+/// The rest of the runtime the front end uses, besides the natives listed in [`BUILTINS`]: the
+/// semantics of primitives (which the lowering hands the constant fold, `crate::ir::fold`) and
+/// function values of natives. A pass imports runtime code through this table only.
+pub use crate::runtime::exec::{native_value, prim};
 
 /// A stream operator the lowering builds nodes for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

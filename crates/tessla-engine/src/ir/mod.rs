@@ -1,20 +1,21 @@
 //! The flat core IR: stream nodes in dependency order with typed value slots.
 //!
 //! Owns: [`Program`] (what the front end produces; the runtime runs it with its code compiled),
-//! the metadata the
-//! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s; its own
-//! operators (`op`: [`BinOp`], [`UnaryOp`], which the lowering maps the syntax's onto); which
-//! operators have a fast-path node ([`scalar_op`]); the stable hashes node identities are made
-//! of ([`text_hash`], [`mix`], and [`owner_key`], the owner the lowering records per node); its
-//! listing (`print`, `tessla-telegraf check --ir`); the pass that orders a lowered program's
-//! nodes and picks the values kept across steps (`schedule`). The value code inside nodes and the
-//! function table are data too (`code`); `runtime::exec` compiles them into closures when the
-//! first monitor of a program is created.
+//! the metadata the bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value
+//! [`Type`]s; its own operators (`op`: [`BinOp`], [`UnaryOp`], which the lowering maps the
+//! syntax's onto); which operators have a fast-path node ([`scalar_op`]); the stable hashes node
+//! identities are made of ([`text_hash`], [`mix`], and [`owner_key`], the owner the lowering
+//! records per node); its listing (`print`, `tessla-telegraf check --ir`). The value code inside
+//! nodes and the function table are data too (`code`); `runtime::exec` compiles them into
+//! closures when the first monitor of a program is created. Two passes over the IR that the
+//! lowering runs: constant folding of closed code (`fold`) and scheduling, the evaluation order
+//! and the values kept across steps (`schedule`).
 
 use crate::value::Value;
 use std::hash::Hasher;
 
 pub mod code;
+pub mod fold;
 pub mod op;
 pub(crate) mod print;
 pub mod schedule;

@@ -5,8 +5,9 @@
 //!
 //! Owns: `Compiler::compile_fn` (a named function, once per definition; a recursive call refers
 //! to the function by its index, so nothing is closed through a cell), `func_value`,
-//! `apply_value_fn`, `as_code`, `param_frame`, constant folding (`fold`, through the runtime's
-//! folder, which the builtins table hands over) and the name of a native callee.
+//! `apply_value_fn`, `as_code`, `param_frame`, constant folding (`fold`, by `crate::ir::fold`
+//! with the primitives' semantics the builtins table hands over) and the name of a native
+//! callee.
 
 use super::*;
 

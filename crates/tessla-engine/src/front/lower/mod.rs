@@ -5,8 +5,8 @@
 //! applied to stream arguments are expanded in place (TeSSLa's macros); operators and liftable
 //! functions on streams become signal lifts; value-level functions are lowered once into the
 //! program's function table ([`Program::functions`]) and called by index. Nothing here builds a
-//! closure: `crate::runtime::exec` compiles the code when a monitor is created (and, here, to fold
-//! constants). Recursion is allowed only through the lazy arguments of the builtins table
+//! closure: `crate::runtime::exec` compiles the code when a monitor is created; constants are
+//! folded on the IR (`crate::ir::fold`). Recursion is allowed only through the lazy arguments of the builtins table
 //! (`last`, `delay`).
 //!
 //! Owns: the [`Compiler`] and `program` (inputs, outputs, `out *` and their annotations) here.
@@ -23,8 +23,9 @@
 //! builtins are `crate::builtins`, operator semantics `crate::runtime::ops`, format strings
 //! `crate::runtime::format`, evaluation order and cross-step slots `crate::ir::schedule`.
 
-use crate::builtins::{self, Builtin, Folder, Kind, StreamOp};
+use crate::builtins::{self, Builtin, Kind, StreamOp};
 use crate::front::resolve::Resolved;
+use crate::ir::fold::Folder;
 use time::unit_factor;
 
 mod call;
@@ -170,7 +171,7 @@ pub struct Compiler<'a> {
     not_value_fns: HashSet<Span>,
     /// The function table (`Program::functions`).
     functions: Vec<Function>,
-    /// Constant folding: the functions finished so far, compiled (see `closure::fold`).
+    /// Constant folding with the functions finished so far (see `closure::fold`).
     folder: Folder,
     unit_node: Option<NodeId>,
     /// The unit of the base time in femtoseconds (`µs` in `33333 µs`); `None`: `base_ns`.
@@ -216,7 +217,7 @@ impl<'a> Compiler<'a> {
             compiled_fns: HashMap::new(),
             not_value_fns: HashSet::new(),
             functions: Vec::new(),
-            folder: Folder::default(),
+            folder: Folder::new(builtins::prim),
             unit_node: None,
             base_unit: None,
             time_units: true,
