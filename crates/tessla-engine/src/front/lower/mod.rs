@@ -12,8 +12,9 @@
 //! Owns: the [`Compiler`] and `program` (inputs, outputs, `out *` and their annotations) here.
 //! It reads the resolved spec (`crate::front::resolve`): which definition, input or imported member a
 //! global name means is decided there once, for the checker and the lowering; lowering keeps
-//! only its local scopes (parameters, blocks and `where`, macro arguments). Types come from the
-//! checker (`crate::front::typeck::Types`: inputs, outputs, `out *` defs). The lowering keeps
+//! only its local scopes (parameters, blocks and `where`, macro arguments). It lowers only a
+//! checked spec (`crate::front::typeck::Typed`, which only the checker makes) and takes its
+//! types from there (inputs, outputs, `out *` defs). The lowering keeps
 //! only the rules the checker leaves open (each marked "the one place" where it is written); a
 //! case the checker or name resolution rules out is `Compiler::unchecked`, an internal error.
 //! By concern: `names`
@@ -25,6 +26,7 @@
 
 use crate::builtins::{self, Builtin, Kind, StreamOp};
 use crate::front::resolve::Resolved;
+use crate::front::typeck::Typed;
 use crate::ir::fold::Folder;
 use time::unit_factor;
 
@@ -188,8 +190,9 @@ pub struct Compiler<'a> {
     /// compile leaked the whole name table (found by cargo fuzz's leak checker).
     scopes: Vec<Rc<RefCell<Option<Env>>>>,
     states: Vec<Rc<RefCell<DefState>>>,
-    /// The checker's types of inputs, outputs and top-level defs (see [`crate::front::typeck::Types`]).
-    types: crate::front::typeck::Types,
+    /// The checked spec: the types of inputs, outputs and top-level defs (see
+    /// [`crate::front::typeck::Typed`]).
+    typed: &'a Typed<'a>,
 }
 
 /// The native of an `extern` no builtin provides: an error when evaluated.
@@ -198,11 +201,9 @@ fn unknown_extern(_: &[Value]) -> Value {
 }
 
 impl<'a> Compiler<'a> {
-    pub fn new(
-        sources: &'a SourceMap,
-        resolved: &'a Resolved<'a>,
-        base_ns_fs: i128,
-    ) -> Compiler<'a> {
+    /// The lowering of a checked spec; `base_ns_fs` is the base time in femtoseconds.
+    pub fn new(sources: &'a SourceMap, typed: &'a Typed<'a>, base_ns_fs: i128) -> Compiler<'a> {
+        let resolved = typed.resolved();
         Compiler {
             sources,
             resolved,
@@ -225,7 +226,7 @@ impl<'a> Compiler<'a> {
             owners: Vec::new(),
             scopes: Vec::new(),
             states: Vec::new(),
-            types: crate::front::typeck::Types::default(),
+            typed,
         }
     }
 
@@ -260,12 +261,6 @@ impl<'a> Compiler<'a> {
     /// Allow or forbid time literals (forbidden when the spec runs without a base time).
     pub fn with_time_units(mut self, allowed: bool) -> Self {
         self.time_units = allowed;
-        self
-    }
-
-    /// The checker's types of inputs, outputs and `out *` defs (the only types lowering uses).
-    pub fn with_types(mut self, types: crate::front::typeck::Types) -> Self {
-        self.types = types;
         self
     }
 
@@ -311,7 +306,7 @@ impl<'a> Compiler<'a> {
             self.input_nodes.push(n);
             self.inputs.push(InputInfo {
                 name: name.name.clone(),
-                ty: self.types.inputs.get(idx).cloned().unwrap_or(Type::Unknown),
+                ty: self.typed.input(idx),
                 annotations: Vec::new(),
             });
         }
@@ -344,7 +339,7 @@ impl<'a> Compiler<'a> {
             match self.object_output(&o.expr, &env) {
                 Some(Ok(members)) => {
                     for (path, t) in members {
-                        let ty = member_type(self.types.output(&o.expr), &path);
+                        let ty = member_type(self.typed.output(&o.expr), &path);
                         if let Ok(n) = self.stream_of(t, o.expr.span) {
                             outputs.push(OutputInfo {
                                 name: format!("{name}.{path}"),
@@ -361,7 +356,7 @@ impl<'a> Compiler<'a> {
                 None => {}
             }
             if let Ok(t) = self.expr(&o.expr, &env) {
-                let ty = self.types.output(&o.expr);
+                let ty = self.typed.output(&o.expr);
                 if let Ok(n) = self.stream_of(t, o.expr.span) {
                     outputs.push(OutputInfo {
                         name,
@@ -390,7 +385,7 @@ impl<'a> Compiler<'a> {
                     && let Term::Stream(n) = t
                     && let Some(name) = resolved.name(id)
                 {
-                    let ty = self.types.defs.get(&name).cloned().unwrap_or(Type::Unknown);
+                    let ty = self.typed.def(&name);
                     outputs.push(OutputInfo {
                         name,
                         ty,
