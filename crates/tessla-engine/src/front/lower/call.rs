@@ -117,7 +117,7 @@ impl Compiler<'_> {
                     && (has_func
                         || has_stream
                         || stream_params
-                        || self.not_value_fns.contains(&def.span));
+                        || self.table.not_value_fns.contains(&def.span));
                 if !expand {
                     let saved = self.diags.len();
                     match self.call_compiled(def, denv, args.clone(), span) {
@@ -134,16 +134,16 @@ impl Compiler<'_> {
                                     .any(|d| d.category == Category::Name) =>
                         {
                             self.diags.truncate(saved);
-                            self.not_value_fns.insert(def.span);
+                            self.table.not_value_fns.insert(def.span);
                             expand = true;
                         }
                         Err(Fail) => return Err(Fail),
                     }
                 }
                 if expand {
-                    self.inline_depth += 1;
-                    if self.inline_depth > 200 {
-                        self.inline_depth -= 1;
+                    self.depth.inline_depth += 1;
+                    if self.depth.inline_depth > 200 {
+                        self.depth.inline_depth -= 1;
                         return self.error(
                             Category::Recursion,
                             span,
@@ -159,7 +159,7 @@ impl Compiler<'_> {
                     // lambdas made inside capture that frame and put parameters after it.
                     let inner = denv.child(names, env.frame.max(denv.frame));
                     let r = self.body(def, &inner);
-                    self.inline_depth -= 1;
+                    self.depth.inline_depth -= 1;
                     r
                 } else {
                     self.call_compiled(def, denv, args, span)

@@ -18,9 +18,9 @@ impl Compiler<'_> {
         make: impl FnOnce(&[SArg], &Code) -> Option<Node>,
     ) {
         if let Term::Stream(n) = t
-            && let Some(Node::SLift { args, f }) = self.nodes.get(*n)
+            && let Some(Node::SLift { args, f }) = self.graph.nodes.get(*n)
             && let Some(node) = make(args, f)
-            && let Some(slot) = self.nodes.get_mut(*n)
+            && let Some(slot) = self.graph.nodes.get_mut(*n)
         {
             *slot = node;
         }
@@ -44,7 +44,7 @@ impl Compiler<'_> {
             ExprKind::Int { value, unit } => {
                 let v = match unit {
                     None => *value,
-                    Some(u) if !self.time_units => {
+                    Some(u) if !self.time.time_units => {
                         self.diags.push(
                             Diagnostic::error(
                                 Category::Time,
@@ -61,7 +61,7 @@ impl Compiler<'_> {
                         // As TeSSLa does: the literal must be a whole number of the base
                         // time's unit; then it is divided by the base's count, truncating
                         // (100ms at 33333 µs is 3), but it must not become 0.
-                        let unit_fs = self.base_unit.unwrap_or(self.base_ns);
+                        let unit_fs = self.time.base_unit.unwrap_or(self.time.base_ns);
                         if fs % unit_fs != 0 {
                             return self.error(
                                 Category::Time,
@@ -72,7 +72,7 @@ impl Compiler<'_> {
                                 ),
                             );
                         }
-                        let r = fs / unit_fs / (self.base_ns / unit_fs).max(1);
+                        let r = fs / unit_fs / (self.time.base_ns / unit_fs).max(1);
                         if r == 0 && *value != 0 {
                             return self.error(
                                 Category::Time,
@@ -251,9 +251,9 @@ impl Compiler<'_> {
                 let mut terms = Vec::with_capacity(args.len());
                 for (i, a) in args.iter().enumerate() {
                     if lazy_first && i == 0 {
-                        self.lazy_depth += 1;
+                        self.depth.lazy_depth += 1;
                         let r = self.expr(&a.value, env);
-                        self.lazy_depth -= 1;
+                        self.depth.lazy_depth -= 1;
                         terms.push(r?);
                     } else {
                         terms.push(self.expr(&a.value, env)?);

@@ -150,49 +150,81 @@ impl Env {
 struct Fail;
 type R<T> = Result<T, Fail>;
 
+/// The lowering of one checked spec. Its state, by concern: the spec it reads, the
+/// definitions' lowering states ([`Defs`]), the stream graph being built ([`Graph`]), the
+/// function table ([`Functions`]), the time settings ([`TimeSettings`]), how deep it is
+/// ([`Depth`]) and the diagnostics.
 pub struct Compiler<'a> {
     sources: &'a SourceMap,
     /// The resolve pass's result: what every global name means (`crate::front::resolve`).
     resolved: &'a Resolved<'a>,
+    /// The checked spec: the types of inputs, outputs and top-level defs (see
+    /// [`crate::front::typeck::Typed`]).
+    typed: &'a Typed<'a>,
+    pub diags: Vec<Diagnostic>,
+    defs: Defs,
+    graph: Graph,
+    table: Functions,
+    time: TimeSettings,
+    depth: Depth,
+}
+
+/// The lowering state of definitions and their scopes (`names`).
+struct Defs {
     /// The lowering state of each global definition, by [`DefId`](crate::front::resolve::DefId),
     /// made on first use (or by a `--set` override).
     globals: Vec<Option<Entry>>,
-    pub diags: Vec<Diagnostic>,
+    /// Every scope cell and def state created: scopes and defs refer to each other through
+    /// `Rc`s, so they are cleared when compiling ends ([`Compiler::break_cycles`]) or each
+    /// compile leaked the whole name table (found by cargo fuzz's leak checker).
+    scopes: Vec<Rc<RefCell<Option<Env>>>>,
+    states: Vec<Rc<RefCell<DefState>>>,
+}
+
+/// The stream graph being built: nodes with their owners, the inputs.
+struct Graph {
     nodes: Vec<Node>,
-    /// Node ids whose definition is pending (reserved aliases), for error checks.
-    lazy_depth: usize,
-    inline_depth: usize,
-    base_ns: i128,
+    /// The owner of each node (`Program::node_owners`).
+    owners: Vec<u64>,
+    /// The owner of the nodes created now (see [`crate::ir::owner_key`]): the name of
+    /// the definition or output being lowered.
+    owner: u64,
+    /// The one `unit` node, once made.
+    unit_node: Option<NodeId>,
     inputs: Vec<InputInfo>,
     input_nodes: Vec<NodeId>,
+}
+
+/// The function table being built (`closure`) and constant folding over it.
+struct Functions {
+    /// The function table (`Program::functions`).
+    functions: Vec<Function>,
     /// The function table entry of each named function lowered so far.
     compiled_fns: HashMap<*const Def, FnId>,
     /// Definitions (by their span: a local def is cloned afresh each time its scope is
     /// lowered) whose body failed to compile as a value function, so calls expand them at once
     /// instead of trying again (mutually recursive nested functions made that exponential).
     not_value_fns: HashSet<Span>,
-    /// The function table (`Program::functions`).
-    functions: Vec<Function>,
     /// Constant folding with the functions finished so far (see `closure::fold`).
     folder: Folder,
-    unit_node: Option<NodeId>,
+}
+
+/// Base time and time literals (`time`).
+struct TimeSettings {
+    /// The base time in femtoseconds.
+    base_ns: i128,
     /// The unit of the base time in femtoseconds (`µs` in `33333 µs`); `None`: `base_ns`.
     base_unit: Option<i128>,
     /// Time literals are allowed (a base time is set, or 1 ns is assumed).
     time_units: bool,
-    /// The owner of the nodes created now (see [`crate::ir::owner_key`]): the name of
-    /// the definition or output being lowered.
-    owner: u64,
-    /// The owner of each node (`Program::node_owners`).
-    owners: Vec<u64>,
-    /// Every scope cell and def state created: scopes and defs refer to each other through
-    /// `Rc`s, so they are cleared when compiling ends ([`Compiler::break_cycles`]) or each
-    /// compile leaked the whole name table (found by cargo fuzz's leak checker).
-    scopes: Vec<Rc<RefCell<Option<Env>>>>,
-    states: Vec<Rc<RefCell<DefState>>>,
-    /// The checked spec: the types of inputs, outputs and top-level defs (see
-    /// [`crate::front::typeck::Typed`]).
-    typed: &'a Typed<'a>,
+}
+
+/// How deep the lowering is.
+struct Depth {
+    /// Inside the lazy argument of `last`/`delay` (of the definition being lowered).
+    lazy_depth: usize,
+    /// Nested macro expansions (calls of functions on streams), bounded.
+    inline_depth: usize,
 }
 
 /// The native of an `extern` no builtin provides: an error when evaluated.
@@ -207,51 +239,61 @@ impl<'a> Compiler<'a> {
         Compiler {
             sources,
             resolved,
-            globals: vec![None; resolved.defs.len()],
-            diags: Vec::new(),
-            nodes: Vec::new(),
-            lazy_depth: 0,
-            inline_depth: 0,
-            base_ns: base_ns_fs,
-            inputs: Vec::new(),
-            input_nodes: Vec::new(),
-            compiled_fns: HashMap::new(),
-            not_value_fns: HashSet::new(),
-            functions: Vec::new(),
-            folder: Folder::new(builtins::prim),
-            unit_node: None,
-            base_unit: None,
-            time_units: true,
-            owner: 0,
-            owners: Vec::new(),
-            scopes: Vec::new(),
-            states: Vec::new(),
             typed,
+            diags: Vec::new(),
+            defs: Defs {
+                globals: vec![None; resolved.defs.len()],
+                scopes: Vec::new(),
+                states: Vec::new(),
+            },
+            graph: Graph {
+                nodes: Vec::new(),
+                owners: Vec::new(),
+                owner: 0,
+                unit_node: None,
+                inputs: Vec::new(),
+                input_nodes: Vec::new(),
+            },
+            table: Functions {
+                functions: Vec::new(),
+                compiled_fns: HashMap::new(),
+                not_value_fns: HashSet::new(),
+                folder: Folder::new(builtins::prim),
+            },
+            time: TimeSettings {
+                base_ns: base_ns_fs,
+                base_unit: None,
+                time_units: true,
+            },
+            depth: Depth {
+                lazy_depth: 0,
+                inline_depth: 0,
+            },
         }
     }
 
     /// A new def state, registered for [`Compiler::break_cycles`].
     fn new_state(&mut self) -> Rc<RefCell<DefState>> {
         let s = Rc::new(RefCell::new(DefState::Todo));
-        self.states.push(s.clone());
+        self.defs.states.push(s.clone());
         s
     }
 
     /// A new scope cell, registered for [`Compiler::break_cycles`].
     fn new_scope(&mut self) -> Rc<RefCell<Option<Env>>> {
         let c = Rc::new(RefCell::new(None));
-        self.scopes.push(c.clone());
+        self.defs.scopes.push(c.clone());
         c
     }
 
     /// Empty every scope cell and def state, breaking the reference cycles between them.
     fn break_cycles(&mut self) {
-        for c in self.scopes.drain(..) {
+        for c in self.defs.scopes.drain(..) {
             if let Ok(mut c) = c.try_borrow_mut() {
                 *c = None;
             }
         }
-        for st in self.states.drain(..) {
+        for st in self.defs.states.drain(..) {
             if let Ok(mut st) = st.try_borrow_mut() {
                 *st = DefState::Failed;
             }
@@ -260,13 +302,13 @@ impl<'a> Compiler<'a> {
 
     /// Allow or forbid time literals (forbidden when the spec runs without a base time).
     pub fn with_time_units(mut self, allowed: bool) -> Self {
-        self.time_units = allowed;
+        self.time.time_units = allowed;
         self
     }
 
     /// Set the unit of the base time (see [`parse_base_parts`]) for time literal conversion.
     pub fn with_base_unit(mut self, unit_fs: i128) -> Self {
-        self.base_unit = Some(unit_fs);
+        self.time.base_unit = Some(unit_fs);
         self
     }
 
@@ -288,9 +330,9 @@ impl<'a> Compiler<'a> {
     }
 
     fn node(&mut self, n: Node) -> NodeId {
-        self.nodes.push(n);
-        self.owners.push(self.owner);
-        self.nodes.len() - 1
+        self.graph.nodes.push(n);
+        self.graph.owners.push(self.graph.owner);
+        self.graph.nodes.len() - 1
     }
 
     /// Lower the resolved spec (inputs, outputs, `out *`, the definitions they use) into a
@@ -301,10 +343,10 @@ impl<'a> Compiler<'a> {
     ) -> Result<(Program, Vec<Diagnostic>), Vec<Diagnostic>> {
         let resolved = self.resolved;
         for (name, _) in &resolved.inputs {
-            let idx = self.inputs.len();
+            let idx = self.graph.inputs.len();
             let n = self.node(Node::Input(idx));
-            self.input_nodes.push(n);
-            self.inputs.push(InputInfo {
+            self.graph.input_nodes.push(n);
+            self.graph.inputs.push(InputInfo {
                 name: name.name.clone(),
                 ty: self.typed.input(idx),
                 annotations: Vec::new(),
@@ -319,7 +361,7 @@ impl<'a> Compiler<'a> {
         for (_, s) in &resolved.statements {
             if let Statement::In { annotations, .. } = s {
                 let anns = self.annotations(annotations, &env);
-                if let Some(info) = self.inputs.get_mut(input_i) {
+                if let Some(info) = self.graph.inputs.get_mut(input_i) {
                     info.annotations = anns;
                 }
                 input_i += 1;
@@ -334,7 +376,7 @@ impl<'a> Compiler<'a> {
                 .alias
                 .as_ref()
                 .map_or_else(|| o.source_text.clone(), |a| a.name.clone());
-            self.owner = owner_key(&name);
+            self.graph.owner = owner_key(&name);
             // An object (a record with stream members): one output per member, as TeSSLa.
             match self.object_output(&o.expr, &env) {
                 Some(Ok(members)) => {
@@ -369,14 +411,14 @@ impl<'a> Compiler<'a> {
             }
         }
         if resolved.out_all {
-            for (i, info) in self.inputs.clone().iter().enumerate() {
+            for (i, info) in self.graph.inputs.clone().iter().enumerate() {
                 outputs.push(OutputInfo {
                     name: info.name.clone(),
                     ty: info.ty.clone(),
                     annotations: Vec::new(),
                     raw: false,
                 });
-                output_nodes.push(self.input_nodes[i]);
+                output_nodes.push(self.graph.input_nodes[i]);
             }
             for (id, g) in resolved.defs.iter().enumerate() {
                 if g.def.params.is_none()
@@ -401,7 +443,7 @@ impl<'a> Compiler<'a> {
         if self.diags.iter().any(|d| d.is_error()) {
             return Err(self.diags);
         }
-        let order = match schedule::order(&self.nodes, &output_nodes) {
+        let order = match schedule::order(&self.graph.nodes, &output_nodes) {
             Ok(o) => o,
             Err(cycle) => {
                 // No node of the cycle has a place in the source.
@@ -412,21 +454,21 @@ impl<'a> Compiler<'a> {
                 return Err(self.diags);
             }
         };
-        let (last_slot, n_last_slots) = schedule::last_slots(&self.nodes, &order);
+        let (last_slot, n_last_slots) = schedule::last_slots(&self.graph.nodes, &order);
         Ok((
             Program {
-                functions: std::mem::take(&mut self.functions),
+                functions: std::mem::take(&mut self.table.functions),
                 last_slot,
                 n_last_slots,
-                inputs: self.inputs,
+                inputs: self.graph.inputs,
                 outputs,
                 delays: order
                     .iter()
                     .copied()
-                    .filter(|i| matches!(self.nodes.get(*i), Some(Node::Delay { .. })))
+                    .filter(|i| matches!(self.graph.nodes.get(*i), Some(Node::Delay { .. })))
                     .collect(),
-                nodes: self.nodes,
-                node_owners: self.owners,
+                nodes: self.graph.nodes,
+                node_owners: self.graph.owners,
                 order,
                 output_nodes,
             },
@@ -492,11 +534,11 @@ impl<'a> Compiler<'a> {
     }
 
     fn unit(&mut self) -> NodeId {
-        if let Some(u) = self.unit_node {
+        if let Some(u) = self.graph.unit_node {
             return u;
         }
         let u = self.node(Node::Const(Value::Unit));
-        self.unit_node = Some(u);
+        self.graph.unit_node = Some(u);
         u
     }
 

@@ -88,7 +88,7 @@ impl Compiler<'_> {
             let mut d = (*entry.def).clone();
             d.body = new_def.body;
             let state = self.new_state();
-            if let Some(slot) = self.globals.get_mut(id) {
+            if let Some(slot) = self.defs.globals.get_mut(id) {
                 *slot = Some(Entry {
                     def: Rc::new(d),
                     env_cell: entry.env_cell.clone(),
