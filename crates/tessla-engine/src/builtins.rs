@@ -1,9 +1,10 @@
 //! Every builtin name of the language, once: stream operators, value functions, constants,
 //! `Operators.*` and the natives reached through `extern("name")`.
 //!
-//! The one door from the front end (`resolve`, `typeck`, `lower`, `schedule`) into the runtime:
+//! The one door from the front end (`resolve`, `typeck`, `lower`) into the runtime:
 //! the natives' function pointers are in the table, and the few other runtime entry points the
-//! lowering needs (constant folding, function values of natives) are re-exported here.
+//! lowering needs (the semantics of primitives for constant folding, function values of
+//! natives) are re-exported here.
 //!
 //! Owns: [`BUILTINS`], each entry with its name, [`Kind`] (what the lowering does with it),
 //! TeSSLa signature (what the checker types a use with; `None`: any type, checked at lowering)
@@ -24,10 +25,10 @@ use crate::value::{NativeFn, Value};
 use std::collections::HashMap;
 use std::sync::OnceLock;
 
-/// The rest of the runtime the front end uses, besides the natives listed in [`BUILTINS`]:
-/// constant folding and function values of natives (the lowering). A pass imports runtime code
-/// through this table only.
-pub use crate::runtime::exec::{Folder, native_value};
+/// The rest of the runtime the front end uses, besides the natives listed in [`BUILTINS`]: the
+/// semantics of primitives (which the lowering hands the constant fold, `crate::ir::fold`) and
+/// function values of natives. A pass imports runtime code through this table only.
+pub use crate::runtime::exec::{native_value, prim};
 
 /// A stream operator the lowering builds nodes for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -180,8 +181,15 @@ pub fn get(name: &str) -> Option<&'static Builtin> {
 
 /// The native `extern("name")` refers to, if any.
 pub fn extern_native(name: &str) -> Option<NativeFn> {
+    extern_named(name).map(|(_, f)| f)
+}
+
+/// The native `extern("name")` refers to, with its name in the table (the key natives are
+/// looked up by afterwards, never their address: the linker may merge two natives of the
+/// same body).
+pub fn extern_named(name: &str) -> Option<(&'static str, NativeFn)> {
     get(name).and_then(|b| match b.kind {
-        Kind::Value(f) | Kind::Extern(f) => Some(f),
+        Kind::Value(f) | Kind::Extern(f) => Some((b.name, f)),
         _ => None,
     })
 }

@@ -5,7 +5,7 @@
 //! 1. text -> syntax: `tessla_syntax` (parser, includes, diagnostics);
 //! 2. syntax -> resolved: `front::resolve` (which definition, input or member each name means);
 //! 3. resolved -> typed: `front::typeck` (reading `builtins` and the bundled `front::prelude`);
-//! 4. typed -> IR: `front::lower`, then `front::schedule` (evaluation order, cross-step slots).
+//! 4. typed -> IR: `front::lower`, then `ir::schedule` (evaluation order, cross-step slots).
 //!    The IR (`ir`) is all data: stream nodes, value code and a function table, listed by
 //!    `ir::print`;
 //! 5. IR -> monitor: `runtime` (`exec` compiles the IR's code into closures once per program,

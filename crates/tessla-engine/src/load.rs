@@ -153,16 +153,17 @@ pub fn load_with(
         asts.push(file);
     }
     let resolved = crate::front::resolve::Resolved::with_library(&asts, library);
-    let (type_errors, types) = crate::front::typeck::check_resolved(&resolved);
-    if !type_errors.is_empty() {
-        return Err(LoadError {
-            sources,
-            diagnostics: type_errors,
-        });
-    }
-    let result = lower::Compiler::new(&sources, &resolved, base)
+    let typed = match crate::front::typeck::check(&resolved) {
+        Ok(typed) => typed,
+        Err(diagnostics) => {
+            return Err(LoadError {
+                sources,
+                diagnostics,
+            });
+        }
+    };
+    let result = lower::Compiler::new(&sources, &typed, base)
         .with_base_unit(base_unit)
-        .with_types(types)
         .with_time_units(!(options.time_units_need_base && options.base_time.is_none()))
         .program(&options.overrides);
     match result {

@@ -6,7 +6,8 @@
 //! natives) are the runtime's.
 //!
 //! Owns: [`Value`] (what an event carries), [`RuntimeError`] (errors as values), the types of
-//! function values ([`Callable`]) and natives ([`NativeFn`]), and the
+//! function values ([`Callable`]) and natives ([`NativeFn`]) and how each is called
+//! ([`call_function_value`], [`call_native`]), and the
 //! TeSSLa output format of a value (`Display`: `()`, `Some(3)`, `List(1, 2)`, strings unquoted).
 //! Scalars are inline (no heap allocation); compound values share their payload with `Arc`.
 //!
@@ -100,10 +101,32 @@ pub enum RuntimeError {
 /// builtins table lists them, and `runtime::natives` implements them.
 pub type NativeFn = fn(&[Value]) -> Value;
 
-/// A function value. Implemented by the evaluator for compiled lambdas; natives that take
-/// functions (`List.fold`, `Map.map` ...) call them through this trait.
+/// A function value. Implemented by the evaluator for compiled lambdas (and by the constant
+/// fold, `ir::fold`, for the lambdas it makes); natives that take functions (`List.fold`,
+/// `Map.map` ...) call them through this trait.
 pub trait Callable: fmt::Debug + Send + Sync {
     fn call(&self, args: &[Value]) -> Value;
+}
+
+/// Call a native strictly: the first error argument is the result. The one calling convention
+/// of natives, for the runtime and the constant fold.
+#[inline]
+pub fn call_native(f: NativeFn, args: &[Value]) -> Value {
+    if let Some(e) = args.iter().find(|v| matches!(v, Value::Error(_))) {
+        return e.clone();
+    }
+    f(args)
+}
+
+/// Call the function value that is the first argument with the others (an error when it is
+/// no function), for the runtime and the constant fold.
+pub fn call_function_value(args: &[Value]) -> Value {
+    match args.first() {
+        Some(Value::Closure(c)) => c.call(&args[1..]),
+        other => Value::Error(RuntimeError::Other(
+            format!("{:?} is not a function", other.unwrap_or(&Value::Unit)).into(),
+        )),
+    }
 }
 
 impl PartialEq for dyn Callable {

@@ -473,7 +473,7 @@ pub(crate) mod tests {
         is_error::<tessla_engine::RuntimeError>();
         is_error::<tessla_engine::runtime::ops::OpError>();
         is_error::<tessla_engine::runtime::snapshot::SError>();
-        is_error::<tessla_engine::front::schedule::Cycle>();
+        is_error::<tessla_engine::ir::schedule::Cycle>();
         is_error::<tessla_engine::runtime::format::FormatError>();
         is_error::<tessla_engine::front::lower::time::BaseTimeError>();
         is_error::<tessla_syntax::include::ResolveError>();

@@ -725,7 +725,7 @@ fn unary(op: UnaryOp, v: Value) -> Result<Value, String> {
     match (op, v) {
         // A negative float literal: `-1.5` (TeSSLa's trace lexer reads it as one literal).
         (UnaryOp::Neg, Value::Float(f)) => Ok(Value::Float(-f)),
-        (op, v) => ops::unary(op, &v).map_err(|e| {
+        (op, v) => ops::unary(op.into(), &v).map_err(|e| {
             op_error(e, || {
                 format!(
                     "operator `{}` does not apply to {}",
@@ -738,7 +738,7 @@ fn unary(op: UnaryOp, v: Value) -> Result<Value, String> {
 }
 
 fn binary(op: BinOp, a: Value, b: Value) -> Result<Value, String> {
-    ops::binary(op, &a, &b).map_err(|e| {
+    ops::binary(op.into(), &a, &b).map_err(|e| {
         op_error(e, || {
             format!(
                 "operator `{}` does not apply to {} and {}",

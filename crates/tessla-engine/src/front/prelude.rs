@@ -199,15 +199,16 @@ pub fn declaration(builtin: &str) -> Option<&'static Def> {
         .map(|e| &e.decl)
 }
 
-/// The parameter names of the value function a native implements (`String.format` ->
-/// `formatString`, `value`), found through the builtins table.
-pub fn native_param_names(f: crate::value::NativeFn) -> Option<Vec<String>> {
-    builtins::BUILTINS
-        .iter()
-        .filter(
-            |b| matches!(b.kind, Kind::Value(g) | Kind::Operator(g) if g as usize == f as usize),
-        )
-        .find_map(|b| param_names(b.name))
+/// The parameter names of the value function the builtins table lists as `name`
+/// (`String.format` -> `formatString`, `value`): looked up by the table's key, never by the
+/// native's address (the linker may merge two natives of the same body). `None` for a name the
+/// table has no value function or operator under, or the prelude declares no parameters for.
+pub fn native_param_names(name: &str) -> Option<Vec<String>> {
+    let b = builtins::get(name)?;
+    match b.kind {
+        Kind::Value(_) | Kind::Operator(_) => param_names(b.name),
+        _ => None,
+    }
 }
 
 fn catalog() -> &'static Catalog {
@@ -688,5 +689,18 @@ mod tests {
             needs("in b: Events[Bool]\ndef boolFilter(x: Events[Bool]) = x\nout boolFilter(b)"),
             None
         );
+    }
+
+    #[test]
+    fn natives_take_their_parameter_names_by_their_name_in_the_table() {
+        // Two names of one native each take their own entry's names; a stream operator or an
+        // unknown name has none here.
+        assert_eq!(
+            native_param_names("String.format"),
+            param_names("String.format")
+        );
+        assert!(native_param_names("String.format").is_some());
+        assert_eq!(native_param_names("last"), None);
+        assert_eq!(native_param_names("no such native"), None);
     }
 }

@@ -9,9 +9,9 @@
 //! lowering builds these; `runtime::exec` compiles them into closures when a monitor is created;
 //! `print` lists them and `runtime::snapshot` hashes them. Nothing here evaluates.
 
+use crate::ir::op::{BinOp, UnaryOp};
 use crate::value::{NativeFn, Value};
 use std::sync::Arc;
-use tessla_syntax::ast::{BinOp, UnaryOp};
 
 /// Index of a function in [`crate::ir::Program::functions`].
 pub type FnId = usize;

@@ -1,21 +1,26 @@
 //! The flat core IR: stream nodes in dependency order with typed value slots.
 //!
 //! Owns: [`Program`] (what the front end produces; the runtime runs it with its code compiled),
-//! the metadata the
-//! bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value [`Type`]s; which
-//! operators have a fast-path node ([`scalar_op`]); the stable hashes node identities are made
-//! of ([`text_hash`], [`mix`], and [`owner_key`], the owner the lowering records per node); its
-//! listing (`print`, `tessla-telegraf check --ir`). The value code inside nodes and the
-//! function table are data too (`code`); `runtime::exec` compiles them into closures when the
-//! first monitor of a program is created.
+//! the metadata the bindings read ([`InputInfo`], [`OutputInfo`], [`Annotation`]) and value
+//! [`Type`]s; its own operators (`op`: [`BinOp`], [`UnaryOp`], which the lowering maps the
+//! syntax's onto); which operators have a fast-path node ([`scalar_op`]); the stable hashes node
+//! identities are made of ([`text_hash`], [`mix`], and [`owner_key`], the owner the lowering
+//! records per node); its listing (`print`, `tessla-telegraf check --ir`). The value code inside
+//! nodes and the function table are data too (`code`); `runtime::exec` compiles them into
+//! closures when the first monitor of a program is created. Two passes over the IR that the
+//! lowering runs: constant folding of closed code (`fold`) and scheduling, the evaluation order
+//! and the values kept across steps (`schedule`).
 
 use crate::value::Value;
 use std::hash::Hasher;
-use tessla_syntax::ast::BinOp;
 
 pub mod code;
+pub mod fold;
+pub mod op;
 pub(crate) mod print;
+pub mod schedule;
 pub use code::{Callee, Code, FnId, Function, LiftFn, Prim};
+pub use op::{BinOp, UnaryOp};
 pub use print::IrListing;
 
 /// A value type, as reported by `check` and used by bindings to convert inputs.
@@ -134,7 +139,7 @@ pub enum ScalarOp {
 }
 
 /// The operators with an inline scalar fast path, and the operator each one stands for (which
-/// syntax operator the lowering may build a [`Node::Bin`] for). Inline: the evaluator asks it
+/// operator the lowering may build a [`Node::Bin`] for). Inline: the evaluator asks it
 /// for every operator it applies (`runtime::exec::binary`).
 #[inline]
 pub fn scalar_op(op: BinOp) -> Option<ScalarOp> {
@@ -351,7 +356,7 @@ pub struct Program {
     /// The `Delay` nodes (the monitor arms and fires only these).
     pub delays: Vec<NodeId>,
     /// Per node: its slot among the values a monitor keeps from earlier steps, or [`NO_SLOT`]
-    /// when no node reads it across steps (see [`crate::front::schedule::last_slots`]).
+    /// when no node reads it across steps (see [`schedule::last_slots`]).
     pub last_slot: Vec<u32>,
     /// Number of slots in use in `last_slot`.
     pub n_last_slots: usize,

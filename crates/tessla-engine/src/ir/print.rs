@@ -13,7 +13,6 @@ use super::code::{Callee, Code, FnId, LiftFn, Prim};
 use super::{NO_SLOT, Node, NodeId, Program, SArg};
 use crate::value::Value;
 use std::fmt;
-use tessla_syntax::ast::UnaryOp;
 
 /// The listing of a program, see [`Program::ir`].
 pub struct IrListing<'a>(&'a Program);
@@ -77,15 +76,7 @@ fn code_here(r: &Render<'_>, c: &Code) -> String {
             (Callee::Prim(Prim::Binary(op)), [x, y]) => {
                 format!("({} {} {})", code(r, x), op.symbol(), code(r, y))
             }
-            (Callee::Prim(Prim::Unary(op)), [x]) => {
-                let sym = match op {
-                    UnaryOp::Not => "!",
-                    UnaryOp::BitNot => "~",
-                    UnaryOp::Neg => "-",
-                    UnaryOp::FNeg => "-.",
-                };
-                format!("{sym}{}", code(r, x))
-            }
+            (Callee::Prim(Prim::Unary(op)), [x]) => format!("{}{}", op.symbol(), code(r, x)),
             (Callee::Prim(Prim::Tuple), _) => format!("({})", args(r, a)),
             (Callee::Prim(Prim::Record(names)), _) => {
                 let fields: Vec<String> = names

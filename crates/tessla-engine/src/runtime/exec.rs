@@ -1,13 +1,14 @@
 //! The closure compiler: value code ([`Code`], data in the IR) compiled into Rust closures, once
-//! per program, when its first monitor is created (and, during lowering, to fold constants).
+//! per program, when its first monitor is created.
 //!
 //! Owns: [`Program`] (what monitors run: the IR with its compiled code, made once and shared),
 //! [`Exec`] (compiled code: a context and a frame in, a value out), [`Ctx`] (the compiled
 //! function table and node functions of one program), [`compile`], [`compile_program`], the
 //! semantics of [`Prim`]itives and [`LiftFn`]s, function values ([`FnClosure`],
 //! [`native_value`]), the [`Fast`] forms of node functions that are one operator or native on
-//! the node's arguments (run by the monitor on its arguments by reference), and the lowering's
-//! constant [`Folder`] (handed to it by the builtins table).
+//! the node's arguments (run by the monitor on its arguments by reference). The semantics of
+//! primitives ([`prim`]) are also what the lowering's constant fold (`crate::ir::fold`) is
+//! handed through the builtins table; nothing else here serves the lowering.
 //!
 //! Calls between program functions go through the context passed to every closure (an index
 //! into [`Ctx`]'s table), so compiled functions never refer to each other and recursion makes
@@ -20,11 +21,11 @@
 use crate::ir::code::{Callee, Code, FnId, LiftFn, Prim};
 use crate::ir::scalar_op;
 use crate::ir::{self, Node};
+use crate::ir::{BinOp, UnaryOp};
 use crate::runtime::collections;
 use crate::runtime::ops;
-use crate::value::{Callable, NativeFn, RuntimeError, Value};
+use crate::value::{Callable, NativeFn, RuntimeError, Value, call_function_value, call_native};
 use std::sync::{Arc, OnceLock, Weak};
-use tessla_syntax::ast::{BinOp, UnaryOp};
 
 /// Compiled code: evaluates over a frame, calling program functions through the context.
 pub type Exec = Arc<dyn Fn(&Ctx, &[Value]) -> Value + Send + Sync>;
@@ -40,9 +41,6 @@ pub struct Ctx {
     /// Per node: its function as a [`Fast`] form, when it has one.
     fast: Vec<Option<Fast>>,
     me: Weak<Ctx>,
-    /// Function values hold this context strongly (the lowering's contexts, which nothing
-    /// else keeps alive) instead of weakly.
-    strong: bool,
 }
 
 impl std::fmt::Debug for Ctx {
@@ -76,7 +74,6 @@ impl Ctx {
     /// A function value of `fun` over `captured`.
     fn closure(&self, fun: FnId, captured: &[Value]) -> Value {
         if captured.is_empty()
-            && !self.strong
             && let Some(slot) = self.values.get(fun)
         {
             return slot
@@ -90,7 +87,7 @@ impl Ctx {
                 .clone();
         }
         let ctx = match self.me.upgrade() {
-            Some(c) if self.strong || !captured.is_empty() => CtxRef::Strong(c),
+            Some(c) if !captured.is_empty() => CtxRef::Strong(c),
             _ => CtxRef::Weak(self.me.clone()),
         };
         Value::Closure(Arc::new(FnClosure {
@@ -102,16 +99,7 @@ impl Ctx {
 }
 
 /// A context built from compiled functions (`None`: not finished, an error when called).
-pub fn context(fns: Vec<Option<Exec>>, nodes: Vec<Option<Exec>>, strong: bool) -> Arc<Ctx> {
-    context_with(fns, nodes, Vec::new(), strong)
-}
-
-fn context_with(
-    fns: Vec<Option<Exec>>,
-    nodes: Vec<Option<Exec>>,
-    fast: Vec<Option<Fast>>,
-    strong: bool,
-) -> Arc<Ctx> {
+fn context(fns: Vec<Option<Exec>>, nodes: Vec<Option<Exec>>, fast: Vec<Option<Fast>>) -> Arc<Ctx> {
     let n = fns.len();
     Arc::new_cyclic(|me| Ctx {
         fns: fns
@@ -122,7 +110,6 @@ fn context_with(
         fast,
         nodes,
         me: me.clone(),
-        strong,
     })
 }
 
@@ -195,7 +182,7 @@ pub fn compile_program(p: &ir::Program) -> Arc<Ctx> {
             _ => None,
         })
         .collect();
-    context_with(fns, nodes, fast, false)
+    context(fns, nodes, fast)
 }
 
 /// A node function that is one operator or native applied to the node's arguments and
@@ -361,90 +348,19 @@ fn is_err(v: &Value) -> Option<Value> {
     }
 }
 
-/// Call a native strictly: the first error argument is the result.
-pub fn call_native(f: NativeFn, args: &[Value]) -> Value {
-    if let Some(e) = args.iter().find_map(is_err) {
-        return e;
-    }
-    f(args)
-}
-
 /// Apply a callee to argument values.
 pub fn apply(cx: &Ctx, callee: &Callee, a: &[Value]) -> Value {
     match callee {
         Callee::Prim(p) => prim(p, a),
         Callee::Native { f, .. } => call_native(*f, a),
         Callee::Fn(id) => cx.call(*id, a),
-        Callee::Value => match a.first() {
-            Some(Value::Closure(c)) => c.call(&a[1..]),
-            other => Value::Error(RuntimeError::Other(
-                format!("{:?} is not a function", other.unwrap_or(&Value::Unit)).into(),
-            )),
-        },
-    }
-}
-
-/// Constant folding for the lowering: evaluates closed code now, with the program functions
-/// finished so far compiled into a context of their own (built on the first fold after a
-/// function is finished, each function compiled once). The lowering reaches it through the
-/// builtins table.
-#[derive(Default)]
-pub struct Folder {
-    /// Per function: its compiled body (`None`: not finished when last compiled).
-    fns: Vec<Option<Exec>>,
-    /// The context of the last fold, until a function is finished.
-    ctx: Option<Arc<Ctx>>,
-}
-
-impl Folder {
-    /// The value of closed code `code`, calling the functions of `functions` that have a body.
-    pub fn fold(&mut self, functions: &[ir::Function], code: &Code) -> Value {
-        let ctx = match &self.ctx {
-            Some(c) => c.clone(),
-            None => {
-                self.fns.resize(functions.len(), None);
-                for (slot, f) in self.fns.iter_mut().zip(functions) {
-                    if slot.is_none()
-                        && let Some(body) = &f.body
-                    {
-                        *slot = Some(compile(body));
-                    }
-                }
-                let c = context(self.fns.clone(), Vec::new(), true);
-                self.ctx = Some(c.clone());
-                c
-            }
-        };
-        eval(&ctx, code)
-    }
-
-    /// A function got its body: the next fold compiles it.
-    pub fn function_finished(&mut self) {
-        self.ctx = None;
+        Callee::Value => call_function_value(a),
     }
 }
 
 /// A native as a function value.
 pub fn native_value(f: NativeFn) -> Value {
     Value::Closure(Arc::new(NativeClosure(f)))
-}
-
-/// Evaluate closed code (no frame) now: constant folding during lowering.
-pub fn eval(cx: &Ctx, code: &Code) -> Value {
-    match code {
-        Code::Const(v) => v.clone(),
-        Code::Apply(c, args) if args.iter().all(|a| matches!(a, Code::Const(_))) => {
-            let vals: Vec<Value> = args
-                .iter()
-                .map(|a| match a {
-                    Code::Const(v) => v.clone(),
-                    _ => Value::Unit,
-                })
-                .collect();
-            apply(cx, c, &vals)
-        }
-        _ => compile(code)(cx, &[]),
-    }
 }
 
 /// A binary operator on two values: the inline scalar path first (as the evaluator's operator
@@ -733,7 +649,7 @@ mod tests {
                 .map(|f| f.body.as_ref().map(compile))
                 .collect(),
             Vec::new(),
-            true,
+            Vec::new(),
         );
         let codes = [
             bin(BinOp::FAdd, Code::Slot(0), Code::Slot(1)),

@@ -11,9 +11,9 @@
 //!
 //! Imports run one way: `snapshot` reads `monitor`, `monitor` runs `exec`, and all of them read
 //! `ops`, `natives`, `collections` and `format`, which read only values (and `ops` the IR's
-//! scalar operators). The front end reaches the runtime only through the builtins table
-//! (`crate::builtins`: the natives' function pointers, constant folding), and `load` hands the
-//! finished IR over as an [`exec::Program`].
+//! operators, `crate::ir::op`). The front end reaches the runtime only through the builtins
+//! table (`crate::builtins`: the natives' function pointers, the semantics of primitives for
+//! constant folding), and `load` hands the finished IR over as an [`exec::Program`].
 
 pub mod collections;
 pub mod exec;

@@ -17,9 +17,9 @@
 //! are their own error. `&&` and `||` here are strict; the trace reader short-circuits them
 //! itself.
 
+use crate::ir::{BinOp, UnaryOp};
 use crate::ir::{Scalar, ScalarOp};
 use crate::value::{RuntimeError, Value};
-use tessla_syntax::ast::{BinOp, UnaryOp};
 
 /// Why an operator has no value.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -223,8 +223,8 @@ pub fn unary_fast(op: UnaryOp, a: &Value) -> Option<Value> {
 /// operands are Unit, which no operator accepts.
 pub mod natives {
     use super::{binary_value, unary_value};
+    use crate::ir::{BinOp, UnaryOp};
     use crate::value::Value;
-    use tessla_syntax::ast::{BinOp, UnaryOp};
 
     fn operand(a: &[Value], i: usize) -> Value {
         a.get(i).cloned().unwrap_or(Value::Unit)

@@ -33,8 +33,10 @@ impl Compiler<'_> {
                 FuncTerm::Builtin(b, _) if crate::front::prelude::param_names(b.name).is_some() => {
                     crate::front::prelude::param_names(b.name).unwrap_or_default()
                 }
-                FuncTerm::Native(f) if crate::front::prelude::native_param_names(*f).is_some() => {
-                    crate::front::prelude::native_param_names(*f).unwrap_or_default()
+                FuncTerm::Native { name, .. }
+                    if crate::front::prelude::native_param_names(name).is_some() =>
+                {
+                    crate::front::prelude::native_param_names(name).unwrap_or_default()
                 }
                 _ => {
                     return self.error(
@@ -91,7 +93,9 @@ impl Compiler<'_> {
         };
         match &*ft {
             FuncTerm::Builtin(b, op) => self.stream_builtin(b.name, *op, args, span),
-            FuncTerm::Native(n) => self.apply_value_fn(closure::native_callee(*n), args, span),
+            FuncTerm::Native { f, .. } => {
+                self.apply_value_fn(closure::native_callee(*f), args, span)
+            }
             FuncTerm::User { def, env: denv } => {
                 let params = def.params.clone().unwrap_or_default();
                 if let Body::Extern { .. } = def.body {
@@ -113,7 +117,7 @@ impl Compiler<'_> {
                     && (has_func
                         || has_stream
                         || stream_params
-                        || self.not_value_fns.contains(&def.span));
+                        || self.table.not_value_fns.contains(&def.span));
                 if !expand {
                     let saved = self.diags.len();
                     match self.call_compiled(def, denv, args.clone(), span) {
@@ -130,16 +134,16 @@ impl Compiler<'_> {
                                     .any(|d| d.category == Category::Name) =>
                         {
                             self.diags.truncate(saved);
-                            self.not_value_fns.insert(def.span);
+                            self.table.not_value_fns.insert(def.span);
                             expand = true;
                         }
                         Err(Fail) => return Err(Fail),
                     }
                 }
                 if expand {
-                    self.inline_depth += 1;
-                    if self.inline_depth > 200 {
-                        self.inline_depth -= 1;
+                    self.depth.inline_depth += 1;
+                    if self.depth.inline_depth > 200 {
+                        self.depth.inline_depth -= 1;
                         return self.error(
                             Category::Recursion,
                             span,
@@ -155,7 +159,7 @@ impl Compiler<'_> {
                     // lambdas made inside capture that frame and put parameters after it.
                     let inner = denv.child(names, env.frame.max(denv.frame));
                     let r = self.body(def, &inner);
-                    self.inline_depth -= 1;
+                    self.depth.inline_depth -= 1;
                     r
                 } else {
                     self.call_compiled(def, denv, args, span)
@@ -221,8 +225,8 @@ impl Compiler<'_> {
     ) -> R<Code> {
         match args.get(i) {
             Some(Term::Func(ft)) => match &**ft {
-                FuncTerm::Native(n) => {
-                    Ok(Code::apply(closure::native_callee(*n), Code::slots(arity)))
+                FuncTerm::Native { f, .. } => {
+                    Ok(Code::apply(closure::native_callee(*f), Code::slots(arity)))
                 }
                 _ => match self.func_value(ft, span)? {
                     Term::Const(Value::Closure(c)) => {

@@ -5,8 +5,9 @@
 //!
 //! Owns: `Compiler::compile_fn` (a named function, once per definition; a recursive call refers
 //! to the function by its index, so nothing is closed through a cell), `func_value`,
-//! `apply_value_fn`, `as_code`, `param_frame`, constant folding (`fold`, through the runtime's
-//! folder, which the builtins table hands over) and the name of a native callee.
+//! `apply_value_fn`, `as_code`, `param_frame`, constant folding (`fold`, by `crate::ir::fold`
+//! with the primitives' semantics the builtins table hands over) and the name of a native
+//! callee.
 
 use super::*;
 
@@ -89,7 +90,7 @@ impl Compiler<'_> {
             if !seen.insert(f) {
                 continue;
             }
-            match self.functions.get(f).and_then(|x| x.body.as_ref()) {
+            match self.table.functions.get(f).and_then(|x| x.body.as_ref()) {
                 Some(b) => b.functions(&mut todo),
                 None => return false,
             }
@@ -99,31 +100,31 @@ impl Compiler<'_> {
 
     /// Evaluate closed code now (constant folding), with the functions finished so far.
     pub(super) fn fold(&mut self, code: &Code) -> Value {
-        self.folder.fold(&self.functions, code)
+        self.table.folder.fold(&self.table.functions, code)
     }
 
     /// A new entry of the function table, its body still to come.
     fn new_function(&mut self, name: &str, frame: usize) -> FnId {
-        self.functions.push(Function {
+        self.table.functions.push(Function {
             name: name.to_string(),
             frame,
             body: None,
         });
-        self.functions.len() - 1
+        self.table.functions.len() - 1
     }
 
     /// Give a function its body.
     fn finish_function(&mut self, id: FnId, body: Code) {
-        if let Some(f) = self.functions.get_mut(id) {
+        if let Some(f) = self.table.functions.get_mut(id) {
             f.body = Some(body);
         }
-        self.folder.function_finished();
+        self.table.folder.function_finished();
     }
 
     /// A function term as a runtime value: a constant (natives) or closure code.
     pub(super) fn func_value(&mut self, ft: &Rc<FuncTerm>, span: Span) -> R<Term> {
         match &**ft {
-            FuncTerm::Native(n) => Ok(Term::Const(builtins::native_value(*n))),
+            FuncTerm::Native { f, .. } => Ok(Term::Const(builtins::native_value(*f))),
             FuncTerm::User { def, env } => {
                 let (fun, _) = self.compile_fn(def, env, span)?;
                 // Defined inside a function body: the closure captures the enclosing frame.
@@ -173,25 +174,29 @@ impl Compiler<'_> {
     /// calls must not be folded now.
     pub(super) fn compile_fn(&mut self, def: &Rc<Def>, env: &Env, span: Span) -> R<(FnId, bool)> {
         let key = Rc::as_ptr(def);
-        if let Some(&id) = self.compiled_fns.get(&key) {
-            let done = self.functions.get(id).is_some_and(|f| f.body.is_some());
+        if let Some(&id) = self.table.compiled_fns.get(&key) {
+            let done = self
+                .table
+                .functions
+                .get(id)
+                .is_some_and(|f| f.body.is_some());
             return Ok((id, done));
         }
         let params = def.params.clone().unwrap_or_default();
         let (names, frame) = self.param_frame(&params, env.frame);
         let id = self.new_function(&def.name.name, frame);
-        self.compiled_fns.insert(key, id);
+        self.table.compiled_fns.insert(key, id);
         let inner = env.child(names, frame);
         let Ok(body) = self.body(def, &inner) else {
-            self.compiled_fns.remove(&key);
+            self.table.compiled_fns.remove(&key);
             return Err(Fail);
         };
         let code = match body {
             Term::Code(c) => c,
             Term::Const(v) => Code::Const(v),
             Term::Func(ft) => match &*ft {
-                FuncTerm::Native(n) if matches!(def.body, Body::Extern { .. }) => {
-                    Code::apply(native_callee(*n), Code::slots(frame))
+                FuncTerm::Native { f, .. } if matches!(def.body, Body::Extern { .. }) => {
+                    Code::apply(native_callee(*f), Code::slots(frame))
                 }
                 // A function returning a function: the result is a function value.
                 _ => match self.func_value(&ft, span)? {

@@ -2,8 +2,10 @@
 //! operators with their inline scalar nodes, `if`, records, tuples, member access, lambdas,
 //! blocks).
 //!
-//! Owns: `Compiler::expr` and the inline nodes of operators (`inline_op`, `slift_node`). Value
-//! operations become [`Prim`]itive applications (semantics in `runtime::exec` and `runtime::ops`).
+//! Owns: `Compiler::expr`, the inline nodes of operators (`inline_op`, `slift_node`) and the one
+//! mapping of the syntax's operators onto the IR's ([`BinOp`], [`UnaryOp`]: `From` the
+//! `tessla_syntax::ast` ones, also what the trace reader converts with). Value operations become
+//! [`Prim`]itive applications (semantics in `runtime::exec` and `runtime::ops`).
 
 use super::*;
 
@@ -16,9 +18,9 @@ impl Compiler<'_> {
         make: impl FnOnce(&[SArg], &Code) -> Option<Node>,
     ) {
         if let Term::Stream(n) = t
-            && let Some(Node::SLift { args, f }) = self.nodes.get(*n)
+            && let Some(Node::SLift { args, f }) = self.graph.nodes.get(*n)
             && let Some(node) = make(args, f)
-            && let Some(slot) = self.nodes.get_mut(*n)
+            && let Some(slot) = self.graph.nodes.get_mut(*n)
         {
             *slot = node;
         }
@@ -42,7 +44,7 @@ impl Compiler<'_> {
             ExprKind::Int { value, unit } => {
                 let v = match unit {
                     None => *value,
-                    Some(u) if !self.time_units => {
+                    Some(u) if !self.time.time_units => {
                         self.diags.push(
                             Diagnostic::error(
                                 Category::Time,
@@ -59,7 +61,7 @@ impl Compiler<'_> {
                         // As TeSSLa does: the literal must be a whole number of the base
                         // time's unit; then it is divided by the base's count, truncating
                         // (100ms at 33333 µs is 3), but it must not become 0.
-                        let unit_fs = self.base_unit.unwrap_or(self.base_ns);
+                        let unit_fs = self.time.base_unit.unwrap_or(self.time.base_ns);
                         if fs % unit_fs != 0 {
                             return self.error(
                                 Category::Time,
@@ -70,7 +72,7 @@ impl Compiler<'_> {
                                 ),
                             );
                         }
-                        let r = fs / unit_fs / (self.base_ns / unit_fs).max(1);
+                        let r = fs / unit_fs / (self.time.base_ns / unit_fs).max(1);
                         if r == 0 && *value != 0 {
                             return self.error(
                                 Category::Time,
@@ -157,13 +159,14 @@ impl Compiler<'_> {
             }
             ExprKind::Unary { op, operand } => {
                 let t = self.expr(operand, env)?;
-                let r = self.apply_value_fn(Callee::Prim(Prim::Unary(*op)), vec![t], e.span)?;
+                let op = UnaryOp::from(*op);
+                let r = self.apply_value_fn(Callee::Prim(Prim::Unary(op)), vec![t], e.span)?;
                 Ok(r)
             }
             ExprKind::Binary { op, lhs, rhs } => {
                 let a = self.expr(lhs, env)?;
                 let b = self.expr(rhs, env)?;
-                let op = *op;
+                let op = BinOp::from(*op);
                 if matches!(op, BinOp::And | BinOp::Or) {
                     // Lazy: the right side is not evaluated when the left decides.
                     if let Term::Code(_) | Term::Const(_) = a
@@ -248,9 +251,9 @@ impl Compiler<'_> {
                 let mut terms = Vec::with_capacity(args.len());
                 for (i, a) in args.iter().enumerate() {
                     if lazy_first && i == 0 {
-                        self.lazy_depth += 1;
+                        self.depth.lazy_depth += 1;
                         let r = self.expr(&a.value, env);
-                        self.lazy_depth -= 1;
+                        self.depth.lazy_depth -= 1;
                         terms.push(r?);
                     } else {
                         terms.push(self.expr(&a.value, env)?);
@@ -266,6 +269,53 @@ impl Compiler<'_> {
                 };
                 self.call(f, terms, e.span, env)
             }
+        }
+    }
+}
+
+impl From<ast::BinOp> for BinOp {
+    /// The IR's operator for the syntax's (the same operator: one variant each).
+    fn from(op: ast::BinOp) -> BinOp {
+        use ast::BinOp as S;
+        match op {
+            S::Mul => BinOp::Mul,
+            S::Div => BinOp::Div,
+            S::Mod => BinOp::Mod,
+            S::FMul => BinOp::FMul,
+            S::FDiv => BinOp::FDiv,
+            S::Add => BinOp::Add,
+            S::Sub => BinOp::Sub,
+            S::FAdd => BinOp::FAdd,
+            S::FSub => BinOp::FSub,
+            S::Shl => BinOp::Shl,
+            S::Shr => BinOp::Shr,
+            S::BitAnd => BinOp::BitAnd,
+            S::BitOr => BinOp::BitOr,
+            S::BitXor => BinOp::BitXor,
+            S::Eq => BinOp::Eq,
+            S::Ne => BinOp::Ne,
+            S::Lt => BinOp::Lt,
+            S::Gt => BinOp::Gt,
+            S::Le => BinOp::Le,
+            S::Ge => BinOp::Ge,
+            S::FLt => BinOp::FLt,
+            S::FGt => BinOp::FGt,
+            S::FLe => BinOp::FLe,
+            S::FGe => BinOp::FGe,
+            S::And => BinOp::And,
+            S::Or => BinOp::Or,
+        }
+    }
+}
+
+impl From<ast::UnaryOp> for UnaryOp {
+    /// The IR's operator for the syntax's.
+    fn from(op: ast::UnaryOp) -> UnaryOp {
+        match op {
+            ast::UnaryOp::Not => UnaryOp::Not,
+            ast::UnaryOp::BitNot => UnaryOp::BitNot,
+            ast::UnaryOp::Neg => UnaryOp::Neg,
+            ast::UnaryOp::FNeg => UnaryOp::FNeg,
         }
     }
 }

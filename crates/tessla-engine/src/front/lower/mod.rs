@@ -5,15 +5,16 @@
 //! applied to stream arguments are expanded in place (TeSSLa's macros); operators and liftable
 //! functions on streams become signal lifts; value-level functions are lowered once into the
 //! program's function table ([`Program::functions`]) and called by index. Nothing here builds a
-//! closure: `crate::runtime::exec` compiles the code when a monitor is created (and, here, to fold
-//! constants). Recursion is allowed only through the lazy arguments of the builtins table
+//! closure: `crate::runtime::exec` compiles the code when a monitor is created; constants are
+//! folded on the IR (`crate::ir::fold`). Recursion is allowed only through the lazy arguments of the builtins table
 //! (`last`, `delay`).
 //!
 //! Owns: the [`Compiler`] and `program` (inputs, outputs, `out *` and their annotations) here.
 //! It reads the resolved spec (`crate::front::resolve`): which definition, input or imported member a
 //! global name means is decided there once, for the checker and the lowering; lowering keeps
-//! only its local scopes (parameters, blocks and `where`, macro arguments). Types come from the
-//! checker (`crate::front::typeck::Types`: inputs, outputs, `out *` defs). The lowering keeps
+//! only its local scopes (parameters, blocks and `where`, macro arguments). It lowers only a
+//! checked spec (`crate::front::typeck::Typed`, which only the checker makes) and takes its
+//! types from there (inputs, outputs, `out *` defs). The lowering keeps
 //! only the rules the checker leaves open (each marked "the one place" where it is written); a
 //! case the checker or name resolution rules out is `Compiler::unchecked`, an internal error.
 //! By concern: `names`
@@ -21,11 +22,12 @@
 //! `expr` (each expression form, operators), `call` (calls and arguments), `closure`
 //! (value-level functions into the function table, function values, constant folding), `stream` (the stream operators), `time` (base time and time units), `overrides` (`--set`). Names and signatures of
 //! builtins are `crate::builtins`, operator semantics `crate::runtime::ops`, format strings
-//! `crate::runtime::format`, evaluation order and cross-step slots `crate::front::schedule`.
+//! `crate::runtime::format`, evaluation order and cross-step slots `crate::ir::schedule`.
 
-use crate::builtins::{self, Builtin, Folder, Kind, StreamOp};
+use crate::builtins::{self, Builtin, Kind, StreamOp};
 use crate::front::resolve::Resolved;
-use crate::front::schedule;
+use crate::front::typeck::Typed;
+use crate::ir::fold::Folder;
 use time::unit_factor;
 
 mod call;
@@ -38,16 +40,16 @@ mod stream;
 pub mod time;
 
 use crate::ir::{
-    Annotation, Callee, Code, FnId, Function, InputInfo, LiftFn, Node, NodeId, OutputInfo, Prim,
-    Program, SArg, Type,
+    Annotation, BinOp, Callee, Code, FnId, Function, InputInfo, LiftFn, Node, NodeId, OutputInfo,
+    Prim, Program, SArg, Type, UnaryOp,
 };
-use crate::ir::{owner_key, scalar_op};
+use crate::ir::{owner_key, scalar_op, schedule};
 use crate::value::{NativeFn, RuntimeError, Value};
 use std::cell::RefCell;
 use std::collections::{HashMap, HashSet};
 use std::rc::Rc;
 use std::sync::Arc;
-use tessla_syntax::ast::{self, BinOp, Body, Def, Expr, ExprKind, Statement, StrPart, UnaryOp};
+use tessla_syntax::ast::{self, Body, Def, Expr, ExprKind, Statement, StrPart};
 use tessla_syntax::diag::{Category, Diagnostic};
 use tessla_syntax::source::{SourceMap, Span};
 
@@ -63,7 +65,12 @@ enum Term {
 enum FuncTerm {
     /// A stream operator of the builtins table (`last`, `merge` ...).
     Builtin(&'static Builtin, StreamOp),
-    Native(NativeFn),
+    /// A native value function, with its name in the builtins table (`unknown extern` for an
+    /// extern no builtin provides).
+    Native {
+        name: &'static str,
+        f: NativeFn,
+    },
     User {
         def: Rc<Def>,
         env: Env,
@@ -143,48 +150,81 @@ impl Env {
 struct Fail;
 type R<T> = Result<T, Fail>;
 
+/// The lowering of one checked spec. Its state, by concern: the spec it reads, the
+/// definitions' lowering states ([`Defs`]), the stream graph being built ([`Graph`]), the
+/// function table ([`Functions`]), the time settings ([`TimeSettings`]), how deep it is
+/// ([`Depth`]) and the diagnostics.
 pub struct Compiler<'a> {
     sources: &'a SourceMap,
     /// The resolve pass's result: what every global name means (`crate::front::resolve`).
     resolved: &'a Resolved<'a>,
+    /// The checked spec: the types of inputs, outputs and top-level defs (see
+    /// [`crate::front::typeck::Typed`]).
+    typed: &'a Typed<'a>,
+    pub diags: Vec<Diagnostic>,
+    defs: Defs,
+    graph: Graph,
+    table: Functions,
+    time: TimeSettings,
+    depth: Depth,
+}
+
+/// The lowering state of definitions and their scopes (`names`).
+struct Defs {
     /// The lowering state of each global definition, by [`DefId`](crate::front::resolve::DefId),
     /// made on first use (or by a `--set` override).
     globals: Vec<Option<Entry>>,
-    pub diags: Vec<Diagnostic>,
+    /// Every scope cell and def state created: scopes and defs refer to each other through
+    /// `Rc`s, so they are cleared when compiling ends ([`Compiler::break_cycles`]) or each
+    /// compile leaked the whole name table (found by cargo fuzz's leak checker).
+    scopes: Vec<Rc<RefCell<Option<Env>>>>,
+    states: Vec<Rc<RefCell<DefState>>>,
+}
+
+/// The stream graph being built: nodes with their owners, the inputs.
+struct Graph {
     nodes: Vec<Node>,
-    /// Node ids whose definition is pending (reserved aliases), for error checks.
-    lazy_depth: usize,
-    inline_depth: usize,
-    base_ns: i128,
+    /// The owner of each node (`Program::node_owners`).
+    owners: Vec<u64>,
+    /// The owner of the nodes created now (see [`crate::ir::owner_key`]): the name of
+    /// the definition or output being lowered.
+    owner: u64,
+    /// The one `unit` node, once made.
+    unit_node: Option<NodeId>,
     inputs: Vec<InputInfo>,
     input_nodes: Vec<NodeId>,
+}
+
+/// The function table being built (`closure`) and constant folding over it.
+struct Functions {
+    /// The function table (`Program::functions`).
+    functions: Vec<Function>,
     /// The function table entry of each named function lowered so far.
     compiled_fns: HashMap<*const Def, FnId>,
     /// Definitions (by their span: a local def is cloned afresh each time its scope is
     /// lowered) whose body failed to compile as a value function, so calls expand them at once
     /// instead of trying again (mutually recursive nested functions made that exponential).
     not_value_fns: HashSet<Span>,
-    /// The function table (`Program::functions`).
-    functions: Vec<Function>,
-    /// Constant folding: the functions finished so far, compiled (see `closure::fold`).
+    /// Constant folding with the functions finished so far (see `closure::fold`).
     folder: Folder,
-    unit_node: Option<NodeId>,
+}
+
+/// Base time and time literals (`time`).
+struct TimeSettings {
+    /// The base time in femtoseconds.
+    base_ns: i128,
     /// The unit of the base time in femtoseconds (`µs` in `33333 µs`); `None`: `base_ns`.
     base_unit: Option<i128>,
     /// Time literals are allowed (a base time is set, or 1 ns is assumed).
     time_units: bool,
-    /// The owner of the nodes created now (see [`crate::ir::owner_key`]): the name of
-    /// the definition or output being lowered.
-    owner: u64,
-    /// The owner of each node (`Program::node_owners`).
-    owners: Vec<u64>,
-    /// Every scope cell and def state created: scopes and defs refer to each other through
-    /// `Rc`s, so they are cleared when compiling ends ([`Compiler::break_cycles`]) or each
-    /// compile leaked the whole name table (found by cargo fuzz's leak checker).
-    scopes: Vec<Rc<RefCell<Option<Env>>>>,
-    states: Vec<Rc<RefCell<DefState>>>,
-    /// The checker's types of inputs, outputs and top-level defs (see [`crate::front::typeck::Types`]).
-    types: crate::front::typeck::Types,
+}
+
+/// How deep the lowering is.
+struct Depth {
+    /// Inside the lazy argument of `last`/`delay` (of the definition being lowered).
+    lazy_depth: usize,
+    /// Nested macro expansions (calls of functions on streams), bounded.
+    inline_depth: usize,
 }
 
 /// The native of an `extern` no builtin provides: an error when evaluated.
@@ -193,59 +233,67 @@ fn unknown_extern(_: &[Value]) -> Value {
 }
 
 impl<'a> Compiler<'a> {
-    pub fn new(
-        sources: &'a SourceMap,
-        resolved: &'a Resolved<'a>,
-        base_ns_fs: i128,
-    ) -> Compiler<'a> {
+    /// The lowering of a checked spec; `base_ns_fs` is the base time in femtoseconds.
+    pub fn new(sources: &'a SourceMap, typed: &'a Typed<'a>, base_ns_fs: i128) -> Compiler<'a> {
+        let resolved = typed.resolved();
         Compiler {
             sources,
             resolved,
-            globals: vec![None; resolved.defs.len()],
+            typed,
             diags: Vec::new(),
-            nodes: Vec::new(),
-            lazy_depth: 0,
-            inline_depth: 0,
-            base_ns: base_ns_fs,
-            inputs: Vec::new(),
-            input_nodes: Vec::new(),
-            compiled_fns: HashMap::new(),
-            not_value_fns: HashSet::new(),
-            functions: Vec::new(),
-            folder: Folder::default(),
-            unit_node: None,
-            base_unit: None,
-            time_units: true,
-            owner: 0,
-            owners: Vec::new(),
-            scopes: Vec::new(),
-            states: Vec::new(),
-            types: crate::front::typeck::Types::default(),
+            defs: Defs {
+                globals: vec![None; resolved.defs.len()],
+                scopes: Vec::new(),
+                states: Vec::new(),
+            },
+            graph: Graph {
+                nodes: Vec::new(),
+                owners: Vec::new(),
+                owner: 0,
+                unit_node: None,
+                inputs: Vec::new(),
+                input_nodes: Vec::new(),
+            },
+            table: Functions {
+                functions: Vec::new(),
+                compiled_fns: HashMap::new(),
+                not_value_fns: HashSet::new(),
+                folder: Folder::new(builtins::prim),
+            },
+            time: TimeSettings {
+                base_ns: base_ns_fs,
+                base_unit: None,
+                time_units: true,
+            },
+            depth: Depth {
+                lazy_depth: 0,
+                inline_depth: 0,
+            },
         }
     }
 
     /// A new def state, registered for [`Compiler::break_cycles`].
     fn new_state(&mut self) -> Rc<RefCell<DefState>> {
         let s = Rc::new(RefCell::new(DefState::Todo));
-        self.states.push(s.clone());
+        self.defs.states.push(s.clone());
         s
     }
 
     /// A new scope cell, registered for [`Compiler::break_cycles`].
     fn new_scope(&mut self) -> Rc<RefCell<Option<Env>>> {
         let c = Rc::new(RefCell::new(None));
-        self.scopes.push(c.clone());
+        self.defs.scopes.push(c.clone());
         c
     }
 
     /// Empty every scope cell and def state, breaking the reference cycles between them.
     fn break_cycles(&mut self) {
-        for c in self.scopes.drain(..) {
+        for c in self.defs.scopes.drain(..) {
             if let Ok(mut c) = c.try_borrow_mut() {
                 *c = None;
             }
         }
-        for st in self.states.drain(..) {
+        for st in self.defs.states.drain(..) {
             if let Ok(mut st) = st.try_borrow_mut() {
                 *st = DefState::Failed;
             }
@@ -254,19 +302,13 @@ impl<'a> Compiler<'a> {
 
     /// Allow or forbid time literals (forbidden when the spec runs without a base time).
     pub fn with_time_units(mut self, allowed: bool) -> Self {
-        self.time_units = allowed;
-        self
-    }
-
-    /// The checker's types of inputs, outputs and `out *` defs (the only types lowering uses).
-    pub fn with_types(mut self, types: crate::front::typeck::Types) -> Self {
-        self.types = types;
+        self.time.time_units = allowed;
         self
     }
 
     /// Set the unit of the base time (see [`parse_base_parts`]) for time literal conversion.
     pub fn with_base_unit(mut self, unit_fs: i128) -> Self {
-        self.base_unit = Some(unit_fs);
+        self.time.base_unit = Some(unit_fs);
         self
     }
 
@@ -288,9 +330,9 @@ impl<'a> Compiler<'a> {
     }
 
     fn node(&mut self, n: Node) -> NodeId {
-        self.nodes.push(n);
-        self.owners.push(self.owner);
-        self.nodes.len() - 1
+        self.graph.nodes.push(n);
+        self.graph.owners.push(self.graph.owner);
+        self.graph.nodes.len() - 1
     }
 
     /// Lower the resolved spec (inputs, outputs, `out *`, the definitions they use) into a
@@ -301,12 +343,12 @@ impl<'a> Compiler<'a> {
     ) -> Result<(Program, Vec<Diagnostic>), Vec<Diagnostic>> {
         let resolved = self.resolved;
         for (name, _) in &resolved.inputs {
-            let idx = self.inputs.len();
+            let idx = self.graph.inputs.len();
             let n = self.node(Node::Input(idx));
-            self.input_nodes.push(n);
-            self.inputs.push(InputInfo {
+            self.graph.input_nodes.push(n);
+            self.graph.inputs.push(InputInfo {
                 name: name.name.clone(),
-                ty: self.types.inputs.get(idx).cloned().unwrap_or(Type::Unknown),
+                ty: self.typed.input(idx),
                 annotations: Vec::new(),
             });
         }
@@ -319,7 +361,7 @@ impl<'a> Compiler<'a> {
         for (_, s) in &resolved.statements {
             if let Statement::In { annotations, .. } = s {
                 let anns = self.annotations(annotations, &env);
-                if let Some(info) = self.inputs.get_mut(input_i) {
+                if let Some(info) = self.graph.inputs.get_mut(input_i) {
                     info.annotations = anns;
                 }
                 input_i += 1;
@@ -334,12 +376,12 @@ impl<'a> Compiler<'a> {
                 .alias
                 .as_ref()
                 .map_or_else(|| o.source_text.clone(), |a| a.name.clone());
-            self.owner = owner_key(&name);
+            self.graph.owner = owner_key(&name);
             // An object (a record with stream members): one output per member, as TeSSLa.
             match self.object_output(&o.expr, &env) {
                 Some(Ok(members)) => {
                     for (path, t) in members {
-                        let ty = member_type(self.types.output(&o.expr), &path);
+                        let ty = member_type(self.typed.output(&o.expr), &path);
                         if let Ok(n) = self.stream_of(t, o.expr.span) {
                             outputs.push(OutputInfo {
                                 name: format!("{name}.{path}"),
@@ -356,7 +398,7 @@ impl<'a> Compiler<'a> {
                 None => {}
             }
             if let Ok(t) = self.expr(&o.expr, &env) {
-                let ty = self.types.output(&o.expr);
+                let ty = self.typed.output(&o.expr);
                 if let Ok(n) = self.stream_of(t, o.expr.span) {
                     outputs.push(OutputInfo {
                         name,
@@ -369,14 +411,14 @@ impl<'a> Compiler<'a> {
             }
         }
         if resolved.out_all {
-            for (i, info) in self.inputs.clone().iter().enumerate() {
+            for (i, info) in self.graph.inputs.clone().iter().enumerate() {
                 outputs.push(OutputInfo {
                     name: info.name.clone(),
                     ty: info.ty.clone(),
                     annotations: Vec::new(),
                     raw: false,
                 });
-                output_nodes.push(self.input_nodes[i]);
+                output_nodes.push(self.graph.input_nodes[i]);
             }
             for (id, g) in resolved.defs.iter().enumerate() {
                 if g.def.params.is_none()
@@ -385,7 +427,7 @@ impl<'a> Compiler<'a> {
                     && let Term::Stream(n) = t
                     && let Some(name) = resolved.name(id)
                 {
-                    let ty = self.types.defs.get(&name).cloned().unwrap_or(Type::Unknown);
+                    let ty = self.typed.def(&name);
                     outputs.push(OutputInfo {
                         name,
                         ty,
@@ -401,29 +443,32 @@ impl<'a> Compiler<'a> {
         if self.diags.iter().any(|d| d.is_error()) {
             return Err(self.diags);
         }
-        let order = match schedule::order(&self.nodes, &output_nodes) {
+        let order = match schedule::order(&self.graph.nodes, &output_nodes) {
             Ok(o) => o,
             Err(cycle) => {
-                let d = cycle.diagnostic();
+                // No node of the cycle has a place in the source.
+                let d = Diagnostic::error(Category::Recursion, None, cycle.to_string()).with_help(
+                    "recursion is allowed only through the first argument of `last` or `delay`",
+                );
                 self.diags.push(d);
                 return Err(self.diags);
             }
         };
-        let (last_slot, n_last_slots) = schedule::last_slots(&self.nodes, &order);
+        let (last_slot, n_last_slots) = schedule::last_slots(&self.graph.nodes, &order);
         Ok((
             Program {
-                functions: std::mem::take(&mut self.functions),
+                functions: std::mem::take(&mut self.table.functions),
                 last_slot,
                 n_last_slots,
-                inputs: self.inputs,
+                inputs: self.graph.inputs,
                 outputs,
                 delays: order
                     .iter()
                     .copied()
-                    .filter(|i| matches!(self.nodes.get(*i), Some(Node::Delay { .. })))
+                    .filter(|i| matches!(self.graph.nodes.get(*i), Some(Node::Delay { .. })))
                     .collect(),
-                nodes: self.nodes,
-                node_owners: self.owners,
+                nodes: self.graph.nodes,
+                node_owners: self.graph.owners,
                 order,
                 output_nodes,
             },
@@ -489,11 +534,11 @@ impl<'a> Compiler<'a> {
     }
 
     fn unit(&mut self) -> NodeId {
-        if let Some(u) = self.unit_node {
+        if let Some(u) = self.graph.unit_node {
             return u;
         }
         let u = self.node(Node::Const(Value::Unit));
-        self.unit_node = Some(u);
+        self.graph.unit_node = Some(u);
         u
     }
 

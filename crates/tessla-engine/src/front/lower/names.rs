@@ -43,7 +43,7 @@ impl Compiler<'_> {
                     None => self.node(Node::Alias(usize::MAX)),
                 };
                 let eager = match eager {
-                    None if self.lazy_depth == 0 => Some(span),
+                    None if self.depth.lazy_depth == 0 => Some(span),
                     e => e,
                 };
                 *e.state.borrow_mut() = DefState::InProgress {
@@ -58,13 +58,13 @@ impl Compiler<'_> {
                     eager: None,
                 };
                 let env = e.env_cell.borrow().clone().unwrap_or_default();
-                let saved = self.lazy_depth;
-                self.lazy_depth = 0;
-                let saved_owner = self.owner;
-                self.owner = owner_key(self.sources.text(e.def.name.span));
+                let saved = self.depth.lazy_depth;
+                self.depth.lazy_depth = 0;
+                let saved_owner = self.graph.owner;
+                self.graph.owner = owner_key(self.sources.text(e.def.name.span));
                 let r = self.body(&e.def, &env);
-                self.owner = saved_owner;
-                self.lazy_depth = saved;
+                self.graph.owner = saved_owner;
+                self.depth.lazy_depth = saved;
                 let (alias, eager) = match &*e.state.borrow() {
                     DefState::InProgress { alias, eager, .. } => (*alias, *eager),
                     _ => (None, None),
@@ -74,11 +74,11 @@ impl Compiler<'_> {
                         if let Some(a) = alias {
                             match &t {
                                 Term::Stream(n) => {
-                                    self.nodes[a] = Node::Alias(*n);
+                                    self.graph.nodes[a] = Node::Alias(*n);
                                     if let Some(at) = eager
                                         && self.strictly_reaches(*n, a)
                                     {
-                                        self.nodes[a] = Node::Nil;
+                                        self.graph.nodes[a] = Node::Nil;
                                         *e.state.borrow_mut() = DefState::Failed;
                                         self.diags.push(
                                             Diagnostic::error(
@@ -94,7 +94,7 @@ impl Compiler<'_> {
                                         return Err(Fail);
                                     }
                                 }
-                                Term::Const(v) => self.nodes[a] = Node::Const(v.clone()),
+                                Term::Const(v) => self.graph.nodes[a] = Node::Const(v.clone()),
                                 _ => {
                                     *e.state.borrow_mut() = DefState::Todo;
                                     return self.error(
@@ -110,7 +110,7 @@ impl Compiler<'_> {
                     }
                     Err(Fail) => {
                         if let Some(a) = alias {
-                            self.nodes[a] = Node::Nil;
+                            self.graph.nodes[a] = Node::Nil;
                         }
                         *e.state.borrow_mut() = DefState::Failed;
                         Err(Fail)
@@ -132,7 +132,7 @@ impl Compiler<'_> {
             if !seen.insert(x) {
                 continue;
             }
-            if let Some(node) = self.nodes.get(x) {
+            if let Some(node) = self.graph.nodes.get(x) {
                 todo.extend(node.strict_deps());
             }
         }
@@ -150,12 +150,13 @@ impl Compiler<'_> {
                     d.name.name
                 ),
             ),
-            Body::Extern { name, .. } => match builtins::extern_native(name) {
-                Some(f) => Ok(Term::Func(Rc::new(FuncTerm::Native(f)))),
+            Body::Extern { name, .. } => match builtins::extern_named(name) {
+                Some((name, f)) => Ok(Term::Func(Rc::new(FuncTerm::Native { name, f }))),
                 // As in TeSSLa, an unknown extern is an error when it is evaluated.
                 None if d.params.is_some() => {
                     let f: NativeFn = unknown_extern;
-                    Ok(Term::Func(Rc::new(FuncTerm::Native(f))))
+                    let name = "unknown extern";
+                    Ok(Term::Func(Rc::new(FuncTerm::Native { name, f })))
                 }
                 None => {
                     let msg: Arc<str> = format!("unknown extern `{name}`").into();
@@ -193,7 +194,7 @@ impl Compiler<'_> {
 
     /// The lowering state of global definition `id`, made on first use.
     pub(super) fn global_entry(&mut self, id: DefId) -> Option<Entry> {
-        if let Some(Some(e)) = self.globals.get(id) {
+        if let Some(Some(e)) = self.defs.globals.get(id) {
             return Some(e.clone());
         }
         let g = self.resolved.defs.get(id)?;
@@ -203,7 +204,7 @@ impl Compiler<'_> {
             env_cell: Rc::new(RefCell::new(Some(Env::module(&g.prefix)))),
             state: self.new_state(),
         };
-        *self.globals.get_mut(id)? = Some(e.clone());
+        *self.defs.globals.get_mut(id)? = Some(e.clone());
         Some(e)
     }
 
@@ -216,6 +217,7 @@ impl Compiler<'_> {
         match self.resolved.global(name, &env.prefix)? {
             Global::Def(id) => self.global_entry(id).map(Binding::Def),
             Global::Input(i) => self
+                .graph
                 .input_nodes
                 .get(i)
                 .map(|n| Binding::Term(Term::Stream(*n))),
@@ -244,7 +246,7 @@ impl Compiler<'_> {
                         Kind::Stream(op) => Term::Func(Rc::new(FuncTerm::Builtin(b, op))),
                         Kind::Constant(v) => Term::Const(v()),
                         Kind::Value(f) | Kind::Operator(f) => {
-                            Term::Func(Rc::new(FuncTerm::Native(f)))
+                            Term::Func(Rc::new(FuncTerm::Native { name: b.name, f }))
                         }
                         // Only through `extern("name")`.
                         Kind::Extern(_) => return self.unchecked(span, "an unknown name"),

@@ -53,10 +53,10 @@ impl Compiler<'_> {
                     // `--set delta=-0.5` means the Float -0.5 (in a spec it is written `-.0.5`).
                     if let Body::Expr { expr, .. } = &mut d.body
                         && let ExprKind::Unary { op, operand } = &mut expr.kind
-                        && *op == UnaryOp::Neg
+                        && *op == ast::UnaryOp::Neg
                         && matches!(operand.kind, ExprKind::Float(_))
                     {
-                        *op = UnaryOp::FNeg;
+                        *op = ast::UnaryOp::FNeg;
                     }
                     d
                 }
@@ -88,7 +88,7 @@ impl Compiler<'_> {
             let mut d = (*entry.def).clone();
             d.body = new_def.body;
             let state = self.new_state();
-            if let Some(slot) = self.globals.get_mut(id) {
+            if let Some(slot) = self.defs.globals.get_mut(id) {
                 *slot = Some(Entry {
                     def: Rc::new(d),
                     env_cell: entry.env_cell.clone(),

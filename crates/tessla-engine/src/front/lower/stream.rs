@@ -224,7 +224,7 @@ impl Compiler<'_> {
                     delay: dnode,
                     reset: u,
                 });
-                self.nodes[alias] = Node::Alias(delay);
+                self.graph.nodes[alias] = Node::Alias(delay);
                 // The periodic events: the delay's firings, plus the start at t = 0.
                 Node::Merge(vec![u, delay])
             }

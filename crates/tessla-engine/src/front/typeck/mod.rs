@@ -28,10 +28,11 @@
 //! generalised (let-polymorphism) when they are done, so generic functions and constants may
 //! be used at several types.
 //!
-//! The result is the typed program the lowering consumes ([`Types`]: element types of inputs,
-//! outputs by [`ExprId`], `out *` defs); the lowering writes no type rule the checker owns.
+//! The result is the typed program the lowering consumes ([`Typed`]: the resolved spec with the
+//! element types of inputs, outputs by [`ExprId`] and `out *` defs), a stage only [`check`]
+//! makes; the lowering writes no type rule the checker owns.
 //!
-//! This file is the driver (`check_resolved`: inputs, definitions, annotations, outputs), the
+//! This file is the driver ([`check`]: inputs, definitions, annotations, outputs), the
 //! [`Checker`] state and its scopes. Each rule lives in one file, by concern: `ty` (types,
 //! unification), `infer` (expressions), `operators`, `calls` (application, named arguments,
 //! type arguments), `defs` (definitions, recursion), `names` (lookup, written types),
@@ -125,20 +126,33 @@ impl ExprId {
     }
 }
 
-/// The typed program the checker hands the lowering: the element type of each input (by its
-/// index in [`Resolved::inputs`]), of each output (by the id of its expression; an object
-/// output's members are fields of it) and of each top-level parameterless def (by dotted
-/// name, for `out *`). Types the checker leaves open are [`Type::Unknown`] inside. The
-/// lowering takes its types from here only; the few rules the checker leaves open (named
-/// arguments of builtins, constant arguments, ...) are marked in `lower/` as their one place.
-#[derive(Debug, Default)]
-pub struct Types {
-    pub inputs: Vec<Type>,
-    pub outputs: HashMap<ExprId, Type>,
-    pub defs: HashMap<String, Type>,
+/// The typed program, the stage between checking and lowering: the resolved spec that passed
+/// the checker, with the element type of each input (by its index in [`Resolved::inputs`]), of
+/// each output (by the id of its expression; an object output's members are fields of it) and
+/// of each top-level parameterless def (by dotted name, for `out *`). Types the checker leaves
+/// open are [`Type::Unknown`] inside. Only [`check`] makes one (its fields are private), so the
+/// lowering, which requires one, runs on checked specs only and takes its types from here; the
+/// few rules the checker leaves open (named arguments of builtins, constant arguments, ...) are
+/// marked in `lower/` as their one place.
+#[derive(Debug)]
+pub struct Typed<'a> {
+    resolved: &'a Resolved<'a>,
+    inputs: Vec<Type>,
+    outputs: HashMap<ExprId, Type>,
+    defs: HashMap<String, Type>,
 }
 
-impl Types {
+impl<'a> Typed<'a> {
+    /// The resolved spec that was checked.
+    pub fn resolved(&self) -> &'a Resolved<'a> {
+        self.resolved
+    }
+
+    /// The element type of input `i` (by its index in [`Resolved::inputs`]).
+    pub fn input(&self, i: usize) -> Type {
+        self.inputs.get(i).cloned().unwrap_or(Type::Unknown)
+    }
+
     /// The element type of an output expression ([`Type::Unknown`]: none, or open).
     pub fn output(&self, e: &Expr) -> Type {
         self.outputs
@@ -146,23 +160,21 @@ impl Types {
             .cloned()
             .unwrap_or(Type::Unknown)
     }
+
+    /// The element type of the top-level parameterless def `name` (for `out *`).
+    pub fn def(&self, name: &str) -> Type {
+        self.defs.get(name).cloned().unwrap_or(Type::Unknown)
+    }
 }
 
-/// Check the statements of all files (includes first); returns the type errors found.
-pub fn check(files: &[ast::File]) -> Vec<Diagnostic> {
-    check_typed(files).0
-}
-
-/// Check the statements of all files; returns the type errors found and the [`Types`] table.
-pub fn check_typed(files: &[ast::File]) -> (Vec<Diagnostic>, Types) {
-    let resolved = Resolved::new(files);
-    check_resolved(&resolved)
-}
-
-/// Check a resolved spec; returns the type errors found (the resolver's first) and the
-/// [`Types`] table.
-pub fn check_resolved(resolved: &Resolved<'_>) -> (Vec<Diagnostic>, Types) {
-    let mut types = Types::default();
+/// Check a resolved spec: the typed program, or the errors found (the resolver's first).
+pub fn check<'a>(resolved: &'a Resolved<'a>) -> Result<Typed<'a>, Vec<Diagnostic>> {
+    let mut types = Typed {
+        resolved,
+        inputs: Vec::new(),
+        outputs: HashMap::new(),
+        defs: HashMap::new(),
+    };
     let mut c = Checker {
         resolved: Some(resolved),
         ..Checker::default()
@@ -241,7 +253,11 @@ pub fn check_resolved(resolved: &Resolved<'_>) -> (Vec<Diagnostic>, Types) {
         }
     }
     c.break_cycles();
-    (std::mem::take(&mut c.diags), types)
+    if c.diags.is_empty() {
+        Ok(types)
+    } else {
+        Err(std::mem::take(&mut c.diags))
+    }
 }
 
 #[derive(Default)]
@@ -442,8 +458,10 @@ mod tests {
     fn an_input_that_is_no_stream_is_a_type_error() {
         let spec = "in x: Int\nout x";
         let (file, _) = tessla_syntax::parse(spec, tessla_syntax::source::FileId::default());
-        let (errors, types) = check_typed(&[file]);
-        assert_eq!(types.inputs, vec![Type::Unknown]);
+        let resolved = Resolved::new(std::slice::from_ref(&file));
+        let Err(errors) = check(&resolved) else {
+            panic!("an input of type Int was accepted");
+        };
         assert_eq!(errors.len(), 1);
         assert_eq!(errors[0].message, "input `x` must have a type Events[T]");
     }
@@ -453,8 +471,10 @@ mod tests {
         let spec = "in x: Events[Int]\nliftable def f(a: Int) = (a, true)\ndef g = f(x)\nout g\nout f(x) as h\nout *";
         let (file, diags) = tessla_syntax::parse(spec, tessla_syntax::source::FileId::default());
         assert!(diags.is_empty());
-        let (errors, types) = check_typed(&[file]);
-        assert!(errors.is_empty());
+        let resolved = Resolved::new(std::slice::from_ref(&file));
+        let Ok(types) = check(&resolved) else {
+            panic!("a well-typed spec was rejected");
+        };
         let pair = Type::Tuple(vec![Type::Int, Type::Bool]);
         assert_eq!(types.defs.get("g"), Some(&pair));
         assert_eq!(types.inputs, vec![Type::Int]);

@@ -1,32 +1,20 @@
-//! Scheduling a lowered program: the order nodes are evaluated in within a step, and which
-//! nodes' values must be kept across steps.
+//! Scheduling a lowered program, an IR-to-IR pass: the order nodes are evaluated in within a
+//! step, and which nodes' values must be kept across steps.
 //!
 //! Owns: [`order`] (strict dependencies first; only what an output reads; a cycle not through
-//! a lazy argument is an error, [`Cycle`]) and [`last_slots`] (the slots a monitor instance keeps).
+//! a lazy argument is an error, [`Cycle`], which the lowering reports as a diagnostic) and
+//! [`last_slots`] (the slots a monitor instance keeps).
 
 use crate::ir::{NO_SLOT, Node, NodeId, SArg, stream_args};
-use tessla_syntax::diag::{Category, Diagnostic};
 
 /// A cycle of strict dependencies (no `last`/`delay` in between): its nodes, in order.
 #[derive(Debug)]
 pub struct Cycle(pub Vec<NodeId>);
 
-impl Cycle {
-    /// The diagnostic when no node of the cycle has a place in the source.
-    pub fn diagnostic(&self) -> Diagnostic {
-        Diagnostic::error(
-            Category::Recursion,
-            None,
-            "a stream depends on itself without `last` or `delay` in between",
-        )
-        .with_help("recursion is allowed only through the first argument of `last` or `delay`")
-    }
-}
-
 impl std::fmt::Display for Cycle {
-    /// The message of [`Cycle::diagnostic`].
+    /// The message of the lowering's diagnostic for it.
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.diagnostic().message)
+        f.write_str("a stream depends on itself without `last` or `delay` in between")
     }
 }
 
