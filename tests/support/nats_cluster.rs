@@ -18,11 +18,11 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-pub use crate::servers::free_port;
+pub use super::servers::free_port;
 
 /// `nats-server`, or `None` after explaining how to get it (panics when servers are required).
 pub fn require_nats_server() -> Option<PathBuf> {
-    crate::servers::require("nats-server", "nats-server")
+    super::servers::require("nats-server", "nats-server")
 }
 
 /// The shipped mapping (`telegraf/fleet-nats/mapping.conf`, 2 partitions).

@@ -13,7 +13,7 @@
 //!   NATS subject `robots.<robot>.action` (published here directly on that subject).
 //!
 //! Include with `#[path = "support/nats_standin.rs"] mod nats_standin;`, after `nats_cluster`
-//! (its [`crate::nats_cluster::Login`]).
+//! (its [`super::nats_cluster::Login`]).
 #![allow(dead_code)]
 
 use influxdb_line_protocol::{FieldValue, parse_lines};
@@ -156,7 +156,7 @@ impl NatsStandIn {
         nats_url: &str,
         partition: usize,
         args: &[String],
-        login: &crate::nats_cluster::Login,
+        login: &super::nats_cluster::Login,
     ) -> NatsStandIn {
         let login = login.clone();
         let mut child = Command::new(bin)

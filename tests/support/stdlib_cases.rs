@@ -7,7 +7,7 @@
 //! `#[path = "support/child.rs"] mod child;` (this module runs the binary through `child`).
 #![allow(dead_code)]
 
-use crate::child;
+use super::child;
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
