@@ -3,6 +3,7 @@
 //! a panic, within a deadline. Every file of the folder must be listed below, so a new broken
 //! spec comes with its expected place.
 
+use crate::support::BIN;
 use crate::support::child;
 
 use std::path::PathBuf;
@@ -314,7 +315,7 @@ fn closed_output_streams_give_an_exit_code_not_a_panic() {
     // Diagnostics (and check's listing) written to pipes nobody reads: `check | head` must not
     // panic (exit 101) when the reader has gone.
     for (name, want) in [("syntax_too_deep", 2), ("../../../specs/robot", 3)] {
-        let mut c = std::process::Command::new(child::BIN)
+        let mut c = std::process::Command::new(BIN)
             .args(["check", &spec(name)])
             .stdout(std::process::Stdio::piped())
             .stderr(std::process::Stdio::piped())

@@ -3,7 +3,7 @@
 
 use std::process::Command;
 
-const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use crate::support::BIN;
 
 fn check(args: &[&str], spec: &str) -> (Option<i32>, String, String) {
     let dir = tempfile::tempdir().unwrap();

@@ -4,7 +4,8 @@
 
 use crate::support::child;
 
-use child::{BIN, root, run_in, text, write};
+use crate::support::BIN;
+use child::{root, run_in, text, write};
 use std::path::Path;
 use std::process::{Command, Output};
 

@@ -6,7 +6,7 @@ use crate::support::recorded;
 use std::path::Path;
 use std::process::Command;
 
-const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use crate::support::BIN;
 const MS: i64 = 1_000_000;
 const T0: i64 = 1_700_000_000_000_000_000;
 

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use crate::support::BIN;
 
 /// Commands not run here, by their start, and why.
 const EXEMPT: &[(&str, &str)] = &[

@@ -2,9 +2,7 @@
 //! default robot on the bundled scenario, a seed fixes the run, `--set` reaches the spec, the
 //! output is the pipeline's line protocol, and bad options give clear errors and exit codes.
 
-use crate::support::recorded;
-
-use recorded::BIN;
+use crate::support::BIN;
 use serde_json::Value;
 use std::path::Path;
 use std::process::{Command, Output};

@@ -14,10 +14,9 @@
 //! - `systemd-analyze verify` accepts the unit with the drop-in (a missing `systemd-analyze`
 //!   fails under REQUIRE_SERVERS=1).
 
-use crate::support::recorded;
 use crate::support::servers;
 
-use recorded::BIN;
+use crate::support::BIN;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};

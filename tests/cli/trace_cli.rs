@@ -3,7 +3,8 @@
 
 use crate::support::child;
 
-use child::{BIN, root, run_in, text};
+use crate::support::BIN;
+use child::{root, run_in, text};
 use std::io::Write;
 use std::process::{Command, Output, Stdio};
 

@@ -10,7 +10,7 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use crate::support::BIN;
 
 fn spawn(args: &[&str]) -> Child {
     Command::new(BIN)

@@ -8,7 +8,7 @@ use crate::support::child;
 use std::io::Write;
 use std::process::{Command, Stdio};
 
-const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use crate::support::BIN;
 const ROBOTS: usize = 3;
 const PER_ROBOT: usize = 40;
 

@@ -4,6 +4,7 @@
 //! verdict (`action` metric) of every valid neighbour present at its timestamp. Memory is bounded
 //! where the input is large (peak RSS of the child read from /proc).
 
+use crate::support::BIN;
 use crate::support::child;
 use crate::support::udp_ends;
 
@@ -440,7 +441,7 @@ mod udp {
     impl Monitor {
         fn start() -> Monitor {
             let (recv, send_to, listen) = udp_ends::open(Duration::from_millis(200));
-            let child = std::process::Command::new(child::BIN)
+            let child = std::process::Command::new(BIN)
                 .args([
                     "run",
                     "--udp-listen",

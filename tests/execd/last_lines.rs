@@ -10,7 +10,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use crate::support::BIN;
 
 /// `n` robot records (a few hundred bytes of output each, under the pipe's 64 KiB in all).
 fn records(n: usize) -> String {

@@ -8,7 +8,7 @@ use std::io::{Read, Write};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use crate::support::BIN;
 
 /// The bound the tests give: long enough that a busy machine never stalls a step this long by
 /// itself, short enough to keep the tests quick.

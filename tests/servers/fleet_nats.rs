@@ -22,7 +22,7 @@ use std::io::Write;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use crate::support::BIN;
 const ROBOTS: usize = 6;
 /// Replay speed: the recorded 30 s run in 10 s.
 const SPEED: &str = "3";

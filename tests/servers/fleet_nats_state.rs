@@ -12,7 +12,7 @@ use nats_cluster::Cluster;
 use std::io::Write;
 use std::process::{Command, Stdio};
 
-const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use crate::support::BIN;
 
 /// Robots `ids`' records (the recorded run, one topic per robot), interleaved, records `range`.
 fn fleet(ids: &[&str], range: std::ops::Range<usize>) -> String {

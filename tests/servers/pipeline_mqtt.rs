@@ -10,10 +10,10 @@ use crate::support::mqtt_client;
 use crate::support::real_telegraf;
 use crate::support::recorded;
 
+use crate::support::BIN;
 use real_telegraf::{
     Field, Rewrite, Row, Telegraf, assert_no_error, broker, wait_subscribed, without_table,
 };
-use recorded::BIN;
 use std::process::Command;
 use std::time::{Duration, Instant};
 

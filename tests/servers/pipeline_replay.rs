@@ -8,7 +8,7 @@ use serde_json::{Value, json};
 use std::process::Command;
 use std::time::Duration;
 
-const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use crate::support::BIN;
 const S: i64 = 1_000_000_000;
 const T0: i64 = 1_700_000_000 * S;
 

@@ -16,7 +16,7 @@ use std::process::Command;
 use std::sync::mpsc::{Receiver, channel};
 use std::time::{Duration, Instant};
 
-const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use crate::support::BIN;
 /// The marker passwords: none may appear in any output.
 const ROBOT1_PW: &str = "Mark3r-robot1-pw";
 const ROBOT2_PW: &str = "Mark3r-robot2-pw";

@@ -7,13 +7,12 @@
 
 use crate::support::mqtt_client;
 use crate::support::real_telegraf;
-use crate::support::recorded;
 use crate::support::servers;
 
+use crate::support::BIN;
 use real_telegraf::{
     Field, Rewrite, Telegraf, assert_no_error, broker, wait_subscribed, without_table,
 };
-use recorded::BIN;
 use serde_json::Value;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};

@@ -11,10 +11,10 @@ use crate::support::real_telegraf;
 use crate::support::recorded;
 use crate::support::servers;
 
+use crate::support::BIN;
 use real_telegraf::{
     Rewrite, Row, Telegraf, assert_no_error, broker, execd_args, offline, wait_subscribed,
 };
-use recorded::BIN;
 use std::collections::BTreeMap;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};

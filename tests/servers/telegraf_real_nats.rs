@@ -38,9 +38,9 @@ use crate::support::nats_cluster;
 use crate::support::real_telegraf;
 use crate::support::recorded;
 
+use crate::support::BIN;
 use nats_cluster::{Cluster, Login};
 use real_telegraf::{Rewrite, Row, execd_args, offline};
-use recorded::BIN;
 use rumqttc::{Client, Event, MqttOptions, Packet, QoS, TlsConfiguration, Transport};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

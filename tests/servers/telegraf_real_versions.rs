@@ -14,10 +14,9 @@
 
 use crate::support::mqtt_client;
 use crate::support::real_telegraf;
-use crate::support::recorded;
 
+use crate::support::BIN;
 use real_telegraf::{Telegraf, broker, wait_subscribed};
-use recorded::BIN;
 use std::time::{Duration, Instant};
 
 /// The last release below the floor the README names.

@@ -3,16 +3,13 @@
 //! it has not exited by the deadline, and its peak resident memory (VmHWM) read from /proc while
 //! it runs. Also the binary run once in a folder, the way a user runs it ([`run_in`]: its whole
 //! `Output`), and the spec or trace files such a run reads ([`write`]).
-//!
-//! Include with `#[path = "support/child.rs"] mod child;`.
-#![allow(dead_code)]
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-pub const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use super::BIN;
 
 /// How a child run ended.
 #[derive(Debug)]

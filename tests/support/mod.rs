@@ -9,11 +9,17 @@
 pub mod child;
 pub mod dashboards;
 pub mod live_child;
+// Without the `tools` feature the tests of `replay`, `simulate` and most of the real Telegraf's
+// are left out (tests/cli/mod.rs, tests/servers/mod.rs), and with them the only users of some
+// helpers of these three.
+#[cfg_attr(not(feature = "tools"), allow(dead_code))]
 pub mod mqtt_client;
 pub mod nats_cluster;
 pub mod nats_standin;
+#[cfg_attr(not(feature = "tools"), allow(dead_code))]
 pub mod real_telegraf;
 pub mod recorded;
+#[cfg_attr(not(feature = "tools"), allow(dead_code))]
 pub mod servers;
 pub mod stdlib_cases;
 pub mod tessla_suite;

@@ -9,9 +9,7 @@
 //! `make-test-certs.sh`, and the users and permissions of `accounts.conf` (its example robots
 //! replaced by the test's), each with a password made for the run ([`Cluster::login`]).
 //!
-//! Include with `#[path = "support/nats_cluster.rs"] mod nats_cluster;`, after
-//! `#[path = "support/servers.rs"] mod servers;` (port and binary lookup).
-#![allow(dead_code)]
+//! Needs its sibling `servers` (port and binary lookup); bench/fleet_nats.rs includes both by path.
 
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};

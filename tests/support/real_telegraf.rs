@@ -12,9 +12,8 @@
 //! out of InfluxDB with its tags and field types, [`to_lines`] writes those rows as line
 //! protocol, so that an offline `run` can be fed exactly what Telegraf fed the monitor.
 //!
-//! Include with `#[path = "support/real_telegraf.rs"] mod real_telegraf;`, after
-//! `#[path = "support/servers.rs"] mod servers;`.
-#![allow(dead_code)]
+//! Needs its sibling `servers` and a `BIN` beside them (bench/telegraf_delay.rs includes both
+//! by path, with the release binary as its `BIN`).
 
 use serde_json::Value;
 use std::collections::BTreeMap;

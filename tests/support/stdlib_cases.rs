@@ -3,9 +3,7 @@
 //! compared as a multiset (floats by value), a pool of worker threads, and the pass-list check
 //! (`UPDATE_STDLIB=1` rewrites the list instead).
 //!
-//! Include with `#[path = "support/stdlib_cases.rs"] mod stdlib_cases;` next to
-//! `#[path = "support/child.rs"] mod child;` (this module runs the binary through `child`).
-#![allow(dead_code)]
+//! Runs the binary through its sibling `child`.
 
 use super::child;
 use std::collections::{BTreeMap, BTreeSet};

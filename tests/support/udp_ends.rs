@@ -1,8 +1,5 @@
 //! The test's ends of UDP mode (the TeSSLa Telegraf Connector's wiring): a socket receiving the
 //! child's outputs and a free address for the child to listen on.
-//!
-//! Include with `#[path = "support/udp_ends.rs"] mod udp_ends;`.
-#![allow(dead_code)]
 
 use std::net::UdpSocket;
 use std::time::Duration;
