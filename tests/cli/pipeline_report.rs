@@ -7,6 +7,7 @@ use std::path::Path;
 use std::process::Command;
 
 use crate::support::BIN;
+
 const MS: i64 = 1_000_000;
 const T0: i64 = 1_700_000_000_000_000_000;
 

@@ -3,24 +3,12 @@
 //! arrives before the next record is written; EOF and SIGTERM flush and exit 0; the shipped
 //! telegraf.conf's command runs as Telegraf would run it; UDP mode round-trips.
 
-use crate::support::child;
+use crate::support::child::{run_text, spawn};
 use crate::support::udp_ends;
 
 use std::io::{BufRead, BufReader, Read, Write};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
-
-use crate::support::BIN;
-
-fn spawn(args: &[&str]) -> Child {
-    Command::new(BIN)
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap()
-}
 
 fn fixture_lines(n: usize) -> Vec<String> {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -33,15 +21,11 @@ fn fixture_lines(n: usize) -> Vec<String> {
         .collect()
 }
 
-fn run_all(args: &[&str], input: &str) -> (String, String, i32) {
-    child::run_text(args, input)
-}
-
 #[test]
 fn passthrough_is_byte_identical_and_outputs_parse_back() {
     let lines = fixture_lines(20);
     let input: String = lines.concat();
-    let (out, err, code) = run_all(&[], &input);
+    let (out, err, code) = run_text(&[], &input);
     assert_eq!(code, 0, "{err}");
     let echoed: Vec<&str> = out
         .split_inclusive('\n')
@@ -65,7 +49,7 @@ fn a_bad_line_costs_only_itself() {
         lines[1],
         lines[2..].concat()
     );
-    let (out, err, code) = run_all(&["--no-passthrough"], &input);
+    let (out, err, code) = run_text(&["--no-passthrough"], &input);
     assert_eq!(code, 0);
     assert_eq!(
         out.lines().filter(|l| l.starts_with("action ")).count(),
@@ -137,7 +121,7 @@ fn a_spec_error_exits_2_before_reading_input() {
     let dir = tempfile::tempdir().unwrap();
     let spec = dir.path().join("bad.tessla");
     std::fs::write(&spec, "in x: Events[Float]\ndef y = x + 1.0\nout y\n").unwrap();
-    let (_, err, code) = run_all(&["--spec", spec.to_str().unwrap()], "");
+    let (_, err, code) = run_text(&["--spec", spec.to_str().unwrap()], "");
     assert_eq!(code, 2);
     assert!(err.contains("bad.tessla:2:9"), "{err}");
     assert!(err.contains("+."), "the fix is named: {err}");
@@ -179,12 +163,12 @@ fn shipped_conf_command_runs_as_telegraf_would() {
         })
         .collect();
     let lines = fixture_lines(6);
-    let (out, err, code) = run_all(&args, &lines[..3].concat());
+    let (out, err, code) = run_text(&args, &lines[..3].concat());
     assert_eq!(code, 0, "{err}");
     assert_eq!(out.lines().filter(|l| l.starts_with("action ")).count(), 3);
     assert!(here.exists(), "the state was saved: {err}");
     // A restart (Telegraf's reload) continues the monitors: the next action is the 4th.
-    let (out, err, code) = run_all(&args, &lines[3..].concat());
+    let (out, err, code) = run_text(&args, &lines[3..].concat());
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("state: restored 1 monitor instances"), "{err}");
     let first = out.lines().find(|l| l.starts_with("action ")).unwrap();
@@ -268,7 +252,7 @@ fn fixture_outputs_are_exact_and_parse_back_with_the_same_values() {
     let input = execd_fixture("speed.lp");
     let expected = execd_fixture("speed.out.lp");
     let spec = spec.to_str().unwrap();
-    let (out, err, code) = run_all(&["--spec", spec, "--tag", "site=lab"], &input);
+    let (out, err, code) = run_text(&["--spec", spec, "--tag", "site=lab"], &input);
     assert_eq!(code, 0, "{err}");
     // Each record, byte for byte, then the outputs it causes (those of its own timestamp).
     let records: Vec<&str> = input.split_inclusive('\n').collect();
@@ -429,7 +413,7 @@ fn a_record_of_verdicts_is_one_field_per_member() {
          out check\nout bounds\nout verdict\n",
     )
     .unwrap();
-    let (out, err, code) = run_all(
+    let (out, err, code) = run_text(
         &["--spec", spec.to_str().unwrap(), "--no-passthrough"],
         "m speed=0.5 10\nm speed=2 20\n",
     );

@@ -3,18 +3,12 @@
 //! lines carry the instance tags, a fleet split across two processes gives the union of what one
 //! process gives (partition invariance), and eviction is counted.
 
-use crate::support::child;
+use crate::support::child::{self, run_text};
 
 use std::io::Write;
-use std::process::{Command, Stdio};
 
-use crate::support::BIN;
 const ROBOTS: usize = 3;
 const PER_ROBOT: usize = 40;
-
-fn run(args: &[&str], input: &str) -> (String, String, i32) {
-    child::run_text(args, input)
-}
 
 /// The recorded run's records as robot `k` sends them: its own MQTT topic, and its clock
 /// offset by `k` µs so that robots interleave without sharing timestamps... except robot 0 and
@@ -59,7 +53,7 @@ fn sorted_lines(s: &str) -> Vec<String> {
 
 #[test]
 fn each_instance_computes_what_its_robot_gets_alone() {
-    let (out, err, code) = run(
+    let (out, err, code) = run_text(
         &["--no-passthrough", "--instance-by", "topic"],
         &fleet(&[0, 1, 2]),
     );
@@ -69,7 +63,7 @@ fn each_instance_computes_what_its_robot_gets_alone() {
         let topic = format!("tessla/robot{k}");
         // Alone, without instances; the static tag stands in for the instance tag.
         let alone_input: String = robot_lines(k).concat();
-        let (alone, err, code) = run(
+        let (alone, err, code) = run_text(
             &["--no-passthrough", "--tag", &format!("topic={topic}")],
             &alone_input,
         );
@@ -104,10 +98,10 @@ fn one_instance_mixes_robots_that_share_timestamps() {
     // Without --instance-by, robots 0 and 2 share one clock: robot 2 is 14 records ahead of
     // robot 0, so every record of robot 0 is late in the shared instance (stepped 1 ns after the
     // last step, its own time lost). This is what instances prevent.
-    let (_, err, code) = run(&["--no-passthrough"], &fleet(&[0, 2]));
+    let (_, err, code) = run_text(&["--no-passthrough"], &fleet(&[0, 2]));
     assert_eq!(code, 0, "{err}");
     assert!(!err.contains(" 0 late records"), "{err}");
-    let (_, err, _) = run(
+    let (_, err, _) = run_text(
         &["--no-passthrough", "--instance-by", "topic"],
         &fleet(&[0, 2]),
     );
@@ -118,11 +112,11 @@ fn one_instance_mixes_robots_that_share_timestamps() {
 #[test]
 fn a_fleet_split_across_two_processes_gives_the_same_outputs() {
     let args = ["--no-passthrough", "--instance-by", "topic"];
-    let (all, err, code) = run(&args, &fleet(&[0, 1, 2]));
+    let (all, err, code) = run_text(&args, &fleet(&[0, 1, 2]));
     assert_eq!(code, 0, "{err}");
-    let (part_a, err, code) = run(&args, &fleet(&[0, 2]));
+    let (part_a, err, code) = run_text(&args, &fleet(&[0, 2]));
     assert_eq!(code, 0, "{err}");
-    let (part_b, err, code) = run(&args, &fleet(&[1]));
+    let (part_b, err, code) = run_text(&args, &fleet(&[1]));
     assert_eq!(code, 0, "{err}");
     assert!(!part_a.is_empty() && !part_b.is_empty());
     let union = format!("{part_a}{part_b}");
@@ -141,13 +135,13 @@ fn pass_through_is_unchanged_with_instances() {
             .filter(|l| l.starts_with("mqtt_consumer"))
             .collect()
     };
-    let (out, err, code) = run(&["--instance-by", "topic", "--threads", "1"], &input);
+    let (out, err, code) = run_text(&["--instance-by", "topic", "--threads", "1"], &input);
     assert_eq!(code, 0, "{err}");
     assert_eq!(echoed(&out), input);
     for threads in [None, Some("2")] {
         let mut args = vec!["--instance-by", "topic"];
         args.extend(threads.map(|t| ["--threads", t]).into_iter().flatten());
-        let (out, err, code) = run(&args, &input);
+        let (out, err, code) = run_text(&args, &input);
         assert_eq!(code, 0, "{err}");
         let echo = echoed(&out);
         assert_eq!(sorted_lines(&echo), sorted_lines(&input), "{threads:?}");
@@ -163,7 +157,7 @@ fn pass_through_is_unchanged_with_instances() {
 fn past_max_instances_the_least_recently_used_is_evicted() {
     // Two robots alternating with room for one instance: every record evicts the other robot.
     let input = fleet(&[0, 1]);
-    let (out, err, code) = run(
+    let (out, err, code) = run_text(
         &[
             "--no-passthrough",
             "--instance-by",
@@ -190,7 +184,7 @@ fn past_max_instances_the_least_recently_used_is_evicted() {
     );
     // And their state starts afresh: a fresh instance's MSE is that of its only sample, so the
     // outputs differ from the run with room for both.
-    let (kept, _, _) = run(&["--no-passthrough", "--instance-by", "topic"], &input);
+    let (kept, _, _) = run_text(&["--no-passthrough", "--instance-by", "topic"], &input);
     assert_ne!(sorted_lines(&out), sorted_lines(&kept));
 }
 
@@ -212,7 +206,7 @@ fn max_instances_is_the_total_over_threads() {
                 threads,
             ]
         };
-        let (_, err, code) = run(&args("2"), &input);
+        let (_, err, code) = run_text(&args("2"), &input);
         assert_eq!(code, 0, "{err}");
         assert!(!err.contains(" 0 evicted"), "{threads}: {err}");
     }
@@ -220,26 +214,20 @@ fn max_instances_is_the_total_over_threads() {
 
 #[test]
 fn max_instances_zero_is_refused() {
-    let (_, err, code) = run(&["--instance-by", "topic", "--max-instances", "0"], "");
+    let (_, err, code) = run_text(&["--instance-by", "topic", "--max-instances", "0"], "");
     assert_eq!(code, 2, "{err}");
 }
 
 #[test]
 fn an_idle_instance_is_evicted() {
     use std::io::{BufRead, BufReader};
-    let mut child = Command::new(BIN)
-        .args([
-            "--no-passthrough",
-            "--instance-by",
-            "topic",
-            "--instance-idle",
-            "200ms",
-        ])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = child::spawn(&[
+        "--no-passthrough",
+        "--instance-by",
+        "topic",
+        "--instance-idle",
+        "200ms",
+    ]);
     let mut stdin = child.stdin.take().unwrap();
     let mut stdout = BufReader::new(child.stdout.take().unwrap());
     let mut send_and_wait = |line: &str| {
@@ -306,7 +294,7 @@ fn shipped_fleet_conf_command_keeps_robots_apart() {
             }
         })
         .collect();
-    let (out, err, code) = run(&args, &fleet(&[0, 1, 2]));
+    let (out, err, code) = run_text(&args, &fleet(&[0, 1, 2]));
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("3 instances"), "{err}");
     assert!(err.contains("state: saved 3 monitor instances"), "{err}");
@@ -344,10 +332,11 @@ fn threads_keep_the_output_set_and_each_instances_order() {
 /// write the same set of lines as one, each instance's lines in the same order; `check` gets the
 /// one-thread and the many-thread stderr. Returns the one-thread stdout and stderr.
 fn threads_agree_with_one(input: &str, check: impl Fn(&str, &str)) -> (String, String) {
-    let (one, err, code) = run(&["--instance-by", "topic", "--threads", "1"], input);
+    let (one, err, code) = run_text(&["--instance-by", "topic", "--threads", "1"], input);
     assert_eq!(code, 0, "{err}");
     for threads in ["2", "3"] {
-        let (many, err_many, code) = run(&["--instance-by", "topic", "--threads", threads], input);
+        let (many, err_many, code) =
+            run_text(&["--instance-by", "topic", "--threads", threads], input);
         assert_eq!(code, 0, "{err_many}");
         assert_eq!(
             sorted_lines(&one),
@@ -444,7 +433,7 @@ fn the_summary_is_the_same_on_any_thread_count() {
         }
     }
     let summary = |threads: &str| {
-        let (_, err, code) = run(
+        let (_, err, code) = run_text(
             &[
                 "--no-passthrough",
                 "--instance-by",

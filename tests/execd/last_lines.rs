@@ -5,12 +5,11 @@
 //! stops reading once the child has exited.
 
 use std::io::{Read, Write};
-use std::process::{Command, Stdio};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use crate::support::BIN;
+use crate::support::child;
 
 /// `n` robot records (a few hundred bytes of output each, under the pipe's 64 KiB in all).
 fn records(n: usize) -> String {
@@ -34,14 +33,7 @@ fn run_slow_reader(
     chunk: usize,
     pause: Duration,
 ) -> (String, Option<i32>, Duration, String) {
-    let mut child = Command::new(BIN)
-        .arg("run")
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = child::spawn(&[&["run"], args].concat());
     let mut stdin = child.stdin.take().unwrap();
     let mut stdout = child.stdout.take().unwrap();
     let mut stderr = child.stderr.take().unwrap();
@@ -86,17 +78,8 @@ fn run_slow_reader(
 fn a_slow_reader_gets_every_line_written_before_the_end() {
     let input = records(40);
     // What the run writes, read at once.
-    let all = Command::new(BIN)
-        .args(["run", "--no-passthrough"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .spawn()
-        .and_then(|mut c| {
-            c.stdin.take().unwrap().write_all(input.as_bytes())?;
-            c.wait_with_output()
-        })
-        .unwrap();
-    let expected = String::from_utf8(all.stdout).unwrap();
+    let (expected, err, code) = child::run_text(&["run", "--no-passthrough"], &input);
+    assert_eq!(code, 0, "{err}");
     assert_eq!(
         expected
             .lines()
@@ -145,9 +128,7 @@ fn output_to_a_file_is_not_waited_for() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("out.lp");
     let started = Instant::now();
-    let out = Command::new(BIN)
-        .args(["run", "--no-passthrough"])
-        .stdin(Stdio::piped())
+    let out = child::command(&["run", "--no-passthrough"])
         .stdout(std::fs::File::create(&path).unwrap())
         .spawn()
         .and_then(|mut c| {

@@ -5,10 +5,10 @@
 //! `--step-timeout 0`, and a slow but live input, which is not a stall.
 
 use std::io::{Read, Write};
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
-use crate::support::BIN;
+use crate::support::{BIN, child};
 
 /// The bound the tests give: long enough that a busy machine never stalls a step this long by
 /// itself, short enough to keep the tests quick.
@@ -31,14 +31,7 @@ fn spec(dir: &tempfile::TempDir) -> String {
 }
 
 fn spawn(args: &[&str]) -> Child {
-    Command::new(BIN)
-        .arg("run")
-        .args(args)
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap()
+    child::spawn(&[&["run"], args].concat())
 }
 
 /// Wait for the child's exit, at most `limit`; kill it past that. Returns the exit code (None:

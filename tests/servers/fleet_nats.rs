@@ -12,17 +12,18 @@
 //! (password from a file, TLS with the test CA), each robot as itself over MQTT with TLS; no
 //! password appears in any process's output.
 
+use crate::support::child;
 use crate::support::nats_cluster;
 use crate::support::nats_standin;
 
 use nats_cluster::{Cluster, Login};
 use nats_standin::{NatsStandIn, Published, action_message, robot_of, telemetry_line};
 use std::collections::{BTreeMap, BTreeSet};
-use std::io::Write;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use crate::support::BIN;
+
 const ROBOTS: usize = 6;
 /// Replay speed: the recorded 30 s run in 10 s.
 const SPEED: &str = "3";
@@ -226,23 +227,13 @@ fn warm_up_mqtt(cluster: &Cluster) {
 
 /// The actions one uninterrupted process computes from `lines`: robot -> messages.
 fn reference(lines: &[String]) -> BTreeSet<(String, String)> {
-    let mut child = Command::new(BIN)
-        .args(["run", "--no-passthrough", "--instance-by", "robot"])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut stdin = child.stdin.take().unwrap();
     let input = lines.join("\n") + "\n";
-    let writer = std::thread::spawn(move || stdin.write_all(input.as_bytes()).unwrap());
-    let out = child.wait_with_output().unwrap();
-    writer.join().unwrap();
-    String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .filter_map(action_message)
-        .collect()
+    let (out, err, code) = child::run_text(
+        &["run", "--no-passthrough", "--instance-by", "robot"],
+        &input,
+    );
+    assert_eq!(code, 0, "{err}");
+    out.lines().filter_map(action_message).collect()
 }
 
 fn timestamp(message: &str) -> i64 {

@@ -19,30 +19,24 @@ use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
 use crate::support::BIN;
+
 /// A password that must never be printed.
 const MARKER: &str = "Mark3r-S3cret-pw";
 
 /// `run --state URL` on one record at debug level, with `env`; (stdout + stderr, exit code).
 /// Fails if MARKER or any of `secrets` appears in the output.
 fn run_state(url: &str, env: &[(&str, &str)], secrets: &[String]) -> (String, i32) {
-    let mut c = Command::new(BIN);
-    c.args([
+    let mut child = child::command(&[
         "run",
         "--no-passthrough",
         "--log-level",
         "debug",
         "--state",
         url,
-    ]);
-    for (k, v) in env {
-        c.env(k, v);
-    }
-    let mut child = c
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    ])
+    .envs(env.iter().copied())
+    .spawn()
+    .unwrap();
     {
         use std::io::Write;
         let mut stdin = child.stdin.take().unwrap();
@@ -419,11 +413,8 @@ fn fleet_mistakes_are_refused_or_loud() {
     };
     let base = format!("nats://127.0.0.1:{}", server.port);
     let spawn = |url: String| -> Child {
-        Command::new(BIN)
-            .args(["run", "--no-passthrough", "--state", &url])
-            .stdin(Stdio::piped())
+        child::command(&["run", "--no-passthrough", "--state", &url])
             .stdout(Stdio::null())
-            .stderr(Stdio::piped())
             .spawn()
             .unwrap()
     };

@@ -10,9 +10,6 @@ use crate::support::nats_cluster;
 
 use nats_cluster::Cluster;
 use std::io::Write;
-use std::process::{Command, Stdio};
-
-use crate::support::BIN;
 
 /// Robots `ids`' records (the recorded run, one topic per robot), interleaved, records `range`.
 fn fleet(ids: &[&str], range: std::ops::Range<usize>) -> String {
@@ -198,14 +195,14 @@ fn a_holder_whose_lease_is_taken_stops_stepping_and_stands_by() {
         return;
     };
     let url = format!("nats://{}/leases?lease=p0&ttl=1s", cluster.hosts());
-    let mut child = Command::new(BIN)
-        .args(["run", "--no-passthrough", "--instance-by", "topic"])
-        .args(["--state", &url])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = child::spawn(&[
+        "run",
+        "--no-passthrough",
+        "--instance-by",
+        "topic",
+        "--state",
+        &url,
+    ]);
     let mut stdin = child.stdin.take().unwrap();
     let stdout = child.stdout.take().unwrap();
     let reader = std::thread::spawn(move || {

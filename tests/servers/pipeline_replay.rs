@@ -9,6 +9,7 @@ use std::process::Command;
 use std::time::Duration;
 
 use crate::support::BIN;
+
 const S: i64 = 1_000_000_000;
 const T0: i64 = 1_700_000_000 * S;
 

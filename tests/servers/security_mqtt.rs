@@ -17,6 +17,7 @@ use std::sync::mpsc::{Receiver, channel};
 use std::time::{Duration, Instant};
 
 use crate::support::BIN;
+
 /// The marker passwords: none may appear in any output.
 const ROBOT1_PW: &str = "Mark3r-robot1-pw";
 const ROBOT2_PW: &str = "Mark3r-robot2-pw";

@@ -28,13 +28,26 @@ impl Finished {
     }
 }
 
-/// The binary started with `args` (in `dir`, or in this process's folder), all three pipes open.
-fn spawn_piped(args: &[&str], dir: Option<&Path>) -> Child {
+/// The binary with `args` and all three pipes open, not started yet: an environment variable or
+/// a folder for the child goes on this `Command` (never on the test process, whose other tests
+/// run at the same time).
+pub fn command(args: &[&str]) -> Command {
     let mut c = Command::new(BIN);
     c.args(args)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
+    c
+}
+
+/// The binary started with `args`, all three pipes open.
+pub fn spawn(args: &[&str]) -> Child {
+    command(args).spawn().expect("spawn the binary")
+}
+
+/// The binary started with `args` (in `dir`, or in this process's folder), all three pipes open.
+fn spawn_piped(args: &[&str], dir: Option<&Path>) -> Child {
+    let mut c = command(args);
     if let Some(dir) = dir {
         c.current_dir(dir);
     }
