@@ -244,6 +244,7 @@ fn timestamp(message: &str) -> i64 {
 
 #[test]
 fn standbys_take_over_killed_primaries_with_the_monitor_state() {
+    let _fleet = nats_cluster::one_fleet_at_a_time();
     let Some(mut cluster) = Cluster::start_secured(&nats_cluster::shipped_mapping(), &robot_ids())
     else {
         return;

@@ -66,13 +66,6 @@ const ACTION_QOS: QoS = QoS::AtLeastOnce;
 /// The bucket of the shipped confs.
 const BUCKET: &str = "tessla_state";
 
-/// One test at a time: each starts a cluster and several Telegrafs on a 2-core machine.
-static SERIAL: Mutex<()> = Mutex::new(());
-
-fn serial() -> std::sync::MutexGuard<'static, ()> {
-    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
-}
-
 /// The partition the shipped mapping (`{{partition(2,1)}}`: nats-server's FNV-1a of the robot
 /// id, modulo 2) gives `robot`. Checked by the run: partition 1's primary steps exactly its
 /// robots' records (its summary), partition 0's standby answers its robots after the kill.
@@ -594,7 +587,8 @@ fn same_action(got: &Row, want: &Row) -> Result<(), String> {
 
 #[test]
 fn fleet_nats_confs_under_real_telegraf_take_over_and_match_an_offline_run() {
-    let _serial = serial();
+    // Each starts a cluster and several Telegrafs on a 2-core machine.
+    let _fleet = nats_cluster::one_fleet_at_a_time();
     for (version, bin) in real_telegraf::versions() {
         let started = Instant::now();
         let robots = robot_ids();
@@ -950,7 +944,8 @@ fn fleet_nats_confs_under_real_telegraf_take_over_and_match_an_offline_run() {
 
 #[test]
 fn fleet_nats_confs_pass_telegraf_test() {
-    let _serial = serial();
+    // Each starts a cluster and several Telegrafs on a 2-core machine.
+    let _fleet = nats_cluster::one_fleet_at_a_time();
     let versions = real_telegraf::versions();
     if versions.is_empty() {
         return;
