@@ -211,7 +211,7 @@ const PLACED: &[(&str, &str)] = &[
 // types/unliftable-macro-type: liftable_stream_parameter; undefined-members:
 // record_unknown_member; undefined-named-arg: named_unknown_parameter; undefined-type:
 // unknown_type; undefined-variable: unknown_stream; unknown-timeunit (a base time of an
-// unknown unit): tests/check_cli.rs. annotation-constant-folding is accepted, as by TeSSLa.
+// unknown unit): tests/cli/check_cli.rs. annotation-constant-folding is accepted, as by TeSSLa.
 
 /// Specs whose diagnostic must say how to fix them: (spec, text of the help).
 const HELPED: &[(&str, &str)] = &[

@@ -1,6 +1,6 @@
 //! What the shipped confs must set for the README's guarantees, read from the files (the
-//! real Telegraf runs each of them in `telegraf_real.rs`, `telegraf_real_nats.rs` and
-//! `telegraf_real_failures.rs`, and `telegraf --test` checks every key there): QoS 1, persistent
+//! real Telegraf runs each of them in `servers::telegraf_real`, `servers::telegraf_real_nats`
+//! and `servers::telegraf_real_failures`, and `telegraf --test` checks every key there): QoS 1, persistent
 //! sessions with fixed client ids, millisecond action timestamps, an absolute command path,
 //! the restart delay, a bounded instance count and the monitors' state kept.
 

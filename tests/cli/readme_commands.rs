@@ -16,7 +16,7 @@ use crate::support::BIN;
 const EXEMPT: &[(&str, &str)] = &[
     (
         "make run",
-        "builds the release binary: tests/first_hour.rs checks what it prints",
+        "builds the release binary: tests/cli/first_hour.rs checks what it prints",
     ),
     ("make test", "the test command this test runs under"),
     ("sudo apt-get", "installs system packages (root, network)"),
@@ -27,19 +27,19 @@ const EXEMPT: &[(&str, &str)] = &[
     ),
     (
         "tessla-telegraf replay",
-        "needs a running MQTT broker (tests/pipeline_replay.rs)",
+        "needs a running MQTT broker (tests/servers/pipeline_replay.rs)",
     ),
     (
         "tessla-telegraf simulate --broker",
-        "needs a running MQTT broker (tests/simulate_mqtt.rs)",
+        "needs a running MQTT broker (tests/servers/simulate_mqtt.rs)",
     ),
     (
         "telegraf ",
-        "runs Telegraf on a shipped conf (tests/telegraf_real.rs runs every one under the real Telegraf)",
+        "runs Telegraf on a shipped conf (tests/servers/telegraf_real.rs runs every one under the real Telegraf)",
     ),
     (
         "tessla-telegraf run --instance-by topic --state /var/lib",
-        "writes a state file into /var/lib (tests/execd_state.rs)",
+        "writes a state file into /var/lib (tests/execd/execd_state.rs)",
     ),
     (
         "sudo dpkg",

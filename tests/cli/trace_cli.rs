@@ -268,7 +268,7 @@ fn ctf_needs_a_trace_directory_with_metadata() {
     let out = trace(s, &["--ctf"], "");
     assert_eq!(out.status.code(), Some(2));
     assert!(text(&out.stderr).contains("--ctf needs a trace"));
-    // A directory without a `metadata` file is not a CTF trace (tests/trace_ctf.rs reads real ones).
+    // A directory without a `metadata` file is not a CTF trace (tests/cli/trace_ctf.rs reads real ones).
     let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
         .join(format!("tessla-ctf-empty-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();

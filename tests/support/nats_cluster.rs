@@ -18,8 +18,9 @@ use std::time::{Duration, Instant};
 
 /// One fleet at a time in this process: a test that runs a cluster with several monitoring
 /// processes (stand-in or real Telegrafs) and times a takeover against the lease TTL holds this
-/// for its run (fleet_nats.rs, telegraf_real_nats.rs), so that two such fleets never share the
-/// machine's 2 cores. Smaller tests may still run beside one, as libtest runs two at once.
+/// for its run (tests/servers/fleet_nats.rs, tests/servers/telegraf_real_nats.rs), so that two
+/// such fleets never share the machine's 2 cores. Smaller tests may still run beside one, as
+/// libtest runs two at once.
 pub fn one_fleet_at_a_time() -> std::sync::MutexGuard<'static, ()> {
     static FLEET: std::sync::Mutex<()> = std::sync::Mutex::new(());
     FLEET.lock().unwrap_or_else(|e| e.into_inner())

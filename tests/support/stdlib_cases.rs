@@ -1,4 +1,4 @@
-//! What the library-corpus runners share (`tests/stdlib.rs`, `tests/prelude.rs`): the corpus's
+//! What the library-corpus runners share (`tests/cli/stdlib.rs`, `tests/cli/prelude.rs`): the corpus's
 //! names (NAMES.txt) and case files, one trace case through the real binary with its outputs
 //! compared as a multiset (floats by value), a pool of worker threads, and the pass-list check
 //! (`UPDATE_STDLIB=1` rewrites the list instead).
