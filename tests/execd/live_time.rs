@@ -408,6 +408,12 @@ const WATCHDOG: &str = "in battery: Events[Float]\n\
     def silent = delay(const(1000000000, battery), battery)\n\
     out silent\nout battery\n";
 
+/// What a busy 2-core machine may add to a timer's output reaching us: the child's wake-up and
+/// our reads are late by up to a few hundred ms while other tests of this binary (they run two
+/// at once), builds or other work share the cores (1.615 s instead of 1.25 s was seen at a load
+/// average of 5).
+const BUSY: Duration = Duration::from_millis(500);
+
 /// Scenario 3: the watchdog written the TeSSLa way fires while stdin stays open and nothing
 /// arrives, about delay + allowed lateness after the last record, stamped with its TeSSLa time.
 #[test]
@@ -431,7 +437,7 @@ fn a_watchdog_fires_while_the_robot_is_silent() {
     );
     assert!(took >= Duration::from_millis(1_250), "{took:?}");
     // At most the delay plus the allowed lateness, plus the wake-up on a busy 2-core machine.
-    assert!(took < Duration::from_millis(1_250 + 100), "{took:?}");
+    assert!(took < Duration::from_millis(1_250) + BUSY, "{took:?}");
     // The input resumes: normal operation, and the watchdog is armed again.
     let ts2 = unix_ns();
     c.write(&format!("robot battery=49.0 {ts2}\n"));
@@ -490,9 +496,11 @@ fn a_silent_robot_in_a_busy_fleet_gets_its_watchdog() {
     eprintln!(
         "1 silent robot among 1000 busy ones ({rounds} rounds): watchdog output seen within {took:?} (polled every 50 ms)"
     );
-    // Polled every 50 ms, so seen up to 50 ms (plus a write) after it came.
+    // Polled every 50 ms, so seen up to 50 ms (plus a write) after it came, plus the wake-up
+    // on a busy machine; a watchdog that waited for the busy input to pause would not be seen
+    // within the 2 s of input at all.
     assert!(took >= Duration::from_millis(1_250), "{took:?}");
-    assert!(took < Duration::from_millis(1_250 + 150), "{took:?}");
+    assert!(took < Duration::from_millis(1_250 + 50) + BUSY, "{took:?}");
     assert_eq!(out.matches("silent=true").count(), 1, "{out}");
 }
 
