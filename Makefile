@@ -17,8 +17,8 @@ build:
 	$(CARGO) build --release
 
 # Rewrite the README's `make run` block and the command outputs it shows with what the binary
-# prints now (after a change to the bundled spec or the fixture; tests/first_hour.rs and
-# tests/readme_commands.rs check that they agree).
+# prints now (after a change to the bundled spec or the fixture; tests/cli/first_hour.rs and
+# tests/cli/readme_commands.rs check that they agree).
 readme-run: build
 	$(MAKE) -s run > target/make-run.txt
 	python3 tools/readme_run_block.py target/make-run.txt
@@ -149,13 +149,13 @@ conformance:
 	UPDATE_CONFORMANCE=1 $(CARGO) test -p tessla-trace --test conformance -- --nocapture
 	cat target/conformance-summary.txt
 
-# Rewrite the standard-library and user-spec pass lists (tests/stdlib.rs)
-# and the prelude's (tests/prelude.rs)
+# Rewrite the standard-library and user-spec pass lists (tests/cli/stdlib.rs)
+# and the prelude's (tests/cli/prelude.rs)
 # after an improvement; the lists may only grow.
 .PHONY: stdlib
 stdlib:
-	UPDATE_STDLIB=1 $(CARGO) test --test stdlib -- --nocapture
-	UPDATE_STDLIB=1 $(CARGO) test --test prelude -- --nocapture
+	UPDATE_STDLIB=1 $(CARGO) test --test integration cli::stdlib:: -- --nocapture
+	UPDATE_STDLIB=1 $(CARGO) test --test integration cli::prelude:: -- --nocapture
 	grep -h 'pass$$' target/stdlib-summary.txt target/prelude-summary.txt
 
 # The README's example image, from the recorded-run fixture.

@@ -13,11 +13,15 @@
 //! Run: `cargo build --release && cargo run --release --example fleet_nats -- [--robots 64]
 //!       [--reps 3] [--bin target/release/tessla-telegraf]`. Prints a markdown table.
 
+// The tests' helpers (tests/support/), of which this tool uses a part.
 #[path = "../tests/support/nats_cluster.rs"]
+#[allow(dead_code)]
 mod nats_cluster;
 #[path = "../tests/support/nats_standin.rs"]
+#[allow(dead_code)]
 mod nats_standin;
 #[path = "../tests/support/servers.rs"]
+#[allow(dead_code)]
 mod servers;
 
 use influxdb_line_protocol::{FieldValue, parse_lines};

@@ -17,9 +17,12 @@
 //! P3 then judge an empty scan), to see what the lidar costs Telegraf. Prints one line: `robots=.. sent=.. answered=.. lost=..
 //! p50_ms=.. p90_ms=.. p99_ms=.. max_ms=..` (the first `--warmup` seconds not counted).
 
+// The tests' helpers (tests/support/), of which this tool uses a part.
 #[path = "../tests/support/real_telegraf.rs"]
+#[allow(dead_code)]
 mod real_telegraf;
 #[path = "../tests/support/servers.rs"]
+#[allow(dead_code)]
 mod servers;
 
 use rumqttc::{Client, Event, MqttOptions, Packet, QoS};

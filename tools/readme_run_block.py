@@ -3,7 +3,7 @@
 - the `make run` block (after `<!-- make run output -->`) with the file given (make run's output);
 - each block after `<!-- output of the command above -->` with what the last command of the `sh`
   block before it prints (the block's other commands run first), run from the repository with target/release first on PATH.
-tests/first_hour.rs and tests/readme_commands.rs fail while the README and the binary differ."""
+tests/cli/first_hour.rs and tests/cli/readme_commands.rs fail while the README and the binary differ."""
 import os
 import pathlib
 import subprocess

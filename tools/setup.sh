@@ -3,7 +3,7 @@
 # (rustup), the MQTT broker, InfluxDB 1.x and nats-server (the fleet tests' 3-node cluster) come
 # from Debian packages, and the openssl command line (the security tests make their TEST-ONLY
 # certificates with telegraf/fleet-nats/make-test-certs.sh) and babeltrace2 (the reference CTF reader
-# that tests/trace_ctf.rs checks `trace --ctf` against). Then Telegraf itself, built from its Go
+# that tests/cli/trace_ctf.rs checks `trace --ctf` against). Then Telegraf itself, built from its Go
 # module at the two pinned versions the tests run under (tools/build-telegraf.sh; cached, so a
 # second run costs nothing). Idempotent: does nothing when everything is present. Needs root (or
 # sudo) only when a Debian package is missing. Without Go, or without the Go module proxy, the

@@ -3,16 +3,13 @@
 //! it has not exited by the deadline, and its peak resident memory (VmHWM) read from /proc while
 //! it runs. Also the binary run once in a folder, the way a user runs it ([`run_in`]: its whole
 //! `Output`), and the spec or trace files such a run reads ([`write`]).
-//!
-//! Include with `#[path = "support/child.rs"] mod child;`.
-#![allow(dead_code)]
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdin, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-pub const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use super::BIN;
 
 /// How a child run ended.
 #[derive(Debug)]
@@ -31,13 +28,26 @@ impl Finished {
     }
 }
 
-/// The binary started with `args` (in `dir`, or in this process's folder), all three pipes open.
-fn spawn_piped(args: &[&str], dir: Option<&Path>) -> Child {
+/// The binary with `args` and all three pipes open, not started yet: an environment variable or
+/// a folder for the child goes on this `Command` (never on the test process, whose other tests
+/// run at the same time).
+pub fn command(args: &[&str]) -> Command {
     let mut c = Command::new(BIN);
     c.args(args)
         .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
+    c
+}
+
+/// The binary started with `args`, all three pipes open.
+pub fn spawn(args: &[&str]) -> Child {
+    command(args).spawn().expect("spawn the binary")
+}
+
+/// The binary started with `args` (in `dir`, or in this process's folder), all three pipes open.
+fn spawn_piped(args: &[&str], dir: Option<&Path>) -> Child {
+    let mut c = command(args);
     if let Some(dir) = dir {
         c.current_dir(dir);
     }

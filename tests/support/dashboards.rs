@@ -1,9 +1,6 @@
 //! Reading the shipped dashboards (telegraf/dashboards/) in tests: their queries, the
 //! measurement/field/tag names each query uses, and an independent evaluation of the InfluxQL
 //! panel queries over a set of line-protocol points (what InfluxDB should answer).
-//!
-//! Include with `#[path = "support/dashboards.rs"] mod dashboards;`.
-#![allow(dead_code)]
 
 use influxdb_line_protocol::{FieldValue, parse_lines, split_lines};
 use serde_json::Value;

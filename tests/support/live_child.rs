@@ -1,15 +1,12 @@
 //! The binary as a long-running child: write input, wait for given stdout/stderr lines (the
 //! readiness signal, never a sleep), send signals, then close stdin and collect everything.
-//!
-//! Include with `#[path = "support/live_child.rs"] mod live_child;`.
-#![allow(dead_code)]
 
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Child, ChildStdin, Command, Stdio};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, channel};
 use std::time::{Duration, Instant};
 
-pub const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use super::BIN;
 const PATIENCE: Duration = Duration::from_secs(60);
 
 pub struct LiveChild {

@@ -1,8 +1,5 @@
 //! Test-side MQTT clients (rumqttc): a subscriber that collects messages of one topic into a
 //! channel, and a publisher (a robot).
-//!
-//! Include with `#[path = "support/mqtt_client.rs"] mod mqtt_client;`.
-#![allow(dead_code)]
 
 use rumqttc::{Client, Event, MqttOptions, Packet, QoS};
 use std::sync::mpsc::{Receiver, channel};

@@ -9,20 +9,28 @@
 //! `make-test-certs.sh`, and the users and permissions of `accounts.conf` (its example robots
 //! replaced by the test's), each with a password made for the run ([`Cluster::login`]).
 //!
-//! Include with `#[path = "support/nats_cluster.rs"] mod nats_cluster;`, after
-//! `#[path = "support/servers.rs"] mod servers;` (port and binary lookup).
-#![allow(dead_code)]
+//! Needs its sibling `servers` (port and binary lookup); bench/fleet_nats.rs includes both by path.
 
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-pub use crate::servers::free_port;
+/// One fleet at a time in this process: a test that runs a cluster with several monitoring
+/// processes (stand-in or real Telegrafs) and times a takeover against the lease TTL holds this
+/// for its run (tests/servers/fleet_nats.rs, tests/servers/telegraf_real_nats.rs), so that two
+/// such fleets never share the machine's 2 cores. Smaller tests may still run beside one, as
+/// libtest runs two at once.
+pub fn one_fleet_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    static FLEET: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    FLEET.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+pub use super::servers::free_port;
 
 /// `nats-server`, or `None` after explaining how to get it (panics when servers are required).
 pub fn require_nats_server() -> Option<PathBuf> {
-    crate::servers::require("nats-server", "nats-server")
+    super::servers::require("nats-server", "nats-server")
 }
 
 /// The shipped mapping (`telegraf/fleet-nats/mapping.conf`, 2 partitions).

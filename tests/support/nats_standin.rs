@@ -12,9 +12,8 @@
 //!   `json_timestamp_units = "1ms"`: one message per action on `robots/<robot>/action`, i.e.
 //!   NATS subject `robots.<robot>.action` (published here directly on that subject).
 //!
-//! Include with `#[path = "support/nats_standin.rs"] mod nats_standin;`, after `nats_cluster`
-//! (its [`crate::nats_cluster::Login`]).
-#![allow(dead_code)]
+//! Needs its sibling `nats_cluster` (its [`super::nats_cluster::Login`]); bench/fleet_nats.rs
+//! includes both by path.
 
 use influxdb_line_protocol::{FieldValue, parse_lines};
 use serde_json::{Map, Value, json};
@@ -156,7 +155,7 @@ impl NatsStandIn {
         nats_url: &str,
         partition: usize,
         args: &[String],
-        login: &crate::nats_cluster::Login,
+        login: &super::nats_cluster::Login,
     ) -> NatsStandIn {
         let login = login.clone();
         let mut child = Command::new(bin)

@@ -12,9 +12,8 @@
 //! out of InfluxDB with its tags and field types, [`to_lines`] writes those rows as line
 //! protocol, so that an offline `run` can be fed exactly what Telegraf fed the monitor.
 //!
-//! Include with `#[path = "support/real_telegraf.rs"] mod real_telegraf;`, after
-//! `#[path = "support/servers.rs"] mod servers;`.
-#![allow(dead_code)]
+//! Needs its sibling `servers` and a `BIN` beside them (bench/telegraf_delay.rs includes both
+//! by path, with the release binary as its `BIN`).
 
 use serde_json::Value;
 use std::collections::BTreeMap;
@@ -98,7 +97,7 @@ impl Rewrite {
     /// The broker, InfluxDB and our binary: what every shipped robot conf names.
     pub fn robot(mqtt_port: u16, influx_url: Option<&str>) -> Rewrite {
         Rewrite::robot_without_binary(mqtt_port, influx_url)
-            .replace("\"/usr/bin/tessla-telegraf\"", format!("{:?}", crate::BIN))
+            .replace("\"/usr/bin/tessla-telegraf\"", format!("{:?}", super::BIN))
     }
 
     /// The broker and InfluxDB only (a conf that runs no child, the UDP wiring).
@@ -387,7 +386,7 @@ pub struct Row {
 }
 
 /// Every point of `measurement` in database `db`, oldest first, with tags and typed fields.
-pub fn influx_rows(influx: &crate::servers::Influxd, db: &str, measurement: &str) -> Vec<Row> {
+pub fn influx_rows(influx: &super::servers::Influxd, db: &str, measurement: &str) -> Vec<Row> {
     let (_, keys) = influx.query(Some(db), &format!("SHOW TAG KEYS FROM \"{measurement}\""));
     let tag_keys: Vec<String> = keys["results"][0]["series"][0]["values"]
         .as_array()
@@ -582,13 +581,13 @@ pub fn same_value(json: &Field, ours: &Field) -> bool {
 /// A Mosquitto that logs subscriptions, so a test can wait until Telegraf has subscribed:
 /// `mqtt_consumer` logs "Connected" before it sends its SUBSCRIBE (`mqtt_consumer.go`
 /// `connect`). Its log goes to stderr, which Mosquitto does not buffer.
-pub fn broker() -> Option<crate::servers::Mosquitto> {
+pub fn broker() -> Option<super::servers::Mosquitto> {
     broker_with("")
 }
 
 /// As [`broker`], with `extra` lines in the broker's conf.
-pub fn broker_with(extra: &str) -> Option<crate::servers::Mosquitto> {
-    crate::servers::Mosquitto::start_with(&format!(
+pub fn broker_with(extra: &str) -> Option<super::servers::Mosquitto> {
+    super::servers::Mosquitto::start_with(&format!(
         "log_dest stderr\nlog_type error\nlog_type warning\nlog_type notice\n\
          log_type information\nlog_type subscribe\n{extra}"
     ))
@@ -598,7 +597,7 @@ pub fn broker_with(extra: &str) -> Option<crate::servers::Mosquitto> {
 /// broker's log after its first `since` lines: a SUBSCRIBE (`<time>: <client> <qos> <topic>`),
 /// or, when `since > 0`, a connection that finds its persistent session (the broker keeps the
 /// subscription, and `mqtt_consumer` does not subscribe again when the session is present).
-pub fn wait_subscribed(broker: &crate::servers::Mosquitto, id: &str, topic: &str, since: usize) {
+pub fn wait_subscribed(broker: &super::servers::Mosquitto, id: &str, topic: &str, since: usize) {
     let deadline = Instant::now() + Duration::from_secs(60);
     let subscribed = |log: &str| {
         log.lines().skip(since).any(|l| {
@@ -685,7 +684,7 @@ pub fn offline(args: &[String], input: &str) -> String {
             args.drain(i..i + 2);
         }
     }
-    let mut child = Command::new(crate::BIN)
+    let mut child = Command::new(super::BIN)
         .arg("run")
         .args(&args)
         .args(["--no-passthrough", "--log-level", "warn"])

@@ -1,14 +1,11 @@
 //! The recorded robot run (tests/fixtures/robot/, written by ROBOT's generator) and our binary's
 //! output for it (`tessla-telegraf run` with the bundled spec, pass-through on).
-//!
-//! Include with `#[path = "support/recorded.rs"] mod recorded;`.
-#![allow(dead_code)]
 
 use std::io::Write;
 use std::path::PathBuf;
 use std::process::{Command, Stdio};
 
-pub const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");
+use super::BIN;
 
 /// The recorded-run fixture: tests/fixtures/robot/recorded_run.lp (the name the Makefile uses),
 /// else the largest `.lp` file in that folder.

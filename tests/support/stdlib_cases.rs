@@ -1,13 +1,11 @@
-//! What the library-corpus runners share (`tests/stdlib.rs`, `tests/prelude.rs`): the corpus's
+//! What the library-corpus runners share (`tests/cli/stdlib.rs`, `tests/cli/prelude.rs`): the corpus's
 //! names (NAMES.txt) and case files, one trace case through the real binary with its outputs
 //! compared as a multiset (floats by value), a pool of worker threads, and the pass-list check
 //! (`UPDATE_STDLIB=1` rewrites the list instead).
 //!
-//! Include with `#[path = "support/stdlib_cases.rs"] mod stdlib_cases;` next to
-//! `#[path = "support/child.rs"] mod child;` (this module runs the binary through `child`).
-#![allow(dead_code)]
+//! Runs the binary through its sibling `child`.
 
-use crate::child;
+use super::child;
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};

@@ -3,9 +3,9 @@
 //! `REQUIRE_TESSLA_SUITE=1` fails), every case descriptor with a spec, and the load options a
 //! descriptor asks for.
 //!
-//! Include with `#[path = "support/tessla_suite.rs"] mod tessla_suite;` (from a member crate's
-//! tests: `#[path = "../../../tests/support/tessla_suite.rs"]`); it needs `serde_json` and
-//! `tessla-engine`.
+//! Also included by path from a member crate's tests (crates/tessla-trace/tests/conformance.rs:
+//! `#[path = "../../../tests/support/tessla_suite.rs"]`), which uses a part of it; it needs
+//! `serde_json` and `tessla-engine`.
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};

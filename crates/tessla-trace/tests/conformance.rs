@@ -13,7 +13,7 @@
 //! case runs on its own thread with a time limit. Without the suite it skips, unless
 //! `REQUIRE_TESSLA_SUITE=1`.
 
-// Shared with the workspace root's snapshot test (tests/state_suite.rs).
+// Shared with the workspace root's snapshot test (tests/cli/state_suite.rs).
 #[path = "../../../tests/support/tessla_suite.rs"]
 mod tessla_suite;
 

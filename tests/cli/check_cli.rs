@@ -1,0 +1,57 @@
+//! `check`'s counterparts of TeSSLa's `compile-core --list-in-streams / --list-out-streams`,
+//! through the real binary.
+
+use std::process::Command;
+
+use crate::support::BIN;
+
+fn check(args: &[&str], spec: &str) -> (Option<i32>, String, String) {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("spec.tessla");
+    std::fs::write(&path, spec).unwrap();
+    let out = Command::new(BIN)
+        .arg("check")
+        .args(args)
+        .arg(&path)
+        .output()
+        .unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+const SPEC: &str = "in speed: Events[Float]\nin mode: Events[String]\n\
+                    def fast = speed >. 1.0\nout fast\nout speed as v\n";
+
+#[test]
+fn list_in_and_out_streams_print_names_one_a_line() {
+    assert_eq!(
+        check(&["--list-in-streams"], SPEC),
+        (Some(0), "speed\nmode\n".into(), String::new())
+    );
+    assert_eq!(
+        check(&["--list-out-streams"], SPEC),
+        (Some(0), "fast\nv\n".into(), String::new())
+    );
+    assert_eq!(
+        check(&["--list-in-streams", "--list-out-streams"], SPEC).1,
+        "speed\nmode\nfast\nv\n"
+    );
+    // A spec without outputs still lists its inputs; a broken spec is still exit 2.
+    assert_eq!(
+        check(&["--list-in-streams"], "in a: Events[Int]\n"),
+        (Some(0), "a\n".into(), String::new())
+    );
+    let (code, out, err) = check(&["--list-out-streams"], "in a: Events[Int]\nout b\n");
+    assert_eq!((code, out.as_str()), (Some(2), ""));
+    assert!(err.contains("spec.tessla:2:5"), "{err}");
+}
+
+#[test]
+fn a_base_time_of_an_unknown_unit_is_a_command_line_error() {
+    let (code, out, err) = check(&["--base-time", "1foo"], SPEC);
+    assert_eq!((code, out.as_str()), (Some(2), ""));
+    assert!(err.contains("unknown unit in base time `1foo`"), "{err}");
+}

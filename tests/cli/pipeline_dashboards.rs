@@ -1,0 +1,125 @@
+//! The dashboards in telegraf/dashboards/ query only names the bundled spec actually emits:
+//! every measurement, field and tag of every InfluxQL and Flux query appears in what our binary
+//! prints for the recorded run (pass-through telemetry and verdicts). Renaming an output
+//! therefore fails this test instead of silently blanking a panel.
+
+use crate::support::dashboards;
+use crate::support::recorded;
+
+use dashboards::{Emitted, Refs, flux_queries, flux_refs, influxql_queries, influxql_refs};
+
+fn set(names: &[&str]) -> std::collections::BTreeSet<String> {
+    names.iter().map(|s| s.to_string()).collect()
+}
+
+#[test]
+fn influxql_names_are_extracted() {
+    let r = influxql_refs(
+        "SELECT count(\"p2_violated\") AS \"n\", \"speed\" FROM \"action\" WHERE \"p2_violated\" = true \
+         AND \"topic\" = 'tessla' AND $timeFilter GROUP BY time($__interval), \"host\" fill(0)",
+    );
+    assert_eq!(
+        r,
+        Refs {
+            measurements: set(&["action"]),
+            fields: set(&["p2_violated", "speed"]),
+            keys: set(&["p2_violated", "topic", "host"]),
+        }
+    );
+}
+
+#[test]
+fn flux_names_are_extracted() {
+    let r = flux_refs(
+        "from(bucket: v.bucket)\n |> filter(fn: (r) => r._measurement == \"action\" and r[\"topic\"] == \"x\")\n \
+         |> filter(fn: (r) => r._field == \"speed\" or r._field == \"augmented\")\n \
+         |> pivot(rowKey: [\"_time\"], columnKey: [\"_field\"], valueColumn: \"_value\")\n \
+         |> filter(fn: (r) => r.augmented == true)\n |> keep(columns: [\"_time\", \"speed\"])",
+    );
+    assert_eq!(
+        r,
+        Refs {
+            measurements: set(&["action"]),
+            fields: set(&["speed", "augmented"]),
+            keys: set(&["topic", "augmented", "speed"]),
+        }
+    );
+}
+
+#[test]
+fn a_renamed_output_is_caught() {
+    let emitted = Emitted::from_lines(
+        "action speed=0.1,p1_margin=0.5 1\nmqtt_consumer,topic=t expectedSpeed=1 1\n",
+    );
+    let ok = influxql_refs("SELECT \"speed\" FROM \"action\" WHERE $timeFilter");
+    assert!(emitted.missing(&ok).is_empty());
+    let renamed = influxql_refs("SELECT \"p1_margin_m\" FROM \"action\" WHERE $timeFilter");
+    assert_eq!(
+        emitted.missing(&renamed),
+        vec!["field \"p1_margin_m\" of \"action\"".to_string()]
+    );
+    let bad_tag =
+        flux_refs("filter(fn: (r) => r._measurement == \"mqtt_consumer\" and r.robot == \"1\")");
+    assert_eq!(
+        emitted.missing(&bad_tag),
+        vec!["tag or field \"robot\" of \"mqtt_consumer\"".to_string()]
+    );
+}
+
+#[test]
+fn dashboards_cover_the_issue_panels() {
+    let influxql = influxql_queries();
+    let flux = flux_queries();
+    assert!(influxql.len() >= 7 && flux.len() >= 7);
+    for queries in [&influxql, &flux] {
+        let text: String = queries.iter().map(|(_, q)| q.as_str()).collect();
+        for name in [
+            "expectedSpeed",
+            "actualSpeed",
+            "augmented",
+            "p1_margin",
+            "p1_status",
+            "p2_violated",
+            "p3_spikes",
+            "p3_dropouts",
+            "speed_mse",
+            "robot_silent",
+        ] {
+            assert!(text.contains(name), "a panel shows {name}");
+        }
+    }
+}
+
+#[test]
+fn every_dashboard_name_is_emitted_by_the_bundled_spec() {
+    let (_, output) = recorded::recorded_output();
+    let emitted = Emitted::from_lines(&output);
+    let mut problems = Vec::new();
+    for (kind, queries, refs_of) in [
+        (
+            "InfluxQL",
+            influxql_queries(),
+            influxql_refs as fn(&str) -> Refs,
+        ),
+        ("Flux", flux_queries(), flux_refs as fn(&str) -> Refs),
+    ] {
+        for (panel, query) in queries {
+            let refs = refs_of(&query);
+            assert!(
+                !refs.measurements.is_empty(),
+                "{kind} {panel:?}: no measurement in {query}"
+            );
+            for missing in emitted.missing(&refs) {
+                problems.push(format!(
+                    "{kind} panel {panel:?} queries {missing}, not emitted"
+                ));
+            }
+        }
+    }
+    assert!(
+        problems.is_empty(),
+        "{}\nemitted: {:#?}",
+        problems.join("\n"),
+        emitted
+    );
+}

@@ -1,0 +1,194 @@
+//! Every command in the README's `sh` blocks runs as printed (with this build's binary first on
+//! `PATH`), except the few listed in [`EXEMPT`] with the reason. A plain block right after the
+//! marker `<!-- output of the command above -->` must be exactly what the command before it
+//! prints on stdout.
+//!
+//! Commands run in a scratch folder that links the repository's `examples`, `specs`, `tests`
+//! and `telegraf` folders, so files they write (`out.lp`, `report/`, `target/...`) land there.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use crate::support::BIN;
+
+/// Commands not run here, by their start, and why.
+const EXEMPT: &[(&str, &str)] = &[
+    (
+        "make run",
+        "builds the release binary: tests/cli/first_hour.rs checks what it prints",
+    ),
+    ("make test", "the test command this test runs under"),
+    ("sudo apt-get", "installs system packages (root, network)"),
+    ("influx ", "needs a running InfluxDB server"),
+    (
+        "mosquitto_sub",
+        "needs a running MQTT broker and waits for messages",
+    ),
+    (
+        "tessla-telegraf replay",
+        "needs a running MQTT broker (tests/servers/pipeline_replay.rs)",
+    ),
+    (
+        "tessla-telegraf simulate --broker",
+        "needs a running MQTT broker (tests/servers/simulate_mqtt.rs)",
+    ),
+    (
+        "telegraf ",
+        "runs Telegraf on a shipped conf (tests/servers/telegraf_real.rs runs every one under the real Telegraf)",
+    ),
+    (
+        "tessla-telegraf run --instance-by topic --state /var/lib",
+        "writes a state file into /var/lib (tests/execd/execd_state.rs)",
+    ),
+    (
+        "sudo dpkg",
+        "installs a package (root): .ci/run installs the .deb",
+    ),
+    (
+        "make deb",
+        "needs cargo-deb and a release build: .ci/run builds the .deb",
+    ),
+    ("cargo install", "downloads and builds a tool"),
+];
+
+/// One command of an `sh` block, and the output shown for it, if any.
+struct Cmd {
+    line: usize,
+    text: String,
+    expected: Option<String>,
+}
+
+fn readme_commands(readme: &str) -> Vec<Cmd> {
+    let mut out: Vec<Cmd> = Vec::new();
+    let lines: Vec<&str> = readme.lines().collect();
+    let mut i = 0;
+    let mut marker = false;
+    while let Some(line) = lines.get(i) {
+        if line.trim() == "<!-- output of the command above -->" {
+            marker = true;
+        } else if line.trim_start().starts_with("```") {
+            let sh = line.trim() == "```sh";
+            let start = i + 1;
+            let mut end = start;
+            while lines
+                .get(end)
+                .is_some_and(|l| !l.trim_start().starts_with("```"))
+            {
+                end += 1;
+            }
+            let body = lines.get(start..end).unwrap_or_default();
+            if sh {
+                for (k, l) in body.iter().enumerate() {
+                    let text = l.trim();
+                    if !text.is_empty() && !text.starts_with('#') {
+                        out.push(Cmd {
+                            line: start + k + 1,
+                            text: text.to_string(),
+                            expected: None,
+                        });
+                    }
+                }
+            } else if marker && let Some(last) = out.last_mut() {
+                let mut text = body.join("\n");
+                text.push('\n');
+                last.expected = Some(text);
+            }
+            marker = false;
+            i = end;
+        }
+        i += 1;
+    }
+    out
+}
+
+fn scratch() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().expect("a scratch folder");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for name in ["examples", "specs", "tests", "telegraf"] {
+        std::os::unix::fs::symlink(root.join(name), dir.path().join(name)).expect("link");
+    }
+    std::fs::create_dir_all(dir.path().join("target")).expect("target");
+    dir
+}
+
+fn run(cmd: &str, dir: &Path) -> (Option<i32>, String, String) {
+    let bin_dir: PathBuf = Path::new(BIN)
+        .parent()
+        .expect("binary folder")
+        .to_path_buf();
+    let path = format!(
+        "{}:{}",
+        bin_dir.display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    let mut child = Command::new("bash")
+        .arg("-c")
+        .arg(format!("set -eo pipefail; {cmd}"))
+        .current_dir(dir)
+        .env("PATH", path)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn bash");
+    let start = Instant::now();
+    loop {
+        if let Ok(Some(_)) = child.try_wait() {
+            break;
+        }
+        if start.elapsed() > Duration::from_secs(120) {
+            let _ = child.kill();
+            panic!("README command did not end within 120 s: {cmd}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let out = child.wait_with_output().expect("output");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn every_readme_command_runs_as_printed() {
+    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md"))
+        .expect("README.md");
+    let cmds = readme_commands(&readme);
+    assert!(cmds.len() >= 15, "found only {} commands", cmds.len());
+    let dir = scratch();
+    let (mut ran, mut compared) = (0, 0);
+    for cmd in &cmds {
+        if let Some((_, why)) = EXEMPT.iter().find(|(start, _)| cmd.text.starts_with(start)) {
+            eprintln!("README line {}: not run ({why}): {}", cmd.line, cmd.text);
+            continue;
+        }
+        let (code, stdout, stderr) = run(&cmd.text, dir.path());
+        assert_eq!(
+            code,
+            Some(0),
+            "README line {}: `{}` failed:\n{stderr}",
+            cmd.line,
+            cmd.text
+        );
+        ran += 1;
+        if let Some(expected) = &cmd.expected {
+            assert_eq!(
+                &stdout, expected,
+                "README line {}: `{}` prints something else than the README shows",
+                cmd.line, cmd.text
+            );
+            compared += 1;
+        }
+    }
+    assert!(ran >= 10, "ran only {ran} commands");
+    assert!(compared >= 3, "compared only {compared} outputs");
+    // Every exemption is still used: a stale one would hide nothing but mislead.
+    for (start, _) in EXEMPT {
+        assert!(
+            cmds.iter().any(|c| c.text.starts_with(start)),
+            "exemption `{start}` matches no README command"
+        );
+    }
+}
