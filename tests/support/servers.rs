@@ -11,18 +11,26 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// A free TCP port on 127.0.0.1 (bound, read, released), never one this process was given
-/// before: the kernel may hand a just-released port out again, and a server given the same port
-/// twice (a NATS node's client, cluster and MQTT ports, say) fails to start.
+/// A free TCP port on 127.0.0.1 (see [`fresh_port`]).
 pub fn free_port() -> u16 {
-    static GIVEN: std::sync::Mutex<Vec<u16>> = std::sync::Mutex::new(Vec::new());
-    let mut given = GIVEN.lock().unwrap_or_else(|e| e.into_inner());
-    loop {
-        let port = TcpListener::bind("127.0.0.1:0")
+    fresh_port(|| {
+        TcpListener::bind("127.0.0.1:0")
             .unwrap()
             .local_addr()
             .unwrap()
-            .port();
+            .port()
+    })
+}
+
+/// A free port from `bind_any` (bind port 0, read the port, release it), never one this process
+/// was given before, TCP or UDP: the tests run at once in one process, the kernel may hand a
+/// just-released port out again before a child has bound it, and a server given the same port
+/// twice (a NATS node's client, cluster and MQTT ports, say) fails to start.
+pub fn fresh_port(mut bind_any: impl FnMut() -> u16) -> u16 {
+    static GIVEN: std::sync::Mutex<Vec<u16>> = std::sync::Mutex::new(Vec::new());
+    let mut given = GIVEN.lock().unwrap_or_else(|e| e.into_inner());
+    loop {
+        let port = bind_any();
         if !given.contains(&port) {
             given.push(port);
             return port;

@@ -13,21 +13,14 @@ pub fn open(read_timeout: Duration) -> (UdpSocket, String, String) {
     (recv, send_to, format!("127.0.0.1:{}", free_udp_port()))
 }
 
-/// A free UDP port on 127.0.0.1 (bound, read, released), never one this process was given before:
-/// the tests run at once in one process, and a port just released by one may be handed out
-/// again before its child has bound it.
+/// A free UDP port on 127.0.0.1, never one this process was given before (see
+/// [`super::servers::fresh_port`]).
 fn free_udp_port() -> u16 {
-    static GIVEN: std::sync::Mutex<Vec<u16>> = std::sync::Mutex::new(Vec::new());
-    let mut given = GIVEN.lock().unwrap_or_else(|e| e.into_inner());
-    loop {
-        let port = UdpSocket::bind("127.0.0.1:0")
+    super::servers::fresh_port(|| {
+        UdpSocket::bind("127.0.0.1:0")
             .unwrap()
             .local_addr()
             .unwrap()
-            .port();
-        if !given.contains(&port) {
-            given.push(port);
-            return port;
-        }
-    }
+            .port()
+    })
 }
