@@ -125,6 +125,9 @@ pub async fn run<S: Source, K: Sink>(
     if let Some(s) = store.as_mut() {
         s.backend.load(proc);
     }
+    // A store holds one processor's instances, and a shared one restores each as it arrives on
+    // this thread: with a store, records are stepped here alone. (`run` asks for one thread
+    // then already; this keeps a caller that does not from losing restores.)
     let threads = if store.is_some() { 1 } else { threads };
     let interval = store.as_ref().and_then(|s| s.interval);
     let mut shards = Shards::new(proc, threads, &watch).map_err(std::io::Error::other)?;
