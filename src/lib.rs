@@ -17,6 +17,7 @@ pub mod replay;
 pub mod report;
 #[cfg(feature = "tools")]
 pub mod simulate;
+pub mod spec_feed;
 pub mod state;
 pub mod step_loop;
 pub mod telegraf;

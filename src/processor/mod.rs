@@ -23,6 +23,7 @@ mod emit;
 pub mod instances;
 mod pool;
 pub mod reload;
+pub mod versions;
 pub mod wiring;
 
 use self::instances::Key;

@@ -25,7 +25,7 @@ pub mod runtime;
 pub mod value;
 
 pub use ir::{Annotation, InputInfo, OutputInfo, Type};
-pub use load::{LoadError, LoadOptions, Loaded, load_file, load_with};
+pub use load::{LoadError, LoadOptions, Loaded, file_resolver, load_file, load_with};
 pub use runtime::exec::Program;
 pub use runtime::monitor::{InputError, Monitor, OutputEvent};
 pub use value::{Callable, RuntimeError, Value};

@@ -69,11 +69,20 @@ impl std::error::Error for LoadError {}
 /// Load the spec at `path` from the file system (includes relative to the including file,
 /// then [`LoadOptions::bundled_includes`]).
 pub fn load_file(path: &Path, options: &LoadOptions) -> Result<Loaded, LoadError> {
-    let resolver = FsOrBundled {
+    load_with(
+        &path.display().to_string(),
+        &file_resolver(options),
+        options,
+    )
+}
+
+/// The resolver [`load_file`] reads through: the file system, then `options`' bundled
+/// includes. For callers that wrap it (a spec bundle records every file a load reads).
+pub fn file_resolver(options: &LoadOptions) -> impl Resolver + '_ {
+    FsOrBundled {
         bundled: &options.bundled_includes,
         on_use: options.on_bundled_include,
-    };
-    load_with(&path.display().to_string(), &resolver, options)
+    }
 }
 
 /// The file system, with [`LoadOptions::bundled_includes`] for includes of missing files.
