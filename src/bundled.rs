@@ -60,13 +60,17 @@ pub fn say_bundled_include(name: &str, from: &str) {
 /// The name of the default spec.
 pub const DEFAULT: &str = "robot.tessla";
 
-/// Load the bundled robot monitors.
-pub fn load(options: &LoadOptions) -> Result<Loaded, LoadError> {
-    let resolver = MemResolver {
+/// The bundled robot monitors' files, by name.
+pub fn resolver() -> MemResolver {
+    MemResolver {
         files: FILES
             .iter()
             .map(|(n, t)| (n.to_string(), t.to_string()))
             .collect(),
-    };
-    tessla_engine::load_with(DEFAULT, &resolver, options)
+    }
+}
+
+/// Load the bundled robot monitors.
+pub fn load(options: &LoadOptions) -> Result<Loaded, LoadError> {
+    tessla_engine::load_with(DEFAULT, &resolver(), options)
 }

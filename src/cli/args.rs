@@ -133,6 +133,11 @@ pub struct RunArgs {
     /// which the drop-in's check reads too: the path is written in one place).
     #[arg(long)]
     pub spec: Option<PathBuf>,
+    /// Watch the spec file and the files it includes (checked every second) and reload it when
+    /// one changes, as SIGHUP does: a spec that does not check is refused and the running one
+    /// stays; streams whose definition did not change keep their state.
+    #[arg(long, requires = "spec")]
+    pub watch_spec: bool,
     #[command(flatten)]
     pub spec_options: SpecOptions,
     /// Exit with code 4 when one step (evaluating a record or a fallen-due delay, and writing its
@@ -245,6 +250,11 @@ pub struct OutputArgs {
     /// Add a static tag to every output metric: `--tag site=lab` (repeatable).
     #[arg(long = "tag", value_name = "KEY=VALUE")]
     pub tags: Vec<String>,
+    /// Tag every output metric with the id of the spec version that computed it (the first 12
+    /// hex digits of the SHA-256 of the spec and its includes): `--version-tag spec_version`.
+    /// A dashboard can then split a verdict series where the spec changed.
+    #[arg(long, value_name = "TAG")]
+    pub version_tag: Option<String>,
     /// Least severe messages written to stderr.
     #[arg(long, value_enum, default_value_t)]
     pub log_level: LogLevel,

@@ -14,8 +14,8 @@ use super::args::{Bound, InstanceArgs, Late, OutputArgs, RunArgs, SPEC_ENV, Time
 use super::error::CliError;
 use super::spec::{SET_ENV, load_options};
 use crate::log::{self, Level};
-use crate::processor::reload::SpecSource;
 use crate::processor::{self, LateMode};
+use crate::spec_feed::reload::SpecSource;
 use crate::state::{self, Target};
 use crate::telegraf::binding::parse_tags;
 use crate::transport::Transport;
@@ -26,6 +26,8 @@ use std::time::Duration;
 pub struct RunConfig {
     /// The spec, loaded at start and on every SIGHUP.
     pub spec: SpecSource,
+    /// `--watch-spec`: reload when the spec file or an include changes.
+    pub watch_spec: bool,
     pub processor: processor::Options,
     pub transport: Transport,
     pub state: Option<StateConfig>,
@@ -99,6 +101,7 @@ impl RunConfig {
         };
         Ok(RunConfig {
             spec,
+            watch_spec: args.watch_spec,
             processor,
             transport,
             state,
@@ -173,6 +176,12 @@ fn processor_options(
         instance_idle: instances.instance_idle,
         max_ahead,
         allowed_lateness,
+        version_tag: output
+            .version_tag
+            .as_deref()
+            .map(str::trim)
+            .filter(|t| !t.is_empty())
+            .map(str::to_string),
     })
 }
 

@@ -10,7 +10,7 @@ use super::error::{CliError, CliResult};
 use super::spec::require_outputs;
 use crate::log::{self, Level};
 use crate::processor::Processor;
-use crate::processor::reload;
+use crate::spec_feed::Updates;
 use crate::state::file::FileBackend;
 use crate::state::nats::NatsBackend;
 use crate::state::nats_conn::Failure;
@@ -22,7 +22,7 @@ use std::sync::Arc;
 
 pub fn run(args: RunArgs) -> CliResult {
     let config = RunConfig::from_args(args)?;
-    let loaded = config.spec.load().map_err(|e| CliError::spec(e.render()))?;
+    let (loaded, bundle) = config.spec.load().map_err(|e| CliError::spec(e.render()))?;
     if !loaded.warnings.is_empty() {
         log::log(
             Level::Warn,
@@ -32,6 +32,7 @@ pub fn run(args: RunArgs) -> CliResult {
     require_outputs(&loaded.program, &config.spec_name()).map_err(CliError::spec)?;
     let mut proc = Processor::new(loaded.program, config.processor.clone())
         .map_err(|e| CliError::spec(format!("spec: {e}")))?;
+    proc.name_base(&bundle.id(), "");
     let watch = Arc::new(Watch::default());
     proc.watch_with(watch.lane());
     watchdog::spawn(watch.clone(), Some(config.step_timeout))
@@ -43,10 +44,11 @@ pub fn run(args: RunArgs) -> CliResult {
         }
         None => (None, None),
     };
-    let source = &config.spec;
-    let mut on_hangup = |p: &mut Processor| {
-        reload::reload(source, p);
+    let partition = match config.state.as_ref().map(|s| &s.target) {
+        Some(Target::Nats(url)) => url.lease.clone().unwrap_or_default(),
+        _ => String::new(),
     };
+    let mut updates = Updates::new(config.spec.clone(), config.watch_spec, &partition);
     let store = backend.as_deref_mut().map(|backend| Store {
         backend,
         interval: config.state.as_ref().and_then(|s| s.interval),
@@ -54,7 +56,7 @@ pub fn run(args: RunArgs) -> CliResult {
     });
     let setup = Setup {
         threads: config.transport.threads(),
-        on_hangup: &mut on_hangup,
+        updates: &mut updates,
         store,
         watch,
     };

@@ -8,7 +8,6 @@ use tessla_engine::Value;
 
 /// What writing a step's outputs needs, apart from the instance.
 pub(super) struct Emitter {
-    pub(super) encodings: Vec<Encoding>,
     pub(super) measurement: String,
     pub(super) events: Vec<(i64, usize, Value)>,
     /// Scratch: the encoder's buffers.
@@ -19,6 +18,7 @@ impl Emitter {
     /// Write the collected events as metrics, one group per timestamp.
     pub(super) fn emit(
         &mut self,
+        encodings: &[Encoding],
         tags: &[(String, String)],
         counters: &mut Counters,
         out: &mut Vec<u8>,
@@ -37,7 +37,7 @@ impl Emitter {
                 &mut self.encode,
                 ts,
                 step,
-                &self.encodings,
+                encodings,
                 &self.measurement,
                 tags,
                 out,

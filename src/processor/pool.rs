@@ -5,17 +5,20 @@
 
 use super::clock::Anchor;
 use super::instances::{Key, Table};
+use super::versions::Versions;
 use super::{Counters, Options};
 use crate::log;
 use crate::watchdog::Lane;
 use lineproto::Metric;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
-use tessla_engine::{Monitor, Program};
+use tessla_engine::Monitor;
 
 /// One monitor and the tags its output lines carry (static tags and instance tags).
 pub(super) struct Instance {
     pub(super) monitor: Monitor,
+    /// The spec version it runs (an index into `Versions`).
+    pub(super) version: usize,
     pub(super) tags: Vec<(String, String)>,
     pub(super) recent: super::dedup::Recent,
     /// Never reused: tells this instance's queued deadlines from a former occupant's of its slot.
@@ -35,6 +38,8 @@ pub(super) struct Pool {
     pub(super) by: Vec<String>,
     /// `--tag`s.
     tags: Vec<(String, String)>,
+    /// `--version-tag`.
+    version_tag: Option<String>,
     /// `--instance-idle`.
     idle: Option<Duration>,
     /// `--max-instances`: the most kept over all threads.
@@ -54,6 +59,7 @@ impl Pool {
             table: Table::default(),
             by: opts.instance_by.clone(),
             tags: opts.tags.clone(),
+            version_tag: opts.version_tag.clone(),
             idle: opts.instance_idle,
             total: opts.max_instances,
             keep: opts.max_instances.max(1),
@@ -91,7 +97,7 @@ impl Pool {
         m: &Metric,
         ts: i64,
         now: Instant,
-        program: &Arc<Program>,
+        versions: &Versions,
         counters: &mut Counters,
         lane: Option<&Lane>,
     ) -> usize {
@@ -104,8 +110,14 @@ impl Pool {
             return i;
         }
         counters.instances += 1;
-        let monitor = Monitor::starting_at(program.clone(), ts);
-        self.insert(key, monitor, now, lane)
+        let v = if versions.has_rules() {
+            versions.target(&key, ts)
+        } else {
+            0
+        };
+        let version = versions.get(v);
+        let monitor = Monitor::starting_at(Arc::clone(&version.program), ts);
+        self.insert(key, monitor, (v, &version.id), now, lane)
     }
 
     /// Add instance `key` (absent from the table) running `monitor`; returns its slot.
@@ -113,6 +125,7 @@ impl Pool {
         &mut self,
         key: Key,
         monitor: Monitor,
+        (version, id): (usize, &str),
         now: Instant,
         lane: Option<&Lane>,
     ) -> usize {
@@ -127,7 +140,11 @@ impl Pool {
                 tags.push((k.clone(), v.clone()));
             }
         }
-        if !self.by.is_empty() {
+        if let Some(t) = &self.version_tag {
+            tags.retain(|(k, _)| k != t);
+            tags.push((t.clone(), id.to_string()));
+        }
+        if !self.by.is_empty() || self.version_tag.is_some() {
             tags.sort();
         }
         self.next_id += 1;
@@ -135,6 +152,7 @@ impl Pool {
             key,
             Instance {
                 monitor,
+                version,
                 tags,
                 recent: Default::default(),
                 id: self.next_id,
@@ -199,6 +217,18 @@ impl Pool {
                 )
             });
         }
+    }
+}
+
+/// Set tag `name` to `value` in `tags` (sorted by name, as [`Pool::insert`] makes them).
+pub(super) fn set_tag(tags: &mut Vec<(String, String)>, name: &str, value: &str) {
+    match tags.binary_search_by(|(k, _)| k.as_str().cmp(name)) {
+        Ok(i) => {
+            if let Some(t) = tags.get_mut(i) {
+                t.1 = value.to_string();
+            }
+        }
+        Err(i) => tags.insert(i, (name.to_string(), value.to_string())),
     }
 }
 

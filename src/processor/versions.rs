@@ -7,8 +7,186 @@
 //! started with.
 
 use super::instances::Key;
+use crate::telegraf::binding::{self, InputBinding};
+use crate::telegraf::encode::{self, Encoding};
 use serde::{Deserialize, Serialize};
 use std::fmt;
+use std::sync::Arc;
+use tessla_engine::runtime::snapshot;
+use tessla_engine::{Monitor, Program};
+
+/// One spec version a processor can run: its program and what reading metrics into it and
+/// writing its outputs needs.
+pub struct Version {
+    /// Its identity (`Bundle::id`), the value of the version tag.
+    pub id: String,
+    /// The operator's label, if any.
+    pub label: String,
+    pub program: Arc<Program>,
+    /// Every node's stable key (`snapshot::node_keys`): a switch carries state by them.
+    pub(super) keys: Vec<u64>,
+    pub(super) bindings: Vec<InputBinding>,
+    pub(super) encodings: Vec<Encoding>,
+}
+
+impl Version {
+    /// Fails when an input annotation is malformed.
+    pub fn new(id: String, label: String, program: Arc<Program>) -> Result<Version, String> {
+        Ok(Version {
+            keys: snapshot::node_keys(&program),
+            bindings: binding::bindings(&program)?,
+            encodings: encode::encodings(&program),
+            id,
+            label,
+            program,
+        })
+    }
+
+    /// The outputs whose streams start afresh when an instance of `from` continues in this
+    /// version (each output once, in the spec's order).
+    pub fn reset_from(&self, from: &Version) -> Vec<String> {
+        let changed = snapshot::changed_nodes(&from.program, &self.program);
+        let mut names: Vec<String> = Vec::new();
+        for (o, n) in self.program.outputs.iter().zip(&self.program.output_nodes) {
+            if changed.binary_search(n).is_ok() && !names.contains(&o.name) {
+                names.push(o.name.clone());
+            }
+        }
+        names
+    }
+
+    /// `monitor` (of another version) continued in this one: each stream whose key is
+    /// unchanged keeps its state, every other starts afresh (as a SIGHUP reload).
+    pub(super) fn carry(&self, from: &Version, monitor: &Monitor) -> Monitor {
+        let snap = snapshot::snapshot_with_keys(monitor, &from.keys);
+        snapshot::restore_with_keys(Arc::clone(&self.program), &snap, &self.keys)
+    }
+}
+
+/// Check `v`'s bindings against metrics this process has seen (none seen: nothing to check).
+/// Refused: an input whose field the metrics carry but never converts to its type, or a
+/// version none of whose inputs any of them feeds.
+pub fn check_against(v: &Version, samples: &[lineproto::Metric]) -> Result<(), String> {
+    if samples.is_empty() || v.bindings.is_empty() {
+        return Ok(());
+    }
+    let mut fed = false;
+    for b in &v.bindings {
+        let mut converted = false;
+        let mut failure = None;
+        for m in samples.iter().filter(|m| b.matches(m)) {
+            match b.extract(m) {
+                Some(Ok(_)) => converted = true,
+                Some(Err(e)) => failure = failure.or(Some(e.reason)),
+                None => {}
+            }
+        }
+        fed |= converted;
+        if let (false, Some(reason)) = (converted, failure) {
+            return Err(format!(
+                "input `{}` cannot read the metrics this process receives: {reason}",
+                b.name
+            ));
+        }
+    }
+    if !fed {
+        let seen: Vec<&str> = samples.iter().map(|m| m.measurement.as_str()).collect();
+        return Err(format!(
+            "none of its inputs is fed by the metrics this process receives (measurements {}); check their @TelegrafIn annotations",
+            seen.join(", ")
+        ));
+    }
+    Ok(())
+}
+
+/// From event time `from` on, the instances `selector` picks run version `version` (an index
+/// into [`Versions::list`]).
+#[derive(Clone)]
+pub struct Rule {
+    pub version: usize,
+    pub from: i64,
+    pub selector: Selector,
+}
+
+/// The versions a processor holds and the rules choosing between them. Version 0 is the spec
+/// the process runs without rules (its `--spec`; a SIGHUP replaces it).
+pub struct Versions {
+    pub(super) list: Vec<Version>,
+    /// In the order accepted: a later rule wins over an earlier one.
+    pub(super) rules: Vec<Rule>,
+    /// `--instance-by`: what selectors name.
+    by: Vec<String>,
+}
+
+impl Versions {
+    pub fn new(base: Version, by: Vec<String>) -> Versions {
+        Versions {
+            list: vec![base],
+            rules: Vec::new(),
+            by,
+        }
+    }
+
+    /// The version without rules.
+    pub fn base(&self) -> &Version {
+        // `list` is never empty: `new` puts the base in and nothing removes it.
+        &self.list[0]
+    }
+
+    pub fn get(&self, v: usize) -> &Version {
+        self.list.get(v).unwrap_or_else(|| self.base())
+    }
+
+    /// The same versions and rules, built again (a `--threads` worker's own).
+    pub fn duplicate(&self) -> Result<Versions, String> {
+        let list = self
+            .list
+            .iter()
+            .map(|v| Version::new(v.id.clone(), v.label.clone(), Arc::clone(&v.program)))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Versions {
+            list,
+            rules: self.rules.clone(),
+            by: self.by.clone(),
+        })
+    }
+
+    /// The index of the version with `id`, if held.
+    pub fn find(&self, id: &str) -> Option<usize> {
+        self.list.iter().position(|v| v.id == id)
+    }
+
+    /// Whether any rule exists (without one, every instance runs the base: nothing to check
+    /// per record).
+    #[inline]
+    pub fn has_rules(&self) -> bool {
+        !self.rules.is_empty()
+    }
+
+    /// The version instance `key` runs at event time `t`.
+    pub fn target(&self, key: &Key, t: i64) -> usize {
+        self.rules
+            .iter()
+            .rev()
+            .find(|r| r.from <= t && r.selector.matches(&self.by, key))
+            .map_or(0, |r| r.version)
+    }
+
+    /// The first time in `(after, upto]` at which a rule picking `key` starts, if any: where
+    /// an instance moving from `after` to `upto` may have to switch.
+    pub fn next_start(&self, key: &Key, after: i64, upto: i64) -> Option<i64> {
+        self.rules
+            .iter()
+            .filter(|r| r.from > after && r.from <= upto && r.selector.matches(&self.by, key))
+            .map(|r| r.from)
+            .min()
+    }
+
+    /// Whether any version holds a `delay`.
+    pub fn has_delays(&self) -> bool {
+        self.list.iter().any(|v| !v.program.delays.is_empty())
+    }
+}
 
 /// Which instances a rollout is for: `TAG=V1,V2[;TAG=V3...]` (every clause must hold); empty:
 /// every instance.

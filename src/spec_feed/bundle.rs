@@ -39,14 +39,23 @@ impl Bundle {
     /// it read. Fails as loading fails (the diagnostic names file, line and column).
     pub fn read(path: &Path, options: &LoadOptions) -> Result<(Bundle, Loaded), LoadError> {
         let inner = tessla_engine::file_resolver(options);
+        Bundle::record(&path.display().to_string(), &inner, options)
+    }
+
+    /// Load the spec `root` through `resolver` and keep every file it read.
+    pub fn record(
+        root: &str,
+        resolver: &dyn Resolver,
+        options: &LoadOptions,
+    ) -> Result<(Bundle, Loaded), LoadError> {
         let recorder = Recorder {
-            inner: &inner,
+            inner: resolver,
             bundle: RefCell::new(Bundle {
                 files: Vec::new(),
                 links: Vec::new(),
             }),
         };
-        let loaded = tessla_engine::load_with(&path.display().to_string(), &recorder, options)?;
+        let loaded = tessla_engine::load_with(root, &recorder, options)?;
         Ok((recorder.bundle.into_inner(), loaded))
     }
 

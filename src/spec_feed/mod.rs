@@ -9,9 +9,19 @@
 //! processor's (`processor::versions`).
 
 pub mod bundle;
+pub mod reload;
+pub mod status;
+pub mod watch;
 
+use crate::log::{self, Level};
+use crate::processor::Processor;
 use crate::processor::versions::Selector;
+use bundle::Bundle;
+use reload::{Reloaded, SpecSource};
 use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::Duration;
 
 /// One publish: version `id` (a [`bundle::Bundle::id`]) in force from event time `from` for the
 /// instances `selector` picks. A channel's rollouts are append-only, in publish order
@@ -53,4 +63,289 @@ pub struct Outcome {
     /// Outputs whose streams start afresh in the instances that switch.
     #[serde(default)]
     pub reset_outputs: Vec<String>,
+}
+
+/// A rollout as a channel delivers it: verified with its bundle, or why it cannot be used (an
+/// unsigned or foreign rollout, a bundle that does not match its digest).
+#[derive(Debug, Clone)]
+pub struct Arrival {
+    pub rollout: Rollout,
+    pub bundle: Result<Bundle, String>,
+}
+
+/// A fleet's spec channel, as the run sees it.
+pub trait Channel {
+    /// Rollouts that arrived since the last call, in revision order; never blocks.
+    fn poll(&mut self) -> Vec<Arrival>;
+    /// Record this process's outcomes where the operator's `spec status` reads them (best
+    /// effort).
+    fn report(&mut self, host: &str, partition: &str, outcomes: &[Outcome]);
+}
+
+/// The id a rollout gives for "the spec each process started with" (`spec rollback` to it).
+pub const BASE: &str = "base";
+
+/// New spec versions while the run goes on: SIGHUP and a watched spec file reload the spec the
+/// process started with; a channel's rollouts put versions in force from an event time. Every
+/// outcome is logged and written as a status metric ([`status`]).
+pub struct Updates {
+    pub source: SpecSource,
+    watch: Option<watch::Watched>,
+    channel: Option<Box<dyn Channel>>,
+    /// Where the status metrics say they come from.
+    host: String,
+    partition: String,
+    /// Every outcome so far (the channel's status key holds them all).
+    outcomes: Vec<Outcome>,
+    /// Versions compiled from rollouts, by id (a rollout of a version already held reuses it).
+    compiled: HashMap<String, Arc<tessla_engine::Program>>,
+}
+
+impl Updates {
+    /// `watch`: look at the spec file every second. `partition`: the lease name (empty: none).
+    pub fn new(source: SpecSource, watch: bool, partition: &str) -> Updates {
+        let watch = if watch {
+            source.path.as_deref().map(watch::Watched::new)
+        } else {
+            None
+        };
+        Updates {
+            source,
+            watch,
+            channel: None,
+            host: crate::state::nats_conn::hostname(),
+            partition: partition.to_string(),
+            outcomes: Vec::new(),
+            compiled: HashMap::new(),
+        }
+    }
+
+    /// Follow `channel` too; `first`: the rollouts it already held, applied before the first
+    /// record by [`Updates::start`].
+    pub fn with_channel(&mut self, channel: Box<dyn Channel>) {
+        self.channel = Some(channel);
+    }
+
+    /// How often the step loop calls [`Updates::tick`] (`None`: never).
+    pub fn interval(&self) -> Option<Duration> {
+        match (&self.channel, &self.watch) {
+            (Some(_), _) => Some(Duration::from_millis(100)),
+            (None, Some(_)) => Some(watch::INTERVAL),
+            (None, None) => None,
+        }
+    }
+
+    /// SIGHUP: reload the spec file into every processor of the run.
+    pub fn hangup(&mut self, procs: &mut [&mut Processor], out: &mut Vec<u8>) {
+        if let Some(w) = self.watch.as_mut() {
+            // What is read now is what the next look compares with.
+            w.changed();
+        }
+        self.reload("SIGHUP", procs, out);
+    }
+
+    /// Look for changes: the watched file, the channel's new rollouts.
+    pub fn tick(&mut self, procs: &mut [&mut Processor], out: &mut Vec<u8>) {
+        if self.watch.as_mut().is_some_and(watch::Watched::changed) {
+            self.reload("spec file changed", procs, out);
+        }
+        let arrivals = match self.channel.as_mut() {
+            Some(c) => c.poll(),
+            None => return,
+        };
+        if arrivals.is_empty() {
+            return;
+        }
+        for a in arrivals {
+            let outcome = self.apply(&a, procs);
+            self.outcome(outcome, a.rollout.from, out);
+        }
+        if let Some(c) = self.channel.as_mut() {
+            c.report(&self.host, &self.partition, &self.outcomes);
+        }
+    }
+
+    fn reload(&mut self, why: &str, procs: &mut [&mut Processor], out: &mut Vec<u8>) {
+        let (id, label) = procs
+            .first()
+            .map(|p| {
+                (
+                    p.versions().base().id.clone(),
+                    p.versions().base().label.clone(),
+                )
+            })
+            .unwrap_or_default();
+        let outcome = match reload::reload(&self.source, why, procs) {
+            Reloaded::Refused(reason) => Outcome {
+                revision: 0,
+                id,
+                label,
+                accepted: false,
+                reason: first_lines(&reason),
+                reset_outputs: Vec::new(),
+            },
+            Reloaded::Replaced {
+                id, reset_outputs, ..
+            } => Outcome {
+                revision: 0,
+                id,
+                label,
+                accepted: true,
+                reason: String::new(),
+                reset_outputs,
+            },
+        };
+        self.outcome(outcome, status::now_ns(), out);
+    }
+
+    /// Check one rollout and put it in force in every processor (all or none).
+    fn apply(&mut self, a: &Arrival, procs: &mut [&mut Processor]) -> Outcome {
+        let r = &a.rollout;
+        let refused = |reason: String| Outcome {
+            revision: r.revision,
+            id: r.id.clone(),
+            label: r.label.clone(),
+            accepted: false,
+            reason,
+            reset_outputs: Vec::new(),
+        };
+        let program = match self.program_of(a, procs) {
+            Ok(p) => p,
+            Err(e) => return refused(e),
+        };
+        // "The spec each process started with" is the base version (index 0), whatever its id.
+        let id = match procs.first() {
+            Some(p) if r.id == BASE => p.versions().base().id.clone(),
+            _ => r.id.clone(),
+        };
+        // Every thread's processor checks first (each has seen other metrics): all accept or
+        // none does.
+        for p in procs.iter() {
+            if let Err(e) = p.check_version(&id, &program, &r.selector) {
+                return refused(e);
+            }
+        }
+        let mut reset = Vec::new();
+        for (i, p) in procs.iter_mut().enumerate() {
+            match p.accept_version(
+                &id,
+                &r.label,
+                Arc::clone(&program),
+                r.from,
+                r.selector.clone(),
+            ) {
+                Ok(acc) => {
+                    if i == 0 {
+                        reset = acc.reset_outputs;
+                    }
+                }
+                // Annotations are the same for every processor: the first refuses before any
+                // accepted.
+                Err(e) => return refused(e),
+            }
+        }
+        Outcome {
+            revision: r.revision,
+            id: r.id.clone(),
+            label: r.label.clone(),
+            accepted: true,
+            reason: String::new(),
+            reset_outputs: reset,
+        }
+    }
+
+    /// The program of a rollout's version: the base's for [`BASE`], one compiled before, or its
+    /// bundle compiled with this process's options.
+    fn program_of(
+        &mut self,
+        a: &Arrival,
+        procs: &[&mut Processor],
+    ) -> Result<Arc<tessla_engine::Program>, String> {
+        let r = &a.rollout;
+        if r.id == BASE {
+            return procs
+                .first()
+                .map(|p| Arc::clone(&p.versions().base().program))
+                .ok_or_else(|| "no processor".to_string());
+        }
+        if let Some(p) = self.compiled.get(&r.id) {
+            return Ok(Arc::clone(p));
+        }
+        let bundle = a.bundle.as_ref().map_err(Clone::clone)?;
+        if bundle.id() != r.id {
+            return Err(format!(
+                "its bundle is version {}, not {} as the rollout says",
+                bundle.id(),
+                r.id
+            ));
+        }
+        let loaded = bundle
+            .load(&self.source.options)
+            .map_err(|e| format!("it does not check here: {}", first_lines(&e.render())))?;
+        if loaded.program.outputs.is_empty() {
+            return Err("it has no outputs, so it would check nothing and write nothing".into());
+        }
+        self.compiled
+            .insert(r.id.clone(), Arc::clone(&loaded.program));
+        Ok(loaded.program)
+    }
+
+    /// Log an outcome, write its status metric, keep it for the channel's status key.
+    fn outcome(&mut self, o: Outcome, from: i64, out: &mut Vec<u8>) {
+        let what = if o.revision == 0 {
+            format!("spec version {}", o.id)
+        } else {
+            format!(
+                "rollout {} (version {}{})",
+                o.revision,
+                o.id,
+                label_note(&o.label)
+            )
+        };
+        if o.accepted {
+            let reset = if o.reset_outputs.is_empty() {
+                "no output starts afresh".to_string()
+            } else {
+                format!("outputs starting afresh: {}", o.reset_outputs.join(", "))
+            };
+            if o.revision != 0 {
+                log::log(
+                    Level::Info,
+                    &format!(
+                        "spec: {what} accepted; in force from {} for {}; {reset}",
+                        status::show_time(from),
+                        "the instances its selector picks"
+                    ),
+                );
+            }
+        } else if o.revision != 0 {
+            log::log(
+                Level::Error,
+                &format!(
+                    "spec: {what} refused: {}; the running versions stay in use",
+                    o.reason
+                ),
+            );
+        }
+        status::write_line(out, &self.host, &self.partition, &o, from);
+        self.outcomes.push(o);
+    }
+}
+
+fn label_note(label: &str) -> String {
+    if label.is_empty() {
+        String::new()
+    } else {
+        format!(", `{label}`")
+    }
+}
+
+/// The first lines of a diagnostic: enough for a status metric and a table cell.
+fn first_lines(text: &str) -> String {
+    let lines: Vec<&str> = text
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .take(3)
+        .collect();
+    lines.join(" | ")
 }

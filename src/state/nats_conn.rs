@@ -218,7 +218,7 @@ pub(super) fn permission_failure(url: &Url, text: &str) -> String {
     )
 }
 
-pub(super) fn hostname() -> String {
+pub fn hostname() -> String {
     std::fs::read_to_string("/proc/sys/kernel/hostname")
         .map(|s| s.trim().to_string())
         .unwrap_or_else(|_| "host".into())

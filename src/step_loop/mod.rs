@@ -21,6 +21,7 @@ pub mod shared;
 use crate::log::{self, Level};
 use crate::processor::Processor;
 use crate::processor::clock::Wall;
+use crate::spec_feed::Updates;
 use crate::state::Backend;
 use crate::state::lease::Lease;
 use crate::watchdog::{Phase, Watch};
@@ -58,9 +59,6 @@ pub trait Sink {
     ) -> impl Future<Output = std::io::Result<()>>;
 }
 
-/// On SIGHUP: the spec reload, on every thread's processor.
-pub type OnHangup<'a> = &'a mut dyn FnMut(&mut Processor);
-
 /// Where the state is kept, and when it is saved.
 pub struct Store<'a> {
     pub backend: &'a mut dyn Backend,
@@ -82,7 +80,8 @@ pub struct SharedStore {
 pub struct Setup<'a> {
     /// Threads to spread `--instance-by` instances over (1: the calling thread only).
     pub threads: usize,
-    pub on_hangup: OnHangup<'a>,
+    /// New spec versions: SIGHUP, a watched spec file, a fleet's spec channel.
+    pub updates: &'a mut Updates,
     pub store: Option<Store<'a>>,
     /// Where the loop marks what it is doing, for the step watchdog (`--step-timeout`).
     pub watch: Arc<Watch>,
@@ -109,7 +108,7 @@ pub async fn run<S: Source, K: Sink>(
 ) -> std::io::Result<Ending> {
     let Setup {
         threads,
-        on_hangup,
+        updates,
         mut store,
         watch,
     } = setup;
@@ -139,7 +138,9 @@ pub async fn run<S: Source, K: Sink>(
         out: Vec::with_capacity(64 * 1024),
         watch: &watch,
     };
-    let r = l.run(source, sink, on_hangup, interval).await;
+    // The versions a channel already holds are in force before the first record.
+    l.updates(updates, false);
+    let r = l.run(source, sink, updates, interval).await;
     // Every ending (EOF, signal, closed output, I/O error) has evaluated what it could: save.
     l.save(Level::Info);
     if let Some(s) = &l.shared {
@@ -175,7 +176,7 @@ impl Loop<'_, '_> {
         &mut self,
         source: &mut S,
         sink: &mut K,
-        on_hangup: OnHangup<'_>,
+        updates: &mut Updates,
         interval: Option<Duration>,
     ) -> std::io::Result<Ending> {
         let watch = self.watch;
@@ -187,6 +188,7 @@ impl Loop<'_, '_> {
             .and_then(|s| s.lease.as_ref())
             .is_some();
         let mut lease_ticks = every(lease_poll.then_some(Duration::from_millis(20)));
+        let mut update_ticks = every(updates.interval());
         let size = source.read_size(self.shards.threads());
         let mut buf = vec![0u8; size];
         let mut splitter = RecordSplitter::default();
@@ -203,12 +205,22 @@ impl Loop<'_, '_> {
                 _ = signals.int.recv() => break Ending::Signal,
                 _ = signals.hup.recv() => {
                     let _busy = watch.enter(Phase::Reload);
-                    on_hangup(self.proc);
-                    self.shards.each(|p| on_hangup(p));
+                    self.updates(updates, true);
+                    if self.write(sink).await.is_err() {
+                        return Ok(Ending::OutputClosed);
+                    }
                     continue;
                 }
                 _ = tick(&mut saves) => {
                     self.save(Level::Debug);
+                    continue;
+                }
+                _ = tick(&mut update_ticks) => {
+                    let _busy = watch.enter(Phase::Reload);
+                    self.updates(updates, false);
+                    if self.write(sink).await.is_err() {
+                        return Ok(Ending::OutputClosed);
+                    }
                     continue;
                 }
                 _ = tick(&mut lease_ticks) => {
@@ -257,6 +269,17 @@ impl Loop<'_, '_> {
             return Ok(Ending::OutputClosed);
         }
         Ok(ending)
+    }
+
+    /// New spec versions into every processor of the run: a reload on SIGHUP (`hangup`),
+    /// else whatever the watched file or the channel brought. Status lines go to the output.
+    fn updates(&mut self, updates: &mut Updates, hangup: bool) {
+        let mut procs = self.shards.all(self.proc);
+        if hangup {
+            updates.hangup(&mut procs, &mut self.out);
+        } else {
+            updates.tick(&mut procs, &mut self.out);
+        }
     }
 
     /// Stepping now: without a lease, or holding it.

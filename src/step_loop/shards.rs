@@ -226,6 +226,17 @@ impl Shards {
         }
     }
 
+    /// `first` and every worker's processor (all are at home between reads).
+    pub(super) fn all<'a>(&'a mut self, first: &'a mut Processor) -> Vec<&'a mut Processor> {
+        let mut v = vec![first];
+        v.extend(
+            self.workers
+                .iter_mut()
+                .filter_map(|w| w.proc.as_deref_mut()),
+        );
+        v
+    }
+
     /// The earliest wall-clock deadline of any thread's instances (see
     /// [`Processor::next_deadline`]).
     pub(super) fn next_deadline(&self, proc: &Processor) -> Option<std::time::Instant> {

@@ -7,6 +7,7 @@
 //! `tessla_engine::runtime::snapshot`) is unchanged keeping its state, and the streams that start
 //! afresh are logged.
 
+use super::bundle::Bundle;
 use crate::log::{self, Level};
 use crate::processor::Processor;
 use std::path::PathBuf;
@@ -23,11 +24,18 @@ pub struct SpecSource {
 }
 
 impl SpecSource {
-    pub fn load(&self) -> Result<Loaded, LoadError> {
-        match &self.path {
-            Some(p) => tessla_engine::load_file(p, &self.options),
-            None => crate::bundled::load(&self.options),
-        }
+    /// Load the spec: the compiled program and the bundle it was read from (its id names the
+    /// version).
+    pub fn load(&self) -> Result<(Loaded, Bundle), LoadError> {
+        let (bundle, loaded) = match &self.path {
+            Some(p) => Bundle::read(p, &self.options)?,
+            None => Bundle::record(
+                crate::bundled::DEFAULT,
+                &crate::bundled::resolver(),
+                &self.options,
+            )?,
+        };
+        Ok((loaded, bundle))
     }
 
     pub fn describe(&self) -> String {
@@ -41,35 +49,34 @@ impl SpecSource {
 /// What a reload did.
 #[derive(Debug, PartialEq)]
 pub enum Reloaded {
-    /// The new spec did not check (or bind); the old one keeps running.
-    Refused,
+    /// The new spec did not check (or bind); the old one keeps running. Why (the diagnostic).
+    Refused(String),
     /// Replaced: the names of the outputs whose streams start afresh, and how many internal
     /// streams do.
     Replaced {
+        id: String,
         reset_outputs: Vec<String>,
         reset_internal: usize,
     },
 }
 
-/// Reload `src` into `proc` (every record before it was evaluated with the old spec, so no
-/// step is open). Logs the outcome.
-pub fn reload(src: &SpecSource, proc: &mut Processor) -> Reloaded {
-    log::log(
-        Level::Info,
-        &format!("SIGHUP: reloading {}", src.describe()),
-    );
-    let loaded = match src.load() {
+/// Reload `src` into every processor of the run (`procs`: one per thread; every record before
+/// it was evaluated with the old spec, so no step is open). `why` says what asked for it
+/// (`SIGHUP`, `spec file changed`). Logs the outcome once.
+pub fn reload(src: &SpecSource, why: &str, procs: &mut [&mut Processor]) -> Reloaded {
+    log::log(Level::Info, &format!("{why}: reloading {}", src.describe()));
+    let (loaded, bundle) = match src.load() {
         Ok(l) => l,
         Err(e) => {
+            let diag = e.render();
             log::log(
                 Level::Error,
                 &format!(
-                    "reload: {} has errors; the running spec stays in use\n{}",
+                    "reload: {} has errors; the running spec stays in use\n{diag}",
                     src.describe(),
-                    e.render()
                 ),
             );
-            return Reloaded::Refused;
+            return Reloaded::Refused(diag);
         }
     };
     if !loaded.warnings.is_empty() {
@@ -82,33 +89,42 @@ pub fn reload(src: &SpecSource, proc: &mut Processor) -> Reloaded {
     if new.outputs.is_empty() {
         // The same rule as at start-up (exit 2 there): a spec without outputs would silently
         // stop every verdict and action.
+        let why = "it has no outputs, so it would check nothing and write nothing (add `out NAME` for each stream to report)";
         log::log(
             Level::Error,
             &format!(
-                "reload: {} has no outputs, so it would check nothing and write nothing; \
-                 the running spec stays in use (add `out NAME` for each stream to report)",
+                "reload: {}: {why}; the running spec stays in use",
                 src.describe()
             ),
         );
-        return Reloaded::Refused;
+        return Reloaded::Refused(why.to_string());
     }
-    let old = Arc::clone(proc.program());
+    let Some(first) = procs.first() else {
+        return Reloaded::Refused("no processor".into());
+    };
+    let old = Arc::clone(first.program());
     let changed = snapshot::changed_nodes(&old, &new);
     let old_keys = snapshot::node_keys(&old);
     let new_keys = snapshot::node_keys(&new);
-    let result = proc.replace_program(Arc::clone(&new), |m| {
-        let snap = snapshot::snapshot_with_keys(m, &old_keys);
-        snapshot::restore_with_keys(Arc::clone(&new), &snap, &new_keys)
-    });
-    if let Err(e) = result {
-        log::log(
-            Level::Error,
-            &format!(
-                "reload: {}: {e}; the running spec stays in use",
-                src.describe()
-            ),
-        );
-        return Reloaded::Refused;
+    let id = bundle.id();
+    let mut instances = 0;
+    for proc in procs.iter_mut() {
+        let result = proc.replace_program(Arc::clone(&new), &id, |m| {
+            let snap = snapshot::snapshot_with_keys(m, &old_keys);
+            snapshot::restore_with_keys(Arc::clone(&new), &snap, &new_keys)
+        });
+        if let Err(e) = result {
+            // The same for every processor: the first refuses before any changed.
+            log::log(
+                Level::Error,
+                &format!(
+                    "reload: {}: {e}; the running spec stays in use",
+                    src.describe()
+                ),
+            );
+            return Reloaded::Refused(e);
+        }
+        instances += proc.instance_count();
     }
     let mut reset_outputs: Vec<String> = new
         .outputs
@@ -122,15 +138,14 @@ pub fn reload(src: &SpecSource, proc: &mut Processor) -> Reloaded {
         .iter()
         .filter(|n| !new.output_nodes.contains(n))
         .count();
-    let instances = proc.instance_count();
     let kept = new.order.len().saturating_sub(changed.len());
     let msg = if changed.is_empty() {
         format!(
-            "reload: spec reloaded for {instances} instances; nothing changed, every stream keeps its state"
+            "reload: spec version {id} for {instances} instances; nothing changed, every stream keeps its state"
         )
     } else {
         format!(
-            "reload: spec reloaded for {instances} instances; {kept} streams keep their state; reset: {}{} internal streams",
+            "reload: spec version {id} for {instances} instances; {kept} streams keep their state; reset: {}{} internal streams",
             if reset_outputs.is_empty() {
                 String::new()
             } else {
@@ -141,6 +156,7 @@ pub fn reload(src: &SpecSource, proc: &mut Processor) -> Reloaded {
     };
     log::log(Level::Info, &msg);
     Reloaded::Replaced {
+        id,
         reset_outputs,
         reset_internal,
     }
