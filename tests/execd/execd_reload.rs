@@ -151,7 +151,13 @@ fn the_bundled_spec_reloads_without_changing_anything() {
         err.contains("I! SIGHUP: reloading the bundled robot monitors"),
         "{err}"
     );
-    assert_eq!(out, whole);
+    // The reload's status metric, then exactly the uninterrupted run's lines.
+    let (status, rest): (Vec<&str>, Vec<&str>) =
+        out.lines().partition(|l| l.starts_with("tessla_spec,"));
+    assert_eq!(status.len(), 1, "{out}");
+    assert!(status[0].contains(",outcome=accepted,"), "{}", status[0]);
+    let rest: String = rest.iter().map(|l| format!("{l}\n")).collect();
+    assert_eq!(rest, whole);
 }
 
 #[test]
@@ -182,6 +188,12 @@ fn udp_mode_reloads_on_sighup() {
     std::fs::write(&main, MAIN_V2).unwrap();
     let msg = hangup(&mut c, "I! reload:");
     assert!(msg.contains("reset: outputs n"), "{msg}");
+    // The reload's status metric comes as a datagram of its own, naming the reset output.
+    let mut status_buf = vec![0u8; 65536];
+    let n = recv.recv(&mut status_buf).unwrap();
+    let status = String::from_utf8_lossy(&status_buf[..n]).into_owned();
+    assert!(status.starts_with("tessla_spec,"), "{status}");
+    assert!(status.contains("reset_outputs=\"n\""), "{status}");
     assert_eq!(ask("m x=1i 20\n"), "tessla c=2i,m=2i,n=1i 20\n");
     c.signal("TERM");
     let (_, err, code) = c.finish();
@@ -226,6 +238,90 @@ fn a_reload_reaches_every_thread() {
             l == want
         });
     }
+    let (_, err, code) = c.finish();
+    assert_eq!(code, 0, "{err}");
+}
+
+/// The id `--version-tag` puts on a line (`spec_version=ID`).
+fn version_of(line: &str) -> String {
+    let tags = line.split(' ').next().unwrap();
+    tags.split(',')
+        .find_map(|t| t.strip_prefix("spec_version="))
+        .unwrap_or_else(|| panic!("no version tag in {line}"))
+        .to_string()
+}
+
+/// `--watch-spec`: an edit of an included file is reloaded without a signal; every output line
+/// names the version that computed it, and each outcome is a `tessla_spec` status line (a
+/// broken edit: refused, with the file and line in its reason, and the old version runs on).
+#[test]
+fn a_watched_spec_reloads_on_an_edit_and_outputs_name_their_version() {
+    let dir = tempfile::tempdir().unwrap();
+    let main = dir.path().join("main.tessla");
+    let lib = dir.path().join("lib.tessla");
+    std::fs::write(&main, MAIN_V1).unwrap();
+    std::fs::write(&lib, LIB_V1).unwrap();
+    let mut c = LiveChild::spawn(&[
+        "--spec",
+        s(&main),
+        "--no-passthrough",
+        "--watch-spec",
+        "--version-tag",
+        "spec_version",
+    ]);
+    let step_v = |c: &mut LiveChild, ts: i64, v: i64| {
+        c.write(&format!("m x={v}i {ts}\n"));
+        let suffix = format!(" {ts}\n");
+        c.wait_out(&format!("the step at {ts}"), |l| {
+            l.starts_with("tessla,") && l.ends_with(&suffix)
+        });
+        c.out
+            .iter()
+            .rev()
+            .find(|l| l.ends_with(&suffix))
+            .cloned()
+            .unwrap()
+    };
+    let first = step_v(&mut c, 10, 1);
+    assert!(first.ends_with(" c=1i,m=2i 10\n"), "{first}");
+    let v1 = version_of(&first);
+    assert_eq!(v1.len(), 12, "{first}");
+    // The watcher looks every second; keep the modification time visibly different.
+    std::thread::sleep(std::time::Duration::from_millis(1100));
+    let from = c.err.len();
+    std::fs::write(&lib, LIB_V2).unwrap();
+    let msg = c.wait_err("the watched reload", from, |l| l.starts_with("I! reload:"));
+    assert!(msg.contains("reset: outputs m"), "{msg}");
+    c.wait_out("the status line", |l| {
+        l.starts_with("tessla_spec,") && l.contains(",outcome=accepted,")
+    });
+    let second = step_v(&mut c, 20, 5);
+    assert!(second.ends_with(" c=2i,m=10i 20\n"), "{second}");
+    let v2 = version_of(&second);
+    assert_ne!(v1, v2);
+    let status = c
+        .out
+        .iter()
+        .find(|l| l.starts_with("tessla_spec,"))
+        .unwrap();
+    assert!(status.contains(&format!(",version={v2}")), "{status}");
+    // A broken edit: refused everywhere it is looked at, the running version stays.
+    std::thread::sleep(std::time::Duration::from_millis(1100));
+    let from = c.err.len();
+    std::fs::write(&lib, "def m = x +\n").unwrap();
+    c.wait_err("the refusal", from, |l| l.starts_with("E! reload:"));
+    c.wait_out("the refusal's status line", |l| {
+        l.starts_with("tessla_spec,") && l.contains(",outcome=refused,")
+    });
+    let refused = c
+        .out
+        .iter()
+        .find(|l| l.contains(",outcome=refused,"))
+        .unwrap();
+    assert!(refused.contains("lib.tessla"), "{refused}");
+    let third = step_v(&mut c, 30, 1);
+    assert_eq!(version_of(&third), v2);
+    assert!(third.ends_with(" c=3i,m=2i 30\n"), "{third}");
     let (_, err, code) = c.finish();
     assert_eq!(code, 0, "{err}");
 }
