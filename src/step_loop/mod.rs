@@ -121,6 +121,11 @@ pub async fn run<S: Source, K: Sink>(
             watch.clone(),
         ))
     });
+    // The versions a channel already holds are in force before anything is restored (an
+    // instance continues in the version its rules give it) and before the first record; the
+    // `--threads` workers made below copy them.
+    let mut out = Vec::with_capacity(64 * 1024);
+    updates.tick(&mut [&mut *proc], &mut out);
     if let Some(s) = store.as_mut() {
         s.backend.load(proc);
     }
@@ -135,11 +140,9 @@ pub async fn run<S: Source, K: Sink>(
         shards: &mut shards,
         shared: shared.as_mut(),
         backend: store.as_mut().map(|s| &mut *s.backend),
-        out: Vec::with_capacity(64 * 1024),
+        out,
         watch: &watch,
     };
-    // The versions a channel already holds are in force before the first record.
-    l.updates(updates, false);
     let r = l.run(source, sink, updates, interval).await;
     // Every ending (EOF, signal, closed output, I/O error) has evaluated what it could: save.
     l.save(Level::Info);
