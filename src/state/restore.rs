@@ -62,7 +62,10 @@ impl Restorer {
         if saved.fingerprint != running.fingerprint {
             let pair = (saved.fingerprint.clone(), running.fingerprint.clone());
             if !self.reported.contains(&pair) {
-                let reset = Reset::between(&saved.keys, &running.program);
+                // Sorted as written; sorted again in case a file was edited by hand.
+                let mut keys = saved.keys.clone();
+                keys.sort_unstable();
+                let reset = Reset::between(&keys, &running.program);
                 note = Some(format!(
                     "state: {} holds state saved by another program (fingerprint {}, this run {}); restored by stream: {}",
                     self.place,
