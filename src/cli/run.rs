@@ -39,7 +39,7 @@ pub fn run(args: RunArgs) -> CliResult {
         .map_err(|e| CliError::io(format!("cannot start the step watchdog: {e}")))?;
     let (mut backend, shared) = match &config.state {
         Some(s) => {
-            let (b, shared) = open_store(s, &proc)?;
+            let (b, shared) = open_store(s)?;
             (Some(b), shared)
         }
         None => (None, None),
@@ -69,10 +69,7 @@ pub fn run(args: RunArgs) -> CliResult {
 /// The state store `--state` names, connected (a NATS bucket: a mistake in its URL's
 /// credentials or TLS files is exit 2, a connection that fails exit 3), and for a shared one
 /// its partition lease.
-fn open_store(
-    s: &StateConfig,
-    proc: &Processor,
-) -> Result<(Box<dyn Backend>, Option<SharedStore>), CliError> {
+fn open_store(s: &StateConfig) -> Result<(Box<dyn Backend>, Option<SharedStore>), CliError> {
     match &s.target {
         Target::File(path) => Ok((
             Box::new(FileBackend {
@@ -82,7 +79,7 @@ fn open_store(
             None,
         )),
         Target::Nats(url) => {
-            let backend = NatsBackend::connect(url, proc, &s.context).map_err(|e| match e {
+            let backend = NatsBackend::connect(url, &s.context).map_err(|e| match e {
                 Failure::Config(m) => CliError::spec(format!("state: {m}")),
                 Failure::Io(m) => CliError::io(format!("state: {m}")),
             })?;

@@ -13,10 +13,12 @@
 //! are reported with their line number and skipped.
 //!
 //! Its rooms: the instances ([`instances`]: the table, and the pool that routes to it, creates
-//! and evicts), writing a step's outputs (`emit`), the live clock ([`clock`]),
+//! and evicts), writing a step's outputs (`emit`), the live clock ([`clock`]), what a monitor
+//! continuing in another program keeps and resets ([`carry`]),
 //! exact duplicates ([`dedup`]), SIGHUP spec reloads ([`reload`]) and warnings about inputs no
 //! metric feeds ([`wiring`]).
 
+pub mod carry;
 pub mod clock;
 pub mod dedup;
 mod emit;

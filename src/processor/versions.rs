@@ -45,14 +45,8 @@ impl Version {
     /// The outputs whose streams start afresh when an instance of `from` continues in this
     /// version (each output once, in the spec's order).
     pub fn reset_from(&self, from: &Version) -> Vec<String> {
-        let changed = snapshot::changed_nodes(&from.program, &self.program);
-        let mut names: Vec<String> = Vec::new();
-        for (o, n) in self.program.outputs.iter().zip(&self.program.output_nodes) {
-            if changed.binary_search(n).is_ok() && !names.contains(&o.name) {
-                names.push(o.name.clone());
-            }
-        }
-        names
+        let old = super::carry::stream_keys(&from.program, &from.keys);
+        super::carry::Reset::between(&old, &self.program).outputs
     }
 
     /// `monitor` (of another version) continued in this one: each stream whose key is

@@ -10,6 +10,7 @@
 use super::bundle::Bundle;
 use crate::log::{self, Level};
 use crate::processor::Processor;
+use crate::processor::carry::{self, Reset};
 use std::path::PathBuf;
 use std::sync::Arc;
 use tessla_engine::runtime::snapshot;
@@ -103,9 +104,9 @@ pub fn reload(src: &SpecSource, why: &str, procs: &mut [&mut Processor]) -> Relo
         return Reloaded::Refused("no processor".into());
     };
     let old = Arc::clone(first.program());
-    let changed = snapshot::changed_nodes(&old, &new);
     let old_keys = snapshot::node_keys(&old);
     let new_keys = snapshot::node_keys(&new);
+    let reset = Reset::between(&carry::stream_keys(&old, &old_keys), &new);
     let id = bundle.id();
     let mut instances = 0;
     for proc in procs.iter_mut() {
@@ -126,35 +127,18 @@ pub fn reload(src: &SpecSource, why: &str, procs: &mut [&mut Processor]) -> Relo
         }
         instances += proc.instance_count();
     }
-    let mut reset_outputs: Vec<String> = new
-        .outputs
-        .iter()
-        .zip(&new.output_nodes)
-        .filter(|(_, n)| changed.binary_search(n).is_ok())
-        .map(|(o, _)| o.name.clone())
-        .collect();
-    reset_outputs.dedup();
-    let reset_internal = changed
-        .iter()
-        .filter(|n| !new.output_nodes.contains(n))
-        .count();
-    let kept = new.order.len().saturating_sub(changed.len());
-    let msg = if changed.is_empty() {
-        format!(
-            "reload: spec version {id} for {instances} instances; nothing changed, every stream keeps its state"
-        )
-    } else {
-        format!(
-            "reload: spec version {id} for {instances} instances; {kept} streams keep their state; reset: {}{} internal streams",
-            if reset_outputs.is_empty() {
-                String::new()
-            } else {
-                format!("outputs {}, ", reset_outputs.join(", "))
-            },
-            reset_internal
-        )
-    };
-    log::log(Level::Info, &msg);
+    log::log(
+        Level::Info,
+        &format!(
+            "reload: spec version {id} for {instances} instances; {}",
+            reset.describe()
+        ),
+    );
+    let Reset {
+        outputs: reset_outputs,
+        internal: reset_internal,
+        ..
+    } = reset;
     Reloaded::Replaced {
         id,
         reset_outputs,

@@ -1,20 +1,24 @@
 //! The format of saved state, the same in every backend: a header (magic, format version, the
-//! fingerprint of the spec and options it was written for) checked in one place
-//! ([`check_header`]), and one instance's entry as a key-value backend stores it
-//! ([`encode_entry`], [`check_entry`]); the warning every backend gives for values that cannot
+//! fingerprint of the options it was written for) checked in one place ([`check_header`]), what
+//! is recorded of the program each instance ran ([`SavedProgram`], computed once per distinct
+//! program by [`Programs`]), and one instance's entry as a key-value backend stores it
+//! ([`encode_entry`], [`decode_entry`]); the warning every backend gives for values that cannot
 //! be saved ([`warn_unsaved`]).
 
 use crate::log::{self, Level};
+use crate::processor::carry;
 use crate::processor::instances::Key;
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
-use tessla_engine::Program;
 use tessla_engine::runtime::snapshot::{self, Snapshot};
+use tessla_engine::{Monitor, Program};
 
 pub const MAGIC: &str = "tessla-telegraf-state";
 /// Format version; bumped on any incompatible change of the layout below or of node keys
-/// (2: structural node keys, see `tessla_engine::runtime::snapshot`).
-pub const VERSION: u32 = 2;
+/// (2: structural node keys, see `tessla_engine::runtime::snapshot`; 3: the fingerprint covers
+/// the options only, and the state records the keys of the program each instance ran, so an
+/// edited spec keeps every stream whose key is unchanged).
+pub const VERSION: u32 = 3;
 
 /// What every saved state starts with.
 #[derive(Deserialize)]
@@ -30,36 +34,123 @@ pub(crate) fn unix_now() -> u64 {
         .map_or(0, |d| d.as_secs())
 }
 
-/// One instance's saved state, as a key-value backend stores it: the file's header, its key and
-/// its monitor.
-#[derive(Serialize, Deserialize)]
-struct Entry {
-    magic: String,
+/// What saved state records of the program an instance ran: enough to say, when it is restored
+/// into another program, which streams start afresh.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct SavedProgram {
+    /// `snapshot::fingerprint` of the program, hex; informative (whether the program restoring
+    /// the state is the same one), never a reason to refuse the state.
+    pub fingerprint: String,
+    /// The key of every evaluated stream, sorted ([`carry::stream_keys`]).
+    pub keys: Vec<u64>,
+}
+
+impl SavedProgram {
+    /// `program`'s record, from its node keys (`snapshot::node_keys`).
+    pub fn of(program: &Program, node_keys: &[u64]) -> SavedProgram {
+        SavedProgram {
+            fingerprint: program_fingerprint(program),
+            keys: carry::stream_keys(program, node_keys),
+        }
+    }
+}
+
+/// `snapshot::fingerprint(program)` as the state writes it (hex).
+pub fn program_fingerprint(program: &Program) -> String {
+    format!("{:016x}", snapshot::fingerprint(program))
+}
+
+/// One program of the monitors being saved.
+pub struct Known {
+    program: Arc<Program>,
+    /// Its node keys, what a snapshot is keyed by.
+    pub node_keys: Vec<u64>,
+    pub saved: SavedProgram,
+}
+
+/// The distinct programs of the monitors being saved (instances may run different versions):
+/// each program's keys are computed once, however many instances run it.
+#[derive(Default)]
+pub struct Programs {
+    pub list: Vec<Known>,
+}
+
+impl Programs {
+    /// The index in [`Programs::list`] of `program` (a monitor's own, `Monitor::program`),
+    /// added when new. The programs are told apart by identity: a processor holds few.
+    pub fn index(&mut self, program: &Arc<Program>) -> usize {
+        if let Some(i) = self
+            .list
+            .iter()
+            .position(|k| Arc::ptr_eq(&k.program, program))
+        {
+            return i;
+        }
+        let node_keys = snapshot::node_keys(program);
+        self.list.push(Known {
+            saved: SavedProgram::of(program, &node_keys),
+            node_keys,
+            program: Arc::clone(program),
+        });
+        self.list.len() - 1
+    }
+
+    /// The node keys of every program, by index (what encoding threads need).
+    pub fn node_keys(&self) -> Vec<&[u64]> {
+        self.list.iter().map(|k| k.node_keys.as_slice()).collect()
+    }
+}
+
+/// One instance's saved state, as a key-value backend stores it: the file's header, the program
+/// it ran, its key and its monitor.
+#[derive(Serialize)]
+struct EntryOut<'a> {
+    magic: &'a str,
     version: u32,
-    fingerprint: String,
+    fingerprint: &'a str,
     written: u64,
+    program: &'a SavedProgram,
+    key: &'a Key,
+    monitor: Snapshot,
+}
+
+/// An entry read back (its header checked by [`check_header`]).
+#[derive(Deserialize)]
+struct EntryIn {
+    program: SavedProgram,
     key: Key,
     monitor: Snapshot,
 }
 
-/// The bytes of instance `key`'s entry (JSON, as the file); the second value counts stream
-/// values that are functions and cannot be saved.
+/// One instance's state as read back from any backend: the program it ran and its monitor.
+pub struct Saved {
+    pub program: SavedProgram,
+    pub monitor: Snapshot,
+}
+
+/// The bytes of instance `key`'s entry (JSON, as the file), its monitor snapshotted with the
+/// keys of its own program (looked up in `programs`); the second value counts stream values
+/// that are functions and cannot be saved.
 pub fn encode_entry(
-    program: &Program,
+    programs: &mut Programs,
     fingerprint: &str,
     key: &Key,
-    monitor: &tessla_engine::Monitor,
+    monitor: &Monitor,
 ) -> (Vec<u8>, usize) {
-    let keys = snapshot::node_keys(program);
-    let monitor = snapshot::snapshot_with_keys(monitor, &keys);
-    let unsaved = monitor.unsaved;
-    let entry = Entry {
-        magic: MAGIC.into(),
+    let i = programs.index(monitor.program());
+    let Some(known) = programs.list.get(i) else {
+        return (Vec::new(), 0);
+    };
+    let snap = snapshot::snapshot_with_keys(monitor, &known.node_keys);
+    let unsaved = snap.unsaved;
+    let entry = EntryOut {
+        magic: MAGIC,
         version: VERSION,
-        fingerprint: fingerprint.to_string(),
+        fingerprint,
         written: unix_now(),
-        key: key.clone(),
-        monitor,
+        program: &known.saved,
+        key,
+        monitor: snap,
     };
     // Serialising owned plain data to memory cannot fail; an empty entry would be rejected.
     (serde_json::to_vec(&entry).unwrap_or_default(), unsaved)
@@ -89,7 +180,8 @@ fn show_key(key: &Key) -> String {
 }
 
 /// Check the header of saved state (`what`: "file" or "entry", for the messages): its magic,
-/// format version and fingerprint (`fingerprint`: this run's). `Err` says why it is not usable.
+/// format version and fingerprint (`fingerprint`: this run's options, [`super::fingerprint`]).
+/// `Err` says why it is not usable.
 pub fn check_header(bytes: &[u8], what: &str, fingerprint: &str) -> Result<(), String> {
     let header: Header = serde_json::from_slice(bytes)
         .map_err(|e| format!("not a state {what} (corrupt or truncated: {e})"))?;
@@ -107,23 +199,18 @@ pub fn check_header(bytes: &[u8], what: &str, fingerprint: &str) -> Result<(), S
     }
     if header.fingerprint != fingerprint {
         return Err(format!(
-            "written for another spec or other options (fingerprint {}, this run {fingerprint}; the spec, --set, --base-time and --instance-by must match)",
+            "written for other options (fingerprint {}, this run {fingerprint}; --set, --base-time and --instance-by must match)",
             header.fingerprint
         ));
     }
     Ok(())
 }
 
-/// Check an entry's bytes (magic, version, fingerprint, that it is `key`'s) and restore its
-/// monitor; `Err` says why it is not usable.
-pub fn check_entry(
-    bytes: &[u8],
-    program: &Arc<Program>,
-    fingerprint: &str,
-    key: &Key,
-) -> Result<tessla_engine::Monitor, String> {
+/// Check an entry's bytes (magic, version, fingerprint, that it is `key`'s) and read what it
+/// saved; `Err` says why it is not usable.
+pub fn decode_entry(bytes: &[u8], fingerprint: &str, key: &Key) -> Result<Saved, String> {
     check_header(bytes, "entry", fingerprint)?;
-    let entry: Entry =
+    let entry: EntryIn =
         serde_json::from_slice(bytes).map_err(|e| format!("corrupt state entry: {e}"))?;
     if &entry.key != key {
         return Err(format!(
@@ -132,10 +219,8 @@ pub fn check_entry(
             show_key(key)
         ));
     }
-    let keys = snapshot::node_keys(program);
-    Ok(snapshot::restore_with_keys(
-        Arc::clone(program),
-        &entry.monitor,
-        &keys,
-    ))
+    Ok(Saved {
+        program: entry.program,
+        monitor: entry.monitor,
+    })
 }

@@ -3,14 +3,16 @@
 //! Owns: the state file (JSON: the header of [`super::entry`], then one engine snapshot per
 //! instance key), the atomic write (temporary file in the same folder, fsync, rename, fsync of
 //! the folder) and reading it back: a missing file starts fresh; a corrupt file, another format
-//! version or a file written for another spec / `--set` / `--base-time` / `--instance-by` is
+//! version or a file written for other `--set` / `--base-time` / `--instance-by` options is
 //! renamed aside (`FILE.rejected-<unix seconds>`) with a warning, and the run starts fresh.
-//! Never fatal.
+//! A file saved by another program (an edited spec) is restored stream by stream
+//! ([`super::restore`]). Never fatal.
 //!
 //! JSON rather than a binary format: it is readable when something goes wrong, floats are stored
 //! as their bits (exact, NaN included), and the size is measured in `docs/state-and-reload.md`.
 
-use super::entry::{self, MAGIC, VERSION, unix_now, warn_unsaved};
+use super::entry::{self, MAGIC, Programs, SavedProgram, VERSION, unix_now, warn_unsaved};
+use super::restore::Restorer;
 use super::{Backend, Context, fingerprint};
 use crate::log::{self, Level};
 use crate::processor::Processor;
@@ -19,14 +21,14 @@ use serde::{Deserialize, Serialize};
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use tessla_engine::Program;
 use tessla_engine::runtime::snapshot::{self, Snapshot};
 
 #[derive(Serialize, Deserialize)]
 struct SavedInstance {
     /// The values of the `--instance-by` tags (`null`: tag absent).
     key: Key,
+    /// The program it ran: an index into [`StateFile::programs`].
+    program: usize,
     monitor: Snapshot,
 }
 
@@ -37,6 +39,8 @@ struct StateFile {
     fingerprint: String,
     /// Unix seconds when written (informational).
     written: u64,
+    /// The programs the instances ran (one, unless a rollout had some run another version).
+    programs: Vec<SavedProgram>,
     instances: Vec<SavedInstance>,
 }
 
@@ -44,6 +48,7 @@ struct StateFile {
 #[derive(Serialize)]
 struct SavedRef<'a> {
     key: &'a Key,
+    program: usize,
     monitor: Snapshot,
 }
 
@@ -54,39 +59,52 @@ struct HeaderOut<'a> {
     version: u32,
     fingerprint: &'a str,
     written: u64,
+    programs: Vec<&'a SavedProgram>,
 }
 
 /// Instances per encoding thread below which one thread does it all.
 const PER_THREAD: usize = 512;
 
+/// One instance to save: its key, its monitor, and the index of its program in [`Programs`].
+type Instance<'a> = (&'a Key, &'a tessla_engine::Monitor, usize);
+
 /// The JSON of `instances`, comma-separated, and the count of stream values that could not be
-/// saved.
-fn encode_instances(
-    instances: &[(&Key, &tessla_engine::Monitor)],
-    keys: &[u64],
-) -> io::Result<(Vec<u8>, usize)> {
+/// saved. `keys`: the node keys of each program, by index.
+fn encode_instances(instances: &[Instance<'_>], keys: &[&[u64]]) -> io::Result<(Vec<u8>, usize)> {
     let mut out = Vec::with_capacity(instances.len() * 2048);
     let mut unsaved = 0;
-    for (i, (key, m)) in instances.iter().enumerate() {
-        let monitor = snapshot::snapshot_with_keys(m, keys);
+    for (i, &(key, m, program)) in instances.iter().enumerate() {
+        let monitor = snapshot::snapshot_with_keys(m, keys.get(program).copied().unwrap_or(&[]));
         unsaved += monitor.unsaved;
         if i > 0 {
             out.push(b',');
         }
-        serde_json::to_writer(&mut out, &SavedRef { key, monitor }).map_err(io::Error::other)?;
+        serde_json::to_writer(
+            &mut out,
+            &SavedRef {
+                key,
+                program,
+                monitor,
+            },
+        )
+        .map_err(io::Error::other)?;
     }
     Ok((out, unsaved))
 }
 
 /// Save every instance of `proc` to `path` atomically. Returns the number of instances saved.
 ///
+/// Each instance is snapshotted with the keys of its own program (computed once per program).
 /// The instances are snapshotted and encoded on up to as many threads as the machine has cores
 /// (each a contiguous run of them, so the file lists them in the same order, least recently used
 /// first), then written in one pass: the bytes are those of `StateFile` serialised whole.
 pub fn save(path: &Path, proc: &Processor, ctx: &Context) -> io::Result<usize> {
-    let program = proc.program();
-    let keys = snapshot::node_keys(program);
-    let monitors: Vec<(&Key, &tessla_engine::Monitor)> = proc.monitors().collect();
+    let mut programs = Programs::default();
+    let monitors: Vec<Instance<'_>> = proc
+        .monitors()
+        .map(|(k, m)| (k, m, programs.index(m.program())))
+        .collect();
+    let keys = programs.node_keys();
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let threads = cores.min(monitors.len() / PER_THREAD).max(1);
     let chunk = monitors.len().div_ceil(threads).max(1);
@@ -109,12 +127,13 @@ pub fn save(path: &Path, proc: &Processor, ctx: &Context) -> io::Result<usize> {
     };
     let unsaved: usize = parts.iter().map(|(_, u)| u).sum();
     warn_unsaved(unsaved);
-    let fingerprint = fingerprint(program, ctx);
+    let fingerprint = fingerprint(ctx);
     let header = serde_json::to_vec(&HeaderOut {
         magic: MAGIC,
         version: VERSION,
         fingerprint: &fingerprint,
         written: unix_now(),
+        programs: programs.list.iter().map(|k| &k.saved).collect(),
     })
     .map_err(io::Error::other)?;
     // `{...}` without its closing brace, then the instances.
@@ -188,7 +207,7 @@ pub enum Outcome {
 
 /// Read `path` and restore its instances into `proc` (which has none yet). Logs what happened.
 pub fn load(path: &Path, proc: &mut Processor, ctx: &Context) -> Outcome {
-    let outcome = load_quiet(path, proc, ctx);
+    let (outcome, notes) = load_quiet(path, proc, ctx);
     let shown = path.display();
     match &outcome {
         Outcome::Missing => log::log(
@@ -214,30 +233,40 @@ pub fn load(path: &Path, proc: &mut Processor, ctx: &Context) -> Outcome {
             &format!("state: cannot read {shown}: {e}; starting fresh"),
         ),
     }
+    for note in notes {
+        log::log(Level::Info, &note);
+    }
     outcome
 }
 
-fn load_quiet(path: &Path, proc: &mut Processor, ctx: &Context) -> Outcome {
+/// [`load`] without its messages; the second value holds what a restore from another program
+/// reset (to log after the outcome).
+fn load_quiet(path: &Path, proc: &mut Processor, ctx: &Context) -> (Outcome, Vec<String>) {
     let text = match fs::read(path) {
         Ok(t) => t,
-        Err(e) if e.kind() == io::ErrorKind::NotFound => return Outcome::Missing,
-        Err(e) => return Outcome::Unreadable(e.to_string()),
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return (Outcome::Missing, Vec::new()),
+        Err(e) => return (Outcome::Unreadable(e.to_string()), Vec::new()),
     };
-    match check(&text, proc.program(), ctx) {
+    match check(&text, ctx) {
         Ok(file) => {
-            let program = Arc::clone(proc.program());
-            let keys = snapshot::node_keys(&program);
+            let mut restorer = Restorer::new(path.display().to_string());
+            let mut notes = Vec::new();
             let n = file.instances.len();
             for s in file.instances {
-                let m = snapshot::restore_with_keys(Arc::clone(&program), &s.monitor, &keys);
+                // `check` made sure every index is in range.
+                let Some(saved) = file.programs.get(s.program) else {
+                    continue;
+                };
+                let (m, note) = restorer.restore(proc, &s.key, saved, &s.monitor);
+                notes.extend(note);
                 proc.restore_instance(s.key, m);
             }
-            Outcome::Restored(n)
+            (Outcome::Restored(n), notes)
         }
         Err(why) => {
             let moved =
                 aside_name(path).and_then(|aside| fs::rename(path, &aside).ok().map(|()| aside));
-            Outcome::Rejected(why, moved)
+            (Outcome::Rejected(why, moved), Vec::new())
         }
     }
 }
@@ -254,9 +283,22 @@ fn aside_name(path: &Path) -> Option<PathBuf> {
 }
 
 /// Parse and validate the file's bytes.
-fn check(text: &[u8], program: &Program, ctx: &Context) -> Result<StateFile, String> {
-    entry::check_header(text, "file", &fingerprint(program, ctx))?;
-    serde_json::from_slice(text).map_err(|e| format!("corrupt state file: {e}"))
+fn check(text: &[u8], ctx: &Context) -> Result<StateFile, String> {
+    entry::check_header(text, "file", &fingerprint(ctx))?;
+    let file: StateFile =
+        serde_json::from_slice(text).map_err(|e| format!("corrupt state file: {e}"))?;
+    if let Some(s) = file
+        .instances
+        .iter()
+        .find(|s| s.program >= file.programs.len())
+    {
+        return Err(format!(
+            "corrupt state file: an instance names program {}, the file lists {}",
+            s.program,
+            file.programs.len()
+        ));
+    }
+    Ok(file)
 }
 
 /// `--state FILE`: [`load`] at start, [`save`] at the save points.
@@ -276,5 +318,145 @@ impl Backend for FileBackend {
 
     fn save(&mut self, proc: &Processor) -> io::Result<usize> {
         save(&self.path, proc, &self.ctx)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::processor::Options;
+    use crate::processor::versions::Selector;
+    use lineproto::RecordSplitter;
+    use std::sync::Arc;
+    use tessla_engine::Program;
+    use tessla_syntax::include::MemResolver;
+
+    fn program(spec: &str) -> Arc<Program> {
+        let resolver = MemResolver {
+            files: [("v.tessla".to_string(), spec.to_string())].into(),
+        };
+        tessla_engine::load_with("v.tessla", &resolver, &Default::default())
+            .unwrap()
+            .program
+    }
+
+    fn processor(spec: &str) -> Processor {
+        Processor::new(
+            program(spec),
+            Options {
+                passthrough: false,
+                instance_by: vec!["robot".into()],
+                ..Options::default()
+            },
+        )
+        .unwrap()
+    }
+
+    fn feed(p: &mut Processor, input: &str) -> String {
+        let mut s = RecordSplitter::default();
+        s.push(input.as_bytes());
+        let mut out = Vec::new();
+        while let Some(r) = s.next_record() {
+            p.record(&r, &mut out);
+        }
+        p.end_of_read();
+        String::from_utf8(out).unwrap()
+    }
+
+    const OLD: &str =
+        "in x: Events[Int]\ndef c = count(x)\ndef s = count(filter(x, x > 0))\nout c\nout s\n";
+    const NEW: &str =
+        "in x: Events[Int]\ndef c = count(x)\ndef s = count(filter(x, x > 1))\nout c\nout s\n";
+
+    /// Instances running different versions (a rollout) are each saved with their own
+    /// program's keys, and restored into the running program stream by stream: robot a, saved
+    /// by the new version, continues everything; robot b, saved by the old one, keeps `c` and
+    /// starts `s` afresh, and one line says so.
+    #[test]
+    fn each_instance_is_saved_by_its_own_program_and_restored_by_stream() {
+        let ctx = Context {
+            instance_by: vec!["robot".into()],
+            ..Context::default()
+        };
+        let mut p = processor(OLD);
+        p.accept_version(
+            "new",
+            "",
+            program(NEW),
+            0,
+            Selector::parse("robot=a").unwrap(),
+        )
+        .unwrap();
+        assert_eq!(
+            feed(&mut p, "m,robot=a x=2i 100\nm,robot=b x=2i 100\n"),
+            "tessla,robot=a c=1i,s=1i 100\ntessla,robot=b c=1i,s=1i 100\n"
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("state.json");
+        assert_eq!(save(&path, &p, &ctx).unwrap(), 2);
+        let file: StateFile = serde_json::from_slice(&fs::read(&path).unwrap()).unwrap();
+        assert_eq!(file.version, 3);
+        assert_eq!(file.programs.len(), 2);
+        let of = |robot: &str| {
+            let i = file
+                .instances
+                .iter()
+                .find(|s| s.key == [Some(robot.to_string())])
+                .unwrap();
+            &file.programs[i.program]
+        };
+        assert_eq!(
+            of("a").fingerprint,
+            entry::program_fingerprint(&program(NEW))
+        );
+        assert_eq!(
+            of("b").fingerprint,
+            entry::program_fingerprint(&program(OLD))
+        );
+
+        let mut q = processor(NEW);
+        let (outcome, notes) = load_quiet(&path, &mut q, &ctx);
+        assert_eq!(outcome, Outcome::Restored(2));
+        assert_eq!(notes.len(), 1, "{notes:?}");
+        assert!(
+            notes[0].contains("holds state saved by another program"),
+            "{notes:?}"
+        );
+        assert!(
+            notes[0].ends_with("reset: outputs s, 2 internal streams"),
+            "{notes:?}"
+        );
+        assert_eq!(
+            feed(&mut q, "m,robot=a x=2i 200\nm,robot=b x=2i 200\n"),
+            "tessla,robot=a c=2i,s=2i 200\ntessla,robot=b c=2i,s=1i 200\n"
+        );
+    }
+
+    /// Only the options refuse a file: another --set, --base-time or --instance-by.
+    #[test]
+    fn the_fingerprint_covers_the_options_only() {
+        let base = Context {
+            set: vec!["delta=0.5".into()],
+            base_time: "0".into(),
+            instance_by: vec!["robot".into()],
+        };
+        let fp = fingerprint(&base);
+        assert_eq!(fp, fingerprint(&base.clone()));
+        for other in [
+            Context {
+                set: vec!["delta=0.6".into()],
+                ..base.clone()
+            },
+            Context {
+                base_time: "1".into(),
+                ..base.clone()
+            },
+            Context {
+                instance_by: vec!["topic".into()],
+                ..base.clone()
+            },
+        ] {
+            assert_ne!(fingerprint(&other), fp, "{other:?}");
+        }
     }
 }

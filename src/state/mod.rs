@@ -1,11 +1,12 @@
 //! Where monitor state is kept between runs and across a fleet: `--state FILE` ([`file`](mod@file)) or a
 //! shared NATS key-value bucket ([`nats`], with the partition [`lease`]), outside the Telegraf
-//! binding. Both store the same entry format ([`entry`]: magic, format version, and the
-//! fingerprint of what the state is valid for).
+//! binding. Both store the same entry format ([`entry`]: magic, format version, the
+//! fingerprint of the options the state is valid for, and the keys of the program each instance
+//! ran), and restore it the same way ([`restore`]: stream by stream into the running program).
 //!
-//! Owns what `--state` names ([`Target`]), what besides the program decides whether saved
-//! state fits a run ([`Context`], [`fingerprint`]), and what the step loop calls at its save
-//! points ([`Backend`]).
+//! Owns what `--state` names ([`Target`]), the options that decide whether saved state fits a
+//! run at all ([`Context`], [`fingerprint`]), and what the step loop calls at its save points
+//! ([`Backend`]).
 
 pub mod entry;
 pub mod file;
@@ -13,6 +14,7 @@ pub mod kv_keys;
 pub mod lease;
 pub mod nats;
 pub mod nats_conn;
+pub mod restore;
 pub mod secrets;
 pub mod url;
 
@@ -20,7 +22,6 @@ use crate::processor::Processor;
 use crate::processor::instances::Key;
 use std::io;
 use std::path::PathBuf;
-use tessla_engine::Program;
 use tessla_engine::runtime::snapshot;
 
 /// Where `--state` keeps the state.
@@ -48,18 +49,21 @@ impl Target {
     }
 }
 
-/// What, besides the program, decides whether saved state fits this run.
+/// What decides whether saved state fits this run at all: options that change the meaning of
+/// every stream's state. (The program does not: each stream whose key is unchanged keeps its
+/// state, [`restore`].)
 #[derive(Debug, Clone, Default)]
 pub struct Context {
-    /// `--set NAME=VALUE`, as given.
+    /// `--set NAME=VALUE`, as given. A set value can reach a stream through a function constant,
+    /// which node keys do not see, so any change refuses the state.
     pub set: Vec<String>,
     pub base_time: String,
     pub instance_by: Vec<String>,
 }
 
-/// The fingerprint of `program` run with `ctx`, as written in the file (hex).
-pub fn fingerprint(program: &Program, ctx: &Context) -> String {
-    let mut h = snapshot::fingerprint(program);
+/// The fingerprint of the options `ctx`, as written in saved state (hex).
+pub fn fingerprint(ctx: &Context) -> String {
+    let mut h = snapshot::text_hash("tessla-telegraf-state options");
     for s in &ctx.set {
         h = snapshot::mix(h, snapshot::text_hash(&format!("--set {s}")));
     }

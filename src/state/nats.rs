@@ -4,6 +4,7 @@
 //! corrupt entry aside (`aside.<key>.<unix seconds>`, with a warning). The design and its
 //! guarantees are in `docs/state-and-reload.md` ("Shared state on NATS").
 
+use super::entry::Programs;
 use super::kv_keys::kv_key;
 use super::kv_keys::kv_key_part_of;
 use super::lease::Lease;
@@ -11,6 +12,7 @@ use super::lease::lease_elsewhere;
 use super::nats_conn::{
     Conn, Failure, connect_failure, connect_options, err, permission_failure, violation,
 };
+use super::restore::Restorer;
 use super::url::Url;
 use super::{Backend, Context, entry, fingerprint};
 use crate::log::{self, Level};
@@ -117,6 +119,8 @@ pub struct NatsBackend {
     conn: Conn,
     store: kv::Store,
     fingerprint: String,
+    /// Restores each instance into the program it runs here, stream by stream.
+    restorer: Restorer,
     /// Instances already looked up (or created) in this process: not restored again.
     seen: HashSet<Key>,
 }
@@ -124,7 +128,7 @@ pub struct NatsBackend {
 impl NatsBackend {
     /// Connect (once: an unreachable server, refused credentials, a TLS or permission failure
     /// stop the process with a message saying which; Telegraf restarts it after `restart_delay`).
-    pub fn connect(url: &Url, proc: &Processor, ctx: &Context) -> Result<NatsBackend, Failure> {
+    pub fn connect(url: &Url, ctx: &Context) -> Result<NatsBackend, Failure> {
         let conn =
             Conn::start().map_err(|e| Failure::Io(format!("cannot start the NATS thread: {e}")))?;
         let store = conn
@@ -134,7 +138,8 @@ impl NatsBackend {
             url: url.clone(),
             conn,
             store,
-            fingerprint: fingerprint(proc.program(), ctx),
+            fingerprint: fingerprint(ctx),
+            restorer: Restorer::new(url.shown()),
             seen: HashSet::new(),
         })
     }
@@ -198,8 +203,14 @@ impl Backend for NatsBackend {
             }
             None => return,
         };
-        match entry::check_entry(&entry.value, proc.program(), &self.fingerprint, key) {
-            Ok(monitor) => {
+        match entry::decode_entry(&entry.value, &self.fingerprint, key) {
+            Ok(saved) => {
+                let (monitor, note) =
+                    self.restorer
+                        .restore(proc, key, &saved.program, &saved.monitor);
+                if let Some(note) = note {
+                    log::log(Level::Info, &note);
+                }
                 log::log(
                     Level::Debug,
                     &format!("state: restored {name} from {}", self.url.shown()),
@@ -224,12 +235,13 @@ impl Backend for NatsBackend {
     }
 
     fn save(&mut self, proc: &Processor) -> io::Result<usize> {
-        let program = proc.program();
+        // Each instance with the keys of its own program, computed once per program.
+        let mut programs = Programs::default();
         let mut unsaved = 0;
         let entries: Vec<(String, bytes::Bytes)> = proc
             .monitors()
             .map(|(key, m)| {
-                let (bytes, u) = entry::encode_entry(program, &self.fingerprint, key, m);
+                let (bytes, u) = entry::encode_entry(&mut programs, &self.fingerprint, key, m);
                 unsaved += u;
                 (kv_key(key), bytes::Bytes::from(bytes))
             })

@@ -1,8 +1,9 @@
 //! `run --state FILE` against the real binary: stopped mid-run (SIGTERM, SIGINT or stdin EOF)
 //! and restarted, the outputs equal those of one uninterrupted run (bundled robot monitors over
 //! the recorded run; a spec with `last`, `delay` and `count` per robot with `--instance-by`);
-//! a missing file starts fresh; a corrupt file and one written for another spec are set aside
-//! with a warning and the run goes on.
+//! a missing file starts fresh; a corrupt file, one of an older format version and one written
+//! for other options are set aside with a warning and the run goes on; a restart with an
+//! edited spec keeps every stream whose definition is unchanged, exactly as a SIGHUP reload.
 
 use crate::support::live_child;
 use crate::support::recorded;
@@ -55,6 +56,8 @@ fn check_restarts(args: &[&str], lines: &[String], cuts: &[usize], how: &str) {
             assert!(err.contains("does not exist yet; starting fresh"), "{err}");
         } else {
             assert!(err.contains("I! state: restored"), "{err}");
+            // The same spec: nothing to say about streams starting afresh.
+            assert!(!err.contains("saved by another program"), "{err}");
         }
         got.push_str(&out);
         start = cut;
@@ -214,8 +217,28 @@ fn the_state_file_is_json_with_a_versioned_header() {
     assert_eq!(code, 0, "{err}");
     let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&state).unwrap()).unwrap();
     assert_eq!(v["magic"], "tessla-telegraf-state");
-    assert_eq!(v["version"], 2);
+    assert_eq!(v["version"], 3);
     assert_eq!(v["instances"].as_array().unwrap().len(), 2);
+    // The program the instances ran: its fingerprint and the key of every evaluated stream.
+    let programs = v["programs"].as_array().unwrap();
+    assert_eq!(programs.len(), 1);
+    assert_eq!(programs[0]["fingerprint"].as_str().unwrap().len(), 16);
+    let keys: Vec<u64> = programs[0]["keys"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|k| k.as_u64().unwrap())
+        .collect();
+    assert!(
+        keys.len() > 5 && keys.windows(2).all(|w| w[0] < w[1]),
+        "{keys:?}"
+    );
+    for i in v["instances"].as_array().unwrap() {
+        assert_eq!(i["program"], 0);
+        for n in i["monitor"]["nodes"].as_array().unwrap() {
+            assert!(keys.contains(&n["key"].as_u64().unwrap()), "{n}");
+        }
+    }
     // No temporary file is left next to it.
     let names: Vec<String> = std::fs::read_dir(dir.path())
         .unwrap()
@@ -272,29 +295,17 @@ fn a_corrupt_state_file_is_set_aside_and_the_run_starts_fresh() {
     }
 }
 
+/// A file written in the previous format version (2) is refused, named with both versions,
+/// and set aside; the run starts fresh.
 #[test]
-fn a_state_file_of_another_spec_is_set_aside_with_a_warning() {
+fn a_state_file_of_format_version_2_is_set_aside() {
     let dir = tempfile::tempdir().unwrap();
     let spec = write_spec(dir.path(), "spec.tessla", SPEC);
-    let other = write_spec(
-        dir.path(),
-        "other.tessla",
-        "in x: Events[Int]\ndef c = count(x)\nout c\n",
-    );
     let state = dir.path().join("state.json");
-    let input = robot_events()[..12].concat();
-    let (_, err, code) = run_all(
-        &[
-            "--spec",
-            s(&other),
-            "--instance-by",
-            "robot",
-            "--state",
-            s(&state),
-        ],
-        &input,
-    );
-    assert_eq!(code, 0, "{err}");
+    // As version 2 wrote it: the fingerprint covered the spec, no program keys.
+    let v2 = br#"{"magic":"tessla-telegraf-state","version":2,"fingerprint":"ec999a2360860b6b","written":1795398451,"instances":[{"key":["a"],"monitor":{"t0":102,"pending":null,"last_evaluated":102,"nodes":[{"key":6171799819722928710,"last":{"Int":0}}]}}]}
+"#;
+    std::fs::write(&state, v2).unwrap();
     let args = [
         "--spec",
         s(&spec),
@@ -303,29 +314,238 @@ fn a_state_file_of_another_spec_is_set_aside_with_a_warning() {
         "--threads",
         "1",
     ];
+    let input = robot_events()[..12].concat();
     let (fresh, _, _) = run_all(&args, &input);
     let mut with_state = args.to_vec();
     with_state.extend(["--state", s(&state)]);
     let (out, err, code) = run_all(&with_state, &input);
     assert_eq!(code, 0, "{err}");
-    assert!(err.contains("W! state:"), "{err}");
-    assert!(err.contains("another spec"), "{err}");
-    assert_eq!(out, fresh);
-    assert_eq!(rejected_files(dir.path()).len(), 1);
-    // Other --instance-by tags or --set values are "another spec" too.
-    let (_, err, _) = run_all(
-        &[
-            "--spec",
-            s(&spec),
-            "--instance-by",
-            "host",
-            "--state",
-            s(&state),
-        ],
-        &input,
+    assert!(
+        err.contains(&format!(
+            "W! state: {} not used: written in state format version 2, this build reads version 3; renamed to",
+            s(&state)
+        )),
+        "{err}"
     );
-    assert!(err.contains("another spec"), "{err}");
-    assert_eq!(rejected_files(dir.path()).len(), 2);
+    assert!(err.contains("starting fresh"), "{err}");
+    assert_eq!(out, fresh);
+    let aside = rejected_files(dir.path());
+    assert_eq!(aside.len(), 1, "{aside:?}");
+    assert_eq!(std::fs::read(&aside[0]).unwrap(), v2);
+}
+
+/// Other --instance-by tags or another --base-time change what every saved value means: the
+/// file is set aside with a warning and the run starts fresh.
+#[test]
+fn a_state_file_of_other_options_is_set_aside_with_a_warning() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = write_spec(dir.path(), "spec.tessla", SPEC);
+    let state = dir.path().join("state.json");
+    let input = robot_events()[..12].concat();
+    let args = [
+        "--spec",
+        s(&spec),
+        "--instance-by",
+        "robot",
+        "--threads",
+        "1",
+    ];
+    let mut with_state = args.to_vec();
+    with_state.extend(["--state", s(&state)]);
+    let (fresh, _, _) = run_all(&args, &input);
+    for (n, other) in [["--instance-by", "host"], ["--base-time", "1 us"]]
+        .iter()
+        .enumerate()
+    {
+        // A good file of this spec and these options...
+        let (_, err, code) = run_all(&with_state, &input);
+        assert_eq!(code, 0, "{err}");
+        assert!(err.contains("I! state: saved 2"), "{err}");
+        // ...refused by a run with another option.
+        let mut changed = with_state.clone();
+        changed.extend(other);
+        let (out, err, code) = run_all(&changed, &input);
+        assert_eq!(code, 0, "{err}");
+        assert!(err.contains("W! state:"), "{err}");
+        assert!(
+            err.contains("written for other options")
+                && err.contains("--set, --base-time and --instance-by must match"),
+            "{err}"
+        );
+        assert!(!err.contains("I! state: restored"), "{err}");
+        if other[0] == "--base-time" {
+            assert_eq!(out, fresh);
+        }
+        assert_eq!(rejected_files(dir.path()).len(), n + 1);
+        std::fs::remove_file(&state).unwrap();
+    }
+}
+
+/// [`SPEC`] with `sum`'s definition changed (`2 * x` instead of `x`); `c`, `prev`, `quietAt`
+/// and `silences` are unchanged.
+const SPEC_EDITED: &str = "in x: Events[Int]\n\
+    def c = count(x)\n\
+    def prev = last(x, x)\n\
+    def quiet = delay(const(5, x), x)\n\
+    def quietAt = time(quiet)\n\
+    def silences = count(quiet)\n\
+    def sum: Events[Int] = default(last(sum, x), 0) + 2 * x\n\
+    out c\nout prev\nout quietAt\nout silences\nout sum\n";
+
+/// An output line: its robot, timestamp and fields.
+fn fields(line: &str) -> (String, String, std::collections::BTreeMap<String, String>) {
+    let mut parts = line.split(' ');
+    let head = parts.next().unwrap();
+    let body = parts.next().unwrap();
+    let ts = parts.next().unwrap().to_string();
+    let robot = head
+        .split(',')
+        .find_map(|t| t.strip_prefix("robot="))
+        .unwrap()
+        .to_string();
+    let fields = body
+        .split(',')
+        .map(|f| {
+            let (k, v) = f.split_once('=').unwrap();
+            (k.to_string(), v.to_string())
+        })
+        .collect();
+    (robot, ts, fields)
+}
+
+/// A restart with an edited spec (Telegraf restarted after the spec file changed): each
+/// stream whose definition is unchanged continues exactly as in one uninterrupted run, the
+/// changed output starts afresh (as a fresh run of the new spec), one line names it, and the
+/// outputs are exactly those of a SIGHUP reload at the same point.
+#[test]
+fn a_restart_with_an_edited_spec_keeps_every_unchanged_stream() {
+    let dir = tempfile::tempdir().unwrap();
+    let spec = write_spec(dir.path(), "spec.tessla", SPEC);
+    let state = dir.path().join("state.json");
+    // Time moves with the records only, so a pause between the parts fires nothing.
+    let args = [
+        "--spec",
+        s(&spec),
+        "--instance-by",
+        "robot",
+        "--no-passthrough",
+        "--allowed-lateness",
+        "off",
+        "--threads",
+        "1",
+    ];
+    let lines = robot_events();
+    let cut = 31;
+    let (whole, err, code) = run_all(&args, &lines.concat());
+    assert_eq!(code, 0, "{err}");
+    let edited = write_spec(dir.path(), "edited.tessla", SPEC_EDITED);
+    let mut fresh_args = args.to_vec();
+    fresh_args[1] = s(&edited);
+    let (fresh, err, code) = run_all(&fresh_args, &lines[cut..].concat());
+    assert_eq!(code, 0, "{err}");
+
+    // The restart: the first part with the spec, the rest after the spec file was edited.
+    let mut with_state = args.to_vec();
+    with_state.extend(["--state", s(&state)]);
+    let (first, err, code) = run_all(&with_state, &lines[..cut].concat());
+    assert_eq!(code, 0, "{err}");
+    std::fs::write(&spec, SPEC_EDITED).unwrap();
+    let (second, err, code) = run_all(&with_state, &lines[cut..].concat());
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("I! state: restored 2 monitor instances"),
+        "{err}"
+    );
+    let notes: Vec<&str> = err
+        .lines()
+        .filter(|l| l.contains("holds state saved by another program"))
+        .collect();
+    assert_eq!(notes.len(), 1, "one line per restore:\n{err}");
+    let note = notes[0];
+    assert!(
+        note.starts_with(&format!(
+            "I! state: {} holds state saved by another program",
+            s(&state)
+        )),
+        "{note}"
+    );
+    assert!(note.contains("reset: outputs sum, "), "{note}");
+    for kept in ["c", "prev", "quietAt", "silences"] {
+        assert!(!note.contains(&format!(" {kept},")), "{note}");
+    }
+    assert!(rejected_files(dir.path()).is_empty());
+
+    // Per robot: the unchanged outputs are the uninterrupted run's, line for line; `sum` after
+    // the restart is the fresh run's.
+    let got = by_instance(&(first.clone() + &second));
+    let whole = by_instance(&whole);
+    let fresh = by_instance(&fresh);
+    let first = by_instance(&first);
+    assert_eq!(got.keys().collect::<Vec<_>>(), ["a", "b"]);
+    for (robot, lines) in &got {
+        let expected = &whole[robot];
+        assert_eq!(lines.len(), expected.len(), "{robot}");
+        let before = first[robot].len();
+        assert_eq!(lines[..before], expected[..before], "{robot}");
+        let mut sums = Vec::new();
+        for (line, other) in lines.iter().zip(expected).skip(before) {
+            let (_, ts, mut got) = fields(line);
+            let (_, want_ts, mut want) = fields(other);
+            assert_eq!(ts, want_ts, "{line} / {other}");
+            if let Some(sum) = got.remove("sum") {
+                sums.push(format!("{sum} {ts}"));
+            }
+            want.remove("sum");
+            assert_eq!(got, want, "{line} / {other}");
+        }
+        let fresh_sums: Vec<String> = fresh[robot]
+            .iter()
+            .filter_map(|l| {
+                let (_, ts, f) = fields(l);
+                Some(format!("{} {ts}", f.get("sum")?))
+            })
+            .collect();
+        assert!(!sums.is_empty());
+        assert_eq!(sums, fresh_sums, "{robot}: `sum` starts afresh");
+    }
+
+    // A SIGHUP at the same point gives exactly these outputs.
+    let hup_spec = write_spec(dir.path(), "hup.tessla", SPEC);
+    let mut hup_args = args.to_vec();
+    hup_args[1] = s(&hup_spec);
+    let mut c = LiveChild::spawn(&hup_args);
+    c.write(&lines[..cut].concat());
+    let mut last = lines[cut - 1].trim_end().split(' ');
+    let robot = last.next().unwrap().strip_prefix("m,robot=").unwrap();
+    let last_ts = last.nth(1).unwrap();
+    let prefix = format!("tessla,robot={robot} c=");
+    let suffix = format!(" {last_ts}\n");
+    c.wait_out("the last record's outputs", |l| {
+        l.starts_with(&prefix) && l.ends_with(&suffix)
+    });
+    std::fs::write(&hup_spec, SPEC_EDITED).unwrap();
+    let from = c.err.len();
+    c.signal("HUP");
+    let reload = c.wait_err("the reload", from, |l| {
+        l.starts_with("I! reload: spec version")
+    });
+    assert!(reload.contains("reset: outputs sum, "), "{reload}");
+    // The same wording as the restore's.
+    assert_eq!(
+        reload.split_once("instances; ").unwrap().1.trim_end(),
+        note.split_once("restored by stream: ").unwrap().1
+    );
+    c.write(&lines[cut..].concat());
+    let (hup, err, code) = c.finish();
+    assert_eq!(code, 0, "{err}");
+    // Besides the reload's status metric, the monitors' lines are the restart's.
+    let mut hup = by_instance(&hup);
+    let status = hup.remove("").unwrap_or_default();
+    assert!(
+        status.len() == 1 && status[0].starts_with("tessla_spec,"),
+        "{status:?}"
+    );
+    assert_eq!(hup, got, "a restart with the edited spec is a reload");
 }
 
 /// UDP mode (the connector's wiring): send one datagram, return the answer.

@@ -1,8 +1,9 @@
 //! `--state nats://...` against a real 3-node NATS cluster: a fleet's state
 //! continues across processes exactly (two runs give one uninterrupted run's outputs), one entry
 //! per robot under its sanitised key, and a corrupt or foreign entry is put aside with a
-//! warning, never trusted; a holder whose lease another process takes stops stepping and stands
-//! by. Also: an unreachable server is a clear error (exit 3).
+//! warning, never trusted; a restart with an edited spec keeps every unchanged stream; a holder
+//! whose lease another process takes stops stepping and stands by. Also: an unreachable server
+//! is a clear error (exit 3).
 
 use crate::support::child;
 
@@ -113,10 +114,14 @@ fn state_in_a_bucket_continues_across_processes_and_rejects_bad_entries() {
     assert_eq!(keys, ["i.vfleet_2fa_2e1", "i.vfleet_2fb_202"]);
     let entry: serde_json::Value = serde_json::from_slice(&saved[0].1).unwrap();
     assert_eq!(entry["magic"], "tessla-telegraf-state");
-    assert_eq!(entry["version"], 2);
+    assert_eq!(entry["version"], 3);
     assert_eq!(entry["key"], serde_json::json!(["fleet/a.1"]));
+    // The program it ran: its fingerprint and the key of every evaluated stream.
+    assert_eq!(entry["program"]["fingerprint"].as_str().unwrap().len(), 16);
+    assert!(entry["program"]["keys"].as_array().unwrap().len() > 50);
 
-    // A corrupt entry and a foreign one (another fingerprint): put aside, the robot starts fresh.
+    // A corrupt entry and a foreign one (another options fingerprint): put aside, the robot
+    // starts fresh.
     put(
         &cluster,
         "robots",
@@ -143,7 +148,7 @@ fn state_in_a_bucket_continues_across_processes_and_rejects_bad_entries() {
     );
     assert!(
         err.contains("W! state: i.vfleet_2fb_202 in nats://")
-            && err.contains("written for another spec or other options"),
+            && err.contains("written for other options"),
         "{err}"
     );
     assert!(
@@ -167,6 +172,129 @@ fn state_in_a_bucket_continues_across_processes_and_rejects_bad_entries() {
         let (_, v) = after.iter().find(|(k, _)| k == key).unwrap();
         let e: serde_json::Value = serde_json::from_slice(v).unwrap();
         assert_eq!(e["fingerprint"], entry["fingerprint"]);
+    }
+}
+
+const SUM: &str = "in x: Events[Int]\ndef c = count(x)\n\
+    def sum: Events[Int] = default(last(sum, x), 0) + x\nout c\nout sum\n";
+/// [`SUM`] with `sum`'s definition changed; `c` unchanged.
+const SUM_EDITED: &str = "in x: Events[Int]\ndef c = count(x)\n\
+    def sum: Events[Int] = default(last(sum, x), 0) + 2 * x\nout c\nout sum\n";
+
+/// Each robot's output lines as (timestamp, c, sum), by robot.
+fn counts_and_sums(
+    text: &str,
+) -> std::collections::BTreeMap<String, Vec<(String, String, String)>> {
+    let mut m = std::collections::BTreeMap::<String, Vec<_>>::new();
+    for l in text.lines() {
+        let mut parts = l.split(' ');
+        let robot = parts.next().unwrap().strip_prefix("tessla,topic=").unwrap();
+        let fields: std::collections::HashMap<&str, &str> = parts
+            .next()
+            .unwrap()
+            .split(',')
+            .map(|f| f.split_once('=').unwrap())
+            .collect();
+        let ts = parts.next().unwrap();
+        m.entry(robot.to_string()).or_default().push((
+            ts.to_string(),
+            fields["c"].to_string(),
+            fields["sum"].to_string(),
+        ));
+    }
+    m
+}
+
+/// A restart with an edited spec on the bucket: each robot's unchanged stream (`c`) continues
+/// as in one uninterrupted run, the changed one (`sum`) starts afresh as in a fresh run of the
+/// new spec, and one line (not one per robot) names the reset output. Needs nats-server: fails
+/// without it.
+#[test]
+fn a_restart_with_an_edited_spec_keeps_every_unchanged_stream_in_the_bucket() {
+    let cluster = Cluster::start(&nats_cluster::mapping(1))
+        .expect("this test needs nats-server (it fails rather than skips without it)");
+    let url = format!("nats://{}/edited?replicas=3", cluster.hosts());
+    let dir = tempfile::tempdir().unwrap();
+    let spec = dir.path().join("spec.tessla");
+    let edited = dir.path().join("edited.tessla");
+    std::fs::write(&spec, SUM).unwrap();
+    std::fs::write(&edited, SUM_EDITED).unwrap();
+    let lines: Vec<String> = (0..30i64)
+        .map(|i| format!("m,topic=r{} x={}i {}\n", i % 3, (i * 7) % 5, 100 + i))
+        .collect();
+    let cut = 14;
+    let args = |spec: &std::path::Path| {
+        vec![
+            "--spec".to_string(),
+            spec.to_str().unwrap().to_string(),
+            "--allowed-lateness".to_string(),
+            "off".to_string(),
+        ]
+    };
+    let run_spec = |spec: &std::path::Path, more: &[&str], input: &str| {
+        let mut a = args(spec);
+        a.extend(more.iter().map(|s| s.to_string()));
+        let a: Vec<&str> = a.iter().map(String::as_str).collect();
+        let (out, err, code) = run(&a, input);
+        assert_eq!(code, 0, "{err}");
+        (out, err)
+    };
+    let (whole, _) = run_spec(&spec, &["--threads", "1"], &lines.concat());
+    let (fresh, _) = run_spec(&edited, &["--threads", "1"], &lines[cut..].concat());
+
+    let (first, _) = run_spec(&spec, &["--state", &url], &lines[..cut].concat());
+    let before = entries(&cluster, "edited");
+    assert_eq!(before.len(), 3);
+    std::fs::write(&spec, SUM_EDITED).unwrap();
+    let (second, err) = run_spec(&spec, &["--state", &url], &lines[cut..].concat());
+    let notes: Vec<&str> = err
+        .lines()
+        .filter(|l| l.contains("holds state saved by another program"))
+        .collect();
+    assert_eq!(notes.len(), 1, "one line for the three robots:\n{err}");
+    assert!(
+        notes[0].starts_with("I! state: nats://") && notes[0].contains("reset: outputs sum, "),
+        "{}",
+        notes[0]
+    );
+    assert!(
+        !notes[0].contains("outputs c") && !err.contains("not used"),
+        "{err}"
+    );
+
+    let got = counts_and_sums(&(first + &second));
+    let whole = counts_and_sums(&whole);
+    let fresh = counts_and_sums(&fresh);
+    assert_eq!(got.len(), 3);
+    for (robot, lines) in &got {
+        let expected = &whole[robot];
+        assert_eq!(lines.len(), expected.len(), "{robot}");
+        // `c` (and the timestamps) as one uninterrupted run.
+        let c = |v: &[(String, String, String)]| -> Vec<(String, String)> {
+            v.iter().map(|(t, c, _)| (t.clone(), c.clone())).collect()
+        };
+        assert_eq!(c(lines), c(expected), "{robot}: `c` continues");
+        // `sum` after the restart as a fresh run of the edited spec.
+        let after = lines.len() - fresh[robot].len();
+        assert_eq!(lines[..after], expected[..after], "{robot}");
+        let sums = |v: &[(String, String, String)]| -> Vec<String> {
+            v.iter().map(|(_, _, s)| s.clone()).collect()
+        };
+        assert_eq!(
+            sums(&lines[after..]),
+            sums(&fresh[robot]),
+            "{robot}: `sum` starts afresh"
+        );
+    }
+    // The entries now hold the edited spec's program.
+    let after = entries(&cluster, "edited");
+    for ((k, old), (k2, new)) in before.iter().zip(&after) {
+        assert_eq!(k, k2);
+        let old: serde_json::Value = serde_json::from_slice(old).unwrap();
+        let new: serde_json::Value = serde_json::from_slice(new).unwrap();
+        assert_eq!(new["version"], 3);
+        assert_ne!(old["program"]["fingerprint"], new["program"]["fingerprint"]);
+        assert_eq!(old["fingerprint"], new["fingerprint"], "the same options");
     }
 }
 
