@@ -10,6 +10,7 @@
 
 pub mod bundle;
 pub mod reload;
+pub mod sign;
 pub mod status;
 pub mod watch;
 
