@@ -9,6 +9,7 @@
 //! processor's (`processor::versions`).
 
 pub mod bundle;
+pub mod nats;
 pub mod reload;
 pub mod sign;
 pub mod status;
