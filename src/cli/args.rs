@@ -57,6 +57,9 @@ pub enum Command {
     /// Run a simulated TurtleBot3 in closed loop with the monitors (the digital twin's behaviour).
     #[cfg(feature = "tools")]
     Simulate(super::simulate::SimulateArgs),
+    /// The fleet's spec channel: publish a spec version (signed), list the rollouts, show what
+    /// every process made of them, roll back, make the signing key.
+    Spec(Box<super::spec_cmd::SpecArgs>),
     /// Print a shell completion script for this command line (`make install` installs them).
     Completions(CompletionsArgs),
     /// Print the man page (roff), made from this command line (`make install` installs it).
