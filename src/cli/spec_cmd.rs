@@ -171,6 +171,10 @@ fn publish(a: PublishArgs) -> CliResult {
         ))
     })?;
     require_outputs(&loaded.program, &a.spec.display().to_string()).map_err(CliError::spec)?;
+    if !loaded.warnings.is_empty() {
+        let text = tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false);
+        let _ = std::io::stderr().lock().write_all(text.as_bytes());
+    }
     let key = read_signing_key(a.sign.sign_key_file.as_deref())
         .map_err(|e| CliError::spec(format!("spec publish: {e}")))?;
     let op = Operator::connect(&a.channel.channel, true).map_err(failure)?;
@@ -287,7 +291,12 @@ fn published_time(ns: i64) -> String {
 
 fn short_key(k: &Option<String>) -> String {
     match k {
-        Some(k) if k.len() > 12 => format!("{}…{}", &k[..6], &k[k.len() - 4..]),
+        // A signer is whatever the record says: cut by characters, never inside one.
+        Some(k) if k.chars().count() > 12 => {
+            let head: String = k.chars().take(6).collect();
+            let tail: Vec<char> = k.chars().rev().take(4).collect();
+            format!("{head}…{}", tail.iter().rev().collect::<String>())
+        }
         Some(k) => k.clone(),
         None => "unsigned".into(),
     }
@@ -697,6 +706,13 @@ mod tests {
         assert!(!covers(&s, &Selector::parse("robot=r1,r2").unwrap()));
         assert!(rollback_plan(&[r(1, "a", "robot=r9")], Some(&s)).is_none());
         assert!(rollback_plan(&[], None).is_none());
+    }
+
+    #[test]
+    fn a_signer_is_shortened_by_characters() {
+        assert_eq!(short_key(&Some("OABCDEFGHIJKLMNOP".into())), "OABCDE…MNOP");
+        assert_eq!(short_key(&Some("ééééééééééééééé".into())), "éééééé…éééé");
+        assert_eq!(short_key(&None), "unsigned");
     }
 
     #[test]

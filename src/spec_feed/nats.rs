@@ -112,10 +112,12 @@ fn bundle_key(id: &str) -> String {
 
 /// The revision of a `rollout.<revision>` key.
 fn revision_of(key: &str) -> Option<u64> {
-    key.strip_prefix("rollout.")?
+    let digits = key.strip_prefix("rollout.")?;
+    // Written as `rollout_key` writes it: no sign, no leading zero.
+    digits
         .parse()
         .ok()
-        .filter(|r| *r > 0)
+        .filter(|r: &u64| *r > 0 && r.to_string() == digits)
 }
 
 /// The connection, the JetStream context and the bucket (`None`: it does not exist yet).
@@ -797,6 +799,8 @@ mod tests {
         assert_eq!(revision_of("rollout.12"), Some(12));
         assert_eq!(revision_of("rollout.0"), None);
         assert_eq!(revision_of("rollout.x"), None);
+        assert_eq!(revision_of("rollout.012"), None);
+        assert_eq!(revision_of("rollout.+1"), None);
         assert_eq!(revision_of("bundle.12"), None);
         assert_eq!(status_key("h.1", "p0", 7), "status.vh_2e1.vp0");
         assert_eq!(status_key("h", "", 7), "status.vh.pid7");
