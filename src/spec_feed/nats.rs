@@ -21,9 +21,7 @@ use super::{Arrival, BASE, Channel, Outcome, Rollout};
 use crate::log::{self, Level, mask};
 use crate::processor::versions::Selector;
 use crate::state::kv_keys::kv_key_part_of;
-use crate::state::nats_conn::{
-    Conn, Failure, connect_failure, connect_options, permission_failure, violation,
-};
+use crate::state::nats_conn::{Conn, Failure, connect_failure, connect_options, violation};
 use crate::state::url::{DEFAULT_TTL, Url};
 use async_nats::jetstream::{self, kv};
 use futures_util::StreamExt;
@@ -148,7 +146,7 @@ async fn open(url: Url, create: bool) -> Result<Opened, Failure> {
             }
             _ => {
                 if let Some(v) = violation(&violations) {
-                    return Err(Failure::Io(permission_failure(&url, &v)));
+                    return Err(Failure::Io(denied(&url, &v)));
                 }
                 return Err(Failure::Io(format!(
                     "cannot open the spec channel {}: {e}",
@@ -160,14 +158,14 @@ async fn open(url: Url, create: bool) -> Result<Opened, Failure> {
     let store = if !missing {
         Some(js.get_key_value(url.bucket.clone()).await.map_err(|e| {
             Failure::Io(match violation(&violations) {
-                Some(v) => permission_failure(&url, &v),
+                Some(v) => denied(&url, &v),
                 None => format!("cannot open the spec channel {}: {e}", url.shown()),
             })
         })?)
     } else if create {
         let store = crate::state::nats::create(&js, &url).await.map_err(|e| {
             match violation(&violations) {
-                Some(v) => Failure::Io(permission_failure(&url, &v)),
+                Some(v) => Failure::Io(denied(&url, &v)),
                 None => Failure::Io(e),
             }
         })?;
@@ -187,6 +185,21 @@ async fn open(url: Url, create: bool) -> Result<Opened, Failure> {
         store,
         violations,
     })
+}
+
+/// A request the server refused (opening, reading or creating the bucket): who, where, and what
+/// the login needs.
+fn denied(url: &Url, text: &str) -> String {
+    format!(
+        "not permitted at {}: the server denied this login ({}) access to the spec channel's \
+         bucket {b}: {}; a process's user needs to read stream KV_{b} (its info, consumers, \
+         message gets) and to write $KV.{b}.status.>, the operator's user (admin) everything \
+         of the bucket (telegraf/fleet-nats/accounts.conf)",
+        url.shown(),
+        url.identity(),
+        mask(text),
+        b = url.bucket
+    )
 }
 
 /// The revisions of every rollout in the bucket, in order.
@@ -332,7 +345,7 @@ impl NatsFeed {
                 let first = match &opened.store {
                     Some(store) => read_all(store, &t).await.map_err(|e| {
                         Failure::Io(match violation(&opened.violations) {
-                            Some(v) => permission_failure(&u, &v),
+                            Some(v) => denied(&u, &v),
                             None => format!("spec channel {}: {e}", u.shown()),
                         })
                     })?,
@@ -616,7 +629,7 @@ impl Operator {
     /// A failure of a request: "not permitted" when the server reported a violation.
     fn failure(&self, what: &str, e: impl std::fmt::Display) -> Failure {
         Failure::Io(match violation(&self.violations) {
-            Some(v) => permission_failure(&self.url, &v),
+            Some(v) => denied(&self.url, &v),
             None => format!("spec channel {}: {what}: {e}", self.url.shown()),
         })
     }

@@ -4,7 +4,8 @@
 //! force before (or the base marker); a tampered bundle, an unsigned, foreign-signed, re-signed
 //! or copied rollout reaches the process refused, saying why; a spec that does not check is
 //! refused before anything is written; with the shipped `accounts.conf` a fleet-p0 login may
-//! follow the channel and write its status but not publish (exit 3, "not permitted").
+//! follow the channel and write its status but not publish (exit 3, "not permitted"); a login
+//! without the channel's permissions is told what it needs.
 //!
 //! A missing nats-server fails these tests (never skips): the spec channel is what keeps an
 //! unsigned spec off the robots.
@@ -700,4 +701,37 @@ fn with_the_shipped_accounts_only_admin_may_publish() {
     });
     assert_eq!(status["processes"][0]["partition"], "p0");
     assert_eq!(status["rollouts"][0]["accepted"], 1);
+}
+
+#[test]
+fn a_login_without_the_channel_permissions_is_told_what_it_needs() {
+    let server = nats_server(
+        "authorization { users: [\n\
+         { user: admin, password: adminpw }\n\
+         { user: other, password: otherpw, permissions: { publish: [\"$JS.API.INFO\"], subscribe: [\"_INBOX.>\"] } }\n\
+         ] }",
+    );
+    let port = server.port;
+    let s = Setup::new();
+    let main = s.write_spec("x * 2");
+    published(
+        &s.publish(
+            &format!("nats://admin:adminpw@127.0.0.1:{port}"),
+            &main,
+            &[],
+        ),
+        1,
+    );
+    let url = parse_url(&format!("nats://other:otherpw@127.0.0.1:{port}")).unwrap();
+    let e = NatsFeed::connect(&url, std::slice::from_ref(&s.public))
+        .err()
+        .unwrap_or_else(|| panic!("connected without the permissions"));
+    let m = e.message();
+    assert!(
+        m.contains("not permitted at nats://other:***@127.0.0.1:")
+            && m.contains("access to the spec channel's bucket tessla_specs")
+            && m.contains("Permissions Violation")
+            && !m.contains("otherpw"),
+        "{m}"
+    );
 }
