@@ -57,6 +57,9 @@ pub enum Command {
     /// Run a simulated TurtleBot3 in closed loop with the monitors (the digital twin's behaviour).
     #[cfg(feature = "tools")]
     Simulate(super::simulate::SimulateArgs),
+    /// The fleet's spec channel: publish a spec version (signed), list the rollouts, show what
+    /// every process made of them, roll back, make the signing key.
+    Spec(Box<super::spec_cmd::SpecArgs>),
     /// Print a shell completion script for this command line (`make install` installs them).
     Completions(CompletionsArgs),
     /// Print the man page (roff), made from this command line (`make install` installs it).
@@ -123,8 +126,9 @@ pub struct TraceArgs {
     pub spec_options: SpecOptions,
 }
 
-/// `run`'s command line, in groups: the spec, time, instances, transport, state, output. Each
-/// group is converted once into what the core takes ([`super::config::RunConfig`]).
+/// `run`'s command line, in groups: the spec, time, instances, transport, state, output, spec
+/// channel. Each group is converted once into what the core takes
+/// ([`super::config::RunConfig`]).
 #[derive(Debug, Args, Clone, Default)]
 pub struct RunArgs {
     /// The `.tessla` file; without it the bundled robot monitors run. Without --spec, the
@@ -155,6 +159,8 @@ pub struct RunArgs {
     pub state: StateArgs,
     #[command(flatten)]
     pub output: OutputArgs,
+    #[command(flatten)]
+    pub spec_channel: SpecChannelArgs,
 }
 
 /// Time: late records, clocks ahead, and how far an instance's time follows the wall clock.
@@ -258,6 +264,32 @@ pub struct OutputArgs {
     /// Least severe messages written to stderr.
     #[arg(long, value_enum, default_value_t)]
     pub log_level: LogLevel,
+}
+
+/// Spec channel: new spec versions for a fleet, published by the operator with `tessla-telegraf
+/// spec publish` (docs/state-and-reload.md, "Spec versions across a fleet").
+#[derive(Debug, Args, Clone, Default)]
+#[command(next_help_heading = "Spec channel")]
+pub struct SpecChannelArgs {
+    /// Follow the fleet's spec channel: `nats://HOST:PORT[,...][/BUCKET][?options]` (bucket
+    /// `tessla_specs` when none is named; the login and TLS options of --state). Each rollout
+    /// signed with a trusted key is checked here and put in force from its event time; one
+    /// that fails is refused and the running versions stay. Every outcome is a `tessla_spec`
+    /// metric and is written to the channel for `tessla-telegraf spec status`.
+    #[arg(long, value_name = "nats://HOST:PORT[/BUCKET]", value_parser = crate::spec_feed::nats::parse_url)]
+    pub spec_channel: Option<crate::state::url::Url>,
+    /// The operator's public key(s) (`tessla-telegraf spec keygen` prints one): a rollout not
+    /// signed with one of them is refused. Needed with --spec-channel (or --spec-trust-file).
+    #[arg(
+        long,
+        value_name = "PUBKEY[,PUBKEY]",
+        value_delimiter = ',',
+        requires = "spec_channel"
+    )]
+    pub spec_trust: Vec<String>,
+    /// A file of trusted public keys, one a line (`#` starts a comment).
+    #[arg(long, value_name = "FILE", requires = "spec_channel")]
+    pub spec_trust_file: Option<PathBuf>,
 }
 
 /// `--late`.

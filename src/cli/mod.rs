@@ -17,6 +17,7 @@ pub mod run;
 #[cfg(feature = "tools")]
 pub mod simulate;
 pub mod spec;
+pub mod spec_cmd;
 pub mod trace;
 
 pub use args::{Cli, Command};
@@ -62,6 +63,7 @@ pub fn main() -> ExitCode {
         Some(Command::Report(a)) => (report::run(a), Style::Log),
         #[cfg(feature = "tools")]
         Some(Command::Simulate(a)) => (simulate::run(a), Style::Log),
+        Some(Command::Spec(a)) => (spec_cmd::run(*a), Style::Plain),
         Some(Command::Completions(a)) => (completions(a.shell), Style::Plain),
         Some(Command::Manpage) => (manpage(), Style::Plain),
     };

@@ -9,7 +9,9 @@
 //! processor's (`processor::versions`).
 
 pub mod bundle;
+pub mod nats;
 pub mod reload;
+pub mod sign;
 pub mod status;
 pub mod watch;
 
@@ -262,6 +264,9 @@ impl Updates {
         procs: &[&mut Processor],
     ) -> Result<Arc<tessla_engine::Program>, String> {
         let r = &a.rollout;
+        // A rollout the channel refused (unsigned, signed by a key not trusted, its bundle not
+        // matching its digest) is refused whatever version it names: the base, or one held.
+        let bundle = a.bundle.as_ref().map_err(Clone::clone)?;
         if r.id == BASE {
             return procs
                 .first()
@@ -271,7 +276,6 @@ impl Updates {
         if let Some(p) = self.compiled.get(&r.id) {
             return Ok(Arc::clone(p));
         }
-        let bundle = a.bundle.as_ref().map_err(Clone::clone)?;
         if bundle.id() != r.id {
             return Err(format!(
                 "its bundle is version {}, not {} as the rollout says",

@@ -32,7 +32,7 @@ pub fn kv_key(key: &Key) -> String {
     s
 }
 
-pub(super) fn kv_key_part_of(name: &str) -> String {
+pub(crate) fn kv_key_part_of(name: &str) -> String {
     let mut s = String::new();
     key_part(&Some(name.to_string()), &mut s);
     s

@@ -91,7 +91,7 @@ async fn open(url: Url) -> Result<kv::Store, Failure> {
     Err(Failure::Io(last))
 }
 
-async fn create(js: &jetstream::Context, url: &Url) -> Result<kv::Store, String> {
+pub(crate) async fn create(js: &jetstream::Context, url: &Url) -> Result<kv::Store, String> {
     // The bucket as `nats kv add` makes it, except that reads go to the stream leader
     // (allow_direct off): a process taking over must see every entry its predecessor wrote.
     let config = stream::Config {

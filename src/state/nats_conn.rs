@@ -13,16 +13,16 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 /// How long any one request to NATS may take.
-pub(super) const REQUEST_TIMEOUT: Duration = Duration::from_secs(2);
+pub(crate) const REQUEST_TIMEOUT: Duration = Duration::from_secs(2);
 
 /// The runtime thread that owns the connection; requests are sent to it and waited for.
-pub(super) struct Conn {
-    pub(super) handle: tokio::runtime::Handle,
+pub(crate) struct Conn {
+    pub(crate) handle: tokio::runtime::Handle,
     _stop: tokio::sync::oneshot::Sender<()>,
 }
 
 impl Conn {
-    pub(super) fn start() -> io::Result<Conn> {
+    pub(crate) fn start() -> io::Result<Conn> {
         let rt = tokio::runtime::Builder::new_current_thread()
             .enable_all()
             .build()?;
@@ -44,7 +44,7 @@ impl Conn {
     }
 
     /// Run `f` on the connection's thread and wait for it (blocks the calling thread).
-    pub(super) fn call<T: Send + 'static>(
+    pub(crate) fn call<T: Send + 'static>(
         &self,
         f: impl Future<Output = T> + Send + 'static,
     ) -> Option<T> {
@@ -77,7 +77,7 @@ impl Failure {
 }
 
 /// The connect options of `url`: credentials and TLS through the client crate's own support.
-pub(super) async fn connect_options(
+pub(crate) async fn connect_options(
     url: &Url,
     violations: Arc<Mutex<Vec<String>>>,
 ) -> Result<async_nats::ConnectOptions, Failure> {
@@ -152,7 +152,7 @@ pub(super) async fn connect_options(
 }
 
 /// The message for a failed connection: refused credentials, TLS, or no server, each its own.
-pub(super) fn connect_failure(url: &Url, e: &async_nats::ConnectError) -> String {
+pub(crate) fn connect_failure(url: &Url, e: &async_nats::ConnectError) -> String {
     use async_nats::ConnectErrorKind as K;
     let at = url.shown();
     // The crate's error text names no secret (kind and source: an I/O or TLS error).
@@ -197,7 +197,7 @@ pub(super) fn tls_failure(at: &str, detail: &str) -> String {
 }
 
 /// A permission violation the server reported for this connection, if any.
-pub(super) fn violation(violations: &Mutex<Vec<String>>) -> Option<String> {
+pub(crate) fn violation(violations: &Mutex<Vec<String>>) -> Option<String> {
     violations.lock().ok().and_then(|v| {
         v.iter()
             .find(|t| t.to_ascii_lowercase().contains("permissions violation"))
@@ -205,7 +205,7 @@ pub(super) fn violation(violations: &Mutex<Vec<String>>) -> Option<String> {
     })
 }
 
-pub(super) fn permission_failure(url: &Url, text: &str) -> String {
+pub(crate) fn permission_failure(url: &Url, text: &str) -> String {
     format!(
         "not permitted at {}: the server denied this process ({}) access to bucket {}: {}; \
          the user's permissions must allow the JetStream API of the bucket (\"$JS.API.>\" for \

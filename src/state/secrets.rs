@@ -51,7 +51,7 @@ impl SecretSource {
         Ok(Secret(value))
     }
 
-    pub(super) fn origin(&self) -> String {
+    pub(crate) fn origin(&self) -> String {
         match self {
             SecretSource::Given(_) => "the URL".into(),
             SecretSource::Env(v) => format!("environment variable {v}"),

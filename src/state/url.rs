@@ -283,7 +283,7 @@ impl Url {
     }
 
     /// Who this process connects as, for messages.
-    pub(super) fn identity(&self) -> String {
+    pub(crate) fn identity(&self) -> String {
         match &self.auth {
             Auth::None => "without credentials".into(),
             Auth::UserPassword { user, password } => {

@@ -5,6 +5,7 @@
 
 mod fleet_nats;
 mod fleet_nats_security;
+mod fleet_nats_specs;
 mod fleet_nats_state;
 mod pipeline_influx;
 #[cfg(feature = "tools")]

@@ -1,0 +1,821 @@
+//! The fleet's spec channel: a JetStream key-value bucket (default `tessla_specs`) beside the
+//! state bucket, named by a URL in `--state`'s syntax with its login and TLS options (the
+//! connection, its failures and their messages are `state::nats_conn`'s).
+//!
+//! Owns the bucket's layout (`docs/state-and-reload.md`, "Spec versions across a fleet"):
+//! - `bundle.<id>`: a version's [`Bundle`] as JSON (`id` = [`Bundle::id`]);
+//! - `rollout.<revision>`: a signed rollout record ([`super::sign`]), revisions 1, 2, 3, …,
+//!   append-only: each is created with the KV `create`, so two publishers never take one
+//!   revision (the later one retries with the next);
+//! - `status.<host>.<partition or pid>`: a process's outcomes ([`Status`]).
+//!
+//! Two sides: [`NatsFeed`], what a running process follows (every rollout verified against the
+//! trusted keys and its bundle against the rollout's digest, handed to the step loop in revision
+//! order, each once; its outcomes written back), and [`Operator`], what `tessla-telegraf spec`
+//! reads and publishes with.
+
+use super::bundle::Bundle;
+use super::sign::{self, Record};
+use super::status::now_ns;
+use super::{Arrival, BASE, Channel, Outcome, Rollout};
+use crate::log::{self, Level, mask};
+use crate::processor::versions::Selector;
+use crate::state::kv_keys::kv_key_part_of;
+use crate::state::nats_conn::{Conn, Failure, connect_failure, connect_options, violation};
+use crate::state::url::{DEFAULT_TTL, Url};
+use async_nats::jetstream::{self, kv};
+use futures_util::StreamExt;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeSet;
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// The bucket a channel URL without one names.
+pub const DEFAULT_BUCKET: &str = "tessla_specs";
+
+/// How often a process looks again for a channel bucket that does not exist yet.
+const LOOK_AGAIN: Duration = Duration::from_secs(2);
+
+/// Parse a channel URL: `--state`'s syntax (`nats://HOST:PORT[,...][/BUCKET][?login, TLS,
+/// replicas]`), the bucket [`DEFAULT_BUCKET`] when none is named. The partition options of
+/// `--state` (`lease=`, `ttl=`) are refused: a channel has no lease.
+pub fn parse_url(s: &str) -> Result<Url, String> {
+    let url = Url::parse(&with_default_bucket(s)).map_err(|e| format!("spec channel {e}"))?;
+    if url.lease.is_some() || url.ttl != DEFAULT_TTL {
+        return Err(format!(
+            "spec channel `{}`: lease= and ttl= are --state's options (the partition lease); a \
+             spec channel has none",
+            mask(s)
+        ));
+    }
+    Ok(url)
+}
+
+/// `s` with `/tessla_specs` after the hosts when it names no bucket.
+fn with_default_bucket(s: &str) -> String {
+    let Some((scheme, rest)) = s.split_once("://") else {
+        return s.to_string();
+    };
+    let (main, query) = match rest.split_once('?') {
+        Some((m, q)) => (m, Some(q)),
+        None => (rest, None),
+    };
+    let hosts = main.rsplit_once('@').map_or(main, |(_, h)| h);
+    let main = if !hosts.contains('/') {
+        format!("{main}/{DEFAULT_BUCKET}")
+    } else if hosts.ends_with('/') {
+        format!("{main}{DEFAULT_BUCKET}")
+    } else {
+        main.to_string()
+    };
+    match query {
+        Some(q) => format!("{scheme}://{main}?{q}"),
+        None => format!("{scheme}://{main}"),
+    }
+}
+
+/// What a process writes to its status key: its outcomes so far, for `spec status`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Status {
+    pub host: String,
+    /// The partition (`--state`'s lease name), or empty.
+    #[serde(default)]
+    pub partition: String,
+    pub pid: u32,
+    /// When it was written (ns since the Unix epoch, the process's wall clock).
+    pub time: i64,
+    pub outcomes: Vec<Outcome>,
+}
+
+/// The status key of a process: `status.<host>.<partition>`, or `status.<host>.pid<N>` without
+/// a partition (host and partition written as the state bucket writes a tag value: injective,
+/// only characters NATS allows).
+pub fn status_key(host: &str, partition: &str, pid: u32) -> String {
+    let who = if partition.is_empty() {
+        format!("pid{pid}")
+    } else {
+        kv_key_part_of(partition)
+    };
+    format!("status.{}.{who}", kv_key_part_of(host))
+}
+
+fn rollout_key(revision: u64) -> String {
+    format!("rollout.{revision}")
+}
+
+fn bundle_key(id: &str) -> String {
+    format!("bundle.{id}")
+}
+
+/// The revision of a `rollout.<revision>` key.
+fn revision_of(key: &str) -> Option<u64> {
+    let digits = key.strip_prefix("rollout.")?;
+    // Written as `rollout_key` writes it: no sign, no leading zero.
+    digits
+        .parse()
+        .ok()
+        .filter(|r: &u64| *r > 0 && r.to_string() == digits)
+}
+
+/// The connection, the JetStream context and the bucket (`None`: it does not exist yet).
+struct Opened {
+    js: jetstream::Context,
+    store: Option<kv::Store>,
+    violations: Arc<Mutex<Vec<String>>>,
+}
+
+/// Connect and open the channel's bucket; `create`: make it when missing (the operator's
+/// commands that publish; with the replicas of the URL).
+async fn open(url: Url, create: bool) -> Result<Opened, Failure> {
+    let violations = Arc::new(Mutex::new(Vec::new()));
+    let options = connect_options(&url, Arc::clone(&violations)).await?;
+    let client = options
+        .connect(url.servers.clone())
+        .await
+        .map_err(|e| Failure::Io(connect_failure(&url, &e)))?;
+    let js = jetstream::new(client.clone());
+    let stream = format!("KV_{}", url.bucket);
+    let missing = match js.get_stream(&stream).await {
+        Ok(_) => false,
+        Err(e) => match e.kind() {
+            jetstream::context::GetStreamErrorKind::JetStream(j)
+                if j.error_code() == jetstream::ErrorCode::STREAM_NOT_FOUND =>
+            {
+                true
+            }
+            _ => {
+                if let Some(v) = violation(&violations) {
+                    return Err(Failure::Io(denied(&url, &v)));
+                }
+                return Err(Failure::Io(format!(
+                    "cannot open the spec channel {}: {e}",
+                    url.shown()
+                )));
+            }
+        },
+    };
+    let store = if !missing {
+        Some(js.get_key_value(url.bucket.clone()).await.map_err(|e| {
+            Failure::Io(match violation(&violations) {
+                Some(v) => denied(&url, &v),
+                None => format!("cannot open the spec channel {}: {e}", url.shown()),
+            })
+        })?)
+    } else if create {
+        let store = crate::state::nats::create(&js, &url).await.map_err(|e| {
+            match violation(&violations) {
+                Some(v) => Failure::Io(denied(&url, &v)),
+                None => Failure::Io(e),
+            }
+        })?;
+        log::log(
+            Level::Info,
+            &format!(
+                "spec: created the spec channel's bucket {} ({} replicas); every process names it with --spec-channel",
+                url.bucket, url.replicas
+            ),
+        );
+        Some(store)
+    } else {
+        None
+    };
+    Ok(Opened {
+        js,
+        store,
+        violations,
+    })
+}
+
+/// A request the server refused (opening, reading or creating the bucket): who, where, and what
+/// the login needs.
+fn denied(url: &Url, text: &str) -> String {
+    format!(
+        "not permitted at {}: the server denied this login ({}) access to the spec channel's \
+         bucket {b}: {}; a process's user needs to read stream KV_{b} (its info, consumers, \
+         message gets) and to write $KV.{b}.status.>, the operator's user (admin) everything \
+         of the bucket (telegraf/fleet-nats/accounts.conf)",
+        url.shown(),
+        url.identity(),
+        mask(text),
+        b = url.bucket
+    )
+}
+
+/// The revisions of every rollout in the bucket, in order.
+async fn revisions(store: &kv::Store) -> Result<Vec<u64>, String> {
+    let mut keys = store
+        .keys()
+        .await
+        .map_err(|e| format!("cannot list the spec channel's keys: {e}"))?;
+    let mut out = Vec::new();
+    while let Some(k) = keys.next().await {
+        let k = k.map_err(|e| format!("cannot list the spec channel's keys: {e}"))?;
+        if let Some(r) = revision_of(&k) {
+            out.push(r);
+        }
+    }
+    out.sort_unstable();
+    out.dedup();
+    Ok(out)
+}
+
+/// The rollout stored as `rollout.<revision>`, checked: its record read, its revision the key's,
+/// its signature by a trusted key, and its bundle (fetched) hashing to its digest.
+async fn arrival(store: &kv::Store, revision: u64, value: &[u8], trust: &[String]) -> Arrival {
+    let record = Record::parse(value);
+    let mut rollout = match &record.rollout {
+        Ok(r) => r.clone(),
+        Err(why) => {
+            return Arrival {
+                rollout: Rollout {
+                    revision,
+                    id: String::new(),
+                    digest: String::new(),
+                    label: String::new(),
+                    from: 0,
+                    selector: Selector::all(),
+                    published: 0,
+                },
+                bundle: Err(why.clone()),
+            };
+        }
+    };
+    let stored_as = rollout.revision;
+    rollout.revision = revision;
+    let bundle = if stored_as != revision {
+        Err(format!(
+            "it says it is revision {stored_as} but is stored as {}: a rollout copied from elsewhere",
+            rollout_key(revision)
+        ))
+    } else {
+        match record.verify(trust) {
+            Err(why) => Err(why),
+            Ok(()) => fetch_bundle(store, &rollout).await,
+        }
+    };
+    Arrival { rollout, bundle }
+}
+
+/// The bundle of a verified rollout, checked against its digest (the `base` marker has none: an
+/// empty bundle).
+async fn fetch_bundle(store: &kv::Store, r: &Rollout) -> Result<Bundle, String> {
+    if r.id == BASE {
+        if !r.digest.is_empty() {
+            return Err(
+                "it names the base version (the spec each process started with) with a digest"
+                    .into(),
+            );
+        }
+        return Ok(Bundle {
+            files: Vec::new(),
+            links: Vec::new(),
+        });
+    }
+    if r.digest.len() != 64 || !r.digest.starts_with(&r.id) || r.id.len() != 12 {
+        return Err(format!(
+            "its version id {} is not the first 12 digits of its digest {}",
+            r.id, r.digest
+        ));
+    }
+    let key = bundle_key(&r.id);
+    let bytes = match store.get(key.as_str()).await {
+        Ok(Some(b)) => b,
+        Ok(None) => return Err(format!("its bundle {key} is not in the spec channel")),
+        Err(e) => return Err(format!("its bundle {key} cannot be read: {e}")),
+    };
+    let bundle: Bundle = serde_json::from_slice(&bytes)
+        .map_err(|e| format!("its bundle {key} is not a spec bundle: {e}"))?;
+    let digest = bundle.digest();
+    if digest != r.digest {
+        return Err(format!(
+            "its bundle {key} does not hash to the digest the rollout was signed with (it hashes \
+             to {digest}): the bundle was changed after publishing"
+        ));
+    }
+    Ok(bundle)
+}
+
+/// Every rollout so far, checked, in revision order.
+async fn read_all(store: &kv::Store, trust: &[String]) -> Result<Vec<Arrival>, String> {
+    let mut out = Vec::new();
+    for r in revisions(store).await? {
+        let key = rollout_key(r);
+        match store.entry(key.as_str()).await {
+            Ok(Some(e)) if e.operation == kv::Operation::Put => {
+                out.push(arrival(store, r, &e.value, trust).await);
+            }
+            Ok(_) => {}
+            Err(e) => return Err(format!("cannot read {key} from the spec channel: {e}")),
+        }
+    }
+    Ok(out)
+}
+
+/// A running process's view of the channel (module doc).
+pub struct NatsFeed {
+    url: Url,
+    /// Keeps the NATS thread (and the watching task on it) alive.
+    _conn: Conn,
+    arrivals: mpsc::Receiver<Arrival>,
+    /// The highest revision handed out so far.
+    last: u64,
+    /// The latest status to write (key, JSON); the writer task puts whichever is newest.
+    status: tokio::sync::watch::Sender<Option<(String, Vec<u8>)>>,
+}
+
+impl NatsFeed {
+    /// Connect, read every rollout so far (blocking, at start, before the first record), and
+    /// start watching for new ones. A bucket that does not exist yet is no error (nothing was
+    /// published): it is looked for every 2 s. `trust`: the public keys whose signatures count
+    /// (none: a configuration error).
+    pub fn connect(url: &Url, trust: &[String]) -> Result<(NatsFeed, Vec<Arrival>), Failure> {
+        if trust.is_empty() {
+            return Err(Failure::Config(
+                "a spec channel needs the operator's public key (--spec-trust KEY)".into(),
+            ));
+        }
+        let conn =
+            Conn::start().map_err(|e| Failure::Io(format!("cannot start the NATS thread: {e}")))?;
+        let trust: Arc<[String]> = trust.to_vec().into();
+        let (u, t) = (url.clone(), Arc::clone(&trust));
+        let (opened, first) = conn
+            .call(async move {
+                let opened = open(u.clone(), false).await?;
+                let first = match &opened.store {
+                    Some(store) => read_all(store, &t).await.map_err(|e| {
+                        Failure::Io(match violation(&opened.violations) {
+                            Some(v) => denied(&u, &v),
+                            None => format!("spec channel {}: {e}", u.shown()),
+                        })
+                    })?,
+                    None => Vec::new(),
+                };
+                Ok::<_, Failure>((opened, first))
+            })
+            .ok_or_else(|| Failure::Io("the NATS thread stopped".to_string()))??;
+        let exists = opened.store.is_some();
+        let known: BTreeSet<u64> = first.iter().map(|a| a.rollout.revision).collect();
+        let last = known.last().copied().unwrap_or(0);
+        let (tx, arrivals) = mpsc::channel();
+        let (status, status_rx) = tokio::sync::watch::channel(None);
+        let (store_tx, store_rx) = tokio::sync::watch::channel(opened.store.clone());
+        conn.handle.spawn(follow(
+            opened.js,
+            url.clone(),
+            opened.store,
+            known,
+            trust,
+            tx,
+            store_tx,
+        ));
+        conn.handle.spawn(write_status(
+            url.clone(),
+            status_rx,
+            store_rx,
+            opened.violations,
+        ));
+        log::log(
+            Level::Info,
+            &if exists {
+                format!(
+                    "spec: following the spec channel {}: {} rollout(s) so far",
+                    url.shown(),
+                    first.len()
+                )
+            } else {
+                format!(
+                    "spec: the spec channel {} has no bucket yet (the first `tessla-telegraf spec \
+                     publish` creates it); looking for it every {}s",
+                    url.shown(),
+                    LOOK_AGAIN.as_secs()
+                )
+            },
+        );
+        Ok((
+            NatsFeed {
+                url: url.clone(),
+                _conn: conn,
+                arrivals,
+                last,
+                status,
+            },
+            first,
+        ))
+    }
+
+    /// Rollouts that arrived since the last call, in revision order, each once; never blocks.
+    pub fn poll(&mut self) -> Vec<Arrival> {
+        let mut got: Vec<Arrival> = self.arrivals.try_iter().collect();
+        if got.is_empty() {
+            return got;
+        }
+        got.sort_by_key(|a| a.rollout.revision);
+        let mut out = Vec::with_capacity(got.len());
+        for a in got {
+            let r = a.rollout.revision;
+            if r <= self.last {
+                log::log(
+                    Level::Warn,
+                    &format!(
+                        "spec: {} arrived after rollout {} in {}: ignored (rollouts take effect in \
+                         revision order; publish with `tessla-telegraf spec publish`, which takes the \
+                         next revision)",
+                        rollout_key(r),
+                        self.last,
+                        self.url.shown()
+                    ),
+                );
+                continue;
+            }
+            self.last = r;
+            out.push(a);
+        }
+        out
+    }
+
+    /// Write this process's outcomes to its status key (best effort, in the background: a
+    /// failure is a `W!` line, never fatal; a newer report replaces one not yet written).
+    pub fn report(&mut self, host: &str, partition: &str, outcomes: &[Outcome]) {
+        let pid = std::process::id();
+        let status = Status {
+            host: host.to_string(),
+            partition: partition.to_string(),
+            pid,
+            time: now_ns(),
+            outcomes: outcomes.to_vec(),
+        };
+        match serde_json::to_vec(&status) {
+            Ok(bytes) => {
+                let _ = self
+                    .status
+                    .send(Some((status_key(host, partition, pid), bytes)));
+            }
+            Err(e) => log::log(Level::Warn, &format!("spec: status not written: {e}")),
+        }
+    }
+}
+
+impl Channel for NatsFeed {
+    fn poll(&mut self) -> Vec<Arrival> {
+        NatsFeed::poll(self)
+    }
+
+    fn report(&mut self, host: &str, partition: &str, outcomes: &[Outcome]) {
+        NatsFeed::report(self, host, partition, outcomes);
+    }
+}
+
+/// Wait for the bucket (if it does not exist yet), then watch `rollout.>` and send every new
+/// rollout, checked, to the feed. A watch that ends (the connection lost for long) is started
+/// again; rollouts already sent are not sent again.
+async fn follow(
+    js: jetstream::Context,
+    url: Url,
+    store: Option<kv::Store>,
+    mut known: BTreeSet<u64>,
+    trust: Arc<[String]>,
+    tx: mpsc::Sender<Arrival>,
+    store_tx: tokio::sync::watch::Sender<Option<kv::Store>>,
+) {
+    let store = match store {
+        Some(s) => s,
+        None => loop {
+            tokio::time::sleep(LOOK_AGAIN).await;
+            if let Ok(s) = js.get_key_value(url.bucket.clone()).await {
+                log::log(
+                    Level::Info,
+                    &format!(
+                        "spec: the spec channel {} exists now; following it",
+                        url.shown()
+                    ),
+                );
+                let _ = store_tx.send(Some(s.clone()));
+                break s;
+            }
+        },
+    };
+    let mut warned = false;
+    loop {
+        match store.watch_with_history("rollout.>").await {
+            Ok(mut watch) => {
+                warned = false;
+                while let Some(entry) = watch.next().await {
+                    let Ok(entry) = entry else { break };
+                    if entry.operation != kv::Operation::Put {
+                        continue;
+                    }
+                    let Some(revision) = revision_of(&entry.key) else {
+                        log::warn_limited("spec-channel-key", || {
+                            format!(
+                                "spec: {} in {} is no rollout key (rollout.<revision>): ignored",
+                                entry.key,
+                                url.shown()
+                            )
+                        });
+                        continue;
+                    };
+                    if !known.insert(revision) {
+                        continue;
+                    }
+                    let a = arrival(&store, revision, &entry.value, &trust).await;
+                    if tx.send(a).is_err() {
+                        return;
+                    }
+                }
+            }
+            Err(e) if !warned => {
+                warned = true;
+                log::log(
+                    Level::Warn,
+                    &format!(
+                        "spec: cannot watch the spec channel {}: {e}; trying again every second",
+                        url.shown()
+                    ),
+                );
+            }
+            Err(_) => {}
+        }
+        tokio::time::sleep(Duration::from_secs(1)).await;
+    }
+}
+
+/// Put the newest status whenever there is one (once the bucket exists).
+async fn write_status(
+    url: Url,
+    mut status: tokio::sync::watch::Receiver<Option<(String, Vec<u8>)>>,
+    mut store: tokio::sync::watch::Receiver<Option<kv::Store>>,
+    violations: Arc<Mutex<Vec<String>>>,
+) {
+    while status.changed().await.is_ok() {
+        let Some((key, bytes)) = status.borrow_and_update().clone() else {
+            continue;
+        };
+        let Ok(s) = store.wait_for(Option::is_some).await.map(|s| s.clone()) else {
+            return;
+        };
+        let Some(s) = s else { continue };
+        if let Err(e) = s.put(key.as_str(), bytes.into()).await {
+            let why = match violation(&violations) {
+                Some(v) => format!(
+                    "not permitted ({}); a process's login must be allowed to write the spec \
+                     channel's status.> keys (telegraf/fleet-nats/accounts.conf)",
+                    mask(&v)
+                ),
+                None => e.to_string(),
+            };
+            log::log(
+                Level::Warn,
+                &format!(
+                    "spec: cannot write this process's status {key} to {}: {why}; `spec status` \
+                     shows an older one",
+                    url.shown()
+                ),
+            );
+        }
+    }
+}
+
+/// A rollout as `spec list` shows it: read from its key, with its signer (not checked: the
+/// operator's command has no trust list; the processes check).
+#[derive(Debug, Clone)]
+pub struct Listed {
+    pub revision: u64,
+    pub rollout: Result<Rollout, String>,
+    pub signer: Option<String>,
+}
+
+/// A status key as `spec status` reads it: its name and the status (`Err`: why it cannot be
+/// read).
+#[derive(Debug, Clone)]
+pub struct Reported {
+    pub key: String,
+    pub status: Result<Status, String>,
+}
+
+/// The operator's side of the channel: read rollouts and statuses, publish.
+pub struct Operator {
+    url: Url,
+    conn: Conn,
+    store: Option<kv::Store>,
+    violations: Arc<Mutex<Vec<String>>>,
+}
+
+impl Operator {
+    /// Connect; `create`: make the bucket when it does not exist (publishing).
+    pub fn connect(url: &Url, create: bool) -> Result<Operator, Failure> {
+        let conn =
+            Conn::start().map_err(|e| Failure::Io(format!("cannot start the NATS thread: {e}")))?;
+        let opened = conn
+            .call(open(url.clone(), create))
+            .ok_or_else(|| Failure::Io("the NATS thread stopped".to_string()))??;
+        Ok(Operator {
+            url: url.clone(),
+            conn,
+            store: opened.store,
+            violations: opened.violations,
+        })
+    }
+
+    /// Whether the bucket exists.
+    pub fn exists(&self) -> bool {
+        self.store.is_some()
+    }
+
+    pub fn url(&self) -> &Url {
+        &self.url
+    }
+
+    /// A failure of a request: "not permitted" when the server reported a violation.
+    fn failure(&self, what: &str, e: impl std::fmt::Display) -> Failure {
+        Failure::Io(match violation(&self.violations) {
+            Some(v) => denied(&self.url, &v),
+            None => format!("spec channel {}: {what}: {e}", self.url.shown()),
+        })
+    }
+
+    fn run<T: Send + 'static>(
+        &self,
+        f: impl std::future::Future<Output = T> + Send + 'static,
+    ) -> Result<T, Failure> {
+        self.conn
+            .call(f)
+            .ok_or_else(|| Failure::Io("the NATS thread stopped".to_string()))
+    }
+
+    /// Every rollout, in revision order.
+    pub fn rollouts(&self) -> Result<Vec<Listed>, Failure> {
+        let Some(store) = self.store.clone() else {
+            return Ok(Vec::new());
+        };
+        let got = self.run(async move {
+            let mut out = Vec::new();
+            for r in revisions(&store).await? {
+                let key = rollout_key(r);
+                match store.entry(key.as_str()).await {
+                    Ok(Some(e)) if e.operation == kv::Operation::Put => {
+                        let rec = Record::parse(&e.value);
+                        out.push(Listed {
+                            revision: r,
+                            rollout: rec.rollout,
+                            signer: rec.signer,
+                        });
+                    }
+                    Ok(_) => {}
+                    Err(e) => return Err(format!("cannot read {key}: {e}")),
+                }
+            }
+            Ok(out)
+        })?;
+        got.map_err(|e| self.failure("reading the rollouts", e))
+    }
+
+    /// Every process's status, in key order.
+    pub fn statuses(&self) -> Result<Vec<Reported>, Failure> {
+        let Some(store) = self.store.clone() else {
+            return Ok(Vec::new());
+        };
+        let got = self.run(async move {
+            let mut keys = store.keys().await.map_err(|e| e.to_string())?;
+            let mut names = Vec::new();
+            while let Some(k) = keys.next().await {
+                let k = k.map_err(|e| e.to_string())?;
+                if k.starts_with("status.") {
+                    names.push(k);
+                }
+            }
+            names.sort();
+            let mut out = Vec::new();
+            for k in names {
+                match store.get(k.as_str()).await {
+                    Ok(Some(v)) => {
+                        let s = serde_json::from_slice::<Status>(&v)
+                            .map_err(|e| format!("not a status: {e}"));
+                        out.push(Reported { key: k, status: s });
+                    }
+                    Ok(None) => {}
+                    Err(e) => return Err(format!("cannot read {k}: {e}")),
+                }
+            }
+            Ok(out)
+        })?;
+        got.map_err(|e| self.failure("reading the statuses", e))
+    }
+
+    /// Check that the bundle of `r` is in the channel and hashes to its digest (a rollback
+    /// publishes an earlier version again).
+    pub fn check_bundle(&self, r: &Rollout) -> Result<(), String> {
+        let Some(store) = self.store.clone() else {
+            return Err("the spec channel has no bucket".into());
+        };
+        let r = r.clone();
+        match self.run(async move { fetch_bundle(&store, &r).await.map(|_| ()) }) {
+            Ok(x) => x,
+            Err(f) => Err(f.message().to_string()),
+        }
+    }
+
+    /// Put `bundle` (none for the base marker), then `rollout` signed with `key` as the next
+    /// revision (its `revision` is set here: taken with the KV `create`, the next one tried
+    /// when another publisher took it). Returns the rollout as published.
+    pub fn publish(
+        &self,
+        bundle: Option<&Bundle>,
+        mut rollout: Rollout,
+        key: &nkeys::KeyPair,
+    ) -> Result<Rollout, Failure> {
+        let Some(store) = self.store.clone() else {
+            return Err(Failure::Io(format!(
+                "spec channel {}: no bucket",
+                self.url.shown()
+            )));
+        };
+        if let Some(b) = bundle {
+            let bytes = serde_json::to_vec(b)
+                .map_err(|e| Failure::Config(format!("the spec bundle: {e}")))?;
+            let k = bundle_key(&b.id());
+            let s = store.clone();
+            let kk = k.clone();
+            let put = self.run(async move { s.put(kk.as_str(), bytes.into()).await })?;
+            if let Err(e) = put {
+                return Err(self.refused(&k, e));
+            }
+        }
+        let s = store.clone();
+        let mut revision = self
+            .run(async move { revisions(&s).await })?
+            .map_err(|e| self.failure("reading the rollouts", e))?
+            .last()
+            .copied()
+            .unwrap_or(0);
+        // Each try takes the next revision; 100 publishers at once would be a fleet of operators.
+        for _ in 0..100 {
+            revision += 1;
+            rollout.revision = revision;
+            let bytes = sign::seal(&rollout, key).map_err(Failure::Config)?;
+            let s = store.clone();
+            let k = rollout_key(revision);
+            let kk = k.clone();
+            let created = self.run(async move { s.create(kk.as_str(), bytes.into()).await })?;
+            match created {
+                Ok(_) => return Ok(rollout),
+                Err(e) if e.kind() == kv::CreateErrorKind::AlreadyExists => continue,
+                Err(e) => return Err(self.refused(&k, e)),
+            }
+        }
+        Err(Failure::Io(format!(
+            "spec channel {}: 100 revisions in a row were taken by other publishers; try again",
+            self.url.shown()
+        )))
+    }
+
+    /// A write that failed: "not permitted" (this login may not publish) or why.
+    fn refused(&self, key: &str, e: impl std::fmt::Display) -> Failure {
+        Failure::Io(match violation(&self.violations) {
+            Some(v) => format!(
+                "not permitted at {}: the server refused this login ({}) to write {key} in bucket \
+                 {}: {}; only the operator's login may publish spec versions (the shipped \
+                 telegraf/fleet-nats/accounts.conf gives that right to admin alone; the processes' \
+                 users may write only status.> keys)",
+                self.url.shown(),
+                self.url.identity(),
+                self.url.bucket,
+                mask(&v)
+            ),
+            None => format!("spec channel {}: cannot write {key}: {e}", self.url.shown()),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_channel_url_is_a_state_url_with_a_default_bucket_and_no_lease() {
+        let u = parse_url("nats://a:1,b:2").unwrap();
+        assert_eq!(u.bucket, DEFAULT_BUCKET);
+        assert_eq!(u.servers, ["a:1", "b:2"]);
+        let u = parse_url("nats://u:p%2Fq@a:1/?replicas=3&tls-ca=/ca.pem").unwrap();
+        assert_eq!((u.bucket.as_str(), u.replicas), (DEFAULT_BUCKET, 3));
+        assert!(u.tls.required);
+        assert_eq!(parse_url("nats://a/specs2").unwrap().bucket, "specs2");
+        let e = parse_url("nats://a/b?lease=p0").unwrap_err();
+        assert!(e.contains("lease="), "{e}");
+        let e = parse_url("nats://u:Secr3t@a/b?x=1").unwrap_err();
+        assert!(e.contains("spec channel") && !e.contains("Secr3t"), "{e}");
+        assert!(parse_url("/a/file").is_err());
+    }
+
+    #[test]
+    fn keys_name_revisions_and_processes() {
+        assert_eq!(revision_of("rollout.12"), Some(12));
+        assert_eq!(revision_of("rollout.0"), None);
+        assert_eq!(revision_of("rollout.x"), None);
+        assert_eq!(revision_of("rollout.012"), None);
+        assert_eq!(revision_of("rollout.+1"), None);
+        assert_eq!(revision_of("bundle.12"), None);
+        assert_eq!(status_key("h.1", "p0", 7), "status.vh_2e1.vp0");
+        assert_eq!(status_key("h", "", 7), "status.vh.pid7");
+    }
+}

@@ -1,0 +1,737 @@
+//! The fleet's spec channel (`--spec-channel`, `tessla-telegraf spec ...`) against real
+//! nats-servers: a publish is listed, followed by a process ([`NatsFeed`], at connect and by
+//! `poll` afterwards) and reported back in `spec status`; a rollback publishes the version in
+//! force before (or the base marker); a tampered bundle, an unsigned, foreign-signed, re-signed
+//! or copied rollout reaches the process refused, saying why; a spec that does not check is
+//! refused before anything is written; with the shipped `accounts.conf` a fleet-p0 login may
+//! follow the channel and write its status but not publish (exit 3, "not permitted"); a login
+//! without the channel's permissions is told what it needs.
+//!
+//! A missing nats-server fails these tests (never skips): the spec channel is what keeps an
+//! unsigned spec off the robots.
+
+use crate::support::child;
+use crate::support::nats_cluster::{self, Cluster};
+use crate::support::servers;
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+use std::time::{Duration, Instant};
+use tessla_telegraf::spec_feed::nats::{NatsFeed, parse_url};
+use tessla_telegraf::spec_feed::{Arrival, Outcome, Rollout, sign};
+
+/// A single nats-server with JetStream on a free port (killed on drop); fails the test when
+/// nats-server is not installed.
+fn nats_server(conf: &str) -> servers::Server {
+    let binary = nats_cluster::require_nats_server().unwrap_or_else(|| {
+        panic!("nats-server is needed by the spec channel's tests (apt-get install nats-server)")
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let port = servers::free_port();
+    let conf = format!(
+        "listen: 127.0.0.1:{port}\njetstream {{ store_dir: \"{}\" }}\n{conf}\n",
+        dir.path().join("js").display()
+    );
+    servers::Server::start(&binary, &["-c"], dir, port, "nats.conf", &conf)
+}
+
+/// A spec folder, the operator's key (made by `spec keygen`) and a channel URL.
+struct Setup {
+    dir: tempfile::TempDir,
+    seed: PathBuf,
+    public: String,
+}
+
+impl Setup {
+    fn new() -> Setup {
+        let dir = tempfile::tempdir().unwrap();
+        let seed = dir.path().join("operator.seed");
+        let out = spec(&["keygen", "--seed-file", seed.to_str().unwrap()], &[]);
+        assert!(out.status.success(), "{}", child::text(&out.stderr));
+        let text = child::text(&out.stdout);
+        let public = text
+            .lines()
+            .find_map(|l| l.strip_prefix("public key: "))
+            .unwrap_or_else(|| panic!("no public key in {text}"))
+            .to_string();
+        let seed_text = std::fs::read_to_string(&seed).unwrap();
+        assert!(seed_text.starts_with("SO"), "a seed: {}", &seed_text[..2]);
+        assert!(!text.contains(seed_text.trim()), "the seed is not printed");
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(&seed).unwrap().permissions().mode();
+        assert_eq!(mode & 0o777, 0o600);
+        Setup { dir, seed, public }
+    }
+
+    /// `main.tessla` including `lib.tessla`, whose `def` is `body`.
+    fn write_spec(&self, body: &str) -> PathBuf {
+        child::write(
+            self.dir.path(),
+            "lib.tessla",
+            &format!("def scaled(x: Events[Int]) = {body}\n"),
+        );
+        child::write(
+            self.dir.path(),
+            "main.tessla",
+            "include \"lib.tessla\"\n@TelegrafIn(\"m\", \"x\")\nin x: Events[Int]\nout scaled(x) as y\n",
+        )
+    }
+
+    /// `spec publish SPEC --channel URL --sign-key-file SEED ARGS...`.
+    fn publish(&self, url: &str, spec_file: &Path, args: &[&str]) -> Output {
+        let mut all = vec![
+            "publish",
+            spec_file.to_str().unwrap(),
+            "--channel",
+            url,
+            "--sign-key-file",
+            self.seed.to_str().unwrap(),
+        ];
+        all.extend_from_slice(args);
+        spec(&all, &[])
+    }
+
+    fn rollback(&self, url: &str, args: &[&str]) -> Output {
+        let mut all = vec![
+            "rollback",
+            "--channel",
+            url,
+            "--sign-key-file",
+            self.seed.to_str().unwrap(),
+        ];
+        all.extend_from_slice(args);
+        spec(&all, &[])
+    }
+}
+
+/// `tessla-telegraf spec ARGS` with `env`.
+fn spec(args: &[&str], env: &[(&str, &str)]) -> Output {
+    let mut all = vec!["spec"];
+    all.extend_from_slice(args);
+    let child = child::command(&all)
+        .envs(env.iter().copied())
+        .spawn()
+        .expect("spawn the binary");
+    child.wait_with_output().expect("wait for the binary")
+}
+
+/// The version id of a `rollout N: version ID ...` line.
+fn published(out: &Output, revision: u64) -> String {
+    let text = child::text(&out.stdout);
+    assert!(out.status.success(), "{text}{}", child::text(&out.stderr));
+    let prefix = format!("rollout {revision}: version ");
+    let rest = text
+        .strip_prefix(&prefix)
+        .unwrap_or_else(|| panic!("expected `{prefix}...`, got {text}"));
+    rest.split(' ').next().unwrap_or_default().to_string()
+}
+
+fn until<T>(what: &str, mut f: impl FnMut() -> Option<T>) -> T {
+    let deadline = Instant::now() + Duration::from_secs(15);
+    loop {
+        if let Some(t) = f() {
+            return t;
+        }
+        assert!(Instant::now() < deadline, "{what} within 15 s");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+fn connect(url: &str, trust: &[String]) -> (NatsFeed, Vec<Arrival>) {
+    NatsFeed::connect(&parse_url(url).unwrap(), trust)
+        .unwrap_or_else(|e| panic!("connect to {url}: {}", e.message()))
+}
+
+fn outcome(r: &Rollout, accepted: bool, reason: &str) -> Outcome {
+    Outcome {
+        revision: r.revision,
+        id: r.id.clone(),
+        label: r.label.clone(),
+        accepted,
+        reason: reason.into(),
+        reset_outputs: if accepted {
+            vec!["y".into()]
+        } else {
+            Vec::new()
+        },
+    }
+}
+
+fn json(out: &Output) -> serde_json::Value {
+    assert!(out.status.success(), "{}", child::text(&out.stderr));
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn publish_list_status_and_a_process_following_the_channel() {
+    let server = nats_server("");
+    let url = format!("nats://127.0.0.1:{}", server.port);
+    let s = Setup::new();
+    let main = s.write_spec("x * 2");
+
+    let v1 = published(&s.publish(&url, &main, &["--label", "double"]), 1);
+    // A process connecting now reads it before its first record: verified, with its bundle.
+    let (mut feed, first) = connect(&url, std::slice::from_ref(&s.public));
+    assert_eq!(first.len(), 1);
+    let a = &first[0];
+    assert_eq!(
+        (a.rollout.revision, a.rollout.label.as_str()),
+        (1, "double")
+    );
+    assert!(a.rollout.selector.is_all());
+    let bundle = a.bundle.as_ref().unwrap();
+    assert_eq!((bundle.id(), bundle.files.len()), (v1.clone(), 2));
+    assert!(feed.poll().is_empty());
+
+    // A publish after connect (the seed from the environment, a canary from a stated time):
+    // `poll` hands it over.
+    s.write_spec("x * 3");
+    let seed = std::fs::read_to_string(&s.seed).unwrap();
+    let out = spec(
+        &[
+            "publish",
+            main.to_str().unwrap(),
+            "--channel",
+            &url,
+            "--select",
+            "robot=r1,r2",
+            "--from",
+            "2023-11-14T22:13:20Z",
+        ],
+        &[("TESSLA_SIGN_KEY", seed.trim())],
+    );
+    let v2 = published(&out, 2);
+    assert_ne!(v1, v2);
+    assert!(
+        child::text(&out.stdout)
+            .contains("in force from 2023-11-14T22:13:20.000000000Z for robot=r1,r2"),
+        "{}",
+        child::text(&out.stdout)
+    );
+    let got = until("the second rollout polled", || {
+        let got = feed.poll();
+        (!got.is_empty()).then_some(got)
+    });
+    assert_eq!(got.len(), 1);
+    let r2 = &got[0].rollout;
+    assert_eq!(
+        (
+            r2.revision,
+            r2.id.as_str(),
+            r2.from,
+            r2.selector.to_string()
+        ),
+        (
+            2,
+            v2.as_str(),
+            1_700_000_000_000_000_000,
+            "robot=r1,r2".to_string()
+        )
+    );
+    assert_eq!(got[0].bundle.as_ref().unwrap().id(), v2);
+    assert!(feed.poll().is_empty(), "each rollout once");
+
+    // Two processes report; `spec status` shows both, per rollout.
+    feed.report(
+        "host-a",
+        "p0",
+        &[
+            outcome(&a.rollout, true, ""),
+            outcome(
+                r2,
+                false,
+                "input `x` cannot read the metrics this process receives",
+            ),
+        ],
+    );
+    let (mut other, both) = connect(&url, std::slice::from_ref(&s.public));
+    assert_eq!(
+        both.iter().map(|a| a.rollout.revision).collect::<Vec<_>>(),
+        [1, 2]
+    );
+    other.report(
+        "host-b",
+        "",
+        &[
+            outcome(&both[0].rollout, true, ""),
+            outcome(&both[1].rollout, true, ""),
+        ],
+    );
+    let status = until("both statuses", || {
+        let v = json(&spec(&["status", "--channel", &url, "--json"], &[]));
+        (v["processes"].as_array().map_or(0, Vec::len) == 2).then_some(v)
+    });
+    let rollouts = status["rollouts"].as_array().unwrap();
+    assert_eq!(rollouts.len(), 2);
+    assert_eq!(rollouts[0]["label"], "double");
+    assert_eq!(rollouts[0]["signer"], s.public.as_str());
+    assert_eq!(
+        (
+            rollouts[0]["accepted"].as_u64(),
+            rollouts[0]["refused"].as_u64()
+        ),
+        (Some(2), Some(0))
+    );
+    assert_eq!(
+        (
+            rollouts[1]["accepted"].as_u64(),
+            rollouts[1]["refused"].as_u64()
+        ),
+        (Some(1), Some(1))
+    );
+    let a_status = status["processes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["host"] == "host-a")
+        .unwrap();
+    assert_eq!(a_status["partition"], "p0");
+    assert_eq!(a_status["key"], "status.vhost-a.vp0");
+    assert_eq!(a_status["outcomes"][1]["accepted"], false);
+
+    let table = child::text(&spec(&["status", "--channel", &url], &[]).stdout);
+    for want in [
+        "1 accepted, 1 refused",
+        "2 accepted, 0 refused",
+        "host-a",
+        "refused",
+        "input `x` cannot read the metrics",
+        "outputs starting afresh: y",
+        "robot=r1,r2",
+    ] {
+        assert!(table.contains(want), "`{want}` in\n{table}");
+    }
+    let list = child::text(&spec(&["list", "--channel", &url], &[]).stdout);
+    assert!(
+        list.starts_with("REV  VERSION ") && list.contains(&v1) && list.contains("double"),
+        "{list}"
+    );
+
+    // Refused before anything is written: a spec that does not check (the full diagnostic,
+    // exit 2), no signing key (exit 2).
+    let bad = child::write(
+        s.dir.path(),
+        "bad.tessla",
+        "in x: Events[Int]\nout x + true\n",
+    );
+    let out = s.publish(&url, &bad, &[]);
+    let err = child::text(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("bad.tessla:2:") && err.contains("was not published: it does not check"),
+        "{err}"
+    );
+    let out = spec(&["publish", main.to_str().unwrap(), "--channel", &url], &[]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        child::text(&out.stderr)
+            .contains("no signing key: give the operator's seed with --sign-key-file FILE"),
+        "{}",
+        child::text(&out.stderr)
+    );
+    let listed = json(&spec(&["list", "--channel", &url, "--json"], &[]));
+    assert_eq!(listed["rollouts"].as_array().unwrap().len(), 2);
+
+    // An unreachable channel: exit 3, saying so.
+    drop(server);
+    let out = spec(&["list", "--channel", &url], &[]);
+    assert_eq!(out.status.code(), Some(3));
+    assert!(
+        child::text(&out.stderr).contains("no NATS server answered"),
+        "{}",
+        child::text(&out.stderr)
+    );
+}
+
+#[test]
+fn a_rollback_publishes_the_version_in_force_before() {
+    let server = nats_server("");
+    let url = format!("nats://127.0.0.1:{}/specs_a", server.port);
+    let s = Setup::new();
+    let main = s.write_spec("x * 2");
+
+    // Nothing published: nothing to roll back (exit 2). A process started before the bucket
+    // exists waits for it.
+    let out = s.rollback(&url, &[]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        child::text(&out.stderr).contains("nothing to roll back"),
+        "{}",
+        child::text(&out.stderr)
+    );
+    let (mut feed, first) = connect(&url, std::slice::from_ref(&s.public));
+    assert!(first.is_empty());
+
+    let v1 = published(&s.publish(&url, &main, &[]), 1);
+    let got = until("the first rollout, once the bucket exists", || {
+        let got = feed.poll();
+        (!got.is_empty()).then_some(got)
+    });
+    assert_eq!(got[0].rollout.id, v1);
+
+    // One rollout: back to the spec each process started with (the base marker).
+    let out = s.rollback(&url, &[]);
+    assert_eq!(published(&out, 2), "base");
+    assert!(
+        child::text(&out.stdout).contains("(`rollback of ")
+            && child::text(&out.stdout)
+                .contains("rolls back rollout 1 to the spec each process started with"),
+        "{}",
+        child::text(&out.stdout)
+    );
+    let got = until("the base rollout", || {
+        let got = feed.poll();
+        (!got.is_empty()).then_some(got)
+    });
+    let base = &got[0];
+    assert_eq!(
+        (base.rollout.id.as_str(), base.rollout.digest.as_str()),
+        ("base", "")
+    );
+    assert_eq!(base.rollout.label, format!("rollback of {v1}"));
+    assert!(base.bundle.as_ref().unwrap().files.is_empty());
+
+    // v2 for all, then a rollback: v1's version again (from a stated time).
+    s.write_spec("x * 5");
+    let v2 = published(&s.publish(&url, &main, &["--label", "five"]), 3);
+    let out = s.rollback(&url, &["--from", "1700000000000000000"]);
+    // Revision 2 (base) was in force before revision 3.
+    assert_eq!(published(&out, 4), "base");
+    // v2 again; a canary of v3 for r1; its rollback for r1 is v2 (the last for every robot).
+    let again = s.publish(&url, &main, &[]);
+    assert_eq!(published(&again, 5), v2);
+    s.write_spec("x * 7");
+    let v3 = published(&s.publish(&url, &main, &["--select", "robot=r1"]), 6);
+    let out = s.rollback(&url, &["--select", "robot=r1"]);
+    assert_eq!(published(&out, 7), v2);
+    assert!(
+        child::text(&out.stdout).contains(&format!("(`rollback of {v3}`)"))
+            && child::text(&out.stdout)
+                .contains("for robot=r1: rolls back rollout 6 to the version of rollout 5"),
+        "{}",
+        child::text(&out.stdout)
+    );
+    let mut got = Vec::new();
+    until("rollouts 3 to 7", || {
+        got.extend(feed.poll());
+        (got.len() >= 5).then_some(())
+    });
+    assert_eq!(
+        got.iter().map(|a| a.rollout.revision).collect::<Vec<_>>(),
+        [3, 4, 5, 6, 7]
+    );
+    assert!(got.iter().all(|a| a.bundle.is_ok()));
+    assert_eq!(got[1].rollout.from, 1_700_000_000_000_000_000);
+
+    // A selector no rollout covers entirely: nothing to roll back for it.
+    let url_b = format!("nats://127.0.0.1:{}/specs_b", server.port);
+    published(&s.publish(&url_b, &main, &["--select", "robot=r1"]), 1);
+    let out = s.rollback(&url_b, &["--select", "robot=r1,r2"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        child::text(&out.stderr).contains("nothing to roll back for robot=r1,r2"),
+        "{}",
+        child::text(&out.stderr)
+    );
+}
+
+/// The bucket `bucket` on `port`, opened by a raw client (what someone with write access
+/// could do without the operator's key).
+fn raw<T>(
+    port: u16,
+    bucket: &str,
+    f: impl AsyncFnOnce(async_nats::jetstream::kv::Store) -> T,
+) -> T {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        let client = async_nats::connect(format!("127.0.0.1:{port}"))
+            .await
+            .unwrap();
+        let kv = async_nats::jetstream::new(client)
+            .get_key_value(bucket)
+            .await
+            .unwrap();
+        f(kv).await
+    })
+}
+
+#[test]
+fn tampered_unsigned_and_foreign_rollouts_are_refused_saying_why() {
+    let server = nats_server("");
+    let port = server.port;
+    let url = format!("nats://127.0.0.1:{port}");
+    let s = Setup::new();
+    let main = s.write_spec("x * 2");
+    let id = published(&s.publish(&url, &main, &["--label", "good"]), 1);
+    let operator =
+        nkeys::KeyPair::from_seed(std::fs::read_to_string(&s.seed).unwrap().trim()).unwrap();
+    let foreign = nkeys::KeyPair::new_operator();
+    let record = raw(port, "tessla_specs", async |kv| {
+        kv.get("rollout.1").await.unwrap().unwrap()
+    });
+    let rec = sign::Record::parse(&record);
+    let good: Rollout = rec.rollout.clone().unwrap();
+    let at = |revision: u64| Rollout {
+        revision,
+        label: format!("r{revision}"),
+        ..good.clone()
+    };
+    // 2: unsigned.
+    let mut unsigned: serde_json::Value = serde_json::from_slice(&record).unwrap();
+    unsigned.as_object_mut().unwrap().remove("signature");
+    unsigned["rollout"] = serde_json::to_value(at(2)).unwrap();
+    // 3: signed by a key the processes do not trust.
+    let untrusted = sign::seal(&at(3), &foreign).unwrap();
+    // 4: signed by the operator, but as revision 2 (copied to another key).
+    let copied = sign::seal(&at(2), &operator).unwrap();
+    // 5: naming the operator as signer, signed by another key.
+    let mut forged: serde_json::Value =
+        serde_json::from_slice(&sign::seal(&at(5), &foreign).unwrap()).unwrap();
+    forged["signer"] = serde_json::Value::String(s.public.clone());
+    // And the good rollout's bundle changed after publishing.
+    raw(port, "tessla_specs", async |kv| {
+        let key = format!("bundle.{id}");
+        let mut b: serde_json::Value =
+            serde_json::from_slice(&kv.get(key.as_str()).await.unwrap().unwrap()).unwrap();
+        let text = b["files"][1]["text"]
+            .as_str()
+            .unwrap()
+            .replace("x * 2", "x * 200");
+        b["files"][1]["text"] = serde_json::Value::String(text);
+        kv.put(key.as_str(), serde_json::to_vec(&b).unwrap().into())
+            .await
+            .unwrap();
+        for (k, v) in [
+            ("rollout.2", serde_json::to_vec(&unsigned).unwrap()),
+            ("rollout.3", untrusted),
+            ("rollout.4", copied),
+            ("rollout.5", serde_json::to_vec(&forged).unwrap()),
+        ] {
+            kv.create(k, v.into()).await.unwrap();
+        }
+    });
+
+    let (mut feed, first) = connect(&url, std::slice::from_ref(&s.public));
+    let why: Vec<(u64, String, String)> = first
+        .iter()
+        .map(|a| {
+            (
+                a.rollout.revision,
+                a.rollout.label.clone(),
+                a.bundle
+                    .as_ref()
+                    .map(|_| String::new())
+                    .unwrap_or_else(Clone::clone),
+            )
+        })
+        .collect();
+    let expect = [
+        (
+            1,
+            "good",
+            "does not hash to the digest the rollout was signed with",
+        ),
+        (2, "r2", "it is unsigned"),
+        (3, "r3", "which this process does not trust (--spec-trust)"),
+        (
+            4,
+            "r2",
+            "it says it is revision 2 but is stored as rollout.4",
+        ),
+        (5, "r5", "its signature does not verify with key"),
+    ];
+    assert_eq!(why.len(), expect.len(), "{why:?}");
+    for ((rev, label, reason), (r, l, want)) in why.iter().zip(expect) {
+        assert_eq!((*rev, label.as_str()), (r, l), "{why:?}");
+        assert!(
+            reason.contains(want),
+            "rollout {rev}: `{want}` in `{reason}`"
+        );
+    }
+    // Trusting the foreign key too: rollout 3 passes the signature check (and its bundle is
+    // the tampered one, refused by its digest).
+    let (_, both) = connect(&url, &[s.public.clone(), foreign.public_key()]);
+    assert!(
+        both[2]
+            .bundle
+            .as_ref()
+            .is_err_and(|e| e.contains("does not hash")),
+        "{:?}",
+        both[2].bundle
+    );
+    // One arriving later is refused the same way.
+    raw(port, "tessla_specs", async |kv| {
+        kv.create(
+            "rollout.6",
+            b"{\"format\":\"tessla-telegraf-rollout/1\",\"rollout\":{\"revision\":6}}"
+                .to_vec()
+                .into(),
+        )
+        .await
+        .unwrap();
+    });
+    let got = until("rollout 6 polled", || {
+        let got = feed.poll();
+        (!got.is_empty()).then_some(got)
+    });
+    assert_eq!(got[0].rollout.revision, 6);
+    assert!(
+        got[0]
+            .bundle
+            .as_ref()
+            .is_err_and(|e| e.contains("its rollout cannot be read")),
+        "{:?}",
+        got[0].bundle
+    );
+    // No trusted key: a configuration error.
+    let e = NatsFeed::connect(&parse_url(&url).unwrap(), &[])
+        .err()
+        .unwrap();
+    assert!(e.message().contains("--spec-trust"), "{}", e.message());
+}
+
+#[test]
+fn with_the_shipped_accounts_only_admin_may_publish() {
+    let cluster = Cluster::start_secured(&nats_cluster::shipped_mapping(), &[])
+        .unwrap_or_else(|| panic!("nats-server is needed by the spec channel's tests"));
+    let hosts = cluster.hosts();
+    let ca = cluster.certs().join("ca.pem");
+    let url = |user: &str| {
+        format!(
+            "nats://{hosts}/tessla_specs?user={user}&password-env=PW&tls-ca={}",
+            ca.display()
+        )
+    };
+    let secrets: Vec<String> = ["fleet-p0", "fleet-p1", "admin"]
+        .iter()
+        .map(|u| cluster.password(u))
+        .collect();
+    let as_user = |user: &str, args: &[&str]| {
+        let pw = cluster.password(user);
+        let out = spec(args, &[("PW", pw.as_str())]);
+        let text = format!("{}{}", child::text(&out.stdout), child::text(&out.stderr));
+        for s in &secrets {
+            assert!(
+                !text.contains(s.as_str()),
+                "a password in the output:\n{text}"
+            );
+        }
+        out
+    };
+    let s = Setup::new();
+    let main = s.write_spec("x * 2");
+    let seed = s.seed.to_str().unwrap();
+    let admin = url("admin");
+    let p0 = url("fleet-p0");
+    let out = as_user(
+        "admin",
+        &[
+            "publish",
+            main.to_str().unwrap(),
+            "--channel",
+            &admin,
+            "--sign-key-file",
+            seed,
+        ],
+    );
+    let id = published(&out, 1);
+
+    // fleet-p0 may not publish: the server refuses the write, the command says so (exit 3).
+    s.write_spec("x * 9");
+    let out = as_user(
+        "fleet-p0",
+        &[
+            "publish",
+            main.to_str().unwrap(),
+            "--channel",
+            &p0,
+            "--sign-key-file",
+            seed,
+        ],
+    );
+    let err = child::text(&out.stderr);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains("spec: not permitted at nats://fleet-p0:***@")
+            && err.contains("to write bundle.")
+            && err.contains("Permissions Violation")
+            && err.contains("gives that right to admin alone"),
+        "{err}"
+    );
+    // Nor take a revision with a bundle already there.
+    let out = as_user(
+        "fleet-p0",
+        &["rollback", "--channel", &p0, "--sign-key-file", seed],
+    );
+    let err = child::text(&out.stderr);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    assert!(
+        err.contains("not permitted") && err.contains("rollout.2"),
+        "{err}"
+    );
+    // Nothing was written; fleet-p0 may read.
+    let listed = json(&as_user("fleet-p0", &["list", "--channel", &p0, "--json"]));
+    assert_eq!(listed["rollouts"].as_array().unwrap().len(), 1);
+
+    // fleet-p0 follows the channel and writes its status.
+    let p0_url = parse_url(&format!(
+        "nats://{hosts}/tessla_specs?user=fleet-p0&password-file={}&tls-ca={}",
+        {
+            let f = s.dir.path().join("p0.password");
+            std::fs::write(&f, cluster.password("fleet-p0")).unwrap();
+            f.display().to_string()
+        },
+        ca.display()
+    ))
+    .unwrap();
+    let (mut feed, first) = NatsFeed::connect(&p0_url, std::slice::from_ref(&s.public))
+        .unwrap_or_else(|e| panic!("{}", e.message()));
+    assert_eq!(first.len(), 1);
+    assert_eq!(first[0].bundle.as_ref().unwrap().id(), id);
+    feed.report("robot-host", "p0", &[outcome(&first[0].rollout, true, "")]);
+    let status = until("fleet-p0's status", || {
+        let v = json(&as_user(
+            "admin",
+            &["status", "--channel", &admin, "--json"],
+        ));
+        (v["processes"].as_array().map_or(0, Vec::len) == 1).then_some(v)
+    });
+    assert_eq!(status["processes"][0]["partition"], "p0");
+    assert_eq!(status["rollouts"][0]["accepted"], 1);
+}
+
+#[test]
+fn a_login_without_the_channel_permissions_is_told_what_it_needs() {
+    let server = nats_server(
+        "authorization { users: [\n\
+         { user: admin, password: adminpw }\n\
+         { user: other, password: otherpw, permissions: { publish: [\"$JS.API.INFO\"], subscribe: [\"_INBOX.>\"] } }\n\
+         ] }",
+    );
+    let port = server.port;
+    let s = Setup::new();
+    let main = s.write_spec("x * 2");
+    published(
+        &s.publish(
+            &format!("nats://admin:adminpw@127.0.0.1:{port}"),
+            &main,
+            &[],
+        ),
+        1,
+    );
+    let url = parse_url(&format!("nats://other:otherpw@127.0.0.1:{port}")).unwrap();
+    let e = NatsFeed::connect(&url, std::slice::from_ref(&s.public))
+        .err()
+        .unwrap_or_else(|| panic!("connected without the permissions"));
+    let m = e.message();
+    assert!(
+        m.contains("not permitted at nats://other:***@127.0.0.1:")
+            && m.contains("access to the spec channel's bucket tessla_specs")
+            && m.contains("Permissions Violation")
+            && !m.contains("otherpw"),
+        "{m}"
+    );
+}
