@@ -28,11 +28,19 @@ pub struct RunConfig {
     pub spec: SpecSource,
     /// `--watch-spec`: reload when the spec file or an include changes.
     pub watch_spec: bool,
+    /// `--spec-channel`: the fleet's spec channel and the keys its rollouts must be signed with.
+    pub channel: Option<ChannelConfig>,
     pub processor: processor::Options,
     pub transport: Transport,
     pub state: Option<StateConfig>,
     /// `--step-timeout` (zero: no watchdog).
     pub step_timeout: Duration,
+}
+
+/// `--spec-channel` with its trusted keys (at least one).
+pub struct ChannelConfig {
+    pub url: crate::state::url::Url,
+    pub trust: Vec<String>,
 }
 
 /// `--state` and what decides whether saved state fits this run.
@@ -59,6 +67,17 @@ impl RunConfig {
             options,
         };
         let udp = args.transport.udp_listen.is_some();
+        let channel = match args.spec_channel.spec_channel.clone() {
+            None => None,
+            Some(url) => Some(ChannelConfig {
+                url,
+                trust: crate::spec_feed::sign::trusted_keys(
+                    &args.spec_channel.spec_trust,
+                    args.spec_channel.spec_trust_file.as_deref(),
+                )
+                .map_err(|e| CliError::spec(format!("--spec-channel: {e}")))?,
+            }),
+        };
         let processor = processor_options(&args.time, &args.instances, &args.output, udp)?;
         let state = args.state.state.clone().map(|target| {
             let interval = args.state.state_interval;
@@ -102,6 +121,7 @@ impl RunConfig {
         Ok(RunConfig {
             spec,
             watch_spec: args.watch_spec,
+            channel,
             processor,
             transport,
             state,

@@ -11,6 +11,7 @@ use super::spec::require_outputs;
 use crate::log::{self, Level};
 use crate::processor::Processor;
 use crate::spec_feed::Updates;
+use crate::spec_feed::nats::NatsFeed;
 use crate::state::file::FileBackend;
 use crate::state::nats::NatsBackend;
 use crate::state::nats_conn::Failure;
@@ -49,6 +50,13 @@ pub fn run(args: RunArgs) -> CliResult {
         _ => String::new(),
     };
     let mut updates = Updates::new(config.spec.clone(), config.watch_spec, &partition);
+    if let Some(ch) = &config.channel {
+        let (feed, first) = NatsFeed::connect(&ch.url, &ch.trust).map_err(|e| match e {
+            Failure::Config(m) => CliError::spec(format!("spec channel: {m}")),
+            Failure::Io(m) => CliError::io(format!("spec channel: {m}")),
+        })?;
+        updates.with_channel(Box::new(feed), first);
+    }
     let store = backend.as_deref_mut().map(|backend| Store {
         backend,
         interval: config.state.as_ref().and_then(|s| s.interval),

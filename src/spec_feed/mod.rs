@@ -101,6 +101,8 @@ pub struct Updates {
     outcomes: Vec<Outcome>,
     /// Versions compiled from rollouts, by id (a rollout of a version already held reuses it).
     compiled: HashMap<String, Arc<tessla_engine::Program>>,
+    /// The rollouts the channel held at connect, not applied yet.
+    first: Vec<Arrival>,
 }
 
 impl Updates {
@@ -119,13 +121,15 @@ impl Updates {
             partition: partition.to_string(),
             outcomes: Vec::new(),
             compiled: HashMap::new(),
+            first: Vec::new(),
         }
     }
 
-    /// Follow `channel` too; `first`: the rollouts it already held, applied before the first
-    /// record by [`Updates::start`].
-    pub fn with_channel(&mut self, channel: Box<dyn Channel>) {
+    /// Follow `channel` too; `first`: the rollouts it already held, applied by the first
+    /// [`Updates::tick`] (the step loop's, before anything is restored or read).
+    pub fn with_channel(&mut self, channel: Box<dyn Channel>, first: Vec<Arrival>) {
         self.channel = Some(channel);
+        self.first = first;
     }
 
     /// How often the step loop calls [`Updates::tick`] (`None`: never).
@@ -151,10 +155,11 @@ impl Updates {
         if self.watch.as_mut().is_some_and(watch::Watched::changed) {
             self.reload("spec file changed", procs, out);
         }
-        let arrivals = match self.channel.as_mut() {
-            Some(c) => c.poll(),
+        let mut arrivals = std::mem::take(&mut self.first);
+        match self.channel.as_mut() {
+            Some(c) => arrivals.extend(c.poll()),
             None => return,
-        };
+        }
         if arrivals.is_empty() {
             return;
         }
