@@ -735,3 +735,212 @@ fn a_login_without_the_channel_permissions_is_told_what_it_needs() {
         "{m}"
     );
 }
+
+/// The base spec of the end-to-end tests: a count that a new version keeps, and `y`, which it
+/// changes.
+const BASE_SPEC: &str = "in x: Events[Int]\ndef c = count(x)\ndef y = x + 1\nout c\nout y\n";
+const NEW_SPEC: &str = "in x: Events[Int]\ndef c = count(x)\ndef y = x * 10\nout c\nout y\n";
+/// Event time of step `k` of the end-to-end input (in the past: no `--max-ahead` refusal).
+fn ts(k: i64) -> i64 {
+    1_700_000_000_000_000_000 + k * 100_000_000
+}
+
+/// Records `ks` of `robots`, interleaved by step.
+fn records(robots: &[&str], ks: std::ops::Range<i64>) -> String {
+    let mut out = String::new();
+    for k in ks {
+        for r in robots {
+            out.push_str(&format!("m,robot={r} x={k}i {}\n", ts(k)));
+        }
+    }
+    out
+}
+
+/// `run` on the channel with the state in `bucket`, fed `input`: its output lines without the
+/// status metrics, and stderr.
+fn run_on_channel(
+    url: &str,
+    s: &Setup,
+    base: &Path,
+    bucket: &str,
+    input: &str,
+) -> (Vec<String>, String) {
+    let state = format!("{url}/{bucket}");
+    let (out, err, code) = child::run_text(
+        &[
+            "run",
+            "--spec",
+            base.to_str().unwrap(),
+            "--no-passthrough",
+            "--instance-by",
+            "robot",
+            "--version-tag",
+            "spec_version",
+            "--spec-channel",
+            url,
+            "--spec-trust",
+            &s.public,
+            "--state",
+            &state,
+        ],
+        input,
+    );
+    assert_eq!(code, 0, "{err}");
+    let lines = out
+        .lines()
+        .filter(|l| !l.starts_with("tessla_spec,"))
+        .map(String::from)
+        .collect();
+    (lines, err)
+}
+
+/// A canary for robots r1 and r2 from step 10 and a rollout to every robot from step 15: one
+/// process judges every record by the version in force at its time (the count carried over);
+/// the same fleet split over a takeover in the middle of the change (at step 12: r1 and r2
+/// switched, r3 not yet), and a robot run by a process of its own, give the same lines.
+#[test]
+fn a_rollout_switches_at_its_event_time_the_same_in_every_process() {
+    let server = nats_server("");
+    let url = format!("nats://127.0.0.1:{}", server.port);
+    let s = Setup::new();
+    let base = child::write(s.dir.path(), "base.tessla", BASE_SPEC);
+    let new = child::write(s.dir.path(), "new.tessla", NEW_SPEC);
+    let v_new = published(
+        &s.publish(
+            &url,
+            &new,
+            &[
+                "--label",
+                "ten",
+                "--select",
+                "robot=r1,r2",
+                "--from",
+                &ts(10).to_string(),
+            ],
+        ),
+        1,
+    );
+    published(&s.publish(&url, &new, &["--from", &ts(15).to_string()]), 2);
+    let robots = ["r1", "r2", "r3"];
+
+    let (single, err) = run_on_channel(&url, &s, &base, "state_single", &records(&robots, 0..20));
+    assert!(err.contains("rollout 1 (version"), "{err}");
+    assert_eq!(single.len(), 60, "one line per record: {single:#?}");
+    let v_base = single[0]
+        .split(',')
+        .find_map(|t| t.split(' ').next()?.strip_prefix("spec_version="))
+        .unwrap()
+        .to_string();
+    assert_ne!(v_base, v_new);
+    for (k, r) in (0..20).flat_map(|k| robots.iter().map(move |r| (k, *r))) {
+        let switched = k >= 15 || (k >= 10 && r != "r3");
+        let (v, y) = if switched {
+            (&v_new, k * 10)
+        } else {
+            (&v_base, k + 1)
+        };
+        let want = format!(
+            "tessla,robot={r},spec_version={v} c={}i,y={y}i {}",
+            k + 1,
+            ts(k)
+        );
+        assert!(single.contains(&want), "missing {want} in {single:#?}");
+    }
+
+    // A takeover in the middle of the change: the first process stops after step 11 (its
+    // state saved), the next restores each robot as it arrives.
+    let (mut split, _) = run_on_channel(&url, &s, &base, "state_split", &records(&robots, 0..12));
+    let (rest, err) = run_on_channel(&url, &s, &base, "state_split", &records(&robots, 12..20));
+    assert!(err.contains("restored"), "{err}");
+    split.extend(rest);
+    assert_eq!(split, single);
+
+    // A partition of its own for r3.
+    let (alone, _) = run_on_channel(&url, &s, &base, "state_r3", &records(&["r3"], 0..20));
+    let r3: Vec<String> = single
+        .iter()
+        .filter(|l| l.starts_with("tessla,robot=r3,"))
+        .cloned()
+        .collect();
+    assert_eq!(alone, r3);
+}
+
+/// Two running processes (two partitions): a good publish reaches both (each writes an accepted
+/// status line and switches at the version's time), a version that cannot read their metrics
+/// is refused by both with the reason, and both go on with the versions in force.
+#[test]
+fn every_running_process_takes_a_publish_and_refuses_a_bad_one() {
+    use crate::support::live_child::LiveChild;
+    let server = nats_server("");
+    let url = format!("nats://127.0.0.1:{}", server.port);
+    let s = Setup::new();
+    let base = child::write(s.dir.path(), "base.tessla", BASE_SPEC);
+    let new = child::write(s.dir.path(), "new.tessla", NEW_SPEC);
+    // Reads `x` as a Bool: the metrics carry an Int.
+    let bad = child::write(s.dir.path(), "bad.tessla", "in x: Events[Bool]\nout x\n");
+    let spawn = || {
+        LiveChild::spawn(&[
+            "run",
+            "--spec",
+            base.to_str().unwrap(),
+            "--no-passthrough",
+            "--instance-by",
+            "robot",
+            "--version-tag",
+            "spec_version",
+            "--spec-channel",
+            &url,
+            "--spec-trust",
+            &s.public,
+        ])
+    };
+    let mut procs = [spawn(), spawn()];
+    for (i, p) in procs.iter_mut().enumerate() {
+        p.write(&format!("m,robot=p{i} x=1i {}\n", ts(0)));
+        p.wait_out("the first answer", |l| {
+            l.contains(&format!(" c=1i,y=2i {}", ts(0)))
+        });
+    }
+    let v_new = published(&s.publish(&url, &new, &["--from", &ts(5).to_string()]), 1);
+    for p in procs.iter_mut() {
+        p.wait_out("the accepted status", |l| {
+            l.starts_with("tessla_spec,") && l.contains(",outcome=accepted,") && l.contains(&v_new)
+        });
+    }
+    published(&s.publish(&url, &bad, &[]), 2);
+    for (i, p) in procs.iter_mut().enumerate() {
+        p.wait_out("the refused status", |l| {
+            l.starts_with("tessla_spec,") && l.contains(",outcome=refused,")
+        });
+        let refused = p
+            .out
+            .iter()
+            .find(|l| l.contains(",outcome=refused,"))
+            .unwrap()
+            .clone();
+        assert!(refused.contains("input `x`"), "{refused}");
+        // Undisturbed: before the version's time the base, from it the new version.
+        p.write(&format!(
+            "m,robot=p{i} x=2i {}\nm,robot=p{i} x=3i {}\n",
+            ts(4),
+            ts(6)
+        ));
+        let want = format!(
+            "tessla,robot=p{i},spec_version={v_new} c=3i,y=30i {}",
+            ts(6)
+        );
+        p.wait_out("the new version's answer", |l| l.trim_end() == want);
+        assert!(
+            p.out
+                .iter()
+                .any(|l| l.trim_end().ends_with(&format!(" c=2i,y=3i {}", ts(4)))),
+            "{:#?}",
+            p.out
+        );
+    }
+    for p in procs {
+        let (_, err, code) = p.finish();
+        assert_eq!(code, 0, "{err}");
+        assert!(err.contains("refused: input `x`"), "{err}");
+    }
+}
