@@ -1,5 +1,5 @@
 # Every command the README mentions lives here. `make run` and `make test` are the README's first two.
-.PHONY: run test setup build install install-files deb profiling readme-run bench bench-criterion bench-process bench-nats bench-telegraf shutdown-save soak fmt lint ci fixtures conformance fuzz reproduce
+.PHONY: run test setup build install install-files deb profiling readme-run bench bench-criterion bench-process bench-nats bench-telegraf shutdown-save rollout-bench soak fmt lint ci fixtures conformance fuzz reproduce
 
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
@@ -117,6 +117,12 @@ bench-telegraf: build
 # 5 s to SIGTERM and 5 more to SIGKILL (Windows: a kill after 5 s). SHUTDOWN_ARGS="--nats
 # HOST:PORT,... --nats-options replicas=3" saves to a JetStream bucket instead of a file.
 SHUTDOWN_INSTANCES ?= 10000 50000 100000
+ROLLOUT_REPS ?= 10
+# Spec rollouts (BENCHMARKS.md, "Spec versions across a fleet"): publish -> both partitions of a
+# two-process fleet running the new version, and no record lost or judged by a mix of versions.
+rollout-bench: build
+	python3 bench/spec_rollout.py --reps $(ROLLOUT_REPS)
+
 shutdown-save: build
 	python3 bench/shutdown_save.py --instances $(SHUTDOWN_INSTANCES) --reps 5 $(SHUTDOWN_ARGS)
 
