@@ -298,12 +298,29 @@ fn shipped_fleet_conf_command_keeps_robots_apart() {
     assert_eq!(code, 0, "{err}");
     assert!(err.contains("3 instances"), "{err}");
     assert!(err.contains("state: saved 3 monitor instances"), "{err}");
+    // Every action names its robot and the spec version that computed it (--version-tag).
+    let tags_of = |l: &str| -> Vec<String> {
+        l.split(' ')
+            .next()
+            .unwrap()
+            .split(',')
+            .skip(1)
+            .map(String::from)
+            .collect()
+    };
     for k in 0..ROBOTS {
-        let actions = out
+        let robot = format!("{by}=tessla/robot{k}");
+        let actions: Vec<&str> = out
             .lines()
-            .filter(|l| l.starts_with(&format!("action,{by}=tessla/robot{k} ")))
-            .count();
-        assert_eq!(actions, PER_ROBOT, "robot {k}");
+            .filter(|l| l.starts_with("action,") && tags_of(l).contains(&robot))
+            .collect();
+        assert_eq!(actions.len(), PER_ROBOT, "robot {k}");
+        for a in actions {
+            assert!(
+                tags_of(a).iter().any(|t| t.starts_with("spec_version=")),
+                "{a}"
+            );
+        }
     }
 }
 
