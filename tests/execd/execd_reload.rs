@@ -22,10 +22,15 @@ const LIB_V2: &str = "def m = x * 2\n";
 
 /// Send `x = v` at `ts` and wait for the output line of that step; returns it.
 fn step(c: &mut LiveChild, ts: i64, v: i64) -> String {
+    step_with(c, "tessla ", ts, v)
+}
+
+/// [`step`] for output lines starting with `prefix` (`tessla,` when they carry tags).
+fn step_with(c: &mut LiveChild, prefix: &str, ts: i64, v: i64) -> String {
     c.write(&format!("m x={v}i {ts}\n"));
     let suffix = format!(" {ts}\n");
     c.wait_out(&format!("for the step at {ts}"), |l| {
-        l.starts_with("tessla ") && l.ends_with(&suffix)
+        l.starts_with(prefix) && l.ends_with(&suffix)
     });
     c.out
         .iter()
@@ -269,19 +274,7 @@ fn a_watched_spec_reloads_on_an_edit_and_outputs_name_their_version() {
         "--version-tag",
         "spec_version",
     ]);
-    let step_v = |c: &mut LiveChild, ts: i64, v: i64| {
-        c.write(&format!("m x={v}i {ts}\n"));
-        let suffix = format!(" {ts}\n");
-        c.wait_out(&format!("the step at {ts}"), |l| {
-            l.starts_with("tessla,") && l.ends_with(&suffix)
-        });
-        c.out
-            .iter()
-            .rev()
-            .find(|l| l.ends_with(&suffix))
-            .cloned()
-            .unwrap()
-    };
+    let step_v = |c: &mut LiveChild, ts: i64, v: i64| step_with(c, "tessla,", ts, v);
     let first = step_v(&mut c, 10, 1);
     assert!(first.ends_with(" c=1i,m=2i 10\n"), "{first}");
     let v1 = version_of(&first);

@@ -756,6 +756,25 @@ fn records(robots: &[&str], ks: std::ops::Range<i64>) -> String {
     out
 }
 
+/// `run BASE` following the channel at `url`, one instance per robot, outputs tagged with their
+/// version.
+fn channel_run<'a>(url: &'a str, s: &'a Setup, base: &'a Path) -> Vec<&'a str> {
+    vec![
+        "run",
+        "--spec",
+        base.to_str().unwrap(),
+        "--no-passthrough",
+        "--instance-by",
+        "robot",
+        "--version-tag",
+        "spec_version",
+        "--spec-channel",
+        url,
+        "--spec-trust",
+        &s.public,
+    ]
+}
+
 /// `run` on the channel with the state in `bucket`, fed `input`: its output lines without the
 /// status metrics, and stderr.
 fn run_on_channel(
@@ -766,25 +785,9 @@ fn run_on_channel(
     input: &str,
 ) -> (Vec<String>, String) {
     let state = format!("{url}/{bucket}");
-    let (out, err, code) = child::run_text(
-        &[
-            "run",
-            "--spec",
-            base.to_str().unwrap(),
-            "--no-passthrough",
-            "--instance-by",
-            "robot",
-            "--version-tag",
-            "spec_version",
-            "--spec-channel",
-            url,
-            "--spec-trust",
-            &s.public,
-            "--state",
-            &state,
-        ],
-        input,
-    );
+    let mut args = channel_run(url, s, base);
+    args.extend(["--state", &state]);
+    let (out, err, code) = child::run_text(&args, input);
     assert_eq!(code, 0, "{err}");
     let lines = out
         .lines()
@@ -878,22 +881,7 @@ fn every_running_process_takes_a_publish_and_refuses_a_bad_one() {
     let new = child::write(s.dir.path(), "new.tessla", NEW_SPEC);
     // Reads `x` as a Bool: the metrics carry an Int.
     let bad = child::write(s.dir.path(), "bad.tessla", "in x: Events[Bool]\nout x\n");
-    let spawn = || {
-        LiveChild::spawn(&[
-            "run",
-            "--spec",
-            base.to_str().unwrap(),
-            "--no-passthrough",
-            "--instance-by",
-            "robot",
-            "--version-tag",
-            "spec_version",
-            "--spec-channel",
-            &url,
-            "--spec-trust",
-            &s.public,
-        ])
-    };
+    let spawn = || LiveChild::spawn(&channel_run(&url, &s, &base));
     let mut procs = [spawn(), spawn()];
     for (i, p) in procs.iter_mut().enumerate() {
         p.write(&format!("m,robot=p{i} x=1i {}\n", ts(0)));
