@@ -72,8 +72,9 @@ pub struct PublishArgs {
     /// A label shown beside the version's id (`tight delta`).
     #[arg(long)]
     pub label: Option<String>,
-    /// The event time from which it is in force: RFC 3339 (`2025-06-01T12:00:00Z`) or
-    /// nanoseconds since the Unix epoch; default: now.
+    /// The event time from which it is in force: RFC 3339 (`2025-06-01T12:00:00Z`),
+    /// nanoseconds since the Unix epoch, or `+DURATION` from now (`+2s`: every process has it
+    /// before its records reach that time, so all switch at one point); default: now.
     #[arg(long, value_name = "TIME", value_parser = parse_time)]
     pub from: Option<i64>,
     /// Only the instances whose `--instance-by` tags match: `robot=r1,r2[;site=lab]`;
@@ -120,11 +121,21 @@ pub struct KeygenArgs {
     pub seed_file: Option<PathBuf>,
 }
 
-/// `--from`: RFC 3339, or an integer count of nanoseconds since the Unix epoch.
+/// `--from`: RFC 3339, an integer count of nanoseconds since the Unix epoch, or `+DURATION`
+/// from now (`+2s`: a start every process of the fleet receives before it comes).
 pub fn parse_time(s: &str) -> Result<i64, String> {
     let s = s.trim();
     if let Ok(ns) = s.parse::<i64>() {
         return Ok(ns);
+    }
+    if let Some(ahead) = s.strip_prefix('+') {
+        let d = humantime::parse_duration(ahead.trim())
+            .map_err(|e| format!("`{s}`: {e} (expected +DURATION, e.g. +2s)"))?;
+        let now = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_err(|_| "the clock is before 1970".to_string())?;
+        return i64::try_from((now + d).as_nanos())
+            .map_err(|_| format!("`{s}` is past the year 2262"));
     }
     let t = humantime::parse_rfc3339_weak(s).map_err(|e| {
         format!("`{s}`: {e} (expected RFC 3339, e.g. 2025-06-01T12:00:00Z, or nanoseconds since the Unix epoch)")
@@ -676,6 +687,17 @@ mod tests {
             Ok(1_700_000_000_500_000_000)
         );
         assert!(parse_time("yesterday").unwrap_err().contains("RFC 3339"));
+        // `+DURATION`: that far from now.
+        let before = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_nanos() as i64;
+        let t = parse_time("+2s").unwrap();
+        assert!(
+            t >= before + 2_000_000_000 && t < before + 3_000_000_000,
+            "{t}"
+        );
+        assert!(parse_time("+soon").unwrap_err().contains("+DURATION"));
     }
 
     #[test]

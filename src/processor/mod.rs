@@ -810,6 +810,22 @@ impl Processor {
         Ok(())
     }
 
+    /// How many instances `selector` picks have stepped past `from`, and by how much at most
+    /// (ns): a rollout starting there arrived late for them.
+    pub fn instances_past(&self, from: i64, selector: &Selector) -> (u64, i64) {
+        let by = &self.opts.instance_by;
+        self.pool
+            .table
+            .iter_lru()
+            .filter(|(k, i)| {
+                selector.matches(by, k) && i.monitor.last_evaluated().is_some_and(|t| t > from)
+            })
+            .fold((0, 0), |(n, max), (_, i)| {
+                let behind = i.monitor.clock().saturating_sub(from);
+                (n + 1, max.max(behind))
+            })
+    }
+
     /// Put a version ([`Processor::check_version`] passed) in force for the instances
     /// `selector` picks from event time `from` on: each switches at its first step at or after
     /// it. `Err`: its input annotations are malformed; nothing changed then.
@@ -1230,5 +1246,19 @@ mod tests {
         assert!(e.contains("none of its inputs"), "{e}");
         p.check_version("new", &program(NEW), &Selector::all())
             .unwrap();
+    }
+
+    /// A rollout starting behind instances' clocks: they are counted (the status says how many
+    /// switched late), and each switches at its next step.
+    #[test]
+    fn instances_already_past_a_start_are_counted_and_switch_next() {
+        let mut p = versioned();
+        feed(&mut p, "m,robot=a x=1i 100\nm,robot=b x=1i 500\n");
+        let sel = Selector::parse("robot=a,b").unwrap();
+        assert_eq!(p.instances_past(300, &sel), (1, 200));
+        assert_eq!(p.instances_past(600, &sel), (0, 0));
+        p.accept_version("new", "", program(NEW), 300, sel).unwrap();
+        let out = feed(&mut p, "m,robot=b x=2i 600\n");
+        assert_eq!(out, "tessla,robot=b,spec_version=new c=2i,s=20i 600\n");
     }
 }

@@ -52,7 +52,7 @@ pub struct Rollout {
 }
 
 /// What one process made of one version.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Outcome {
     /// The rollout's revision (0 for a local reload: SIGHUP or a watched file).
     pub revision: u64,
@@ -65,6 +65,10 @@ pub struct Outcome {
     /// Outputs whose streams start afresh in the instances that switch.
     #[serde(default)]
     pub reset_outputs: Vec<String>,
+    /// Instances it picks that had already stepped past its start when it arrived: they switch
+    /// at their next step, so their records since the start were judged by the version before.
+    #[serde(default)]
+    pub late_instances: u64,
 }
 
 /// A rollout as a channel delivers it: verified with its bundle, or why it cannot be used (an
@@ -189,7 +193,7 @@ impl Updates {
                 label,
                 accepted: false,
                 reason: first_lines(&reason),
-                reset_outputs: Vec::new(),
+                ..Outcome::default()
             },
             Reloaded::Replaced {
                 id, reset_outputs, ..
@@ -198,8 +202,8 @@ impl Updates {
                 id,
                 label,
                 accepted: true,
-                reason: String::new(),
                 reset_outputs,
+                ..Outcome::default()
             },
         };
         self.outcome(outcome, status::now_ns(), out);
@@ -214,7 +218,7 @@ impl Updates {
             label: r.label.clone(),
             accepted: false,
             reason,
-            reset_outputs: Vec::new(),
+            ..Outcome::default()
         };
         let program = match self.program_of(a, procs) {
             Ok(p) => p,
@@ -233,6 +237,12 @@ impl Updates {
             }
         }
         let mut reset = Vec::new();
+        let (mut late, mut behind) = (0u64, 0i64);
+        for p in procs.iter() {
+            let (n, by) = p.instances_past(r.from, &r.selector);
+            late += n;
+            behind = behind.max(by);
+        }
         for (i, p) in procs.iter_mut().enumerate() {
             match p.accept_version(
                 &id,
@@ -251,13 +261,25 @@ impl Updates {
                 Err(e) => return refused(e),
             }
         }
+        if late > 0 {
+            log::log(
+                Level::Warn,
+                &format!(
+                    "spec: rollout {} starts at {}, but {late} instances it picks had already stepped past it (by up to {}): they switch at their next step, and their records since its start were judged by the version before. For one switch point in every process, publish with a start a moment ahead (`spec publish --from +2s`)",
+                    r.revision,
+                    status::show_time(r.from),
+                    crate::processor::clock::human_ns(behind)
+                ),
+            );
+        }
         Outcome {
             revision: r.revision,
             id: r.id.clone(),
             label: r.label.clone(),
             accepted: true,
-            reason: String::new(),
             reset_outputs: reset,
+            late_instances: late,
+            ..Outcome::default()
         }
     }
 

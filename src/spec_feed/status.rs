@@ -3,7 +3,8 @@
 //! the operator sees a rollout on the dashboards.
 //!
 //! `tessla_spec,host=H,partition=P,version=ID,outcome=accepted|refused revision=3i,label="…",reason="…",reset_outputs="a,b",from=T i,pid=N i TIME`
-//! (`partition` only with a lease; `label`, `reason` and `reset_outputs` only when not empty.)
+//! (`partition` only with a lease; `label`, `reason` and `reset_outputs` only when not empty;
+//! `late_instances=Ni` when a rollout arrived after instances it picks had passed its start.)
 
 use super::Outcome;
 use lineproto::{
@@ -60,6 +61,10 @@ pub fn write_line(out: &mut Vec<u8>, host: &str, partition: &str, o: &Outcome, f
         ("from", FieldValue::Int(from)),
         ("pid", FieldValue::Int(i64::from(std::process::id()))),
     ];
+    if o.late_instances > 0 {
+        let n = i64::try_from(o.late_instances).unwrap_or(i64::MAX);
+        fields.push(("late_instances", FieldValue::Int(n)));
+    }
     for (k, v) in [
         ("label", &o.label),
         ("reason", &o.reason),
@@ -94,7 +99,7 @@ mod tests {
             label: "tight delta".into(),
             accepted: false,
             reason: "it does not check here: \"x\"".into(),
-            reset_outputs: Vec::new(),
+            ..Outcome::default()
         };
         let mut out = Vec::new();
         write_line(&mut out, "h 1", "p0", &o, 5);

@@ -154,6 +154,7 @@ fn outcome(r: &Rollout, accepted: bool, reason: &str) -> Outcome {
         } else {
             Vec::new()
         },
+        late_instances: 0,
     }
 }
 
