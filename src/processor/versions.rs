@@ -94,7 +94,7 @@ pub fn check_against(v: &Version, samples: &[lineproto::Metric]) -> Result<(), S
 }
 
 /// From event time `from` on, the instances `selector` picks run version `version` (an index
-/// into [`Versions::list`]).
+/// into the versions of [`Versions`]).
 #[derive(Clone)]
 pub struct Rule {
     pub version: usize,

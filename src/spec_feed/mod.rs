@@ -5,7 +5,7 @@
 //!
 //! Owns the rollout record every channel carries ([`Rollout`]: which version, from which event
 //! time, for which instances), the outcome a process reports for each ([`Outcome`]), and the
-//! [`Feed`] the step loop polls. Checking a version and switching instances to it is the
+//! [`Updates`] the step loop calls. Checking a version and switching instances to it is the
 //! processor's (`processor::versions`).
 
 pub mod bundle;

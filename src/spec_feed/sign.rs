@@ -3,7 +3,7 @@
 //! trust (`--spec-trust`). A spec steers robots, so write access to the channel's bucket is not
 //! enough.
 //!
-//! Owns: the record a channel stores for a rollout ([`seal`], [`open`]), the canonical JSON the
+//! Owns: the record a channel stores for a rollout ([`seal`], [`Record::verify`]), the canonical JSON the
 //! signature covers ([`canonical_json`]), reading the signing seed and the trusted keys, and
 //! every reason a record is refused, each saying which.
 //!

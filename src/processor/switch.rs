@@ -1,0 +1,179 @@
+//! Spec versions in a running processor: replacing the base version (a reload), checking and
+//! accepting a rollout's version, and switching an instance to the version its rules give it
+//! at each step ([`versions`](super::versions) owns the table and the rules).
+
+use super::clock::{Anchor, Wall};
+use super::versions::{Rule, Selector, Version};
+use super::{Accepted, Processor, pool};
+use crate::telegraf::encode;
+use std::sync::Arc;
+use tessla_engine::{Monitor, OutputEvent, Program};
+
+impl Processor {
+    /// Switch instance `slot` to the version its rules give it at `upto`, stepping through
+    /// every version start on the way: before each start its old version fires the `delay`s
+    /// due before it, then the instance continues in the new version (streams whose key is
+    /// unchanged keep their state). Its outputs go to `out`.
+    pub(super) fn settle(&mut self, slot: usize, upto: i64, out: &mut Vec<u8>) {
+        let Some(key) = self.pool.table.key(slot).cloned() else {
+            return;
+        };
+        let Some(inst) = self.pool.table.get_mut(slot) else {
+            return;
+        };
+        let mut cursor = inst.monitor.clock();
+        // First where the instance stands (a rule may have started at or before its clock),
+        // then each start after it up to `upto`; `cursor` only grows.
+        let mut next = if self.versions.target(&key, cursor) != inst.version {
+            Some(cursor)
+        } else {
+            self.versions.next_start(&key, cursor, upto)
+        };
+        while let Some(at) = next {
+            let target = self.versions.target(&key, at);
+            if target != inst.version {
+                // The old version's firings before the start.
+                let events = &mut self.emitter.events;
+                inst.monitor.advance_to(at, &mut |e: OutputEvent<'_>| {
+                    events.push((e.ts, e.output, e.value.clone()))
+                });
+                let old = self.versions.get(inst.version);
+                self.emitter
+                    .emit(&old.encodings, &inst.tags, &mut self.counters, out);
+                let new = self.versions.get(target);
+                inst.monitor = new.carry(old, &inst.monitor);
+                inst.version = target;
+                if let Some(tag) = &self.opts.version_tag {
+                    pool::set_tag(&mut inst.tags, tag, &new.id);
+                }
+                self.counters.switched += 1;
+            }
+            cursor = at;
+            next = self.versions.next_start(&key, cursor, upto);
+        }
+    }
+
+    /// Run `program` from now on in place of the base version (a spec reload): `carry` turns
+    /// the monitor of each instance running the base into one of the new program (no step is
+    /// open between records), and every instance's next `delay` firing is queued afresh.
+    /// Instances running a version of a rollout keep it.
+    /// Fails (nothing changed) when the new program's input annotations are malformed.
+    pub fn replace_program(
+        &mut self,
+        program: Arc<Program>,
+        id: &str,
+        mut carry: impl FnMut(&Monitor) -> Monitor,
+    ) -> Result<(), String> {
+        let label = self.versions.base().label.clone();
+        let base = Version::new(id.to_string(), label, program)?;
+        self.end_of_read();
+        for inst in self.pool.table.values_mut() {
+            if inst.version == 0 {
+                inst.monitor = carry(&inst.monitor);
+                if let Some(tag) = &self.opts.version_tag {
+                    pool::set_tag(&mut inst.tags, tag, &base.id);
+                }
+            }
+        }
+        self.emitter.encode = encode::Scratch::default();
+        self.wiring = super::wiring::WiringCheck::new(&base.bindings);
+        if let Some(slot) = self.versions.list.first_mut() {
+            *slot = base;
+        }
+        self.requeue_all();
+        Ok(())
+    }
+
+    /// Queue every instance's next `delay` firing afresh (after its program changed).
+    pub(super) fn requeue_all(&mut self) {
+        self.has_delays = self.versions.has_delays() && self.opts.allowed_lateness.is_some();
+        self.deadlines.clear();
+        let (at, lateness) = (Wall::now().at, self.lateness());
+        for (slot, inst) in self.pool.table.slots_mut() {
+            inst.queued = None;
+            if inst.anchor.is_none() {
+                let ts = inst.monitor.clock();
+                inst.anchor = Some(Anchor { ts, at });
+            }
+            if self.has_delays {
+                Self::queue(&mut self.deadlines, inst, slot, lateness);
+            }
+        }
+    }
+
+    /// Check a new version against this processor: its input annotations, that the selector
+    /// names `--instance-by` tags, and its bindings against the metrics seen so far (an input
+    /// whose field is there but never converts to its type, or no input fed at all, refuses
+    /// it). `Err` says why it is refused.
+    pub fn check_version(
+        &self,
+        id: &str,
+        program: &Arc<Program>,
+        selector: &Selector,
+    ) -> Result<(), String> {
+        let unknown = selector.unknown_tags(&self.opts.instance_by);
+        if !unknown.is_empty() {
+            return Err(format!(
+                "its selector `{selector}` names tag(s) {} that do not choose instances here (--instance-by {})",
+                unknown.join(", "),
+                if self.opts.instance_by.is_empty() {
+                    "is not set".to_string()
+                } else {
+                    self.opts.instance_by.join(",")
+                }
+            ));
+        }
+        if self.versions.find(id).is_none() {
+            let v = Version::new(id.to_string(), String::new(), Arc::clone(program))
+                .map_err(|e| format!("its input annotations: {e}"))?;
+            super::versions::check_against(&v, &self.samples)?;
+        }
+        Ok(())
+    }
+
+    /// How many instances `selector` picks have stepped past `from`, and by how much at most
+    /// (ns): a rollout starting there arrived late for them.
+    pub fn instances_past(&self, from: i64, selector: &Selector) -> (u64, i64) {
+        let by = &self.opts.instance_by;
+        self.pool
+            .table
+            .iter_lru()
+            .filter(|(k, i)| {
+                selector.matches(by, k) && i.monitor.last_evaluated().is_some_and(|t| t > from)
+            })
+            .fold((0, 0), |(n, max), (_, i)| {
+                let behind = i.monitor.clock().saturating_sub(from);
+                (n + 1, max.max(behind))
+            })
+    }
+
+    /// Put a version ([`Processor::check_version`] passed) in force for the instances
+    /// `selector` picks from event time `from` on: each switches at its first step at or after
+    /// it. `Err`: its input annotations are malformed; nothing changed then.
+    pub fn accept_version(
+        &mut self,
+        id: &str,
+        label: &str,
+        program: Arc<Program>,
+        from: i64,
+        selector: Selector,
+    ) -> Result<Accepted, String> {
+        let version = match self.versions.find(id) {
+            Some(v) => v,
+            None => {
+                let v = Version::new(id.to_string(), label.to_string(), program)
+                    .map_err(|e| format!("its input annotations: {e}"))?;
+                self.versions.list.push(v);
+                self.versions.list.len() - 1
+            }
+        };
+        let reset_outputs = self.versions.get(version).reset_from(self.versions.base());
+        self.versions.rules.push(Rule {
+            version,
+            from,
+            selector,
+        });
+        self.requeue_all();
+        Ok(Accepted { reset_outputs })
+    }
+}
