@@ -1,8 +1,8 @@
 //! The fast path of the text trace reader: an event line `TS: name = value` whose value is a
 //! plain literal of the input's declared type, read from the line's bytes straight into an
 //! [`Event`]: no copy of the line, no pass for UTF-8 over it, no expression parser, no value
-//! built only to be checked against the type, and the input found through a hash of its name
-//! instead of comparing it with every input's name.
+//! built only to be checked against the type, and the input found by its name's first eight
+//! bytes taken as one word, instead of comparing the name with every input's name.
 //!
 //! Owns: which lines take this path and the table of input names. It takes only lines that
 //! [`reader::parse_line_any`](crate::reader::parse_line_any) reads to the same event (a test
@@ -17,64 +17,102 @@
 use crate::reader::{Event, Lit};
 use tessla_engine::{Program, Type};
 
-/// The inputs of a program by name: an open-addressing table of FNV-1a hashes of the names.
+/// The inputs of a program by name: an open-addressing table keyed by a name's first eight
+/// bytes (as one word) and its length, so that a name of up to eight bytes is found and
+/// checked by comparing two words, without hashing it byte by byte or calling `memcmp`.
 pub(crate) struct Inputs<'p> {
     program: &'p Program,
-    /// Input index + 1 per slot, 0 for an empty slot; a power of two long.
-    slots: Vec<u32>,
+    /// A power of two long.
+    slots: Vec<Slot>,
+    /// 64 - log2(slots.len()): the top bits of the mixed key pick the slot.
+    shift: u32,
 }
 
-/// FNV-1a, one byte.
+#[derive(Clone, Copy, Default)]
+struct Slot {
+    /// The name's first eight bytes, little-endian, zero-padded.
+    key: u64,
+    len: usize,
+    /// Input index + 1; 0 for an empty slot.
+    id: usize,
+}
+
+/// The bytes of a plain name (`[A-Za-z0-9_]`), by table.
+static NAME_BYTE: [bool; 256] = {
+    let mut t = [false; 256];
+    let mut c = 0;
+    while c < 256 {
+        let b = c as u8;
+        t[c] = b.is_ascii_alphanumeric() || b == b'_';
+        c += 1;
+    }
+    t
+};
+
+/// The first eight bytes of `name`, little-endian, zero-padded.
 #[inline(always)]
-fn fnv(h: u64, b: u8) -> u64 {
-    (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3)
+fn key_of(name: &[u8]) -> u64 {
+    name.iter()
+        .take(8)
+        .enumerate()
+        .fold(0, |k, (i, &b)| k | u64::from(b) << (8 * i))
 }
-
-const FNV_START: u64 = 0xcbf2_9ce4_8422_2325;
 
 impl<'p> Inputs<'p> {
     pub(crate) fn new(program: &'p Program) -> Inputs<'p> {
         let n = program.inputs.len();
         let len = (2 * n).next_power_of_two().max(8);
-        let mut slots = vec![0u32; len];
+        let mut table = Inputs {
+            program,
+            slots: vec![Slot::default(); len],
+            shift: 64 - len.trailing_zeros(),
+        };
         for (k, input) in program.inputs.iter().enumerate() {
-            let Ok(id) = u32::try_from(k + 1) else {
-                break;
-            };
-            let h = input.name.bytes().fold(FNV_START, fnv);
-            let mut at = h as usize & (len - 1);
-            loop {
-                match slots.get(at).copied() {
-                    // The first of two inputs of one name wins, as `Program::input_index`.
-                    Some(s) if s != 0 && program_name(program, s) == Some(input.name.as_str()) => {
-                        break;
-                    }
-                    Some(0) => {
-                        if let Some(slot) = slots.get_mut(at) {
-                            *slot = id;
-                        }
-                        break;
-                    }
-                    Some(_) => at = (at + 1) & (len - 1),
-                    None => break,
+            let name = input.name.as_bytes();
+            // The first of two inputs of one name wins, as `Program::input_index`.
+            if table.find(name, key_of(name)).is_some() {
+                continue;
+            }
+            let mut at = table.home(key_of(name), name.len());
+            while let Some(s) = table.slots.get_mut(at) {
+                if s.id == 0 {
+                    *s = Slot {
+                        key: key_of(name),
+                        len: name.len(),
+                        id: k + 1,
+                    };
+                    break;
                 }
+                at = (at + 1) & (len - 1);
             }
         }
-        Inputs { program, slots }
+        table
     }
 
-    /// The index of the input named `name`, whose FNV-1a hash is `h`.
+    /// The first slot to look in for a name.
+    #[inline(always)]
+    fn home(&self, key: u64, len: usize) -> usize {
+        ((key ^ len as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) >> self.shift) as usize
+    }
+
+    /// The index of the input named `name`, whose first eight bytes are `key`.
     #[inline]
-    fn find(&self, name: &[u8], h: u64) -> Option<usize> {
+    fn find(&self, name: &[u8], key: u64) -> Option<usize> {
         let mask = self.slots.len() - 1;
-        let mut at = h as usize & mask;
+        let mut at = self.home(key, name.len());
         loop {
             let s = *self.slots.get(at)?;
-            if s == 0 {
+            if s.id == 0 {
                 return None;
             }
-            if program_name(self.program, s).is_some_and(|n| n.as_bytes() == name) {
-                return Some(s as usize - 1);
+            if s.key == key && s.len == name.len() {
+                let input = s.id - 1;
+                // Longer names: the rest compared too.
+                if name.len() <= 8
+                    || self.program.inputs.get(input)?.name.as_bytes().get(8..) == name.get(8..)
+                {
+                    return Some(input);
+                }
             }
             at = (at + 1) & mask;
         }
@@ -104,20 +142,28 @@ impl<'p> Inputs<'p> {
         (*raw.get(p.i)? == b':').then_some(())?;
         p.i += 1;
         p.spaces();
-        // The name: a plain identifier, hashed as it is read.
+        // The name: a plain identifier.
         let name_at = p.i;
-        let mut h = FNV_START;
-        while let Some(&c) = raw.get(p.i)
-            && (c.is_ascii_alphanumeric() || c == b'_')
-        {
-            h = fnv(h, c);
+        while raw.get(p.i).is_some_and(|&c| NAME_BYTE[usize::from(c)]) {
             p.i += 1;
         }
-        let name = raw.get(name_at..p.i)?;
-        if name.is_empty() {
+        let n = p.i - name_at;
+        if n == 0 {
             return None;
         }
-        let input = self.find(name, h)?;
+        let key = match raw.get(name_at..name_at + 8) {
+            // One load: the bytes after the name masked off.
+            Some(&[a, b, c, d, e, f, g, h]) => {
+                let word = u64::from_le_bytes([a, b, c, d, e, f, g, h]);
+                if n >= 8 {
+                    word
+                } else {
+                    word & ((1u64 << (8 * n)) - 1)
+                }
+            }
+            _ => key_of(raw.get(name_at..p.i)?),
+        };
+        let input = self.find(raw.get(name_at..p.i)?, key)?;
         let ty = &self.program.inputs.get(input)?.ty;
         p.spaces();
         let value = match raw.get(p.i) {
@@ -138,15 +184,6 @@ impl<'p> Inputs<'p> {
             value,
         })
     }
-}
-
-/// The name of input `id - 1`.
-#[inline]
-fn program_name(program: &Program, id: u32) -> Option<&str> {
-    program
-        .inputs
-        .get((id as usize).checked_sub(1)?)
-        .map(|i| i.name.as_str())
 }
 
 #[cfg(test)]
@@ -260,5 +297,27 @@ mod tests {
             assert_eq!(e.map(|e| e.input), p.input_index(&format!("s{k}")), "{l}");
         }
         assert_eq!(inputs.event(b"1: s40 = 1", 1), None);
+        // Names of eight bytes and more, alike in their first eight, and at the line's end.
+        let p = program(
+            "in temperat: Events[Unit]\nin temperature_1: Events[Int]\n\
+             in temperature_2: Events[Int]\nin t: Events[Unit]\n\
+             out temperat\nout temperature_1\nout temperature_2\nout t",
+        );
+        let inputs = Inputs::new(&p);
+        for (l, want) in [
+            ("1: temperat", Some(0)),
+            ("1: temperat = ()", Some(0)),
+            ("1: temperature_1 = 5", Some(1)),
+            ("1: temperature_2 = 5", Some(2)),
+            ("1: t", Some(3)),
+            ("1:t", Some(3)),
+            ("1: temperature_3 = 5", None),
+            ("1: temperature_ = 5", None),
+            ("1: temperatu = 5", None),
+            ("1: tempera", None),
+            ("1: te", None),
+        ] {
+            assert_eq!(inputs.event(l.as_bytes(), 1).map(|e| e.input), want, "{l}");
+        }
     }
 }
