@@ -396,10 +396,12 @@ pub(crate) struct Lit<'a> {
 }
 
 impl Lit<'_> {
+    #[inline(always)]
     fn peek(&self) -> Option<u8> {
         self.b.get(self.i).copied()
     }
 
+    #[inline(always)]
     pub(crate) fn spaces(&mut self) {
         while matches!(self.peek(), Some(b' ' | b'\t')) {
             self.i += 1;
@@ -407,12 +409,14 @@ impl Lit<'_> {
     }
 
     /// A `,` (after spaces), or `None`.
+    #[inline(always)]
     fn comma(&mut self) -> Option<()> {
         self.spaces();
         (self.peek() == Some(b',')).then(|| self.i += 1)
     }
 
     /// Whether a `)` follows (after spaces); it is consumed.
+    #[inline(always)]
     fn close(&mut self) -> bool {
         self.spaces();
         let close = self.peek() == Some(b')');
@@ -467,10 +471,53 @@ impl Lit<'_> {
     /// What [`Lit::value`] reads, when it is a value of type `ty` (what [`fits`] it), without
     /// reading anything of another type: `None` otherwise. The fast path reads by the input's
     /// declared type, so it never builds a value only to find it does not fit.
+    #[inline(always)]
     pub(crate) fn typed(&mut self, ty: &Type, depth: usize) -> Option<Value> {
         match ty {
+            Type::Tuple(ts) if ts.iter().all(|t| !matches!(t, Type::Tuple(_))) => {
+                self.flat_tuple(ts, depth)
+            }
             Type::Tuple(ts) => self.tuple(ts, depth),
             _ => self.scalar(ty, depth),
+        }
+    }
+
+    /// [`Lit::tuple`] for a tuple of scalars: every element read in place, no call per element
+    /// (what most traces hold: `(1, 2)`).
+    #[inline(always)]
+    fn flat_tuple(&mut self, ts: &[Type], depth: usize) -> Option<Value> {
+        self.spaces();
+        if depth >= 8 || self.peek()? != b'(' {
+            return None;
+        }
+        self.i += 1;
+        let d = depth + 1;
+        match ts {
+            [ta, tb] => {
+                let a = self.scalar(ta, d)?;
+                self.comma()?;
+                let b = self.scalar(tb, d)?;
+                self.close().then(|| Value::Tuple(Arc::new([a, b])))
+            }
+            [ta, tb, tc] => {
+                let a = self.scalar(ta, d)?;
+                self.comma()?;
+                let b = self.scalar(tb, d)?;
+                self.comma()?;
+                let c = self.scalar(tc, d)?;
+                self.close().then(|| Value::Tuple(Arc::new([a, b, c])))
+            }
+            [ta, tb, tc, td] => {
+                let a = self.scalar(ta, d)?;
+                self.comma()?;
+                let b = self.scalar(tb, d)?;
+                self.comma()?;
+                let c = self.scalar(tc, d)?;
+                self.comma()?;
+                let d = self.scalar(td, d)?;
+                self.close().then(|| Value::Tuple(Arc::new([a, b, c, d])))
+            }
+            _ => None,
         }
     }
 
