@@ -104,7 +104,7 @@ pub fn run_with(program: &Arc<Program>, source: &str, trace: &str, options: &Opt
 
 /// Writes output events and remembers the first error value or write failure.
 struct Printer<'a, W: Write> {
-    program: &'a Program,
+    lines: writer::Lines<'a>,
     out: &'a mut W,
     error: Option<RunError>,
     /// The output index of `-S`'s stream.
@@ -116,7 +116,7 @@ impl<'a, W: Write> Printer<'a, W> {
     /// A printer of `program`'s outputs to `out`, stopping at `-S`'s stream if one is given.
     fn new(program: &'a Program, out: &'a mut W, options: &Options) -> Result<Self, RunError> {
         Ok(Printer {
-            program,
+            lines: writer::Lines::new(&program.outputs),
             out,
             error: None,
             stop_on: stop_on_index(program, options)?,
@@ -138,10 +138,7 @@ impl<'a, W: Write> Printer<'a, W> {
             });
             return;
         }
-        let Some(o) = self.program.outputs.get(e.output) else {
-            return;
-        };
-        if let Err(err) = writer::write_event(self.out, e.ts, o, e.value) {
+        if let Err(err) = self.lines.write(self.out, e.ts, e.output, e.value) {
             self.error = Some(io_error("writing the outputs", &err));
         }
     }
