@@ -10,7 +10,9 @@
 //! `Map(k -> v, ...)` build set and map values (`->` only occurs in maps, so it is read as a
 //! comma and the arguments are paired). Plain literals and tuples of them, what most traces
 //! hold, are read by a fast path first (`literal`); it takes only what the parser reads the
-//! same way, and leaves everything else (and every message) to it. Integers are unbounded, as
+//! same way, and leaves everything else (and every message) to it. Whole event lines of that
+//! kind are read before this module sees them, by the input's type (`crate::fast`, with
+//! `Lit`'s typed reading); what that path leaves comes here as before. Integers are unbounded, as
 //! TeSSLa's `Int`. Operators mean what they mean in a spec: their semantics are
 //! `tessla_engine::runtime::ops` (so a negative shift shifts the other way, as TeSSLa's
 //! unbounded integers do).
