@@ -82,8 +82,8 @@ const ENGINE_NO_SYNTAX: Forbidden = &[
 ];
 
 /// tessla-trace: the CTF reader on top of the text-trace driver (lib.rs: options, errors, the
-/// printer), on top of the trace reader and writer.
-const TRACE_LAYERS: Layers = &[&["ctf"], &["lib"], &["reader", "writer"]];
+/// printer), on top of the fast path for plain event lines, on top of the trace reader and writer.
+const TRACE_LAYERS: Layers = &[&["ctf"], &["lib"], &["fast"], &["reader", "writer"]];
 
 /// lineproto: records cut, parsed and written; the parsers' parts; the record types.
 const LINEPROTO_LAYERS: Layers = &[

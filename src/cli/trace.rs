@@ -15,6 +15,11 @@ use std::rc::Rc;
 
 type Out = Rc<RefCell<BufWriter<StdoutLock<'static>>>>;
 
+/// The size of the trace's read buffer and of the output buffer: a trace is read, and outputs
+/// written, in blocks of this size (std's default of 8 KiB made a read and a write system call
+/// per 8 KiB of a fast trace on stdin, the outputs being flushed before each read).
+const BUFFER: usize = 64 * 1024;
+
 /// The output writer, shared with [`FlushBeforeRead`].
 struct SharedOut(Out);
 
@@ -83,7 +88,7 @@ pub fn run(args: TraceArgs) -> CliResult {
         Some(p) if args.ctf => tessla_trace::ctf::run_dir(
             &loaded.program,
             p,
-            &mut BufWriter::new(stdout.lock()),
+            &mut BufWriter::with_capacity(BUFFER, stdout.lock()),
             &options,
         ),
         // A trace file is read as fast as possible: outputs are block-buffered.
@@ -91,8 +96,8 @@ pub fn run(args: TraceArgs) -> CliResult {
             Ok(f) => run_stream_with(
                 &loaded.program,
                 &p.display().to_string(),
-                BufReader::new(f),
-                &mut BufWriter::new(stdout.lock()),
+                BufReader::with_capacity(BUFFER, f),
+                &mut BufWriter::with_capacity(BUFFER, stdout.lock()),
                 &options,
             ),
             Err(e) => {
@@ -105,11 +110,17 @@ pub fn run(args: TraceArgs) -> CliResult {
         // A trace on stdin may arrive slowly (a live feed): outputs are block-buffered but
         // flushed whenever reading would wait for more input.
         None => {
-            let out = Rc::new(RefCell::new(BufWriter::new(stdout.lock())));
-            let input = BufReader::new(FlushBeforeRead {
-                inner: std::io::stdin(),
-                out: out.clone(),
-            });
+            let out = Rc::new(RefCell::new(BufWriter::with_capacity(
+                BUFFER,
+                stdout.lock(),
+            )));
+            let input = BufReader::with_capacity(
+                BUFFER,
+                FlushBeforeRead {
+                    inner: std::io::stdin(),
+                    out: out.clone(),
+                },
+            );
             run_stream_with(
                 &loaded.program,
                 "<stdin>",

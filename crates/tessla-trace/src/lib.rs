@@ -9,6 +9,7 @@
 //! value reaching an output stops the run at that step.
 
 pub mod ctf;
+mod fast;
 pub mod reader;
 pub mod writer;
 
@@ -103,7 +104,7 @@ pub fn run_with(program: &Arc<Program>, source: &str, trace: &str, options: &Opt
 
 /// Writes output events and remembers the first error value or write failure.
 struct Printer<'a, W: Write> {
-    program: &'a Program,
+    lines: writer::Lines<'a>,
     out: &'a mut W,
     error: Option<RunError>,
     /// The output index of `-S`'s stream.
@@ -115,7 +116,7 @@ impl<'a, W: Write> Printer<'a, W> {
     /// A printer of `program`'s outputs to `out`, stopping at `-S`'s stream if one is given.
     fn new(program: &'a Program, out: &'a mut W, options: &Options) -> Result<Self, RunError> {
         Ok(Printer {
-            program,
+            lines: writer::Lines::new(&program.outputs),
             out,
             error: None,
             stop_on: stop_on_index(program, options)?,
@@ -137,10 +138,7 @@ impl<'a, W: Write> Printer<'a, W> {
             });
             return;
         }
-        let Some(o) = self.program.outputs.get(e.output) else {
-            return;
-        };
-        if let Err(err) = writer::write_event(self.out, e.ts, o, e.value) {
+        if let Err(err) = self.lines.write(self.out, e.ts, e.output, e.value) {
             self.error = Some(io_error("writing the outputs", &err));
         }
     }
@@ -206,80 +204,192 @@ pub fn run_stream_with(
     out: &mut impl Write,
     options: &Options,
 ) -> Result<(), RunError> {
-    let mut printer = Printer::new(program, out, options)?;
-    let mut monitor = Monitor::new(program.clone());
-    let at = |line: usize, msg: &str| format!("{source}:{line}: {msg}");
-    let read_error = |e: reader::ReadError| RunError {
-        kind: match e.kind {
-            reader::ReadErrorKind::Malformed => ErrorKind::Input,
-            reader::ReadErrorKind::Unsupported => ErrorKind::Unsupported,
-        },
-        message: at(e.line, &e.message),
+    let mut feed = Feed {
+        printer: Printer::new(program, out, options)?,
+        monitor: Monitor::new(program.clone()),
+        program,
+        fast: fast::Inputs::new(program),
+        source,
+        options,
+        csv: reader::CsvReader::default(),
+        events_read: 0,
+        line: 0,
     };
-    let mut csv = reader::CsvReader::default();
-    let mut events_read: u64 = 0;
     let mut input = input;
-    // One buffer for every line (`BufRead::lines` would allocate one per line).
-    let mut raw = String::new();
-    let mut reads = Vec::new();
-    let mut line = 0;
-    'lines: loop {
-        raw.clear();
-        let n = input
-            .read_line(&mut raw)
-            .map_err(|e| io_error(&format!("reading {source}"), &e))?;
-        if n == 0 {
-            break;
+    // The lines are read in the reader's own buffer; only a line that continues past its end
+    // is copied (into `carry`), so there is no copy per line.
+    let mut carry: Vec<u8> = Vec::new();
+    let flow = 'read: loop {
+        let buf = match input.fill_buf() {
+            Ok(b) => b,
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(io_error(&format!("reading {source}"), &e)),
+        };
+        if buf.is_empty() {
+            break Flow::Go;
         }
-        line += 1;
-        // As `lines()`: without the `\n` or `\r\n` ending.
-        if raw.ends_with('\n') {
-            raw.pop();
-            if raw.ends_with('\r') {
-                raw.pop();
+        let mut at = 0;
+        if !carry.is_empty() {
+            // The rest of a line begun in the previous buffer.
+            let Some(nl) = memchr::memchr(b'\n', buf) else {
+                carry.extend_from_slice(buf);
+                let n = buf.len();
+                input.consume(n);
+                continue;
+            };
+            carry.extend_from_slice(buf.get(..nl).unwrap_or_default());
+            let flow = feed.line(&carry, true)?;
+            carry.clear();
+            if flow != Flow::Go {
+                break flow;
+            }
+            at = nl + 1;
+        }
+        let rest = buf.get(at..).unwrap_or_default();
+        let mut done = 0;
+        for nl in memchr::memchr_iter(b'\n', rest) {
+            let flow = feed.line(rest.get(done..nl).unwrap_or_default(), true)?;
+            done = nl + 1;
+            if flow != Flow::Go {
+                break 'read flow;
             }
         }
-        match options.format {
-            Format::Tessla => match reader::parse_line_any(&raw, line, program) {
-                None => continue,
-                Some(r) => reads.push(r.map_err(read_error)?),
+        carry.extend_from_slice(rest.get(done..).unwrap_or_default());
+        let n = buf.len();
+        input.consume(n);
+    };
+    let flow = match flow {
+        // The last line, without a line ending.
+        Flow::Go if !carry.is_empty() => feed.line(&carry, false)?,
+        flow => flow,
+    };
+    if flow != Flow::Stopped {
+        feed.monitor.flush(&mut |e| feed.printer.event(e));
+    }
+    finish(feed.printer)
+}
+
+/// How a run goes on after a line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Flow {
+    /// On to the next line.
+    Go,
+    /// `-a`'s count is reached: the run ends as at the end of the trace.
+    Aborted,
+    /// `-S`'s stream had its event: the run ends now.
+    Stopped,
+}
+
+/// One run over a trace, fed line by line.
+struct Feed<'a, W: Write> {
+    printer: Printer<'a, W>,
+    monitor: Monitor,
+    program: &'a Program,
+    fast: fast::Inputs<'a>,
+    source: &'a str,
+    options: &'a Options,
+    csv: reader::CsvReader,
+    events_read: u64,
+    /// The number of the current line, from 1.
+    line: usize,
+}
+
+impl<W: Write> Feed<'_, W> {
+    /// One line of the trace, without its `\n`; `ended` when it had one (then a `\r` before it
+    /// is not part of the line either, as with `BufRead::lines`).
+    fn line(&mut self, raw: &[u8], ended: bool) -> Result<Flow, RunError> {
+        self.line += 1;
+        let raw = match raw {
+            [l @ .., b'\r'] if ended => l,
+            l => l,
+        };
+        if self.options.format == Format::Tessla
+            && let Some(ev) = self.fast.event(raw, self.line)
+        {
+            return self.read(reader::Read::Event(ev));
+        }
+        let Ok(text) = std::str::from_utf8(raw) else {
+            // What `BufRead::read_line` says.
+            let e = io::Error::new(
+                io::ErrorKind::InvalidData,
+                "stream did not contain valid UTF-8",
+            );
+            return Err(io_error(&format!("reading {}", self.source), &e));
+        };
+        match self.options.format {
+            Format::Tessla => match reader::parse_line_any(text, self.line, self.program) {
+                None => Ok(Flow::Go),
+                Some(r) => {
+                    let read = r.map_err(|e| self.read_error(e))?;
+                    self.read(read)
+                }
             },
-            Format::Csv => reads.extend(csv.parse_line(&raw, line, program).map_err(read_error)?),
-        }
-        for read in reads.drain(..) {
-            if options.abort_at.is_some_and(|n| events_read > n) {
-                break 'lines;
-            }
-            events_read += 1;
-            let pushed = match read {
-                reader::Read::Event(ev) => {
-                    monitor.push(ev.ts, ev.input, ev.value, &mut |e| printer.event(e))
-                }
-                reader::Read::Undeclared { line, ts, name } => {
-                    if options.reject_undeclared {
-                        return Err(read_error(reader::undeclared(line, &name, program)));
+            Format::Csv => {
+                let reads = self
+                    .csv
+                    .parse_line(text, self.line, self.program)
+                    .map_err(|e| self.read_error(e))?;
+                for read in reads {
+                    let flow = self.read(read)?;
+                    if flow != Flow::Go {
+                        return Ok(flow);
                     }
-                    monitor.open_step(ts, &mut |e| printer.event(e))
                 }
-            };
-            if let Some(e) = printer.error.take() {
-                return Err(e);
+                Ok(Flow::Go)
             }
-            if printer.stopped {
-                return finish(printer);
-            }
-            let message = match pushed {
-                Ok(()) => continue,
-                Err(e) => input_error_message(program, &e),
-            };
-            return Err(RunError {
-                kind: ErrorKind::Runtime,
-                message: at(line, &message),
-            });
         }
     }
-    monitor.flush(&mut |e| printer.event(e));
-    finish(printer)
+
+    /// One event read from the current line, into the monitor.
+    #[inline]
+    fn read(&mut self, read: reader::Read) -> Result<Flow, RunError> {
+        if self.options.abort_at.is_some_and(|n| self.events_read > n) {
+            return Ok(Flow::Aborted);
+        }
+        self.events_read += 1;
+        let pushed = match read {
+            reader::Read::Event(ev) => {
+                let printer = &mut self.printer;
+                self.monitor
+                    .push(ev.ts, ev.input, ev.value, &mut |e| printer.event(e))
+            }
+            reader::Read::Undeclared { line, ts, name } => {
+                if self.options.reject_undeclared {
+                    return Err(self.read_error(reader::undeclared(line, &name, self.program)));
+                }
+                let printer = &mut self.printer;
+                self.monitor.open_step(ts, &mut |e| printer.event(e))
+            }
+        };
+        if let Some(e) = self.printer.error.take() {
+            return Err(e);
+        }
+        if self.printer.stopped {
+            return Ok(Flow::Stopped);
+        }
+        match pushed {
+            Ok(()) => Ok(Flow::Go),
+            Err(e) => Err(RunError {
+                kind: ErrorKind::Runtime,
+                message: self.at(&input_error_message(self.program, &e)),
+            }),
+        }
+    }
+
+    /// `SOURCE:LINE: msg`, at the current line.
+    fn at(&self, msg: &str) -> String {
+        format!("{}:{}: {msg}", self.source, self.line)
+    }
+
+    fn read_error(&self, e: reader::ReadError) -> RunError {
+        RunError {
+            kind: match e.kind {
+                reader::ReadErrorKind::Malformed => ErrorKind::Input,
+                reader::ReadErrorKind::Unsupported => ErrorKind::Unsupported,
+            },
+            message: format!("{}:{}: {}", self.source, e.line, e.message),
+        }
+    }
 }
 
 /// An event the monitor refused, in the words of TeSSLa's interpreter (text and CTF traces).
@@ -444,6 +554,50 @@ pub(crate) mod tests {
         let e = r.error.unwrap();
         assert_eq!(e.kind, ErrorKind::Runtime);
         assert_eq!(e.message, "Runtime error: Division by zero (t = 2)");
+    }
+
+    /// Lines cut by the reader's buffer anywhere (a line ending `\r\n` cut in two, the last line
+    /// without its ending) read as whole lines, on the fast path and off it.
+    #[test]
+    fn lines_across_buffer_ends() {
+        let p = program("in x: Events[Int]\nin u: Events[Unit]\nout x\nout u");
+        let traces = [
+            "1: x = 2\r\n# c\n\n2: u\n3: x = 1 + 4\r\n4: x = 77",
+            "1: x = 2\n2: x = 3\r",
+            "1: x = 2\n2: x = (1\n3: x = 4\n",
+            "1: x = 2\n3: x = 1\n2: x = 4\n",
+            "\n\n5: x = -5\n",
+            "",
+        ];
+        for trace in traces {
+            let want = run_named(&p, "t", trace);
+            for cap in 1..12 {
+                let mut out = Vec::new();
+                let input = std::io::BufReader::with_capacity(cap, trace.as_bytes());
+                let e = run_stream(&p, "t", input, &mut out).err();
+                assert_eq!(
+                    String::from_utf8_lossy(&out),
+                    want.output,
+                    "{trace:?} {cap}"
+                );
+                assert_eq!(e, want.error, "{trace:?} {cap}");
+            }
+        }
+    }
+
+    /// A line that is no UTF-8 stops the run with `read_line`'s message, as before the reader
+    /// read its lines in place.
+    #[test]
+    fn a_line_that_is_no_utf8_is_a_read_error() {
+        let p = program("in x: Events[Int]\nout x");
+        let mut out = Vec::new();
+        let trace: &[u8] = b"1: x = 2\n2: x = \xff\n3: x = 4\n";
+        let e = run_stream(&p, "t", trace, &mut out).unwrap_err();
+        assert_eq!(String::from_utf8_lossy(&out), "");
+        assert_eq!(e.kind, ErrorKind::Io);
+        let mut line = String::new();
+        let std_error = BufRead::read_line(&mut &b"\xff"[..], &mut line).unwrap_err();
+        assert_eq!(e.message, format!("error reading t: {std_error}"));
     }
 
     #[test]

@@ -10,7 +10,9 @@
 //! `Map(k -> v, ...)` build set and map values (`->` only occurs in maps, so it is read as a
 //! comma and the arguments are paired). Plain literals and tuples of them, what most traces
 //! hold, are read by a fast path first (`literal`); it takes only what the parser reads the
-//! same way, and leaves everything else (and every message) to it. Integers are unbounded, as
+//! same way, and leaves everything else (and every message) to it. Whole event lines of that
+//! kind are read before this module sees them, by the input's type (`crate::fast`, with
+//! `Lit`'s typed reading); what that path leaves comes here as before. Integers are unbounded, as
 //! TeSSLa's `Int`. Operators mean what they mean in a spec: their semantics are
 //! `tessla_engine::runtime::ops` (so a negative shift shifts the other way, as TeSSLa's
 //! unbounded integers do).
@@ -389,30 +391,34 @@ fn literal(text: &str) -> Option<Value> {
     (p.i == p.b.len()).then_some(v)
 }
 
-/// The cursor of [`literal`].
-struct Lit<'a> {
-    b: &'a [u8],
-    i: usize,
+/// The cursor of [`literal`], and of the typed reading of the fast path (`crate::fast`).
+pub(crate) struct Lit<'a> {
+    pub(crate) b: &'a [u8],
+    pub(crate) i: usize,
 }
 
 impl Lit<'_> {
+    #[inline(always)]
     fn peek(&self) -> Option<u8> {
         self.b.get(self.i).copied()
     }
 
-    fn spaces(&mut self) {
+    #[inline(always)]
+    pub(crate) fn spaces(&mut self) {
         while matches!(self.peek(), Some(b' ' | b'\t')) {
             self.i += 1;
         }
     }
 
     /// A `,` (after spaces), or `None`.
+    #[inline(always)]
     fn comma(&mut self) -> Option<()> {
         self.spaces();
         (self.peek() == Some(b',')).then(|| self.i += 1)
     }
 
     /// Whether a `)` follows (after spaces); it is consumed.
+    #[inline(always)]
     fn close(&mut self) -> bool {
         self.spaces();
         let close = self.peek() == Some(b')');
@@ -434,35 +440,8 @@ impl Lit<'_> {
         self.spaces();
         match self.peek()? {
             b'-' | b'0'..=b'9' => self.number(),
-            b'"' => {
-                let start = self.i + 1;
-                let len = self.b.get(start..)?.iter().position(|&c| c == b'"')?;
-                let body = self.b.get(start..start + len)?;
-                if body.iter().any(|&c| matches!(c, b'\\' | b'$' | b'%')) {
-                    return None;
-                }
-                self.i = start + len + 1;
-                Some(Value::Str(std::str::from_utf8(body).ok()?.into()))
-            }
-            b't' | b'f' => {
-                let rest = self.b.get(self.i..)?;
-                let (word, v) = if rest.starts_with(b"true") {
-                    (4, true)
-                } else if rest.starts_with(b"false") {
-                    (5, false)
-                } else {
-                    return None;
-                };
-                // `trueish` is a name, not `true`.
-                if rest
-                    .get(word)
-                    .is_some_and(|&c| c.is_ascii_alphanumeric() || c == b'_')
-                {
-                    return None;
-                }
-                self.i += word;
-                Some(Value::Bool(v))
-            }
+            b'"' => self.string(),
+            b't' | b'f' => self.boolean(),
             b'(' if depth < 8 => {
                 self.i += 1;
                 self.spaces();
@@ -489,6 +468,187 @@ impl Lit<'_> {
             }
             _ => None,
         }
+    }
+
+    /// What [`Lit::value`] reads, when it is a value of type `ty` (what [`fits`] it), without
+    /// reading anything of another type: `None` otherwise. The fast path reads by the input's
+    /// declared type, so it never builds a value only to find it does not fit.
+    #[inline(always)]
+    pub(crate) fn typed(&mut self, ty: &Type, depth: usize) -> Option<Value> {
+        match ty {
+            Type::Tuple(ts) if ts.iter().all(|t| !matches!(t, Type::Tuple(_))) => {
+                self.flat_tuple(ts, depth)
+            }
+            Type::Tuple(ts) => self.tuple(ts, depth),
+            _ => self.scalar(ty, depth),
+        }
+    }
+
+    /// [`Lit::tuple`] for a tuple of scalars: every element read in place, no call per element
+    /// (what most traces hold: `(1, 2)`).
+    #[inline(always)]
+    fn flat_tuple(&mut self, ts: &[Type], depth: usize) -> Option<Value> {
+        self.spaces();
+        if depth >= 8 || self.peek()? != b'(' {
+            return None;
+        }
+        self.i += 1;
+        let d = depth + 1;
+        match ts {
+            [ta, tb] => {
+                let a = self.scalar(ta, d)?;
+                self.comma()?;
+                let b = self.scalar(tb, d)?;
+                self.close().then(|| Value::Tuple(Arc::new([a, b])))
+            }
+            [ta, tb, tc] => {
+                let a = self.scalar(ta, d)?;
+                self.comma()?;
+                let b = self.scalar(tb, d)?;
+                self.comma()?;
+                let c = self.scalar(tc, d)?;
+                self.close().then(|| Value::Tuple(Arc::new([a, b, c])))
+            }
+            [ta, tb, tc, td] => {
+                let a = self.scalar(ta, d)?;
+                self.comma()?;
+                let b = self.scalar(tb, d)?;
+                self.comma()?;
+                let c = self.scalar(tc, d)?;
+                self.comma()?;
+                let d = self.scalar(td, d)?;
+                self.close().then(|| Value::Tuple(Arc::new([a, b, c, d])))
+            }
+            _ => None,
+        }
+    }
+
+    /// [`Lit::typed`] for a type that is no tuple.
+    #[inline(always)]
+    fn scalar(&mut self, ty: &Type, depth: usize) -> Option<Value> {
+        self.spaces();
+        match ty {
+            Type::Int => self.int(),
+            Type::Float => match self.peek()? {
+                b'-' | b'0'..=b'9' => self.number().filter(|v| matches!(v, Value::Float(_))),
+                _ => None,
+            },
+            Type::Bool => self.boolean(),
+            Type::String => match self.peek()? {
+                b'"' => self.string(),
+                _ => None,
+            },
+            Type::Unit if depth < 8 => {
+                (self.peek()? == b'(').then(|| self.i += 1)?;
+                self.close().then_some(Value::Unit)
+            }
+            _ => None,
+        }
+    }
+
+    /// [`Lit::typed`] for a tuple type: as [`Lit::value`], two to four elements.
+    fn tuple(&mut self, ts: &[Type], depth: usize) -> Option<Value> {
+        self.spaces();
+        if depth >= 8 || self.peek()? != b'(' {
+            return None;
+        }
+        self.i += 1;
+        // An element: a scalar read in place, a tuple by a call.
+        let elem = |p: &mut Self, t: &Type| match t {
+            Type::Tuple(ts) => p.tuple(ts, depth + 1),
+            _ => p.scalar(t, depth + 1),
+        };
+        match ts {
+            [ta, tb] => {
+                let a = elem(self, ta)?;
+                self.comma()?;
+                let b = elem(self, tb)?;
+                self.close().then(|| Value::Tuple(Arc::new([a, b])))
+            }
+            [ta, tb, tc] => {
+                let a = elem(self, ta)?;
+                self.comma()?;
+                let b = elem(self, tb)?;
+                self.comma()?;
+                let c = elem(self, tc)?;
+                self.close().then(|| Value::Tuple(Arc::new([a, b, c])))
+            }
+            [ta, tb, tc, td] => {
+                let a = elem(self, ta)?;
+                self.comma()?;
+                let b = elem(self, tb)?;
+                self.comma()?;
+                let c = elem(self, tc)?;
+                self.comma()?;
+                let d = elem(self, td)?;
+                self.close().then(|| Value::Tuple(Arc::new([a, b, c, d])))
+            }
+            _ => None,
+        }
+    }
+
+    /// What [`Lit::number`] reads when it is an `Int`, in one pass over the digits.
+    #[inline(always)]
+    fn int(&mut self) -> Option<Value> {
+        let neg = self.peek() == Some(b'-');
+        if neg {
+            self.i += 1;
+        }
+        let start = self.i;
+        let mut n: i64 = 0;
+        while let Some(&c) = self.b.get(self.i) {
+            let d = c.wrapping_sub(b'0');
+            if d > 9 {
+                break;
+            }
+            n = n.wrapping_mul(10).wrapping_add(i64::from(d));
+            self.i += 1;
+        }
+        let len = self.i - start;
+        // As `number`: no hex, no leading zeros, at most 18 digits (no overflow), and no `.`,
+        // exponent or name after the digits.
+        if len == 0 || len > 18 || (len > 1 && self.b.get(start) == Some(&b'0')) {
+            return None;
+        }
+        if self
+            .peek()
+            .is_some_and(|c| c.is_ascii_alphanumeric() || c == b'_' || c == b'.')
+        {
+            return None;
+        }
+        Some(Value::Int(if neg { -n } else { n }))
+    }
+
+    /// A string literal without escapes, `$` or `%` (at the opening quote).
+    fn string(&mut self) -> Option<Value> {
+        let start = self.i + 1;
+        let len = self.b.get(start..)?.iter().position(|&c| c == b'"')?;
+        let body = self.b.get(start..start + len)?;
+        if body.iter().any(|&c| matches!(c, b'\\' | b'$' | b'%')) {
+            return None;
+        }
+        self.i = start + len + 1;
+        Some(Value::Str(std::str::from_utf8(body).ok()?.into()))
+    }
+
+    /// `true` or `false`, not followed by a name character (`trueish` is a name).
+    fn boolean(&mut self) -> Option<Value> {
+        let rest = self.b.get(self.i..)?;
+        let (word, v) = if rest.starts_with(b"true") {
+            (4, true)
+        } else if rest.starts_with(b"false") {
+            (5, false)
+        } else {
+            return None;
+        };
+        if rest
+            .get(word)
+            .is_some_and(|&c| c.is_ascii_alphanumeric() || c == b'_')
+        {
+            return None;
+        }
+        self.i += word;
+        Some(Value::Bool(v))
     }
 
     /// `-`? digits, then `.` digits and/or an exponent for a float; the lexer's forms only.

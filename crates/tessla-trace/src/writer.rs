@@ -11,58 +11,65 @@ pub fn write_event(
     output: &OutputInfo,
     value: &Value,
 ) -> io::Result<()> {
-    if output.raw {
-        return writeln!(out, "{value}");
-    }
-    // The common events (an integer, a boolean) without the formatting machinery: one buffer,
-    // one write.
-    let mut buf = [0u8; 96];
-    let mut len = 0;
-    let mut put = |bytes: &[u8]| -> bool {
-        match buf.get_mut(len..len + bytes.len()) {
-            Some(dst) => {
-                dst.copy_from_slice(bytes);
-                len += bytes.len();
-                true
-            }
-            None => false,
-        }
-    };
-    let mut digits = [0u8; 20];
-    let fits = put(decimal(ts, &mut digits))
-        && put(b": ")
-        && put(output.name.as_bytes())
-        && put(b" = ")
-        && match value {
-            Value::Bool(true) => put(b"true"),
-            Value::Bool(false) => put(b"false"),
-            Value::Int(i) => put(decimal(*i, &mut digits)),
-            _ => false,
-        }
-        && put(b"\n");
-    if fits {
-        return out.write_all(&buf[..len]);
-    }
-    writeln!(out, "{ts}: {} = {value}", output.name)
+    Lines::new(std::slice::from_ref(output)).write(out, ts, 0, value)
 }
 
-/// `n` in decimal, as `Display` writes it, in `buf`'s tail.
-fn decimal(n: i64, buf: &mut [u8; 20]) -> &[u8] {
-    let mut at = buf.len();
-    let mut m = n.unsigned_abs();
-    loop {
-        at -= 1;
-        buf[at] = b'0' + (m % 10) as u8;
-        m /= 10;
-        if m == 0 {
-            break;
+/// The outputs of a program, ready to write their events: each output's fixed part
+/// (`: name = `) made once, so a line is its timestamp, that part and its value, put together
+/// in one reused buffer and written at once.
+pub struct Lines<'a> {
+    outputs: &'a [OutputInfo],
+    /// Per output: `: name = `.
+    fixed: Vec<Vec<u8>>,
+    line: Vec<u8>,
+}
+
+impl<'a> Lines<'a> {
+    pub fn new(outputs: &'a [OutputInfo]) -> Lines<'a> {
+        let fixed = outputs
+            .iter()
+            .map(|o| format!(": {} = ", o.name).into_bytes())
+            .collect();
+        Lines {
+            outputs,
+            fixed,
+            line: Vec::with_capacity(64),
         }
     }
-    if n < 0 {
-        at -= 1;
-        buf[at] = b'-';
+
+    /// Write an event of output `index` (nothing for an index without an output).
+    #[inline]
+    pub fn write(
+        &mut self,
+        out: &mut impl Write,
+        ts: i64,
+        index: usize,
+        value: &Value,
+    ) -> io::Result<()> {
+        let (Some(output), Some(fixed)) = (self.outputs.get(index), self.fixed.get(index)) else {
+            return Ok(());
+        };
+        if output.raw {
+            return writeln!(out, "{value}");
+        }
+        // The common events (an integer, a boolean) without the formatting machinery
+        // (`itoa` writes integers as `Display` does).
+        let line = &mut self.line;
+        line.clear();
+        let mut digits = itoa::Buffer::new();
+        line.extend_from_slice(digits.format(ts).as_bytes());
+        line.extend_from_slice(fixed);
+        match value {
+            Value::Bool(true) => line.extend_from_slice(b"true\n"),
+            Value::Bool(false) => line.extend_from_slice(b"false\n"),
+            Value::Int(i) => {
+                line.extend_from_slice(digits.format(*i).as_bytes());
+                line.push(b'\n');
+            }
+            _ => return writeln!(out, "{ts}: {} = {value}", output.name),
+        }
+        out.write_all(line)
     }
-    &buf[at..]
 }
 
 #[cfg(test)]

@@ -187,10 +187,13 @@ pub fn compile_program(p: &ir::Program) -> Arc<Ctx> {
 
 /// A node function that is one operator or native applied to the node's arguments and
 /// constants (`$0 +. $1`, `$0 + 1`, `!$0`, `intToFloat($0)`, or a program function whose body
-/// is one of these). The monitor runs it on its arguments by reference: no frame of cloned
-/// values, no closure call. It computes exactly what the compiled closure does.
+/// is one of these), or a constant (`slift(x) { () }`, what `unitIf` makes). The monitor runs it
+/// on its arguments by reference: no frame of cloned values, no closure call. It computes
+/// exactly what the compiled closure does.
 #[derive(Debug, Clone)]
 pub enum Fast {
+    /// A constant, whatever the arguments.
+    Const(Value),
     Binary(BinOp, Operand, Operand),
     Unary(UnaryOp, Operand),
     Native1(NativeFn, Operand),
@@ -227,8 +230,10 @@ impl Fast {
         functions: &[crate::ir::Function],
         depth: u8,
     ) -> Option<Fast> {
-        let Code::Apply(callee, args) = code else {
-            return None;
+        let (callee, args) = match code {
+            Code::Apply(callee, args) => (callee, args),
+            Code::Const(v) => return Some(Fast::Const(v.clone())),
+            _ => return None,
         };
         let operand = |c: &Code| match c {
             Code::Slot(i) if *i < arity => Some(Operand::Arg(*i)),
@@ -255,6 +260,7 @@ impl Fast {
                     c @ Operand::Const(_) => Some(c),
                 };
                 Some(match inner {
+                    Fast::Const(v) => Fast::Const(v),
                     Fast::Binary(op, a, b) => Fast::Binary(op, sub(a)?, sub(b)?),
                     Fast::Unary(op, a) => Fast::Unary(op, sub(a)?),
                     Fast::Native1(f, a) => Fast::Native1(f, sub(a)?),
@@ -270,6 +276,7 @@ impl Fast {
     #[inline]
     pub fn run(&self, args: &[&Value]) -> Option<Value> {
         Some(match self {
+            Fast::Const(v) => v.clone(),
             Fast::Binary(op, a, b) => binary(*op, a.get(args)?, b.get(args)?),
             Fast::Unary(op, a) => {
                 let a = a.get(args)?;
@@ -467,13 +474,13 @@ fn member(fname: &Arc<str>, v: Option<&Value>) -> Value {
 }
 
 /// A `lift` node's function on its arguments' events this step.
-pub fn lift(cx: &Ctx, f: &LiftFn, code: Option<&Exec>, a: &[Option<Value>]) -> Option<Value> {
+pub fn lift(cx: &Ctx, f: &LiftFn, code: Option<&Exec>, a: &[Option<&Value>]) -> Option<Value> {
     match f {
         LiftFn::Options(_) => {
             let opts: Vec<Value> = a
                 .iter()
                 .map(|o| match o {
-                    Some(v) => Value::Some(Arc::new(v.clone())),
+                    Some(v) => Value::Some(Arc::new((*v).clone())),
                     None => Value::None,
                 })
                 .collect();
@@ -487,19 +494,19 @@ pub fn lift(cx: &Ctx, f: &LiftFn, code: Option<&Exec>, a: &[Option<Value>]) -> O
                 other => Some(other),
             }
         }
-        LiftFn::First => a.first().cloned().flatten(),
+        LiftFn::First => a.first().copied().flatten().cloned(),
         LiftFn::On => match a {
-            [Some(_), Some(now), _] => Some(now.clone()),
-            [Some(_), None, Some(prev)] => Some(prev.clone()),
+            [Some(_), Some(now), _] => Some((*now).clone()),
+            [Some(_), None, Some(prev)] => Some((*prev).clone()),
             _ => None,
         },
         LiftFn::Distinct => match a {
             [Some(x), Some(p)] if x == p => None,
-            [x, ..] => x.clone(),
+            [x, ..] => x.cloned(),
             [] => None,
         },
         LiftFn::FirstOnly => match a {
-            [Some(x), None] => Some(x.clone()),
+            [Some(x), None] => Some((*x).clone()),
             _ => None,
         },
         LiftFn::Edge(want) => match a {
@@ -518,8 +525,8 @@ pub fn lift(cx: &Ctx, f: &LiftFn, code: Option<&Exec>, a: &[Option<Value>]) -> O
             _ => None,
         },
         LiftFn::AddRemove => {
-            let opt = |o: &Option<Value>| match o {
-                Some(v) => Value::Some(Arc::new(v.clone())),
+            let opt = |o: &Option<&Value>| match o {
+                Some(v) => Value::Some(Arc::new((*v).clone())),
                 None => Value::None,
             };
             Some(Value::Tuple(a.iter().map(opt).collect::<Vec<_>>().into()))
@@ -665,6 +672,9 @@ mod tests {
                 },
                 vec![Code::Slot(0)],
             ),
+            Code::Const(Value::Unit),
+            Code::Const(Value::Int(7)),
+            bin(BinOp::Eq, Code::Slot(0), Code::Slot(1)),
         ];
         let values = [
             Value::Float(1.5),
@@ -673,6 +683,7 @@ mod tests {
             Value::Int(3),
             Value::Bool(true),
             Value::Str("x".into()),
+            Value::Tuple(vec![Value::Int(1), Value::Str("x".into())].into()),
             Value::Error(RuntimeError::DivisionByZero),
         ];
         for code in &codes {

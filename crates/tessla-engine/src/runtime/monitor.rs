@@ -327,15 +327,15 @@ impl Monitor {
                 }),
                 Node::Lift { args, f } => {
                     if args.iter().any(|a| cur[*a].is_some()) {
-                        let lift = |vals: &[Option<Value>]| {
+                        let lift = |vals: &[Option<&Value>]| {
                             crate::runtime::exec::lift(cx, f, cx.node(i), vals)
                         };
-                        // Up to three arguments on the stack, not in a new vector.
+                        // Up to three arguments on the stack, by reference.
                         match args[..] {
-                            [a] => lift(&[cur[a].clone()]),
-                            [a, b] => lift(&[cur[a].clone(), cur[b].clone()]),
-                            [a, b, c] => lift(&[cur[a].clone(), cur[b].clone(), cur[c].clone()]),
-                            _ => lift(&args.iter().map(|a| cur[*a].clone()).collect::<Vec<_>>()),
+                            [a] => lift(&[cur[a].as_ref()]),
+                            [a, b] => lift(&[cur[a].as_ref(), cur[b].as_ref()]),
+                            [a, b, c] => lift(&[cur[a].as_ref(), cur[b].as_ref(), cur[c].as_ref()]),
+                            _ => lift(&args.iter().map(|a| cur[*a].as_ref()).collect::<Vec<_>>()),
                         }
                     } else {
                         None
