@@ -101,17 +101,7 @@ impl Reset {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::sync::Arc;
-    use tessla_syntax::include::MemResolver;
-
-    fn program(spec: &str) -> Arc<Program> {
-        let resolver = MemResolver {
-            files: [("v.tessla".to_string(), spec.to_string())].into(),
-        };
-        tessla_engine::load_with("v.tessla", &resolver, &Default::default())
-            .unwrap()
-            .program
-    }
+    use crate::processor::tests::program;
 
     const OLD: &str = "in x: Events[Int]\ndef c = count(x)\ndef s = x + 1\nout c\nout s\n";
 

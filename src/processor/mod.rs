@@ -718,7 +718,7 @@ impl Processor {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::processor::versions::Selector;
     use lineproto::{RecordSplitter, parse_record};
@@ -969,7 +969,8 @@ mod tests {
         assert!(p.summary().ends_with("3 instances, 0 evicted"));
     }
 
-    fn program(spec: &str) -> Arc<Program> {
+    /// A program compiled from `spec` (the processor's tests and its neighbours' use it).
+    pub(crate) fn program(spec: &str) -> Arc<Program> {
         let resolver = MemResolver {
             files: [("v.tessla".to_string(), spec.to_string())].into(),
         };

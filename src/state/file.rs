@@ -325,20 +325,9 @@ impl Backend for FileBackend {
 mod tests {
     use super::*;
     use crate::processor::Options;
+    use crate::processor::tests::program;
     use crate::processor::versions::Selector;
     use lineproto::RecordSplitter;
-    use std::sync::Arc;
-    use tessla_engine::Program;
-    use tessla_syntax::include::MemResolver;
-
-    fn program(spec: &str) -> Arc<Program> {
-        let resolver = MemResolver {
-            files: [("v.tessla".to_string(), spec.to_string())].into(),
-        };
-        tessla_engine::load_with("v.tessla", &resolver, &Default::default())
-            .unwrap()
-            .program
-    }
 
     fn processor(spec: &str) -> Processor {
         Processor::new(
