@@ -19,6 +19,10 @@ pub(super) struct Instance {
     pub(super) monitor: Monitor,
     /// The spec version it runs (an index into `Versions`).
     pub(super) version: usize,
+    /// When it last settled its version (`Processor::settle`): how many rules there were, and
+    /// the next start of one that picks it (`i64::MAX`: none). Until the rules change or that
+    /// start comes, its version stays.
+    pub(super) settled: (usize, i64),
     pub(super) tags: Vec<(String, String)>,
     pub(super) recent: super::dedup::Recent,
     /// Never reused: tells this instance's queued deadlines from a former occupant's of its slot.
@@ -153,6 +157,8 @@ impl Pool {
             Instance {
                 monitor,
                 version,
+                // Never settled: the first step with rules looks.
+                settled: (usize::MAX, i64::MIN),
                 tags,
                 recent: Default::default(),
                 id: self.next_id,

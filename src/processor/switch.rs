@@ -15,6 +15,14 @@ impl Processor {
     /// due before it, then the instance continues in the new version (streams whose key is
     /// unchanged keep their state). Its outputs go to `out`.
     pub(super) fn settle(&mut self, slot: usize, upto: i64, out: &mut Vec<u8>) {
+        // Most steps: the rules have not changed since the instance last settled and no start
+        // of one that picks it comes before `upto` (no key lookup, no copy per record).
+        let rules = self.versions.rules.len();
+        match self.pool.table.get_mut(slot) {
+            Some(inst) if inst.settled.0 == rules && upto < inst.settled.1 => return,
+            Some(_) => {}
+            None => return,
+        }
         let Some(key) = self.pool.table.key(slot).cloned() else {
             return;
         };
@@ -51,6 +59,8 @@ impl Processor {
             cursor = at;
             next = self.versions.next_start(&key, cursor, upto);
         }
+        let after = self.versions.next_start(&key, cursor, i64::MAX);
+        inst.settled = (rules, after.unwrap_or(i64::MAX));
     }
 
     /// Run `program` from now on in place of the base version (a spec reload): `carry` turns

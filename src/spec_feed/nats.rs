@@ -21,7 +21,7 @@ use super::{Arrival, BASE, Channel, Outcome, Rollout};
 use crate::log::{self, Level, mask};
 use crate::processor::versions::Selector;
 use crate::state::kv_keys::kv_key_part_of;
-use crate::state::nats_conn::{Conn, Failure, connect_failure, connect_options, violation};
+use crate::state::nats_conn::{Conn, Failure, connect, violation};
 use crate::state::url::{DEFAULT_TTL, Url};
 use async_nats::jetstream::{self, kv};
 use futures_util::StreamExt;
@@ -128,12 +128,7 @@ struct Opened {
 /// Connect and open the channel's bucket; `create`: make it when missing (the operator's
 /// commands that publish; with the replicas of the URL).
 async fn open(url: Url, create: bool) -> Result<Opened, Failure> {
-    let violations = Arc::new(Mutex::new(Vec::new()));
-    let options = connect_options(&url, Arc::clone(&violations)).await?;
-    let client = options
-        .connect(url.servers.clone())
-        .await
-        .map_err(|e| Failure::Io(connect_failure(&url, &e)))?;
+    let (client, violations) = connect(&url).await?;
     let js = jetstream::new(client.clone());
     let stream = format!("KV_{}", url.bucket);
     let missing = match js.get_stream(&stream).await {

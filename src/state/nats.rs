@@ -9,9 +9,7 @@ use super::kv_keys::kv_key;
 use super::kv_keys::kv_key_part_of;
 use super::lease::Lease;
 use super::lease::lease_elsewhere;
-use super::nats_conn::{
-    Conn, Failure, connect_failure, connect_options, err, permission_failure, violation,
-};
+use super::nats_conn::{Conn, Failure, connect, err, permission_failure, violation};
 use super::restore::Restorer;
 use super::url::Url;
 use super::{Backend, Context, entry, fingerprint};
@@ -22,17 +20,11 @@ use async_nats::jetstream::kv;
 use async_nats::jetstream::{self, stream};
 use std::collections::HashSet;
 use std::io;
-use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 /// Connect and open (or create) the bucket.
 async fn open(url: Url) -> Result<kv::Store, Failure> {
-    let violations = Arc::new(Mutex::new(Vec::new()));
-    let options = connect_options(&url, Arc::clone(&violations)).await?;
-    let client = options
-        .connect(url.servers.clone())
-        .await
-        .map_err(|e| Failure::Io(connect_failure(&url, &e)))?;
+    let (client, violations) = connect(&url).await?;
     let js = jetstream::new(client.clone());
     // Before the bucket is looked up (or created): the partition's lease live in another bucket
     // means the processes of one partition were given different buckets; each would step the

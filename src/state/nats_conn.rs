@@ -77,7 +77,7 @@ impl Failure {
 }
 
 /// The connect options of `url`: credentials and TLS through the client crate's own support.
-pub(crate) async fn connect_options(
+async fn connect_options(
     url: &Url,
     violations: Arc<Mutex<Vec<String>>>,
 ) -> Result<async_nats::ConnectOptions, Failure> {
@@ -152,7 +152,21 @@ pub(crate) async fn connect_options(
 }
 
 /// The message for a failed connection: refused credentials, TLS, or no server, each its own.
-pub(crate) fn connect_failure(url: &Url, e: &async_nats::ConnectError) -> String {
+/// Connect to `url`'s servers with its login and TLS: the client, and the list into which the
+/// server's permission violations are put (see [`violation`]).
+pub(crate) async fn connect(
+    url: &Url,
+) -> Result<(async_nats::Client, Arc<Mutex<Vec<String>>>), Failure> {
+    let violations = Arc::new(Mutex::new(Vec::new()));
+    let options = connect_options(url, Arc::clone(&violations)).await?;
+    let client = options
+        .connect(url.servers.clone())
+        .await
+        .map_err(|e| Failure::Io(connect_failure(url, &e)))?;
+    Ok((client, violations))
+}
+
+fn connect_failure(url: &Url, e: &async_nats::ConnectError) -> String {
     use async_nats::ConnectErrorKind as K;
     let at = url.shown();
     // The crate's error text names no secret (kind and source: an I/O or TLS error).
