@@ -198,6 +198,8 @@ pub enum Fast {
     Unary(UnaryOp, Operand),
     Native1(NativeFn, Operand),
     Native2(NativeFn, Operand, Operand),
+    /// `intToFloat` (the native, for what is not an `Int`): a node every mean or ratio has.
+    IntToFloat(NativeFn, Operand),
 }
 
 /// An operand of a [`Fast`] form: argument `i` of the node, or a constant.
@@ -245,6 +247,13 @@ impl Fast {
                 Some(Fast::Binary(*op, operand(a)?, operand(b)?))
             }
             (Callee::Prim(Prim::Unary(op)), [a]) => Some(Fast::Unary(*op, operand(a)?)),
+            (
+                Callee::Native {
+                    name: "intToFloat",
+                    f,
+                },
+                [a],
+            ) => Some(Fast::IntToFloat(*f, operand(a)?)),
             (Callee::Native { f, .. }, [a]) => Some(Fast::Native1(*f, operand(a)?)),
             (Callee::Native { f, .. }, [a, b]) => Some(Fast::Native2(*f, operand(a)?, operand(b)?)),
             (Callee::Fn(id), _) if depth > 0 => {
@@ -265,6 +274,7 @@ impl Fast {
                     Fast::Unary(op, a) => Fast::Unary(op, sub(a)?),
                     Fast::Native1(f, a) => Fast::Native1(f, sub(a)?),
                     Fast::Native2(f, a, b) => Fast::Native2(f, sub(a)?, sub(b)?),
+                    Fast::IntToFloat(f, a) => Fast::IntToFloat(f, sub(a)?),
                 })
             }
             _ => None,
@@ -289,8 +299,72 @@ impl Fast {
             Fast::Native2(f, a, b) => {
                 call_native(*f, &[a.get(args)?.clone(), b.get(args)?.clone()])
             }
+            Fast::IntToFloat(f, a) => match a.get(args)? {
+                Value::Int(i) => Value::Float(*i as f64),
+                v => call_native(*f, &[v.clone()]),
+            },
         })
     }
+
+    /// [`Fast::run`] for constants, operators and `intToFloat`, with their scalar cases inline in the
+    /// evaluator's loop: an operator on `Float`/`Int`/`Bool` operands (as operator nodes
+    /// compute it), `!`, `-.`, `intToFloat` of an `Int`; anything else (errors, strings,
+    /// tuples, overflow) goes out of line to the general semantics, as in [`Fast::run`].
+    /// `None` for the other forms (natives): the caller runs [`Fast::run`].
+    #[inline(always)]
+    pub fn scalar(&self, args: &[&Value]) -> Option<Value> {
+        Some(match self {
+            Fast::Binary(op, a, b) => {
+                let (x, y) = (a.get(args)?, b.get(args)?);
+                let inline = match scalar_op(*op) {
+                    Some(sop) => sop.eval_values(x, y),
+                    None => match (x, y) {
+                        (
+                            Value::Float(_) | Value::Int(_) | Value::Bool(_),
+                            Value::Float(_) | Value::Int(_) | Value::Bool(_),
+                        ) => ops::eq_values(*op, x, y),
+                        _ => None,
+                    },
+                };
+                match inline {
+                    Some(r) => r,
+                    None => binary_general(*op, x, y),
+                }
+            }
+            Fast::Unary(op, a) => {
+                let a = a.get(args)?;
+                match ops::unary_fast(*op, a) {
+                    Some(r) => r,
+                    None => unary_general(*op, a),
+                }
+            }
+            Fast::IntToFloat(f, a) => match a.get(args)? {
+                Value::Int(i) => Value::Float(*i as f64),
+                v => native_general(*f, v),
+            },
+            // `unitIf`'s `()`, and other constants.
+            Fast::Const(Value::Unit) => Value::Unit,
+            Fast::Const(v) => v.clone(),
+            _ => return None,
+        })
+    }
+}
+
+/// The general ways of [`Fast::scalar`], out of the evaluator's loop.
+#[inline(never)]
+fn binary_general(op: BinOp, a: &Value, b: &Value) -> Value {
+    // What `binary` does after its scalar path, which `Fast::scalar` has already taken.
+    ops::eq_values(op, a, b).unwrap_or_else(|| ops::binary_value(op, a, b))
+}
+
+#[inline(never)]
+fn unary_general(op: UnaryOp, a: &Value) -> Value {
+    ops::unary_value(op, a)
+}
+
+#[inline(never)]
+fn native_general(f: NativeFn, a: &Value) -> Value {
+    call_native(f, &[a.clone()])
 }
 
 enum CtxRef {
@@ -675,13 +749,23 @@ mod tests {
             Code::Const(Value::Unit),
             Code::Const(Value::Int(7)),
             bin(BinOp::Eq, Code::Slot(0), Code::Slot(1)),
+            bin(BinOp::Or, Code::Slot(0), Code::Slot(1)),
+            bin(BinOp::Lt, Code::Slot(0), Code::Slot(1)),
+            bin(BinOp::Sub, Code::Slot(0), Code::Slot(1)),
+            Code::apply(
+                Callee::Prim(Prim::Unary(UnaryOp::FNeg)),
+                vec![Code::Slot(1)],
+            ),
         ];
         let values = [
             Value::Float(1.5),
             Value::Float(-0.25),
             Value::Int(i64::MAX),
             Value::Int(3),
+            Value::Float(f64::NAN),
+            Value::from_big(num_bigint::BigInt::from(i64::MAX) * 4),
             Value::Bool(true),
+            Value::Bool(false),
             Value::Str("x".into()),
             Value::Tuple(vec![Value::Int(1), Value::Str("x".into())].into()),
             Value::Error(RuntimeError::DivisionByZero),
@@ -695,8 +779,15 @@ mod tests {
             for a in &values {
                 for b in &values {
                     let want = exec(&cx, &[a.clone(), b.clone()]);
+                    // Compared as printed: NaN is not equal to itself.
+                    let want = format!("{:?}", Some(want));
                     let got = fast.run(&[a, b]);
-                    assert_eq!(got.as_ref(), Some(&want), "{code:?} on {a:?}, {b:?}");
+                    assert_eq!(format!("{got:?}"), want, "{code:?} on {a:?}, {b:?}");
+                    // The inline way, where it applies, computes the same.
+                    if let Some(inline) = fast.scalar(&[a, b]) {
+                        let inline = format!("{:?}", Some(inline));
+                        assert_eq!(inline, want, "inline {code:?} on {a:?}, {b:?}");
+                    }
                 }
             }
         }

@@ -528,6 +528,7 @@ fn arg<'a>(
 /// Signal lift. Checks for an event first (most nodes have none in a step), then passes up to
 /// three arguments in a stack array and more in a reused buffer, so a step allocates nothing for
 /// scalar values.
+#[inline(always)]
 fn slift(
     cur: &[Option<Value>],
     last: &[Option<Value>],
@@ -547,8 +548,14 @@ fn slift(
         // By reference: no frame of cloned values, no closure call.
         let arg = |a| arg(cur, last, slots, a);
         let r = match args {
-            [a] => fast.run(&[arg(a)?]),
-            [a, b] => fast.run(&[arg(a)?, arg(b)?]),
+            [a] => {
+                let x = [arg(a)?];
+                fast.scalar(&x).or_else(|| fast.run(&x))
+            }
+            [a, b] => {
+                let x = [arg(a)?, arg(b)?];
+                fast.scalar(&x).or_else(|| fast.run(&x))
+            }
             [a, b, c] => fast.run(&[arg(a)?, arg(b)?, arg(c)?]),
             _ => None,
         };
@@ -650,11 +657,15 @@ impl Monitor {
 }
 
 /// `f(acc, x)` of a `fold` or `reduce` node, strict in the accumulator.
+#[inline(always)]
 fn strict2(cx: &Ctx, node: NodeId, a: &Value, b: &Value) -> Value {
     if let Value::Error(e) = a {
         return Value::Error(e.clone());
     }
-    if let Some(r) = cx.fast(node).and_then(|f| f.run(&[a, b])) {
+    if let Some(r) = cx
+        .fast(node)
+        .and_then(|f| f.scalar(&[a, b]).or_else(|| f.run(&[a, b])))
+    {
         return r;
     }
     call(cx, cx.node(node), &[a.clone(), b.clone()])
