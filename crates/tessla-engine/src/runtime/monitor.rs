@@ -314,17 +314,20 @@ impl Monitor {
                     }
                 }
                 Node::Default { stream, value } => cur[*stream]
-                    .clone()
+                    .as_ref()
+                    .map(clone_value)
                     .or_else(|| first.then(|| value.clone())),
-                Node::DefaultFrom { stream, from } => cur[*stream].clone().or_else(|| {
-                    let s_never = last_of(last, slots, *stream).is_none();
-                    let d_first = last_of(last, slots, *from).is_none();
-                    if s_never && d_first {
-                        cur[*from].clone()
-                    } else {
-                        None
-                    }
-                }),
+                Node::DefaultFrom { stream, from } => {
+                    cur[*stream].as_ref().map(clone_value).or_else(|| {
+                        let s_never = last_of(last, slots, *stream).is_none();
+                        let d_first = last_of(last, slots, *from).is_none();
+                        if s_never && d_first {
+                            cur[*from].as_ref().map(clone_value)
+                        } else {
+                            None
+                        }
+                    })
+                }
                 Node::Lift { args, f } => {
                     if args.iter().any(|a| cur[*a].is_some()) {
                         let lift = |vals: &[Option<&Value>]| {
@@ -457,7 +460,7 @@ impl Monitor {
                     // Swap in place, then drop the previous value.
                     std::mem::swap(c, l);
                 }
-                *c = None;
+                release(c.take());
             }
         }
         for i in self.inputs.iter_mut() {
