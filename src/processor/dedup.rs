@@ -201,10 +201,14 @@ mod tests {
                         FieldValue::Str("1".into()),
                         FieldValue::Float(0.25),
                     ] {
-                        let mut m = Metric::default();
-                        m.measurement = "m".into();
-                        m.fields.push((key.clone(), v));
-                        m.fields.push(("x".into(), FieldValue::Int(len as i64)));
+                        let m = Metric {
+                            measurement: "m".into(),
+                            fields: vec![
+                                (key.clone(), v),
+                                ("x".into(), FieldValue::Int(len as i64)),
+                            ],
+                            ..Default::default()
+                        };
                         seen.insert(digest(&m));
                         n += 1;
                     }
@@ -215,14 +219,15 @@ mod tests {
         let mut distinct = std::collections::HashSet::new();
         let mut total = 0;
         for i in 0..200_000u64 {
-            let mut m = Metric::default();
-            m.measurement = "mqtt_consumer".into();
-            m.tags
-                .push(("robot".into(), format!("tb3-{:05}", i % 1000)));
-            m.fields
-                .push(("lidar_1".into(), FieldValue::Float(i as f64 * 0.001)));
-            m.fields
-                .push(("lidar_2".into(), FieldValue::Float((i / 7) as f64)));
+            let m = Metric {
+                measurement: "mqtt_consumer".into(),
+                tags: vec![("robot".into(), format!("tb3-{:05}", i % 1000))],
+                fields: vec![
+                    ("lidar_1".into(), FieldValue::Float(i as f64 * 0.001)),
+                    ("lidar_2".into(), FieldValue::Float((i / 7) as f64)),
+                ],
+                ..Default::default()
+            };
             distinct.insert(digest(&m));
             total += 1;
         }
