@@ -55,16 +55,17 @@ impl Recent {
 /// Why distinct records practically never collide: the timestamp is compared exactly, not
 /// digested, and a record is compared with at most [`WINDOW`] others. A pair digest is a
 /// folded multiply (the 128-bit product's halves xor-ed, as in wyhash and foldhash) of the key's
-/// digest and the value's bits, each xor-ed with a distinct constant, folded once more: every
-/// output bit depends on every input bit of key and value, so pair digests of different pairs
-/// behave like independent 64-bit random values, and two different sets of pairs have equal sums
-/// with a chance about 2^-64 (a sum of random values is as uniform as one of them). The field
-/// count is mixed in besides. Even 10^12 records each compared with 32 others sharing their
-/// timestamp would collide with a chance near 2^-64 * 32 * 10^12 < 10^-6. The digest is not
-/// keyed: records crafted to collide could make one of them dropped; the records come from the
-/// operator's own robots. Hand-written (not `FxHasher` plus a finaliser, as before, nor a hash
-/// crate's hasher, which none in the tree gives for a fixed seed in one multiply per word): about
-/// a third of the instructions per field (`lidar`: 360 fields a record).
+/// digest (itself folded multiplies of the key's bytes and length, under a seed for the kind and
+/// the value's type) and the value's bits, each xor-ed with a distinct constant: every output bit
+/// depends on every bit of key and value, so pair digests of different pairs behave like
+/// independent 64-bit random values, and two different sets of pairs have equal sums with a
+/// chance about 2^-64 (a sum of random values is as uniform as one of them). The field count is
+/// mixed in besides. Even 10^12 records each compared with 32 others sharing their timestamp
+/// would collide with a chance near 2^-64 * 32 * 10^12 < 10^-6. The digest is not keyed: records
+/// crafted to collide could make one of them dropped; the records come from the operator's own
+/// robots. Hand-written (before: `FxHasher` over kind, key and value plus splitmix64's finaliser
+/// per pair; no hash crate in the tree gives a fixed-seed hasher this cheap): a few dozen
+/// instructions per field (`lidar`: 360 fields a record).
 fn digest(m: &Metric) -> u64 {
     let mut sum = bytes_digest(K[0], m.measurement.as_bytes());
     for (k, v) in &m.tags {
@@ -108,7 +109,7 @@ fn fold(a: u64, b: u64) -> u64 {
 /// A pair's digest from its key's digest and its value's bits.
 #[inline(always)]
 fn pair(key: u64, value: u64) -> u64 {
-    fold(fold(key ^ K[0], value ^ K[1]) ^ K[2], K[3])
+    fold(key ^ K[0], value ^ K[1])
 }
 
 /// Digest of a byte string under `seed` (a kind: measurement, tag key, field key of a value
