@@ -11,7 +11,6 @@
 //! same instance. Records without a timestamp are never duplicates (each gets the wall clock).
 
 use lineproto::{FieldValue, Metric};
-use std::hash::{Hash, Hasher};
 
 /// How many recent records of one instance a record is compared with (a resent message comes
 /// back right after the reconnect, before anything newer of the same robot).
@@ -22,55 +21,138 @@ pub const WINDOW: usize = 32;
 pub struct Recent {
     seen: Vec<(i64, u64)>,
     next: usize,
+    /// The newest timestamp ever remembered: a record newer than it repeats none of `seen`
+    /// (the usual case, records in time order), so the window is not searched.
+    newest: Option<i64>,
 }
 
 impl Recent {
     /// Whether `m` (timestamp `ts`) repeats a recent record; if not, it is remembered.
     pub fn is_duplicate(&mut self, ts: i64, m: &Metric) -> bool {
         let d = digest(m);
-        if self.seen.iter().any(|&(t, x)| t == ts && x == d) {
+        let newer = self.newest.is_none_or(|n| ts > n);
+        if !newer && self.seen.iter().any(|&(t, x)| t == ts && x == d) {
             return true;
+        }
+        if newer {
+            self.newest = Some(ts);
         }
         if self.seen.len() < WINDOW {
             self.seen.push((ts, d));
         } else {
-            self.seen[self.next] = (ts, d);
+            if let Some(s) = self.seen.get_mut(self.next) {
+                *s = (ts, d);
+            }
             self.next = (self.next + 1) % WINDOW;
         }
         false
     }
 }
 
-/// Order-independent digest of a metric's measurement, tags and fields: each pair is hashed
-/// alone, mixed, and the results summed.
+/// Order-independent digest of a metric's measurement, tags and fields: each (kind, key, value)
+/// pair is digested alone into 64 bits, and the pair digests are summed.
+///
+/// Why distinct records practically never collide: the timestamp is compared exactly, not
+/// digested, and a record is compared with at most [`WINDOW`] others. A pair digest is a
+/// folded multiply (the 128-bit product's halves xor-ed, as in wyhash and foldhash) of the key's
+/// digest (itself folded multiplies of the key's bytes and length, under a seed for the kind and
+/// the value's type) and the value's bits, each xor-ed with a distinct constant: every output bit
+/// depends on every bit of key and value, so pair digests of different pairs behave like
+/// independent 64-bit random values, and two different sets of pairs have equal sums with a
+/// chance about 2^-64 (a sum of random values is as uniform as one of them). The field count is
+/// mixed in besides. Even 10^12 records each compared with 32 others sharing their timestamp
+/// would collide with a chance near 2^-64 * 32 * 10^12 < 10^-6. The digest is not keyed: records
+/// crafted to collide could make one of them dropped; the records come from the operator's own
+/// robots. Hand-written (before: `FxHasher` over kind, key and value plus splitmix64's finaliser
+/// per pair; no hash crate in the tree gives a fixed-seed hasher this cheap): a few dozen
+/// instructions per field (`lidar`: 360 fields a record).
 fn digest(m: &Metric) -> u64 {
-    let mut sum = pair_hash(0, m.measurement.as_bytes(), |_| {});
+    let mut sum = bytes_digest(K[0], m.measurement.as_bytes());
     for (k, v) in &m.tags {
-        sum = sum.wrapping_add(pair_hash(1, k.as_bytes(), |h| v.hash(h)));
+        sum = sum.wrapping_add(pair(
+            bytes_digest(K[1], k.as_bytes()),
+            bytes_digest(K[5], v.as_bytes()),
+        ));
     }
     for (k, v) in &m.fields {
-        sum = sum.wrapping_add(pair_hash(2, k.as_bytes(), |h| match v {
-            FieldValue::Float(f) => (0u8, f.to_bits()).hash(h),
-            FieldValue::Int(i) => (1u8, *i).hash(h),
-            FieldValue::UInt(u) => (2u8, *u).hash(h),
-            FieldValue::Bool(b) => (3u8, *b).hash(h),
-            FieldValue::Str(s) => (4u8, s).hash(h),
-        }));
+        let (seed, bits) = match v {
+            FieldValue::Float(f) => (K[2], f.to_bits()),
+            FieldValue::Int(i) => (K[3], *i as u64),
+            FieldValue::UInt(u) => (K[4], *u),
+            FieldValue::Bool(b) => (K[6], u64::from(*b)),
+            FieldValue::Str(s) => (K[7], bytes_digest(K[5], s.as_bytes())),
+        };
+        sum = sum.wrapping_add(pair(bytes_digest(seed, k.as_bytes()), bits));
     }
     sum ^ (m.fields.len() as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
 }
 
-fn pair_hash(kind: u8, key: &[u8], value: impl FnOnce(&mut rustc_hash::FxHasher)) -> u64 {
-    let mut h = rustc_hash::FxHasher::default();
-    h.write_u8(kind);
-    h.write(key);
-    h.write_u8(0xff);
-    value(&mut h);
-    // splitmix64's finalizer: spreads Fx's output so that sums of pair hashes do not collide.
-    let mut z = h.finish();
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
+/// Constants with no structure (hex digits of pi, as foldhash and wyhash use).
+const K: [u64; 8] = [
+    0x243f_6a88_85a3_08d3,
+    0x1319_8a2e_0370_7344,
+    0xa409_3822_299f_31d0,
+    0x082e_fa98_ec4e_6c89,
+    0x4528_21e6_38d0_1377,
+    0xbe54_66cf_34e9_0c6c,
+    0xc0ac_29b7_c97c_50dd,
+    0x3f84_d5b5_b547_0917,
+];
+
+/// The 128-bit product's halves xor-ed.
+#[inline(always)]
+fn fold(a: u64, b: u64) -> u64 {
+    let p = u128::from(a) * u128::from(b);
+    (p as u64) ^ ((p >> 64) as u64)
+}
+
+/// A pair's digest from its key's digest and its value's bits.
+#[inline(always)]
+fn pair(key: u64, value: u64) -> u64 {
+    fold(key ^ K[0], value ^ K[1])
+}
+
+/// Digest of a byte string under `seed` (a kind: measurement, tag key, field key of a value
+/// type, string value): its length and every byte, 16 at a time, through folded multiplies.
+#[inline]
+fn bytes_digest(seed: u64, b: &[u8]) -> u64 {
+    let len = b.len();
+    let mut s = seed ^ (len as u64).wrapping_mul(K[4]);
+    let (x, y) = if len <= 16 {
+        if len >= 8 {
+            (word8(b.first_chunk()), word8(b.last_chunk()))
+        } else if len >= 4 {
+            (word4(b.first_chunk()), word4(b.last_chunk()))
+        } else if let (Some(&f), Some(&l)) = (b.first(), b.last()) {
+            let mid = b.get(len / 2).copied().unwrap_or(0);
+            (u64::from(f) | (u64::from(mid) << 8), u64::from(l))
+        } else {
+            (0, 0)
+        }
+    } else {
+        let mut rest = b;
+        while let Some((c, r)) = rest.split_first_chunk::<16>() {
+            if r.is_empty() {
+                break;
+            }
+            s = fold(word8(c.first_chunk()) ^ K[5], word8(c.last_chunk()) ^ s);
+            rest = r;
+        }
+        // The last 16 bytes (overlapping the chunks before when the length is not a multiple).
+        let tail = b.get(len - 16..).unwrap_or_default();
+        (word8(tail.first_chunk()), word8(tail.last_chunk()))
+    };
+    fold(x ^ K[6], y ^ s)
+}
+
+#[inline(always)]
+fn word8(c: Option<&[u8; 8]>) -> u64 {
+    c.map_or(0, |c| u64::from_le_bytes(*c))
+}
+
+#[inline(always)]
+fn word4(c: Option<&[u8; 4]>) -> u64 {
+    c.map_or(0, |c| u64::from(u32::from_le_bytes(*c)))
 }
 
 #[cfg(test)]
@@ -98,6 +180,59 @@ mod tests {
         assert!(!r.is_duplicate(ts, &metric("m,topic=t a=2,b=1,s=\"x\" 1")));
         // Int 1 and float 1 differ.
         assert!(!r.is_duplicate(ts, &metric("m,topic=t a=1i,b=2,s=\"x\" 1")));
+    }
+
+    /// Records that differ in one key byte (at any length, through the 16-byte chunks), in one
+    /// value or in the value's type all have distinct digests.
+    #[test]
+    fn near_records_have_distinct_digests() {
+        let mut seen = std::collections::HashSet::new();
+        let mut n = 0;
+        for len in 0..40 {
+            for pos in 0..len {
+                for b in [b'a', b'b', b'\\', b'z'] {
+                    let mut key = vec![b'k'; len];
+                    key[pos] = b;
+                    let key = String::from_utf8(key).unwrap();
+                    for v in [
+                        FieldValue::Float(1.0),
+                        FieldValue::Int(1),
+                        FieldValue::UInt(1),
+                        FieldValue::Bool(true),
+                        FieldValue::Str("1".into()),
+                        FieldValue::Float(0.25),
+                    ] {
+                        let m = Metric {
+                            measurement: "m".into(),
+                            fields: vec![
+                                (key.clone(), v),
+                                ("x".into(), FieldValue::Int(len as i64)),
+                            ],
+                            ..Default::default()
+                        };
+                        seen.insert(digest(&m));
+                        n += 1;
+                    }
+                }
+            }
+        }
+        assert_eq!(seen.len(), n);
+        let mut distinct = std::collections::HashSet::new();
+        let mut total = 0;
+        for i in 0..200_000u64 {
+            let m = Metric {
+                measurement: "mqtt_consumer".into(),
+                tags: vec![("robot".into(), format!("tb3-{:05}", i % 1000))],
+                fields: vec![
+                    ("lidar_1".into(), FieldValue::Float(i as f64 * 0.001)),
+                    ("lidar_2".into(), FieldValue::Float((i / 7) as f64)),
+                ],
+                ..Default::default()
+            };
+            distinct.insert(digest(&m));
+            total += 1;
+        }
+        assert_eq!(distinct.len(), total);
     }
 
     #[test]

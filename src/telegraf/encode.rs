@@ -116,6 +116,7 @@ pub struct Scratch {
     /// A member's field key before escaping (see [`Writer`]).
     name: String,
     line: String,
+    floats: Floats,
 }
 
 /// An encoding's measurement escaped and its field key escaped with `=` (`None`: not writable).
@@ -264,14 +265,59 @@ fn writable_leaf(v: &Value) -> Option<&Value> {
 /// Append a scalar from [`writable_leaf`] in line-protocol form (what [`field_value`] and
 /// [`lineproto::write_value`] write, without the intermediate [`FieldValue`]).
 #[inline]
-fn write_leaf(line: &mut String, v: &Value) {
+fn write_leaf(line: &mut String, floats: &mut Floats, v: &Value) {
     match v {
-        Value::Unit => line.push_str("true"),
-        Value::Bool(b) => line.push_str(if *b { "true" } else { "false" }),
+        Value::Unit | Value::Bool(true) => line.push_str("true"),
+        // Apart from `true`: a literal of known length is copied inline, not through memcpy.
+        Value::Bool(false) => line.push_str("false"),
         Value::Int(i) => lineproto::write::write_int(line, *i),
-        Value::Float(f) => lineproto::write_float(line, *f),
+        Value::Float(f) => floats.write(line, *f),
         Value::Str(s) => lineproto::write::write_string(line, s),
         _ => {}
+    }
+}
+
+/// Floats written lately and their text, one slot per value by a hash of its bits: a value that
+/// repeats (a constant output like `0.015`, a value written to two metrics of a step) is copied,
+/// not formatted again (formatting a Float was the largest item of writing a line). A slot
+/// costs a copy of the text when it changes.
+#[derive(Debug)]
+pub struct Floats {
+    slots: [(u64, String); 16],
+}
+
+/// The bits of a NaN: no slot of an unused [`Floats`] matches a finite value.
+const NO_FLOAT: u64 = 0x7ff8_0000_0000_0001;
+
+impl Default for Floats {
+    fn default() -> Floats {
+        Floats {
+            slots: std::array::from_fn(|_| (NO_FLOAT, String::new())),
+        }
+    }
+}
+
+impl Floats {
+    /// Append finite `f` as [`lineproto::write_float`] writes it.
+    #[inline]
+    fn write(&mut self, line: &mut String, f: f64) {
+        let bits = f.to_bits();
+        let slot = (bits.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 60) as usize;
+        let Some((b, text)) = self.slots.get_mut(slot) else {
+            lineproto::write_float(line, f);
+            return;
+        };
+        if *b == bits {
+            line.push_str(text);
+            return;
+        }
+        let start = line.len();
+        lineproto::write_float(line, f);
+        if let Some(t) = line.get(start..) {
+            text.clear();
+            text.push_str(t);
+            *b = bits;
+        }
     }
 }
 
@@ -325,6 +371,7 @@ struct Writer<'a> {
     encodings: &'a [Encoding],
     default_measurement: &'a str,
     line: &'a mut String,
+    floats: &'a mut Floats,
     /// A member's field key before escaping: the output's field and the member's path.
     name: &'a mut String,
     dropped: &'a mut Vec<Dropped>,
@@ -344,6 +391,7 @@ impl Writer<'_> {
             encodings: self.encodings,
             default_measurement: self.default_measurement,
             line: self.line,
+            floats: self.floats,
             name: self.name,
             dropped: self.dropped,
             written: self.written,
@@ -398,7 +446,7 @@ impl Writer<'_> {
                         return;
                     }
                 }
-                write_leaf(self.line, v);
+                write_leaf(self.line, self.floats, v);
                 self.written = true;
             }
             (None, _) if self.report => self.drop_value(idx, path, v),
@@ -483,12 +531,14 @@ fn encode<E: StepEvent>(
         path,
         name,
         line,
+        floats,
     } = scratch;
     let mut dropped = Vec::new();
     let mut w = Writer {
         encodings,
         default_measurement,
         line,
+        floats,
         name,
         dropped: &mut dropped,
         written: false,

@@ -288,8 +288,8 @@ pub fn write_float(out: &mut String, f: f64) {
                 out.push_str(s.get(..s.len() - 2).unwrap_or(s));
                 return;
             }
-        } else if body.len() < 17 {
-            // Too few digits for a tie (see below).
+        } else if body.len() < 17 || !may_tie(f) {
+            // Too few digits for a tie (see below), or a binary exponent no tie has.
             out.push_str(s);
             return;
         } else if let Some(dot) = bytes.iter().position(|&b| b == b'.') {
@@ -364,6 +364,22 @@ pub fn write_float(out: &mut String, f: f64) {
         out.push('.');
         out.push_str(b);
     }
+}
+
+/// Whether [`is_tie`] can hold for `f` at some scale: `|f| = m * 2^e` (`m` odd) with `e`
+/// within 26 of zero. Most values with 17 digits (sensor readings, their differences) have `e`
+/// near -60 and skip the search for the point.
+#[inline]
+fn may_tie(f: f64) -> bool {
+    let bits = f.to_bits();
+    let biased = ((bits >> 52) & 0x7ff) as i32;
+    let frac = bits & ((1u64 << 52) - 1);
+    let (m, e) = if biased == 0 {
+        (frac, -1074)
+    } else {
+        (frac | (1u64 << 52), biased - 1075)
+    };
+    m != 0 && (e + m.trailing_zeros() as i32).unsigned_abs() <= 26
 }
 
 /// Whether `|f|` is exactly `(sig ++ "5") * 10^j` (`sig`'s digits, other bytes skipped), the midpoint between the decimal `sig` (at
