@@ -79,7 +79,7 @@ impl WiringCheck {
         }
         let started = *self.started.get_or_insert_with(Instant::now);
         self.records += 1;
-        self.note_shape(m);
+        let runs = self.note_shape(m);
         for (seen, b) in self.inputs.iter_mut().zip(bindings) {
             if !b.matches(m) {
                 continue;
@@ -97,13 +97,22 @@ impl WiringCheck {
                     }
                 }
                 FieldPattern::Indexed(prefix) => {
-                    let prefix = prefix.as_bytes();
-                    let len = m
-                        .fields
-                        .iter()
-                        .filter_map(|(k, _)| index_of(k.as_bytes(), prefix))
-                        .max()
-                        .map(|i| i + 1);
+                    // A prefix ending in `_` takes exactly the keys that split into it and an
+                    // index, so the runs the shape pass found give its longest list without a
+                    // second pass over the record's keys.
+                    let max = match &runs {
+                        Some(runs) if prefix.ends_with('_') => runs
+                            .iter()
+                            .filter(|(name, _)| *name == prefix)
+                            .map(|&(_, i)| i)
+                            .max(),
+                        _ => m
+                            .fields
+                            .iter()
+                            .filter_map(|(k, _)| index_of(k.as_bytes(), prefix.as_bytes()))
+                            .max(),
+                    };
+                    let len = max.map(|i| i + 1);
                     if let Some(len) = len {
                         seen.present += 1;
                         seen.converted += 1;
@@ -125,11 +134,14 @@ impl WiringCheck {
         self.done = true;
     }
 
-    fn note_shape(&mut self, m: &Metric) {
+    /// Note the record's measurement, tag set and field names; the record's indexed names
+    /// (`lidar_` of `lidar_12`) with the largest index of each run of keys of one name, unless
+    /// the record's measurement is not kept (too many measurements).
+    fn note_shape<'m>(&mut self, m: &'m Metric) -> Option<Vec<(&'m str, usize)>> {
         if !self.measurements.contains_key(&m.measurement)
             && self.measurements.len() >= MAX_MEASUREMENTS
         {
-            return;
+            return None;
         }
         let seen = match self.measurements.get_mut(&m.measurement) {
             Some(seen) => seen,
@@ -150,6 +162,7 @@ impl WiringCheck {
         // largest index is written to the entry when another indexed name comes or the record
         // ends (an entry never looked at in between, so the same as updating it per key).
         let mut run: Option<(&str, usize)> = None;
+        let mut runs = Vec::new();
         for (k, _) in &m.fields {
             let (name, idx) = match split_index(k) {
                 Some((prefix, i)) => {
@@ -161,6 +174,7 @@ impl WiringCheck {
                     }
                     if let Some((p, max)) = run.replace((prefix, i)) {
                         raise(&mut seen.fields, p, max);
+                        runs.push((p, max));
                     }
                     (prefix, Some(i))
                 }
@@ -181,7 +195,9 @@ impl WiringCheck {
         }
         if let Some((p, max)) = run {
             raise(&mut seen.fields, p, max);
+            runs.push((p, max));
         }
+        Some(runs)
     }
 
     fn report(&mut self, bindings: &[InputBinding]) {
@@ -493,15 +509,52 @@ mod tests {
     }
 
     #[test]
+    fn a_list_length_from_the_runs_equals_one_from_the_keys() {
+        let bind = |prefix: &str| InputBinding {
+            input: 0,
+            name: "scan".into(),
+            ty: Type::List(Box::new(Type::Float)),
+            measurement: None,
+            tags: Vec::new(),
+            field: FieldPattern::Indexed(prefix.into()),
+            length: None,
+        };
+        let records: [&[u8]; 6] = [
+            b"m a_3=1,b=2,a_10=1,c_1=0,a_2=1,a_x=1 1",
+            b"m c_7=1,a_1=1,c_9=2 1",
+            b"m a_=1,a_007=1,a_+4=1,a=2 1",
+            b"m b=1 1",
+            b"m a_99999999999999999999=1,a_5=1 1",
+            b"m x1_2=1,a_1_2=1,a_4=1 1",
+        ];
+        for prefix in ["a_", "c_", "a", "x1_", "a_1_"] {
+            let b = bind(prefix);
+            for r in records {
+                let m = lineproto::parse_record(r).unwrap().unwrap();
+                let mut w = WiringCheck::new(std::slice::from_ref(&b));
+                w.observe(&m, std::slice::from_ref(&b));
+                let want = m
+                    .fields
+                    .iter()
+                    .filter_map(|(k, _)| index_of(k.as_bytes(), prefix.as_bytes()))
+                    .max()
+                    .map_or(0, |i| i + 1);
+                assert_eq!(w.inputs[0].max_len, want, "{prefix} {r:?}");
+                assert_eq!(w.inputs[0].present, u64::from(want > 0), "{prefix} {r:?}");
+            }
+        }
+    }
+
+    #[test]
     fn indexed_names_as_the_standard_parser_reads_them() {
-        let old_split = |key: &str| -> Option<(&str, usize)> {
+        fn old_split(key: &str) -> Option<(&str, usize)> {
             let cut = key.rfind('_')? + 1;
             let (prefix, digits) = key.split_at(cut);
             if digits.is_empty() || !digits.bytes().all(|b| b.is_ascii_digit()) {
                 return None;
             }
             Some((prefix, digits.parse().ok()?))
-        };
+        }
         let keys = [
             "",
             "_",
