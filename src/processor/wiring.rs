@@ -14,7 +14,7 @@
 //! for each record and [`WiringCheck::finish`] when the input ends.
 
 use crate::log::{self, Level};
-use crate::telegraf::binding::{FieldPattern, InputBinding, show_field};
+use crate::telegraf::binding::{FieldPattern, InputBinding, Prefix, show_field};
 use lineproto::{FieldValue, Metric};
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
@@ -161,18 +161,21 @@ impl WiringCheck {
         // its entry was looked up: a scan's 360 beams take one map look-up, not one each. The
         // largest index is written to the entry when another indexed name comes or the record
         // ends (an entry never looked at in between, so the same as updating it per key).
-        let mut run: Option<(&str, usize)> = None;
+        // A key of the run is its name (compared a word at a time) and digits; any other key
+        // splits into another name or none.
+        let mut run: Option<(Prefix<'m>, &str, usize)> = None;
         let mut runs = Vec::new();
         for (k, _) in &m.fields {
+            if let Some((p, _, max)) = run.as_mut()
+                && let Some(i) = p.rest(k.as_bytes()).and_then(digits_value)
+            {
+                *max = (*max).max(i);
+                continue;
+            }
             let (name, idx) = match split_index(k) {
                 Some((prefix, i)) => {
-                    if let Some((p, max)) = run.as_mut()
-                        && *p == prefix
-                    {
-                        *max = (*max).max(i);
-                        continue;
-                    }
-                    if let Some((p, max)) = run.replace((prefix, i)) {
+                    let next = (Prefix::new(prefix.as_bytes()), prefix, i);
+                    if let Some((_, p, max)) = run.replace(next) {
                         raise(&mut seen.fields, p, max);
                         runs.push((p, max));
                     }
@@ -193,7 +196,7 @@ impl WiringCheck {
                 None => seen.more_fields = true,
             }
         }
-        if let Some((p, max)) = run {
+        if let Some((_, p, max)) = run {
             raise(&mut seen.fields, p, max);
             runs.push((p, max));
         }
