@@ -301,7 +301,7 @@ impl Fast {
             }
             Fast::IntToFloat(f, a) => match a.get(args)? {
                 Value::Int(i) => Value::Float(*i as f64),
-                v => call_native(*f, &[v.clone()]),
+                v => call_native(*f, std::slice::from_ref(v)),
             },
         })
     }
@@ -364,7 +364,7 @@ fn unary_general(op: UnaryOp, a: &Value) -> Value {
 
 #[inline(never)]
 fn native_general(f: NativeFn, a: &Value) -> Value {
-    call_native(f, &[a.clone()])
+    call_native(f, std::slice::from_ref(a))
 }
 
 enum CtxRef {
