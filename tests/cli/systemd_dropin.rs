@@ -150,8 +150,10 @@ fn a_reload_with_a_broken_spec_is_refused_and_telegraf_keeps_running() {
     let bad = broken_spec(&dir);
     let good = root().join("specs/robot.tessla");
     for (spec, passes) in [(&bad, false), (&good, true)] {
-        let mut telegraf = Command::new("sleep")
-            .arg("60")
+        // With SIGHUP's default action even when this test runs with it ignored (under
+        // `nohup`, which every child would inherit): `env` execs `sleep` in its own process.
+        let mut telegraf = Command::new("env")
+            .args(["--default-signal=HUP", "sleep", "60"])
             .stdin(Stdio::null())
             .spawn()
             .unwrap();
