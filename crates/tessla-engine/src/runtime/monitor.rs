@@ -551,14 +551,8 @@ fn slift(
         // By reference: no frame of cloned values, no closure call.
         let arg = |a| arg(cur, last, slots, a);
         let r = match args {
-            [a] => {
-                let x = [arg(a)?];
-                fast.scalar(&x).or_else(|| fast.run(&x))
-            }
-            [a, b] => {
-                let x = [arg(a)?, arg(b)?];
-                fast.scalar(&x).or_else(|| fast.run(&x))
-            }
+            [a] => fast.run(&[arg(a)?]),
+            [a, b] => fast.run(&[arg(a)?, arg(b)?]),
             [a, b, c] => fast.run(&[arg(a)?, arg(b)?, arg(c)?]),
             _ => None,
         };
@@ -665,10 +659,7 @@ fn strict2(cx: &Ctx, node: NodeId, a: &Value, b: &Value) -> Value {
     if let Value::Error(e) = a {
         return Value::Error(e.clone());
     }
-    if let Some(r) = cx
-        .fast(node)
-        .and_then(|f| f.scalar(&[a, b]).or_else(|| f.run(&[a, b])))
-    {
+    if let Some(r) = cx.fast(node).and_then(|f| f.run(&[a, b])) {
         return r;
     }
     call(cx, cx.node(node), &[a.clone(), b.clone()])
