@@ -28,8 +28,8 @@ pub struct Recent {
 
 impl Recent {
     /// Whether `m` (timestamp `ts`) repeats a recent record; if not, it is remembered.
-    pub fn is_duplicate(&mut self, ts: i64, m: &Metric) -> bool {
-        let d = digest(m);
+    pub fn is_duplicate(&mut self, ts: i64, m: &Metric, keys: &mut ListKeys) -> bool {
+        let d = digest(m, keys);
         let newer = self.newest.is_none_or(|n| ts > n);
         if !newer && self.seen.iter().any(|&(t, x)| t == ts && x == d) {
             return true;
@@ -66,7 +66,11 @@ impl Recent {
 /// robots. Hand-written (before: `FxHasher` over kind, key and value plus splitmix64's finaliser
 /// per pair; no hash crate in the tree gives a fixed-seed hasher this cheap): a few dozen
 /// instructions per field (`lidar`: 360 fields a record).
-fn digest(m: &Metric) -> u64 {
+///
+/// A record whose list elements the parser read apart ([`lineproto::ListCapture`]) has the same
+/// digest as read into fields: each element's key digest (`lidar_12` as Float key) comes from
+/// [`ListKeys`].
+fn digest(m: &Metric, keys: &mut ListKeys) -> u64 {
     let mut sum = bytes_digest(K[0], m.measurement.as_bytes());
     for (k, v) in &m.tags {
         sum = sum.wrapping_add(pair(
@@ -84,7 +88,42 @@ fn digest(m: &Metric) -> u64 {
         };
         sum = sum.wrapping_add(pair(bytes_digest(seed, k.as_bytes()), bits));
     }
-    sum ^ (m.fields.len() as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+    let mut fields = m.fields.len();
+    if m.list.holds_record() {
+        let keys = keys.for_list(&m.list);
+        for (i, f) in m.list.elements() {
+            let key = keys.get(i).copied().unwrap_or_default();
+            sum = sum.wrapping_add(pair(key, f.to_bits()));
+        }
+        fields += m.list.count();
+    }
+    sum ^ (fields as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+}
+
+/// The digests of the Float keys `<prefix><index>` of a captured list, by index, made once (a
+/// key digest per beam per record was a quarter of a lidar record's digest).
+#[derive(Debug, Default)]
+pub struct ListKeys {
+    prefix: Vec<u8>,
+    digests: Vec<u64>,
+}
+
+impl ListKeys {
+    /// The key digests for `list`'s prefix, at least as many as its record's length.
+    fn for_list(&mut self, list: &lineproto::ListCapture) -> &[u64] {
+        if self.prefix != list.prefix() {
+            self.prefix = list.prefix().to_vec();
+            self.digests.clear();
+        }
+        let want = list.values().len();
+        let mut key = self.prefix.clone();
+        for i in self.digests.len()..want {
+            key.truncate(self.prefix.len());
+            key.extend_from_slice(i.to_string().as_bytes());
+            self.digests.push(bytes_digest(K[2], &key));
+        }
+        &self.digests
+    }
 }
 
 /// Constants with no structure (hex digits of pi, as foldhash and wyhash use).
@@ -165,21 +204,51 @@ mod tests {
         m
     }
 
+    /// A record whose list the parser read apart has the digest it has read into fields, so a
+    /// redelivery is found across the moment the processor starts reading lists apart.
+    #[test]
+    fn a_list_read_apart_has_the_digest_of_its_fields() {
+        let mut keys = ListKeys::default();
+        for line in [
+            "m,t=a lidar_2=1.5,x=1i,lidar_0=0,lidar_10=2.4749999046325684 5",
+            "m lidar_0=1 5",
+            "m lidar_count=2i,lidar_1=3 5",
+            "m x=1 5",
+        ] {
+            let plain = metric(line);
+            let mut apart = Metric::default();
+            apart.list.set_prefix(Some("lidar_"), 100);
+            assert!(lineproto::parse_record_into(line.as_bytes(), &mut apart).unwrap());
+            assert!(apart.list.holds_record(), "{line}");
+            assert_eq!(
+                apart.list.count() + apart.fields.len(),
+                plain.fields.len(),
+                "{line}"
+            );
+            assert_eq!(
+                digest(&plain, &mut keys),
+                digest(&apart, &mut keys),
+                "{line}"
+            );
+        }
+    }
+
     #[test]
     fn the_same_message_in_another_field_order_is_a_duplicate() {
         let mut r = Recent::default();
+        let mut k = ListKeys::default();
         let ts = 1_700_000_000_000_000_000;
-        assert!(!r.is_duplicate(ts, &metric("m,topic=t a=1,b=2,s=\"x\" 1")));
-        assert!(r.is_duplicate(ts, &metric("m,topic=t b=2,s=\"x\",a=1 1")));
+        assert!(!r.is_duplicate(ts, &metric("m,topic=t a=1,b=2,s=\"x\" 1"), &mut k));
+        assert!(r.is_duplicate(ts, &metric("m,topic=t b=2,s=\"x\",a=1 1"), &mut k));
         // Another value, another field set, another time, another tag: not a duplicate.
-        assert!(!r.is_duplicate(ts, &metric("m,topic=t a=1,b=3,s=\"x\" 1")));
-        assert!(!r.is_duplicate(ts, &metric("m,topic=t a=1,b=2 1")));
-        assert!(!r.is_duplicate(ts + 1, &metric("m,topic=t a=1,b=2,s=\"x\" 1")));
-        assert!(!r.is_duplicate(ts, &metric("m,topic=u a=1,b=2,s=\"x\" 1")));
+        assert!(!r.is_duplicate(ts, &metric("m,topic=t a=1,b=3,s=\"x\" 1"), &mut k));
+        assert!(!r.is_duplicate(ts, &metric("m,topic=t a=1,b=2 1"), &mut k));
+        assert!(!r.is_duplicate(ts + 1, &metric("m,topic=t a=1,b=2,s=\"x\" 1"), &mut k));
+        assert!(!r.is_duplicate(ts, &metric("m,topic=u a=1,b=2,s=\"x\" 1"), &mut k));
         // Swapped values between keys are different records.
-        assert!(!r.is_duplicate(ts, &metric("m,topic=t a=2,b=1,s=\"x\" 1")));
+        assert!(!r.is_duplicate(ts, &metric("m,topic=t a=2,b=1,s=\"x\" 1"), &mut k));
         // Int 1 and float 1 differ.
-        assert!(!r.is_duplicate(ts, &metric("m,topic=t a=1i,b=2,s=\"x\" 1")));
+        assert!(!r.is_duplicate(ts, &metric("m,topic=t a=1i,b=2,s=\"x\" 1"), &mut k));
     }
 
     /// Records that differ in one key byte (at any length, through the 16-byte chunks), in one
@@ -210,7 +279,7 @@ mod tests {
                             ],
                             ..Default::default()
                         };
-                        seen.insert(digest(&m));
+                        seen.insert(digest(&m, &mut ListKeys::default()));
                         n += 1;
                     }
                 }
@@ -229,7 +298,7 @@ mod tests {
                 ],
                 ..Default::default()
             };
-            distinct.insert(digest(&m));
+            distinct.insert(digest(&m, &mut ListKeys::default()));
             total += 1;
         }
         assert_eq!(distinct.len(), total);
@@ -238,14 +307,15 @@ mod tests {
     #[test]
     fn only_the_last_window_records_are_remembered() {
         let mut r = Recent::default();
+        let mut k = ListKeys::default();
         let m = metric("m a=1 1");
         for t in 0..WINDOW as i64 {
-            assert!(!r.is_duplicate(t, &m));
+            assert!(!r.is_duplicate(t, &m, &mut k));
         }
-        assert!(r.is_duplicate(0, &m));
-        assert!(!r.is_duplicate(WINDOW as i64, &m));
+        assert!(r.is_duplicate(0, &m, &mut k));
+        assert!(!r.is_duplicate(WINDOW as i64, &m, &mut k));
         // Record 0 was overwritten by the newest one.
-        assert!(!r.is_duplicate(0, &m));
-        assert!(r.is_duplicate(WINDOW as i64 - 1, &m));
+        assert!(!r.is_duplicate(0, &m, &mut k));
+        assert!(r.is_duplicate(WINDOW as i64 - 1, &m, &mut k));
     }
 }

@@ -90,6 +90,7 @@ impl Processor {
         if let Some(slot) = self.versions.list.first_mut() {
             *slot = base;
         }
+        self.capture = self.versions.list_to_capture();
         self.requeue_all();
         Ok(())
     }
@@ -174,6 +175,7 @@ impl Processor {
                 let v = Version::new(id.to_string(), label.to_string(), program)
                     .map_err(|e| format!("its input annotations: {e}"))?;
                 self.versions.list.push(v);
+                self.capture = self.versions.list_to_capture();
                 self.versions.list.len() - 1
             }
         };

@@ -7,7 +7,7 @@
 //! started with.
 
 use super::instances::Key;
-use crate::telegraf::binding::{self, InputBinding};
+use crate::telegraf::binding::{self, FieldPattern, InputBinding};
 use crate::telegraf::encode::{self, Encoding};
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -129,6 +129,30 @@ impl Versions {
 
     pub fn get(&self, v: usize) -> &Version {
         self.list.get(v).unwrap_or_else(|| self.base())
+    }
+
+    /// The one list pattern (`lidar_` of `lidar_*`) whose elements the parser may read straight
+    /// into an array instead of into the metric's fields ([`lineproto::ListCapture`]): the only
+    /// indexed pattern of every version held, when no exact field of any version starts with it
+    /// (that field would not be found among the fields). `None`: the parser captures nothing.
+    pub fn list_to_capture(&self) -> Option<String> {
+        let bindings = || self.list.iter().flat_map(|v| &v.bindings);
+        let mut prefix: Option<&str> = None;
+        for b in bindings() {
+            if let FieldPattern::Indexed(p) = &b.field {
+                match prefix {
+                    Some(q) if q != p => return None,
+                    _ => prefix = Some(p),
+                }
+            }
+        }
+        let p = prefix.filter(|p| !p.is_empty())?;
+        bindings()
+            .all(|b| match &b.field {
+                FieldPattern::Exact(f) => !f.starts_with(p),
+                FieldPattern::Indexed(_) => true,
+            })
+            .then(|| p.to_string())
     }
 
     /// The same versions and rules, built again (a `--threads` worker's own).
@@ -285,5 +309,35 @@ mod tests {
         assert!(Selector::parse("robot").is_err());
         assert!(Selector::parse("robot=").is_err());
         assert_eq!(s.unknown_tags(&["robot".to_string()]), ["site"]);
+    }
+
+    fn version(spec: &str) -> Version {
+        let resolver = tessla_syntax::include::MemResolver {
+            files: [("t.tessla".to_string(), spec.to_string())].into(),
+        };
+        let loaded = tessla_engine::load_with("t.tessla", &resolver, &Default::default()).unwrap();
+        Version::new("v".into(), String::new(), loaded.program).unwrap()
+    }
+
+    /// The list read apart is the one indexed pattern of every version held, and none while
+    /// a version's exact field or another pattern could take one of its keys.
+    #[test]
+    fn a_list_is_read_apart_only_when_no_other_input_can_take_its_keys() {
+        const LIST: &str =
+            "@TelegrafIn(\"m\", \"\", \"lidar_*\")\nin l: Events[List[Float]]\nout l\n";
+        const X: &str = "@TelegrafIn(\"m\", \"\", \"x\")\nin x: Events[Float]\nout x\n";
+        const BEAM: &str = "@TelegrafIn(\"m\", \"\", \"lidar_3\")\nin b: Events[Float]\nout b\n";
+        const OTHER: &str =
+            "@TelegrafIn(\"m\", \"\", \"ranges_*\")\nin r: Events[List[Float]]\nout r\n";
+        let held = |specs: &[&str]| {
+            let mut v = Versions::new(version(specs[0]), Vec::new());
+            v.list.extend(specs[1..].iter().map(|s| version(s)));
+            v.list_to_capture()
+        };
+        assert_eq!(held(&[LIST]).as_deref(), Some("lidar_"));
+        assert_eq!(held(&[LIST, X, LIST]).as_deref(), Some("lidar_"));
+        assert_eq!(held(&[X]), None);
+        assert_eq!(held(&[LIST, BEAM]), None);
+        assert_eq!(held(&[LIST, OTHER]), None);
     }
 }

@@ -14,8 +14,8 @@
 //! for each record and [`WiringCheck::finish`] when the input ends.
 
 use crate::log::{self, Level};
-use crate::telegraf::binding::{FieldPattern, InputBinding, Prefix, show_field};
-use lineproto::{FieldValue, Metric};
+use crate::telegraf::binding::{FieldPattern, InputBinding, show_field};
+use lineproto::{FieldValue, Metric, Prefix};
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
 use tessla_engine::Type;
@@ -70,6 +70,11 @@ impl WiringCheck {
             done: bindings.is_empty(),
             ..WiringCheck::default()
         }
+    }
+
+    /// Whether the window is over (and reported).
+    pub fn is_done(&self) -> bool {
+        self.done
     }
 
     /// Watch one record; at the end of the window, report (once).

@@ -182,6 +182,7 @@ fn metric_of(json: &Value) -> Option<Metric> {
         fields,
         timestamp: None,
         overwritten: 0,
+        list: Default::default(),
     })
 }
 

@@ -7,7 +7,7 @@
 //! with NaN, a longer or much shorter one is warned about and kept as it came), and the lossless conversions from line-protocol
 //! values to [`Value`]s of the input's type.
 
-use lineproto::{FieldValue, Metric};
+use lineproto::{FieldValue, Metric, Prefix, list_index};
 use std::cell::Cell;
 use std::sync::Arc;
 use tessla_engine::{Program, Type, Value};
@@ -158,7 +158,14 @@ impl InputBinding {
             FieldPattern::Exact(f) => m.field(f).map(|v| self.convert(v)),
             FieldPattern::Indexed(prefix) => {
                 let mut list = spare_list();
-                let out = match Arc::get_mut(&mut list).map(|l| (gather(prefix, &m.fields, l), l)) {
+                let fill = |l: &mut Vec<Value>| {
+                    if m.list.holds(prefix) {
+                        copy_captured(m.list.values(), l)
+                    } else {
+                        gather(prefix, &m.fields, l)
+                    }
+                };
+                let out = match Arc::get_mut(&mut list).map(|l| (fill(l), l)) {
                     Some((None, _)) => None,
                     Some((Some(Ok(())), l)) => {
                         self.to_length(l);
@@ -349,57 +356,25 @@ fn gather(
     (len > 0).then_some(Ok(()))
 }
 
-/// A list pattern's prefix (`lidar_`), compared with a key a word at a time when both allow
-/// (every key of a 360-beam scan is compared, and a call to `memcmp` per key cost more than
-/// the rest of the gathering).
-pub(crate) struct Prefix<'a> {
-    bytes: &'a [u8],
-    /// The prefix's bytes as a little-endian word and the mask of its length (prefixes of at
-    /// most 8 bytes).
-    word: Option<(u64, u64)>,
-}
-
-impl<'a> Prefix<'a> {
-    pub(crate) fn new(bytes: &'a [u8]) -> Self {
-        let word = (bytes.len() <= 8).then(|| {
-            let mut w = [0u8; 8];
-            w[..bytes.len()].copy_from_slice(bytes);
-            let mask = u64::MAX
-                .checked_shr(64 - 8 * bytes.len() as u32)
-                .unwrap_or(0);
-            (u64::from_le_bytes(w), mask)
-        });
-        Prefix { bytes, word }
+/// [`gather`] for a record whose elements the parser read into an array
+/// ([`lineproto::ListCapture`]: every element a Float, indices canonical and below its limit,
+/// missing ones NaN), written over `beams` the same way.
+fn copy_captured(values: &[f64], beams: &mut Vec<Value>) -> Option<Result<(), usize>> {
+    if values.is_empty() {
+        return None;
     }
-
-    /// What follows the prefix in `key`, when `key` starts with it.
-    #[inline]
-    pub(crate) fn rest<'k>(&self, key: &'k [u8]) -> Option<&'k [u8]> {
-        if let (Some((word, mask)), Some(head)) = (self.word, key.first_chunk::<8>()) {
-            if u64::from_le_bytes(*head) & mask != word {
-                return None;
-            }
-            return key.get(self.bytes.len()..);
+    let common = beams.len().min(values.len());
+    for (b, &x) in beams.iter_mut().zip(values) {
+        match b {
+            Value::Float(f) => *f = x,
+            other => *other = Value::Float(x),
         }
-        key.strip_prefix(self.bytes)
     }
-}
-
-/// The index in a list field's key (`lidar_123` -> 123): what `str::parse::<usize>` accepts,
-/// read by hand for the usual short all-digit keys (360 of them in every lidar record).
-fn list_index(s: &[u8]) -> Option<usize> {
-    if (1..=9).contains(&s.len()) {
-        let mut v = 0usize;
-        for &d in s {
-            let x = d.wrapping_sub(b'0');
-            if x > 9 {
-                return std::str::from_utf8(s).ok()?.parse::<usize>().ok();
-            }
-            v = v * 10 + usize::from(x);
-        }
-        return Some(v);
+    beams.truncate(values.len());
+    if let Some(more) = values.get(common..) {
+        beams.extend(more.iter().map(|&x| Value::Float(x)));
     }
-    std::str::from_utf8(s).ok()?.parse::<usize>().ok()
+    Some(Ok(()))
 }
 
 fn whole(f: f64) -> Option<i64> {
@@ -420,63 +395,6 @@ pub fn show_field(v: &FieldValue) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn list_indices_read_as_str_parse_reads_them() {
-        for k in [
-            "0",
-            "7",
-            "007",
-            "359",
-            "123456789",
-            "1234567890",
-            "+5",
-            "-1",
-            "",
-            "1a",
-            " 1",
-        ] {
-            assert_eq!(list_index(k.as_bytes()), k.parse::<usize>().ok(), "{k:?}");
-        }
-    }
-
-    #[test]
-    fn prefixes_match_as_strip_prefix_does() {
-        let keys = [
-            "",
-            "l",
-            "lidar",
-            "lidar_",
-            "lidar_5",
-            "lidar_12",
-            "lidar_359",
-            "lidar_1234567",
-            "lidaR_12",
-            "xlidar_12",
-            "lidar_abcdefgh",
-            "ranges_10",
-            "ranges__1",
-            "ü_12345678",
-        ];
-        for prefix in [
-            "",
-            "l",
-            "lidar_",
-            "ranges_",
-            "12345678",
-            "lidar_12",
-            "a_longer_prefix_",
-        ] {
-            let p = Prefix::new(prefix.as_bytes());
-            for k in keys {
-                assert_eq!(
-                    p.rest(k.as_bytes()),
-                    k.as_bytes().strip_prefix(prefix.as_bytes()),
-                    "{prefix:?} {k:?}"
-                );
-            }
-        }
-    }
 
     fn b(ty: Type, field: FieldPattern) -> InputBinding {
         InputBinding {

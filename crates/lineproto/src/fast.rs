@@ -12,7 +12,7 @@
 //! path; this path is several times faster (`cargo bench -p lineproto --bench codec`, groups
 //! `parse_p2` and `parse_lidar360`, figures in BENCHMARKS.md).
 
-use crate::metric::{FieldValue, Metric};
+use crate::metric::{FieldValue, ListKey, Metric};
 use std::cell::Cell;
 
 /// A byte allowed in a plain name or tag value: printable, not a line-protocol delimiter.
@@ -121,10 +121,41 @@ fn parse_into(text: &str, m: &mut Metric) -> Option<()> {
         return None;
     }
     let mut nf = 0;
+    let capture = m.list.is_on();
+    if capture {
+        m.list.begin();
+    }
     loop {
+        // A list element, its key read once (the usual field of a lidar record).
+        if capture && let Some((i, at)) = m.list.element_at(c.s.as_bytes(), c.i) {
+            c.i = at;
+            // A repeated key, or anything but a Float: the full path.
+            if !m.list.set(i, float_value(&mut c)?) {
+                return None;
+            }
+            if !c.eat(b',') {
+                break;
+            }
+            continue;
+        }
         let k = c.name()?;
         if !c.eat(b'=') {
             return None;
+        }
+        if capture {
+            match m.list.classify(k.as_bytes()) {
+                ListKey::Other => {}
+                ListKey::Element(i) => {
+                    if !m.list.set(i, float_value(&mut c)?) {
+                        return None;
+                    }
+                    if !c.eat(b',') {
+                        break;
+                    }
+                    continue;
+                }
+                ListKey::Unusual => return None,
+            }
         }
         match m.fields.get_mut(nf) {
             Some((fk, fv)) => {
@@ -197,6 +228,21 @@ fn value(c: &mut Cursor<'_>, out: &mut FieldValue) -> Option<()> {
     }
     c.i = end;
     Some(())
+}
+
+/// A Float value at the cursor, consumed (`None` for any other value).
+#[inline]
+fn float_value(c: &mut Cursor<'_>) -> Option<f64> {
+    if let Some((f, end)) = short_float(c.s.as_bytes(), c.i) {
+        c.i = end;
+        return Some(f);
+    }
+    let mut v = FieldValue::Bool(false);
+    other_value(c, &mut v)?;
+    match v {
+        FieldValue::Float(f) if f.is_finite() => Some(f),
+        _ => None,
+    }
 }
 
 /// [`value`] for a string, a boolean, an integer or a float that is not short.
@@ -660,5 +706,80 @@ mod tests {
         assert!(same(&line));
         let dup = line.replace("lidar_7=", "lidar_8=");
         assert!(!same(&dup));
+    }
+
+    /// Reading a list's elements apart gives the metric a parser that reads them as fields
+    /// gives (field order aside), or takes the full path and captures nothing; a bad record is
+    /// bad either way.
+    #[test]
+    fn a_list_read_apart_holds_what_the_fields_hold() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move |m: u64| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed % m
+        };
+        let keys = [
+            "l_0",
+            "l_1",
+            "l_2",
+            "l_10",
+            "l_02",
+            "l_+1",
+            "l_",
+            "l_x",
+            "l_1x",
+            "l",
+            "x",
+            "l_999",
+            "l_1000",
+            "l\\ 1",
+            "l_123456789",
+            "l_1234567890",
+        ];
+        let values = [
+            "1",
+            "0",
+            "2.5",
+            "-0.25",
+            "3i",
+            "4u",
+            "true",
+            "\"s\"",
+            "1e3",
+            "2.4749999046325684",
+            "01",
+            "1.",
+            "NaN",
+        ];
+        let mut apart = Metric::default();
+        apart.list.set_prefix(Some("l_"), 1000);
+        let mut captured = 0;
+        for _ in 0..20_000 {
+            let n = 1 + next(8);
+            let fields: Vec<String> = (0..n)
+                .map(|_| {
+                    let k = keys[next(keys.len() as u64) as usize];
+                    let v = values[next(values.len() as u64) as usize];
+                    format!("{k}={v}")
+                })
+                .collect();
+            let line = format!("m,t=a {} 5", fields.join(","));
+            let want = crate::parse_record(line.as_bytes());
+            let got = crate::parse_record_into(line.as_bytes(), &mut apart);
+            match (want, got) {
+                (Ok(Some(mut want)), Ok(true)) => {
+                    captured += usize::from(apart.list.holds_record());
+                    let mut got = apart.with_list_as_fields();
+                    got.fields.sort_by(|a, b| a.0.cmp(&b.0));
+                    want.fields.sort_by(|a, b| a.0.cmp(&b.0));
+                    assert_eq!(got, want, "{line}");
+                }
+                (Err(_), Err(_)) => assert!(!apart.list.holds_record(), "{line}"),
+                (want, got) => panic!("{line}: {want:?} against {got:?}"),
+            }
+        }
+        assert!(captured > 1000, "{captured}");
     }
 }

@@ -12,7 +12,7 @@ pub mod split;
 mod telegraf_rules;
 pub mod write;
 
-pub use metric::{FieldValue, Metric};
+pub use metric::{FieldValue, ListCapture, Metric, Prefix, list_index};
 pub use parse::{ParseError, parse_record, parse_record_into};
 pub use split::{DEFAULT_MAX_RECORD, OVERSIZED_HEAD, Record, RecordRef, RecordSplitter};
 pub use write::{

@@ -74,9 +74,13 @@ pub fn parse_record_into(bytes: &[u8], m: &mut Metric) -> Result<bool, ParseErro
     {
         return Ok(true);
     }
+    // The full path captures no list: its metric has every field in `fields`.
+    m.list.clear_record();
     match parse_record_full(bytes)? {
         Some(full) => {
+            let list = std::mem::take(&mut m.list);
             *m = full;
+            m.list = list;
             Ok(true)
         }
         None => Ok(false),
@@ -169,6 +173,7 @@ pub(crate) fn parse_record_full(bytes: &[u8]) -> Result<Option<Metric>, ParseErr
         fields,
         timestamp: parsed.timestamp,
         overwritten,
+        list: Default::default(),
     }))
 }
 

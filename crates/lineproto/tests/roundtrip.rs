@@ -67,7 +67,7 @@ proptest! {
         fields in prop::collection::vec((exact_name(), value()), 1..6),
         timestamp in prop::option::of(any::<i64>()),
     ) {
-        let m = Metric { measurement, tags: dedup(tags), fields: dedup(fields), timestamp, overwritten: 0 };
+        let m = Metric { measurement, tags: dedup(tags), fields: dedup(fields), timestamp, overwritten: 0, list: Default::default() };
         let line = write(&m).unwrap();
         let back = parse_record(line.as_bytes()).unwrap().unwrap();
         prop_assert_eq!(&back.measurement, &m.measurement);
@@ -86,7 +86,7 @@ proptest! {
         tags in prop::collection::vec((any_name(), any_name()), 0..4),
         fields in prop::collection::vec((any_name(), value()), 1..6),
     ) {
-        let m = Metric { measurement, tags, fields, timestamp: Some(1), overwritten: 0 };
+        let m = Metric { measurement, tags, fields, timestamp: Some(1), overwritten: 0, list: Default::default() };
         let Some(line) = write(&m) else {
             // Only an unwritable measurement or no writable field key may prevent a line.
             prop_assert!(
@@ -122,7 +122,7 @@ proptest! {
     ) {
         let lines: Vec<String> = metrics.into_iter().enumerate()
             .filter_map(|(i, (measurement, fields))| write(&Metric {
-                measurement, tags: vec![], fields: dedup(fields), timestamp: Some(i as i64), overwritten: 0,
+                measurement, tags: vec![], fields: dedup(fields), timestamp: Some(i as i64), overwritten: 0, list: Default::default(),
             }))
             .collect();
         let input: Vec<u8> = lines.concat().into_bytes();
