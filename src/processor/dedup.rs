@@ -90,10 +90,11 @@ fn digest(m: &Metric, keys: &mut ListKeys) -> u64 {
     }
     let mut fields = m.fields.len();
     if m.list.holds_record() {
-        let keys = keys.for_list(&m.list);
-        for (i, f) in m.list.elements() {
-            let key = keys.get(i).copied().unwrap_or_default();
-            sum = sum.wrapping_add(pair(key, f.to_bits()));
+        // Each element beside its key's digest; NaN marks a missing element.
+        for (v, &key) in m.list.values().iter().zip(keys.for_list(&m.list)) {
+            if !v.is_nan() {
+                sum = sum.wrapping_add(pair(key, v.to_bits()));
+            }
         }
         fields += m.list.count();
     }
@@ -116,11 +117,13 @@ impl ListKeys {
             self.digests.clear();
         }
         let want = list.values().len();
-        let mut key = self.prefix.clone();
-        for i in self.digests.len()..want {
-            key.truncate(self.prefix.len());
-            key.extend_from_slice(i.to_string().as_bytes());
-            self.digests.push(bytes_digest(K[2], &key));
+        if self.digests.len() < want {
+            let mut key = self.prefix.clone();
+            for i in self.digests.len()..want {
+                key.truncate(self.prefix.len());
+                key.extend_from_slice(i.to_string().as_bytes());
+                self.digests.push(bytes_digest(K[2], &key));
+            }
         }
         &self.digests
     }
