@@ -12,7 +12,7 @@
 //! path; this path is several times faster (`cargo bench -p lineproto --bench codec`, groups
 //! `parse_p2` and `parse_lidar360`, figures in BENCHMARKS.md).
 
-use crate::metric::{FieldValue, ListKey, Metric};
+use crate::metric::{Capture, FieldValue, ListKey, Metric};
 use std::cell::Cell;
 
 /// A byte allowed in a plain name or tag value: printable, not a line-protocol delimiter.
@@ -120,59 +120,14 @@ fn parse_into(text: &str, m: &mut Metric) -> Option<()> {
     if !c.eat(b' ') {
         return None;
     }
-    let mut nf = 0;
-    let capture = m.list.is_on();
-    if capture {
-        m.list.begin();
-    }
-    loop {
-        // A list element, its key read once (the usual field of a lidar record).
-        if capture && let Some((i, at)) = m.list.element_at(c.s.as_bytes(), c.i) {
-            c.i = at;
-            // A repeated key, or anything but a Float: the full path.
-            if !m.list.set(i, float_value(&mut c)?) {
-                return None;
-            }
-            if !c.eat(b',') {
-                break;
-            }
-            continue;
+    // Two copies of the field loop: a record without a list to read apart pays no test for it.
+    let nf = match m.list.active() {
+        Some(cap) => {
+            cap.begin();
+            read_fields::<true>(&mut c, &mut m.fields, Some(cap))?
         }
-        let k = c.name()?;
-        if !c.eat(b'=') {
-            return None;
-        }
-        if capture {
-            match m.list.classify(k.as_bytes()) {
-                ListKey::Other => {}
-                ListKey::Element(i) => {
-                    if !m.list.set(i, float_value(&mut c)?) {
-                        return None;
-                    }
-                    if !c.eat(b',') {
-                        break;
-                    }
-                    continue;
-                }
-                ListKey::Unusual => return None,
-            }
-        }
-        match m.fields.get_mut(nf) {
-            Some((fk, fv)) => {
-                set(fk, k);
-                value(&mut c, fv)?;
-            }
-            None => {
-                let mut fv = FieldValue::Bool(false);
-                value(&mut c, &mut fv)?;
-                m.fields.push((k.to_string(), fv));
-            }
-        }
-        nf += 1;
-        if !c.eat(b',') {
-            break;
-        }
-    }
+        None => read_fields::<false>(&mut c, &mut m.fields, None)?,
+    };
     m.fields.truncate(nf);
     m.timestamp = match c.peek() {
         None => None,
@@ -230,8 +185,89 @@ fn value(c: &mut Cursor<'_>, out: &mut FieldValue) -> Option<()> {
     Some(())
 }
 
-/// A Float value at the cursor, consumed (`None` for any other value).
+/// The field set at the cursor: each field into `fields` (reusing its slots), or, with
+/// `CAPTURE`, each element of the list into `capture` (see [`Capture`]). The count of `fields`
+/// used; `None` when the record is not plain (or its list needs the full path).
+#[inline(always)]
+fn read_fields<const CAPTURE: bool>(
+    c: &mut Cursor<'_>,
+    fields: &mut Vec<(String, FieldValue)>,
+    mut capture: Option<&mut Capture>,
+) -> Option<usize> {
+    let mut nf = 0;
+    loop {
+        // A run of list elements (the usual fields of a lidar record).
+        if CAPTURE && let Some(cap) = capture.as_deref_mut() {
+            match elements(cap, c)? {
+                Run::FieldsEnd => break,
+                Run::OtherKey => {}
+            }
+        }
+        let k = c.name()?;
+        if !c.eat(b'=') {
+            return None;
+        }
+        if CAPTURE && let Some(cap) = capture.as_deref_mut() {
+            match cap.classify(k.as_bytes()) {
+                ListKey::Other => {}
+                ListKey::Element(i) => {
+                    if !cap.set(i, float_value(c)?) {
+                        return None;
+                    }
+                    if !c.eat(b',') {
+                        break;
+                    }
+                    continue;
+                }
+                ListKey::Unusual => return None,
+            }
+        }
+        match fields.get_mut(nf) {
+            Some((fk, fv)) => {
+                set(fk, k);
+                value(c, fv)?;
+            }
+            None => {
+                let mut fv = FieldValue::Bool(false);
+                value(c, &mut fv)?;
+                fields.push((k.to_string(), fv));
+            }
+        }
+        nf += 1;
+        if !c.eat(b',') {
+            break;
+        }
+    }
+    Some(nf)
+}
+
+/// Where a run of list elements stopped.
+enum Run {
+    /// The last field was an element.
+    FieldsEnd,
+    /// The cursor is at a key that is not read as an element.
+    OtherKey,
+}
+
+/// The list elements from the cursor on, each key read once, until a key that is not
+/// `<prefix><canonical index>=` (a tight loop of its own: 360 of them in a lidar record).
+/// `None`: a repeated element or one that is not a Float, which the full path reads.
 #[inline]
+fn elements(cap: &mut Capture, c: &mut Cursor<'_>) -> Option<Run> {
+    while let Some((i, at)) = cap.element_at(c.s.as_bytes(), c.i) {
+        c.i = at;
+        if !cap.set(i, float_value(c)?) {
+            return None;
+        }
+        if !c.eat(b',') {
+            return Some(Run::FieldsEnd);
+        }
+    }
+    Some(Run::OtherKey)
+}
+
+/// A Float value at the cursor, consumed (`None` for any other value).
+#[inline(always)]
 fn float_value(c: &mut Cursor<'_>) -> Option<f64> {
     if let Some((f, end)) = short_float(c.s.as_bytes(), c.i) {
         c.i = end;

@@ -45,7 +45,7 @@ impl Metric {
     pub fn with_list_as_fields(&self) -> Metric {
         let mut m = self.clone();
         if self.list.holds_record() {
-            let prefix = String::from_utf8_lossy(&self.list.prefix);
+            let prefix = String::from_utf8_lossy(self.list.prefix());
             m.fields.extend(
                 self.list
                     .elements()
@@ -71,7 +71,11 @@ impl Metric {
 /// key repeated, or holding anything but a Float. Keys of the prefix whose rest is no index at
 /// all (`lidar_count`) stay ordinary fields.
 #[derive(Debug, Clone, Default)]
-pub struct ListCapture {
+pub struct ListCapture(Option<Box<Capture>>);
+
+/// A [`ListCapture`] asked for: the prefix and the current record's elements.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Capture {
     prefix: Vec<u8>,
     /// [`Prefix`]'s word of `prefix`.
     word: Option<(u64, u64)>,
@@ -105,52 +109,71 @@ impl ListCapture {
     /// nor for a prefix with a byte a plain key cannot hold: a space, `,`, `=`, `\\`, `"`, a
     /// control byte).
     pub fn set_prefix(&mut self, prefix: Option<&str>, limit: usize) {
-        let prefix = prefix.unwrap_or_default().as_bytes();
-        if self.prefix != prefix || self.limit != limit {
-            let plain = prefix
-                .iter()
-                .all(|&c| c > b' ' && !b",=\\\"".contains(&c) && c != 0x7f);
-            *self = ListCapture {
-                prefix: prefix.to_vec(),
-                word: Prefix::new(prefix).word,
-                limit,
-                enabled: plain && !prefix.is_empty(),
-                ..ListCapture::default()
-            };
+        match prefix.filter(|p| !p.is_empty()) {
+            None => {
+                if self.0.is_some() {
+                    self.0 = None;
+                }
+            }
+            Some(p) => {
+                if self
+                    .0
+                    .as_ref()
+                    .is_none_or(|c| c.prefix != p.as_bytes() || c.limit != limit)
+                {
+                    self.0 = Some(Box::new(Capture::new(p.as_bytes(), limit)));
+                }
+            }
         }
     }
 
     /// The prefix asked for (empty: none).
     pub fn prefix(&self) -> &[u8] {
-        &self.prefix
+        self.0.as_ref().map_or(&[], |c| &c.prefix)
     }
 
-    /// Whether the parser is to capture.
+    /// The capture the parser is to fill, if one was asked for with a prefix it can take.
     #[inline]
-    pub(crate) fn is_on(&self) -> bool {
-        self.enabled
+    pub(crate) fn active(&mut self) -> Option<&mut Capture> {
+        self.0.as_deref_mut().filter(|c| c.enabled)
+    }
+
+    /// The current record was not captured (the full parser read it).
+    pub(crate) fn clear_record(&mut self) {
+        if let Some(c) = &mut self.0 {
+            c.clear_record();
+        }
+    }
+
+    /// This record's capture, when it was captured.
+    #[inline]
+    fn record(&self) -> Option<&Capture> {
+        self.0.as_deref().filter(|c| c.on)
     }
 
     /// Whether the metric's record was captured: its elements are here and none is in `fields`.
     #[inline]
     pub fn holds_record(&self) -> bool {
-        self.on
+        self.record().is_some()
     }
 
     /// Whether this record's elements of the pattern `prefix` are here.
     #[inline]
     pub fn holds(&self, prefix: &str) -> bool {
-        self.on && self.prefix == prefix.as_bytes()
+        self.record().is_some_and(|c| c.prefix == prefix.as_bytes())
     }
 
-    /// How many elements the record had.
+    /// How many elements the record had (0 when it was not captured).
     pub fn count(&self) -> usize {
-        self.count
+        self.record().map_or(0, |c| c.count)
     }
 
-    /// The list: one past the largest index the record had, every missing element NaN.
+    /// The list: one past the largest index the record had, every missing element NaN (empty
+    /// when the record was not captured).
     pub fn values(&self) -> &[f64] {
-        self.values.get(..self.len).unwrap_or_default()
+        self.record()
+            .and_then(|c| c.values.get(..c.len))
+            .unwrap_or_default()
     }
 
     /// The record's elements, (index, value), ascending.
@@ -160,6 +183,21 @@ impl ListCapture {
             .enumerate()
             .filter(|(_, v)| !v.is_nan())
             .map(|(i, v)| (i, *v))
+    }
+}
+
+impl Capture {
+    fn new(prefix: &[u8], limit: usize) -> Capture {
+        let plain = prefix
+            .iter()
+            .all(|&c| c > b' ' && !b",=\\\"".contains(&c) && c != 0x7f);
+        Capture {
+            prefix: prefix.to_vec(),
+            word: Prefix::new(prefix).word,
+            limit,
+            enabled: plain,
+            ..Capture::default()
+        }
     }
 
     /// A record begins: none of its elements seen yet (the last record's become NaN).
@@ -261,14 +299,20 @@ impl ListCapture {
 /// Equal when both captured the same elements of the same prefix (or neither captured).
 impl PartialEq for ListCapture {
     fn eq(&self, other: &ListCapture) -> bool {
-        self.holds_record() == other.holds_record()
-            && (!self.holds_record()
-                || (self.prefix == other.prefix
-                    && self.count == other.count
+        match (self.record(), other.record()) {
+            (None, None) => true,
+            (Some(a), Some(b)) => {
+                a.prefix == b.prefix
+                    && a.count == b.count
+                    && self.values().len() == other.values().len()
                     && self
-                        .elements()
-                        .zip(other.elements())
-                        .all(|((i, a), (j, b))| i == j && a.to_bits() == b.to_bits())))
+                        .values()
+                        .iter()
+                        .zip(other.values())
+                        .all(|(x, y)| x.to_bits() == y.to_bits())
+            }
+            _ => false,
+        }
     }
 }
 
