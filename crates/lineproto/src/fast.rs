@@ -349,7 +349,8 @@ fn short_float(b: &[u8], start: usize) -> Option<(f64, usize)> {
     if !matches!(b.get(i), None | Some(b',' | b' ')) || int_len + frac_len > 15 {
         return None;
     }
-    let x = mantissa as f64 / POW10.get(frac_len)?;
+    // At most 15 digits: below 2^63, so the signed conversion (one instruction) is exact.
+    let x = mantissa as i64 as f64 / POW10.get(frac_len)?;
     Some((if neg { -x } else { x }, i))
 }
 
