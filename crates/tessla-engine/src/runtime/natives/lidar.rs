@@ -35,68 +35,69 @@ fn scan(args: &[Value], with_gamma: bool) -> Option<Scan<'_>> {
     })
 }
 
+/// Beams per block of [`Scan::walk`]: a block's cleaned ranges and its two neighbours live in a
+/// stack buffer, so the spike test runs over plain floats.
+const BLOCK: usize = 64;
+
 impl Scan<'_> {
     fn len(&self) -> usize {
         self.beams.len()
     }
 
-    /// Beam `i`'s range (NaN for an element that is not a float).
-    #[inline]
-    fn at(&self, i: usize) -> f64 {
-        self.beams.get(i).map_or(f64::NAN, beam)
-    }
-
-    /// Whether a range is a valid reading (`&`, not `&&`: no branch per beam).
-    #[inline]
-    fn ok(&self, r: f64) -> bool {
-        r.is_finite() & (r >= self.rmin) & (r <= self.rmax)
-    }
-
-    /// Whether `r` differs from both neighbours `a` and `b` by more than gamma in the same
-    /// direction (a spike when all three are valid).
-    #[inline]
-    fn steep(&self, a: f64, r: f64, b: f64) -> bool {
-        let g = self.gamma;
-        ((r - a > g) & (r - b > g)) | ((a - r > g) & (b - r > g))
-    }
-
-    /// `f(range, valid, spike)` for each beam of `beams`, ascending, reading each beam once:
-    /// a window of the beam and its cyclic neighbours moves along the range. A spike needs two
-    /// valid neighbours besides itself (none in a scan of fewer than 3 beams).
-    #[inline]
-    fn walk(&self, beams: Range<usize>, mut f: impl FnMut(f64, bool, bool)) {
-        let n = self.len();
-        if beams.is_empty() {
-            return;
+    /// Bounds `lo`, `hi` with `lo <= r && r <= hi` exactly when `r` is a valid reading (finite
+    /// and within [rmin, rmax]): finite bounds leave no room for the infinities, and a NaN bound
+    /// admits nothing. Two comparisons per beam instead of three.
+    fn bounds(&self) -> (f64, f64) {
+        if self.rmin.is_nan() || self.rmax.is_nan() {
+            (f64::INFINITY, f64::NEG_INFINITY)
+        } else {
+            (self.rmin.max(-f64::MAX), self.rmax.min(f64::MAX))
         }
+    }
+
+    /// `f(range, spike)` for each beam of `beams`, ascending, where `range` is the beam's range
+    /// when it is valid and NaN when it is not. Each block of beams is read once into a buffer of
+    /// ranges (NaN for invalid ones) with its cyclic neighbours; a NaN fails every comparison, so
+    /// the spike test needs no validity flags: a beam is a spike when it and both neighbours are
+    /// valid and it differs from each by more than gamma in the same direction, and `a - r` is
+    /// exactly `-(r - a)`, so two differences suffice. No spikes in a scan of fewer than 3 beams.
+    #[inline(always)]
+    fn walk(&self, beams: Range<usize>, mut f: impl FnMut(f64, bool)) {
+        let n = self.len();
+        let (lo, hi) = self.bounds();
+        let clean = |v: &Value| clean(beam(v), lo, hi);
+        let Some(all) = self.beams.get(beams.clone()) else {
+            return;
+        };
         if n < 3 {
-            for i in beams {
-                let r = self.at(i);
-                f(r, self.ok(r), false);
+            for v in all {
+                f(clean(v), false);
             }
             return;
         }
-        let a = self.at(if beams.start == 0 {
+        let (g, ng) = (self.gamma, -self.gamma);
+        let at = |i: usize| self.beams.get(i).map_or(f64::NAN, clean);
+        let mut buf = [0.0f64; BLOCK + 2];
+        let mut prev = at(if beams.start == 0 {
             n - 1
         } else {
             beams.start - 1
         });
-        let r = self.at(beams.start);
-        let (mut a, mut a_ok, mut r, mut r_ok) = (a, self.ok(a), r, self.ok(r));
-        // The beams after the range's first as a slice (no index arithmetic or bounds check per
-        // beam), then the range's last beam with its cyclic successor.
-        let rest = self
-            .beams
-            .get(beams.start + 1..beams.end)
-            .unwrap_or_default();
-        for v in rest {
-            let b = beam(v);
-            let b_ok = self.ok(b);
-            f(r, r_ok, a_ok & r_ok & b_ok & self.steep(a, r, b));
-            (a, a_ok, r, r_ok) = (r, r_ok, b, b_ok);
+        let mut next = beams.start;
+        for block in all.chunks(BLOCK) {
+            next += block.len();
+            let k = block.len();
+            buf[0] = prev;
+            for (o, v) in buf[1..=k].iter_mut().zip(block) {
+                *o = clean(v);
+            }
+            buf[k + 1] = at(if next == n { 0 } else { next });
+            for ((a, r), b) in buf[..k].iter().zip(&buf[1..=k]).zip(&buf[2..k + 2]) {
+                let (d1, d2) = (r - a, r - b);
+                f(*r, ((d1 > g) & (d2 > g)) | ((d1 < ng) & (d2 < ng)));
+            }
+            prev = buf[k];
         }
-        let b = self.at(if beams.end == n { 0 } else { beams.end });
-        f(r, r_ok, a_ok & r_ok & self.ok(b) & self.steep(a, r, b));
     }
 
     /// Beam indices whose angle `i·360/N` lies in the sector `from..to` degrees
@@ -118,6 +119,13 @@ impl Scan<'_> {
             [0..hi.min(lo), lo..n]
         }
     }
+}
+
+/// `r` when `lo <= r <= hi`, else NaN: the exponent and quiet bits or-ed in by mask, no select.
+#[inline(always)]
+fn clean(r: f64, lo: f64, hi: f64) -> f64 {
+    let bad = u64::from(!((r >= lo) & (r <= hi)));
+    f64::from_bits(r.to_bits() | bad.wrapping_neg() & f64::NAN.to_bits())
 }
 
 /// A beam's range: NaN for an element that is not a float.
@@ -153,12 +161,18 @@ fn bad(name: &str) -> Value {
 /// `lidar_dropouts(scan, range_min, range_max): Int`.
 pub fn dropouts(a: &[Value]) -> Value {
     match scan(a, false) {
-        Some(s) => Value::Int(
-            s.beams
-                .iter()
-                .map(|v| usize::from(!s.ok(beam(v))))
-                .sum::<usize>() as i64,
-        ),
+        Some(s) => {
+            let (lo, hi) = s.bounds();
+            Value::Int(
+                s.beams
+                    .iter()
+                    .map(|v| {
+                        let r = beam(v);
+                        usize::from(!((r >= lo) & (r <= hi)))
+                    })
+                    .sum::<usize>() as i64,
+            )
+        }
         None => bad("lidar_dropouts"),
     }
 }
@@ -168,7 +182,7 @@ pub fn spikes(a: &[Value]) -> Value {
     match scan(a, true) {
         Some(s) => {
             let mut count = 0usize;
-            s.walk(0..s.len(), |_, _, spike| count += usize::from(spike));
+            s.walk(0..s.len(), |_, spike| count += usize::from(spike));
             Value::Int(count as i64)
         }
         None => bad("lidar_spikes"),
@@ -185,8 +199,9 @@ pub fn sector_min(a: &[Value]) -> Value {
     };
     let mut m = f64::INFINITY;
     for beams in s.sector(*from, *to) {
-        s.walk(beams, |r, ok, spike| {
-            if ok & !spike {
+        // A NaN range (an invalid beam) leaves `m` as it is.
+        s.walk(beams, |r, spike| {
+            if !spike {
                 m = m.min(r);
             }
         });
@@ -209,7 +224,7 @@ pub fn sector_valid_fraction(a: &[Value]) -> Value {
     }
     let mut ok = 0usize;
     for beams in sector {
-        s.walk(beams, |_, valid, spike| ok += usize::from(valid & !spike));
+        s.walk(beams, |r, spike| ok += usize::from(!r.is_nan() & !spike));
     }
     Value::Float(ok as f64 / all as f64)
 }
@@ -323,29 +338,55 @@ mod tests {
             f64::NAN,
             f64::INFINITY,
         ];
-        for round in 0..4000 {
+        for round in 0..6000 {
             let n = match round % 8 {
-                0 => (next() % 4) as usize,
+                0 => (next() % 5) as usize,
                 1 => 360,
                 2 => 7,
                 _ => (next() % 50) as usize,
             };
             let beams: Vec<f64> = (0..n)
-                .map(|_| match next() % 12 {
+                .map(|_| match next() % 18 {
                     0 => 0.0,
                     1 => f64::NAN,
                     2 => 5.0,
                     3 => 0.05,
                     4 => 3.5,
                     5 => 0.12,
+                    6 => f64::INFINITY,
+                    7 => f64::NEG_INFINITY,
+                    8 => -0.0,
+                    9 => -((next() % 3400) as f64) / 1000.0,
+                    10 => f64::MAX,
                     _ => (next() % 3400) as f64 / 1000.0 + 0.1,
                 })
                 .collect();
+            // Mostly the robots' bounds; also bounds admitting zeros, negatives, everything
+            // finite, or nothing (NaN), and gammas that are negative, infinite or NaN.
+            let (rmin, rmax) = match (round / 3) % 9 {
+                0 => (0.0, 3.5),
+                1 => (-0.0, 0.0),
+                2 => (f64::NEG_INFINITY, f64::INFINITY),
+                3 => (-1.0, f64::MAX),
+                4 => (f64::NAN, 3.5),
+                5 => (0.12, f64::NAN),
+                6 => (3.5, 0.12),
+                _ => (0.12, 3.5),
+            };
             let r = reference::Scan {
                 beams: beams.clone(),
-                rmin: 0.12,
-                rmax: 3.5,
-                gamma: [0.3, 0.0, 1.0][round % 3],
+                rmin,
+                rmax,
+                gamma: [
+                    0.3,
+                    0.0,
+                    1.0,
+                    0.3,
+                    -0.5,
+                    f64::NAN,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                ][(round / 7) % 8],
             };
             let mut l = list(&beams);
             if round % 5 == 0 && n > 0 {
@@ -354,7 +395,11 @@ mod tests {
                     unreachable!()
                 };
                 let i = (next() % n as u64) as usize;
-                Arc::make_mut(items)[i] = Value::Int(1);
+                Arc::make_mut(items)[i] = if next() % 2 == 0 {
+                    Value::Int(1)
+                } else {
+                    Value::Bool(true)
+                };
                 let mut b = beams.clone();
                 b[i] = f64::NAN;
                 check_against(&l, &reference::Scan { beams: b, ..r }, &bounds, &mut next);
