@@ -65,18 +65,18 @@ impl Scan<'_> {
     fn walk(&self, beams: Range<usize>, mut f: impl FnMut(f64, bool)) {
         let n = self.len();
         let (lo, hi) = self.bounds();
-        let clean = |v: &Value| clean(beam(v), lo, hi);
+        let cleaned = |v: &Value| clean(beam(v), lo, hi);
         let Some(all) = self.beams.get(beams.clone()) else {
             return;
         };
         if n < 3 {
             for v in all {
-                f(clean(v), false);
+                f(cleaned(v), false);
             }
             return;
         }
         let (g, ng) = (self.gamma, -self.gamma);
-        let at = |i: usize| self.beams.get(i).map_or(f64::NAN, clean);
+        let at = |i: usize| self.beams.get(i).map_or(f64::NAN, cleaned);
         let mut buf = [0.0f64; BLOCK + 2];
         let mut prev = at(if beams.start == 0 {
             n - 1
@@ -88,8 +88,9 @@ impl Scan<'_> {
             next += block.len();
             let k = block.len();
             buf[0] = prev;
-            for (o, v) in buf[1..=k].iter_mut().zip(block) {
-                *o = clean(v);
+            gather(block, &mut buf[1..=k]);
+            for r in &mut buf[1..=k] {
+                *r = clean(*r, lo, hi);
             }
             buf[k + 1] = at(if next == n { 0 } else { next });
             for ((a, r), b) in buf[..k].iter().zip(&buf[1..=k]).zip(&buf[2..k + 2]) {
@@ -128,6 +129,22 @@ fn clean(r: f64, lo: f64, hi: f64) -> f64 {
     f64::from_bits(r.to_bits() | bad.wrapping_neg() & f64::NAN.to_bits())
 }
 
+/// Each beam's range into `out` (NaN for an element that is not a float), four at a time: the
+/// element's tag decides a branch per beam, so the unrolled loop saves the loop's own count.
+#[inline(always)]
+fn gather(beams: &[Value], out: &mut [f64]) {
+    let mut o4 = out.chunks_exact_mut(4);
+    let mut b4 = beams.chunks_exact(4);
+    for (o, b) in (&mut o4).zip(&mut b4) {
+        if let ([o0, o1, o2, o3], [b0, b1, b2, b3]) = (o, b) {
+            (*o0, *o1, *o2, *o3) = (beam(b0), beam(b1), beam(b2), beam(b3));
+        }
+    }
+    for (o, b) in o4.into_remainder().iter_mut().zip(b4.remainder()) {
+        *o = beam(b);
+    }
+}
+
 /// A beam's range: NaN for an element that is not a float.
 #[inline]
 fn beam(v: &Value) -> f64 {
@@ -162,16 +179,19 @@ fn bad(name: &str) -> Value {
 pub fn dropouts(a: &[Value]) -> Value {
     match scan(a, false) {
         Some(s) => {
+            // Gathered a block at a time, then counted over plain floats (vectorised).
             let (lo, hi) = s.bounds();
-            Value::Int(
-                s.beams
+            let mut buf = [0.0f64; BLOCK];
+            let mut bad = 0usize;
+            for block in s.beams.chunks(BLOCK) {
+                let rs = &mut buf[..block.len()];
+                gather(block, rs);
+                bad += rs
                     .iter()
-                    .map(|v| {
-                        let r = beam(v);
-                        usize::from(!((r >= lo) & (r <= hi)))
-                    })
-                    .sum::<usize>() as i64,
-            )
+                    .map(|r| usize::from(!((*r >= lo) & (*r <= hi))))
+                    .sum::<usize>();
+            }
+            Value::Int(bad as i64)
         }
         None => bad("lidar_dropouts"),
     }
