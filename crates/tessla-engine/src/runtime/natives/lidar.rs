@@ -55,31 +55,24 @@ impl Scan<'_> {
         }
     }
 
-    /// `f(range, spike)` for each beam of `beams`, ascending, where `range` is the beam's range
-    /// when it is valid and NaN when it is not. Each block of beams is read once into a buffer of
-    /// ranges (NaN for invalid ones) with its cyclic neighbours; a NaN fails every comparison, so
-    /// the spike test needs no validity flags: a beam is a spike when it and both neighbours are
-    /// valid and it differs from each by more than gamma in the same direction, and `a - r` is
-    /// exactly `-(r - a)`, so two differences suffice. No spikes in a scan of fewer than 3 beams.
+    /// `f(ranges)` for consecutive blocks of `beams`, ascending: `ranges` holds the block's
+    /// beams with one cyclic neighbour each side, each its range when it is valid and NaN when it
+    /// is not (neighbours NaN in a scan of fewer than 3 beams, which has no spikes). Each beam is
+    /// read once into the buffer; [`steep`] on its windows tells the spikes.
     #[inline(always)]
-    fn walk(&self, beams: Range<usize>, mut f: impl FnMut(f64, bool)) {
+    fn blocks(&self, beams: Range<usize>, mut f: impl FnMut(&[f64])) {
         let n = self.len();
         let (lo, hi) = self.bounds();
-        let cleaned = |v: &Value| clean(beam(v), lo, hi);
         let Some(all) = self.beams.get(beams.clone()) else {
             return;
         };
-        if n < 3 {
-            for v in all {
-                f(cleaned(v), false);
-            }
-            return;
-        }
-        let (g, ng) = (self.gamma, -self.gamma);
-        let at = |i: usize| self.beams.get(i).map_or(f64::NAN, cleaned);
+        let at = |i: usize| match self.beams.get(i) {
+            Some(v) if n >= 3 => clean(beam(v), lo, hi),
+            _ => f64::NAN,
+        };
         let mut buf = [0.0f64; BLOCK + 2];
         let mut prev = at(if beams.start == 0 {
-            n - 1
+            n.wrapping_sub(1)
         } else {
             beams.start - 1
         });
@@ -93,12 +86,20 @@ impl Scan<'_> {
                 *r = clean(*r, lo, hi);
             }
             buf[k + 1] = at(if next == n { 0 } else { next });
-            for ((a, r), b) in buf[..k].iter().zip(&buf[1..=k]).zip(&buf[2..k + 2]) {
-                let (d1, d2) = (r - a, r - b);
-                f(*r, ((d1 > g) & (d2 > g)) | ((d1 < ng) & (d2 < ng)));
-            }
+            f(&buf[..k + 2]);
             prev = buf[k];
         }
+    }
+
+    /// `f(range, spike)` for each beam of `beams`, ascending, `range` as in [`Scan::blocks`].
+    #[inline(always)]
+    fn walk(&self, beams: Range<usize>, mut f: impl FnMut(f64, bool)) {
+        let g = self.gamma;
+        self.blocks(beams, |w| {
+            for ((a, r), b) in w.iter().zip(&w[1..]).zip(&w[2..]) {
+                f(*r, steep(g, *a, *r, *b));
+            }
+        });
     }
 
     /// Beam indices whose angle `i·360/N` lies in the sector `from..to` degrees
@@ -127,6 +128,15 @@ impl Scan<'_> {
 fn clean(r: f64, lo: f64, hi: f64) -> f64 {
     let bad = u64::from(!((r >= lo) & (r <= hi)));
     f64::from_bits(r.to_bits() | bad.wrapping_neg() & f64::NAN.to_bits())
+}
+
+/// Whether `r` differs from both neighbours `a` and `b` by more than `g` in the same direction:
+/// a spike when all three are valid ranges, and never when one is NaN (an invalid beam), as a NaN
+/// fails every comparison. `a - r` is exactly `-(r - a)`, so two differences suffice.
+#[inline(always)]
+fn steep(g: f64, a: f64, r: f64, b: f64) -> bool {
+    let (d1, d2) = (r - a, r - b);
+    ((d1 > g) & (d2 > g)) | ((d1 < -g) & (d2 < -g))
 }
 
 /// Each beam's range into `out` (NaN for an element that is not a float), four at a time: the
@@ -217,13 +227,18 @@ pub fn sector_min(a: &[Value]) -> Value {
     else {
         return bad("lidar_sector_min");
     };
-    let mut m = f64::INFINITY;
+    let (g, mut m) = (s.gamma, f64::INFINITY);
+    let mut keep = [0.0f64; BLOCK];
     for beams in s.sector(*from, *to) {
-        // A NaN range (an invalid beam) leaves `m` as it is.
-        s.walk(beams, |r, spike| {
-            if !spike {
-                m = m.min(r);
+        s.blocks(beams, |w| {
+            // The block's ranges with spikes made NaN (a pass over plain floats), then their
+            // minimum in beam order: a NaN (an invalid beam or a spike) leaves `m` as it is.
+            let keep = &mut keep[..w.len() - 2];
+            for (k, ((a, r), b)) in keep.iter_mut().zip(w.iter().zip(&w[1..]).zip(&w[2..])) {
+                let spike = u64::from(steep(g, *a, *r, *b));
+                *k = f64::from_bits(r.to_bits() | spike.wrapping_neg() & f64::NAN.to_bits());
             }
+            m = keep.iter().fold(m, |m, r| m.min(*r));
         });
     }
     Value::Float(if m.is_finite() { m } else { s.rmax })
