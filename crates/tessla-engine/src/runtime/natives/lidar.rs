@@ -37,7 +37,7 @@ fn scan(args: &[Value], with_gamma: bool) -> Option<Scan<'_>> {
 
 /// Beams per block of [`Scan::walk`]: a block's cleaned ranges and its two neighbours live in a
 /// stack buffer, so the spike test runs over plain floats.
-const BLOCK: usize = 64;
+const BLOCK: usize = 32;
 
 impl Scan<'_> {
     fn len(&self) -> usize {
