@@ -35,68 +35,71 @@ fn scan(args: &[Value], with_gamma: bool) -> Option<Scan<'_>> {
     })
 }
 
+/// Beams per block of [`Scan::walk`]: a block's cleaned ranges and its two neighbours live in a
+/// stack buffer, so the spike test runs over plain floats.
+const BLOCK: usize = 32;
+
 impl Scan<'_> {
     fn len(&self) -> usize {
         self.beams.len()
     }
 
-    /// Beam `i`'s range (NaN for an element that is not a float).
-    #[inline]
-    fn at(&self, i: usize) -> f64 {
-        self.beams.get(i).map_or(f64::NAN, beam)
+    /// Bounds `lo`, `hi` with `lo <= r && r <= hi` exactly when `r` is a valid reading (finite
+    /// and within [rmin, rmax]): finite bounds leave no room for the infinities, and a NaN bound
+    /// admits nothing. Two comparisons per beam instead of three.
+    fn bounds(&self) -> (f64, f64) {
+        if self.rmin.is_nan() || self.rmax.is_nan() {
+            (f64::INFINITY, f64::NEG_INFINITY)
+        } else {
+            (self.rmin.max(-f64::MAX), self.rmax.min(f64::MAX))
+        }
     }
 
-    /// Whether a range is a valid reading (`&`, not `&&`: no branch per beam).
-    #[inline]
-    fn ok(&self, r: f64) -> bool {
-        r.is_finite() & (r >= self.rmin) & (r <= self.rmax)
-    }
-
-    /// Whether `r` differs from both neighbours `a` and `b` by more than gamma in the same
-    /// direction (a spike when all three are valid).
-    #[inline]
-    fn steep(&self, a: f64, r: f64, b: f64) -> bool {
-        let g = self.gamma;
-        ((r - a > g) & (r - b > g)) | ((a - r > g) & (b - r > g))
-    }
-
-    /// `f(range, valid, spike)` for each beam of `beams`, ascending, reading each beam once:
-    /// a window of the beam and its cyclic neighbours moves along the range. A spike needs two
-    /// valid neighbours besides itself (none in a scan of fewer than 3 beams).
-    #[inline]
-    fn walk(&self, beams: Range<usize>, mut f: impl FnMut(f64, bool, bool)) {
+    /// `f(ranges)` for consecutive blocks of `beams`, ascending: `ranges` holds the block's
+    /// beams with one cyclic neighbour each side, each its range when it is valid and NaN when it
+    /// is not (neighbours NaN in a scan of fewer than 3 beams, which has no spikes). Each beam is
+    /// read once into the buffer; [`steep`] on its windows tells the spikes.
+    #[inline(always)]
+    fn blocks(&self, beams: Range<usize>, mut f: impl FnMut(&[f64])) {
         let n = self.len();
-        if beams.is_empty() {
+        let (lo, hi) = self.bounds();
+        let Some(all) = self.beams.get(beams.clone()) else {
             return;
-        }
-        if n < 3 {
-            for i in beams {
-                let r = self.at(i);
-                f(r, self.ok(r), false);
-            }
-            return;
-        }
-        let a = self.at(if beams.start == 0 {
-            n - 1
+        };
+        let at = |i: usize| match self.beams.get(i) {
+            Some(v) if n >= 3 => clean(beam(v), lo, hi),
+            _ => f64::NAN,
+        };
+        let mut buf = [0.0f64; BLOCK + 2];
+        let mut prev = at(if beams.start == 0 {
+            n.wrapping_sub(1)
         } else {
             beams.start - 1
         });
-        let r = self.at(beams.start);
-        let (mut a, mut a_ok, mut r, mut r_ok) = (a, self.ok(a), r, self.ok(r));
-        // The beams after the range's first as a slice (no index arithmetic or bounds check per
-        // beam), then the range's last beam with its cyclic successor.
-        let rest = self
-            .beams
-            .get(beams.start + 1..beams.end)
-            .unwrap_or_default();
-        for v in rest {
-            let b = beam(v);
-            let b_ok = self.ok(b);
-            f(r, r_ok, a_ok & r_ok & b_ok & self.steep(a, r, b));
-            (a, a_ok, r, r_ok) = (r, r_ok, b, b_ok);
+        let mut next = beams.start;
+        for block in all.chunks(BLOCK) {
+            next += block.len();
+            let k = block.len();
+            buf[0] = prev;
+            gather(block, &mut buf[1..=k]);
+            for r in &mut buf[1..=k] {
+                *r = clean(*r, lo, hi);
+            }
+            buf[k + 1] = at(if next == n { 0 } else { next });
+            f(&buf[..k + 2]);
+            prev = buf[k];
         }
-        let b = self.at(if beams.end == n { 0 } else { beams.end });
-        f(r, r_ok, a_ok & r_ok & self.ok(b) & self.steep(a, r, b));
+    }
+
+    /// `f(range, spike)` for each beam of `beams`, ascending, `range` as in [`Scan::blocks`].
+    #[inline(always)]
+    fn walk(&self, beams: Range<usize>, mut f: impl FnMut(f64, bool)) {
+        let g = self.gamma;
+        self.blocks(beams, |w| {
+            for ((a, r), b) in w.iter().zip(&w[1..]).zip(&w[2..]) {
+                f(*r, steep(g, *a, *r, *b));
+            }
+        });
     }
 
     /// Beam indices whose angle `i·360/N` lies in the sector `from..to` degrees
@@ -117,6 +120,38 @@ impl Scan<'_> {
             // No beam is both past `from` and up to `to` here, so hi <= lo.
             [0..hi.min(lo), lo..n]
         }
+    }
+}
+
+/// `r` when `lo <= r <= hi`, else NaN: the exponent and quiet bits or-ed in by mask, no select.
+#[inline(always)]
+fn clean(r: f64, lo: f64, hi: f64) -> f64 {
+    let bad = u64::from(!((r >= lo) & (r <= hi)));
+    f64::from_bits(r.to_bits() | bad.wrapping_neg() & f64::NAN.to_bits())
+}
+
+/// Whether `r` differs from both neighbours `a` and `b` by more than `g` in the same direction:
+/// a spike when all three are valid ranges, and never when one is NaN (an invalid beam), as a NaN
+/// fails every comparison. `a - r` is exactly `-(r - a)`, so two differences suffice.
+#[inline(always)]
+fn steep(g: f64, a: f64, r: f64, b: f64) -> bool {
+    let (d1, d2) = (r - a, r - b);
+    ((d1 > g) & (d2 > g)) | ((d1 < -g) & (d2 < -g))
+}
+
+/// Each beam's range into `out` (NaN for an element that is not a float), four at a time: the
+/// element's tag decides a branch per beam, so the unrolled loop saves the loop's own count.
+#[inline(always)]
+fn gather(beams: &[Value], out: &mut [f64]) {
+    let mut o4 = out.chunks_exact_mut(4);
+    let mut b4 = beams.chunks_exact(4);
+    for (o, b) in (&mut o4).zip(&mut b4) {
+        if let ([o0, o1, o2, o3], [b0, b1, b2, b3]) = (o, b) {
+            (*o0, *o1, *o2, *o3) = (beam(b0), beam(b1), beam(b2), beam(b3));
+        }
+    }
+    for (o, b) in o4.into_remainder().iter_mut().zip(b4.remainder()) {
+        *o = beam(b);
     }
 }
 
@@ -153,12 +188,21 @@ fn bad(name: &str) -> Value {
 /// `lidar_dropouts(scan, range_min, range_max): Int`.
 pub fn dropouts(a: &[Value]) -> Value {
     match scan(a, false) {
-        Some(s) => Value::Int(
-            s.beams
-                .iter()
-                .map(|v| usize::from(!s.ok(beam(v))))
-                .sum::<usize>() as i64,
-        ),
+        Some(s) => {
+            // Gathered a block at a time, then counted over plain floats (vectorised).
+            let (lo, hi) = s.bounds();
+            let mut buf = [0.0f64; BLOCK];
+            let mut bad = 0usize;
+            for block in s.beams.chunks(BLOCK) {
+                let rs = &mut buf[..block.len()];
+                gather(block, rs);
+                bad += rs
+                    .iter()
+                    .map(|r| usize::from(!((*r >= lo) & (*r <= hi))))
+                    .sum::<usize>();
+            }
+            Value::Int(bad as i64)
+        }
         None => bad("lidar_dropouts"),
     }
 }
@@ -168,7 +212,7 @@ pub fn spikes(a: &[Value]) -> Value {
     match scan(a, true) {
         Some(s) => {
             let mut count = 0usize;
-            s.walk(0..s.len(), |_, _, spike| count += usize::from(spike));
+            s.walk(0..s.len(), |_, spike| count += usize::from(spike));
             Value::Int(count as i64)
         }
         None => bad("lidar_spikes"),
@@ -183,12 +227,18 @@ pub fn sector_min(a: &[Value]) -> Value {
     else {
         return bad("lidar_sector_min");
     };
-    let mut m = f64::INFINITY;
+    let (g, mut m) = (s.gamma, f64::INFINITY);
+    let mut keep = [0.0f64; BLOCK];
     for beams in s.sector(*from, *to) {
-        s.walk(beams, |r, ok, spike| {
-            if ok & !spike {
-                m = m.min(r);
+        s.blocks(beams, |w| {
+            // The block's ranges with spikes made NaN (a pass over plain floats), then their
+            // minimum in beam order: a NaN (an invalid beam or a spike) leaves `m` as it is.
+            let keep = &mut keep[..w.len() - 2];
+            for (k, ((a, r), b)) in keep.iter_mut().zip(w.iter().zip(&w[1..]).zip(&w[2..])) {
+                let spike = u64::from(steep(g, *a, *r, *b));
+                *k = f64::from_bits(r.to_bits() | spike.wrapping_neg() & f64::NAN.to_bits());
             }
+            m = keep.iter().fold(m, |m, r| m.min(*r));
         });
     }
     Value::Float(if m.is_finite() { m } else { s.rmax })
@@ -209,7 +259,7 @@ pub fn sector_valid_fraction(a: &[Value]) -> Value {
     }
     let mut ok = 0usize;
     for beams in sector {
-        s.walk(beams, |_, valid, spike| ok += usize::from(valid & !spike));
+        s.walk(beams, |r, spike| ok += usize::from(!r.is_nan() & !spike));
     }
     Value::Float(ok as f64 / all as f64)
 }
@@ -323,29 +373,55 @@ mod tests {
             f64::NAN,
             f64::INFINITY,
         ];
-        for round in 0..4000 {
+        for round in 0..6000 {
             let n = match round % 8 {
-                0 => (next() % 4) as usize,
+                0 => (next() % 5) as usize,
                 1 => 360,
                 2 => 7,
                 _ => (next() % 50) as usize,
             };
             let beams: Vec<f64> = (0..n)
-                .map(|_| match next() % 12 {
+                .map(|_| match next() % 18 {
                     0 => 0.0,
                     1 => f64::NAN,
                     2 => 5.0,
                     3 => 0.05,
                     4 => 3.5,
                     5 => 0.12,
+                    6 => f64::INFINITY,
+                    7 => f64::NEG_INFINITY,
+                    8 => -0.0,
+                    9 => -((next() % 3400) as f64) / 1000.0,
+                    10 => f64::MAX,
                     _ => (next() % 3400) as f64 / 1000.0 + 0.1,
                 })
                 .collect();
+            // Mostly the robots' bounds; also bounds admitting zeros, negatives, everything
+            // finite, or nothing (NaN), and gammas that are negative, infinite or NaN.
+            let (rmin, rmax) = match (round / 3) % 9 {
+                0 => (0.0, 3.5),
+                1 => (-0.0, 0.0),
+                2 => (f64::NEG_INFINITY, f64::INFINITY),
+                3 => (-1.0, f64::MAX),
+                4 => (f64::NAN, 3.5),
+                5 => (0.12, f64::NAN),
+                6 => (3.5, 0.12),
+                _ => (0.12, 3.5),
+            };
             let r = reference::Scan {
                 beams: beams.clone(),
-                rmin: 0.12,
-                rmax: 3.5,
-                gamma: [0.3, 0.0, 1.0][round % 3],
+                rmin,
+                rmax,
+                gamma: [
+                    0.3,
+                    0.0,
+                    1.0,
+                    0.3,
+                    -0.5,
+                    f64::NAN,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                ][(round / 7) % 8],
             };
             let mut l = list(&beams);
             if round % 5 == 0 && n > 0 {
@@ -354,7 +430,11 @@ mod tests {
                     unreachable!()
                 };
                 let i = (next() % n as u64) as usize;
-                Arc::make_mut(items)[i] = Value::Int(1);
+                Arc::make_mut(items)[i] = if next() % 2 == 0 {
+                    Value::Int(1)
+                } else {
+                    Value::Bool(true)
+                };
                 let mut b = beams.clone();
                 b[i] = f64::NAN;
                 check_against(&l, &reference::Scan { beams: b, ..r }, &bounds, &mut next);
