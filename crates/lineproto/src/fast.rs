@@ -12,7 +12,8 @@
 //! path; this path is several times faster (`cargo bench -p lineproto --bench codec`, groups
 //! `parse_p2` and `parse_lidar360`, figures in BENCHMARKS.md).
 
-use crate::metric::{Capture, FieldValue, ListKey, Metric};
+use crate::list::{Capture, ListKey};
+use crate::metric::{FieldValue, Metric};
 use std::cell::Cell;
 
 /// A byte allowed in a plain name or tag value: printable, not a line-protocol delimiter.

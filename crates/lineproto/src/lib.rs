@@ -2,17 +2,19 @@
 //!
 //! Owns: cutting a byte stream into records ([`split`], quote-aware: a string field may hold a raw
 //! newline), parsing one record into a [`Metric`] ([`parse`]; the record types in `metric`, on the `influxdb-line-protocol`
-//! crate with Telegraf's rules applied on top), and writing metrics back with Telegraf's escaping
-//! ([`write`]). No I/O happens here.
+//! crate with Telegraf's rules applied on top; a list pattern's elements read apart in `list`),
+//! and writing metrics back with Telegraf's escaping ([`write`]). No I/O happens here.
 
 mod fast;
+mod list;
 mod metric;
 pub mod parse;
 pub mod split;
 mod telegraf_rules;
 pub mod write;
 
-pub use metric::{FieldValue, ListCapture, Metric, Prefix, list_index};
+pub use list::{ListCapture, Prefix, list_index};
+pub use metric::{FieldValue, Metric};
 pub use parse::{ParseError, parse_record, parse_record_into};
 pub use split::{DEFAULT_MAX_RECORD, OVERSIZED_HEAD, Record, RecordRef, RecordSplitter};
 pub use write::{
