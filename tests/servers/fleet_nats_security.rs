@@ -10,6 +10,7 @@
 //! start, a process given another partition's lease name warns while it stands by.
 
 use crate::support::child;
+use crate::support::live_child::LiveChild;
 use crate::support::nats_cluster;
 use crate::support::servers;
 
@@ -443,17 +444,20 @@ fn fleet_mistakes_are_refused_or_loud() {
         "{err}"
     );
 
-    // p0's process given p1's lease name: it stands by and says that p0 has no holder.
-    let wrong = spawn(format!("{base}/fleet?lease=p1&ttl=1s"));
-    std::thread::sleep(Duration::from_secs(6));
-    let (err, code) = finish(wrong);
-    assert_eq!(code, 0, "{err}");
+    // p0's process given p1's lease name: it stands by and says that p0 has no holder (its
+    // first report comes after three TTLs of standing by; waited for, never slept on).
+    let url = format!("{base}/fleet?lease=p1&ttl=1s");
+    let mut wrong = LiveChild::spawn(&["run", "--no-passthrough", "--state", &url]);
+    let line = wrong.wait_err("the standby's report", 0, |l| {
+        l.starts_with("W! lease: partition p1: standing by for ")
+    });
     assert!(
-        err.contains("W! lease: partition p1: standing by for ")
-            && err.contains("while nobody holds partition(s) p0: their robots get no actions")
-            && err.contains("has the wrong ?lease= name"),
-        "{err}"
+        line.contains("while nobody holds partition(s) p0: their robots get no actions")
+            && line.contains("has the wrong ?lease= name"),
+        "{line}"
     );
+    let (_, err, code) = wrong.finish();
+    assert_eq!(code, 0, "{err}");
     let (err, code) = finish(holder);
     assert_eq!(code, 0, "{err}");
 }
