@@ -85,12 +85,14 @@ const ENGINE_NO_SYNTAX: Forbidden = &[
 /// printer), on top of the fast path for plain event lines, on top of the trace reader and writer.
 const TRACE_LAYERS: Layers = &[&["ctf"], &["lib"], &["fast"], &["reader", "writer"]];
 
-/// lineproto: records cut, parsed and written; the parsers' parts; the record types.
+/// lineproto: records cut, parsed and written; the parsers' parts; the record types; a list
+/// pattern's keys and the array its elements can be read into.
 const LINEPROTO_LAYERS: Layers = &[
     &["lib"],
     &["split", "parse", "write"],
     &["fast", "telegraf_rules"],
     &["metric"],
+    &["list"],
 ];
 
 struct Crate {
