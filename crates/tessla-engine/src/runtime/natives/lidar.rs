@@ -238,10 +238,18 @@ pub fn sector_min(a: &[Value]) -> Value {
                 let spike = u64::from(steep(g, *a, *r, *b));
                 *k = f64::from_bits(r.to_bits() | spike.wrapping_neg() & f64::NAN.to_bits());
             }
-            m = keep.iter().fold(m, |m, r| m.min(*r));
+            m = keep.iter().fold(m, |m, r| first_min(m, *r));
         });
     }
     Value::Float(if m.is_finite() { m } else { s.rmax })
+}
+
+/// The smaller of `m` and `r`, `m` when they are equal or `r` is NaN: a minimum taken in beam
+/// order is then the first of equal beams, whatever the build (`f64::min` may return either of
+/// 0.0 and -0.0, and which one changes with vectorisation).
+#[inline(always)]
+fn first_min(m: f64, r: f64) -> f64 {
+    if r < m { r } else { m }
 }
 
 /// `lidar_sector_valid_fraction(scan, range_min, range_max, gamma, from_deg, to_deg): Float`:
@@ -325,7 +333,7 @@ mod tests {
                     .into_iter()
                     .filter(|i| self.valid(*i) && !self.spike(*i))
                     .map(|i| self.beams[i])
-                    .fold(f64::INFINITY, f64::min);
+                    .fold(f64::INFINITY, |m, r| if r < m { r } else { m });
                 if m.is_finite() { m } else { self.rmax }
             }
 
