@@ -23,6 +23,7 @@ use crate::ir::scalar_op;
 use crate::ir::{self, Node};
 use crate::ir::{BinOp, UnaryOp};
 use crate::runtime::collections;
+use crate::runtime::flat::{KArg, Kernel, Plan};
 use crate::runtime::ops;
 use crate::value::{Callable, NativeFn, RuntimeError, Value, call_function_value, call_native};
 use std::sync::{Arc, OnceLock, Weak};
@@ -40,6 +41,8 @@ pub struct Ctx {
     nodes: Vec<Option<Exec>>,
     /// Per node: its function as a [`Fast`] form, when it has one.
     fast: Vec<Option<Fast>>,
+    /// The program's step as a flat plan, when it has one (see `runtime::flat`).
+    plan: Option<Plan>,
     me: Weak<Ctx>,
 }
 
@@ -60,6 +63,12 @@ impl Ctx {
     #[inline]
     pub fn fast(&self, n: usize) -> Option<&Fast> {
         self.fast.get(n).and_then(Option::as_ref)
+    }
+
+    /// The program's flat plan, if it has one.
+    #[inline]
+    pub fn plan(&self) -> Option<&Plan> {
+        self.plan.as_ref()
     }
 
     /// Call function `id` with `frame`.
@@ -99,7 +108,12 @@ impl Ctx {
 }
 
 /// A context built from compiled functions (`None`: not finished, an error when called).
-fn context(fns: Vec<Option<Exec>>, nodes: Vec<Option<Exec>>, fast: Vec<Option<Fast>>) -> Arc<Ctx> {
+fn context(
+    fns: Vec<Option<Exec>>,
+    nodes: Vec<Option<Exec>>,
+    fast: Vec<Option<Fast>>,
+    plan: Option<Plan>,
+) -> Arc<Ctx> {
     let n = fns.len();
     Arc::new_cyclic(|me| Ctx {
         fns: fns
@@ -109,6 +123,7 @@ fn context(fns: Vec<Option<Exec>>, nodes: Vec<Option<Exec>>, fast: Vec<Option<Fa
         values: (0..n).map(|_| OnceLock::new()).collect(),
         fast,
         nodes,
+        plan,
         me: me.clone(),
     })
 }
@@ -121,6 +136,8 @@ fn context(fns: Vec<Option<Exec>>, nodes: Vec<Option<Exec>>, fast: Vec<Option<Fa
 pub struct Program {
     ir: ir::Program,
     exec: OnceLock<Arc<Ctx>>,
+    /// Whether the program may run as a flat plan (`runtime::flat`) when it has one.
+    flat: bool,
 }
 
 impl Program {
@@ -129,14 +146,30 @@ impl Program {
         Program {
             ir,
             exec: OnceLock::new(),
+            flat: true,
         }
+    }
+
+    /// The IR, always run by the general step, never as a flat plan: what the plan is tested
+    /// and measured against.
+    pub fn general_only(ir: ir::Program) -> Program {
+        Program {
+            flat: false,
+            ..Program::new(ir)
+        }
+    }
+
+    /// Take the IR back (to make another program of it).
+    pub fn into_ir(self) -> ir::Program {
+        self.ir
     }
 
     /// The program's code compiled into closures: built once, by the first monitor created,
     /// and shared by every monitor of the program.
     #[inline]
     pub fn exec(&self) -> &Arc<Ctx> {
-        self.exec.get_or_init(|| compile_program(&self.ir))
+        self.exec
+            .get_or_init(|| compile_program_with(&self.ir, self.flat))
     }
 }
 
@@ -155,8 +188,12 @@ impl std::ops::Deref for Program {
     }
 }
 
-/// Compile a program's function table and node functions.
+/// Compile a program's function table and node functions, and its flat plan if it has one.
 pub fn compile_program(p: &ir::Program) -> Arc<Ctx> {
+    compile_program_with(p, true)
+}
+
+fn compile_program_with(p: &ir::Program, flat: bool) -> Arc<Ctx> {
     let fns = p
         .functions
         .iter()
@@ -181,8 +218,13 @@ pub fn compile_program(p: &ir::Program) -> Arc<Ctx> {
             Node::Fold { f, .. } | Node::Reduce { f, .. } => Fast::of(f, 2, &p.functions),
             _ => None,
         })
-        .collect();
-    context(fns, nodes, fast)
+        .collect::<Vec<_>>();
+    let plan = if flat {
+        Plan::build(p, |n| fast.get(n)?.as_ref().and_then(Fast::kernel))
+    } else {
+        None
+    };
+    context(fns, nodes, fast, plan)
 }
 
 /// A node function that is one operator or native applied to the node's arguments and
@@ -279,6 +321,31 @@ impl Fast {
             }
             _ => None,
         }
+    }
+
+    /// The form as a flat plan's [`Kernel`], if it is one scalar operator (the kernel computes
+    /// what [`Fast::run`] does on scalars and gives up on anything else).
+    fn kernel(&self) -> Option<Kernel> {
+        let arg = |o: &Operand| match o {
+            Operand::Arg(i) => u8::try_from(*i).ok().map(KArg::Arg),
+            Operand::Const(v) => Some(KArg::Const(v.clone())),
+        };
+        Some(match self {
+            Fast::Const(v) => Kernel::Const(v.clone()),
+            Fast::Binary(op, a, b) => match (scalar_op(*op), op) {
+                (Some(sop), _) => Kernel::Op(sop, arg(a)?, arg(b)?),
+                (None, BinOp::Eq | BinOp::Ne) => Kernel::Eq {
+                    ne: *op == BinOp::Ne,
+                    a: arg(a)?,
+                    b: arg(b)?,
+                },
+                (None, _) => return None,
+            },
+            Fast::Unary(UnaryOp::Not, a) => Kernel::Not(arg(a)?),
+            Fast::Unary(UnaryOp::FNeg, a) => Kernel::FNeg(arg(a)?),
+            Fast::IntToFloat(_, a) => Kernel::IntToFloat(arg(a)?),
+            Fast::Unary(..) | Fast::Native1(..) | Fast::Native2(..) => return None,
+        })
     }
 
     /// Run on the node's argument values (`None`: an operand out of range, never for a form
@@ -713,6 +780,7 @@ mod tests {
                 .collect(),
             Vec::new(),
             Vec::new(),
+            None,
         );
         let codes = [
             bin(BinOp::FAdd, Code::Slot(0), Code::Slot(1)),

@@ -17,6 +17,7 @@
 
 pub mod collections;
 pub mod exec;
+pub mod flat;
 pub mod format;
 pub mod monitor;
 pub mod natives;

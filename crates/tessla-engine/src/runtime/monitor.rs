@@ -28,6 +28,7 @@
 
 use crate::ir::{NO_SLOT, Node, NodeId, SArg};
 use crate::runtime::exec::{Ctx, Exec, Program};
+use crate::runtime::flat::{Slot, StepState};
 use crate::value::{RuntimeError, Value};
 
 use std::cell::RefCell;
@@ -104,6 +105,8 @@ struct Scratch {
     cur: Vec<Option<Value>>,
     /// Argument buffer of signal lifts with more than three arguments.
     args: Vec<Value>,
+    /// This step's event of each node, for a program run as a flat plan.
+    flat: Vec<Slot>,
 }
 
 thread_local! {
@@ -272,6 +275,25 @@ impl Monitor {
         let program = &*self.program;
         let slots = &program.last_slot[..];
         let first = self.last_evaluated.is_none();
+        if let Some(plan) = program.exec().plan() {
+            let st = StepState {
+                ts,
+                first,
+                inputs: &self.inputs,
+                last: &mut self.last,
+            };
+            let mut send = |output, value: &Value| {
+                sink(OutputEvent { ts, output, value });
+            };
+            if plan.step(st, &mut sc.flat, &mut send) {
+                for i in self.inputs.iter_mut() {
+                    release(i.take());
+                }
+                self.last_evaluated = Some(ts);
+                return;
+            }
+            // No scalar answer for this step: the general step runs it, from the same state.
+        }
         let cur = &mut sc.cur;
         // Every entry is `None` between steps (the commit below empties it).
         if cur.len() != program.nodes.len() {

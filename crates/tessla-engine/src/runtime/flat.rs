@@ -1,0 +1,1031 @@
+//! The flat plan: a program whose streams all carry scalars, run as a list of typed
+//! instructions over plain slots.
+//!
+//! Owns: [`Plan`] (made once per program by `runtime::exec`, beside its compiled code, when
+//! every node the program evaluates has a form here), [`Kernel`] (a node function that is one
+//! scalar operator on its arguments, handed over by `exec` from its fast forms), [`Slot`] (this
+//! step's event of a node: its bits and whether there is one) and the plan's step
+//! ([`Plan::step`]).
+//!
+//! Why: the general step (`runtime::monitor`) moves an `Option<Value>` of 24 bytes per node
+//! through a match over every node kind, tests its operands' types per operation and drops it
+//! at the end of the step. A spec like P2 is 22 nodes of `Float`, `Int` and `Bool`. Their types
+//! are known when the plan is made, so here each node is one instruction of a known type on a
+//! 64-bit slot, with nothing to test but presence and nothing to drop.
+//!
+//! The plan computes exactly what the general step does. Whatever it has no scalar answer for
+//! (an `Int` overflow, a kept value that is an error value or a big integer, an input value of
+//! another type) makes it give up before it has sent or changed anything: [`Plan::step`]
+//! returns `false` and the monitor runs the general step on the same state. The plan reads and
+//! writes the monitor's state as the general step keeps it (`Option<Value>` per kept node), so
+//! the two can take turns at any step.
+
+use crate::ir::{self, NO_SLOT, Node, NodeId, SArg, ScalarOp};
+use crate::value::Value;
+
+/// The type of a node's values in a plan.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    Unit,
+    Bool,
+    Int,
+    Float,
+}
+
+impl Kind {
+    fn of_type(t: &ir::Type) -> Option<Kind> {
+        Some(match t {
+            ir::Type::Unit => Kind::Unit,
+            ir::Type::Bool => Kind::Bool,
+            ir::Type::Int => Kind::Int,
+            ir::Type::Float => Kind::Float,
+            _ => return None,
+        })
+    }
+
+    /// The kind and bits of a scalar value.
+    fn of_value(v: &Value) -> Option<(Kind, u64)> {
+        Some(match v {
+            Value::Unit => (Kind::Unit, 0),
+            Value::Bool(b) => (Kind::Bool, u64::from(*b)),
+            Value::Int(i) => (Kind::Int, *i as u64),
+            Value::Float(x) => (Kind::Float, x.to_bits()),
+            _ => return None,
+        })
+    }
+
+    /// The bits of `v`, if it is a value of this kind.
+    #[inline(always)]
+    fn bits(self, v: &Value) -> Option<u64> {
+        match (self, v) {
+            (Kind::Float, Value::Float(x)) => Some(x.to_bits()),
+            (Kind::Int, Value::Int(i)) => Some(*i as u64),
+            (Kind::Bool, Value::Bool(b)) => Some(u64::from(*b)),
+            (Kind::Unit, Value::Unit) => Some(0),
+            _ => None,
+        }
+    }
+
+    #[inline(always)]
+    fn value(self, bits: u64) -> Value {
+        match self {
+            Kind::Float => Value::Float(f64::from_bits(bits)),
+            Kind::Int => Value::Int(bits as i64),
+            Kind::Bool => Value::Bool(bits != 0),
+            Kind::Unit => Value::Unit,
+        }
+    }
+}
+
+/// This step's event of a node: its bits (an `f64`'s, an `i64`'s, 0 or 1), when it has one.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Slot {
+    bits: u64,
+    has: bool,
+}
+
+/// An operand of a [`Kernel`]: argument `i` of the node (for `fold` and `reduce`: 0 the
+/// accumulator, 1 the event), or a constant.
+#[derive(Clone, Debug)]
+pub enum KArg {
+    Arg(u8),
+    Const(Value),
+}
+
+/// A node function the plan runs: one scalar operator on the node's arguments and constants.
+#[derive(Clone, Debug)]
+pub enum Kernel {
+    /// A binary operator with an inline scalar path (`+.`, `<`, `&&`, ...).
+    Op(ScalarOp, KArg, KArg),
+    /// `==` (`ne: false`) or `!=` on two scalars of one type.
+    Eq {
+        ne: bool,
+        a: KArg,
+        b: KArg,
+    },
+    Not(KArg),
+    FNeg(KArg),
+    IntToFloat(KArg),
+    Const(Value),
+}
+
+/// A binary operator on typed bits.
+#[derive(Clone, Copy, Debug)]
+enum Op2 {
+    FAdd,
+    FSub,
+    FMul,
+    FDiv,
+    FLt,
+    FGt,
+    FLe,
+    FGe,
+    IAdd,
+    ISub,
+    ILt,
+    IGt,
+    ILe,
+    IGe,
+    And,
+    Or,
+    /// `==`, `!=` on floats.
+    FEq,
+    FNe,
+    /// `==`, `!=` on integers or booleans (equal bits).
+    BitsEq,
+    BitsNe,
+}
+
+impl Op2 {
+    fn of(op: ScalarOp) -> Op2 {
+        match op {
+            ScalarOp::FAdd => Op2::FAdd,
+            ScalarOp::FSub => Op2::FSub,
+            ScalarOp::FMul => Op2::FMul,
+            ScalarOp::FDiv => Op2::FDiv,
+            ScalarOp::FLt => Op2::FLt,
+            ScalarOp::FGt => Op2::FGt,
+            ScalarOp::FLe => Op2::FLe,
+            ScalarOp::FGe => Op2::FGe,
+            ScalarOp::IAdd => Op2::IAdd,
+            ScalarOp::ISub => Op2::ISub,
+            ScalarOp::ILt => Op2::ILt,
+            ScalarOp::IGt => Op2::IGt,
+            ScalarOp::ILe => Op2::ILe,
+            ScalarOp::IGe => Op2::IGe,
+            ScalarOp::And => Op2::And,
+            ScalarOp::Or => Op2::Or,
+        }
+    }
+
+    /// The operator `==`/`!=` is on operands of kind `k`.
+    fn eq(ne: bool, k: Kind) -> Option<Op2> {
+        Some(match (k, ne) {
+            (Kind::Float, false) => Op2::FEq,
+            (Kind::Float, true) => Op2::FNe,
+            (Kind::Int | Kind::Bool, false) => Op2::BitsEq,
+            (Kind::Int | Kind::Bool, true) => Op2::BitsNe,
+            (Kind::Unit, _) => return None,
+        })
+    }
+
+    /// The kinds of its operands and of its result.
+    fn kinds(self) -> (Option<Kind>, Kind) {
+        use Op2::*;
+        match self {
+            FAdd | FSub | FMul | FDiv => (Some(Kind::Float), Kind::Float),
+            FLt | FGt | FLe | FGe | FEq | FNe => (Some(Kind::Float), Kind::Bool),
+            IAdd | ISub => (Some(Kind::Int), Kind::Int),
+            ILt | IGt | ILe | IGe => (Some(Kind::Int), Kind::Bool),
+            And | Or => (Some(Kind::Bool), Kind::Bool),
+            // Either, the same for both (checked where it is made).
+            BitsEq | BitsNe => (None, Kind::Bool),
+        }
+    }
+
+    /// The result, as `ScalarOp::eval` and the `==` of values compute it; `None` on `Int`
+    /// overflow (a big integer: the general step's).
+    #[inline(always)]
+    fn run(self, a: u64, b: u64) -> Option<u64> {
+        let (x, y) = (f64::from_bits(a), f64::from_bits(b));
+        let (i, j) = (a as i64, b as i64);
+        let t = |c: bool| u64::from(c);
+        use Op2::*;
+        Some(match self {
+            FAdd => (x + y).to_bits(),
+            FSub => (x - y).to_bits(),
+            FMul => (x * y).to_bits(),
+            FDiv => (x / y).to_bits(),
+            FLt => t(x < y),
+            FGt => t(x > y),
+            FLe => t(x <= y),
+            FGe => t(x >= y),
+            IAdd => i.checked_add(j)? as u64,
+            ISub => i.checked_sub(j)? as u64,
+            ILt => t(i < j),
+            IGt => t(i > j),
+            ILe => t(i <= j),
+            IGe => t(i >= j),
+            And => t(a != 0 && b != 0),
+            Or => t(a != 0 || b != 0),
+            FEq => t(x == y),
+            FNe => t(x != y),
+            BitsEq => t(a == b),
+            BitsNe => t(a != b),
+        })
+    }
+}
+
+/// A unary operator on typed bits.
+#[derive(Clone, Copy, Debug)]
+enum Op1 {
+    Not,
+    FNeg,
+    IntToFloat,
+}
+
+impl Op1 {
+    #[inline(always)]
+    fn run(self, a: u64) -> u64 {
+        match self {
+            Op1::Not => u64::from(a == 0),
+            Op1::FNeg => (-f64::from_bits(a)).to_bits(),
+            Op1::IntToFloat => ((a as i64) as f64).to_bits(),
+        }
+    }
+
+    /// The kinds of its operand and of its result.
+    fn kinds(self) -> (Kind, Kind) {
+        match self {
+            Op1::Not => (Kind::Bool, Kind::Bool),
+            Op1::FNeg => (Kind::Float, Kind::Float),
+            Op1::IntToFloat => (Kind::Int, Kind::Float),
+        }
+    }
+}
+
+/// `Src::slot` of a constant operand.
+const CONST: u32 = u32::MAX - 1;
+
+/// Where an operand's value comes from: node `n`'s event this step, else its latest value from
+/// earlier steps (kept in `slot`, or [`NO_SLOT`]); or, with `slot` [`CONST`], the constant
+/// `k` (its `n` is the plan's slot that never has an event). `kind` is the value's.
+#[derive(Clone, Copy, Debug)]
+struct Src {
+    n: u32,
+    slot: u32,
+    kind: Kind,
+    k: u64,
+}
+
+/// An operand of a `fold` or `reduce` node's operator.
+#[derive(Clone, Copy, Debug)]
+enum FArg {
+    Acc,
+    X,
+    Const(u64),
+}
+
+/// One node's evaluation; `dst` is the node.
+#[derive(Clone, Debug)]
+enum Instr {
+    Nil {
+        dst: u32,
+    },
+    Input {
+        dst: u32,
+        input: u32,
+        kind: Kind,
+    },
+    Const {
+        dst: u32,
+        bits: u64,
+    },
+    Alias {
+        dst: u32,
+        src: u32,
+    },
+    Time {
+        dst: u32,
+        src: u32,
+    },
+    /// `value`: the kept value read (its `n` never has an event).
+    Last {
+        dst: u32,
+        value: Src,
+        trigger: u32,
+    },
+    Default {
+        dst: u32,
+        stream: u32,
+        bits: u64,
+    },
+    DefaultFrom {
+        dst: u32,
+        stream: Src,
+        from: Src,
+    },
+    Op2 {
+        dst: u32,
+        op: Op2,
+        a: Src,
+        b: Src,
+    },
+    Op1 {
+        dst: u32,
+        op: Op1,
+        a: Src,
+    },
+    /// A signal lift of a constant (`unitIf`'s `()`): fires like a lift of `args`.
+    SConst {
+        dst: u32,
+        args: Box<[Src]>,
+        bits: u64,
+    },
+    Ite {
+        dst: u32,
+        cond: Src,
+        then: Src,
+        other: Src,
+    },
+    Merge {
+        dst: u32,
+        args: Box<[u32]>,
+    },
+    Filter {
+        dst: u32,
+        stream: u32,
+        cond: Src,
+    },
+    /// `acc`: the node's own kept value.
+    Fold {
+        dst: u32,
+        stream: u32,
+        init: u64,
+        acc: Src,
+        op: Op2,
+        a: FArg,
+        b: FArg,
+    },
+    Reduce {
+        dst: u32,
+        stream: u32,
+        acc: Src,
+        op: Op2,
+        a: FArg,
+        b: FArg,
+    },
+}
+
+/// A program's step as flat instructions (see the module's documentation).
+#[derive(Debug)]
+pub struct Plan {
+    instrs: Vec<Instr>,
+    /// Number of slots: one per node and one that never has an event.
+    slots: usize,
+    /// (node, slot, kind) of each node kept across steps.
+    kept: Vec<(u32, u32, Kind)>,
+    /// The node of each output, with its kind.
+    outputs: Vec<(u32, Kind)>,
+}
+
+/// The program has no plan (some node or type has no form here).
+struct NoPlan;
+
+/// `Some` or no plan.
+fn need<T>(o: Option<T>) -> Result<T, NoPlan> {
+    o.ok_or(NoPlan)
+}
+
+/// The kind of each node, as far as the nodes' forms tell: inputs by their declared type,
+/// constants by their value, operators by their result. `last` reads a node that may come
+/// later in the order, so this runs until nothing changes.
+fn kinds(p: &ir::Program, kernel: &impl Fn(NodeId) -> Option<Kernel>) -> Vec<Option<Kind>> {
+    let mut kinds: Vec<Option<Kind>> = vec![None; p.nodes.len()];
+    loop {
+        let mut changed = false;
+        for &i in &p.order {
+            if kinds.get(i).copied().flatten().is_some() {
+                continue;
+            }
+            let k = |n: &NodeId| kinds.get(*n).copied().flatten();
+            let sk = |a: &SArg| match a {
+                SArg::Stream(n) => k(n),
+                SArg::Const(v) => Kind::of_value(v).map(|(k, _)| k),
+            };
+            let kind = match p.nodes.get(i) {
+                Some(Node::Input(j)) => p.inputs.get(*j).and_then(|inp| Kind::of_type(&inp.ty)),
+                Some(Node::Const(v) | Node::Default { value: v, .. }) => {
+                    Kind::of_value(v).map(|(k, _)| k)
+                }
+                Some(Node::Fold { init, .. }) => Kind::of_value(init).map(|(k, _)| k),
+                Some(Node::Alias(n)) | Some(Node::Last { value: n, .. }) => k(n),
+                Some(Node::Reduce { stream: n, .. } | Node::Filter { stream: n, .. }) => k(n),
+                Some(Node::DefaultFrom { stream, .. }) => k(stream),
+                // `nil` never has an event: any kind (the first other argument's).
+                Some(Node::Merge(args)) => args
+                    .iter()
+                    .find(|a| !matches!(p.nodes.get(**a), Some(Node::Nil)))
+                    .and_then(k),
+                Some(Node::Nil) => Some(Kind::Unit),
+                Some(Node::Time(_)) => Some(Kind::Int),
+                Some(Node::Bin { op, .. }) => Some(Op2::of(*op).kinds().1),
+                Some(Node::Ite { then, .. }) => sk(then),
+                Some(Node::SLift { .. }) => match kernel(i) {
+                    Some(Kernel::Op(op, ..)) => Some(Op2::of(op).kinds().1),
+                    Some(Kernel::Eq { .. }) | Some(Kernel::Not(_)) => Some(Kind::Bool),
+                    Some(Kernel::FNeg(_) | Kernel::IntToFloat(_)) => Some(Kind::Float),
+                    Some(Kernel::Const(v)) => Kind::of_value(&v).map(|(k, _)| k),
+                    None => None,
+                },
+                _ => None,
+            };
+            if let (Some(kind), Some(slot)) = (kind, kinds.get_mut(i)) {
+                *slot = Some(kind);
+                changed = true;
+            }
+        }
+        if !changed {
+            return kinds;
+        }
+    }
+}
+
+/// Makes a [`Plan`]: the checks that every operand has the kind its operator takes.
+struct Builder<'a> {
+    p: &'a ir::Program,
+    kinds: Vec<Option<Kind>>,
+    /// The slot that never has an event (after the nodes').
+    never: u32,
+}
+
+impl Builder<'_> {
+    fn idx(&self, n: NodeId) -> Result<u32, NoPlan> {
+        need(u32::try_from(n).ok().filter(|_| n < self.p.nodes.len()))
+    }
+
+    fn kind(&self, n: NodeId) -> Result<Kind, NoPlan> {
+        need(self.kinds.get(n).copied().flatten())
+    }
+
+    fn slot(&self, n: NodeId) -> Result<u32, NoPlan> {
+        need(self.p.last_slot.get(n).copied())
+    }
+
+    fn constant(&self, v: &Value) -> Result<Src, NoPlan> {
+        let (kind, k) = need(Kind::of_value(v))?;
+        Ok(Src {
+            n: self.never,
+            slot: CONST,
+            kind,
+            k,
+        })
+    }
+
+    fn src(&self, a: &SArg) -> Result<Src, NoPlan> {
+        match a {
+            SArg::Stream(n) => Ok(Src {
+                n: self.idx(*n)?,
+                slot: self.slot(*n)?,
+                kind: self.kind(*n)?,
+                k: 0,
+            }),
+            SArg::Const(v) => self.constant(v),
+        }
+    }
+
+    /// Node `n`'s kept value, read without its event.
+    fn kept(&self, n: NodeId) -> Result<Src, NoPlan> {
+        Ok(Src {
+            n: self.never,
+            ..self.src(&SArg::Stream(n))?
+        })
+    }
+
+    fn check(&self, src: &Src, kind: Option<Kind>) -> Result<(), NoPlan> {
+        match kind {
+            Some(k) if k != src.kind => Err(NoPlan),
+            _ => Ok(()),
+        }
+    }
+
+    /// The binary instruction of `op` on `a` and `b`, its kinds checked.
+    fn op2(&self, dst: u32, op: Op2, a: Src, b: Src) -> Result<Instr, NoPlan> {
+        let (operand, _) = op.kinds();
+        self.check(&a, operand)?;
+        self.check(&b, operand)?;
+        if a.kind != b.kind {
+            return Err(NoPlan);
+        }
+        Ok(Instr::Op2 { dst, op, a, b })
+    }
+
+    /// A signal lift's function as an instruction: only when its operands are its arguments,
+    /// each used (a lift fires on its arguments, an operator on its operands).
+    fn slift(&self, dst: u32, args: &[SArg], k: &Kernel) -> Result<Instr, NoPlan> {
+        let srcs: Vec<Src> = args.iter().map(|a| self.src(a)).collect::<Result<_, _>>()?;
+        let mut used = vec![false; srcs.len()];
+        let mut operand = |a: &KArg| -> Result<Src, NoPlan> {
+            match a {
+                KArg::Arg(i) => {
+                    let i = usize::from(*i);
+                    *need(used.get_mut(i))? = true;
+                    need(srcs.get(i).copied())
+                }
+                KArg::Const(v) => self.constant(v),
+            }
+        };
+        let instr = match k {
+            Kernel::Op(op, a, b) => {
+                let (a, b) = (operand(a)?, operand(b)?);
+                self.op2(dst, Op2::of(*op), a, b)?
+            }
+            Kernel::Eq { ne, a, b } => {
+                let (a, b) = (operand(a)?, operand(b)?);
+                self.op2(dst, need(Op2::eq(*ne, a.kind))?, a, b)?
+            }
+            Kernel::Not(a) | Kernel::FNeg(a) | Kernel::IntToFloat(a) => {
+                let op = match k {
+                    Kernel::Not(_) => Op1::Not,
+                    Kernel::FNeg(_) => Op1::FNeg,
+                    _ => Op1::IntToFloat,
+                };
+                let a = operand(a)?;
+                self.check(&a, Some(op.kinds().0))?;
+                Instr::Op1 { dst, op, a }
+            }
+            Kernel::Const(v) => {
+                used.iter_mut().for_each(|u| *u = true);
+                Instr::SConst {
+                    dst,
+                    args: srcs.clone().into_boxed_slice(),
+                    bits: need(Kind::of_value(v))?.1,
+                }
+            }
+        };
+        if srcs.is_empty() || used.iter().any(|u| !u) {
+            return Err(NoPlan);
+        }
+        Ok(instr)
+    }
+
+    /// A `fold`'s or `reduce`'s function on (accumulator, event) as an operator.
+    fn step_fn(&self, k: &Kernel, acc: Kind, x: Kind) -> Result<(Op2, FArg, FArg), NoPlan> {
+        let arg = |a: &KArg| -> Result<(FArg, Kind), NoPlan> {
+            match a {
+                KArg::Arg(0) => Ok((FArg::Acc, acc)),
+                KArg::Arg(1) => Ok((FArg::X, x)),
+                KArg::Arg(_) => Err(NoPlan),
+                KArg::Const(v) => {
+                    let (kind, bits) = need(Kind::of_value(v))?;
+                    Ok((FArg::Const(bits), kind))
+                }
+            }
+        };
+        let (op, a, b) = match k {
+            Kernel::Op(op, a, b) => (Op2::of(*op), arg(a)?, arg(b)?),
+            Kernel::Eq { ne, a, b } => {
+                let (a, b) = (arg(a)?, arg(b)?);
+                (need(Op2::eq(*ne, a.1))?, a, b)
+            }
+            _ => return Err(NoPlan),
+        };
+        let (operand, result) = op.kinds();
+        if a.1 != b.1 || operand.is_some_and(|k| k != a.1) || result != acc {
+            return Err(NoPlan);
+        }
+        Ok((op, a.0, b.0))
+    }
+
+    fn instr(&self, i: NodeId, kernel: Option<Kernel>) -> Result<Instr, NoPlan> {
+        let dst = self.idx(i)?;
+        let kind = self.kind(i)?;
+        let bits = |v: &Value| -> Result<u64, NoPlan> {
+            match Kind::of_value(v) {
+                Some((k, b)) if k == kind => Ok(b),
+                _ => Err(NoPlan),
+            }
+        };
+        let same = |n: NodeId| -> Result<u32, NoPlan> {
+            if self.kind(n)? == kind || matches!(self.p.nodes.get(n), Some(Node::Nil)) {
+                self.idx(n)
+            } else {
+                Err(NoPlan)
+            }
+        };
+        Ok(match need(self.p.nodes.get(i))? {
+            Node::Input(k) => Instr::Input {
+                dst,
+                input: need(u32::try_from(*k).ok())?,
+                kind,
+            },
+            Node::Nil => Instr::Nil { dst },
+            Node::Const(v) => Instr::Const {
+                dst,
+                bits: bits(v)?,
+            },
+            Node::Alias(n) => Instr::Alias {
+                dst,
+                src: same(*n)?,
+            },
+            Node::Time(n) => Instr::Time {
+                dst,
+                src: self.idx(*n)?,
+            },
+            Node::Last { value, trigger } => Instr::Last {
+                dst,
+                value: self.kept(*value)?,
+                trigger: self.idx(*trigger)?,
+            },
+            Node::Default { stream, value } => Instr::Default {
+                dst,
+                stream: same(*stream)?,
+                bits: bits(value)?,
+            },
+            Node::DefaultFrom { stream, from } => {
+                same(*stream)?;
+                same(*from)?;
+                Instr::DefaultFrom {
+                    dst,
+                    stream: self.src(&SArg::Stream(*stream))?,
+                    from: self.src(&SArg::Stream(*from))?,
+                }
+            }
+            Node::Bin { op, a, b, .. } => {
+                self.op2(dst, Op2::of(*op), self.src(a)?, self.src(b)?)?
+            }
+            Node::SLift { args, .. } => self.slift(dst, args, &need(kernel)?)?,
+            Node::Ite { cond, then, other } => {
+                let (cond, then, other) = (self.src(cond)?, self.src(then)?, self.src(other)?);
+                self.check(&cond, Some(Kind::Bool))?;
+                self.check(&then, Some(kind))?;
+                self.check(&other, Some(kind))?;
+                Instr::Ite {
+                    dst,
+                    cond,
+                    then,
+                    other,
+                }
+            }
+            Node::Merge(args) => Instr::Merge {
+                dst,
+                args: args.iter().map(|a| same(*a)).collect::<Result<_, _>>()?,
+            },
+            Node::Filter { stream, cond } => {
+                let cond = self.src(&SArg::Stream(*cond))?;
+                self.check(&cond, Some(Kind::Bool))?;
+                Instr::Filter {
+                    dst,
+                    stream: same(*stream)?,
+                    cond,
+                }
+            }
+            Node::Fold { stream, init, .. } => {
+                let (op, a, b) = self.step_fn(&need(kernel)?, kind, self.kind(*stream)?)?;
+                Instr::Fold {
+                    dst,
+                    stream: self.idx(*stream)?,
+                    init: bits(init)?,
+                    acc: self.kept(i)?,
+                    op,
+                    a,
+                    b,
+                }
+            }
+            Node::Reduce { stream, .. } => {
+                let (op, a, b) = self.step_fn(&need(kernel)?, kind, self.kind(*stream)?)?;
+                Instr::Reduce {
+                    dst,
+                    stream: same(*stream)?,
+                    acc: self.kept(i)?,
+                    op,
+                    a,
+                    b,
+                }
+            }
+            Node::Delay { .. } | Node::Lift { .. } => return Err(NoPlan),
+        })
+    }
+}
+
+impl Plan {
+    /// The plan of `p`, if every node it evaluates has a form here and every value a scalar
+    /// type; `kernel(n)` is node `n`'s function as a [`Kernel`] (`slift`, `fold`, `reduce`).
+    pub fn build(p: &ir::Program, kernel: impl Fn(NodeId) -> Option<Kernel>) -> Option<Plan> {
+        Plan::try_build(p, kernel).ok()
+    }
+
+    fn try_build(
+        p: &ir::Program,
+        kernel: impl Fn(NodeId) -> Option<Kernel>,
+    ) -> Result<Plan, NoPlan> {
+        let n = p.nodes.len();
+        if !p.delays.is_empty() || p.last_slot.len() != n {
+            return Err(NoPlan);
+        }
+        if p.inputs.iter().any(|i| Kind::of_type(&i.ty).is_none()) {
+            return Err(NoPlan);
+        }
+        let b = Builder {
+            p,
+            kinds: kinds(p, &kernel),
+            never: need(u32::try_from(n).ok())?,
+        };
+        let mut evaluated = vec![false; n];
+        let mut instrs = Vec::with_capacity(n);
+        for &i in &p.order {
+            *need(evaluated.get_mut(i))? = true;
+            instrs.push(b.instr(i, kernel(i))?);
+        }
+        // A node never evaluated has no event (no step reads one; the slots are shared by every
+        // program on a thread, so they are emptied anyway).
+        let mut all: Vec<Instr> = (0..n)
+            .filter(|i| !evaluated[*i])
+            .map(|i| b.idx(i).map(|dst| Instr::Nil { dst }))
+            .collect::<Result<_, _>>()?;
+        all.push(Instr::Nil { dst: b.never });
+        all.extend(instrs);
+        let mut kept = Vec::new();
+        for (i, &s) in p.last_slot.iter().enumerate() {
+            if s != NO_SLOT && evaluated[i] {
+                kept.push((b.idx(i)?, s, b.kind(i)?));
+            }
+        }
+        let outputs = p
+            .output_nodes
+            .iter()
+            .map(|o| Ok((b.idx(*o)?, b.kind(*o)?)))
+            .collect::<Result<_, NoPlan>>()?;
+        Ok(Plan {
+            instrs: all,
+            slots: n + 1,
+            kept,
+            outputs,
+        })
+    }
+}
+
+/// What one step of a plan reads and writes of a monitor.
+pub struct StepState<'a> {
+    pub ts: i64,
+    /// No step has been evaluated yet (constants and `fold`'s initial value fire).
+    pub first: bool,
+    /// This step's input events.
+    pub inputs: &'a [Option<Value>],
+    /// The latest values of the kept nodes; updated when the step completes.
+    pub last: &'a mut [Option<Value>],
+}
+
+/// Node `n`'s event this step.
+#[inline(always)]
+fn cur_of(cur: &[Slot], n: u32) -> Slot {
+    cur.get(n as usize).copied().unwrap_or_default()
+}
+
+/// The value kept in `slot` (`Some(None)` for none or [`NO_SLOT`]); `None`: not a scalar of
+/// `kind` (an error value, a big integer).
+#[inline(always)]
+fn kept_of(last: &[Option<Value>], slot: u32, kind: Kind) -> Option<Option<u64>> {
+    match last.get(slot as usize) {
+        Some(Some(v)) => kind.bits(v).map(Some),
+        _ => Some(None),
+    }
+}
+
+/// An operand's value: this step's event, else the latest one, or the constant.
+#[inline(always)]
+fn value_of(cur: &[Slot], last: &[Option<Value>], a: &Src) -> Option<Option<u64>> {
+    let c = cur_of(cur, a.n);
+    if c.has {
+        Some(Some(c.bits))
+    } else if a.slot == CONST {
+        Some(Some(a.k))
+    } else {
+        kept_of(last, a.slot, a.kind)
+    }
+}
+
+#[inline(always)]
+fn has_event(cur: &[Slot], a: &Src) -> bool {
+    cur_of(cur, a.n).has
+}
+
+#[inline(always)]
+fn some(bits: u64) -> Slot {
+    Slot { bits, has: true }
+}
+
+const NONE: Slot = Slot {
+    bits: 0,
+    has: false,
+};
+
+/// A `fold`'s or `reduce`'s operand.
+#[inline(always)]
+fn farg(a: FArg, acc: u64, x: u64) -> u64 {
+    match a {
+        FArg::Acc => acc,
+        FArg::X => x,
+        FArg::Const(k) => k,
+    }
+}
+
+impl Plan {
+    /// Evaluate one step into `cur` (the thread's slots), send the outputs to `sink` and keep the
+    /// values read across steps in `st.last`. `false`: the plan has no scalar answer for this
+    /// step; nothing was sent or changed, and the general step must run it.
+    #[inline]
+    pub fn step<F: FnMut(usize, &Value)>(
+        &self,
+        st: StepState<'_>,
+        cur: &mut Vec<Slot>,
+        sink: &mut F,
+    ) -> bool {
+        if cur.len() != self.slots {
+            cur.clear();
+            cur.resize(self.slots, NONE);
+        }
+        if self.eval(&st, cur).is_none() {
+            return false;
+        }
+        for (out, &(n, kind)) in self.outputs.iter().enumerate() {
+            let c = cur_of(cur, n);
+            if c.has {
+                let v = kind.value(c.bits);
+                sink(out, &v);
+                // A scalar: nothing to drop.
+                std::mem::forget(v);
+            }
+        }
+        for &(n, slot, kind) in &self.kept {
+            let c = cur_of(cur, n);
+            if c.has
+                && let Some(l) = st.last.get_mut(slot as usize)
+            {
+                let old = l.replace(kind.value(c.bits));
+                match old {
+                    // Scalars need no drop.
+                    None | Some(Value::Unit | Value::Bool(_) | Value::Int(_) | Value::Float(_)) => {
+                        std::mem::forget(old)
+                    }
+                    old => drop(old),
+                }
+            }
+        }
+        true
+    }
+
+    /// The step's events into `cur`; `None` as soon as one has no scalar answer.
+    #[inline(always)]
+    fn eval(&self, st: &StepState<'_>, cur: &mut [Slot]) -> Option<()> {
+        let last = &*st.last;
+        for instr in &self.instrs {
+            let (dst, v) = match instr {
+                Instr::Nil { dst } => (dst, NONE),
+                Instr::Input { dst, input, kind } => (
+                    dst,
+                    match st.inputs.get(*input as usize) {
+                        Some(Some(v)) => some(kind.bits(v)?),
+                        _ => NONE,
+                    },
+                ),
+                Instr::Op2 { dst, op, a, b } => {
+                    if !has_event(cur, a) && !has_event(cur, b) {
+                        (dst, NONE)
+                    } else {
+                        match (value_of(cur, last, a)?, value_of(cur, last, b)?) {
+                            (Some(x), Some(y)) => (dst, some(op.run(x, y)?)),
+                            _ => (dst, NONE),
+                        }
+                    }
+                }
+                Instr::Op1 { dst, op, a } => (
+                    dst,
+                    match (has_event(cur, a), value_of(cur, last, a)?) {
+                        (true, Some(x)) => some(op.run(x)),
+                        _ => NONE,
+                    },
+                ),
+                Instr::Ite {
+                    dst,
+                    cond,
+                    then,
+                    other,
+                } => {
+                    if !has_event(cur, cond) && !has_event(cur, then) && !has_event(cur, other) {
+                        (dst, NONE)
+                    } else {
+                        match (
+                            value_of(cur, last, cond)?,
+                            value_of(cur, last, then)?,
+                            value_of(cur, last, other)?,
+                        ) {
+                            (Some(c), Some(t), Some(e)) => (dst, some(if c != 0 { t } else { e })),
+                            _ => (dst, NONE),
+                        }
+                    }
+                }
+                Instr::Fold {
+                    dst,
+                    stream,
+                    init,
+                    acc,
+                    op,
+                    a,
+                    b,
+                } => {
+                    let x = cur_of(cur, *stream);
+                    let v = if st.first {
+                        if x.has {
+                            some(op.run(farg(*a, *init, x.bits), farg(*b, *init, x.bits))?)
+                        } else {
+                            some(*init)
+                        }
+                    } else if x.has {
+                        match kept_of(last, acc.slot, acc.kind)? {
+                            Some(s) => some(op.run(farg(*a, s, x.bits), farg(*b, s, x.bits))?),
+                            None => NONE,
+                        }
+                    } else {
+                        NONE
+                    };
+                    (dst, v)
+                }
+                Instr::Reduce {
+                    dst,
+                    stream,
+                    acc,
+                    op,
+                    a,
+                    b,
+                } => {
+                    let x = cur_of(cur, *stream);
+                    let v = if x.has {
+                        match kept_of(last, acc.slot, acc.kind)? {
+                            Some(s) => some(op.run(farg(*a, s, x.bits), farg(*b, s, x.bits))?),
+                            None => x,
+                        }
+                    } else {
+                        NONE
+                    };
+                    (dst, v)
+                }
+                Instr::Const { dst, bits } => (dst, if st.first { some(*bits) } else { NONE }),
+                Instr::Alias { dst, src } => (dst, cur_of(cur, *src)),
+                Instr::Time { dst, src } => (
+                    dst,
+                    if cur_of(cur, *src).has {
+                        some(st.ts as u64)
+                    } else {
+                        NONE
+                    },
+                ),
+                Instr::Last {
+                    dst,
+                    value,
+                    trigger,
+                } => (
+                    dst,
+                    if cur_of(cur, *trigger).has {
+                        match kept_of(last, value.slot, value.kind)? {
+                            Some(v) => some(v),
+                            None => NONE,
+                        }
+                    } else {
+                        NONE
+                    },
+                ),
+                Instr::Default { dst, stream, bits } => {
+                    let s = cur_of(cur, *stream);
+                    (dst, if !s.has && st.first { some(*bits) } else { s })
+                }
+                Instr::DefaultFrom { dst, stream, from } => {
+                    let s = cur_of(cur, stream.n);
+                    let v = if s.has {
+                        s
+                    } else {
+                        let s_never = kept_of(last, stream.slot, stream.kind)?.is_none();
+                        let d_first = kept_of(last, from.slot, from.kind)?.is_none();
+                        if s_never && d_first {
+                            cur_of(cur, from.n)
+                        } else {
+                            NONE
+                        }
+                    };
+                    (dst, v)
+                }
+                Instr::SConst { dst, args, bits } => {
+                    if !args.iter().any(|a| has_event(cur, a)) {
+                        (dst, NONE)
+                    } else {
+                        let mut all = true;
+                        for a in args.iter() {
+                            all &= value_of(cur, last, a)?.is_some();
+                        }
+                        (dst, if all { some(*bits) } else { NONE })
+                    }
+                }
+                Instr::Merge { dst, args } => (
+                    dst,
+                    args.iter()
+                        .map(|a| cur_of(cur, *a))
+                        .find(|v| v.has)
+                        .unwrap_or(NONE),
+                ),
+                Instr::Filter { dst, stream, cond } => {
+                    let s = cur_of(cur, *stream);
+                    let v = if s.has && value_of(cur, last, cond)? == Some(1) {
+                        s
+                    } else {
+                        NONE
+                    };
+                    (dst, v)
+                }
+            };
+            if let Some(c) = cur.get_mut(*dst as usize) {
+                *c = v;
+            }
+        }
+        Some(())
+    }
+}
