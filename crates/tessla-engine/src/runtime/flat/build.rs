@@ -1,0 +1,375 @@
+//! Making a [`Plan`]: the kind (`Unit`, `Bool`, `Int`, `Float`) of every node, inferred from
+//! the nodes' forms, and each node's instruction with its operands' kinds checked. A program
+//! with a node or a type the plan has no form for gets no plan.
+
+use super::{CONST, FArg, Instr, KArg, Kernel, Kind, NoPlan, Op1, Op2, Plan, Src, need};
+use crate::ir::{self, NO_SLOT, Node, NodeId, SArg};
+use crate::value::Value;
+
+/// The kind of each node, as far as the nodes' forms tell: inputs by their declared type,
+/// constants by their value, operators by their result. `last` reads a node that may come
+/// later in the order, so this runs until nothing changes.
+fn kinds(p: &ir::Program, kernel: &impl Fn(NodeId) -> Option<Kernel>) -> Vec<Option<Kind>> {
+    let mut kinds: Vec<Option<Kind>> = vec![None; p.nodes.len()];
+    loop {
+        let mut changed = false;
+        for &i in &p.order {
+            if kinds.get(i).copied().flatten().is_some() {
+                continue;
+            }
+            let k = |n: &NodeId| kinds.get(*n).copied().flatten();
+            let sk = |a: &SArg| match a {
+                SArg::Stream(n) => k(n),
+                SArg::Const(v) => Kind::of_value(v).map(|(k, _)| k),
+            };
+            let kind = match p.nodes.get(i) {
+                Some(Node::Input(j)) => p.inputs.get(*j).and_then(|inp| Kind::of_type(&inp.ty)),
+                Some(Node::Const(v) | Node::Default { value: v, .. }) => {
+                    Kind::of_value(v).map(|(k, _)| k)
+                }
+                Some(Node::Fold { init, .. }) => Kind::of_value(init).map(|(k, _)| k),
+                Some(Node::Alias(n)) | Some(Node::Last { value: n, .. }) => k(n),
+                Some(Node::Reduce { stream: n, .. } | Node::Filter { stream: n, .. }) => k(n),
+                Some(Node::DefaultFrom { stream, .. }) => k(stream),
+                // `nil` never has an event: any kind (the first other argument's).
+                Some(Node::Merge(args)) => args
+                    .iter()
+                    .find(|a| !matches!(p.nodes.get(**a), Some(Node::Nil)))
+                    .and_then(k),
+                Some(Node::Nil) => Some(Kind::Unit),
+                Some(Node::Time(_)) => Some(Kind::Int),
+                Some(Node::Bin { op, .. }) => Some(Op2::of(*op).kinds().1),
+                Some(Node::Ite { then, .. }) => sk(then),
+                Some(Node::SLift { .. }) => match kernel(i) {
+                    Some(Kernel::Op(op, ..)) => Some(Op2::of(op).kinds().1),
+                    Some(Kernel::Eq { .. }) | Some(Kernel::Not(_)) => Some(Kind::Bool),
+                    Some(Kernel::FNeg(_) | Kernel::IntToFloat(_)) => Some(Kind::Float),
+                    Some(Kernel::Const(v)) => Kind::of_value(&v).map(|(k, _)| k),
+                    None => None,
+                },
+                _ => None,
+            };
+            if let (Some(kind), Some(slot)) = (kind, kinds.get_mut(i)) {
+                *slot = Some(kind);
+                changed = true;
+            }
+        }
+        if !changed {
+            return kinds;
+        }
+    }
+}
+
+/// Makes a [`Plan`]: the checks that every operand has the kind its operator takes.
+struct Builder<'a> {
+    p: &'a ir::Program,
+    kinds: Vec<Option<Kind>>,
+    /// The slot that never has an event (after the nodes').
+    never: u32,
+}
+
+impl Builder<'_> {
+    fn idx(&self, n: NodeId) -> Result<u32, NoPlan> {
+        need(u32::try_from(n).ok().filter(|_| n < self.p.nodes.len()))
+    }
+
+    fn kind(&self, n: NodeId) -> Result<Kind, NoPlan> {
+        need(self.kinds.get(n).copied().flatten())
+    }
+
+    fn slot(&self, n: NodeId) -> Result<u32, NoPlan> {
+        need(self.p.last_slot.get(n).copied())
+    }
+
+    fn constant(&self, v: &Value) -> Result<Src, NoPlan> {
+        let (kind, k) = need(Kind::of_value(v))?;
+        Ok(Src {
+            n: self.never,
+            slot: CONST,
+            kind,
+            k,
+        })
+    }
+
+    fn src(&self, a: &SArg) -> Result<Src, NoPlan> {
+        match a {
+            SArg::Stream(n) => Ok(Src {
+                n: self.idx(*n)?,
+                slot: self.slot(*n)?,
+                kind: self.kind(*n)?,
+                k: 0,
+            }),
+            SArg::Const(v) => self.constant(v),
+        }
+    }
+
+    /// Node `n`'s kept value, read without its event.
+    fn kept(&self, n: NodeId) -> Result<Src, NoPlan> {
+        Ok(Src {
+            n: self.never,
+            ..self.src(&SArg::Stream(n))?
+        })
+    }
+
+    fn check(&self, src: &Src, kind: Option<Kind>) -> Result<(), NoPlan> {
+        match kind {
+            Some(k) if k != src.kind => Err(NoPlan),
+            _ => Ok(()),
+        }
+    }
+
+    /// The binary instruction of `op` on `a` and `b`, its kinds checked.
+    fn op2(&self, dst: u32, op: Op2, a: Src, b: Src) -> Result<Instr, NoPlan> {
+        let (operand, _) = op.kinds();
+        self.check(&a, operand)?;
+        self.check(&b, operand)?;
+        if a.kind != b.kind {
+            return Err(NoPlan);
+        }
+        Ok(Instr::Op2 { dst, op, a, b })
+    }
+
+    /// A signal lift's function as an instruction: only when its operands are its arguments,
+    /// each used (a lift fires on its arguments, an operator on its operands).
+    fn slift(&self, dst: u32, args: &[SArg], k: &Kernel) -> Result<Instr, NoPlan> {
+        let srcs: Vec<Src> = args.iter().map(|a| self.src(a)).collect::<Result<_, _>>()?;
+        let mut used = vec![false; srcs.len()];
+        let mut operand = |a: &KArg| -> Result<Src, NoPlan> {
+            match a {
+                KArg::Arg(i) => {
+                    let i = usize::from(*i);
+                    *need(used.get_mut(i))? = true;
+                    need(srcs.get(i).copied())
+                }
+                KArg::Const(v) => self.constant(v),
+            }
+        };
+        let instr = match k {
+            Kernel::Op(op, a, b) => {
+                let (a, b) = (operand(a)?, operand(b)?);
+                self.op2(dst, Op2::of(*op), a, b)?
+            }
+            Kernel::Eq { ne, a, b } => {
+                let (a, b) = (operand(a)?, operand(b)?);
+                self.op2(dst, need(Op2::eq(*ne, a.kind))?, a, b)?
+            }
+            Kernel::Not(a) | Kernel::FNeg(a) | Kernel::IntToFloat(a) => {
+                let op = match k {
+                    Kernel::Not(_) => Op1::Not,
+                    Kernel::FNeg(_) => Op1::FNeg,
+                    _ => Op1::IntToFloat,
+                };
+                let a = operand(a)?;
+                self.check(&a, Some(op.kinds().0))?;
+                Instr::Op1 { dst, op, a }
+            }
+            Kernel::Const(v) => {
+                used.iter_mut().for_each(|u| *u = true);
+                Instr::SConst {
+                    dst,
+                    args: srcs.clone().into_boxed_slice(),
+                    bits: need(Kind::of_value(v))?.1,
+                }
+            }
+        };
+        if srcs.is_empty() || used.iter().any(|u| !u) {
+            return Err(NoPlan);
+        }
+        Ok(instr)
+    }
+
+    /// A `fold`'s or `reduce`'s function on (accumulator, event) as an operator.
+    fn step_fn(&self, k: &Kernel, acc: Kind, x: Kind) -> Result<(Op2, FArg, FArg), NoPlan> {
+        let arg = |a: &KArg| -> Result<(FArg, Kind), NoPlan> {
+            match a {
+                KArg::Arg(0) => Ok((FArg::Acc, acc)),
+                KArg::Arg(1) => Ok((FArg::X, x)),
+                KArg::Arg(_) => Err(NoPlan),
+                KArg::Const(v) => {
+                    let (kind, bits) = need(Kind::of_value(v))?;
+                    Ok((FArg::Const(bits), kind))
+                }
+            }
+        };
+        let (op, a, b) = match k {
+            Kernel::Op(op, a, b) => (Op2::of(*op), arg(a)?, arg(b)?),
+            Kernel::Eq { ne, a, b } => {
+                let (a, b) = (arg(a)?, arg(b)?);
+                (need(Op2::eq(*ne, a.1))?, a, b)
+            }
+            _ => return Err(NoPlan),
+        };
+        let (operand, result) = op.kinds();
+        if a.1 != b.1 || operand.is_some_and(|k| k != a.1) || result != acc {
+            return Err(NoPlan);
+        }
+        Ok((op, a.0, b.0))
+    }
+
+    fn instr(&self, i: NodeId, kernel: Option<Kernel>) -> Result<Instr, NoPlan> {
+        let dst = self.idx(i)?;
+        let kind = self.kind(i)?;
+        let bits = |v: &Value| -> Result<u64, NoPlan> {
+            match Kind::of_value(v) {
+                Some((k, b)) if k == kind => Ok(b),
+                _ => Err(NoPlan),
+            }
+        };
+        let same = |n: NodeId| -> Result<u32, NoPlan> {
+            if self.kind(n)? == kind || matches!(self.p.nodes.get(n), Some(Node::Nil)) {
+                self.idx(n)
+            } else {
+                Err(NoPlan)
+            }
+        };
+        Ok(match need(self.p.nodes.get(i))? {
+            Node::Input(k) => Instr::Input {
+                dst,
+                input: need(u32::try_from(*k).ok())?,
+                kind,
+            },
+            Node::Nil => Instr::Nil { dst },
+            Node::Const(v) => Instr::Const {
+                dst,
+                bits: bits(v)?,
+            },
+            Node::Alias(n) => Instr::Alias {
+                dst,
+                src: same(*n)?,
+            },
+            Node::Time(n) => Instr::Time {
+                dst,
+                src: self.idx(*n)?,
+            },
+            Node::Last { value, trigger } => Instr::Last {
+                dst,
+                value: self.kept(*value)?,
+                trigger: self.idx(*trigger)?,
+            },
+            Node::Default { stream, value } => Instr::Default {
+                dst,
+                stream: same(*stream)?,
+                bits: bits(value)?,
+            },
+            Node::DefaultFrom { stream, from } => {
+                same(*stream)?;
+                same(*from)?;
+                Instr::DefaultFrom {
+                    dst,
+                    stream: self.src(&SArg::Stream(*stream))?,
+                    from: self.src(&SArg::Stream(*from))?,
+                }
+            }
+            Node::Bin { op, a, b, .. } => {
+                self.op2(dst, Op2::of(*op), self.src(a)?, self.src(b)?)?
+            }
+            Node::SLift { args, .. } => self.slift(dst, args, &need(kernel)?)?,
+            Node::Ite { cond, then, other } => {
+                let (cond, then, other) = (self.src(cond)?, self.src(then)?, self.src(other)?);
+                self.check(&cond, Some(Kind::Bool))?;
+                self.check(&then, Some(kind))?;
+                self.check(&other, Some(kind))?;
+                Instr::Ite {
+                    dst,
+                    cond,
+                    then,
+                    other,
+                }
+            }
+            Node::Merge(args) => Instr::Merge {
+                dst,
+                args: args.iter().map(|a| same(*a)).collect::<Result<_, _>>()?,
+            },
+            Node::Filter { stream, cond } => {
+                let cond = self.src(&SArg::Stream(*cond))?;
+                self.check(&cond, Some(Kind::Bool))?;
+                Instr::Filter {
+                    dst,
+                    stream: same(*stream)?,
+                    cond,
+                }
+            }
+            Node::Fold { stream, init, .. } => {
+                let (op, a, b) = self.step_fn(&need(kernel)?, kind, self.kind(*stream)?)?;
+                Instr::Fold {
+                    dst,
+                    stream: self.idx(*stream)?,
+                    init: bits(init)?,
+                    acc: self.kept(i)?,
+                    op,
+                    a,
+                    b,
+                }
+            }
+            Node::Reduce { stream, .. } => {
+                let (op, a, b) = self.step_fn(&need(kernel)?, kind, self.kind(*stream)?)?;
+                Instr::Reduce {
+                    dst,
+                    stream: same(*stream)?,
+                    acc: self.kept(i)?,
+                    op,
+                    a,
+                    b,
+                }
+            }
+            Node::Delay { .. } | Node::Lift { .. } => return Err(NoPlan),
+        })
+    }
+}
+
+impl Plan {
+    /// The plan of `p`, if every node it evaluates has a form here and every value a scalar
+    /// type; `kernel(n)` is node `n`'s function as a [`Kernel`] (`slift`, `fold`, `reduce`).
+    pub fn build(p: &ir::Program, kernel: impl Fn(NodeId) -> Option<Kernel>) -> Option<Plan> {
+        Plan::try_build(p, kernel).ok()
+    }
+
+    fn try_build(
+        p: &ir::Program,
+        kernel: impl Fn(NodeId) -> Option<Kernel>,
+    ) -> Result<Plan, NoPlan> {
+        let n = p.nodes.len();
+        if !p.delays.is_empty() || p.last_slot.len() != n {
+            return Err(NoPlan);
+        }
+        if p.inputs.iter().any(|i| Kind::of_type(&i.ty).is_none()) {
+            return Err(NoPlan);
+        }
+        let b = Builder {
+            p,
+            kinds: kinds(p, &kernel),
+            never: need(u32::try_from(n).ok())?,
+        };
+        let mut evaluated = vec![false; n];
+        let mut instrs = Vec::with_capacity(n);
+        for &i in &p.order {
+            *need(evaluated.get_mut(i))? = true;
+            instrs.push(b.instr(i, kernel(i))?);
+        }
+        // A node never evaluated has no event (no step reads one; the slots are shared by every
+        // program on a thread, so they are emptied anyway).
+        let mut all: Vec<Instr> = (0..n)
+            .filter(|i| !evaluated[*i])
+            .map(|i| b.idx(i).map(|dst| Instr::Nil { dst }))
+            .collect::<Result<_, _>>()?;
+        all.push(Instr::Nil { dst: b.never });
+        all.extend(instrs);
+        let mut kept = Vec::new();
+        for (i, &s) in p.last_slot.iter().enumerate() {
+            if s != NO_SLOT && evaluated[i] {
+                kept.push((b.idx(i)?, s, b.kind(i)?));
+            }
+        }
+        let outputs = p
+            .output_nodes
+            .iter()
+            .map(|o| Ok((b.idx(*o)?, b.kind(*o)?)))
+            .collect::<Result<_, NoPlan>>()?;
+        Ok(Plan {
+            instrs: all,
+            slots: n + 1,
+            kept,
+            outputs,
+        })
+    }
+}
