@@ -49,6 +49,18 @@ const RECURSION: &str = "in x: Events[Float]\nin n: Events[Int]\n\
     def big = fold(n, 0, (a: Int, v: Int) => a - v)\n\
     out c\nout m2\nout s\nout big\n";
 
+/// Values the plan only moves (strings from constants: `const`, `if`, `filter`, `last`,
+/// `merge`), and lifts whose value is one of their arguments (`first`, a lambda's parameter).
+const MOVED: &str = "in x: Events[Float]\nin n: Events[Int]\nin b: Events[Bool]\n\
+    def reason = filter(const(\"p2\", x), b)\n\
+    def label = if b then \"yes\" else \"no\"\n\
+    def said = last(label, x)\n\
+    def either = merge(reason, const(\"n\", n))\n\
+    def seq = first(count(x), n)\n\
+    def kept = first(n, x)\n\
+    def second = slift(x, n, (a: Float, v: Int) => v)\n\
+    out reason\nout label\nout said\nout either\nout seq\nout kept\nout second\n";
+
 struct Rng(u64);
 
 impl Rng {
@@ -109,7 +121,7 @@ fn outputs(program: &Arc<Program>, seed: u64, steps: usize) -> Vec<String> {
 
 #[test]
 fn the_plan_sends_what_the_general_step_sends() {
-    for spec in [EVERY_FORM, RECURSION] {
+    for spec in [EVERY_FORM, RECURSION, MOVED] {
         let (flat, general) = both(spec);
         assert!(flat.exec().plan().is_some(), "no plan for\n{spec}");
         assert!(general.exec().plan().is_none());

@@ -220,11 +220,50 @@ fn compile_program_with(p: &ir::Program, flat: bool) -> Arc<Ctx> {
         })
         .collect::<Vec<_>>();
     let plan = if flat {
-        Plan::build(p, |n| fast.get(n)?.as_ref().and_then(Fast::kernel))
+        Plan::build(p, |n| match (fast.get(n)?, p.nodes.get(n)?) {
+            (Some(f), _) => f.kernel(),
+            // `slift(a, b) { $0 }` has no fast form (no operator): the plan picks the argument.
+            (None, Node::SLift { f, args }) => picked_arg(f, args.len(), &p.functions, 4)
+                .and_then(|i| u8::try_from(i).ok())
+                .map(Kernel::Pick),
+            (None, _) => None,
+        })
     } else {
         None
     };
     context(fns, nodes, fast, plan)
+}
+
+/// The argument a node function over `arity` arguments is (`$1`, or a function whose body is
+/// one of its parameters applied to the arguments: `(a, v) => v`), if it is one.
+fn picked_arg(
+    code: &Code,
+    arity: usize,
+    functions: &[crate::ir::Function],
+    depth: u8,
+) -> Option<usize> {
+    match code {
+        Code::Slot(i) if *i < arity => Some(*i),
+        Code::Apply(callee, args) if depth > 0 => {
+            let Callee::Fn(id) = &**callee else {
+                return None;
+            };
+            let fun = functions.get(*id)?;
+            if fun.frame != args.len() {
+                return None;
+            }
+            match args.get(picked_arg(
+                fun.body.as_ref()?,
+                args.len(),
+                functions,
+                depth - 1,
+            )?)? {
+                Code::Slot(j) if *j < arity => Some(*j),
+                _ => None,
+            }
+        }
+        _ => None,
+    }
 }
 
 /// A node function that is one operator or native applied to the node's arguments and

@@ -1,10 +1,16 @@
-//! Making a [`Plan`]: the kind (`Unit`, `Bool`, `Int`, `Float`) of every node, inferred from
-//! the nodes' forms, and each node's instruction with its operands' kinds checked. A program
-//! with a node or a type the plan has no form for gets no plan.
+//! Making a [`Plan`]: the kind (`Unit`, `Bool`, `Int`, `Float`, or another value only moved) of
+//! every node, inferred from the nodes' forms, and each node's instruction with its operands'
+//! kinds checked. A program with a node or a type the plan has no form for gets no plan.
 
 use super::{CONST, FArg, Instr, KArg, Kernel, Kind, NoPlan, Op1, Op2, Plan, Src, need};
 use crate::ir::{self, NO_SLOT, Node, NodeId, SArg};
 use crate::value::Value;
+use std::cell::RefCell;
+
+/// The kind of a constant: a scalar's, else [`Kind::Other`].
+fn const_kind(v: &Value) -> Kind {
+    Kind::of_value(v).map_or(Kind::Other, |(k, _)| k)
+}
 
 /// The kind of each node, as far as the nodes' forms tell: inputs by their declared type,
 /// constants by their value, operators by their result. `last` reads a node that may come
@@ -20,14 +26,12 @@ fn kinds(p: &ir::Program, kernel: &impl Fn(NodeId) -> Option<Kernel>) -> Vec<Opt
             let k = |n: &NodeId| kinds.get(*n).copied().flatten();
             let sk = |a: &SArg| match a {
                 SArg::Stream(n) => k(n),
-                SArg::Const(v) => Kind::of_value(v).map(|(k, _)| k),
+                SArg::Const(v) => Some(const_kind(v)),
             };
             let kind = match p.nodes.get(i) {
                 Some(Node::Input(j)) => p.inputs.get(*j).and_then(|inp| Kind::of_type(&inp.ty)),
-                Some(Node::Const(v) | Node::Default { value: v, .. }) => {
-                    Kind::of_value(v).map(|(k, _)| k)
-                }
-                Some(Node::Fold { init, .. }) => Kind::of_value(init).map(|(k, _)| k),
+                Some(Node::Const(v) | Node::Default { value: v, .. }) => Some(const_kind(v)),
+                Some(Node::Fold { init, .. }) => Some(const_kind(init)),
                 Some(Node::Alias(n)) | Some(Node::Last { value: n, .. }) => k(n),
                 Some(Node::Reduce { stream: n, .. } | Node::Filter { stream: n, .. }) => k(n),
                 Some(Node::DefaultFrom { stream, .. }) => k(stream),
@@ -44,7 +48,11 @@ fn kinds(p: &ir::Program, kernel: &impl Fn(NodeId) -> Option<Kernel>) -> Vec<Opt
                     Some(Kernel::Op(op, ..)) => Some(Op2::of(op).kinds().1),
                     Some(Kernel::Eq { .. }) | Some(Kernel::Not(_)) => Some(Kind::Bool),
                     Some(Kernel::FNeg(_) | Kernel::IntToFloat(_)) => Some(Kind::Float),
-                    Some(Kernel::Const(v)) => Kind::of_value(&v).map(|(k, _)| k),
+                    Some(Kernel::Const(v)) => Some(const_kind(&v)),
+                    Some(Kernel::Pick(a)) => match p.nodes.get(i) {
+                        Some(Node::SLift { args, .. }) => args.get(usize::from(a)).and_then(sk),
+                        _ => None,
+                    },
                     None => None,
                 },
                 _ => None,
@@ -66,6 +74,8 @@ struct Builder<'a> {
     kinds: Vec<Option<Kind>>,
     /// The slot that never has an event (after the nodes').
     never: u32,
+    /// The constants of [`Kind::Other`] met so far ([`Plan::consts`]).
+    consts: RefCell<Vec<Value>>,
 }
 
 impl Builder<'_> {
@@ -81,8 +91,17 @@ impl Builder<'_> {
         need(self.p.last_slot.get(n).copied())
     }
 
+    /// A constant's kind and bits: a scalar's, or its index among the plan's constants.
+    fn const_bits(&self, v: &Value) -> (Kind, u64) {
+        Kind::of_value(v).unwrap_or_else(|| {
+            let mut consts = self.consts.borrow_mut();
+            consts.push(v.clone());
+            (Kind::Other, consts.len() as u64 - 1)
+        })
+    }
+
     fn constant(&self, v: &Value) -> Result<Src, NoPlan> {
-        let (kind, k) = need(Kind::of_value(v))?;
+        let (kind, k) = self.const_bits(v);
         Ok(Src {
             n: self.never,
             slot: CONST,
@@ -168,7 +187,17 @@ impl Builder<'_> {
                 Instr::SConst {
                     dst,
                     args: srcs.clone().into_boxed_slice(),
-                    bits: need(Kind::of_value(v))?.1,
+                    bits: self.const_bits(v).1,
+                }
+            }
+            Kernel::Pick(a) => {
+                used.iter_mut().for_each(|u| *u = true);
+                let pick = usize::from(*a);
+                need(srcs.get(pick))?;
+                Instr::SPick {
+                    dst,
+                    args: srcs.clone().into_boxed_slice(),
+                    pick,
                 }
             }
         };
@@ -186,7 +215,7 @@ impl Builder<'_> {
                 KArg::Arg(1) => Ok((FArg::X, x)),
                 KArg::Arg(_) => Err(NoPlan),
                 KArg::Const(v) => {
-                    let (kind, bits) = need(Kind::of_value(v))?;
+                    let (kind, bits) = self.const_bits(v);
                     Ok((FArg::Const(bits), kind))
                 }
             }
@@ -210,8 +239,8 @@ impl Builder<'_> {
         let dst = self.idx(i)?;
         let kind = self.kind(i)?;
         let bits = |v: &Value| -> Result<u64, NoPlan> {
-            match Kind::of_value(v) {
-                Some((k, b)) if k == kind => Ok(b),
+            match self.const_bits(v) {
+                (k, b) if k == kind => Ok(b),
                 _ => Err(NoPlan),
             }
         };
@@ -339,6 +368,7 @@ impl Plan {
             p,
             kinds: kinds(p, &kernel),
             never: need(u32::try_from(n).ok())?,
+            consts: RefCell::new(Vec::new()),
         };
         let mut evaluated = vec![false; n];
         let mut instrs = Vec::with_capacity(n);
@@ -370,6 +400,7 @@ impl Plan {
             slots: n + 1,
             kept,
             outputs,
+            consts: b.consts.into_inner(),
         })
     }
 }

@@ -30,6 +30,9 @@ enum Kind {
     Bool,
     Int,
     Float,
+    /// Any other value: one of the plan's constants ([`Plan::consts`], by index), only ever
+    /// moved (a string a lift sends, passed on by a filter), never computed on.
+    Other,
 }
 
 impl Kind {
@@ -66,15 +69,42 @@ impl Kind {
         }
     }
 
+    /// The bits of `v` read as this kind: a scalar's, or the index of a constant equal to it.
     #[inline(always)]
-    fn value(self, bits: u64) -> Value {
+    fn read(self, v: &Value, consts: &[Value]) -> Option<u64> {
+        match self.bits(v) {
+            Some(b) => Some(b),
+            None if self == Kind::Other => constant_index(v, consts),
+            None => None,
+        }
+    }
+
+    #[inline(always)]
+    fn value(self, bits: u64, consts: &[Value]) -> Value {
         match self {
             Kind::Float => Value::Float(f64::from_bits(bits)),
             Kind::Int => Value::Int(bits as i64),
             Kind::Bool => Value::Bool(bits != 0),
             Kind::Unit => Value::Unit,
+            Kind::Other => other_value(bits, consts),
         }
     }
+}
+
+/// The index of a constant equal to `v` (a kept value of [`Kind::Other`]); `None` for a value
+/// that is none of them (the general step made it: it runs the step).
+#[inline(never)]
+fn constant_index(v: &Value, consts: &[Value]) -> Option<u64> {
+    consts.iter().position(|c| c == v).map(|i| i as u64)
+}
+
+#[inline(never)]
+fn other_value(bits: u64, consts: &[Value]) -> Value {
+    usize::try_from(bits)
+        .ok()
+        .and_then(|i| consts.get(i))
+        .cloned()
+        .unwrap_or(Value::Unit)
 }
 
 /// This step's event of a node: its bits (an `f64`'s, an `i64`'s, 0 or 1), when it has one.
@@ -107,6 +137,8 @@ pub enum Kernel {
     FNeg(KArg),
     IntToFloat(KArg),
     Const(Value),
+    /// Argument `i` itself (`slift(a, b) { $0 }`: `a`'s value whenever either has an event).
+    Pick(u8),
 }
 
 /// A binary operator on typed bits.
@@ -165,7 +197,7 @@ impl Op2 {
             (Kind::Float, true) => Op2::FNe,
             (Kind::Int | Kind::Bool, false) => Op2::BitsEq,
             (Kind::Int | Kind::Bool, true) => Op2::BitsNe,
-            (Kind::Unit, _) => return None,
+            (Kind::Unit | Kind::Other, _) => return None,
         })
     }
 
@@ -322,6 +354,12 @@ enum Instr {
         args: Box<[Src]>,
         bits: u64,
     },
+    /// A signal lift whose value is its argument `pick`: fires like a lift of `args`.
+    SPick {
+        dst: u32,
+        args: Box<[Src]>,
+        pick: usize,
+    },
     Ite {
         dst: u32,
         cond: Src,
@@ -367,6 +405,8 @@ pub struct Plan {
     kept: Vec<(u32, u32, Kind)>,
     /// The node of each output, with its kind.
     outputs: Vec<(u32, Kind)>,
+    /// The values of [`Kind::Other`] constants, by index.
+    consts: Vec<Value>,
 }
 
 /// The program has no plan (some node or type has no form here).
@@ -399,23 +439,28 @@ fn cur_of(cur: &[Slot], n: u32) -> Slot {
 /// The value kept in `slot` (`Some(None)` for none or [`NO_SLOT`]); `None`: not a scalar of
 /// `kind` (an error value, a big integer).
 #[inline(always)]
-fn kept_of(last: &[Option<Value>], slot: u32, kind: Kind) -> Option<Option<u64>> {
+fn kept_of(last: &[Option<Value>], consts: &[Value], slot: u32, kind: Kind) -> Option<Option<u64>> {
     match last.get(slot as usize) {
-        Some(Some(v)) => kind.bits(v).map(Some),
+        Some(Some(v)) => kind.read(v, consts).map(Some),
         _ => Some(None),
     }
 }
 
 /// An operand's value: this step's event, else the latest one, or the constant.
 #[inline(always)]
-fn value_of(cur: &[Slot], last: &[Option<Value>], a: &Src) -> Option<Option<u64>> {
+fn value_of(
+    cur: &[Slot],
+    last: &[Option<Value>],
+    consts: &[Value],
+    a: &Src,
+) -> Option<Option<u64>> {
     let c = cur_of(cur, a.n);
     if c.has {
         Some(Some(c.bits))
     } else if a.slot == CONST {
         Some(Some(a.k))
     } else {
-        kept_of(last, a.slot, a.kind)
+        kept_of(last, consts, a.slot, a.kind)
     }
 }
 
@@ -465,10 +510,14 @@ impl Plan {
         for (out, &(n, kind)) in self.outputs.iter().enumerate() {
             let c = cur_of(cur, n);
             if c.has {
-                let v = kind.value(c.bits);
+                let v = kind.value(c.bits, &self.consts);
                 sink(out, &v);
-                // A scalar: nothing to drop.
-                std::mem::forget(v);
+                if kind == Kind::Other {
+                    drop(v);
+                } else {
+                    // A scalar: nothing to drop.
+                    std::mem::forget(v);
+                }
             }
         }
         for &(n, slot, kind) in &self.kept {
@@ -476,7 +525,7 @@ impl Plan {
             if c.has
                 && let Some(l) = st.last.get_mut(slot as usize)
             {
-                let old = l.replace(kind.value(c.bits));
+                let old = l.replace(kind.value(c.bits, &self.consts));
                 match old {
                     // Scalars need no drop.
                     None | Some(Value::Unit | Value::Bool(_) | Value::Int(_) | Value::Float(_)) => {
@@ -493,6 +542,7 @@ impl Plan {
     #[inline(always)]
     fn eval(&self, st: &StepState<'_>, cur: &mut [Slot]) -> Option<()> {
         let last = &*st.last;
+        let consts = &self.consts[..];
         for instr in &self.instrs {
             let (dst, v) = match instr {
                 Instr::Nil { dst } => (dst, NONE),
@@ -507,7 +557,10 @@ impl Plan {
                     if !has_event(cur, a) && !has_event(cur, b) {
                         (dst, NONE)
                     } else {
-                        match (value_of(cur, last, a)?, value_of(cur, last, b)?) {
+                        match (
+                            value_of(cur, last, consts, a)?,
+                            value_of(cur, last, consts, b)?,
+                        ) {
                             (Some(x), Some(y)) => (dst, some(op.run(x, y)?)),
                             _ => (dst, NONE),
                         }
@@ -515,7 +568,7 @@ impl Plan {
                 }
                 Instr::Op1 { dst, op, a } => (
                     dst,
-                    match (has_event(cur, a), value_of(cur, last, a)?) {
+                    match (has_event(cur, a), value_of(cur, last, consts, a)?) {
                         (true, Some(x)) => some(op.run(x)),
                         _ => NONE,
                     },
@@ -530,9 +583,9 @@ impl Plan {
                         (dst, NONE)
                     } else {
                         match (
-                            value_of(cur, last, cond)?,
-                            value_of(cur, last, then)?,
-                            value_of(cur, last, other)?,
+                            value_of(cur, last, consts, cond)?,
+                            value_of(cur, last, consts, then)?,
+                            value_of(cur, last, consts, other)?,
                         ) {
                             (Some(c), Some(t), Some(e)) => (dst, some(if c != 0 { t } else { e })),
                             _ => (dst, NONE),
@@ -556,7 +609,7 @@ impl Plan {
                             some(*init)
                         }
                     } else if x.has {
-                        match kept_of(last, acc.slot, acc.kind)? {
+                        match kept_of(last, consts, acc.slot, acc.kind)? {
                             Some(s) => some(op.run(farg(*a, s, x.bits), farg(*b, s, x.bits))?),
                             None => NONE,
                         }
@@ -575,7 +628,7 @@ impl Plan {
                 } => {
                     let x = cur_of(cur, *stream);
                     let v = if x.has {
-                        match kept_of(last, acc.slot, acc.kind)? {
+                        match kept_of(last, consts, acc.slot, acc.kind)? {
                             Some(s) => some(op.run(farg(*a, s, x.bits), farg(*b, s, x.bits))?),
                             None => x,
                         }
@@ -601,7 +654,7 @@ impl Plan {
                 } => (
                     dst,
                     if cur_of(cur, *trigger).has {
-                        match kept_of(last, value.slot, value.kind)? {
+                        match kept_of(last, consts, value.slot, value.kind)? {
                             Some(v) => some(v),
                             None => NONE,
                         }
@@ -618,8 +671,8 @@ impl Plan {
                     let v = if s.has {
                         s
                     } else {
-                        let s_never = kept_of(last, stream.slot, stream.kind)?.is_none();
-                        let d_first = kept_of(last, from.slot, from.kind)?.is_none();
+                        let s_never = kept_of(last, consts, stream.slot, stream.kind)?.is_none();
+                        let d_first = kept_of(last, consts, from.slot, from.kind)?.is_none();
                         if s_never && d_first {
                             cur_of(cur, from.n)
                         } else {
@@ -634,9 +687,26 @@ impl Plan {
                     } else {
                         let mut all = true;
                         for a in args.iter() {
-                            all &= value_of(cur, last, a)?.is_some();
+                            all &= value_of(cur, last, consts, a)?.is_some();
                         }
                         (dst, if all { some(*bits) } else { NONE })
+                    }
+                }
+                Instr::SPick { dst, args, pick } => {
+                    if !args.iter().any(|a| has_event(cur, a)) {
+                        (dst, NONE)
+                    } else {
+                        let mut all = true;
+                        for a in args.iter() {
+                            all &= value_of(cur, last, consts, a)?.is_some();
+                        }
+                        match args.get(*pick) {
+                            Some(a) if all => match value_of(cur, last, consts, a)? {
+                                Some(v) => (dst, some(v)),
+                                None => (dst, NONE),
+                            },
+                            _ => (dst, NONE),
+                        }
                     }
                 }
                 Instr::Merge { dst, args } => (
@@ -648,7 +718,7 @@ impl Plan {
                 ),
                 Instr::Filter { dst, stream, cond } => {
                     let s = cur_of(cur, *stream);
-                    let v = if s.has && value_of(cur, last, cond)? == Some(1) {
+                    let v = if s.has && value_of(cur, last, consts, cond)? == Some(1) {
                         s
                     } else {
                         NONE
