@@ -61,6 +61,13 @@ const MOVED: &str = "in x: Events[Float]\nin n: Events[Int]\nin b: Events[Bool]\
     def second = slift(x, n, (a: Float, v: Int) => v)\n\
     out reason\nout label\nout said\nout either\nout seq\nout kept\nout second\n";
 
+/// Event lifts: `on`, `pure` (of floats, NaN and ±0 among them, and of integers), `firstEvent`,
+/// `rising`, `falling`; their `nil` arguments are never evaluated.
+const LIFTS: &str = "in x: Events[Float]\nin n: Events[Int]\nin b: Events[Bool]\n\
+    def o = on(b, x)\ndef p = pure(x)\ndef pn = pure(n)\ndef fe = firstEvent(n)\n\
+    def r = rising(b)\ndef f = falling(b)\n\
+    out o\nout p\nout pn\nout fe\nout r\nout f\n";
+
 struct Rng(u64);
 
 impl Rng {
@@ -121,7 +128,7 @@ fn outputs(program: &Arc<Program>, seed: u64, steps: usize) -> Vec<String> {
 
 #[test]
 fn the_plan_sends_what_the_general_step_sends() {
-    for spec in [EVERY_FORM, RECURSION, MOVED] {
+    for spec in [EVERY_FORM, RECURSION, MOVED, LIFTS] {
         let (flat, general) = both(spec);
         assert!(flat.exec().plan().is_some(), "no plan for\n{spec}");
         assert!(general.exec().plan().is_none());

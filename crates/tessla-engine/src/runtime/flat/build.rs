@@ -2,8 +2,8 @@
 //! every node, inferred from the nodes' forms, and each node's instruction with its operands'
 //! kinds checked. A program with a node or a type the plan has no form for gets no plan.
 
-use super::{CONST, FArg, Instr, KArg, Kernel, Kind, NoPlan, Op1, Op2, Plan, Src, need};
-use crate::ir::{self, NO_SLOT, Node, NodeId, SArg};
+use super::{CONST, FArg, Instr, KArg, Kernel, Kind, LiftOp, NoPlan, Op1, Op2, Plan, Src, need};
+use crate::ir::{self, LiftFn, NO_SLOT, Node, NodeId, SArg};
 use crate::value::Value;
 use std::cell::RefCell;
 
@@ -42,6 +42,14 @@ fn kinds(p: &ir::Program, kernel: &impl Fn(NodeId) -> Option<Kernel>) -> Vec<Opt
                     .and_then(k),
                 Some(Node::Nil) => Some(Kind::Unit),
                 Some(Node::Time(_)) => Some(Kind::Int),
+                Some(Node::Lift { args, f }) => match lift_op(f, args.len()) {
+                    Some(LiftOp::On) => args.get(1).and_then(k),
+                    Some(LiftOp::First | LiftOp::Distinct | LiftOp::FirstOnly) => {
+                        args.first().and_then(k)
+                    }
+                    Some(LiftOp::Edge(_)) => Some(Kind::Bool),
+                    None => None,
+                },
                 Some(Node::Bin { op, .. }) => Some(Op2::of(*op).kinds().1),
                 Some(Node::Ite { then, .. }) => sk(then),
                 Some(Node::SLift { .. }) => match kernel(i) {
@@ -66,6 +74,19 @@ fn kinds(p: &ir::Program, kernel: &impl Fn(NodeId) -> Option<Kernel>) -> Vec<Opt
             return kinds;
         }
     }
+}
+
+/// The plan's form of an event lift's function over `n` arguments, if it has one (the arities
+/// are the ones `runtime::exec::lift` gives an event for).
+fn lift_op(f: &LiftFn, n: usize) -> Option<LiftOp> {
+    Some(match (f, n) {
+        (LiftFn::First, 1..=3) => LiftOp::First,
+        (LiftFn::On, 3) => LiftOp::On,
+        (LiftFn::Distinct, 2) => LiftOp::Distinct,
+        (LiftFn::FirstOnly, 2) => LiftOp::FirstOnly,
+        (LiftFn::Edge(want), 2) => LiftOp::Edge(*want),
+        _ => return None,
+    })
 }
 
 /// Makes a [`Plan`]: the checks that every operand has the kind its operator takes.
@@ -341,7 +362,34 @@ impl Builder<'_> {
                     b,
                 }
             }
-            Node::Delay { .. } | Node::Lift { .. } => return Err(NoPlan),
+            Node::Lift { args, f } => {
+                let f = need(lift_op(f, args.len()))?;
+                let mut a = [self.never; 3];
+                for (d, n) in a.iter_mut().zip(args) {
+                    *d = self.idx(*n)?;
+                }
+                let kinds: Vec<Kind> = args
+                    .iter()
+                    .map(|n| self.kind(*n))
+                    .collect::<Result<_, _>>()?;
+                let ok = match f {
+                    LiftOp::On => kinds.get(1) == Some(&kind) && kinds.get(2) == Some(&kind),
+                    LiftOp::First | LiftOp::FirstOnly => kinds.first() == Some(&kind),
+                    LiftOp::Distinct => kinds.first() == Some(&kind) && kinds.get(1) == Some(&kind),
+                    LiftOp::Edge(_) => kinds.iter().all(|k| *k == Kind::Bool),
+                };
+                if !ok {
+                    return Err(NoPlan);
+                }
+                Instr::Lift {
+                    dst,
+                    f,
+                    args: a,
+                    n: need(u8::try_from(args.len()).ok())?,
+                    kind,
+                }
+            }
+            Node::Delay { .. } => return Err(NoPlan),
         })
     }
 }

@@ -276,6 +276,64 @@ impl Op1 {
     }
 }
 
+/// An event lift's function (the IR's [`ir::LiftFn`] but for `Options` and `AddRemove`, whose
+/// values are not scalars, and `ResetTag`, which only `resetCount` uses, beside a fold the plan
+/// has no form for); what `runtime::exec::lift` computes.
+#[derive(Clone, Copy, Debug)]
+enum LiftOp {
+    First,
+    On,
+    Distinct,
+    FirstOnly,
+    Edge(bool),
+}
+
+impl LiftOp {
+    /// The events of the arguments in; the node's event out (`None`: the general step's).
+    #[inline(always)]
+    fn run(self, a: [Slot; 3], kind: Kind, consts: &[Value]) -> Option<Slot> {
+        let [x, y, z] = a;
+        Some(match self {
+            LiftOp::First => x,
+            LiftOp::On => match (x.has, y.has, z.has) {
+                (true, true, _) => y,
+                (true, false, true) => z,
+                _ => NONE,
+            },
+            LiftOp::Distinct => {
+                if x.has && y.has && same_value(kind, x.bits, y.bits, consts) {
+                    NONE
+                } else {
+                    x
+                }
+            }
+            LiftOp::FirstOnly => {
+                if x.has && !y.has {
+                    x
+                } else {
+                    NONE
+                }
+            }
+            LiftOp::Edge(want) => match (x.has, y.has) {
+                (true, true) => some(u64::from((x.bits != 0) == want && (y.bits != 0) != want)),
+                (true, false) => some(0),
+                _ => NONE,
+            },
+        })
+    }
+}
+
+/// Whether two values of `kind` are equal as values compare (`==` on floats: NaN is not equal
+/// to itself, 0.0 equals -0.0).
+#[inline(always)]
+fn same_value(kind: Kind, a: u64, b: u64, consts: &[Value]) -> bool {
+    match kind {
+        Kind::Float => f64::from_bits(a) == f64::from_bits(b),
+        Kind::Other => other_value(a, consts) == other_value(b, consts),
+        Kind::Unit | Kind::Bool | Kind::Int => a == b,
+    }
+}
+
 /// `Src::slot` of a constant operand.
 const CONST: u32 = u32::MAX - 1;
 
@@ -353,6 +411,15 @@ enum Instr {
         dst: u32,
         args: Box<[Src]>,
         bits: u64,
+    },
+    /// An event lift (`on`, `first`, `pure`, ...) of up to three arguments' events (`args[..n]`).
+    Lift {
+        dst: u32,
+        f: LiftOp,
+        args: [u32; 3],
+        n: u8,
+        /// The arguments' kind, for `pure`'s comparison.
+        kind: Kind,
     },
     /// A signal lift whose value is its argument `pick`: fires like a lift of `args`.
     SPick {
@@ -690,6 +757,23 @@ impl Plan {
                             all &= value_of(cur, last, consts, a)?.is_some();
                         }
                         (dst, if all { some(*bits) } else { NONE })
+                    }
+                }
+                Instr::Lift {
+                    dst,
+                    f,
+                    args,
+                    n,
+                    kind,
+                } => {
+                    let mut a = [NONE; 3];
+                    for (v, arg) in a.iter_mut().zip(&args[..usize::from(*n)]) {
+                        *v = cur_of(cur, *arg);
+                    }
+                    if !(a[0].has || a[1].has || a[2].has) {
+                        (dst, NONE)
+                    } else {
+                        (dst, f.run(a, *kind, consts)?)
                     }
                 }
                 Instr::SPick { dst, args, pick } => {
