@@ -497,6 +497,27 @@ pub struct StepState<'a> {
     pub last: &'a mut [Option<Value>],
 }
 
+/// Keep a node's event in its slot of the monitor's state: a scalar over one of its kind is
+/// written in place (the usual case: the slot had the node's previous event).
+#[inline(always)]
+fn keep(l: &mut Option<Value>, kind: Kind, bits: u64, consts: &[Value]) {
+    match (kind, &mut *l) {
+        (Kind::Float, Some(Value::Float(x))) => *x = f64::from_bits(bits),
+        (Kind::Int, Some(Value::Int(x))) => *x = bits as i64,
+        (Kind::Bool, Some(Value::Bool(x))) => *x = bits != 0,
+        _ => {
+            let old = l.replace(kind.value(bits, consts));
+            match old {
+                // Scalars need no drop.
+                None | Some(Value::Unit | Value::Bool(_) | Value::Int(_) | Value::Float(_)) => {
+                    std::mem::forget(old)
+                }
+                old => drop(old),
+            }
+        }
+    }
+}
+
 /// Node `n`'s event this step.
 #[inline(always)]
 fn cur_of(cur: &[Slot], n: u32) -> Slot {
@@ -592,14 +613,7 @@ impl Plan {
             if c.has
                 && let Some(l) = st.last.get_mut(slot as usize)
             {
-                let old = l.replace(kind.value(c.bits, &self.consts));
-                match old {
-                    // Scalars need no drop.
-                    None | Some(Value::Unit | Value::Bool(_) | Value::Int(_) | Value::Float(_)) => {
-                        std::mem::forget(old)
-                    }
-                    old => drop(old),
-                }
+                keep(l, kind, c.bits, &self.consts);
             }
         }
         true
