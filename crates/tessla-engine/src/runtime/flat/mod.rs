@@ -1,5 +1,5 @@
-//! The flat plan: a program whose streams all carry scalars, run as a list of typed
-//! instructions over plain slots.
+//! The flat plan: a program whose streams carry scalars (and constants that are only passed
+//! on), run as a list of typed instructions over plain slots.
 //!
 //! Owns: [`Plan`] (made once per program by `runtime::exec`, beside its compiled code, when
 //! every node the program evaluates has a form here; `build` makes it), [`Kernel`] (a node
