@@ -25,8 +25,9 @@ fn both(spec: &str) -> (Arc<Program>, Arc<Program>) {
 }
 
 /// Every form the plan has: `last`, `default`, `defaultFrom`, `time`, `merge`, `filter`,
-/// `reduce`, `fold` (one near `Int`'s limit, so it overflows into a big integer), `count`,
-/// `unitIf`, `==`, `!=`, `-.`, `!`, `intToFloat`, `if`, integer and float operators, `&&`.
+/// `reduce`, `fold` (one near `Int`'s limit, so it overflows into a big integer, and a product),
+/// `count`, `unitIf`, `==`, `!=`, `-.`, `!`, `intToFloat`, `if`, integer and float operators
+/// (`*`, `/`, `%` with zero divisors and overflow among them), `&&`.
 const EVERY_FORM: &str = "in x: Events[Float]\nin y: Events[Float]\nin n: Events[Int]\n\
     in b: Events[Bool]\n\
     def lx = last(x, y)\ndef dx = default(x, 1.5)\ndef dfx = defaultFrom(x, y)\n\
@@ -37,9 +38,11 @@ const EVERY_FORM: &str = "in x: Events[Float]\nin y: Events[Float]\nin n: Events
     def neg = -. x\ndef notb = !b\ndef i2f = intToFloat(n)\n\
     def pick = if b then x else y\ndef sub = n - 3\ndef cmp = n <= rn\n\
     def andb = b && (x >. y)\ndef fl = x /. y\ndef lsn = last(sn, b)\n\
+    def prod = n * rn\ndef quo = rn / (n % 7)\ndef rem = n % (n - 1)\n\
+    def pr = fold(n, 1, (a: Int, v: Int) => a * v)\n\
     out lx\nout dx\nout dfx\nout tx\nout mxy\nout fx\nout rn\nout sn\nout cn\nout u\n\
     out eqn\nout nex\nout neg\nout notb\nout i2f\nout pick\nout sub\nout cmp\nout andb\n\
-    out fl\nout lsn\n";
+    out fl\nout lsn\nout prod\nout quo\nout rem\nout pr\n";
 
 /// Constants, `nil`, an alias, and a recursion through `last` (a node read before it is
 /// defined).

@@ -23,7 +23,7 @@ use crate::ir::scalar_op;
 use crate::ir::{self, Node};
 use crate::ir::{BinOp, UnaryOp};
 use crate::runtime::collections;
-use crate::runtime::flat::{KArg, Kernel, Plan};
+use crate::runtime::flat::{IntOp, KArg, Kernel, Plan};
 use crate::runtime::ops;
 use crate::value::{Callable, NativeFn, RuntimeError, Value, call_function_value, call_native};
 use std::sync::{Arc, OnceLock, Weak};
@@ -373,6 +373,9 @@ impl Fast {
             Fast::Const(v) => Kernel::Const(v.clone()),
             Fast::Binary(op, a, b) => match (scalar_op(*op), op) {
                 (Some(sop), _) => Kernel::Op(sop, arg(a)?, arg(b)?),
+                (None, BinOp::Mul) => Kernel::Int(IntOp::Mul, arg(a)?, arg(b)?),
+                (None, BinOp::Div) => Kernel::Int(IntOp::Div, arg(a)?, arg(b)?),
+                (None, BinOp::Mod) => Kernel::Int(IntOp::Mod, arg(a)?, arg(b)?),
                 (None, BinOp::Eq | BinOp::Ne) => Kernel::Eq {
                     ne: *op == BinOp::Ne,
                     a: arg(a)?,

@@ -54,6 +54,7 @@ fn kinds(p: &ir::Program, kernel: &impl Fn(NodeId) -> Option<Kernel>) -> Vec<Opt
                 Some(Node::Ite { then, .. }) => sk(then),
                 Some(Node::SLift { .. }) => match kernel(i) {
                     Some(Kernel::Op(op, ..)) => Some(Op2::of(op).kinds().1),
+                    Some(Kernel::Int(..)) => Some(Kind::Int),
                     Some(Kernel::Eq { .. }) | Some(Kernel::Not(_)) => Some(Kind::Bool),
                     Some(Kernel::FNeg(_) | Kernel::IntToFloat(_)) => Some(Kind::Float),
                     Some(Kernel::Const(v)) => Some(const_kind(&v)),
@@ -189,6 +190,10 @@ impl Builder<'_> {
                 let (a, b) = (operand(a)?, operand(b)?);
                 self.op2(dst, Op2::of(*op), a, b)?
             }
+            Kernel::Int(op, a, b) => {
+                let (a, b) = (operand(a)?, operand(b)?);
+                self.op2(dst, Op2::int(*op), a, b)?
+            }
             Kernel::Eq { ne, a, b } => {
                 let (a, b) = (operand(a)?, operand(b)?);
                 self.op2(dst, need(Op2::eq(*ne, a.kind))?, a, b)?
@@ -243,6 +248,7 @@ impl Builder<'_> {
         };
         let (op, a, b) = match k {
             Kernel::Op(op, a, b) => (Op2::of(*op), arg(a)?, arg(b)?),
+            Kernel::Int(op, a, b) => (Op2::int(*op), arg(a)?, arg(b)?),
             Kernel::Eq { ne, a, b } => {
                 let (a, b) = (arg(a)?, arg(b)?);
                 (need(Op2::eq(*ne, a.1))?, a, b)

@@ -127,6 +127,8 @@ pub enum KArg {
 pub enum Kernel {
     /// A binary operator with an inline scalar path (`+.`, `<`, `&&`, ...).
     Op(ScalarOp, KArg, KArg),
+    /// `*`, `/`, `%` on integers.
+    Int(IntOp, KArg, KArg),
     /// `==` (`ne: false`) or `!=` on two scalars of one type.
     Eq {
         ne: bool,
@@ -139,6 +141,15 @@ pub enum Kernel {
     Const(Value),
     /// Argument `i` itself (`slift(a, b) { $0 }`: `a`'s value whenever either has an event).
     Pick(u8),
+}
+
+/// An integer operator without an inline scalar path in the IR (the general step computes it
+/// with big integers past 64 bits, and division by zero as an error value).
+#[derive(Clone, Copy, Debug)]
+pub enum IntOp {
+    Mul,
+    Div,
+    Mod,
 }
 
 /// A binary operator on typed bits: the IR's scalar operators ([`ScalarOp`], mapped one to one by
@@ -160,6 +171,10 @@ enum Op2 {
     IGt,
     ILe,
     IGe,
+    /// `*`, `/`, `%` on integers (`None` on overflow or a zero divisor: the general step's).
+    IMul,
+    IDiv,
+    IMod,
     And,
     Or,
     /// `==`, `!=` on floats.
@@ -192,6 +207,14 @@ impl Op2 {
         }
     }
 
+    fn int(op: IntOp) -> Op2 {
+        match op {
+            IntOp::Mul => Op2::IMul,
+            IntOp::Div => Op2::IDiv,
+            IntOp::Mod => Op2::IMod,
+        }
+    }
+
     /// The operator `==`/`!=` is on operands of kind `k`.
     fn eq(ne: bool, k: Kind) -> Option<Op2> {
         Some(match (k, ne) {
@@ -209,7 +232,7 @@ impl Op2 {
         match self {
             FAdd | FSub | FMul | FDiv => (Some(Kind::Float), Kind::Float),
             FLt | FGt | FLe | FGe | FEq | FNe => (Some(Kind::Float), Kind::Bool),
-            IAdd | ISub => (Some(Kind::Int), Kind::Int),
+            IAdd | ISub | IMul | IDiv | IMod => (Some(Kind::Int), Kind::Int),
             ILt | IGt | ILe | IGe => (Some(Kind::Int), Kind::Bool),
             And | Or => (Some(Kind::Bool), Kind::Bool),
             // Either, the same for both (checked where it is made).
@@ -236,6 +259,9 @@ impl Op2 {
             FGe => t(x >= y),
             IAdd => i.checked_add(j)? as u64,
             ISub => i.checked_sub(j)? as u64,
+            IMul => i.checked_mul(j)? as u64,
+            IDiv => i.checked_div(j)? as u64,
+            IMod => i.checked_rem(j)? as u64,
             ILt => t(i < j),
             IGt => t(i > j),
             ILe => t(i <= j),
