@@ -326,11 +326,11 @@ enum LiftOp {
 }
 
 impl LiftOp {
-    /// The events of the arguments in; the node's event out (`None`: the general step's).
+    /// The events of the arguments in; the node's event out.
     #[inline(always)]
-    fn run(self, a: [Slot; 3], kind: Kind, consts: &[Value]) -> Option<Slot> {
+    fn run(self, a: [Slot; 3], kind: Kind, consts: &[Value]) -> Slot {
         let [x, y, z] = a;
-        Some(match self {
+        match self {
             LiftOp::First => x,
             LiftOp::On => match (x.has, y.has, z.has) {
                 (true, true, _) => y,
@@ -356,7 +356,7 @@ impl LiftOp {
                 (true, false) => some(0),
                 _ => NONE,
             },
-        })
+        }
     }
 }
 
@@ -594,6 +594,20 @@ fn has_event(cur: &[Slot], a: &Src) -> bool {
     cur_of(cur, a.n).has
 }
 
+/// Whether a signal lift of `args` fires: one has an event and every one has a value (`None`: a
+/// kept value the plan cannot read).
+#[inline(always)]
+fn fires(cur: &[Slot], last: &[Option<Value>], consts: &[Value], args: &[Src]) -> Option<bool> {
+    if !args.iter().any(|a| has_event(cur, a)) {
+        return Some(false);
+    }
+    let mut all = true;
+    for a in args {
+        all &= value_of(cur, last, consts, a)?.is_some();
+    }
+    Some(all)
+}
+
 #[inline(always)]
 fn some(bits: u64) -> Slot {
     Slot { bits, has: true }
@@ -799,17 +813,14 @@ impl Plan {
                     };
                     (dst, v)
                 }
-                Instr::SConst { dst, args, bits } => {
-                    if !args.iter().any(|a| has_event(cur, a)) {
-                        (dst, NONE)
+                Instr::SConst { dst, args, bits } => (
+                    dst,
+                    if fires(cur, last, consts, args)? {
+                        some(*bits)
                     } else {
-                        let mut all = true;
-                        for a in args.iter() {
-                            all &= value_of(cur, last, consts, a)?.is_some();
-                        }
-                        (dst, if all { some(*bits) } else { NONE })
-                    }
-                }
+                        NONE
+                    },
+                ),
                 Instr::Lift {
                     dst,
                     f,
@@ -818,31 +829,23 @@ impl Plan {
                     kind,
                 } => {
                     let mut a = [NONE; 3];
-                    for (v, arg) in a.iter_mut().zip(&args[..usize::from(*n)]) {
+                    for (v, arg) in a.iter_mut().zip(args.iter().take(usize::from(*n))) {
                         *v = cur_of(cur, *arg);
                     }
                     if !(a[0].has || a[1].has || a[2].has) {
                         (dst, NONE)
                     } else {
-                        (dst, f.run(a, *kind, consts)?)
+                        (dst, f.run(a, *kind, consts))
                     }
                 }
                 Instr::SPick { dst, args, pick } => {
-                    if !args.iter().any(|a| has_event(cur, a)) {
-                        (dst, NONE)
-                    } else {
-                        let mut all = true;
-                        for a in args.iter() {
-                            all &= value_of(cur, last, consts, a)?.is_some();
+                    let v = match args.get(*pick) {
+                        Some(a) if fires(cur, last, consts, args)? => {
+                            value_of(cur, last, consts, a)?
                         }
-                        match args.get(*pick) {
-                            Some(a) if all => match value_of(cur, last, consts, a)? {
-                                Some(v) => (dst, some(v)),
-                                None => (dst, NONE),
-                            },
-                            _ => (dst, NONE),
-                        }
-                    }
+                        _ => None,
+                    };
+                    (dst, v.map_or(NONE, some))
                 }
                 Instr::Merge { dst, args } => (
                     dst,
