@@ -2,8 +2,10 @@
 //! and stepped on the processor, outputs to a [`Sink`], until the input ends, a signal comes or
 //! the reader of the outputs goes away. Pending steps are always evaluated and written.
 //!
-//! Owns, for every transport alike: every record answered within the read that brought it;
-//! the wall clock of each read; waking when an instance's `delay` falls due while the input is
+//! Owns, for every transport alike: every record answered within the read that brought it
+//! (before the next read's records are stepped; with worker threads, after a read that filled
+//! the buffer the next one is taken while the slowest worker finishes, see
+//! [`Source::read_ahead`]); the wall clock of each read; waking when an instance's `delay` falls due while the input is
 //! silent ([`Processor::advance_wall`]); the signals (SIGTERM and SIGINT end the run, SIGHUP
 //! reloads the spec); the save points of a state store (`--state-interval`, and every ending)
 //! with its [`crate::state::Backend`]; the marks of the step watchdog. Stepping itself is on one
@@ -45,6 +47,14 @@ pub trait Source {
     /// Whether each read is a whole message (a datagram): its last record ends with it.
     fn whole_reads(&self) -> bool {
         false
+    }
+
+    /// Read into `buf` only what is waiting now, without blocking: `Some(n)` with `n > 0`
+    /// bytes, `None` when nothing is waiting, at the end of the input or on an error (the next
+    /// [`Source::read`] meets them again), or when the source cannot tell. With worker threads
+    /// the loop reads ahead while a worker still steps the read before.
+    fn read_ahead(&mut self, _buf: &mut [u8]) -> Option<usize> {
+        None
     }
 }
 
@@ -194,6 +204,10 @@ impl Loop<'_, '_> {
         let mut update_ticks = every(updates.interval());
         let size = source.read_size(self.shards.threads());
         let mut buf = vec![0u8; size];
+        // With worker threads: the next read, taken while a worker still steps the one before
+        // when that one filled `buf` (so more input was waiting); `pending` bytes of it.
+        let mut ahead = Vec::new();
+        let mut pending = None;
         let mut splitter = RecordSplitter::default();
         let ending = loop {
             // A standby holds no instances: only the process stepping a partition advances
@@ -233,7 +247,12 @@ impl Loop<'_, '_> {
                     }
                     continue;
                 }
-                r = source.read(&mut buf) => r?,
+                r = async {
+                    match pending.take() {
+                        Some(n) => Ok(Some(n)),
+                        None => source.read(&mut buf).await,
+                    }
+                } => r?,
                 _ = sleep_until(deadline) => {
                     // Silent input: the instances whose delays fell due move on by the wall clock.
                     let _busy = watch.enter(Phase::Delays);
@@ -255,7 +274,17 @@ impl Loop<'_, '_> {
             let _busy = watch.enter(Phase::Records);
             let bytes = buf.get(..n).unwrap_or_default();
             let whole = source.whole_reads();
-            self.records(&mut splitter, bytes, whole || n < size, whole)?;
+            let end_read = whole || n < size;
+            let mut read_ahead = || {
+                if !end_read {
+                    ahead.resize(size, 0);
+                    pending = source.read_ahead(&mut ahead);
+                }
+            };
+            self.records(&mut splitter, bytes, end_read, whole, &mut read_ahead)?;
+            if pending.is_some() {
+                std::mem::swap(&mut buf, &mut ahead);
+            }
             if whole {
                 // Each message on its own: its lines are numbered from 1.
                 splitter = RecordSplitter::default();
@@ -266,7 +295,12 @@ impl Loop<'_, '_> {
             }
         };
         let _busy = watch.enter(Phase::Records);
-        self.records(&mut splitter, &[], true, true)?;
+        // A read taken ahead is stepped and answered before the ending.
+        if let Some(n) = pending.take() {
+            let bytes = buf.get(..n).unwrap_or_default();
+            self.records(&mut splitter, bytes, true, false, &mut || {})?;
+        }
+        self.records(&mut splitter, &[], true, true, &mut || {})?;
         watch.set(Phase::Writing);
         if self.write(sink).await.is_err() {
             return Ok(Ending::OutputClosed);
@@ -292,13 +326,15 @@ impl Loop<'_, '_> {
 
     /// Step the records of one read (`bytes`) as the splitter finds them; `end_read`: no more
     /// input is waiting; `last`: the input or the message ended, so a last line without its
-    /// newline is a record too.
+    /// newline is a record too. With worker threads, `read_ahead` runs once the calling
+    /// thread has stepped its records, while a worker may still step its own.
     fn records(
         &mut self,
         splitter: &mut RecordSplitter,
         bytes: &[u8],
         end_read: bool,
         last: bool,
+        read_ahead: &mut dyn FnMut(),
     ) -> std::io::Result<()> {
         let wall = Wall::now();
         if self.shards.threads() > 1 {
@@ -310,7 +346,7 @@ impl Loop<'_, '_> {
             }
             return self
                 .shards
-                .process(self.proc, end_read, wall, &mut self.out);
+                .process(self.proc, end_read, wall, &mut self.out, read_ahead);
         }
         let Loop {
             proc,
@@ -429,4 +465,136 @@ impl Signals {
 fn advance_silent(proc: &mut Processor, wall: Wall, out: &mut Vec<u8>) {
     proc.set_wall(wall);
     proc.advance_wall(wall.at, out);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::processor::Options;
+    use crate::spec_feed::reload::SpecSource;
+    use tessla_syntax::include::MemResolver;
+
+    /// Two reads: the first fills the buffer, the second is taken ahead while the workers step
+    /// the first, and SIGTERM arrives before the loop comes back for it. `read` is never
+    /// called a third time when the signal was seen first.
+    struct Ahead {
+        first: Option<Vec<u8>>,
+        ahead: Option<Vec<u8>>,
+        size: usize,
+        read_after_ahead: bool,
+    }
+
+    impl Source for Ahead {
+        async fn read(&mut self, buf: &mut [u8]) -> std::io::Result<Option<usize>> {
+            let Some(first) = self.first.take() else {
+                self.read_after_ahead = true;
+                return std::future::pending().await;
+            };
+            buf.get_mut(..first.len())
+                .ok_or_else(|| std::io::Error::other("short buffer"))?
+                .copy_from_slice(&first);
+            Ok(Some(first.len()))
+        }
+
+        fn read_size(&mut self, _threads: usize) -> usize {
+            self.size
+        }
+
+        fn read_ahead(&mut self, buf: &mut [u8]) -> Option<usize> {
+            let ahead = self.ahead.take()?;
+            let signalled = std::process::Command::new("kill")
+                .args(["-TERM", &std::process::id().to_string()])
+                .status()
+                .is_ok_and(|s| s.success());
+            assert!(signalled, "kill -TERM did not run");
+            // The handler has run once `kill` returned; give its wake-up a moment.
+            std::thread::sleep(Duration::from_millis(50));
+            buf.get_mut(..ahead.len())?.copy_from_slice(&ahead);
+            Some(ahead.len())
+        }
+    }
+
+    struct Collect(Vec<u8>);
+
+    impl Sink for Collect {
+        async fn write(&mut self, out: &mut Vec<u8>, more: &mut [Vec<u8>]) -> std::io::Result<()> {
+            self.0.append(out);
+            for m in more {
+                self.0.append(m);
+            }
+            // Let the runtime's driver take in the signal before the loop selects again.
+            tokio::task::yield_now().await;
+            Ok(())
+        }
+    }
+
+    fn records(from: i64, to: i64) -> Vec<u8> {
+        (from..to)
+            .map(|i| format!("m,robot=r{} x={i}i {}\n", i % 7, 1_000 + i))
+            .collect::<String>()
+            .into_bytes()
+    }
+
+    /// A read taken ahead is stepped and answered even when a signal ends the run before the
+    /// loop comes back for it: nothing already read is lost.
+    #[test]
+    fn a_read_taken_ahead_is_answered_when_a_signal_ends_the_run() {
+        let resolver = MemResolver {
+            files: [(
+                "t.tessla".to_string(),
+                "in x: Events[Int]\nout x\n".to_string(),
+            )]
+            .into(),
+        };
+        let loaded = tessla_engine::load_with("t.tessla", &resolver, &Default::default())
+            .unwrap_or_else(|e| panic!("{e:?}"));
+        let opts = Options {
+            instance_by: vec!["robot".to_string()],
+            passthrough: false,
+            ..Options::default()
+        };
+        let mut proc = Processor::new(loaded.program, opts).unwrap_or_else(|e| panic!("{e}"));
+        let (first, ahead) = (records(0, 40), records(40, 70));
+        assert!(ahead.len() <= first.len());
+        let mut source = Ahead {
+            size: first.len(),
+            first: Some(first),
+            ahead: Some(ahead),
+            read_after_ahead: false,
+        };
+        let mut sink = Collect(Vec::new());
+        let mut updates = Updates::new(
+            SpecSource {
+                path: None,
+                options: Default::default(),
+            },
+            false,
+            "",
+        );
+        let setup = Setup {
+            threads: 2,
+            updates: &mut updates,
+            store: None,
+            watch: Arc::new(Watch::default()),
+        };
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap_or_else(|e| panic!("{e}"));
+        let ending = rt
+            .block_on(run(&mut proc, &mut source, &mut sink, setup))
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(ending, Ending::Signal);
+        assert!(
+            !source.read_after_ahead,
+            "the signal was seen after the read ahead was stepped"
+        );
+        let out = String::from_utf8_lossy(&sink.0);
+        let mut xs: Vec<i64> = out
+            .lines()
+            .filter_map(|l| l.split_once(" x=")?.1.split_once("i ")?.0.parse().ok())
+            .collect();
+        xs.sort_unstable();
+        assert_eq!(xs, (0..70).collect::<Vec<i64>>(), "{out}");
+    }
 }

@@ -4,7 +4,8 @@
 //! records are routed by instance key (one instance always to the same thread), every thread
 //! steps its records, and the read's outputs are written once all threads are done (the sink
 //! writes the workers' outputs behind the reader's, not copied), so a record is still answered
-//! before the next read. Each instance's outputs keep their order; the order between instances
+//! before the next read's records are stepped (the next read itself may be taken meanwhile:
+//! [`Shards::process`] runs the loop's read-ahead while a worker finishes). Each instance's outputs keep their order; the order between instances
 //! within one read follows the threads. The records are handed over in one reused byte buffer
 //! per thread (no allocation per record). A thread waiting for the other side spins briefly
 //! before it sleeps (`SPIN`): waking a sleeping thread costs more than the wait between two
@@ -179,6 +180,7 @@ impl Shards {
         flush: bool,
         wall: Wall,
         out: &mut Vec<u8>,
+        meanwhile: &mut dyn FnMut(),
     ) -> std::io::Result<()> {
         let lost = || std::io::Error::other("a worker thread stopped");
         for (i, w) in self.workers.iter_mut().enumerate() {
@@ -197,6 +199,7 @@ impl Shards {
         if flush {
             proc.end_of_read();
         }
+        meanwhile();
         for _ in 0..self.workers.len() {
             let (shard, p, batch, o) = recv(&self.done, true).map_err(|_| lost())?;
             self.workers.get_mut(shard - 1).ok_or_else(lost)?.proc = Some(p);

@@ -65,6 +65,15 @@ impl Source for Input {
         Ok((n > 0).then_some(n))
     }
 
+    /// A pipe's waiting bytes (tokio tries the read only while it still counts the pipe
+    /// readable, as it does after a read that filled the buffer).
+    fn read_ahead(&mut self, buf: &mut [u8]) -> Option<usize> {
+        match self {
+            Input::Pipe(r) => r.try_read(buf).ok().filter(|&n| n > 0),
+            Input::Other(_) => None,
+        }
+    }
+
     /// `BUF` on one thread (larger reads made it slower: the buffers leave the caches);
     /// with worker threads, a pipe enlarged to [`THREADS_BUF`] and read that much at a time:
     /// each read ends with every thread waiting for the slowest, and how many of the read's
