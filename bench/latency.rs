@@ -7,6 +7,12 @@
 //!       --rate 1000 --seconds 10 [--warmup 1000] -- run --spec bench/p2.tessla`
 //! Prints one line: `rate=.. sent=.. answered=.. p50_us=.. p90_us=.. p99_us=.. p999_us=.. max_us=..`.
 //! The first `--warmup` records (default: one second's worth) are sent but not counted.
+//!
+//! `latency --echo` is the floor to compare with: a child that does nothing but answer. It reads
+//! what stdin has, and writes every whole line back at once, renamed so that it counts as the
+//! answer (`mqtt_consumer` becomes `echo`): the pipes, the wake-ups and the scheduling of this
+//! machine, without any work. Run: `cargo run --release --example latency -- --bin
+//! target/release/examples/latency -- --echo`.
 
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Command, Stdio};
@@ -79,7 +85,50 @@ fn percentile(sorted: &[u64], p: f64) -> f64 {
     sorted.get(i).copied().unwrap_or(0) as f64 / 1000.0
 }
 
+/// `--echo`: answer every whole line read at once (see the module doc).
+fn echo() -> std::io::Result<()> {
+    use std::io::Read;
+    let (mut input, mut output) = (std::io::stdin().lock(), std::io::stdout().lock());
+    let mut buf = vec![0u8; 64 * 1024];
+    let (mut have, mut out) = (0usize, Vec::new());
+    loop {
+        let n = input.read(buf.get_mut(have..).unwrap_or_default())?;
+        if n == 0 {
+            return Ok(());
+        }
+        have += n;
+        let filled = buf.get(..have).unwrap_or_default();
+        let whole = filled
+            .iter()
+            .rposition(|&b| b == b'\n')
+            .map_or(0, |i| i + 1);
+        for line in filled
+            .get(..whole)
+            .unwrap_or_default()
+            .split_inclusive(|&b| b == b'\n')
+        {
+            out.extend_from_slice(b"echo");
+            out.extend_from_slice(line.strip_prefix(b"mqtt_consumer").unwrap_or(line));
+        }
+        output.write_all(&out)?;
+        output.flush()?;
+        out.clear();
+        buf.copy_within(whole..have, 0);
+        have -= whole;
+        if have == buf.len() {
+            buf.resize(buf.len() * 2, 0);
+        }
+    }
+}
+
 fn main() {
+    if std::env::args().nth(1).as_deref() == Some("--echo") {
+        if let Err(e) = echo() {
+            eprintln!("latency --echo: {e}");
+            std::process::exit(1);
+        }
+        return;
+    }
     let args = match parse_args() {
         Ok(a) => a,
         Err(e) => {

@@ -21,7 +21,7 @@ Two `trace` yardsticks from public data in ../shared/corpora (skipped with a not
                  traces, and on the first --auction-prefix events of the first trace beside
                  rtlola-cli on bench/auction.lola (far slower, so a prefix)
 Also: spec load (start-up of `run` on empty input), answer latency at 1k and 10k lines/s
-(bench/latency.rs), and a check that the Python baseline writes exactly what tessla-telegraf writes.
+(bench/latency.rs) beside its floor (the same tool's `--echo` child, which only echoes each line), and a check that the Python baseline writes exactly what tessla-telegraf writes.
 
 Usage: python3 bench/run.py [--reps N] [--no-build] [--no-rtlola] [--latency-reps N] [--latency-only]
                            [--only p2,lidar,fleet,startup,latency,primes,auction]
@@ -162,11 +162,13 @@ def same_output(p2_lp, n=20_000):
     return ours == py and len(ours) > len(head)
 
 
-def latency_run(rate, secs, prefix):
-    """One run of bench/latency.rs (P2 spec): its key=value line as a dict."""
-    r = subprocess.run([*prefix, str(EXAMPLES / "latency"), "--bin", str(BIN), "--rate", str(rate), "--seconds",
-                        str(secs), "--", "run", "--spec", str(P2_SPEC)], capture_output=True, text=True,
-                       check=True).stdout.strip()
+def latency_run(rate, secs, prefix, echo=False):
+    """One run of bench/latency.rs (P2 spec; with `echo`, its own `--echo` child, the floor): its key=value
+    line as a dict."""
+    child = ["--bin", str(EXAMPLES / "latency"), "--", "--echo"] if echo else \
+        ["--bin", str(BIN), "--", "run", "--spec", str(P2_SPEC)]
+    r = subprocess.run([*prefix, str(EXAMPLES / "latency"), "--rate", str(rate), "--seconds", str(secs), *child],
+                       capture_output=True, text=True, check=True).stdout.strip()
     log(f"   {' '.join(prefix)} {r}".strip())
     return dict(x.split("=", 1) for x in r.split())
 
@@ -185,16 +187,19 @@ def latency_section(reps):
     # real-time priority (`chrt -f 50`, inherited by the child; needs root or CAP_SYS_NICE), so that
     # other processes cannot delay a wake-up. Rows whose tool is missing or refused are left out.
     last_cpu = str((os.cpu_count() or 1) - 1)
-    runs = [("1,000/s", 1000, 10, []), ("10,000/s", 10000, 5, [])]
+    # The floor first: a child that only echoes each line (`latency --echo`), the same pipes and
+    # wake-ups without any work; a percentile of ours below the floor's is out of our hands.
+    runs = [("floor: an echo child (`latency --echo`), 1,000/s", 1000, 10, [], True),
+            ("1,000/s", 1000, 10, [], False), ("10,000/s", 10000, 5, [], False)]
     if shutil.which("taskset") and subprocess.run(["taskset", "-c", last_cpu, "true"],
                                                   capture_output=True).returncode == 0:
         runs.append((f"1,000/s, pinned to CPU {last_cpu} (`taskset -c {last_cpu}`)", 1000, 10,
-                     ["taskset", "-c", last_cpu]))
+                     ["taskset", "-c", last_cpu], False))
     if shutil.which("chrt") and subprocess.run(["chrt", "-f", "50", "true"], capture_output=True).returncode == 0:
-        runs.append(("1,000/s (`chrt -f 50`)", 1000, 10, ["chrt", "-f", "50"]))
-    for label, rate, secs, prefix in runs:
+        runs.append(("1,000/s (`chrt -f 50`)", 1000, 10, ["chrt", "-f", "50"], False))
+    for label, rate, secs, prefix, echo in runs:
         before = os.getloadavg()[0]
-        kvs = [latency_run(rate, secs, prefix) for _ in range(reps)]
+        kvs = [latency_run(rate, secs, prefix, echo) for _ in range(reps)]
         after = os.getloadavg()[0]
 
         def med(key):
