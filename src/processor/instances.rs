@@ -363,15 +363,18 @@ mod tests {
         }
         let alphabet = b"ab=, \t\n\\\"#r";
         let keys: [&[u8]; 4] = [b"a", b"ab", b"a=b", b""];
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        // A linear congruential sequence (Knuth's MMIX constants), its high bits taken.
+        let mut state = 1u64;
+        let mut next = |below: usize| {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 33) as usize % below
+        };
         for _ in 0..50_000 {
-            let mut input = Vec::new();
-            for _ in 0..(seed % 24) {
-                seed ^= seed << 13;
-                seed ^= seed >> 7;
-                seed ^= seed << 17;
-                input.push(alphabet[(seed % alphabet.len() as u64) as usize]);
-            }
+            let input: Vec<u8> = (0..next(24))
+                .map(|_| alphabet[next(alphabet.len())])
+                .collect();
             for key in keys {
                 let got = plain_series(&input)
                     .and_then(|s| raw_tag(s, key))
