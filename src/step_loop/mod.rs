@@ -5,8 +5,8 @@
 //! Owns, for every transport alike: every record answered within the read that brought it
 //! (before the next read's records are stepped; with worker threads, after a read that filled
 //! the buffer the next one is taken while the slowest worker finishes, see
-//! [`Source::read_ahead`]); the wall clock of each read; waking when an instance's `delay` falls due while the input is
-//! silent ([`Processor::advance_wall`]); the signals (SIGTERM and SIGINT end the run, SIGHUP
+//! [`Source::read_ahead`]); the wall clock of each read; waking when an instance's `delay`
+//! falls due while the input is silent ([`Processor::advance_wall`]); the signals (SIGTERM and SIGINT end the run, SIGHUP
 //! reloads the spec); the save points of a state store (`--state-interval`, and every ending)
 //! with its [`crate::state::Backend`]; the marks of the step watchdog. Stepping itself is on one
 //! thread or spread over several ([`shards`]), or with a store shared by a fleet ([`shared`]:
@@ -502,13 +502,11 @@ mod tests {
 
         fn read_ahead(&mut self, buf: &mut [u8]) -> Option<usize> {
             let ahead = self.ahead.take()?;
-            let signalled = std::process::Command::new("kill")
-                .args(["-TERM", &std::process::id().to_string()])
-                .status()
-                .is_ok_and(|s| s.success());
-            assert!(signalled, "kill -TERM did not run");
-            // The handler has run once `kill` returned; give its wake-up a moment.
-            std::thread::sleep(Duration::from_millis(50));
+            // SIGTERM to this thread: the runtime's handler has run when `raise` returns, and
+            // the sink's yield lets the runtime take it in before the loop selects again.
+            // SAFETY: `raise` has no memory effects; the runtime's handler is installed (the
+            // loop's `Signals` came before its first read), so the process is not ended.
+            assert_eq!(unsafe { libc::raise(libc::SIGTERM) }, 0, "raise(SIGTERM)");
             buf.get_mut(..ahead.len())?.copy_from_slice(&ahead);
             Some(ahead.len())
         }
