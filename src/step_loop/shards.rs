@@ -6,10 +6,10 @@
 //! writes the workers' outputs behind the reader's, not copied), so a record is still answered
 //! before the next read's records are stepped (the next read itself may be taken meanwhile:
 //! [`Shards::process`] runs the loop's read-ahead while a worker finishes). Each instance's
-//! outputs keep their order; the order between instances within one read follows the threads. The records are handed over in one reused byte buffer
-//! per thread (no allocation per record). A thread waiting for the other side spins briefly
-//! before it sleeps (`SPIN`): waking a sleeping thread costs more than the wait between two
-//! reads while records flow.
+//! outputs keep their order; the order between instances within one read follows the threads.
+//! The records are handed over in one reused byte buffer per thread (no allocation per record).
+//! A thread waiting for the other side spins briefly before it sleeps (`SPIN`): waking a
+//! sleeping thread costs more than the wait between two reads while records flow.
 
 use crate::processor::Processor;
 use crate::processor::clock::Wall;
