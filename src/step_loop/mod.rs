@@ -7,10 +7,11 @@
 //! the buffer the next one is taken while the slowest worker finishes, see
 //! [`Source::read_ahead`]); the wall clock of each read; waking when an instance's `delay`
 //! falls due while the input is silent ([`Processor::advance_wall`]); the signals (SIGTERM and
-//! SIGINT end the run, SIGHUP reloads the spec); the save points of a state store (`--state-interval`, and every ending)
-//! with its [`crate::state::Backend`]; the marks of the step watchdog. Stepping itself is on one
-//! thread or spread over several ([`shards`]), or with a store shared by a fleet ([`shared`]:
-//! instances restored as they arrive, the partition lease followed).
+//! SIGINT end the run, SIGHUP reloads the spec); the save points of a state store
+//! (`--state-interval`, and every ending) with its [`crate::state::Backend`]; the marks of the
+//! step watchdog. Stepping itself is on one thread or spread over several ([`shards`]), or with
+//! a store shared by a fleet ([`shared`]: instances restored as they arrive, the partition lease
+//! followed).
 //!
 //! Each loop iteration selects, `biased`, in this order: SIGTERM, SIGINT, SIGHUP (a signal is
 //! never starved by input), the periodic save, the lease poll, the input, and last the
