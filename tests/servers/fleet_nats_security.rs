@@ -17,7 +17,6 @@ use crate::support::servers;
 use nats_cluster::Cluster;
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
-use std::time::Duration;
 
 use crate::support::BIN;
 
@@ -430,12 +429,21 @@ fn fleet_mistakes_are_refused_or_loud() {
     // Partition p0 was served and released (its primary now misconfigured); p1 has a holder.
     let (err, code) = finish(spawn(format!("{base}/fleet?lease=p0&ttl=1s")));
     assert_eq!(code, 0, "{err}");
-    let holder = spawn(format!("{base}/fleet?lease=p1&ttl=1s"));
-    std::thread::sleep(Duration::from_millis(800));
+    // p1's holder: a TTL of 3 s, so that a holder starved of the CPU for a second on a busy
+    // machine keeps its lease (renewed every TTL/4); waited for until it says it holds it.
+    let mut holder = LiveChild::spawn(&[
+        "run",
+        "--no-passthrough",
+        "--state",
+        &format!("{base}/fleet?lease=p1&ttl=3s"),
+    ]);
+    holder.wait_err("p1's holder taking its lease", 0, |l| {
+        l.starts_with("I! lease: partition p1: held by this process")
+    });
 
     // A standby of p1 given another bucket: refused at start (exit 2), naming both buckets,
     // before that bucket is created.
-    let (err, code) = finish(spawn(format!("{base}/fleet_b?lease=p1&ttl=1s")));
+    let (err, code) = finish(spawn(format!("{base}/fleet_b?lease=p1&ttl=3s")));
     assert_eq!(code, 2, "{err}");
     assert!(!err.contains("created bucket fleet_b"), "{err}");
     assert!(
@@ -446,7 +454,7 @@ fn fleet_mistakes_are_refused_or_loud() {
 
     // p0's process given p1's lease name: it stands by and says that p0 has no holder (its
     // first report comes after three TTLs of standing by; waited for, never slept on).
-    let url = format!("{base}/fleet?lease=p1&ttl=1s");
+    let url = format!("{base}/fleet?lease=p1&ttl=3s");
     let mut wrong = LiveChild::spawn(&["run", "--no-passthrough", "--state", &url]);
     let line = wrong.wait_err("the standby's report", 0, |l| {
         l.starts_with("W! lease: partition p1: standing by for ")
@@ -458,6 +466,7 @@ fn fleet_mistakes_are_refused_or_loud() {
     );
     let (_, err, code) = wrong.finish();
     assert_eq!(code, 0, "{err}");
-    let (err, code) = finish(holder);
+    let (_, err, code) = holder.finish();
     assert_eq!(code, 0, "{err}");
+    assert!(!err.contains("taken over by another process"), "{err}");
 }
