@@ -50,6 +50,8 @@ type Seen = (Vec<(String, Vec<u8>)>, Vec<Published>);
 struct Observer {
     /// Telemetry messages seen so far, per partition.
     seen: std::sync::Arc<[std::sync::atomic::AtomicUsize; 2]>,
+    /// Actions seen so far.
+    actions: std::sync::Arc<std::sync::atomic::AtomicUsize>,
     stop: tokio::sync::oneshot::Sender<()>,
     done: std::thread::JoinHandle<Seen>,
 }
@@ -62,6 +64,8 @@ impl Observer {
         let url = url.to_string();
         let seen: std::sync::Arc<[std::sync::atomic::AtomicUsize; 2]> = Default::default();
         let counts = std::sync::Arc::clone(&seen);
+        let actions_seen: std::sync::Arc<std::sync::atomic::AtomicUsize> = Default::default();
+        let action_count = std::sync::Arc::clone(&actions_seen);
         let done = std::thread::spawn(move || {
             let rt = tokio::runtime::Builder::new_current_thread()
                 .enable_all()
@@ -93,6 +97,7 @@ impl Observer {
                         Some(m) = actions.next() => {
                             let robot = m.subject.as_str().split('.').nth(1).unwrap_or("").to_string();
                             a.push((Instant::now(), robot, String::from_utf8_lossy(&m.payload).into_owned()));
+                            action_count.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
                         }
                         _ = &mut stopped => break,
                     }
@@ -101,7 +106,12 @@ impl Observer {
             })
         });
         ready_rx.recv_timeout(Duration::from_secs(30)).unwrap();
-        Observer { seen, stop, done }
+        Observer {
+            seen,
+            actions: actions_seen,
+            stop,
+            done,
+        }
     }
 
     /// Wait until partition `p` has had `n` telemetry messages; returns the time.
@@ -115,6 +125,10 @@ impl Observer {
             std::thread::sleep(Duration::from_millis(5));
         }
         Instant::now()
+    }
+
+    fn actions(&self) -> usize {
+        self.actions.load(std::sync::atomic::Ordering::SeqCst)
     }
 
     fn total(&self) -> usize {
@@ -330,8 +344,31 @@ fn standbys_take_over_killed_primaries_with_the_monitor_state() {
         );
         assert!(!passwords.iter().any(|p| err.contains(p.as_str())), "{err}");
     }
-    // Past the lease TTL and a replay: the standbys are active and caught up.
-    std::thread::sleep(Duration::from_secs(4));
+    // Waited for, never slept on: each standby has taken over, been given every record of its
+    // partition and stepped them all.
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while !standbys.iter().enumerate().all(|(p, s)| {
+        s.caught_up() && s.fed() == observer.seen[p].load(std::sync::atomic::Ordering::SeqCst)
+    }) {
+        assert!(
+            Instant::now() < deadline,
+            "the standbys never stepped every record of their partitions"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    // Then every action published has reached the observer, unless the cluster lost some with
+    // its node (at most once): those count as lost below.
+    let published = || -> usize {
+        primaries
+            .iter()
+            .chain(&standbys)
+            .map(|s| s.published())
+            .sum()
+    };
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while observer.actions() < published() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+    }
 
     let mut finished = Vec::new();
     for s in primaries.into_iter().chain(standbys) {

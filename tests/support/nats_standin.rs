@@ -17,9 +17,11 @@
 
 use influxdb_line_protocol::{FieldValue, parse_lines};
 use serde_json::{Map, Value, json};
+use std::collections::HashSet;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::mpsc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, mpsc};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -137,10 +139,23 @@ pub fn action_message(line: &str) -> Option<(String, String)> {
 /// One published action: when, on which robot's subject, the JSON message.
 pub type Published = (Instant, String, String);
 
+/// What a stand-in has done so far, readable while it runs.
+#[derive(Default)]
+struct Progress {
+    /// Records written to the processor's stdin.
+    fed: AtomicUsize,
+    /// Actions published.
+    published: AtomicUsize,
+    /// The last record written to the processor's stdin, and every line it wrote back.
+    last_fed: Mutex<Option<String>>,
+    written_back: Mutex<HashSet<String>>,
+}
+
 /// A running stand-in Telegraf of one partition.
 pub struct NatsStandIn {
     pub name: String,
     child: Child,
+    progress: Arc<Progress>,
     stop: Option<tokio::sync::oneshot::Sender<()>>,
     input: Option<JoinHandle<usize>>,
     output: Option<JoinHandle<Vec<Published>>>,
@@ -206,6 +221,8 @@ impl NatsStandIn {
         let client = ready_rx
             .recv_timeout(Duration::from_secs(30))
             .expect("stand-in subscribed");
+        let progress = Arc::new(Progress::default());
+        let fed_progress = Arc::clone(&progress);
         let input = std::thread::spawn(move || {
             let mut fed = 0;
             for line in lines_rx {
@@ -213,9 +230,12 @@ impl NatsStandIn {
                     break;
                 }
                 fed += 1;
+                *fed_progress.last_fed.lock().unwrap() = Some(line);
+                fed_progress.fed.fetch_add(1, Ordering::SeqCst);
             }
             fed
         });
+        let out_progress = Arc::clone(&progress);
         // outputs.mqtt: each action on its robot's subject.
         let output = std::thread::spawn(move || {
             let rt = tokio::runtime::Builder::new_current_thread()
@@ -225,13 +245,16 @@ impl NatsStandIn {
             let mut published = Vec::new();
             for line in BufReader::new(stdout).lines() {
                 let Ok(line) = line else { break };
-                if let Some((robot, message)) = action_message(&line) {
+                let action = action_message(&line);
+                out_progress.written_back.lock().unwrap().insert(line);
+                if let Some((robot, message)) = action {
                     let subject = format!("robots.{robot}.action");
                     rt.block_on(async {
                         let _ = client.publish(subject, message.clone().into()).await;
                         let _ = client.flush().await;
                     });
                     published.push((Instant::now(), robot, message));
+                    out_progress.published.fetch_add(1, Ordering::SeqCst);
                 }
             }
             published
@@ -244,11 +267,29 @@ impl NatsStandIn {
         NatsStandIn {
             name: name.to_string(),
             child,
+            progress,
             stop: Some(stop),
             input: Some(input),
             output: Some(output),
             stderr: Some(stderr),
         }
+    }
+
+    /// Records written to the processor so far.
+    pub fn fed(&self) -> usize {
+        self.progress.fed.load(Ordering::SeqCst)
+    }
+
+    /// Actions published so far.
+    pub fn published(&self) -> usize {
+        self.progress.published.load(Ordering::SeqCst)
+    }
+
+    /// Whether the processor has written back (passed through) the last record fed to it, i.e.
+    /// stepped every record it was given (a standby writes back nothing until it takes over).
+    pub fn caught_up(&self) -> bool {
+        let last = self.progress.last_fed.lock().unwrap().clone();
+        last.is_some_and(|l| self.progress.written_back.lock().unwrap().contains(&l))
     }
 
     pub fn pid(&self) -> u32 {
