@@ -592,3 +592,66 @@ mod udp {
         );
     }
 }
+
+/// A recursive function in the spec that a record drives too deep (or that never ends): that
+/// output is an error value, dropped with a warning naming it and the record's time, and the
+/// process lives on. The records before and after are answered, on the main thread and on the
+/// workers of `--threads 2` (whose stacks are smaller). Before, the stack overflowed: the
+/// process aborted and lost what it had not written yet.
+#[test]
+fn a_recursion_too_deep_for_a_record_drops_that_value_and_the_run_goes_on() {
+    let spec = "in x: Events[Int]\n\
+        def depth(n: Int): Int = if n <= 0 then 0 else 1 + depth(n - 1)\n\
+        def forever(n: Int): Int = forever(n)\n\
+        def d = slift1(x, depth)\n\
+        def never = filter(slift1(x, forever), x < 0)\n\
+        out d\nout never\n";
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rec.tessla");
+    std::fs::write(&path, spec).unwrap();
+    let mut input = String::new();
+    for r in ["a", "b", "c", "d"] {
+        input.push_str(&format!(
+            "m,robot={r} x=10i 1000\nm,robot={r} x=10000000i 2000\nm,robot={r} x=-1i 3000\nm,robot={r} x=5000i 4000\n"
+        ));
+    }
+    for threads in ["1", "2"] {
+        let f = run_bytes(
+            &[
+                "run",
+                "--spec",
+                path.to_str().unwrap(),
+                "--no-passthrough",
+                "--instance-by",
+                "robot",
+                "--threads",
+                threads,
+            ],
+            input.clone().into_bytes(),
+            DEADLINE,
+        );
+        assert_eq!(f.code, Some(0), "{}", f.stderr);
+        let out = f.stdout_text();
+        for r in ["a", "b", "c", "d"] {
+            for want in [
+                format!("tessla,robot={r} d=10i 1000"),
+                format!("tessla,robot={r} d=0i 3000"),
+                format!("tessla,robot={r} d=5000i 4000"),
+            ] {
+                assert!(out.lines().any(|l| l == want), "{want} missing:\n{out}");
+            }
+        }
+        assert!(
+            !out.lines().any(|l| l.ends_with(" 2000")),
+            "a value at 2000:\n{out}"
+        );
+        assert!(
+            f.stderr.contains("output `d` at 2000")
+                && f.stderr
+                    .contains("runtime error: function calls nested more than 20000 deep"),
+            "{}",
+            f.stderr
+        );
+        assert!(f.stderr.contains("output `never` at 3000"), "{}", f.stderr);
+    }
+}
