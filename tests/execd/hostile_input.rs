@@ -648,10 +648,41 @@ fn a_recursion_too_deep_for_a_record_drops_that_value_and_the_run_goes_on() {
         assert!(
             f.stderr.contains("output `d` at 2000")
                 && f.stderr
-                    .contains("runtime error: function calls nested more than 20000 deep"),
+                    .contains("runtime error: function calls nested more than 100000 deep"),
             "{}",
             f.stderr
         );
         assert!(f.stderr.contains("output `never` at 3000"), "{}", f.stderr);
     }
+}
+
+/// The same recursion in a constant, which the spec's loading folds: the constant is the error
+/// value, each output computed from it is dropped with a warning, the others are answered, and
+/// memory stays bounded. Before, the fold grew its stack on the heap without end (24 GB, then
+/// the kernel killed the process).
+#[test]
+fn a_constant_that_recurses_forever_is_an_error_value_not_an_endless_load() {
+    let spec = "in x: Events[Int]\n\
+        def forever(n: Int): Int = forever(n)\n\
+        def broken = x + forever(1)\n\
+        out broken\nout x\n";
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rec.tessla");
+    std::fs::write(&path, spec).unwrap();
+    let f = run_bytes(
+        &["run", "--spec", path.to_str().unwrap(), "--no-passthrough"],
+        b"m x=1i 1000\nm x=2i 2000\n".to_vec(),
+        DEADLINE,
+    );
+    assert_eq!(f.code, Some(0), "{}", f.stderr);
+    assert_eq!(f.stdout_text(), "tessla x=1i 1000\ntessla x=2i 2000\n");
+    assert!(
+        f.stderr.contains("output `broken` at 1000")
+            && f.stderr
+                .contains("function calls nested more than 100000 deep"),
+        "{}",
+        f.stderr
+    );
+    let peak = f.peak_rss_kib.unwrap_or(0);
+    assert!(peak < 1024 * 1024, "peak RSS {peak} KiB");
 }

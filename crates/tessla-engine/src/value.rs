@@ -108,6 +108,51 @@ pub trait Callable: fmt::Debug + Send + Sync {
     fn call(&self, args: &[Value]) -> Value;
 }
 
+/// Most calls of a spec's functions nested in one another, in one evaluation (the runtime's
+/// and the constant fold's alike).
+pub const MAX_CALL_DEPTH: u32 = 100_000;
+
+/// Stack a call needs left before it runs; below it, the next calls run on a new segment.
+const CALL_RED_ZONE: usize = 128 * 1024;
+const CALL_STACK_SEGMENT: usize = 2 * 1024 * 1024;
+
+thread_local! {
+    /// Calls of a spec's functions running now on this thread, nested.
+    static CALL_DEPTH: std::cell::Cell<u32> = const { std::cell::Cell::new(0) };
+}
+
+/// Run `call`, one call of a spec's function (the runtime's compiled code or the constant
+/// fold), nested in the calls running now on this thread. It runs on a stack that grows on the
+/// heap, so a recursion as deep as [`MAX_CALL_DEPTH`] needs no large thread stack; a call
+/// deeper than that (a recursion that never ends, or one too deep for its argument) is an
+/// error value, as TeSSLa's runtime errors are: the output is dropped with a warning and the
+/// monitor goes on, where the process would die of a stack overflow (or, growing its stack,
+/// of memory).
+#[inline]
+pub fn nested_call(call: impl FnOnce() -> Value) -> Value {
+    CALL_DEPTH.with(|depth| {
+        let d = depth.get();
+        if d >= MAX_CALL_DEPTH {
+            return calls_too_deep();
+        }
+        depth.set(d + 1);
+        let v = stacker::maybe_grow(CALL_RED_ZONE, CALL_STACK_SEGMENT, call);
+        depth.set(d);
+        v
+    })
+}
+
+#[cold]
+fn calls_too_deep() -> Value {
+    Value::Error(RuntimeError::Other(
+        format!(
+            "function calls nested more than {MAX_CALL_DEPTH} deep (a recursion that does not \
+             end, or is too deep for this input)"
+        )
+        .into(),
+    ))
+}
+
 /// Call a native strictly: the first error argument is the result. The one calling convention
 /// of natives, for the runtime and the constant fold.
 #[inline]

@@ -11,10 +11,11 @@
 //!
 //! A fold gives exactly what the runtime's compiled code gives for the same code: the same
 //! branches of `if`, `&&` and `||`, `()` for a slot beyond the frame, and a program function
-//! without a body (still being lowered) an error value when called.
+//! without a body (still being lowered) an error value when called, and a recursion deeper
+//! than [`crate::value::MAX_CALL_DEPTH`] the same error value.
 
 use crate::ir::code::{Callee, Code, FnId, Function, Prim};
-use crate::value::{Callable, RuntimeError, Value, call_function_value, call_native};
+use crate::value::{Callable, RuntimeError, Value, call_function_value, call_native, nested_call};
 use std::sync::Arc;
 
 /// The semantics of a primitive on argument values (the runtime's, shared).
@@ -87,7 +88,7 @@ fn not_compiled() -> Value {
 /// Call function `fun` of `table` with `frame`.
 fn call(prim: Semantics, table: &Arc<[Function]>, fun: FnId, frame: &[Value]) -> Value {
     match table.get(fun).and_then(|f| f.body.as_ref()) {
-        Some(body) => eval(prim, table, body, frame),
+        Some(body) => nested_call(|| eval(prim, table, body, frame)),
         None => not_compiled(),
     }
 }

@@ -25,7 +25,9 @@ use crate::ir::{BinOp, UnaryOp};
 use crate::runtime::collections;
 use crate::runtime::flat::{IntOp, KArg, Kernel, Plan};
 use crate::runtime::ops;
-use crate::value::{Callable, NativeFn, RuntimeError, Value, call_function_value, call_native};
+use crate::value::{
+    Callable, NativeFn, RuntimeError, Value, call_function_value, call_native, nested_call,
+};
 use std::sync::{Arc, OnceLock, Weak};
 
 /// Compiled code: evaluates over a frame, calling program functions through the context.
@@ -71,25 +73,14 @@ impl Ctx {
         self.plan.as_ref()
     }
 
-    /// Call function `id` with `frame`. A spec's recursive function runs on a stack that grows
-    /// on the heap, up to [`MAX_CALL_DEPTH`] nested calls; a call deeper than that (a recursion
-    /// that does not end, or one on a huge argument) is an error value, as TeSSLa's runtime
-    /// errors are, and the monitor goes on: the process never dies of a stack overflow.
+    /// Call function `id` with `frame`, nested in the calls running now ([`nested_call`]: a
+    /// recursion too deep is an error value, never a stack overflow).
     #[inline]
     pub fn call(&self, id: FnId, frame: &[Value]) -> Value {
-        let Some(f) = self.fns.get(id) else {
-            return not_compiled();
-        };
-        CALL_DEPTH.with(|depth| {
-            let d = depth.get();
-            if d >= MAX_CALL_DEPTH {
-                return too_deep();
-            }
-            depth.set(d + 1);
-            let v = stacker::maybe_grow(CALL_RED_ZONE, CALL_STACK_SEGMENT, || f(self, frame));
-            depth.set(d);
-            v
-        })
+        match self.fns.get(id) {
+            Some(f) => nested_call(|| f(self, frame)),
+            None => not_compiled(),
+        }
     }
 
     /// A function value of `fun` over `captured`.
@@ -519,28 +510,6 @@ impl Callable for NativeClosure {
     fn call(&self, args: &[Value]) -> Value {
         call_native(self.0, args)
     }
-}
-
-/// Most nested calls of a spec's functions in one evaluation (see [`Ctx::call`]).
-pub const MAX_CALL_DEPTH: u32 = 20_000;
-/// Stack a call needs left before it runs; below it, the next calls run on a new segment.
-const CALL_RED_ZONE: usize = 128 * 1024;
-const CALL_STACK_SEGMENT: usize = 2 * 1024 * 1024;
-
-thread_local! {
-    /// Calls of a spec's functions now running on this thread, nested.
-    static CALL_DEPTH: std::cell::Cell<u32> = const { std::cell::Cell::new(0) };
-}
-
-#[cold]
-fn too_deep() -> Value {
-    Value::Error(RuntimeError::Other(
-        format!(
-            "function calls nested more than {MAX_CALL_DEPTH} deep (a recursion that does not \
-             end, or is too deep for this input)"
-        )
-        .into(),
-    ))
 }
 
 fn not_compiled() -> Value {
