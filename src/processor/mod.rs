@@ -1129,13 +1129,8 @@ pub(crate) mod tests {
     /// be: missing, repeated and non-Float elements, other index forms, keys of the prefix that
     /// are no index, escapes, redelivered and late records.
     fn list_records(n: usize) -> String {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move |m: u64| {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed % m
-        };
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0x9e37_79b9);
+        let mut next = move |m: u64| rand::RngCore::next_u64(&mut rng) % m;
         let mut text = String::new();
         let mut last = String::new();
         for r in 0..n {

@@ -624,11 +624,9 @@ mod tests {
     /// Short decimals take the division fast path; it must agree with `str::parse` exactly.
     #[test]
     fn short_decimals_equal_str_parse() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0x9e37_79b9);
         for _ in 0..200_000 {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
+            let seed = rand::RngCore::next_u64(&mut rng);
             let int = seed % 100_000;
             let frac_len = ((seed >> 20) % 12) as usize;
             let frac = (seed >> 32) % 10u64.pow(frac_len as u32);
@@ -647,15 +645,13 @@ mod tests {
     /// The one-pass reader of short floats gives `number`'s value and ends where the token ends.
     #[test]
     fn short_float_equals_number() {
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0x2545_f491);
+        let mut next = move || rand::RngCore::next_u64(&mut rng);
         let alphabet = b"0123456789.-iue,";
         for _ in 0..300_000 {
             let mut tok = Vec::new();
-            for _ in 0..(seed % 19) {
-                seed ^= seed << 13;
-                seed ^= seed >> 7;
-                seed ^= seed << 17;
-                tok.push(alphabet[(seed % alphabet.len() as u64) as usize]);
+            for _ in 0..(next() % 19) {
+                tok.push(alphabet[(next() % alphabet.len() as u64) as usize]);
             }
             let text = String::from_utf8(tok).unwrap();
             let end = text.find([',', ' ']).unwrap_or(text.len());
@@ -693,13 +689,8 @@ mod tests {
     /// The table finds exactly the repeated keys a set finds, at every width it serves and past it.
     #[test]
     fn duplicate_keys_found_as_a_set_finds_them() {
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0x2545_f491);
+        let mut next = move || rand::RngCore::next_u64(&mut rng);
         for round in 0..3000 {
             let n = match round % 6 {
                 0 => (next() % 20) as usize,
@@ -751,13 +742,8 @@ mod tests {
     /// bad either way.
     #[test]
     fn a_list_read_apart_holds_what_the_fields_hold() {
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = move |m: u64| {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed % m
-        };
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0x2545_f491);
+        let mut next = move |m: u64| rand::RngCore::next_u64(&mut rng) % m;
         let keys = [
             "l_0",
             "l_1",

@@ -613,14 +613,12 @@ mod tests {
             out
         }
         let alphabet = b"ab\"\\\n=, #\t";
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0x2545_f491);
+        let mut next = move || rand::RngCore::next_u64(&mut rng);
         for _ in 0..20_000 {
             let mut input = Vec::new();
-            for _ in 0..(seed % 80) {
-                seed ^= seed << 13;
-                seed ^= seed >> 7;
-                seed ^= seed << 17;
-                input.push(alphabet[(seed % alphabet.len() as u64) as usize]);
+            for _ in 0..(next() % 80) {
+                input.push(alphabet[(next() % alphabet.len() as u64) as usize]);
             }
             let want = reference(&input);
             for chunk in [1, 3, 64] {

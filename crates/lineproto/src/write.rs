@@ -470,13 +470,8 @@ mod tests {
     /// neighbours of powers of ten and of halfway cases are where two shortest forms compete).
     #[test]
     fn write_float_equals_display_on_millions_of_values() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0x9e37_79b9);
+        let mut next = move || rand::RngCore::next_u64(&mut rng);
         let mut n = 0;
         for _ in 0..1_000_000 {
             let f = f64::from_bits(next());

@@ -22,22 +22,19 @@ const TRICKY: &[&str] = &[
     ".", "e", "%", "f\"", "=>", ":", ",", ";", "@", " ", "ms", "-.", "\t", "\u{0}",
 ];
 
-/// xorshift64*: a fixed-seed generator, so failures reproduce.
-struct Rng(u64);
+/// A fixed-seed generator (ChaCha), so failures reproduce.
+struct Rng(rand_chacha::ChaCha8Rng);
 
 impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    fn seeded(seed: u64) -> Rng {
+        Rng(rand::SeedableRng::seed_from_u64(seed))
     }
 
     fn below(&mut self, n: usize) -> usize {
         if n == 0 {
             0
         } else {
-            (self.next() % n as u64) as usize
+            (rand::RngCore::next_u64(&mut self.0) % n as u64) as usize
         }
     }
 }
@@ -117,7 +114,7 @@ fn mutated_specs_never_panic() {
             seeds.push(t);
         }
     }
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let mut rng = Rng::seeded(0x9e37_79b9);
     for seed in &seeds {
         check(seed);
         for _ in 0..60 {

@@ -26,11 +26,9 @@ pub fn unordered(line: &str) -> String {
     let (head, rest) = line.split_once(' ').unwrap_or_default();
     let (fields, ts) = rest.rsplit_once(' ').unwrap_or_default();
     let mut fields: Vec<&str> = fields.split(',').collect();
-    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0x2545_f491);
     for i in (1..fields.len()).rev() {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
+        let seed = rand::RngCore::next_u64(&mut rng);
         fields.swap(i, (seed % (i as u64 + 1)) as usize);
     }
     format!("{head} {} {ts}", fields.join(","))

@@ -502,11 +502,9 @@ mod tests {
             Value::Bool(true),
             Value::Unit,
         ];
-        let mut x: u64 = 0x9e37_79b9_7f4a_7c15;
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0x9e37_79b9);
         for _ in 0..600 {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
+            let x = rand::RngCore::next_u64(&mut rng);
             keys.push(match x % 3 {
                 0 => Value::Int((x >> 8) as i64 % 5000),
                 1 => Value::Str(format!("item{}", (x >> 8) % 700).into()),

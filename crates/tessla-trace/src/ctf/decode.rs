@@ -752,13 +752,8 @@ mod tests {
               event.header := struct { enum : uint8_t { a = 0, b = 1 } id; variant <id> { uint8_t a; u32 b; } v; }; };
             event { name = \"x\"; id = 0; fields := struct { string s; s7 n; float f; uint8_t len; s7 seq[len]; }; };
             event { name = \"y\"; id = 1; fields := struct { enum : uint8_t { p, q } tag; variant <tag> { string p; struct { uint8_t z; } q; } v; uint8_t arr[3]; }; };";
-        let mut seed: u64 = 0x9E37_79B9_7F4A_7C15;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0x9e37_79b9);
+        let mut next = move || rand::RngCore::next_u64(&mut rng);
         for _ in 0..3000 {
             let len = (next() % 96) as usize;
             let mut data: Vec<u8> = (0..len).map(|_| next() as u8).collect();

@@ -353,13 +353,8 @@ mod tests {
 
     #[test]
     fn the_natives_equal_the_plain_definitions() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed
-        };
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0x9e37_79b9);
+        let mut next = move || rand::RngCore::next_u64(&mut rng);
         let bounds = [
             0.0,
             1.0,
