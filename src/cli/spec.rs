@@ -15,7 +15,8 @@ pub struct SpecOptions {
     pub base_time: Option<String>,
     /// Override a top-level constant of the spec: `--set delta=0.05` (repeatable). `run` and
     /// `check` without any --set read the environment variable TESSLA_SET instead:
-    /// NAME=VALUE assignments separated by spaces (`TESSLA_SET="delta=0.05 gain=1.0"`).
+    /// NAME=VALUE assignments separated by spaces (`TESSLA_SET="delta=0.05 gain=1.0"`; a
+    /// string value in double quotes may hold spaces: `greeting="hello world"`).
     #[arg(long = "set", value_name = "NAME=VALUE")]
     pub set: Vec<String>,
 }
@@ -31,9 +32,36 @@ impl SpecOptions {
         if self.set.is_empty()
             && let Ok(v) = std::env::var(SET_ENV)
         {
-            self.set = v.split_whitespace().map(str::to_string).collect();
+            self.set = assignments(&v);
         }
     }
+}
+
+/// The assignments of a [`SET_ENV`] value: split at whitespace outside TeSSLa string literals,
+/// so that `greeting="hello world" delta=0.1` is two (a literal's `\"` does not end it).
+/// Hand-written: shell-style splitters (`shlex`) would strip the quotes the literal needs.
+fn assignments(v: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut cur = String::new();
+    let (mut quoted, mut escaped) = (false, false);
+    for c in v.chars() {
+        if quoted {
+            quoted = escaped || c != '"';
+            escaped = !escaped && c == '\\';
+        } else if c.is_whitespace() {
+            if !cur.is_empty() {
+                out.push(std::mem::take(&mut cur));
+            }
+            continue;
+        } else {
+            quoted = c == '"';
+        }
+        cur.push(c);
+    }
+    if !cur.is_empty() {
+        out.push(cur);
+    }
+    out
 }
 
 impl SpecOptions {
@@ -77,5 +105,31 @@ pub fn require_outputs(program: &tessla_engine::Program, spec: &str) -> Result<(
         ))
     } else {
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::assignments;
+
+    #[test]
+    fn assignments_split_at_spaces_outside_string_literals() {
+        assert_eq!(
+            assignments("  delta=0.05\tgain=1.0 \n"),
+            ["delta=0.05", "gain=1.0"]
+        );
+        assert_eq!(
+            assignments(r#"greeting="hello world" delta=0.1"#),
+            [r#"greeting="hello world""#, "delta=0.1"]
+        );
+        // An escaped quote does not end the literal; an escaped backslash before the quote
+        // does not keep it open.
+        assert_eq!(
+            assignments(r#"a="say \"hi there\"" b="c:\\" d=1"#),
+            [r#"a="say \"hi there\"""#, r#"b="c:\\""#, "d=1"]
+        );
+        assert!(assignments("   ").is_empty());
+        // An unclosed literal keeps the rest: the spec's check then names the bad value.
+        assert_eq!(assignments(r#"a="x y"#), [r#"a="x y"#]);
     }
 }

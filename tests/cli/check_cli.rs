@@ -55,3 +55,39 @@ fn a_base_time_of_an_unknown_unit_is_a_command_line_error() {
     assert_eq!((code, out.as_str()), (Some(2), ""));
     assert!(err.contains("unknown unit in base time `1foo`"), "{err}");
 }
+
+/// `TESSLA_SET` (read by `run` and `check` without `--set`) splits at spaces outside string
+/// literals: a string constant set there may hold spaces, as with `--set` on the command line.
+#[test]
+fn tessla_set_takes_a_string_with_spaces() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("spec.tessla");
+    std::fs::write(
+        &path,
+        "in x: Events[Int]\ndef greeting = \"hi\"\ndef k = 1\n\
+         def y = slift1(x, (v: Int) => String.concat(greeting, toString(v + k)))\nout y\n",
+    )
+    .unwrap();
+    let mut child = Command::new(BIN)
+        .args(["run", "--no-passthrough", "--spec"])
+        .arg(&path)
+        .env("TESSLA_SET", "greeting=\"hello \\\"big\\\" world \" k=2")
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    {
+        use std::io::Write;
+        let mut stdin = child.stdin.take().unwrap();
+        stdin.write_all(b"m x=1i 1000\n").unwrap();
+    }
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert_eq!(
+        String::from_utf8_lossy(&out.stdout),
+        "tessla y=\"hello \\\"big\\\" world 3\" 1000\n",
+        "{err}"
+    );
+}
