@@ -224,16 +224,14 @@ impl NatsStandIn {
         let progress = Arc::new(Progress::default());
         let fed_progress = Arc::clone(&progress);
         let input = std::thread::spawn(move || {
-            let mut fed = 0;
             for line in lines_rx {
                 if stdin.write_all(line.as_bytes()).is_err() || stdin.write_all(b"\n").is_err() {
                     break;
                 }
-                fed += 1;
                 *fed_progress.last_fed.lock().unwrap() = Some(line);
                 fed_progress.fed.fetch_add(1, Ordering::SeqCst);
             }
-            fed
+            fed_progress.fed.load(Ordering::SeqCst)
         });
         let out_progress = Arc::clone(&progress);
         // outputs.mqtt: each action on its robot's subject.
