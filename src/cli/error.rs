@@ -7,6 +7,7 @@
 //! - 2: a spec error (parse, type, include ...) or a bad command line
 //! - 3: an I/O error that stops the run (input file unreadable, UDP address not bindable)
 //! - 4: `run`'s step watchdog: a step made no progress for `--step-timeout`
+//! - 5: `spec publish`, `spec rollback`, `spec decide`: the fleet aborted the rollout
 
 use std::fmt;
 
@@ -19,6 +20,8 @@ pub enum Code {
     Spec = 2,
     /// 3: an I/O error that stops the run.
     Io = 3,
+    /// 5: the fleet aborted a rollout (`spec publish`, `rollback`, `decide`).
+    Aborted = 5,
 }
 
 /// A subcommand's failure: the exit code and what to tell the user (written to stderr by
@@ -43,6 +46,10 @@ impl CliError {
 
     pub fn io(message: impl Into<String>) -> Self {
         Self::new(Code::Io, message)
+    }
+
+    pub fn aborted(message: impl Into<String>) -> Self {
+        Self::new(Code::Aborted, message)
     }
 
     pub fn runtime(message: impl Into<String>) -> Self {

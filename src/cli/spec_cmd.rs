@@ -1,26 +1,30 @@
-//! `tessla-telegraf spec publish|list|status|rollback|keygen`: the operator's command for the
-//! fleet's spec channel (`spec_feed::nats`). It logs in with the URL, TLS and credential options
-//! of `--state` (`--channel URL`) and signs what it publishes with the operator's seed
-//! (`--sign-key-file FILE` or `TESSLA_SIGN_KEY`, never on the command line).
+//! `tessla-telegraf spec publish|decide|abort|list|status|rollback|keygen`: the operator's
+//! command for the fleet's spec channel (`spec_feed::nats`). It logs in with the URL, TLS and
+//! credential options of `--state` (`--channel URL`) and signs what it publishes and decides
+//! with the operator's seed (`--sign-key-file FILE` or `TESSLA_SIGN_KEY`, never on the command
+//! line).
 //!
 //! Owns: checking a spec before it is published (a spec that does not check is refused here,
-//! with the full diagnostic, exit 2), the `--from` time and `--select` syntax, which version a
-//! rollback publishes, and the tables and JSON it prints.
+//! with the full diagnostic, exit 2), waiting for the processes' votes and writing the fleet's
+//! decision (the rule is `spec_feed::decide`'s; exit 5 on an abort), the `--from` time and
+//! `--select` syntax, which version a rollback publishes, and the tables and JSON it prints.
 
 use super::error::{CliError, CliResult};
 use super::spec::{SpecOptions, load_options, require_outputs};
 use crate::processor::versions::Selector;
 use crate::spec_feed::bundle::Bundle;
-use crate::spec_feed::nats::{Listed, Operator, Status, parse_url};
+use crate::spec_feed::decide;
+use crate::spec_feed::nats::{Decided, Listed, Operator, Status, parse_url};
 use crate::spec_feed::sign::read_signing_key;
 use crate::spec_feed::status::{now_ns, show_time};
-use crate::spec_feed::{BASE, Rollout};
+use crate::spec_feed::{BASE, Decision, Phase, Rollout};
 use crate::state::nats_conn::Failure;
 use crate::state::url::Url;
 use clap::{Args, Subcommand};
 use serde_json::{Value, json};
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
 #[derive(Debug, Args, Clone)]
 pub struct SpecArgs {
@@ -30,9 +34,15 @@ pub struct SpecArgs {
 
 #[derive(Debug, Subcommand, Clone)]
 pub enum SpecAction {
-    /// Check a spec (with its includes), put it in the channel and publish a signed rollout of
-    /// it: every process following the channel checks it and switches to it from --from.
+    /// Check a spec (with its includes), put it in the channel and propose a signed rollout of
+    /// it; every live process following the channel checks it and votes, and the fleet's
+    /// decision (commit when all accepted, else abort) is written once: exit 5 on an abort.
     Publish(PublishArgs),
+    /// Decide a rollout left undecided (its publisher stopped before deciding): count the
+    /// votes of the processes alive now and write the decision.
+    Decide(DecideArgs),
+    /// Abort an undecided rollout outright (no process acts on it).
+    Abort(AbortArgs),
     /// Every rollout: revision, version, label, from, selector, published, signer.
     List(ListArgs),
     /// The rollouts and what every process made of each (accepted, or refused and why).
@@ -82,11 +92,47 @@ pub struct PublishArgs {
     #[arg(long, value_name = "TAG=V1,V2[;TAG=V]", value_parser = Selector::parse)]
     pub select: Option<Selector>,
     #[command(flatten)]
+    pub vote: VoteArgs,
+    #[command(flatten)]
     pub channel: ChannelArgs,
     #[command(flatten)]
     pub sign: SignArgs,
     #[command(flatten)]
     pub spec_options: SpecOptions,
+}
+
+/// How long to wait for the processes' votes.
+#[derive(Debug, Args, Clone)]
+pub struct VoteArgs {
+    /// How long to wait for every live process's vote; a process that has not answered by
+    /// then counts as a refusal (the rollout is aborted).
+    #[arg(long, value_name = "DURATION", default_value = "10s", value_parser = humantime::parse_duration)]
+    pub vote_timeout: Duration,
+}
+
+#[derive(Debug, Args, Clone)]
+pub struct DecideArgs {
+    /// The rollout's revision (`spec status` lists the undecided ones).
+    pub revision: u64,
+    #[command(flatten)]
+    pub vote: VoteArgs,
+    #[command(flatten)]
+    pub channel: ChannelArgs,
+    #[command(flatten)]
+    pub sign: SignArgs,
+}
+
+#[derive(Debug, Args, Clone)]
+pub struct AbortArgs {
+    /// The rollout's revision.
+    pub revision: u64,
+    /// Why (recorded in the decision and shown by `spec status`).
+    #[arg(long, default_value = "")]
+    pub reason: String,
+    #[command(flatten)]
+    pub channel: ChannelArgs,
+    #[command(flatten)]
+    pub sign: SignArgs,
 }
 
 #[derive(Debug, Args, Clone)]
@@ -107,6 +153,8 @@ pub struct RollbackArgs {
     /// The event time from which the rollback is in force (as publish's); default: now.
     #[arg(long, value_name = "TIME", value_parser = parse_time)]
     pub from: Option<i64>,
+    #[command(flatten)]
+    pub vote: VoteArgs,
     #[command(flatten)]
     pub channel: ChannelArgs,
     #[command(flatten)]
@@ -149,6 +197,8 @@ pub fn parse_time(s: &str) -> Result<i64, String> {
 pub fn run(args: SpecArgs) -> CliResult {
     match args.action {
         SpecAction::Publish(a) => publish(a),
+        SpecAction::Decide(a) => decide_cmd(a),
+        SpecAction::Abort(a) => abort_cmd(a),
         SpecAction::List(a) => list(a),
         SpecAction::Status(a) => status(a),
         SpecAction::Rollback(a) => rollback(a),
@@ -189,6 +239,7 @@ fn publish(a: PublishArgs) -> CliResult {
     let key = read_signing_key(a.sign.sign_key_file.as_deref())
         .map_err(|e| CliError::spec(format!("spec publish: {e}")))?;
     let op = Operator::connect(&a.channel.channel, true).map_err(failure)?;
+    refuse_while_undecided(&op)?;
     let now = now_ns();
     let rollout = Rollout {
         revision: 0,
@@ -199,8 +250,217 @@ fn publish(a: PublishArgs) -> CliResult {
         selector: a.select.clone().unwrap_or_default(),
         published: now,
     };
-    let r = op.publish(Some(&bundle), rollout, &key).map_err(failure)?;
-    print(&format!("{}\n", published_line(&r, "")))
+    let (r, proposed) = op.publish(Some(&bundle), rollout, &key).map_err(failure)?;
+    print(&format!("{}\n", published_line(&r, "")))?;
+    settle(&op, &r, proposed, &key, a.vote.vote_timeout)
+}
+
+/// The rollouts that are readable, signed and undecided (each holds every later one in every
+/// process until it is decided).
+fn undecided(op: &Operator) -> Result<Vec<u64>, CliError> {
+    let decided: Vec<u64> = op
+        .decisions()
+        .map_err(failure)?
+        .iter()
+        .map(|d| d.revision)
+        .collect();
+    Ok(op
+        .rollouts()
+        .map_err(failure)?
+        .iter()
+        .filter(|l| l.rollout.is_ok() && l.signer.is_some() && !decided.contains(&l.revision))
+        .map(|l| l.revision)
+        .collect())
+}
+
+/// A new rollout waits for every earlier one in every process: refuse to propose one while an
+/// earlier one is undecided.
+fn refuse_while_undecided(op: &Operator) -> CliResult {
+    match undecided(op)?.first() {
+        None => Ok(()),
+        Some(n) => Err(CliError::spec(format!(
+            "spec: rollout {n} in {} is undecided (its publisher stopped before the processes' votes were counted), and every later rollout would wait for it; decide it first: `tessla-telegraf spec decide {n} --channel ...` (counts the votes) or `tessla-telegraf spec abort {n} --channel ...`",
+            op.url().shown()
+        ))),
+    }
+}
+
+/// Wait for the votes on `r` (proposed at server time `proposed`), write the fleet's decision
+/// and print it with every vote; an abort is exit 5.
+fn settle(
+    op: &Operator,
+    r: &Rollout,
+    proposed: i64,
+    key: &nkeys::KeyPair,
+    timeout: Duration,
+) -> CliResult {
+    let deadline = Instant::now() + timeout;
+    let tally = loop {
+        let statuses = op.statuses().map_err(failure)?;
+        let t = decide::tally(r.revision, &statuses, proposed);
+        if t.complete() || t.refused() || Instant::now() >= deadline {
+            break t;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let mine = decide::decide(r, &tally, now_ns());
+    let d = match op.decide(&mine, key).map_err(failure)? {
+        None => mine,
+        Some(Ok(first)) => first,
+        Some(Err(why)) => {
+            return Err(CliError::io(format!(
+                "spec: rollout {} was decided by another command, but its decision cannot be read: {why}",
+                r.revision
+            )));
+        }
+    };
+    print(&decision_report(&d, r))?;
+    if d.commit {
+        Ok(())
+    } else {
+        Err(CliError::aborted(format!(
+            "spec: rollout {} aborted: {}; no process puts it in force",
+            r.revision, d.reason
+        )))
+    }
+}
+
+/// Every vote, then the decision.
+fn decision_report(d: &Decision, r: &Rollout) -> String {
+    let mut out = String::new();
+    if !d.votes.is_empty() {
+        let rows: Vec<Vec<String>> = d
+            .votes
+            .iter()
+            .map(|v| {
+                vec![
+                    v.process.clone(),
+                    match v.accepted {
+                        Some(true) => "accepted",
+                        Some(false) => "refused",
+                        None => "no answer",
+                    }
+                    .to_string(),
+                    v.reason.clone(),
+                ]
+            })
+            .collect();
+        out.push_str(&table(&["PROCESS", "VOTE", "REASON"], &rows));
+    }
+    if d.commit {
+        out.push_str(&format!(
+            "committed: {}; every process puts version {} in force from {} for {}\n",
+            d.reason,
+            r.id,
+            show_time(r.from),
+            who(&r.selector)
+        ));
+    } else {
+        out.push_str(&format!("aborted: {}\n", d.reason));
+    }
+    out
+}
+
+/// The readable rollout `revision`, and when the server stored it.
+fn find_rollout(op: &Operator, revision: u64) -> Result<(Rollout, i64), CliError> {
+    let listed = op.rollouts().map_err(failure)?;
+    let l = listed
+        .iter()
+        .find(|l| l.revision == revision)
+        .ok_or_else(|| {
+            CliError::spec(format!(
+                "spec: {} has no rollout {revision}",
+                op.url().shown()
+            ))
+        })?;
+    let r = l.rollout.clone().map_err(|why| {
+        CliError::spec(format!(
+            "spec: rollout {revision} cannot be read ({why}); it can only be aborted (`spec abort {revision}`)"
+        ))
+    })?;
+    Ok((r, l.written))
+}
+
+/// The decision on `revision`, if there is one.
+fn decision_on(op: &Operator, revision: u64) -> Result<Option<Decided>, CliError> {
+    Ok(op
+        .decisions()
+        .map_err(failure)?
+        .into_iter()
+        .find(|d| d.revision == revision))
+}
+
+fn already_decided(d: &Decided) -> CliError {
+    CliError::spec(format!(
+        "spec: rollout {} is decided already ({}); a decision is never changed: publish a new rollout (or `spec rollback`)",
+        d.revision,
+        match &d.decision {
+            Ok(x) if x.commit => "committed".to_string(),
+            Ok(x) => format!("aborted: {}", x.reason),
+            Err(why) => format!("its record cannot be read: {why}"),
+        }
+    ))
+}
+
+fn decide_cmd(a: DecideArgs) -> CliResult {
+    let key = read_signing_key(a.sign.sign_key_file.as_deref())
+        .map_err(|e| CliError::spec(format!("spec decide: {e}")))?;
+    let op = Operator::connect(&a.channel.channel, false).map_err(failure)?;
+    if let Some(d) = decision_on(&op, a.revision)? {
+        return Err(already_decided(&d));
+    }
+    let (r, _) = find_rollout(&op, a.revision)?;
+    // The voters are the processes alive now: the newest status key stands for the server's
+    // "now" (every live process rewrites its key every few seconds).
+    let now = op
+        .statuses()
+        .map_err(failure)?
+        .iter()
+        .map(|s| s.written)
+        .max()
+        .unwrap_or(0);
+    settle(&op, &r, now, &key, a.vote.vote_timeout)
+}
+
+fn abort_cmd(a: AbortArgs) -> CliResult {
+    let key = read_signing_key(a.sign.sign_key_file.as_deref())
+        .map_err(|e| CliError::spec(format!("spec abort: {e}")))?;
+    let op = Operator::connect(&a.channel.channel, false).map_err(failure)?;
+    if let Some(d) = decision_on(&op, a.revision)? {
+        return Err(already_decided(&d));
+    }
+    let listed = op.rollouts().map_err(failure)?;
+    let Some(l) = listed.iter().find(|l| l.revision == a.revision) else {
+        return Err(CliError::spec(format!(
+            "spec abort: {} has no rollout {}",
+            op.url().shown(),
+            a.revision
+        )));
+    };
+    let (id, digest) = match &l.rollout {
+        Ok(r) => (r.id.clone(), r.digest.clone()),
+        Err(_) => (String::new(), String::new()),
+    };
+    let d = Decision {
+        revision: a.revision,
+        id,
+        digest,
+        commit: false,
+        reason: if a.reason.is_empty() {
+            "aborted by the operator (spec abort)".into()
+        } else {
+            format!("aborted by the operator: {}", a.reason)
+        },
+        votes: Vec::new(),
+        decided: now_ns(),
+    };
+    match op.decide(&d, &key).map_err(failure)? {
+        None => print(&format!("rollout {}: aborted\n", a.revision)),
+        Some(_) => Err(CliError::spec(format!(
+            "spec abort: rollout {} was decided meanwhile by another command (`spec status` shows it)",
+            a.revision
+        ))),
+    }
 }
 
 /// `rollout N: version ID (`label`) in force from T for S`.
@@ -230,17 +490,31 @@ fn who(s: &Selector) -> String {
 fn list(a: ListArgs) -> CliResult {
     let op = Operator::connect(&a.channel.channel, false).map_err(failure)?;
     let listed = op.rollouts().map_err(failure)?;
+    let decided = op.decisions().map_err(failure)?;
     if a.json {
         let v = json!({
             "channel": op.url().shown(),
-            "rollouts": listed.iter().map(|l| rollout_json(l, &[])).collect::<Vec<_>>(),
+            "rollouts": listed.iter().map(|l| rollout_json(l, &decided, &[])).collect::<Vec<_>>(),
         });
         return print(&format!("{v:#}\n"));
     }
     if !op.exists() {
         return print(&no_bucket(&op));
     }
-    print(&rollout_table(&listed, None))
+    print(&rollout_table(&listed, &decided, None))
+}
+
+/// A rollout's decision in a word: `committed`, `aborted`, `undecided` (or why its record
+/// cannot be read).
+fn decision_word(revision: u64, decided: &[Decided]) -> String {
+    match decided.iter().find(|d| d.revision == revision) {
+        None => "undecided".into(),
+        Some(d) => match &d.decision {
+            Ok(x) if x.commit => "committed".into(),
+            Ok(_) => "aborted".into(),
+            Err(why) => format!("unreadable decision: {why}"),
+        },
+    }
 }
 
 fn no_bucket(op: &Operator) -> String {
@@ -250,7 +524,14 @@ fn no_bucket(op: &Operator) -> String {
     )
 }
 
-fn rollout_json(l: &Listed, statuses: &[Status]) -> Value {
+fn rollout_json(l: &Listed, decided: &[Decided], statuses: &[Status]) -> Value {
+    let decision = match decided.iter().find(|d| d.revision == l.revision) {
+        None => Value::Null,
+        Some(d) => match &d.decision {
+            Ok(x) => serde_json::to_value(x).unwrap_or(Value::Null),
+            Err(why) => json!({ "problem": why }),
+        },
+    };
     match &l.rollout {
         Ok(r) => {
             let (acc, refd) = counts(l.revision, statuses);
@@ -263,6 +544,8 @@ fn rollout_json(l: &Listed, statuses: &[Status]) -> Value {
                 "selector": r.selector.to_string(),
                 "published": r.published,
                 "signer": l.signer,
+                "state": decision_word(l.revision, decided),
+                "decision": decision,
             });
             if !statuses.is_empty() {
                 v["accepted"] = json!(acc);
@@ -274,12 +557,18 @@ fn rollout_json(l: &Listed, statuses: &[Status]) -> Value {
     }
 }
 
-/// How many processes accepted and refused rollout `revision` (each process's latest outcome).
+/// How many processes voted to accept and to refuse rollout `revision` (each process's latest
+/// check of it).
 fn counts(revision: u64, statuses: &[Status]) -> (usize, usize) {
     let mut acc = 0;
     let mut refd = 0;
     for s in statuses {
-        if let Some(o) = s.outcomes.iter().rev().find(|o| o.revision == revision) {
+        let check = s
+            .outcomes
+            .iter()
+            .rev()
+            .find(|o| o.revision == revision && o.phase == Phase::Check);
+        if let Some(o) = check {
             if o.accepted {
                 acc += 1;
             } else {
@@ -313,8 +602,9 @@ fn short_key(k: &Option<String>) -> String {
     }
 }
 
-/// The rollouts as a table; with `statuses`, how many processes accepted and refused each.
-fn rollout_table(listed: &[Listed], statuses: Option<&[Status]>) -> String {
+/// The rollouts as a table with the fleet's decision on each; with `statuses`, how many
+/// processes voted to accept and to refuse each.
+fn rollout_table(listed: &[Listed], decided: &[Decided], statuses: Option<&[Status]>) -> String {
     if listed.is_empty() {
         return "no rollouts yet\n".into();
     }
@@ -326,9 +616,10 @@ fn rollout_table(listed: &[Listed], statuses: Option<&[Status]>) -> String {
         "SELECTOR",
         "PUBLISHED",
         "SIGNER",
+        "DECISION",
     ];
     if statuses.is_some() {
-        head.push("PROCESSES");
+        head.push("VOTES");
     }
     let rows = listed
         .iter()
@@ -346,6 +637,7 @@ fn rollout_table(listed: &[Listed], statuses: Option<&[Status]>) -> String {
                     },
                     published_time(r.published),
                     short_key(&l.signer),
+                    decision_word(l.revision, decided),
                 ],
                 Err(why) => vec![
                     l.revision.to_string(),
@@ -354,7 +646,7 @@ fn rollout_table(listed: &[Listed], statuses: Option<&[Status]>) -> String {
                 ],
             };
             if let Some(s) = statuses {
-                while row.len() < 7 {
+                while row.len() < 8 {
                     row.push(String::new());
                 }
                 let (a, r) = counts(l.revision, s);
@@ -401,6 +693,7 @@ fn table(head: &[&str], rows: &[Vec<String>]) -> String {
 fn status(a: ListArgs) -> CliResult {
     let op = Operator::connect(&a.channel.channel, false).map_err(failure)?;
     let listed = op.rollouts().map_err(failure)?;
+    let decided = op.decisions().map_err(failure)?;
     let keyed = op.statuses().map_err(failure)?;
     let statuses: Vec<Status> = keyed
         .iter()
@@ -420,7 +713,7 @@ fn status(a: ListArgs) -> CliResult {
             .collect();
         let v = json!({
             "channel": op.url().shown(),
-            "rollouts": listed.iter().map(|l| rollout_json(l, &statuses)).collect::<Vec<_>>(),
+            "rollouts": listed.iter().map(|l| rollout_json(l, &decided, &statuses)).collect::<Vec<_>>(),
             "processes": processes,
         });
         return print(&format!("{v:#}\n"));
@@ -429,7 +722,7 @@ fn status(a: ListArgs) -> CliResult {
         return print(&no_bucket(&op));
     }
     let mut out = format!("Rollouts in {}\n", op.url().shown());
-    out.push_str(&rollout_table(&listed, Some(&statuses)));
+    out.push_str(&rollout_table(&listed, &decided, Some(&statuses)));
     out.push_str(&format!("\nProcesses ({})\n", keyed.len()));
     if keyed.is_empty() {
         out.push_str("no process has reported yet\n");
@@ -489,7 +782,18 @@ fn status(a: ListArgs) -> CliResult {
                     o.revision.to_string()
                 },
                 o.id.clone(),
-                if o.accepted { "accepted" } else { "refused" }.into(),
+                // The vote, then what the decision did here.
+                match s
+                    .outcomes
+                    .iter()
+                    .rev()
+                    .find(|v| v.revision == o.revision && v.phase == Phase::Check)
+                {
+                    Some(v) if o.revision != 0 && o.phase != Phase::Check => {
+                        format!("voted {}, {}", v.word(), o.word())
+                    }
+                    _ => o.word().to_string(),
+                },
                 if o.accepted && !o.reset_outputs.is_empty() {
                     format!("outputs starting afresh: {}", o.reset_outputs.join(", "))
                 } else {
@@ -567,10 +871,20 @@ fn rollback(a: RollbackArgs) -> CliResult {
     let key = read_signing_key(a.sign.sign_key_file.as_deref())
         .map_err(|e| CliError::spec(format!("spec rollback: {e}")))?;
     let op = Operator::connect(&a.channel.channel, false).map_err(failure)?;
+    refuse_while_undecided(&op)?;
+    // Only committed rollouts were ever in force: aborted ones are skipped.
+    let committed: Vec<u64> = op
+        .decisions()
+        .map_err(failure)?
+        .iter()
+        .filter(|d| d.decision.as_ref().is_ok_and(|x| x.commit))
+        .map(|d| d.revision)
+        .collect();
     let rollouts: Vec<Rollout> = op
         .rollouts()
         .map_err(failure)?
         .into_iter()
+        .filter(|l| committed.contains(&l.revision))
         .filter_map(|l| l.rollout.ok())
         .collect();
     let Some((undone, selector, previous)) = rollback_plan(&rollouts, a.select.as_ref()) else {
@@ -609,7 +923,7 @@ fn rollback(a: RollbackArgs) -> CliResult {
         selector,
         published: now,
     };
-    let r = op.publish(None, rollout, &key).map_err(failure)?;
+    let (r, proposed) = op.publish(None, rollout, &key).map_err(failure)?;
     let what = match previous {
         Some(p) => format!("the version of rollout {}", p.revision),
         None => "the spec each process started with".into(),
@@ -618,7 +932,8 @@ fn rollback(a: RollbackArgs) -> CliResult {
         "{}: rolls back rollout {} to {what}\n",
         published_line(&r, ""),
         undone.revision
-    ))
+    ))?;
+    settle(&op, &r, proposed, &key, a.vote.vote_timeout)
 }
 
 fn keygen(a: KeygenArgs) -> CliResult {

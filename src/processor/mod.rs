@@ -248,6 +248,12 @@ impl Processor {
         }
     }
 
+    /// The metrics kept for checking a new version's bindings (the first, and each new
+    /// instance's first, up to 16): a process checks against every thread's together.
+    pub fn samples(&self) -> &[Metric] {
+        &self.samples
+    }
+
     /// The versions held.
     pub fn versions(&self) -> &Versions {
         &self.versions
@@ -1018,7 +1024,8 @@ pub(crate) mod tests {
     fn a_rollout_switches_its_instances_at_their_first_step_from_its_start() {
         let mut p = versioned();
         let sel = Selector::parse("robot=a").unwrap();
-        p.check_version("new", &program(NEW), &sel).unwrap();
+        p.check_version("new", &program(NEW), &sel, p.samples())
+            .unwrap();
         let acc = p
             .accept_version("new", "ten", program(NEW), 300, sel)
             .unwrap();
@@ -1081,21 +1088,26 @@ pub(crate) mod tests {
     fn a_version_that_does_not_fit_is_refused() {
         let mut p = versioned();
         let e = p
-            .check_version("new", &program(NEW), &Selector::parse("site=lab").unwrap())
+            .check_version(
+                "new",
+                &program(NEW),
+                &Selector::parse("site=lab").unwrap(),
+                &[],
+            )
             .unwrap_err();
         assert!(e.contains("site"), "{e}");
         feed(&mut p, "m,robot=a x=1i 100\n");
         let strings = "in x: Events[Bool]\nout x\n";
         let e = p
-            .check_version("b", &program(strings), &Selector::all())
+            .check_version("b", &program(strings), &Selector::all(), p.samples())
             .unwrap_err();
         assert!(e.contains("input `x`"), "{e}");
         let other = "in y: Events[Int]\nout y\n";
         let e = p
-            .check_version("o", &program(other), &Selector::all())
+            .check_version("o", &program(other), &Selector::all(), p.samples())
             .unwrap_err();
         assert!(e.contains("none of its inputs"), "{e}");
-        p.check_version("new", &program(NEW), &Selector::all())
+        p.check_version("new", &program(NEW), &Selector::all(), p.samples())
             .unwrap();
     }
 

@@ -113,14 +113,16 @@ impl Processor {
     }
 
     /// Check a new version against this processor: its input annotations, that the selector
-    /// names `--instance-by` tags, and its bindings against the metrics seen so far (an input
-    /// whose field is there but never converts to its type, or no input fed at all, refuses
-    /// it). `Err` says why it is refused.
+    /// names `--instance-by` tags, and its bindings against `samples`, the metrics the process
+    /// has seen (every thread's [`Processor::samples`]: one answer for the process, never one
+    /// thread's share; an input whose field is there but never converts to its type, or no
+    /// input fed at all, refuses it). `Err` says why it is refused.
     pub fn check_version(
         &self,
         id: &str,
         program: &Arc<Program>,
         selector: &Selector,
+        samples: &[lineproto::Metric],
     ) -> Result<(), String> {
         let unknown = selector.unknown_tags(&self.opts.instance_by);
         if !unknown.is_empty() {
@@ -137,7 +139,7 @@ impl Processor {
         if self.versions.find(id).is_none() {
             let v = Version::new(id.to_string(), String::new(), Arc::clone(program))
                 .map_err(|e| format!("its input annotations: {e}"))?;
-            super::versions::check_against(&v, &self.samples)?;
+            super::versions::check_against(&v, samples)?;
         }
         Ok(())
     }

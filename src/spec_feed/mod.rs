@@ -1,14 +1,19 @@
 //! Where new spec versions come from while a run goes on, and what each process says about
-//! them: the fleet's spec channel (a NATS key-value bucket of signed rollouts, [`nats`]), the
-//! watched spec file of one process ([`watch`]), and the bundle a version travels as
-//! ([`bundle`]).
+//! them: the fleet's spec channel (a NATS key-value bucket of signed rollouts and the fleet's
+//! signed decisions on them, [`nats`]), the watched spec file of one process ([`watch`]), and
+//! the bundle a version travels as ([`bundle`]).
 //!
 //! Owns the rollout record every channel carries ([`Rollout`]: which version, from which event
-//! time, for which instances), the outcome a process reports for each ([`Outcome`]), and the
-//! [`Updates`] the step loop calls. Checking a version and switching instances to it is the
-//! processor's (`processor::versions`).
+//! time, for which instances), the fleet's decision on it ([`Decision`]: committed or aborted,
+//! with every process's vote), the outcome a process reports for each ([`Outcome`]: its vote,
+//! then what the decision did here), and the [`Updates`] the step loop calls. A rollout is a
+//! proposal: a process checks it and votes, and acts only on the decision, in revision order
+//! ([`ledger`]). Checking a version and switching instances to it is the processor's
+//! (`processor::versions`).
 
 pub mod bundle;
+pub mod decide;
+pub mod ledger;
 pub mod nats;
 pub mod reload;
 pub mod sign;
@@ -19,12 +24,12 @@ use crate::log::{self, Level};
 use crate::processor::Processor;
 use crate::processor::versions::Selector;
 use bundle::Bundle;
+use ledger::{Ledger, Step};
 use reload::{Reloaded, SpecSource};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Duration;
-
 /// One publish: version `id` (a [`bundle::Bundle::id`]) in force from event time `from` for the
 /// instances `selector` picks. A channel's rollouts are append-only, in publish order
 /// (`revision` increasing): a rollback is a rollout of the earlier version.
@@ -51,6 +56,22 @@ pub struct Rollout {
     pub published: i64,
 }
 
+/// What a process's outcome for a version is: its check of a proposal (its vote), or what the
+/// fleet's decision did here.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Phase {
+    /// A reload checked (and, accepted, put in force), or a rollout checked: `accepted` is the
+    /// process's vote.
+    #[default]
+    Check,
+    /// The fleet committed the rollout: `accepted`, it is in force here from its start;
+    /// refused, this process cannot run it (its robots stay on the versions they run).
+    Committed,
+    /// The fleet aborted the rollout: nothing changed.
+    Aborted,
+}
+
 /// What one process made of one version.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Outcome {
@@ -58,6 +79,8 @@ pub struct Outcome {
     pub revision: u64,
     pub id: String,
     pub label: String,
+    /// [`Phase::Check`]: passed the checks here (a rollout: the vote to commit it);
+    /// [`Phase::Committed`]: in force here.
     pub accepted: bool,
     /// Why it was refused (the first lines of the diagnostic), or empty.
     #[serde(default)]
@@ -65,10 +88,61 @@ pub struct Outcome {
     /// Outputs whose streams start afresh in the instances that switch.
     #[serde(default)]
     pub reset_outputs: Vec<String>,
-    /// Instances it picks that had already stepped past its start when it arrived: they switch
-    /// at their next step, so their records since the start were judged by the version before.
+    /// Instances it picks that had already stepped past its start when it was committed: they
+    /// switch at their next step, so their records since the start were judged by the version
+    /// before.
     #[serde(default)]
     pub late_instances: u64,
+    /// A check (a vote), or what the fleet's decision did.
+    #[serde(default)]
+    pub phase: Phase,
+}
+
+impl Outcome {
+    /// The status metric's `outcome` tag and `spec status`'s word: `accepted`/`refused` (a
+    /// reload, or a vote), `committed`, `unrunnable` (committed, but it cannot run here),
+    /// `aborted`.
+    pub fn word(&self) -> &'static str {
+        match (self.phase, self.accepted) {
+            (Phase::Check, true) => "accepted",
+            (Phase::Check, false) => "refused",
+            (Phase::Committed, true) => "committed",
+            (Phase::Committed, false) => "unrunnable",
+            (Phase::Aborted, _) => "aborted",
+        }
+    }
+}
+
+/// One process's vote on a rollout, as the decision records it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Vote {
+    /// The process's status key (`status.<host>.<partition or pid>`).
+    pub process: String,
+    /// `Some(true)`: it accepted; `Some(false)`: it refused (`reason`); `None`: it did not
+    /// answer before the deadline (counted as a refusal).
+    pub accepted: Option<bool>,
+    #[serde(default)]
+    pub reason: String,
+}
+
+/// The fleet's decision on a rollout: stored once (`decision.<revision>`, created with the KV
+/// `create`), signed with the operator's key like the rollout. Processes act on nothing else.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Decision {
+    pub revision: u64,
+    /// The rollout's version id and digest: a decision is for that rollout only.
+    pub id: String,
+    pub digest: String,
+    /// Committed (every process that voted accepted it) or aborted.
+    pub commit: bool,
+    /// Why (the refusals, the processes that did not answer; or that every vote accepted).
+    #[serde(default)]
+    pub reason: String,
+    /// The votes it was decided on.
+    #[serde(default)]
+    pub votes: Vec<Vote>,
+    /// When it was decided (ns since the Unix epoch, the deciding command's wall clock).
+    pub decided: i64,
 }
 
 /// A rollout as a channel delivers it: verified with its bundle, or why it cannot be used (an
@@ -79,12 +153,33 @@ pub struct Arrival {
     pub bundle: Result<Bundle, String>,
 }
 
+/// What a channel delivers: a rollout (a proposal), or the fleet's decision on one (`Err`: a
+/// decision record that is unsigned, signed by a key not trusted, or cannot be read).
+#[derive(Debug, Clone)]
+pub enum Event {
+    Proposal(Arrival),
+    Decision {
+        revision: u64,
+        decision: Result<Decision, String>,
+    },
+}
+
+impl Event {
+    pub fn revision(&self) -> u64 {
+        match self {
+            Event::Proposal(a) => a.rollout.revision,
+            Event::Decision { revision, .. } => *revision,
+        }
+    }
+}
+
 /// A fleet's spec channel, as the run sees it.
 pub trait Channel {
-    /// Rollouts that arrived since the last call, in revision order; never blocks.
-    fn poll(&mut self) -> Vec<Arrival>;
-    /// Record this process's outcomes where the operator's `spec status` reads them (best
-    /// effort).
+    /// Rollouts and decisions that arrived since the last call; never blocks.
+    fn poll(&mut self) -> Vec<Event>;
+    /// Record this process's outcomes where the operator's `spec status` and `spec publish`
+    /// read them (best effort; also rewritten every few seconds, which tells the publisher
+    /// that the process is alive).
     fn report(&mut self, host: &str, partition: &str, outcomes: &[Outcome]);
 }
 
@@ -92,8 +187,9 @@ pub trait Channel {
 pub const BASE: &str = "base";
 
 /// New spec versions while the run goes on: SIGHUP and a watched spec file reload the spec the
-/// process started with; a channel's rollouts put versions in force from an event time. Every
-/// outcome is logged and written as a status metric ([`status`]).
+/// process started with; a channel's rollouts are checked (the process's vote) and put in
+/// force from their event time once the fleet commits them. Every outcome is logged and
+/// written as a status metric ([`status`]).
 pub struct Updates {
     pub source: SpecSource,
     watch: Option<watch::Watched>,
@@ -105,8 +201,10 @@ pub struct Updates {
     outcomes: Vec<Outcome>,
     /// Versions compiled from rollouts, by id (a rollout of a version already held reuses it).
     compiled: HashMap<String, Arc<tessla_engine::Program>>,
-    /// The rollouts the channel held at connect, not applied yet.
-    first: Vec<Arrival>,
+    /// What the channel held at connect, not taken in yet.
+    first: Vec<Event>,
+    /// The rollouts and decisions, in revision order.
+    ledger: Ledger,
 }
 
 impl Updates {
@@ -126,12 +224,15 @@ impl Updates {
             outcomes: Vec::new(),
             compiled: HashMap::new(),
             first: Vec::new(),
+            ledger: Ledger::default(),
         }
     }
 
-    /// Follow `channel` too; `first`: the rollouts it already held, applied by the first
-    /// [`Updates::tick`] (the step loop's, before anything is restored or read).
-    pub fn with_channel(&mut self, channel: Box<dyn Channel>, first: Vec<Arrival>) {
+    /// Follow `channel` too; `first`: what it already held, taken in by the first
+    /// [`Updates::tick`] (the step loop's, before anything is restored or read). Reports this
+    /// process to the channel at once (with no outcome yet), so a publisher counts its vote.
+    pub fn with_channel(&mut self, mut channel: Box<dyn Channel>, first: Vec<Event>) {
+        channel.report(&self.host, &self.partition, &self.outcomes);
         self.channel = Some(channel);
         self.first = first;
     }
@@ -154,22 +255,60 @@ impl Updates {
         self.reload("SIGHUP", procs, out);
     }
 
-    /// Look for changes: the watched file, the channel's new rollouts.
+    /// Look for changes: the watched file, the channel's new rollouts and decisions.
     pub fn tick(&mut self, procs: &mut [&mut Processor], out: &mut Vec<u8>) {
         if self.watch.as_mut().is_some_and(watch::Watched::changed) {
             self.reload("spec file changed", procs, out);
         }
-        let mut arrivals = std::mem::take(&mut self.first);
+        let mut events = std::mem::take(&mut self.first);
         match self.channel.as_mut() {
-            Some(c) => arrivals.extend(c.poll()),
+            Some(c) => events.extend(c.poll()),
             None => return,
         }
-        if arrivals.is_empty() {
+        if events.is_empty() {
             return;
         }
-        for a in arrivals {
-            let outcome = self.apply(&a, procs);
-            self.outcome(outcome, a.rollout.from, out);
+        // Decisions first: a rollout already decided when it arrives is never voted on.
+        let (decisions, proposals): (Vec<Event>, Vec<Event>) = events
+            .into_iter()
+            .partition(|e| matches!(e, Event::Decision { .. }));
+        for e in decisions.into_iter().chain(proposals) {
+            match e {
+                Event::Decision { revision, decision } => self.ledger.decided(revision, decision),
+                Event::Proposal(a) => {
+                    if let Some(a) = self.ledger.proposed(a) {
+                        let vote = self.vote(&a, procs);
+                        self.outcome(vote, a.rollout.from, out);
+                    }
+                }
+            }
+        }
+        while let Some(step) = self.ledger.next_step() {
+            let outcome = match step {
+                Step::Commit(a) => self.commit(&a, procs),
+                Step::Abort(a, why) => {
+                    log::log(
+                        Level::Info,
+                        &format!(
+                            "spec: rollout {} (version {}{}) aborted by the fleet: {why}; nothing changes",
+                            a.rollout.revision,
+                            a.rollout.id,
+                            label_note(&a.rollout.label)
+                        ),
+                    );
+                    Outcome {
+                        revision: a.rollout.revision,
+                        id: a.rollout.id.clone(),
+                        label: a.rollout.label.clone(),
+                        accepted: false,
+                        reason: why,
+                        phase: Phase::Aborted,
+                        ..Outcome::default()
+                    }
+                }
+            };
+            let from = self.ledger.from_of(outcome.revision);
+            self.outcome(outcome, from, out);
         }
         if let Some(c) = self.channel.as_mut() {
             c.report(&self.host, &self.partition, &self.outcomes);
@@ -186,7 +325,8 @@ impl Updates {
                 )
             })
             .unwrap_or_default();
-        let outcome = match reload::reload(&self.source, why, procs) {
+        let samples = samples_of(procs);
+        let outcome = match reload::reload(&self.source, why, procs, &samples) {
             Reloaded::Refused(reason) => Outcome {
                 revision: 0,
                 id,
@@ -209,33 +349,101 @@ impl Updates {
         self.outcome(outcome, status::now_ns(), out);
     }
 
-    /// Check one rollout and put it in force in every processor (all or none).
-    fn apply(&mut self, a: &Arrival, procs: &mut [&mut Processor]) -> Outcome {
+    /// The version a rollout names here: the base's id for [`BASE`].
+    fn version_id(r: &Rollout, procs: &[&mut Processor]) -> String {
+        match procs.first() {
+            Some(p) if r.id == BASE => p.versions().base().id.clone(),
+            _ => r.id.clone(),
+        }
+    }
+
+    /// Check a rollout here, once for the whole process (its threads' processors together,
+    /// against every metric any of them has seen): this process's vote. Nothing changes.
+    fn vote(&mut self, a: &Arrival, procs: &[&mut Processor]) -> Outcome {
         let r = &a.rollout;
-        let refused = |reason: String| Outcome {
+        let checked = self.check(a, procs);
+        let (accepted, reason) = match &checked {
+            Ok(_) => (true, String::new()),
+            Err(e) => (false, e.clone()),
+        };
+        if accepted {
+            log::log(
+                Level::Info,
+                &format!(
+                    "spec: rollout {} (version {}{}) checks here: voted to commit it; it is put in force when the fleet commits it",
+                    r.revision,
+                    r.id,
+                    label_note(&r.label)
+                ),
+            );
+        } else {
+            log::log(
+                Level::Error,
+                &format!(
+                    "spec: rollout {} (version {}{}) refused here: {reason}; voted to abort it",
+                    r.revision,
+                    r.id,
+                    label_note(&r.label)
+                ),
+            );
+        }
+        Outcome {
             revision: r.revision,
             id: r.id.clone(),
             label: r.label.clone(),
-            accepted: false,
+            accepted,
             reason,
             ..Outcome::default()
-        };
-        let program = match self.program_of(a, procs) {
-            Ok(p) => p,
-            Err(e) => return refused(e),
-        };
-        // "The spec each process started with" is the base version (index 0), whatever its id.
-        let id = match procs.first() {
-            Some(p) if r.id == BASE => p.versions().base().id.clone(),
-            _ => r.id.clone(),
-        };
-        // Every thread's processor checks first (each has seen other metrics): all accept or
-        // none does.
-        for p in procs.iter() {
-            if let Err(e) = p.check_version(&id, &program, &r.selector) {
-                return refused(e);
-            }
         }
+    }
+
+    /// Every check a rollout passes before it may run here: its record and bundle, compiling
+    /// with this process's options, and the processors' checks (selector, annotations, the
+    /// bindings against every thread's samples at once).
+    fn check(
+        &mut self,
+        a: &Arrival,
+        procs: &[&mut Processor],
+    ) -> Result<Arc<tessla_engine::Program>, String> {
+        let program = self.program_of(a, procs)?;
+        let id = Self::version_id(&a.rollout, procs);
+        let samples = samples_of(procs);
+        if let Some(p) = procs.first() {
+            p.check_version(&id, &program, &a.rollout.selector, &samples)?;
+        }
+        Ok(program)
+    }
+
+    /// The fleet committed a rollout: put it in force in every processor from its start. A
+    /// version this process cannot run (it does not compile with its options, or its inputs do
+    /// not fit what arrives here) is a loud error: its robots stay on the versions they run.
+    fn commit(&mut self, a: &Arrival, procs: &mut [&mut Processor]) -> Outcome {
+        let r = &a.rollout;
+        let cannot = |reason: String| {
+            log::log(
+                Level::Error,
+                &format!(
+                    "spec: rollout {} (version {}{}) was committed by the fleet, but this process cannot run it: {reason}; the instances it picks stay on the versions they run (spec status shows it as unrunnable here)",
+                    r.revision,
+                    r.id,
+                    label_note(&r.label)
+                ),
+            );
+            Outcome {
+                revision: r.revision,
+                id: r.id.clone(),
+                label: r.label.clone(),
+                accepted: false,
+                reason,
+                phase: Phase::Committed,
+                ..Outcome::default()
+            }
+        };
+        let program = match self.check(a, procs) {
+            Ok(p) => p,
+            Err(e) => return cannot(e),
+        };
+        let id = Self::version_id(r, procs);
         let mut reset = Vec::new();
         let (mut late, mut behind) = (0u64, 0i64);
         for p in procs.iter() {
@@ -258,20 +466,40 @@ impl Updates {
                 }
                 // Annotations are the same for every processor: the first refuses before any
                 // accepted.
-                Err(e) => return refused(e),
+                Err(e) => return cannot(e),
             }
         }
         if late > 0 {
             log::log(
                 Level::Warn,
                 &format!(
-                    "spec: rollout {} starts at {}, but {late} instances it picks had already stepped past it (by up to {}): they switch at their next step, and their records since its start were judged by the version before. For one switch point in every process, publish with a start a moment ahead (`spec publish --from +2s`)",
+                    "spec: rollout {} starts at {}, but {late} instances it picks had already stepped past it (by up to {}) when it was committed: they switch at their next step, and their records since its start were judged by the version before. For one switch point in every process, publish with a start a moment ahead (`spec publish --from +5s`)",
                     r.revision,
                     status::show_time(r.from),
                     crate::processor::clock::human_ns(behind)
                 ),
             );
         }
+        let reset_note = if reset.is_empty() {
+            "no output starts afresh".to_string()
+        } else {
+            format!("outputs starting afresh: {}", reset.join(", "))
+        };
+        log::log(
+            Level::Info,
+            &format!(
+                "spec: rollout {} (version {}{}) committed by the fleet; in force from {} for {}; {reset_note}",
+                r.revision,
+                r.id,
+                label_note(&r.label),
+                status::show_time(r.from),
+                if r.selector.is_all() {
+                    "every instance".to_string()
+                } else {
+                    r.selector.to_string()
+                }
+            ),
+        );
         Outcome {
             revision: r.revision,
             id: r.id.clone(),
@@ -279,6 +507,7 @@ impl Updates {
             accepted: true,
             reset_outputs: reset,
             late_instances: late,
+            phase: Phase::Committed,
             ..Outcome::default()
         }
     }
@@ -321,46 +550,20 @@ impl Updates {
         Ok(loaded.program)
     }
 
-    /// Log an outcome, write its status metric, keep it for the channel's status key.
+    /// Log a local reload's outcome, write its status metric, keep it for the channel's status
+    /// key (a rollout's vote and decision are logged where they are made).
     fn outcome(&mut self, o: Outcome, from: i64, out: &mut Vec<u8>) {
-        let what = if o.revision == 0 {
-            format!("spec version {}", o.id)
-        } else {
-            format!(
-                "rollout {} (version {}{})",
-                o.revision,
-                o.id,
-                label_note(&o.label)
-            )
-        };
-        if o.accepted {
-            let reset = if o.reset_outputs.is_empty() {
-                "no output starts afresh".to_string()
-            } else {
-                format!("outputs starting afresh: {}", o.reset_outputs.join(", "))
-            };
-            if o.revision != 0 {
-                log::log(
-                    Level::Info,
-                    &format!(
-                        "spec: {what} accepted; in force from {} for {}; {reset}",
-                        status::show_time(from),
-                        "the instances its selector picks"
-                    ),
-                );
-            }
-        } else if o.revision != 0 {
-            log::log(
-                Level::Error,
-                &format!(
-                    "spec: {what} refused: {}; the running versions stay in use",
-                    o.reason
-                ),
-            );
-        }
         status::write_line(out, &self.host, &self.partition, &o, from);
         self.outcomes.push(o);
     }
+}
+
+/// Every thread's samples together: what the process has seen.
+fn samples_of(procs: &[&mut Processor]) -> Vec<lineproto::Metric> {
+    procs
+        .iter()
+        .flat_map(|p| p.samples().iter().cloned())
+        .collect()
 }
 
 fn label_note(label: &str) -> String {
@@ -379,4 +582,238 @@ fn first_lines(text: &str) -> String {
         .take(3)
         .collect();
     lines.join(" | ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::processor::Options;
+    use bundle::BundleFile;
+    use lineproto::RecordSplitter;
+    use std::sync::Mutex;
+
+    /// A channel that hands out what the test puts in and keeps what the process reports.
+    #[derive(Clone, Default)]
+    struct Stand {
+        events: Arc<Mutex<Vec<Event>>>,
+        reports: Arc<Mutex<Vec<Vec<Outcome>>>>,
+    }
+
+    impl Channel for Stand {
+        fn poll(&mut self) -> Vec<Event> {
+            std::mem::take(&mut *self.events.lock().unwrap())
+        }
+        fn report(&mut self, _: &str, _: &str, outcomes: &[Outcome]) {
+            self.reports.lock().unwrap().push(outcomes.to_vec());
+        }
+    }
+
+    const BASE_SPEC: &str = "in y: Events[Float]\ndef n = count(y)\nout n\n";
+    const BOOL_SPEC: &str = "in y: Events[Bool]\ndef n = count(y)\ndef b = y\nout n\nout b\n";
+
+    fn bundle(text: &str) -> Bundle {
+        Bundle {
+            files: vec![BundleFile {
+                name: "s.tessla".into(),
+                text: text.into(),
+            }],
+            links: vec![bundle::Link {
+                from: None,
+                written: "s.tessla".into(),
+                file: 0,
+            }],
+        }
+    }
+
+    fn proposal(revision: u64, text: &str, from: i64) -> Event {
+        let b = bundle(text);
+        Event::Proposal(Arrival {
+            rollout: Rollout {
+                revision,
+                id: b.id(),
+                digest: b.digest(),
+                label: String::new(),
+                from,
+                selector: Selector::all(),
+                published: 0,
+            },
+            bundle: Ok(b),
+        })
+    }
+
+    fn decision(revision: u64, text: &str, commit: bool) -> Event {
+        let b = bundle(text);
+        Event::Decision {
+            revision,
+            decision: Ok(Decision {
+                revision,
+                id: b.id(),
+                digest: b.digest(),
+                commit,
+                reason: String::new(),
+                votes: Vec::new(),
+                decided: 0,
+            }),
+        }
+    }
+
+    fn processor() -> Processor {
+        let b = bundle(BASE_SPEC);
+        let loaded = b.load(&Default::default()).unwrap();
+        let mut p = Processor::new(
+            loaded.program,
+            Options {
+                passthrough: false,
+                instance_by: vec!["robot".into()],
+                version_tag: Some("v".into()),
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        p.name_base(&b.id(), "");
+        p
+    }
+
+    fn updates(stand: &Stand, first: Vec<Event>) -> Updates {
+        let mut u = Updates::new(
+            SpecSource {
+                path: None,
+                options: Default::default(),
+            },
+            false,
+            "",
+        );
+        u.with_channel(Box::new(stand.clone()), first);
+        u
+    }
+
+    fn feed(p: &mut Processor, input: &str) -> String {
+        let mut s = RecordSplitter::default();
+        s.push(input.as_bytes());
+        let mut out = Vec::new();
+        while let Some(r) = s.next_record() {
+            p.record(&r, &mut out);
+        }
+        while let Some(r) = s.finish() {
+            p.record(&r, &mut out);
+        }
+        String::from_utf8(out).unwrap()
+    }
+
+    /// The outcomes of the last report, as words.
+    fn words(stand: &Stand) -> Vec<String> {
+        let reports = stand.reports.lock().unwrap();
+        reports
+            .last()
+            .map(|o| {
+                o.iter()
+                    .map(|o| format!("{} {}", o.revision, o.word()))
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+
+    /// Defect 5 of the issue: robot r5 sends `y=1.5` and r2 `y=true`; a rollout reads `y` as
+    /// Bool. The process votes once, on everything it has seen: the same vote whether the two
+    /// robots landed on one thread's processor or on two.
+    #[test]
+    fn the_thread_count_does_not_change_a_vote() {
+        let records = ["m,robot=r5 y=1.5 100\n", "m,robot=r2 y=true 100\n"];
+        let vote = |procs: &mut [&mut Processor]| {
+            let stand = Stand::default();
+            let mut u = updates(&stand, vec![proposal(1, BOOL_SPEC, 1000)]);
+            let mut out = Vec::new();
+            u.tick(procs, &mut out);
+            words(&stand)
+        };
+        let mut one = processor();
+        feed(&mut one, &records.concat());
+        let (mut a, mut b) = (processor(), processor());
+        feed(&mut a, records[0]);
+        feed(&mut b, records[1]);
+        assert_eq!(vote(&mut [&mut one]), ["1 accepted"]);
+        assert_eq!(vote(&mut [&mut a, &mut b]), ["1 accepted"]);
+        // One thread's share alone would have refused it.
+        let mut only_r5 = processor();
+        feed(&mut only_r5, records[0]);
+        assert_eq!(vote(&mut [&mut only_r5]), ["1 refused"]);
+    }
+
+    /// Defect 2 of the issue: a rollout refused by the running processes is aborted for the
+    /// fleet; a process that starts afterwards (no metric seen, so it would have accepted it)
+    /// follows the record and never runs it. A rollout committed before a process starts is in
+    /// force there from its start. Nothing is put in force before the decision.
+    #[test]
+    fn a_process_follows_the_decision_and_never_decides_again() {
+        // The running process: votes to refuse (its records carry a Float, not a Bool).
+        let stand = Stand::default();
+        let mut running = processor();
+        feed(&mut running, "m,robot=r1 y=1.5 100\n");
+        let mut u = updates(&stand, vec![proposal(1, BOOL_SPEC, 1000)]);
+        let mut out = Vec::new();
+        u.tick(&mut [&mut running], &mut out);
+        assert_eq!(words(&stand), ["1 refused"]);
+        stand
+            .events
+            .lock()
+            .unwrap()
+            .push(decision(1, BOOL_SPEC, false));
+        u.tick(&mut [&mut running], &mut out);
+        assert_eq!(words(&stand), ["1 refused", "1 aborted"]);
+        // Restarted after the abort: no vote, the base stays.
+        let stand2 = Stand::default();
+        let mut restarted = processor();
+        let mut u2 = updates(
+            &stand2,
+            vec![proposal(1, BOOL_SPEC, 1000), decision(1, BOOL_SPEC, false)],
+        );
+        u2.tick(&mut [&mut restarted], &mut out);
+        assert_eq!(words(&stand2), ["1 aborted"]);
+        let base = bundle(BASE_SPEC).id();
+        let a = feed(&mut running, "m,robot=r1 y=2.5 2000\n");
+        let b = feed(&mut restarted, "m,robot=r1 y=2.5 2000\n");
+        assert!(a.contains(&format!("v={base}")), "{a}");
+        assert!(b.contains(&format!("v={base}")), "{b}");
+        // A proposal alone puts nothing in force; its commit does, from its start.
+        let stand3 = Stand::default();
+        let mut p = processor();
+        let mut u3 = updates(&stand3, vec![proposal(1, BOOL_SPEC, 1000)]);
+        u3.tick(&mut [&mut p], &mut out);
+        let before = feed(&mut p, "m,robot=r9 y=true 1500\n");
+        assert!(before.contains(&format!("v={base}")), "{before}");
+        stand3
+            .events
+            .lock()
+            .unwrap()
+            .push(decision(1, BOOL_SPEC, true));
+        u3.tick(&mut [&mut p], &mut out);
+        assert_eq!(words(&stand3), ["1 accepted", "1 committed"]);
+        let after = feed(&mut p, "m,robot=r9 y=true 1600\n");
+        let new = bundle(BOOL_SPEC).id();
+        assert!(
+            after.contains(&format!("v={new}")) && after.contains("b=true"),
+            "{after}"
+        );
+    }
+
+    /// A committed version this process cannot run (here: its inputs do not fit the metrics
+    /// it receives) is reported as unrunnable, loudly, and its robots keep their version: no
+    /// output is silently lost.
+    #[test]
+    fn a_committed_version_that_cannot_run_here_is_unrunnable_and_changes_nothing() {
+        let stand = Stand::default();
+        let mut p = processor();
+        feed(&mut p, "m,robot=r1 y=1.5 100\n");
+        let mut u = updates(
+            &stand,
+            vec![proposal(1, BOOL_SPEC, 1000), decision(1, BOOL_SPEC, true)],
+        );
+        let mut out = Vec::new();
+        u.tick(&mut [&mut p], &mut out);
+        assert_eq!(words(&stand), ["1 unrunnable"]);
+        let status = String::from_utf8(out).unwrap();
+        assert!(status.contains("outcome=unrunnable"), "{status}");
+        let after = feed(&mut p, "m,robot=r1 y=2.5 2000\n");
+        assert!(after.contains("n=2i"), "{after}");
+    }
 }

@@ -7,17 +7,20 @@
 //! - `rollout.<revision>`: a signed rollout record ([`super::sign`]), revisions 1, 2, 3, …,
 //!   append-only: each is created with the KV `create`, so two publishers never take one
 //!   revision (the later one retries with the next);
-//! - `status.<host>.<partition or pid>`: a process's outcomes ([`Status`]).
+//! - `decision.<revision>`: the fleet's signed decision on that rollout ([`Decision`]: commit
+//!   or abort, with the votes), created once with the KV `create`;
+//! - `status.<host>.<partition or pid>`: a process's outcomes ([`Status`]): its votes and what
+//!   each decision did there, rewritten every [`HEARTBEAT`] so a publisher sees it is alive.
 //!
-//! Two sides: [`NatsFeed`], what a running process follows (every rollout verified against the
-//! trusted keys and its bundle against the rollout's digest, handed to the step loop in revision
-//! order, each once; its outcomes written back), and [`Operator`], what `tessla-telegraf spec`
-//! reads and publishes with.
+//! Two sides: [`NatsFeed`], what a running process follows (every rollout and decision
+//! verified against the trusted keys and a rollout's bundle against its digest, handed to the
+//! step loop; its outcomes written back), and [`Operator`], what `tessla-telegraf spec` reads,
+//! publishes and decides with.
 
 use super::bundle::Bundle;
 use super::sign::{self, Record};
 use super::status::now_ns;
-use super::{Arrival, BASE, Channel, Outcome, Rollout};
+use super::{Arrival, BASE, Channel, Decision, Event, Outcome, Rollout};
 use crate::log::{self, Level, mask};
 use crate::processor::versions::Selector;
 use crate::state::kv_keys::kv_key_part_of;
@@ -36,6 +39,15 @@ pub const DEFAULT_BUCKET: &str = "tessla_specs";
 
 /// How often a process looks again for a channel bucket that does not exist yet.
 const LOOK_AGAIN: Duration = Duration::from_secs(2);
+
+/// How often a process rewrites its status key (with the same outcomes): the publisher counts
+/// a process whose key was written within [`LIVE`] before its rollout as one whose vote it
+/// waits for.
+pub const HEARTBEAT: Duration = Duration::from_secs(2);
+
+/// A process whose status key is older than this (by the server's clock) when a rollout is
+/// proposed is taken to be gone: its vote is not waited for.
+pub const LIVE: Duration = Duration::from_secs(10);
 
 /// Parse a channel URL: `--state`'s syntax (`nats://HOST:PORT[,...][/BUCKET][?login, TLS,
 /// replicas]`), the bucket [`DEFAULT_BUCKET`] when none is named. The partition options of
@@ -104,13 +116,26 @@ fn rollout_key(revision: u64) -> String {
     format!("rollout.{revision}")
 }
 
+fn decision_key(revision: u64) -> String {
+    format!("decision.{revision}")
+}
+
 fn bundle_key(id: &str) -> String {
     format!("bundle.{id}")
 }
 
 /// The revision of a `rollout.<revision>` key.
 fn revision_of(key: &str) -> Option<u64> {
-    let digits = key.strip_prefix("rollout.")?;
+    numbered(key, "rollout.")
+}
+
+/// The revision of a `decision.<revision>` key.
+fn decided_revision_of(key: &str) -> Option<u64> {
+    numbered(key, "decision.")
+}
+
+fn numbered(key: &str, prefix: &str) -> Option<u64> {
+    let digits = key.strip_prefix(prefix)?;
     // Written as `rollout_key` writes it: no sign, no leading zero.
     digits
         .parse()
@@ -199,6 +224,11 @@ fn denied(url: &Url, text: &str) -> String {
 
 /// The revisions of every rollout in the bucket, in order.
 async fn revisions(store: &kv::Store) -> Result<Vec<u64>, String> {
+    numbered_keys(store, revision_of).await
+}
+
+/// The revisions of every key `of` reads a revision from, in order.
+async fn numbered_keys(store: &kv::Store, of: fn(&str) -> Option<u64>) -> Result<Vec<u64>, String> {
     let mut keys = store
         .keys()
         .await
@@ -206,7 +236,7 @@ async fn revisions(store: &kv::Store) -> Result<Vec<u64>, String> {
     let mut out = Vec::new();
     while let Some(k) = keys.next().await {
         let k = k.map_err(|e| format!("cannot list the spec channel's keys: {e}"))?;
-        if let Some(r) = revision_of(&k) {
+        if let Some(r) = of(&k) {
             out.push(r);
         }
     }
@@ -218,8 +248,8 @@ async fn revisions(store: &kv::Store) -> Result<Vec<u64>, String> {
 /// The rollout stored as `rollout.<revision>`, checked: its record read, its revision the key's,
 /// its signature by a trusted key, and its bundle (fetched) hashing to its digest.
 async fn arrival(store: &kv::Store, revision: u64, value: &[u8], trust: &[String]) -> Arrival {
-    let record = Record::parse(value);
-    let mut rollout = match &record.rollout {
+    let record = Record::<Rollout>::parse(value);
+    let mut rollout = match &record.body {
         Ok(r) => r.clone(),
         Err(why) => {
             return Arrival {
@@ -291,14 +321,42 @@ async fn fetch_bundle(store: &kv::Store, r: &Rollout) -> Result<Bundle, String> 
     Ok(bundle)
 }
 
-/// Every rollout so far, checked, in revision order.
-async fn read_all(store: &kv::Store, trust: &[String]) -> Result<Vec<Arrival>, String> {
+/// The decision stored as `decision.<revision>`, checked: its record read, signed by a trusted
+/// key, and for the revision its key names.
+fn decision_of(revision: u64, value: &[u8], trust: &[String]) -> Result<Decision, String> {
+    let record = Record::<Decision>::parse(value);
+    let d = record.body.clone()?;
+    record.verify(trust)?;
+    if d.revision != revision {
+        return Err(format!(
+            "it says it decides revision {} but is stored as {}",
+            d.revision,
+            decision_key(revision)
+        ));
+    }
+    Ok(d)
+}
+
+/// Every rollout and decision so far, checked, in revision order (each decision before its
+/// rollout).
+async fn read_all(store: &kv::Store, trust: &[String]) -> Result<Vec<Event>, String> {
     let mut out = Vec::new();
+    for r in numbered_keys(store, decided_revision_of).await? {
+        let key = decision_key(r);
+        match store.entry(key.as_str()).await {
+            Ok(Some(e)) if e.operation == kv::Operation::Put => out.push(Event::Decision {
+                revision: r,
+                decision: decision_of(r, &e.value, trust),
+            }),
+            Ok(_) => {}
+            Err(e) => return Err(format!("cannot read {key} from the spec channel: {e}")),
+        }
+    }
     for r in revisions(store).await? {
         let key = rollout_key(r);
         match store.entry(key.as_str()).await {
             Ok(Some(e)) if e.operation == kv::Operation::Put => {
-                out.push(arrival(store, r, &e.value, trust).await);
+                out.push(Event::Proposal(arrival(store, r, &e.value, trust).await));
             }
             Ok(_) => {}
             Err(e) => return Err(format!("cannot read {key} from the spec channel: {e}")),
@@ -312,11 +370,12 @@ pub struct NatsFeed {
     url: Url,
     /// Keeps the NATS thread (and the watching task on it) alive.
     _conn: Conn,
-    arrivals: mpsc::Receiver<Arrival>,
-    /// The highest revision handed out so far.
+    arrivals: mpsc::Receiver<Event>,
+    /// The highest revision of a rollout handed out so far.
     last: u64,
-    /// The latest status to write (key, JSON); the writer task puts whichever is newest.
-    status: tokio::sync::watch::Sender<Option<(String, Vec<u8>)>>,
+    /// The latest status to write (key, status); the writer task puts whichever is newest,
+    /// and again every [`HEARTBEAT`].
+    status: tokio::sync::watch::Sender<Option<(String, Status)>>,
 }
 
 impl NatsFeed {
@@ -324,7 +383,7 @@ impl NatsFeed {
     /// start watching for new ones. A bucket that does not exist yet is no error (nothing was
     /// published): it is looked for every 2 s. `trust`: the public keys whose signatures count
     /// (none: a configuration error).
-    pub fn connect(url: &Url, trust: &[String]) -> Result<(NatsFeed, Vec<Arrival>), Failure> {
+    pub fn connect(url: &Url, trust: &[String]) -> Result<(NatsFeed, Vec<Event>), Failure> {
         if trust.is_empty() {
             return Err(Failure::Config(
                 "a spec channel needs the operator's public key (--spec-trust KEY)".into(),
@@ -350,20 +409,37 @@ impl NatsFeed {
             })
             .ok_or_else(|| Failure::Io("the NATS thread stopped".to_string()))??;
         let exists = opened.store.is_some();
-        let known: BTreeSet<u64> = first.iter().map(|a| a.rollout.revision).collect();
+        let proposals = first.iter().filter(|e| matches!(e, Event::Proposal(_)));
+        let known: BTreeSet<u64> = proposals.map(Event::revision).collect();
+        let decided: BTreeSet<u64> = first
+            .iter()
+            .filter(|e| matches!(e, Event::Decision { .. }))
+            .map(Event::revision)
+            .collect();
         let last = known.last().copied().unwrap_or(0);
+        let rollouts = first
+            .iter()
+            .filter(|e| matches!(e, Event::Proposal(_)))
+            .count();
         let (tx, arrivals) = mpsc::channel();
         let (status, status_rx) = tokio::sync::watch::channel(None);
         let (store_tx, store_rx) = tokio::sync::watch::channel(opened.store.clone());
         conn.handle.spawn(follow(
-            opened.js,
             url.clone(),
-            opened.store,
+            store_rx.clone(),
             known,
+            Arc::clone(&trust),
+            tx.clone(),
+        ));
+        conn.handle.spawn(follow_decisions(
+            url.clone(),
+            store_rx.clone(),
+            decided,
             trust,
             tx,
-            store_tx,
         ));
+        conn.handle
+            .spawn(find_bucket(opened.js, url.clone(), opened.store, store_tx));
         conn.handle.spawn(write_status(
             url.clone(),
             status_rx,
@@ -374,9 +450,8 @@ impl NatsFeed {
             Level::Info,
             &if exists {
                 format!(
-                    "spec: following the spec channel {}: {} rollout(s) so far",
+                    "spec: following the spec channel {}: {rollouts} rollout(s) so far",
                     url.shown(),
-                    first.len()
                 )
             } else {
                 format!(
@@ -399,17 +474,18 @@ impl NatsFeed {
         ))
     }
 
-    /// Rollouts that arrived since the last call, in revision order, each once; never blocks.
-    pub fn poll(&mut self) -> Vec<Arrival> {
-        let mut got: Vec<Arrival> = self.arrivals.try_iter().collect();
+    /// Rollouts and decisions that arrived since the last call, in revision order, each once;
+    /// never blocks.
+    pub fn poll(&mut self) -> Vec<Event> {
+        let mut got: Vec<Event> = self.arrivals.try_iter().collect();
         if got.is_empty() {
             return got;
         }
-        got.sort_by_key(|a| a.rollout.revision);
+        got.sort_by_key(Event::revision);
         let mut out = Vec::with_capacity(got.len());
-        for a in got {
-            let r = a.rollout.revision;
-            if r <= self.last {
+        for e in got {
+            let r = e.revision();
+            if matches!(e, Event::Proposal(_)) && r <= self.last {
                 log::log(
                     Level::Warn,
                     &format!(
@@ -423,8 +499,10 @@ impl NatsFeed {
                 );
                 continue;
             }
-            self.last = r;
-            out.push(a);
+            if matches!(e, Event::Proposal(_)) {
+                self.last = r;
+            }
+            out.push(e);
         }
         out
     }
@@ -440,19 +518,14 @@ impl NatsFeed {
             time: now_ns(),
             outcomes: outcomes.to_vec(),
         };
-        match serde_json::to_vec(&status) {
-            Ok(bytes) => {
-                let _ = self
-                    .status
-                    .send(Some((status_key(host, partition, pid), bytes)));
-            }
-            Err(e) => log::log(Level::Warn, &format!("spec: status not written: {e}")),
-        }
+        let _ = self
+            .status
+            .send(Some((status_key(host, partition, pid), status)));
     }
 }
 
 impl Channel for NatsFeed {
-    fn poll(&mut self) -> Vec<Arrival> {
+    fn poll(&mut self) -> Vec<Event> {
         NatsFeed::poll(self)
     }
 
@@ -461,38 +534,60 @@ impl Channel for NatsFeed {
     }
 }
 
-/// Wait for the bucket (if it does not exist yet), then watch `rollout.>` and send every new
-/// rollout, checked, to the feed. A watch that ends (the connection lost for long) is started
-/// again; rollouts already sent are not sent again.
-async fn follow(
+/// Look for the bucket every [`LOOK_AGAIN`] until it exists (the first `spec publish` makes
+/// it), then hand it to the tasks waiting for it.
+async fn find_bucket(
     js: jetstream::Context,
     url: Url,
     store: Option<kv::Store>,
-    mut known: BTreeSet<u64>,
-    trust: Arc<[String]>,
-    tx: mpsc::Sender<Arrival>,
     store_tx: tokio::sync::watch::Sender<Option<kv::Store>>,
 ) {
-    let store = match store {
-        Some(s) => s,
-        None => loop {
-            tokio::time::sleep(LOOK_AGAIN).await;
-            if let Ok(s) = js.get_key_value(url.bucket.clone()).await {
-                log::log(
-                    Level::Info,
-                    &format!(
-                        "spec: the spec channel {} exists now; following it",
-                        url.shown()
-                    ),
-                );
-                let _ = store_tx.send(Some(s.clone()));
-                break s;
-            }
-        },
-    };
+    if store.is_some() {
+        return;
+    }
+    loop {
+        tokio::time::sleep(LOOK_AGAIN).await;
+        if let Ok(s) = js.get_key_value(url.bucket.clone()).await {
+            log::log(
+                Level::Info,
+                &format!(
+                    "spec: the spec channel {} exists now; following it",
+                    url.shown()
+                ),
+            );
+            let _ = store_tx.send(Some(s));
+            // Keep the sender (and so the receivers' last value) alive.
+            std::future::pending::<()>().await;
+        }
+    }
+}
+
+/// The bucket, once it exists (`None`: the process is ending).
+async fn bucket(store: &mut tokio::sync::watch::Receiver<Option<kv::Store>>) -> Option<kv::Store> {
+    store
+        .wait_for(Option::is_some)
+        .await
+        .ok()
+        .and_then(|s| s.clone())
+}
+
+/// Watch `prefix.>` (from the start of its history) and hand each new put whose key `of` reads
+/// a revision from, not in `known`, to `each`; a watch that ends (the connection lost for
+/// long) is started again. Returns when `each` says the feed is gone.
+async fn watch_keys<F, Fut>(
+    url: &Url,
+    store: &kv::Store,
+    prefix: &str,
+    of: fn(&str) -> Option<u64>,
+    mut known: BTreeSet<u64>,
+    mut each: F,
+) where
+    F: FnMut(u64, kv::Entry) -> Fut,
+    Fut: std::future::Future<Output = bool>,
+{
     let mut warned = false;
     loop {
-        match store.watch_with_history("rollout.>").await {
+        match store.watch_with_history(format!("{prefix}.>")).await {
             Ok(mut watch) => {
                 warned = false;
                 while let Some(entry) = watch.next().await {
@@ -500,10 +595,10 @@ async fn follow(
                     if entry.operation != kv::Operation::Put {
                         continue;
                     }
-                    let Some(revision) = revision_of(&entry.key) else {
+                    let Some(revision) = of(&entry.key) else {
                         log::warn_limited("spec-channel-key", || {
                             format!(
-                                "spec: {} in {} is no rollout key (rollout.<revision>): ignored",
+                                "spec: {} in {} is no {prefix} key ({prefix}.<revision>): ignored",
                                 entry.key,
                                 url.shown()
                             )
@@ -513,8 +608,7 @@ async fn follow(
                     if !known.insert(revision) {
                         continue;
                     }
-                    let a = arrival(&store, revision, &entry.value, &trust).await;
-                    if tx.send(a).is_err() {
+                    if !each(revision, entry).await {
                         return;
                     }
                 }
@@ -535,38 +629,112 @@ async fn follow(
     }
 }
 
-/// Put the newest status whenever there is one (once the bucket exists).
+/// Send every new rollout, checked, to the feed (once the bucket exists).
+async fn follow(
+    url: Url,
+    mut store: tokio::sync::watch::Receiver<Option<kv::Store>>,
+    known: BTreeSet<u64>,
+    trust: Arc<[String]>,
+    tx: mpsc::Sender<Event>,
+) {
+    let Some(store) = bucket(&mut store).await else {
+        return;
+    };
+    let s = store.clone();
+    watch_keys(
+        &url,
+        &store,
+        "rollout",
+        revision_of,
+        known,
+        |revision, entry| {
+            let (s, trust, tx) = (s.clone(), Arc::clone(&trust), tx.clone());
+            async move {
+                let a = arrival(&s, revision, &entry.value, &trust).await;
+                tx.send(Event::Proposal(a)).is_ok()
+            }
+        },
+    )
+    .await;
+}
+
+/// Send every new decision, checked, to the feed (once the bucket exists).
+async fn follow_decisions(
+    url: Url,
+    mut store: tokio::sync::watch::Receiver<Option<kv::Store>>,
+    known: BTreeSet<u64>,
+    trust: Arc<[String]>,
+    tx: mpsc::Sender<Event>,
+) {
+    let Some(store) = bucket(&mut store).await else {
+        return;
+    };
+    watch_keys(
+        &url,
+        &store,
+        "decision",
+        decided_revision_of,
+        known,
+        |revision, entry| {
+            let decision = decision_of(revision, &entry.value, &trust);
+            let sent = tx.send(Event::Decision { revision, decision }).is_ok();
+            async move { sent }
+        },
+    )
+    .await;
+}
+
+/// Put the newest status whenever there is one (once the bucket exists), and again every
+/// [`HEARTBEAT`] with its time renewed: a publisher counts the votes of the processes whose key
+/// is fresh.
 async fn write_status(
     url: Url,
-    mut status: tokio::sync::watch::Receiver<Option<(String, Vec<u8>)>>,
+    mut status: tokio::sync::watch::Receiver<Option<(String, Status)>>,
     mut store: tokio::sync::watch::Receiver<Option<kv::Store>>,
     violations: Arc<Mutex<Vec<String>>>,
 ) {
-    while status.changed().await.is_ok() {
-        let Some((key, bytes)) = status.borrow_and_update().clone() else {
+    let mut warned = false;
+    loop {
+        // A new status, or the heartbeat's time: write; the process ending: stop.
+        if let Ok(Err(_)) = tokio::time::timeout(HEARTBEAT, status.changed()).await {
+            return;
+        }
+        let Some((key, mut s)) = status.borrow_and_update().clone() else {
             continue;
         };
-        let Ok(s) = store.wait_for(Option::is_some).await.map(|s| s.clone()) else {
-            return;
+        let Some(bucket) = store.borrow_and_update().clone() else {
+            continue;
         };
-        let Some(s) = s else { continue };
-        if let Err(e) = s.put(key.as_str(), bytes.into()).await {
-            let why = match violation(&violations) {
-                Some(v) => format!(
-                    "not permitted ({}); a process's login must be allowed to write the spec \
-                     channel's status.> keys (telegraf/fleet-nats/accounts.conf)",
-                    mask(&v)
-                ),
-                None => e.to_string(),
-            };
-            log::log(
-                Level::Warn,
-                &format!(
-                    "spec: cannot write this process's status {key} to {}: {why}; `spec status` \
-                     shows an older one",
-                    url.shown()
-                ),
-            );
+        s.time = now_ns();
+        let bytes = match serde_json::to_vec(&s) {
+            Ok(b) => b,
+            Err(e) => {
+                log::log(Level::Warn, &format!("spec: status not written: {e}"));
+                continue;
+            }
+        };
+        match bucket.put(key.as_str(), bytes.into()).await {
+            Ok(_) => warned = false,
+            Err(e) if !warned => {
+                warned = true;
+                let why = match violation(&violations) {
+                    Some(v) => format!(
+                        "not permitted ({}); a process's login must be allowed to write the spec \
+                         channel's status.> keys (telegraf/fleet-nats/accounts.conf)",
+                        mask(&v)
+                    ),
+                    None => e.to_string(),
+                };
+                log::log(
+                    Level::Warn,
+                    &format!(
+                        "spec: cannot write this process's status {key} to {}: {why}; `spec status` \
+                         shows an older one, and a publisher counts this process as silent",
+                        url.shown()
+                    ),
+                );
+            }
+            Err(_) => {}
         }
     }
 }
@@ -578,6 +746,22 @@ pub struct Listed {
     pub revision: u64,
     pub rollout: Result<Rollout, String>,
     pub signer: Option<String>,
+    /// When the server stored it (ns since the Unix epoch, the server's clock).
+    pub written: i64,
+}
+
+/// A decision as the operator's command reads it (its signature not checked: `Err` only when
+/// it cannot be read), with its signer.
+#[derive(Debug, Clone)]
+pub struct Decided {
+    pub revision: u64,
+    pub decision: Result<Decision, String>,
+    pub signer: Option<String>,
+}
+
+/// When the server stored `e` (ns since the Unix epoch): a clock every reader shares.
+fn server_ns(e: &kv::Entry) -> i64 {
+    i64::try_from(e.created.unix_timestamp_nanos()).unwrap_or(i64::MAX)
 }
 
 /// A status key as `spec status` reads it: its name and the status (`Err`: why it cannot be
@@ -586,6 +770,8 @@ pub struct Listed {
 pub struct Reported {
     pub key: String,
     pub status: Result<Status, String>,
+    /// When the server stored it (ns since the Unix epoch, the server's clock): how fresh it is.
+    pub written: i64,
 }
 
 /// The operator's side of the channel: read rollouts and statuses, publish.
@@ -649,11 +835,12 @@ impl Operator {
                 let key = rollout_key(r);
                 match store.entry(key.as_str()).await {
                     Ok(Some(e)) if e.operation == kv::Operation::Put => {
-                        let rec = Record::parse(&e.value);
+                        let rec = Record::<Rollout>::parse(&e.value);
                         out.push(Listed {
                             revision: r,
-                            rollout: rec.rollout,
+                            rollout: rec.body,
                             signer: rec.signer,
+                            written: server_ns(&e),
                         });
                     }
                     Ok(_) => {}
@@ -682,19 +869,84 @@ impl Operator {
             names.sort();
             let mut out = Vec::new();
             for k in names {
-                match store.get(k.as_str()).await {
-                    Ok(Some(v)) => {
-                        let s = serde_json::from_slice::<Status>(&v)
+                match store.entry(k.as_str()).await {
+                    Ok(Some(e)) if e.operation == kv::Operation::Put => {
+                        let s = serde_json::from_slice::<Status>(&e.value)
                             .map_err(|e| format!("not a status: {e}"));
-                        out.push(Reported { key: k, status: s });
+                        out.push(Reported {
+                            key: k,
+                            status: s,
+                            written: server_ns(&e),
+                        });
                     }
-                    Ok(None) => {}
+                    Ok(_) => {}
                     Err(e) => return Err(format!("cannot read {k}: {e}")),
                 }
             }
             Ok(out)
         })?;
         got.map_err(|e| self.failure("reading the statuses", e))
+    }
+
+    /// Every decision, in revision order.
+    pub fn decisions(&self) -> Result<Vec<Decided>, Failure> {
+        let Some(store) = self.store.clone() else {
+            return Ok(Vec::new());
+        };
+        let got = self.run(async move {
+            let mut out = Vec::new();
+            for r in numbered_keys(&store, decided_revision_of).await? {
+                let key = decision_key(r);
+                match store.entry(key.as_str()).await {
+                    Ok(Some(e)) if e.operation == kv::Operation::Put => {
+                        let rec = Record::<Decision>::parse(&e.value);
+                        out.push(Decided {
+                            revision: r,
+                            decision: rec.body,
+                            signer: rec.signer,
+                        });
+                    }
+                    Ok(_) => {}
+                    Err(e) => return Err(format!("cannot read {key}: {e}")),
+                }
+            }
+            Ok(out)
+        })?;
+        got.map_err(|e| self.failure("reading the decisions", e))
+    }
+
+    /// Store `decision`, signed with `key`, as `decision.<revision>` with the KV `create`: a
+    /// revision is decided once. `Ok(None)`: stored; `Ok(Some(d))`: another command decided it
+    /// first, and `d` is what it decided (the record that counts).
+    pub fn decide(
+        &self,
+        decision: &Decision,
+        key: &nkeys::KeyPair,
+    ) -> Result<Option<Result<Decision, String>>, Failure> {
+        let Some(store) = self.store.clone() else {
+            return Err(Failure::Io(format!(
+                "spec channel {}: no bucket",
+                self.url.shown()
+            )));
+        };
+        let bytes = sign::seal(decision, key).map_err(Failure::Config)?;
+        let k = decision_key(decision.revision);
+        let kk = k.clone();
+        let s = store.clone();
+        let created = self.run(async move { s.create(kk.as_str(), bytes.into()).await })?;
+        match created {
+            Ok(_) => Ok(None),
+            Err(e) if e.kind() == kv::CreateErrorKind::AlreadyExists => {
+                let kk = k.clone();
+                let got = self.run(async move { store.get(kk.as_str()).await })?;
+                match got {
+                    Ok(Some(v)) => Ok(Some(Record::<Decision>::parse(&v).body)),
+                    Ok(None) => Ok(Some(Err(format!("{k} vanished while it was read")))),
+                    Err(e) => Err(self.failure("reading the decision", e)),
+                }
+            }
+            Err(e) => Err(self.refused(&k, e)),
+        }
     }
 
     /// Check that the bundle of `r` is in the channel and hashes to its digest (a rollback
@@ -712,13 +964,14 @@ impl Operator {
 
     /// Put `bundle` (none for the base marker), then `rollout` signed with `key` as the next
     /// revision (its `revision` is set here: taken with the KV `create`, the next one tried
-    /// when another publisher took it). Returns the rollout as published.
+    /// when another publisher took it). Returns the rollout as published and when the server
+    /// stored it (ns, the server's clock).
     pub fn publish(
         &self,
         bundle: Option<&Bundle>,
         mut rollout: Rollout,
         key: &nkeys::KeyPair,
-    ) -> Result<Rollout, Failure> {
+    ) -> Result<(Rollout, i64), Failure> {
         let Some(store) = self.store.clone() else {
             return Err(Failure::Io(format!(
                 "spec channel {}: no bucket",
@@ -753,7 +1006,15 @@ impl Operator {
             let kk = k.clone();
             let created = self.run(async move { s.create(kk.as_str(), bytes.into()).await })?;
             match created {
-                Ok(_) => return Ok(rollout),
+                Ok(_) => {
+                    let s = store.clone();
+                    let entry = self.run(async move { s.entry(k.as_str()).await })?;
+                    let written = match entry {
+                        Ok(Some(e)) => server_ns(&e),
+                        _ => now_ns(),
+                    };
+                    return Ok((rollout, written));
+                }
                 Err(e) if e.kind() == kv::CreateErrorKind::AlreadyExists => continue,
                 Err(e) => return Err(self.refused(&k, e)),
             }

@@ -11,6 +11,7 @@ use super::bundle::Bundle;
 use crate::log::{self, Level};
 use crate::processor::Processor;
 use crate::processor::carry::{self, Reset};
+use crate::processor::versions::{self, Version};
 use std::path::PathBuf;
 use std::sync::Arc;
 use tessla_engine::runtime::snapshot;
@@ -63,8 +64,15 @@ pub enum Reloaded {
 
 /// Reload `src` into every processor of the run (`procs`: one per thread; every record before
 /// it was evaluated with the old spec, so no step is open). `why` says what asked for it
-/// (`SIGHUP`, `spec file changed`). Logs the outcome once.
-pub fn reload(src: &SpecSource, why: &str, procs: &mut [&mut Processor]) -> Reloaded {
+/// (`SIGHUP`, `spec file changed`). Its bindings are checked against `samples` (every
+/// thread's, as a rollout's are): an input that cannot read the metrics the process receives
+/// refuses it. Logs the outcome once.
+pub fn reload(
+    src: &SpecSource,
+    why: &str,
+    procs: &mut [&mut Processor],
+    samples: &[lineproto::Metric],
+) -> Reloaded {
     log::log(Level::Info, &format!("{why}: reloading {}", src.describe()));
     let (loaded, bundle) = match src.load() {
         Ok(l) => l,
@@ -103,6 +111,18 @@ pub fn reload(src: &SpecSource, why: &str, procs: &mut [&mut Processor]) -> Relo
     let Some(first) = procs.first() else {
         return Reloaded::Refused("no processor".into());
     };
+    let checked = Version::new(String::new(), String::new(), Arc::clone(&new))
+        .and_then(|v| versions::check_against(&v, samples));
+    if let Err(e) = checked {
+        log::log(
+            Level::Error,
+            &format!(
+                "reload: {}: {e}; the running spec stays in use",
+                src.describe()
+            ),
+        );
+        return Reloaded::Refused(e);
+    }
     let old = Arc::clone(first.program());
     let old_keys = snapshot::node_keys(&old);
     let new_keys = snapshot::node_keys(&new);

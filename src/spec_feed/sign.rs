@@ -3,27 +3,53 @@
 //! trust (`--spec-trust`). A spec steers robots, so write access to the channel's bucket is not
 //! enough.
 //!
-//! Owns: the record a channel stores for a rollout ([`seal`], [`Record::verify`]), the canonical JSON the
-//! signature covers ([`canonical_json`]), reading the signing seed and the trusted keys, and
-//! every reason a record is refused, each saying which.
+//! Owns: the records a channel stores signed, a rollout's proposal and the fleet's decision on
+//! it ([`seal`], [`Record::verify`], [`Signable`]), the canonical JSON the signature covers
+//! ([`canonical_json`]), reading the signing seed and the trusted keys, and every reason a
+//! record is refused, each saying which.
 //!
-//! The record: `{"format":"tessla-telegraf-rollout/1","rollout":{…},"signer":"O…","signature":"…"}`.
-//! The signature (128 hex digits) is the signer's ed25519 signature of [`DOMAIN`] followed by the
-//! canonical JSON of the `rollout` object as stored (so fields a later version adds are covered
-//! too). The rollout names its bundle's full SHA-256, so the signature covers the bundle.
+//! A record: `{"format":"tessla-telegraf-rollout/1","rollout":{…},"signer":"O…","signature":"…"}`
+//! (a decision: `tessla-telegraf-decision/1` and `decision`). The signature (128 hex digits) is
+//! the signer's ed25519 signature of the kind's domain line (rollouts: [`DOMAIN`]) followed by
+//! the canonical JSON of the signed object as stored (so fields a later version adds are
+//! covered too). The rollout names its bundle's full SHA-256, so the signature covers the
+//! bundle; a decision names its rollout's revision and digest.
 
-use super::Rollout;
+use super::{Decision, Rollout};
 use crate::state::secrets::SecretSource;
 use nkeys::KeyPair;
+use serde::Serialize;
+use serde::de::DeserializeOwned;
 use serde_json::{Map, Value};
 use std::path::Path;
 
-/// The record's `format`.
+/// A rollout record's `format`.
 pub const FORMAT: &str = "tessla-telegraf-rollout/1";
 
-/// What every signed message starts with, so that a rollout signature can never be taken for
-/// the signature of anything else made with the same key (a NATS login's nonce, a JWT).
+/// What every signed rollout starts with, so that a rollout signature can never be taken for
+/// the signature of anything else made with the same key (a NATS login's nonce, a JWT, a
+/// decision).
 pub const DOMAIN: &[u8] = b"tessla-telegraf rollout signature v1\n";
+
+/// What the channel stores signed: its record's `format`, the member holding it, the domain
+/// line its signature starts with, and what a message calls it.
+pub trait Signable: Serialize + DeserializeOwned {
+    const FORMAT: &'static str;
+    const FIELD: &'static str;
+    const DOMAIN: &'static [u8];
+}
+
+impl Signable for Rollout {
+    const FORMAT: &'static str = FORMAT;
+    const FIELD: &'static str = "rollout";
+    const DOMAIN: &'static [u8] = DOMAIN;
+}
+
+impl Signable for Decision {
+    const FORMAT: &'static str = "tessla-telegraf-decision/1";
+    const FIELD: &'static str = "decision";
+    const DOMAIN: &'static [u8] = b"tessla-telegraf decision signature v1\n";
+}
 
 /// The environment variable `spec publish` and `spec rollback` read the seed from without
 /// `--sign-key-file`.
@@ -76,10 +102,10 @@ fn write_string(s: &str, out: &mut String) {
     out.push_str(&Value::String(s.to_string()).to_string());
 }
 
-/// The bytes a signature covers: [`DOMAIN`] and the canonical JSON of the rollout object.
-fn message(rollout: &Value) -> Vec<u8> {
-    let mut m = DOMAIN.to_vec();
-    m.extend_from_slice(canonical_json(rollout).as_bytes());
+/// The bytes a signature covers: the kind's domain line and the canonical JSON of the object.
+fn message(domain: &[u8], body: &Value) -> Vec<u8> {
+    let mut m = domain.to_vec();
+    m.extend_from_slice(canonical_json(body).as_bytes());
     m
 }
 
@@ -164,67 +190,70 @@ pub fn trusted_keys(given: &[String], file: Option<&Path>) -> Result<Vec<String>
     Ok(keys)
 }
 
-/// The record of `rollout`, signed with `key`.
-pub fn seal(rollout: &Rollout, key: &KeyPair) -> Result<Vec<u8>, String> {
-    let value = serde_json::to_value(rollout).map_err(|e| format!("rollout: {e}"))?;
+/// The record of `body` (a rollout or a decision), signed with `key`.
+pub fn seal<T: Signable>(body: &T, key: &KeyPair) -> Result<Vec<u8>, String> {
+    let value = serde_json::to_value(body).map_err(|e| format!("{}: {e}", T::FIELD))?;
     let signature = key
-        .sign(&message(&value))
+        .sign(&message(T::DOMAIN, &value))
         .map_err(|e| format!("cannot sign with this seed: {e}"))?;
     let mut record = Map::new();
-    record.insert("format".into(), Value::String(FORMAT.into()));
-    record.insert("rollout".into(), value);
+    record.insert("format".into(), Value::String(T::FORMAT.into()));
+    record.insert(T::FIELD.into(), value);
     record.insert("signer".into(), Value::String(key.public_key()));
     record.insert("signature".into(), Value::String(hex(&signature)));
-    serde_json::to_vec(&Value::Object(record)).map_err(|e| format!("rollout: {e}"))
+    serde_json::to_vec(&Value::Object(record)).map_err(|e| format!("{}: {e}", T::FIELD))
 }
 
 /// A record read back, before its signature is checked.
 #[derive(Debug, Clone)]
-pub struct Record {
-    /// The rollout it holds (`Err`: why there is none).
-    pub rollout: Result<Rollout, String>,
+pub struct Record<T: Signable = Rollout> {
+    /// The rollout (or decision) it holds (`Err`: why there is none).
+    pub body: Result<T, String>,
     /// The public key it names as its signer, if any.
     pub signer: Option<String>,
     value: Option<Value>,
     signature: Option<String>,
 }
 
-impl Record {
+impl<T: Signable> Record<T> {
     /// Read a record (no signature checked: see [`Record::verify`]).
-    pub fn parse(bytes: &[u8]) -> Record {
+    pub fn parse(bytes: &[u8]) -> Record<T> {
+        let what = T::FIELD;
         let none = |why: String| Record {
-            rollout: Err(why),
+            body: Err(why),
             signer: None,
             value: None,
             signature: None,
         };
         let record: Value = match serde_json::from_slice(bytes) {
             Ok(v) => v,
-            Err(e) => return none(format!("it is not a rollout record (not JSON: {e})")),
+            Err(e) => return none(format!("it is not a {what} record (not JSON: {e})")),
         };
         let Some(obj) = record.as_object() else {
-            return none("it is not a rollout record (not a JSON object)".into());
+            return none(format!("it is not a {what} record (not a JSON object)"));
         };
         match obj.get("format").and_then(Value::as_str) {
-            Some(FORMAT) => {}
+            Some(f) if f == T::FORMAT => {}
             Some(other) => {
                 return none(format!(
-                    "its format is `{other}`, not `{FORMAT}` (written by another version of tessla-telegraf?)"
+                    "its format is `{other}`, not `{}` (written by another version of tessla-telegraf?)",
+                    T::FORMAT
                 ));
             }
             None => {
                 return none(format!(
-                    "it is not a rollout record (no `format`: {FORMAT})"
+                    "it is not a {what} record (no `format`: {})",
+                    T::FORMAT
                 ));
             }
         }
-        let Some(value) = obj.get("rollout").cloned() else {
-            return none("it is not a rollout record (no `rollout`)".into());
+        let Some(value) = obj.get(what).cloned() else {
+            return none(format!("it is not a {what} record (no `{what}`)"));
         };
         let text = |k: &str| obj.get(k).and_then(Value::as_str).map(str::to_string);
         Record {
-            rollout: serde_json::from_value::<Rollout>(value.clone())
-                .map_err(|e| format!("its rollout cannot be read: {e}")),
+            body: serde_json::from_value::<T>(value.clone())
+                .map_err(|e| format!("its {what} cannot be read: {e}")),
             signer: text("signer"),
             signature: text("signature"),
             value: Some(value),
@@ -238,11 +267,11 @@ impl Record {
             return Err("it cannot be read, so its signature cannot be checked".into());
         };
         let (Some(signer), Some(signature)) = (&self.signer, &self.signature) else {
-            return Err(
-                "it is unsigned: only rollouts signed with the operator's key are run (publish with \
-                 `tessla-telegraf spec publish`, which signs)"
-                    .into(),
-            );
+            return Err(format!(
+                "it is unsigned: only {}s signed with the operator's key count (publish with \
+                 `tessla-telegraf spec publish`, which signs)",
+                T::FIELD
+            ));
         };
         if !trusted.iter().any(|t| t == signer) {
             return Err(format!(
@@ -258,7 +287,7 @@ impl Record {
         };
         let key = KeyPair::from_public_key(signer).map_err(|_| bad("not a public key"))?;
         let signature = unhex(signature).ok_or_else(|| bad("the signature is not hex"))?;
-        key.verify(&message(value), &signature)
+        key.verify(&message(T::DOMAIN, value), &signature)
             .map_err(|_| bad("wrong signature"))
     }
 }
@@ -321,8 +350,8 @@ mod tests {
         let key = KeyPair::new_operator();
         let r = rollout();
         let bytes = seal(&r, &key).unwrap();
-        let rec = Record::parse(&bytes);
-        assert_eq!(rec.rollout.as_ref().unwrap(), &r);
+        let rec = Record::<Rollout>::parse(&bytes);
+        assert_eq!(rec.body.as_ref().unwrap(), &r);
         assert_eq!(rec.signer.as_deref(), Some(key.public_key().as_str()));
         assert_eq!(rec.verify(&[key.public_key()]), Ok(()));
         // Another key trusted: refused as untrusted, naming the signer.
@@ -335,7 +364,10 @@ mod tests {
         // Re-spaced and reordered: still verifies (the signature covers the canonical form).
         let v: Value = serde_json::from_slice(&bytes).unwrap();
         let pretty = serde_json::to_vec_pretty(&v).unwrap();
-        assert_eq!(Record::parse(&pretty).verify(&[key.public_key()]), Ok(()));
+        assert_eq!(
+            Record::<Rollout>::parse(&pretty).verify(&[key.public_key()]),
+            Ok(())
+        );
     }
 
     #[test]
@@ -351,7 +383,7 @@ mod tests {
         ] {
             let mut v: Value = serde_json::from_slice(&bytes).unwrap();
             v["rollout"][field] = new;
-            let e = Record::parse(&serde_json::to_vec(&v).unwrap())
+            let e = Record::<Rollout>::parse(&serde_json::to_vec(&v).unwrap())
                 .verify(&trusted)
                 .unwrap_err();
             assert!(e.contains("does not verify"), "{field}: {e}");
@@ -360,33 +392,33 @@ mod tests {
         let mut v: Value = serde_json::from_slice(&bytes).unwrap();
         v["rollout"]["extra"] = Value::from(1);
         assert!(
-            Record::parse(&serde_json::to_vec(&v).unwrap())
+            Record::<Rollout>::parse(&serde_json::to_vec(&v).unwrap())
                 .verify(&trusted)
                 .is_err()
         );
         // Unsigned.
         let mut v: Value = serde_json::from_slice(&bytes).unwrap();
         v.as_object_mut().unwrap().remove("signature");
-        let e = Record::parse(&serde_json::to_vec(&v).unwrap())
+        let e = Record::<Rollout>::parse(&serde_json::to_vec(&v).unwrap())
             .verify(&trusted)
             .unwrap_err();
         assert!(e.contains("unsigned"), "{e}");
         // Signed by another key that names itself: untrusted.
         let foreign = KeyPair::new_operator();
-        let e = Record::parse(&seal(&rollout(), &foreign).unwrap())
+        let e = Record::<Rollout>::parse(&seal(&rollout(), &foreign).unwrap())
             .verify(&trusted)
             .unwrap_err();
         assert!(e.contains("does not trust"), "{e}");
         // The trusted key named, but the signature made by another: does not verify.
         let mut v: Value = serde_json::from_slice(&seal(&rollout(), &foreign).unwrap()).unwrap();
         v["signer"] = Value::String(key.public_key());
-        let e = Record::parse(&serde_json::to_vec(&v).unwrap())
+        let e = Record::<Rollout>::parse(&serde_json::to_vec(&v).unwrap())
             .verify(&trusted)
             .unwrap_err();
         assert!(e.contains("does not verify"), "{e}");
         // Not a record at all.
-        let rec = Record::parse(b"{\"revision\":1}");
-        assert!(rec.rollout.is_err() && rec.verify(&trusted).is_err());
+        let rec = Record::<Rollout>::parse(b"{\"revision\":1}");
+        assert!(rec.body.is_err() && rec.verify(&trusted).is_err());
     }
 
     #[test]

@@ -1,8 +1,9 @@
 //! The status metric: one line of line protocol per outcome of a spec version in this process
-//! (accepted or refused, and why), which Telegraf carries to InfluxDB beside the verdicts, so
-//! the operator sees a rollout on the dashboards.
+//! (a reload accepted or refused; a rollout's vote, accepted or refused; then the fleet's
+//! decision: committed, unrunnable here, or aborted; and why), which Telegraf carries to
+//! InfluxDB beside the verdicts, so the operator sees a rollout on the dashboards.
 //!
-//! `tessla_spec,host=H,partition=P,version=ID,outcome=accepted|refused revision=3i,label="…",reason="…",reset_outputs="a,b",from=T i,pid=N i TIME`
+//! `tessla_spec,host=H,partition=P,version=ID,outcome=accepted|refused|committed|unrunnable|aborted revision=3i,label="…",reason="…",reset_outputs="a,b",from=T i,pid=N i TIME`
 //! (`partition` only with a lease; `label`, `reason` and `reset_outputs` only when not empty;
 //! `late_instances=Ni` when a rollout arrived after instances it picks had passed its start.)
 
@@ -36,10 +37,7 @@ pub fn show_time(ns: i64) -> String {
 pub fn write_line(out: &mut Vec<u8>, host: &str, partition: &str, o: &Outcome, from: i64) {
     let mut line = String::with_capacity(160);
     write_measurement(&mut line, MEASUREMENT);
-    let mut tags = vec![
-        ("host", host),
-        ("outcome", if o.accepted { "accepted" } else { "refused" }),
-    ];
+    let mut tags = vec![("host", host), ("outcome", o.word())];
     if !partition.is_empty() {
         tags.push(("partition", partition));
     }
