@@ -239,6 +239,16 @@ fn publish(a: PublishArgs) -> CliResult {
     let key = read_signing_key(a.sign.sign_key_file.as_deref())
         .map_err(|e| CliError::spec(format!("spec publish: {e}")))?;
     let op = Operator::connect(&a.channel.channel, true).map_err(failure)?;
+    if op.created() {
+        // Processes started before the channel existed are looking for it: let them find it
+        // and report, so their votes are waited for.
+        let wait = Operator::settling();
+        eprintln!(
+            "spec: created the channel; waiting {} s for running processes to find it",
+            wait.as_secs_f64()
+        );
+        std::thread::sleep(wait);
+    }
     refuse_while_undecided(&op)?;
     let now = now_ns();
     let rollout = Rollout {

@@ -3,7 +3,8 @@
 //!
 //! Voters are the processes alive when the rollout was proposed: those whose status key the
 //! server stored within [`LIVE`] before it (every process rewrites its key every
-//! [`super::nats::HEARTBEAT`]), and any that report a vote for it later. A vote is the process's
+//! [`super::nats::HEARTBEAT`]) and did not mark it stopped, and any that report a vote for it
+//! later. A vote is the process's
 //! check outcome for the rollout's revision. The rollout is committed when every voter accepted
 //! it (with no voter at all too: the processes that start later follow the record); a refusal,
 //! or a voter that has not answered by the deadline, aborts it.
@@ -57,7 +58,7 @@ pub fn tally(revision: u64, statuses: &[Reported], proposed: i64) -> Tally {
                 accepted: Some(o.accepted),
                 reason: o.reason.clone(),
             }),
-            None if r.written >= live_since => votes.push(Vote {
+            None if r.written >= live_since && !s.stopped => votes.push(Vote {
                 process: r.key.clone(),
                 accepted: None,
                 reason: String::new(),
@@ -128,6 +129,7 @@ mod tests {
                 pid: 1,
                 time: written,
                 outcomes,
+                stopped: false,
             }),
             written,
         }

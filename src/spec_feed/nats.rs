@@ -98,6 +98,10 @@ pub struct Status {
     /// When it was written (ns since the Unix epoch, the process's wall clock).
     pub time: i64,
     pub outcomes: Vec<Outcome>,
+    /// Written by the process as it stopped (its key is no longer renewed): a publisher does
+    /// not wait for its vote.
+    #[serde(default)]
+    pub stopped: bool,
 }
 
 /// The status key of a process: `status.<host>.<partition>`, or `status.<host>.pid<N>` without
@@ -148,6 +152,8 @@ struct Opened {
     js: jetstream::Context,
     store: Option<kv::Store>,
     violations: Arc<Mutex<Vec<String>>>,
+    /// The bucket was made by this call.
+    created: bool,
 }
 
 /// Connect and open the channel's bucket; `create`: make it when missing (the operator's
@@ -204,6 +210,7 @@ async fn open(url: Url, create: bool) -> Result<Opened, Failure> {
         js,
         store,
         violations,
+        created: missing && create,
     })
 }
 
@@ -369,13 +376,15 @@ async fn read_all(store: &kv::Store, trust: &[String]) -> Result<Vec<Event>, Str
 pub struct NatsFeed {
     url: Url,
     /// Keeps the NATS thread (and the watching task on it) alive.
-    _conn: Conn,
+    conn: Conn,
     arrivals: mpsc::Receiver<Event>,
     /// The highest revision of a rollout handed out so far.
     last: u64,
     /// The latest status to write (key, status); the writer task puts whichever is newest,
     /// and again every [`HEARTBEAT`].
     status: tokio::sync::watch::Sender<Option<(String, Status)>>,
+    /// The bucket, once it exists (the last status is written there as the process stops).
+    store: tokio::sync::watch::Receiver<Option<kv::Store>>,
 }
 
 impl NatsFeed {
@@ -443,7 +452,7 @@ impl NatsFeed {
         conn.handle.spawn(write_status(
             url.clone(),
             status_rx,
-            store_rx,
+            store_rx.clone(),
             opened.violations,
         ));
         log::log(
@@ -465,10 +474,11 @@ impl NatsFeed {
         Ok((
             NatsFeed {
                 url: url.clone(),
-                _conn: conn,
+                conn,
                 arrivals,
                 last,
                 status,
+                store: store_rx,
             },
             first,
         ))
@@ -517,10 +527,37 @@ impl NatsFeed {
             pid,
             time: now_ns(),
             outcomes: outcomes.to_vec(),
+            stopped: false,
         };
         let _ = self
             .status
             .send(Some((status_key(host, partition, pid), status)));
+    }
+}
+
+impl Drop for NatsFeed {
+    /// The process stops: its status is written once more, marked stopped, so a publisher
+    /// does not wait for its vote (best effort, at most [`crate::state::nats_conn::REQUEST_TIMEOUT`]).
+    fn drop(&mut self) {
+        let Some((key, mut status)) = self.status.borrow().clone() else {
+            return;
+        };
+        let Some(store) = self.store.borrow().clone() else {
+            return;
+        };
+        status.stopped = true;
+        status.time = now_ns();
+        let Ok(bytes) = serde_json::to_vec(&status) else {
+            return;
+        };
+        let put = async move {
+            tokio::time::timeout(
+                crate::state::nats_conn::REQUEST_TIMEOUT,
+                store.put(key.as_str(), bytes.into()),
+            )
+            .await
+        };
+        let _ = self.conn.call(put);
     }
 }
 
@@ -780,6 +817,7 @@ pub struct Operator {
     conn: Conn,
     store: Option<kv::Store>,
     violations: Arc<Mutex<Vec<String>>>,
+    created: bool,
 }
 
 impl Operator {
@@ -795,7 +833,20 @@ impl Operator {
             conn,
             store: opened.store,
             violations: opened.violations,
+            created: opened.created,
         })
+    }
+
+    /// Whether this command made the bucket (processes started before it exist look for it
+    /// every [`LOOK_AGAIN`] and report within a [`HEARTBEAT`] of finding it).
+    pub fn created(&self) -> bool {
+        self.created
+    }
+
+    /// How long after making the bucket the processes that were waiting for it have all
+    /// reported.
+    pub fn settling() -> Duration {
+        LOOK_AGAIN + HEARTBEAT + Duration::from_millis(500)
     }
 
     /// Whether the bucket exists.

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::process::Output;
 use std::time::{Duration, Instant};
 use tessla_telegraf::spec_feed::nats::{NatsFeed, parse_url};
-use tessla_telegraf::spec_feed::{Arrival, Outcome, Rollout, sign};
+use tessla_telegraf::spec_feed::{Arrival, Event, Outcome, Rollout, sign};
 
 /// A single nats-server with JetStream on a free port (killed on drop); fails the test when
 /// nats-server is not installed.
@@ -138,8 +138,20 @@ fn until<T>(what: &str, mut f: impl FnMut() -> Option<T>) -> T {
 }
 
 fn connect(url: &str, trust: &[String]) -> (NatsFeed, Vec<Arrival>) {
-    NatsFeed::connect(&parse_url(url).unwrap(), trust)
-        .unwrap_or_else(|e| panic!("connect to {url}: {}", e.message()))
+    let (feed, first) = NatsFeed::connect(&parse_url(url).unwrap(), trust)
+        .unwrap_or_else(|e| panic!("connect to {url}: {}", e.message()));
+    (feed, proposals(first))
+}
+
+/// The rollouts among a channel's events (the decisions left out).
+fn proposals(events: Vec<Event>) -> Vec<Arrival> {
+    events
+        .into_iter()
+        .filter_map(|e| match e {
+            Event::Proposal(a) => Some(a),
+            Event::Decision { .. } => None,
+        })
+        .collect()
 }
 
 fn outcome(r: &Rollout, accepted: bool, reason: &str) -> Outcome {
@@ -154,7 +166,7 @@ fn outcome(r: &Rollout, accepted: bool, reason: &str) -> Outcome {
         } else {
             Vec::new()
         },
-        late_instances: 0,
+        ..Outcome::default()
     }
 }
 
@@ -182,7 +194,7 @@ fn publish_list_status_and_a_process_following_the_channel() {
     assert!(a.rollout.selector.is_all());
     let bundle = a.bundle.as_ref().unwrap();
     assert_eq!((bundle.id(), bundle.files.len()), (v1.clone(), 2));
-    assert!(feed.poll().is_empty());
+    assert!(proposals(feed.poll()).is_empty());
 
     // A publish after connect (the seed from the environment, a canary from a stated time):
     // `poll` hands it over.
@@ -210,7 +222,7 @@ fn publish_list_status_and_a_process_following_the_channel() {
         child::text(&out.stdout)
     );
     let got = until("the second rollout polled", || {
-        let got = feed.poll();
+        let got = proposals(feed.poll());
         (!got.is_empty()).then_some(got)
     });
     assert_eq!(got.len(), 1);
@@ -230,7 +242,7 @@ fn publish_list_status_and_a_process_following_the_channel() {
         )
     );
     assert_eq!(got[0].bundle.as_ref().unwrap().id(), v2);
-    assert!(feed.poll().is_empty(), "each rollout once");
+    assert!(proposals(feed.poll()).is_empty(), "each rollout once");
 
     // Two processes report; `spec status` shows both, per rollout.
     feed.report(
@@ -365,7 +377,7 @@ fn a_rollback_publishes_the_version_in_force_before() {
 
     let v1 = published(&s.publish(&url, &main, &[]), 1);
     let got = until("the first rollout, once the bucket exists", || {
-        let got = feed.poll();
+        let got = proposals(feed.poll());
         (!got.is_empty()).then_some(got)
     });
     assert_eq!(got[0].rollout.id, v1);
@@ -381,7 +393,7 @@ fn a_rollback_publishes_the_version_in_force_before() {
         child::text(&out.stdout)
     );
     let got = until("the base rollout", || {
-        let got = feed.poll();
+        let got = proposals(feed.poll());
         (!got.is_empty()).then_some(got)
     });
     let base = &got[0];
@@ -414,7 +426,7 @@ fn a_rollback_publishes_the_version_in_force_before() {
     );
     let mut got = Vec::new();
     until("rollouts 3 to 7", || {
-        got.extend(feed.poll());
+        got.extend(proposals(feed.poll()));
         (got.len() >= 5).then_some(())
     });
     assert_eq!(
@@ -473,8 +485,8 @@ fn tampered_unsigned_and_foreign_rollouts_are_refused_saying_why() {
     let record = raw(port, "tessla_specs", async |kv| {
         kv.get("rollout.1").await.unwrap().unwrap()
     });
-    let rec = sign::Record::parse(&record);
-    let good: Rollout = rec.rollout.clone().unwrap();
+    let rec = sign::Record::<Rollout>::parse(&record);
+    let good: Rollout = rec.body.clone().unwrap();
     let at = |revision: u64| Rollout {
         revision,
         label: format!("r{revision}"),
@@ -575,7 +587,7 @@ fn tampered_unsigned_and_foreign_rollouts_are_refused_saying_why() {
         .unwrap();
     });
     let got = until("rollout 6 polled", || {
-        let got = feed.poll();
+        let got = proposals(feed.poll());
         (!got.is_empty()).then_some(got)
     });
     assert_eq!(got[0].rollout.revision, 6);
@@ -690,6 +702,7 @@ fn with_the_shipped_accounts_only_admin_may_publish() {
     .unwrap();
     let (mut feed, first) = NatsFeed::connect(&p0_url, std::slice::from_ref(&s.public))
         .unwrap_or_else(|e| panic!("{}", e.message()));
+    let first = proposals(first);
     assert_eq!(first.len(), 1);
     assert_eq!(first[0].bundle.as_ref().unwrap().id(), id);
     feed.report("robot-host", "p0", &[outcome(&first[0].rollout, true, "")]);
@@ -890,16 +903,45 @@ fn every_running_process_takes_a_publish_and_refuses_a_bad_one() {
             l.contains(&format!(" c=1i,y=2i {}", ts(0)))
         });
     }
-    let v_new = published(&s.publish(&url, &new, &["--from", &ts(5).to_string()]), 1);
+    let out = s.publish(&url, &new, &["--from", &ts(5).to_string()]);
+    let v_new = published(&out, 1);
+    // Both voted; the fleet's decision is printed with each vote.
+    let text = child::text(&out.stdout);
+    assert!(
+        text.contains("committed: all 2 processes accepted it") && text.contains("PROCESS"),
+        "{text}"
+    );
     for p in procs.iter_mut() {
-        p.wait_out("the accepted status", |l| {
-            l.starts_with("tessla_spec,") && l.contains(",outcome=accepted,") && l.contains(&v_new)
+        p.wait_out("the committed status", |l| {
+            l.starts_with("tessla_spec,") && l.contains(",outcome=committed,") && l.contains(&v_new)
         });
+        assert!(
+            p.out
+                .iter()
+                .any(|l| l.contains(",outcome=accepted,") && l.contains(&v_new)),
+            "the vote before the decision: {:#?}",
+            p.out
+        );
     }
-    published(&s.publish(&url, &bad, &[]), 2);
+    // Refused by both: aborted for the fleet, exit 5, saying who refused and why.
+    let out = s.publish(&url, &bad, &[]);
+    let text = child::text(&out.stdout);
+    assert_eq!(
+        out.status.code(),
+        Some(5),
+        "{text}{}",
+        child::text(&out.stderr)
+    );
+    assert!(
+        text.starts_with("rollout 2: version ")
+            && text.contains("refused")
+            && text.contains("aborted: ")
+            && text.contains("input `x`"),
+        "{text}"
+    );
     for (i, p) in procs.iter_mut().enumerate() {
-        p.wait_out("the refused status", |l| {
-            l.starts_with("tessla_spec,") && l.contains(",outcome=refused,")
+        p.wait_out("the aborted status", |l| {
+            l.starts_with("tessla_spec,") && l.contains(",outcome=aborted,")
         });
         let refused = p
             .out
@@ -930,6 +972,88 @@ fn every_running_process_takes_a_publish_and_refuses_a_bad_one() {
     for p in procs {
         let (_, err, code) = p.finish();
         assert_eq!(code, 0, "{err}");
-        assert!(err.contains("refused: input `x`"), "{err}");
+        assert!(err.contains("refused here: input `x`"), "{err}");
+        assert!(err.contains("aborted by the fleet"), "{err}");
     }
+}
+
+/// Defect 2 of the issue "One fleet, one truth", through real processes: a rollout the running
+/// process refuses is aborted for the fleet; a process restarted afterwards (it has seen no
+/// metric, so alone it would have accepted it) follows the decision and keeps the base; a
+/// good rollout committed later reaches it, and a process started after that commit runs it
+/// from its start too. Every line equals what one process with the same records gives.
+#[test]
+fn a_restart_after_an_aborted_rollout_and_a_start_after_a_commit_follow_the_decisions() {
+    use crate::support::live_child::LiveChild;
+    let server = nats_server("");
+    let url = format!("nats://127.0.0.1:{}", server.port);
+    let s = Setup::new();
+    let base = child::write(s.dir.path(), "base.tessla", BASE_SPEC);
+    let new = child::write(s.dir.path(), "new.tessla", NEW_SPEC);
+    let bad = child::write(s.dir.path(), "bad.tessla", "in x: Events[Bool]\nout x\n");
+    let state = format!("{url}/state_restart");
+    let run_args = || {
+        let mut a = channel_run(&url, &s, &base);
+        a.extend(["--state", state.as_str()]);
+        a
+    };
+    let mut first = LiveChild::spawn(&run_args());
+    first.write(&format!("m,robot=r1 x=1i {}\n", ts(0)));
+    first.wait_out("the first answer", |l| l.contains(" c=1i,y=2i "));
+    let out = s.publish(&url, &bad, &[]);
+    assert_eq!(out.status.code(), Some(5), "{}", child::text(&out.stdout));
+    first.wait_out("the abort", |l| l.contains(",outcome=aborted,"));
+    let (_, err, code) = first.finish();
+    assert_eq!(code, 0, "{err}");
+
+    // Restarted: it reads the rollout and its abort before its first record, never votes.
+    let mut second = LiveChild::spawn(&run_args());
+    second.write(&format!("m,robot=r1 x=2i {}\n", ts(1)));
+    second.wait_out("the restored answer", |l| l.contains(" c=2i,y=3i "));
+    assert!(
+        !second
+            .out
+            .iter()
+            .any(|l| l.contains(",outcome=accepted,") || l.contains(",outcome=refused,")),
+        "a decided rollout is never voted on: {:#?}",
+        second.out
+    );
+    // A good rollout now: the running process votes, the fleet commits.
+    let v_new = published(&s.publish(&url, &new, &["--from", &ts(5).to_string()]), 2);
+    second.wait_out("the commit", |l| {
+        l.contains(",outcome=committed,") && l.contains(&v_new)
+    });
+    second.write(&format!(
+        "m,robot=r1 x=3i {}\nm,robot=r1 x=4i {}\n",
+        ts(4),
+        ts(6)
+    ));
+    second.wait_out("the new version", |l| {
+        l.trim_end() == format!("tessla,robot=r1,spec_version={v_new} c=4i,y=40i {}", ts(6))
+    });
+    let (_, err, code) = second.finish();
+    assert_eq!(code, 0, "{err}");
+    assert!(err.contains("aborted by the fleet"), "{err}");
+
+    // Started after the commit, for another robot: the rollout is in force from its start.
+    let (lines, err) = run_on_channel(
+        &url,
+        &s,
+        &base,
+        "state_late",
+        &format!("m,robot=r9 x=1i {}\nm,robot=r9 x=2i {}\n", ts(4), ts(6)),
+    );
+    assert!(err.contains("committed by the fleet"), "{err}");
+    let v_base = lines[0]
+        .split(',')
+        .find_map(|t| t.split(' ').next()?.strip_prefix("spec_version="))
+        .unwrap()
+        .to_string();
+    assert_eq!(
+        lines,
+        [
+            format!("tessla,robot=r9,spec_version={v_base} c=1i,y=2i {}", ts(4)),
+            format!("tessla,robot=r9,spec_version={v_new} c=2i,y=20i {}", ts(6)),
+        ]
+    );
 }
