@@ -199,7 +199,7 @@ const CAPTURE_LIMIT: usize = 16384;
 impl Processor {
     /// A processor for `program`; fails when an input annotation is malformed.
     pub fn new(program: Arc<Program>, opts: Options) -> Result<Processor, String> {
-        let base = Version::new(String::new(), String::new(), program)?;
+        let base = Version::new(String::new(), String::new(), program, &opts.measurement)?;
         Ok(Self::with_versions(
             Versions::new(base, opts.instance_by.clone()),
             opts,
@@ -213,7 +213,6 @@ impl Processor {
             capture: versions.list_to_capture(),
             versions,
             emitter: Emitter {
-                measurement: opts.measurement.clone(),
                 events: Vec::new(),
                 encode: encode::Scratch::default(),
             },
@@ -1111,6 +1110,82 @@ pub(crate) mod tests {
         p.accept_version("new", "", program(NEW), 300, sel).unwrap();
         let out = feed(&mut p, "m,robot=b x=2i 600\n");
         assert_eq!(out, "tessla,robot=b,spec_version=new c=2i,s=20i 600\n");
+    }
+
+    const AB: &str = "in x: Events[Int]\ndef a = x * 2\ndef b = x + 100\nout a\nout b\n";
+    const CD: &str = "in x: Events[Int]\ndef c = x * 3\ndef d = x + 1000\nout c\nout d\n";
+
+    fn renamed() -> Processor {
+        let mut p = Processor::new(
+            program(AB),
+            Options {
+                passthrough: false,
+                instance_by: vec!["robot".into()],
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        p.name_base("v1", "");
+        p
+    }
+
+    /// A canary whose outputs have other names than the base's (as many of them): each
+    /// instance's lines carry its own version's field names, whichever instance wrote last.
+    #[test]
+    fn a_canary_with_renamed_outputs_writes_its_own_field_names() {
+        let mut p = renamed();
+        p.accept_version(
+            "v2",
+            "",
+            program(CD),
+            300,
+            Selector::parse("robot=r1").unwrap(),
+        )
+        .unwrap();
+        let out = feed(
+            &mut p,
+            "m,robot=r1 x=5i 100\nm,robot=r2 x=5i 100\nm,robot=r1 x=5i 300\nm,robot=r2 x=5i 300\nm,robot=r1 x=6i 400\nm,robot=r2 x=6i 400\nm,robot=r1 x=7i 500\n",
+        );
+        assert_eq!(
+            out,
+            "tessla,robot=r1 a=10i,b=105i 100\n\
+             tessla,robot=r2 a=10i,b=105i 100\n\
+             tessla,robot=r1 c=15i,d=1005i 300\n\
+             tessla,robot=r2 a=10i,b=105i 300\n\
+             tessla,robot=r1 c=18i,d=1006i 400\n\
+             tessla,robot=r2 a=12i,b=106i 400\n\
+             tessla,robot=r1 c=21i,d=1007i 500\n"
+        );
+        // Without a rollout, the same bytes as ever.
+        let mut q = renamed();
+        let out = feed(&mut q, "m,robot=r1 x=5i 100\nm,robot=r2 x=6i 100\n");
+        assert_eq!(
+            out,
+            "tessla,robot=r1 a=10i,b=105i 100\ntessla,robot=r2 a=12i,b=106i 100\n"
+        );
+    }
+
+    /// One instance switching to a version with renamed outputs, back, and to it again: each
+    /// line carries the names of the version that computed it.
+    #[test]
+    fn an_instance_switching_back_and_forth_writes_each_versions_names() {
+        let mut p = renamed();
+        let r1 = || Selector::parse("robot=r1").unwrap();
+        p.accept_version("v2", "", program(CD), 200, r1()).unwrap();
+        p.accept_version("v1", "", program(AB), 300, r1()).unwrap();
+        p.accept_version("v2", "", program(CD), 400, r1()).unwrap();
+        let out = feed(
+            &mut p,
+            "m,robot=r1 x=1i 100\nm,robot=r1 x=1i 200\nm,robot=r1 x=1i 300\nm,robot=r1 x=1i 400\n",
+        );
+        assert_eq!(
+            out,
+            "tessla,robot=r1 a=2i,b=101i 100\n\
+             tessla,robot=r1 c=3i,d=1001i 200\n\
+             tessla,robot=r1 a=2i,b=101i 300\n\
+             tessla,robot=r1 c=3i,d=1001i 400\n"
+        );
+        assert_eq!(p.counters.switched, 3);
     }
 
     /// A spec over a list pattern and an exact field: the list's length, some elements and a

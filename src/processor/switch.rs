@@ -5,7 +5,6 @@
 use super::clock::{Anchor, Wall};
 use super::versions::{Rule, Selector, Version};
 use super::{Accepted, Processor, pool};
-use crate::telegraf::encode;
 use std::sync::Arc;
 use tessla_engine::{Monitor, OutputEvent, Program};
 
@@ -75,7 +74,7 @@ impl Processor {
         mut carry: impl FnMut(&Monitor) -> Monitor,
     ) -> Result<(), String> {
         let label = self.versions.base().label.clone();
-        let base = Version::new(id.to_string(), label, program)?;
+        let base = Version::new(id.to_string(), label, program, &self.opts.measurement)?;
         self.end_of_read();
         for inst in self.pool.table.values_mut() {
             if inst.version == 0 {
@@ -85,7 +84,6 @@ impl Processor {
                 }
             }
         }
-        self.emitter.encode = encode::Scratch::default();
         self.wiring = super::wiring::WiringCheck::new(&base.bindings);
         if let Some(slot) = self.versions.list.first_mut() {
             *slot = base;
@@ -135,7 +133,8 @@ impl Processor {
             ));
         }
         if self.versions.find(id).is_none() {
-            let v = Version::new(id.to_string(), String::new(), Arc::clone(program))
+            let m = &self.opts.measurement;
+            let v = Version::new(id.to_string(), String::new(), Arc::clone(program), m)
                 .map_err(|e| format!("its input annotations: {e}"))?;
             super::versions::check_against(&v, &self.samples)?;
         }
@@ -172,7 +171,8 @@ impl Processor {
         let version = match self.versions.find(id) {
             Some(v) => v,
             None => {
-                let v = Version::new(id.to_string(), label.to_string(), program)
+                let m = &self.opts.measurement;
+                let v = Version::new(id.to_string(), label.to_string(), program, m)
                     .map_err(|e| format!("its input annotations: {e}"))?;
                 self.versions.list.push(v);
                 self.capture = self.versions.list_to_capture();

@@ -8,7 +8,7 @@
 
 use super::instances::Key;
 use crate::telegraf::binding::{self, FieldPattern, InputBinding};
-use crate::telegraf::encode::{self, Encoding};
+use crate::telegraf::encode;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::sync::Arc;
@@ -26,16 +26,23 @@ pub struct Version {
     /// Every node's stable key (`snapshot::node_keys`): a switch carries state by them.
     pub(super) keys: Vec<u64>,
     pub(super) bindings: Vec<InputBinding>,
-    pub(super) encodings: Vec<Encoding>,
+    /// How its outputs are written, prepared once: only its own instances' lines use it.
+    pub(super) encodings: encode::Prepared,
 }
 
 impl Version {
-    /// Fails when an input annotation is malformed.
-    pub fn new(id: String, label: String, program: Arc<Program>) -> Result<Version, String> {
+    /// Fails when an input annotation is malformed. `measurement`: `--measurement`, where
+    /// outputs without an annotation go.
+    pub fn new(
+        id: String,
+        label: String,
+        program: Arc<Program>,
+        measurement: &str,
+    ) -> Result<Version, String> {
         Ok(Version {
             keys: snapshot::node_keys(&program),
             bindings: binding::bindings(&program)?,
-            encodings: encode::encodings(&program),
+            encodings: encode::Prepared::new(encode::encodings(&program), measurement),
             id,
             label,
             program,
@@ -160,7 +167,10 @@ impl Versions {
         let list = self
             .list
             .iter()
-            .map(|v| Version::new(v.id.clone(), v.label.clone(), Arc::clone(&v.program)))
+            .map(|v| {
+                let m = v.encodings.default_measurement();
+                Version::new(v.id.clone(), v.label.clone(), Arc::clone(&v.program), m)
+            })
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Versions {
             list,
@@ -316,7 +326,7 @@ mod tests {
             files: [("t.tessla".to_string(), spec.to_string())].into(),
         };
         let loaded = tessla_engine::load_with("t.tessla", &resolver, &Default::default()).unwrap();
-        Version::new("v".into(), String::new(), loaded.program).unwrap()
+        Version::new("v".into(), String::new(), loaded.program, "tessla").unwrap()
     }
 
     /// The list read apart is the one indexed pattern of every version held, and none while
