@@ -44,7 +44,8 @@ use tessla_engine::{InputError, Monitor, OutputEvent, Program};
 /// A version accepted for some instances from an event time on ([`Processor::accept_version`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Accepted {
-    /// Outputs whose streams start afresh in an instance switching to it from the base.
+    /// Outputs whose streams start afresh in the instances it picks: those whose definition
+    /// differs between the version such an instance ran just before its start and this one.
     pub reset_outputs: Vec<String>,
 }
 
@@ -1186,6 +1187,51 @@ pub(crate) mod tests {
              tessla,robot=r1 c=3i,d=1001i 400\n"
         );
         assert_eq!(p.counters.switched, 3);
+    }
+
+    /// `reset_outputs` names what changes between the version each picked robot runs before the
+    /// start and the new one: r1 ran v2 (from 100), which v3 changes in `t` only, although v3
+    /// differs from the base in `s` too; a selector also picking r2 (on the base) adds `s`.
+    #[test]
+    fn reset_outputs_name_only_what_changes_from_the_version_the_robot_ran() {
+        const V1: &str = "in x: Events[Int]\ndef s = x + 1\ndef t = x + 2\nout s\nout t\n";
+        const V2: &str = "in x: Events[Int]\ndef s = x * 10\ndef t = x + 2\nout s\nout t\n";
+        const V3: &str = "in x: Events[Int]\ndef s = x * 10\ndef t = x * 20\nout s\nout t\n";
+        let base = || {
+            let mut p = Processor::new(
+                program(V1),
+                Options {
+                    passthrough: false,
+                    instance_by: vec!["robot".into()],
+                    ..Options::default()
+                },
+            )
+            .unwrap();
+            let r1 = Selector::parse("robot=r1").unwrap();
+            let acc = p.accept_version("v2", "", program(V2), 100, r1).unwrap();
+            assert_eq!(acc.reset_outputs, ["s"]);
+            p
+        };
+        let mut p = base();
+        let r1 = Selector::parse("robot=r1").unwrap();
+        let acc = p.accept_version("v3", "", program(V3), 200, r1).unwrap();
+        assert_eq!(acc.reset_outputs, ["t"]);
+        let mut p = base();
+        let both = Selector::parse("robot=r1,r2").unwrap();
+        let acc = p.accept_version("v3", "", program(V3), 200, both).unwrap();
+        assert_eq!(acc.reset_outputs, ["s", "t"]);
+        // Every robot but r1 runs the base at 199: all of them start `s` and `t` afresh.
+        let mut p = base();
+        let acc = p
+            .accept_version("v3", "", program(V3), 200, Selector::all())
+            .unwrap();
+        assert_eq!(acc.reset_outputs, ["s", "t"]);
+        // A rule starting after the new one does not count; one for r1 back to the base does.
+        let mut p = base();
+        let r1 = || Selector::parse("robot=r1").unwrap();
+        p.accept_version("v3", "", program(V3), 300, r1()).unwrap();
+        let acc = p.accept_version("v2", "", program(V2), 250, r1()).unwrap();
+        assert_eq!(acc.reset_outputs, Vec::<String>::new());
     }
 
     /// A spec over a list pattern and an exact field: the list's length, some elements and a

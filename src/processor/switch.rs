@@ -179,7 +179,7 @@ impl Processor {
                 self.versions.list.len() - 1
             }
         };
-        let reset_outputs = self.versions.get(version).reset_from(self.versions.base());
+        let reset_outputs = self.versions.reset_for(version, from, &selector);
         self.versions.rules.push(Rule {
             version,
             from,
