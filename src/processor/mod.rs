@@ -392,7 +392,7 @@ impl Processor {
             self.passthrough(rec, out);
             return;
         }
-        let now = self.pool.now();
+        let now = self.pool.now(self.wall.at);
         let created = self.counters.instances;
         let slot = self.pool.slot_for(
             metric,
@@ -506,16 +506,21 @@ impl Processor {
         self.opts.allowed_lateness.unwrap_or(Duration::MAX)
     }
 
-    /// The earliest wall-clock time at which an instance's `delay` may fall due (a transport
-    /// sleeps until then when no input arrives).
+    /// The earliest wall-clock time at which an instance's `delay` may fall due, or (with
+    /// `--instance-idle`) an instance falls idle past the limit: a transport sleeps until then
+    /// when no input arrives, then calls [`Processor::advance_wall`].
     pub fn next_deadline(&self) -> Option<Instant> {
-        self.deadlines.next()
+        match (self.deadlines.next(), self.pool.idle_due()) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
     }
 
     /// The input is silent: move every instance whose `delay` has fallen due on to its time by
     /// the wall clock (its last record's time plus the wall time since, less
     /// `--allowed-lateness`), firing those delays; their outputs carry their TeSSLa time.
-    /// Touches only the instances with a due deadline.
+    /// Touches only the instances with a due deadline. An instance idle past `--instance-idle`
+    /// when its `delay` falls due, or at `now`, is evicted (its `delay`s never fire).
     pub fn advance_wall(&mut self, now: Instant, out: &mut Vec<u8>) {
         let lateness = self.lateness();
         while let Some((due, id, slot)) = self.deadlines.pop_due(now) {
@@ -529,6 +534,12 @@ impl Processor {
             let (Some(anchor), Some(deadline)) = (inst.anchor, inst.deadline) else {
                 continue;
             };
+            if self.pool.idle_at(slot, deadline.min(now)) {
+                // Idle past the limit before the firing: evicted, its delays go with it.
+                self.pool
+                    .evict_slot(slot, false, &mut self.counters, self.lane.as_deref());
+                continue;
+            }
             if deadline <= now {
                 let upto = anchor.time_at(now, lateness).saturating_add(1);
                 if self.versions.has_rules() {
@@ -550,6 +561,9 @@ impl Processor {
                 Self::queue(&mut self.deadlines, inst, slot, lateness);
             }
         }
+        let now = self.pool.now(now);
+        self.pool
+            .evict_idle(now, &mut self.counters, self.lane.as_deref());
     }
 
     /// Whether `bytes` holds a newline before its last byte.
@@ -611,10 +625,11 @@ impl Processor {
             .emit(&version.encodings, &inst.tags, &mut self.counters, out);
     }
 
-    /// No more input right now (the end of a read): evict idle instances. Every record has
-    /// been evaluated already.
+    /// No more input right now (the end of a read): evict instances past `--max-instances`
+    /// (idle ones go by their own silence: [`Processor::advance_wall`] and their next record).
+    /// Every record has been evaluated already.
     pub fn end_of_read(&mut self) {
-        let now = self.pool.now();
+        let now = self.pool.now(self.wall.at);
         self.pool
             .evict(now, &mut self.counters, self.lane.as_deref());
     }
@@ -687,7 +702,7 @@ impl Processor {
             );
             return;
         }
-        let now = self.pool.now();
+        let now = self.pool.now(Instant::now());
         if self.pool.table.find(&key, now).is_none() {
             let ts = monitor.clock();
             // The version whose program it was saved for (another: the base).
@@ -1232,6 +1247,118 @@ pub(crate) mod tests {
         p.accept_version("v3", "", program(V3), 300, r1()).unwrap();
         let acc = p.accept_version("v2", "", program(V2), 250, r1()).unwrap();
         assert_eq!(acc.reset_outputs, Vec::<String>::new());
+    }
+
+    const COUNT: &str = "in x: Events[Int]\ndef n = count(x)\nout n\n";
+
+    fn idle_processor(spec: &str, idle: Duration) -> Processor {
+        Processor::new(
+            program(spec),
+            Options {
+                passthrough: false,
+                instance_by: vec!["robot".into()],
+                instance_idle: Some(idle),
+                max_ahead: None,
+                ..Options::default()
+            },
+        )
+        .unwrap()
+    }
+
+    /// Output lines sorted (instances on different processors interleave otherwise).
+    fn sorted(out: &str) -> Vec<String> {
+        let mut v: Vec<String> = out.lines().map(String::from).collect();
+        v.sort();
+        v
+    }
+
+    /// Whether an instance is evicted for idleness depends on its own silence only: robots r5
+    /// and r2 each silent 2.5 s past a 1 s limit both start afresh, on one processor (one
+    /// thread) as on two (two threads, one robot each).
+    #[test]
+    fn an_idle_instance_is_evicted_by_its_own_silence_alone() {
+        let t0 = Instant::now();
+        let first = "m,robot=r5 x=1i 1000\nm,robot=r2 x=1i 1000\n";
+        let second = "m,robot=r5 x=1i 2000\nm,robot=r2 x=1i 2000\n";
+        let run = |procs: &mut [Processor], text: &str, at: Instant| {
+            let mut out = String::new();
+            for line in text.lines() {
+                let i = if procs.len() > 1 && line.contains("r2") {
+                    1
+                } else {
+                    0
+                };
+                procs[i].set_wall(Wall { at, ns: 0 });
+                out.push_str(&feed(&mut procs[i], &format!("{line}\n")));
+            }
+            out
+        };
+        let idle = Duration::from_secs(1);
+        let mut one = [idle_processor(COUNT, idle)];
+        let mut two = [idle_processor(COUNT, idle), idle_processor(COUNT, idle)];
+        let later = t0 + Duration::from_millis(2500);
+        let mut a = run(&mut one, first, t0);
+        a.push_str(&run(&mut one, second, later));
+        let mut b = run(&mut two, first, t0);
+        b.push_str(&run(&mut two, second, later));
+        assert_eq!(
+            sorted(&a),
+            [
+                "tessla,robot=r2 n=1i 1000",
+                "tessla,robot=r2 n=1i 2000",
+                "tessla,robot=r5 n=1i 1000",
+                "tessla,robot=r5 n=1i 2000",
+            ]
+        );
+        assert_eq!(sorted(&a), sorted(&b));
+        assert_eq!(one[0].counters.evicted, 2);
+        assert_eq!(two[0].counters.evicted + two[1].counters.evicted, 2);
+        // Within the limit, both keep their count.
+        let mut p = idle_processor(COUNT, idle);
+        p.set_wall(Wall { at: t0, ns: 0 });
+        feed(&mut p, first);
+        p.set_wall(Wall {
+            at: t0 + Duration::from_millis(900),
+            ns: 0,
+        });
+        assert_eq!(
+            feed(&mut p, second),
+            "tessla,robot=r5 n=2i 2000\ntessla,robot=r2 n=2i 2000\n"
+        );
+        assert_eq!(p.counters.evicted, 0);
+    }
+
+    /// A silent instance idle past the limit before its watchdog falls due is evicted, its
+    /// `delay` never fires; the wall clock wakes the loop for the eviction itself.
+    #[test]
+    fn a_watchdog_due_after_the_idle_limit_does_not_fire() {
+        let spec = "in x: Events[Int]\n\
+                    def silent = delay(const(2000000000, x), x)\n\
+                    out silent\n";
+        let t0 = Instant::now();
+        let mut p = idle_processor(spec, Duration::from_secs(1));
+        p.set_wall(Wall { at: t0, ns: 0 });
+        feed(&mut p, "m,robot=r1 x=1i 1000000000\n");
+        // Evicting it is due at the idle limit, before the watchdog.
+        let next = p.next_deadline().unwrap();
+        assert!(next <= t0 + Duration::from_millis(1001), "{next:?}");
+        let mut out = Vec::new();
+        p.advance_wall(t0 + Duration::from_millis(2260), &mut out);
+        assert_eq!(String::from_utf8(out).unwrap(), "");
+        assert_eq!(p.counters.evicted, 1);
+        assert_eq!(p.instance_count(), 0);
+        assert_eq!(p.next_deadline(), None);
+        // With a longer limit, it fires.
+        let mut p = idle_processor(spec, Duration::from_secs(5));
+        p.set_wall(Wall { at: t0, ns: 0 });
+        feed(&mut p, "m,robot=r1 x=1i 1000000000\n");
+        let mut out = Vec::new();
+        p.advance_wall(t0 + Duration::from_millis(2260), &mut out);
+        assert_eq!(
+            String::from_utf8(out).unwrap(),
+            "tessla,robot=r1 silent=true 3000000000\n"
+        );
+        assert_eq!(p.counters.evicted, 0);
     }
 
     /// A spec over a list pattern and an exact field: the list's length, some elements and a
