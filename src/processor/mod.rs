@@ -644,7 +644,8 @@ impl Processor {
         &self.versions.base().program
     }
 
-    /// The program instance `key` runs after a step at `t` (restoring saved state).
+    /// The program instance `key` runs at event time `t` (restoring saved state: at its
+    /// horizon).
     pub fn program_for(&self, key: &Key, t: i64) -> &Arc<Program> {
         &self.versions.get(self.versions.target(key, t)).program
     }
@@ -660,11 +661,26 @@ impl Processor {
     /// whose clock is beyond `--max-ahead` of the wall clock is left out: a wrong clock is
     /// never saved.
     pub fn monitors(&self) -> impl Iterator<Item = (&Key, &Monitor)> {
+        self.saved_instances().map(|(k, m, _)| (k, m))
+    }
+
+    /// [`Processor::monitors`] with each instance's horizon, the event time whose version it
+    /// runs (restored by [`Processor::restore_instance_at`]): what `--state` saves.
+    pub fn saved_instances(&self) -> impl Iterator<Item = (&Key, &Monitor, i64)> {
+        let rules = self.versions.has_rules();
         self.pool
             .table
             .iter_lru()
-            .map(|(k, i)| (k, &i.monitor))
-            .filter(|(k, m)| match self.clock_ahead(m) {
+            .map(move |(k, i)| {
+                // Without rules no step settled a version: it stands at its clock.
+                let horizon = if rules {
+                    i.horizon
+                } else {
+                    i.horizon.max(i.monitor.clock())
+                };
+                (k, &i.monitor, horizon)
+            })
+            .filter(|(k, m, _)| match self.clock_ahead(m) {
                 None => true,
                 Some(ahead) => {
                     log::warn_limited("state clock", || {
@@ -683,6 +699,13 @@ impl Processor {
     /// refused (the instance starts fresh with its next record) when its clock is beyond
     /// `--max-ahead` of the wall clock. Its silent time counts from now.
     pub fn restore_instance(&mut self, key: Key, monitor: Monitor) {
+        self.restore_instance_at(key, monitor, None);
+    }
+
+    /// [`Processor::restore_instance`] with the horizon it was saved with (`None`: state that
+    /// did not record one, the monitor's clock): its version is the one the rules give there
+    /// ([`Processor::program_for`]), and it switches at its first step from the next start.
+    pub fn restore_instance_at(&mut self, key: Key, monitor: Monitor, horizon: Option<i64>) {
         if let Some(ahead) = self.clock_ahead(&monitor) {
             log::log(
                 log::Level::Warn,
@@ -713,9 +736,20 @@ impl Processor {
                 .position(|v| Arc::ptr_eq(&v.program, monitor.program()))
                 .unwrap_or(0);
             let id = self.versions.get(v).id.clone();
+            let horizon = horizon.unwrap_or(ts);
+            let settled = (v == self.versions.target(&key, horizon)).then(|| {
+                let next = self.versions.next_start(&key, horizon, i64::MAX);
+                (self.versions.rules.len(), next.unwrap_or(i64::MAX))
+            });
             let slot = self
                 .pool
                 .insert(key, monitor, (v, &id), now, self.lane.as_deref());
+            if let Some(inst) = self.pool.table.get_mut(slot) {
+                inst.horizon = horizon;
+                if let Some(settled) = settled {
+                    inst.settled = settled;
+                }
+            }
             self.schedule(slot, ts);
         }
     }

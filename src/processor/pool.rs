@@ -25,6 +25,10 @@ pub(super) struct Instance {
     /// the next start of one that picks it (`i64::MAX`: none). Until the rules change or that
     /// start comes, its version stays.
     pub(super) settled: (usize, i64),
+    /// The latest event time its version was settled for: its first step's time, then the
+    /// largest time `Processor::settle` was asked for (a record's stamp, not the time a late
+    /// record is stepped at). The rules at the horizon give its version; saved with it.
+    pub(super) horizon: i64,
     pub(super) tags: Vec<(String, String)>,
     pub(super) recent: super::dedup::Recent,
     /// Never reused: tells this instance's queued deadlines from a former occupant's of its slot.
@@ -173,6 +177,7 @@ impl Pool {
             tags.sort();
         }
         self.next_id += 1;
+        let horizon = monitor.clock();
         let i = self.table.insert(
             key,
             Instance {
@@ -180,6 +185,7 @@ impl Pool {
                 version,
                 // Never settled: the first step with rules looks.
                 settled: (usize::MAX, i64::MIN),
+                horizon,
                 tags,
                 recent: Default::default(),
                 id: self.next_id,

@@ -10,15 +10,21 @@ use tessla_engine::{Monitor, OutputEvent, Program};
 
 impl Processor {
     /// Switch instance `slot` to the version its rules give it at `upto`, stepping through
-    /// every version start on the way: before each start its old version fires the `delay`s
-    /// due before it, then the instance continues in the new version (streams whose key is
-    /// unchanged keep their state). Its outputs go to `out`.
+    /// every version start from its horizon on the way: before each start its old version
+    /// fires the `delay`s due before it, then the instance continues in the new version
+    /// (streams whose key is unchanged keep their state). Its outputs go to `out`. The horizon
+    /// (not the monitor's clock, which a late record moves past its stamp) is where it stands:
+    /// the record's stamp decides its version, and a restart that restores the horizon decides
+    /// alike.
     pub(super) fn settle(&mut self, slot: usize, upto: i64, out: &mut Vec<u8>) {
         // Most steps: the rules have not changed since the instance last settled and no start
         // of one that picks it comes before `upto` (no key lookup, no copy per record).
         let rules = self.versions.rules.len();
         match self.pool.table.get_mut(slot) {
-            Some(inst) if inst.settled.0 == rules && upto < inst.settled.1 => return,
+            Some(inst) if inst.settled.0 == rules && upto < inst.settled.1 => {
+                inst.horizon = inst.horizon.max(upto);
+                return;
+            }
             Some(_) => {}
             None => return,
         }
@@ -28,7 +34,7 @@ impl Processor {
         let Some(inst) = self.pool.table.get_mut(slot) else {
             return;
         };
-        let mut cursor = inst.monitor.clock();
+        let mut cursor = inst.horizon;
         // First where the instance stands (a rule may have started at or before its clock),
         // then each start after it up to `upto`; `cursor` only grows.
         let mut next = if self.versions.target(&key, cursor) != inst.version {
@@ -60,6 +66,7 @@ impl Processor {
         }
         let after = self.versions.next_start(&key, cursor, i64::MAX);
         inst.settled = (rules, after.unwrap_or(i64::MAX));
+        inst.horizon = inst.horizon.max(upto);
     }
 
     /// Run `program` from now on in place of the base version (a spec reload): `carry` turns
@@ -180,6 +187,12 @@ impl Processor {
             }
         };
         let reset_outputs = self.versions.reset_for(version, from, &selector);
+        if !self.versions.has_rules() {
+            // Without rules no step settled a version: each instance stands at its clock.
+            for inst in self.pool.table.values_mut() {
+                inst.horizon = inst.horizon.max(inst.monitor.clock());
+            }
+        }
         self.versions.rules.push(Rule {
             version,
             from,
