@@ -1,5 +1,6 @@
 //! Criterion guard of output formatting: one step's output events written as line protocol by
-//! `encode::encode_step` (fresh buffers) and `encode_step_with` (the processor's reused ones),
+//! `encode::encode_step` (fresh buffers) and `encode_prepared` (the processor's reused buffers
+//! and encodings prepared once per spec version),
 //! for the P2 spec's default metric (five fields) and the robot spec's `action` metric with
 //! instance tags (eight `@TelegrafField` fields of mixed types).
 //! Run with `make bench` (or `cargo bench --bench encode`).
@@ -8,7 +9,9 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::sync::Arc;
 use tessla_engine::Value;
-use tessla_telegraf::telegraf::encode::{Encoding, Scratch, encode_step, encode_step_with};
+use tessla_telegraf::telegraf::encode::{
+    Encoding, Prepared, Scratch, encode_prepared, encode_step,
+};
 
 fn p2(c: &mut Criterion) {
     let encodings: Vec<Encoding> = [
@@ -45,17 +48,17 @@ fn p2(c: &mut Criterion) {
             black_box((d, out.len()))
         })
     });
-    // The processor's path: buffers and escaped names kept between steps.
+    // The processor's path: buffers kept between steps, names escaped once.
     let mut scratch = Scratch::default();
+    let prepared = Prepared::new(encodings.clone(), "tessla");
     g.bench_function("p2_default_metric_reused", |b| {
         b.iter(|| {
             out.clear();
-            let d = encode_step_with(
+            let d = encode_prepared(
                 &mut scratch,
+                &prepared,
                 1_719_231_000_123_456_789,
                 black_box(&events),
-                &encodings,
-                "tessla",
                 &[],
                 &mut out,
             );
@@ -108,15 +111,15 @@ fn p2(c: &mut Criterion) {
         })
     });
     let mut scratch = Scratch::default();
+    let prepared = Prepared::new(encodings.clone(), "tessla");
     g.bench_function("robot_action_metric_reused", |b| {
         b.iter(|| {
             out.clear();
-            let d = encode_step_with(
+            let d = encode_prepared(
                 &mut scratch,
+                &prepared,
                 1_719_231_000_123_456_789,
                 black_box(&events),
-                &encodings,
-                "tessla",
                 &tags,
                 &mut out,
             );

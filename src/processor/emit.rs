@@ -1,24 +1,25 @@
 //! Writing a step's outputs: the events an instance's monitor produced in one step, collected
-//! and encoded as metrics, one group per timestamp, with the instance's tags.
+//! and encoded as metrics, one group per timestamp, with the instance's tags, by the encodings
+//! of the version that computed them (each version's prepared once, in its `Version`).
 
 use super::Counters;
 use crate::log;
-use crate::telegraf::encode::{self, Encoding};
+use crate::telegraf::encode::{self, Prepared};
 use tessla_engine::Value;
 
 /// What writing a step's outputs needs, apart from the instance.
 pub(super) struct Emitter {
-    pub(super) measurement: String,
     pub(super) events: Vec<(i64, usize, Value)>,
-    /// Scratch: the encoder's buffers.
+    /// Scratch: the encoder's buffers (the same whatever version writes).
     pub(super) encode: encode::Scratch,
 }
 
 impl Emitter {
-    /// Write the collected events as metrics, one group per timestamp.
+    /// Write the collected events as metrics, one group per timestamp, by `encodings` (those
+    /// of the version whose monitor produced the events).
     pub(super) fn emit(
         &mut self,
-        encodings: &[Encoding],
+        encodings: &Prepared,
         tags: &[(String, String)],
         counters: &mut Counters,
         out: &mut Vec<u8>,
@@ -33,15 +34,7 @@ impl Emitter {
             let (step, tail) = rest.split_at(n);
             rest = tail;
             counters.outputs += step.len() as u64;
-            let dropped = encode::encode_step_with(
-                &mut self.encode,
-                ts,
-                step,
-                encodings,
-                &self.measurement,
-                tags,
-                out,
-            );
+            let dropped = encode::encode_prepared(&mut self.encode, encodings, ts, step, tags, out);
             for d in dropped {
                 counters.dropped_values += 1;
                 log::warn_limited("output value", || {

@@ -68,6 +68,26 @@ impl<T> Table<T> {
         }
     }
 
+    /// The slot of `key` when it was last used more than `idle` before `now` (not marked used).
+    pub fn idle_slot(&self, key: &Key, idle: Duration, now: Instant) -> Option<usize> {
+        let &i = self.index.get(key)?;
+        self.idle_at(i, idle, now).then_some(i)
+    }
+
+    /// Whether slot `i` was last used more than `idle` before `at`.
+    pub fn idle_at(&self, i: usize, idle: Duration, at: Instant) -> bool {
+        self.slots
+            .get(i)
+            .and_then(|s| s.as_ref())
+            .is_some_and(|s| at.saturating_duration_since(s.last_used) > idle)
+    }
+
+    /// When the least recently used instance was last used.
+    pub fn oldest_use(&self) -> Option<Instant> {
+        let (_, &i) = self.lru.first_key_value()?;
+        Some(self.slots.get(i)?.as_ref()?.last_used)
+    }
+
     /// Insert a new instance (the caller has checked that `key` is absent); returns its slot.
     pub fn insert(&mut self, key: Key, value: T, now: Instant) -> usize {
         let seq = self.next_seq;

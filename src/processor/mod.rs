@@ -44,7 +44,8 @@ use tessla_engine::{InputError, Monitor, OutputEvent, Program};
 /// A version accepted for some instances from an event time on ([`Processor::accept_version`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Accepted {
-    /// Outputs whose streams start afresh in an instance switching to it from the base.
+    /// Outputs whose streams start afresh in the instances it picks: those whose definition
+    /// differs between the version such an instance ran just before its start and this one.
     pub reset_outputs: Vec<String>,
 }
 
@@ -199,7 +200,7 @@ const CAPTURE_LIMIT: usize = 16384;
 impl Processor {
     /// A processor for `program`; fails when an input annotation is malformed.
     pub fn new(program: Arc<Program>, opts: Options) -> Result<Processor, String> {
-        let base = Version::new(String::new(), String::new(), program)?;
+        let base = Version::new(String::new(), String::new(), program, &opts.measurement)?;
         Ok(Self::with_versions(
             Versions::new(base, opts.instance_by.clone()),
             opts,
@@ -213,7 +214,6 @@ impl Processor {
             capture: versions.list_to_capture(),
             versions,
             emitter: Emitter {
-                measurement: opts.measurement.clone(),
                 events: Vec::new(),
                 encode: encode::Scratch::default(),
             },
@@ -398,7 +398,7 @@ impl Processor {
             self.passthrough(rec, out);
             return;
         }
-        let now = self.pool.now();
+        let now = self.pool.now(self.wall.at);
         let created = self.counters.instances;
         let slot = self.pool.slot_for(
             metric,
@@ -512,16 +512,21 @@ impl Processor {
         self.opts.allowed_lateness.unwrap_or(Duration::MAX)
     }
 
-    /// The earliest wall-clock time at which an instance's `delay` may fall due (a transport
-    /// sleeps until then when no input arrives).
+    /// The earliest wall-clock time at which an instance's `delay` may fall due, or (with
+    /// `--instance-idle`) an instance falls idle past the limit: a transport sleeps until then
+    /// when no input arrives, then calls [`Processor::advance_wall`].
     pub fn next_deadline(&self) -> Option<Instant> {
-        self.deadlines.next()
+        match (self.deadlines.next(), self.pool.idle_due()) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
     }
 
     /// The input is silent: move every instance whose `delay` has fallen due on to its time by
     /// the wall clock (its last record's time plus the wall time since, less
     /// `--allowed-lateness`), firing those delays; their outputs carry their TeSSLa time.
-    /// Touches only the instances with a due deadline.
+    /// Touches only the instances with a due deadline. An instance idle past `--instance-idle`
+    /// when its `delay` falls due, or at `now`, is evicted (its `delay`s never fire).
     pub fn advance_wall(&mut self, now: Instant, out: &mut Vec<u8>) {
         let lateness = self.lateness();
         while let Some((due, id, slot)) = self.deadlines.pop_due(now) {
@@ -535,6 +540,12 @@ impl Processor {
             let (Some(anchor), Some(deadline)) = (inst.anchor, inst.deadline) else {
                 continue;
             };
+            if self.pool.idle_at(slot, deadline.min(now)) {
+                // Idle past the limit before the firing: evicted, its delays go with it.
+                self.pool
+                    .evict_slot(slot, false, &mut self.counters, self.lane.as_deref());
+                continue;
+            }
             if deadline <= now {
                 let upto = anchor.time_at(now, lateness).saturating_add(1);
                 if self.versions.has_rules() {
@@ -556,6 +567,9 @@ impl Processor {
                 Self::queue(&mut self.deadlines, inst, slot, lateness);
             }
         }
+        let now = self.pool.now(now);
+        self.pool
+            .evict_idle(now, &mut self.counters, self.lane.as_deref());
     }
 
     /// Whether `bytes` holds a newline before its last byte.
@@ -617,10 +631,11 @@ impl Processor {
             .emit(&version.encodings, &inst.tags, &mut self.counters, out);
     }
 
-    /// No more input right now (the end of a read): evict idle instances. Every record has
-    /// been evaluated already.
+    /// No more input right now (the end of a read): evict instances past `--max-instances`
+    /// (idle ones go by their own silence: [`Processor::advance_wall`] and their next record).
+    /// Every record has been evaluated already.
     pub fn end_of_read(&mut self) {
-        let now = self.pool.now();
+        let now = self.pool.now(self.wall.at);
         self.pool
             .evict(now, &mut self.counters, self.lane.as_deref());
     }
@@ -635,7 +650,8 @@ impl Processor {
         &self.versions.base().program
     }
 
-    /// The program instance `key` runs after a step at `t` (restoring saved state).
+    /// The program instance `key` runs at event time `t` (restoring saved state: at its
+    /// horizon).
     pub fn program_for(&self, key: &Key, t: i64) -> &Arc<Program> {
         &self.versions.get(self.versions.target(key, t)).program
     }
@@ -651,11 +667,26 @@ impl Processor {
     /// whose clock is beyond `--max-ahead` of the wall clock is left out: a wrong clock is
     /// never saved.
     pub fn monitors(&self) -> impl Iterator<Item = (&Key, &Monitor)> {
+        self.saved_instances().map(|(k, m, _)| (k, m))
+    }
+
+    /// [`Processor::monitors`] with each instance's horizon, the event time whose version it
+    /// runs (restored by [`Processor::restore_instance_at`]): what `--state` saves.
+    pub fn saved_instances(&self) -> impl Iterator<Item = (&Key, &Monitor, i64)> {
+        let rules = self.versions.has_rules();
         self.pool
             .table
             .iter_lru()
-            .map(|(k, i)| (k, &i.monitor))
-            .filter(|(k, m)| match self.clock_ahead(m) {
+            .map(move |(k, i)| {
+                // Without rules no step settled a version: it stands at its clock.
+                let horizon = if rules {
+                    i.horizon
+                } else {
+                    i.horizon.max(i.monitor.clock())
+                };
+                (k, &i.monitor, horizon)
+            })
+            .filter(|(k, m, _)| match self.clock_ahead(m) {
                 None => true,
                 Some(ahead) => {
                     log::warn_limited("state clock", || {
@@ -674,6 +705,13 @@ impl Processor {
     /// refused (the instance starts fresh with its next record) when its clock is beyond
     /// `--max-ahead` of the wall clock. Its silent time counts from now.
     pub fn restore_instance(&mut self, key: Key, monitor: Monitor) {
+        self.restore_instance_at(key, monitor, None);
+    }
+
+    /// [`Processor::restore_instance`] with the horizon it was saved with (`None`: state that
+    /// did not record one, the monitor's clock): its version is the one the rules give there
+    /// ([`Processor::program_for`]), and it switches at its first step from the next start.
+    pub fn restore_instance_at(&mut self, key: Key, monitor: Monitor, horizon: Option<i64>) {
         if let Some(ahead) = self.clock_ahead(&monitor) {
             log::log(
                 log::Level::Warn,
@@ -693,7 +731,7 @@ impl Processor {
             );
             return;
         }
-        let now = self.pool.now();
+        let now = self.pool.now(Instant::now());
         if self.pool.table.find(&key, now).is_none() {
             let ts = monitor.clock();
             // The version whose program it was saved for (another: the base).
@@ -704,9 +742,20 @@ impl Processor {
                 .position(|v| Arc::ptr_eq(&v.program, monitor.program()))
                 .unwrap_or(0);
             let id = self.versions.get(v).id.clone();
+            let horizon = horizon.unwrap_or(ts);
+            let settled = (v == self.versions.target(&key, horizon)).then(|| {
+                let next = self.versions.next_start(&key, horizon, i64::MAX);
+                (self.versions.rules.len(), next.unwrap_or(i64::MAX))
+            });
             let slot = self
                 .pool
                 .insert(key, monitor, (v, &id), now, self.lane.as_deref());
+            if let Some(inst) = self.pool.table.get_mut(slot) {
+                inst.horizon = horizon;
+                if let Some(settled) = settled {
+                    inst.settled = settled;
+                }
+            }
             self.schedule(slot, ts);
         }
     }
@@ -1123,6 +1172,239 @@ pub(crate) mod tests {
         p.accept_version("new", "", program(NEW), 300, sel).unwrap();
         let out = feed(&mut p, "m,robot=b x=2i 600\n");
         assert_eq!(out, "tessla,robot=b,spec_version=new c=2i,s=20i 600\n");
+    }
+
+    const AB: &str = "in x: Events[Int]\ndef a = x * 2\ndef b = x + 100\nout a\nout b\n";
+    const CD: &str = "in x: Events[Int]\ndef c = x * 3\ndef d = x + 1000\nout c\nout d\n";
+
+    fn renamed() -> Processor {
+        let mut p = Processor::new(
+            program(AB),
+            Options {
+                passthrough: false,
+                instance_by: vec!["robot".into()],
+                ..Options::default()
+            },
+        )
+        .unwrap();
+        p.name_base("v1", "");
+        p
+    }
+
+    /// A canary whose outputs have other names than the base's (as many of them): each
+    /// instance's lines carry its own version's field names, whichever instance wrote last.
+    #[test]
+    fn a_canary_with_renamed_outputs_writes_its_own_field_names() {
+        let mut p = renamed();
+        p.accept_version(
+            "v2",
+            "",
+            program(CD),
+            300,
+            Selector::parse("robot=r1").unwrap(),
+        )
+        .unwrap();
+        let out = feed(
+            &mut p,
+            "m,robot=r1 x=5i 100\nm,robot=r2 x=5i 100\nm,robot=r1 x=5i 300\nm,robot=r2 x=5i 300\nm,robot=r1 x=6i 400\nm,robot=r2 x=6i 400\nm,robot=r1 x=7i 500\n",
+        );
+        assert_eq!(
+            out,
+            "tessla,robot=r1 a=10i,b=105i 100\n\
+             tessla,robot=r2 a=10i,b=105i 100\n\
+             tessla,robot=r1 c=15i,d=1005i 300\n\
+             tessla,robot=r2 a=10i,b=105i 300\n\
+             tessla,robot=r1 c=18i,d=1006i 400\n\
+             tessla,robot=r2 a=12i,b=106i 400\n\
+             tessla,robot=r1 c=21i,d=1007i 500\n"
+        );
+        // Without a rollout, the same bytes as ever.
+        let mut q = renamed();
+        let out = feed(&mut q, "m,robot=r1 x=5i 100\nm,robot=r2 x=6i 100\n");
+        assert_eq!(
+            out,
+            "tessla,robot=r1 a=10i,b=105i 100\ntessla,robot=r2 a=12i,b=106i 100\n"
+        );
+    }
+
+    /// One instance switching to a version with renamed outputs, back, and to it again: each
+    /// line carries the names of the version that computed it.
+    #[test]
+    fn an_instance_switching_back_and_forth_writes_each_versions_names() {
+        let mut p = renamed();
+        let r1 = || Selector::parse("robot=r1").unwrap();
+        p.accept_version("v2", "", program(CD), 200, r1()).unwrap();
+        p.accept_version("v1", "", program(AB), 300, r1()).unwrap();
+        p.accept_version("v2", "", program(CD), 400, r1()).unwrap();
+        let out = feed(
+            &mut p,
+            "m,robot=r1 x=1i 100\nm,robot=r1 x=1i 200\nm,robot=r1 x=1i 300\nm,robot=r1 x=1i 400\n",
+        );
+        assert_eq!(
+            out,
+            "tessla,robot=r1 a=2i,b=101i 100\n\
+             tessla,robot=r1 c=3i,d=1001i 200\n\
+             tessla,robot=r1 a=2i,b=101i 300\n\
+             tessla,robot=r1 c=3i,d=1001i 400\n"
+        );
+        assert_eq!(p.counters.switched, 3);
+    }
+
+    /// `reset_outputs` names what changes between the version each picked robot runs before the
+    /// start and the new one: r1 ran v2 (from 100), which v3 changes in `t` only, although v3
+    /// differs from the base in `s` too; a selector also picking r2 (on the base) adds `s`.
+    #[test]
+    fn reset_outputs_name_only_what_changes_from_the_version_the_robot_ran() {
+        const V1: &str = "in x: Events[Int]\ndef s = x + 1\ndef t = x + 2\nout s\nout t\n";
+        const V2: &str = "in x: Events[Int]\ndef s = x * 10\ndef t = x + 2\nout s\nout t\n";
+        const V3: &str = "in x: Events[Int]\ndef s = x * 10\ndef t = x * 20\nout s\nout t\n";
+        let base = || {
+            let mut p = Processor::new(
+                program(V1),
+                Options {
+                    passthrough: false,
+                    instance_by: vec!["robot".into()],
+                    ..Options::default()
+                },
+            )
+            .unwrap();
+            let r1 = Selector::parse("robot=r1").unwrap();
+            let acc = p.accept_version("v2", "", program(V2), 100, r1).unwrap();
+            assert_eq!(acc.reset_outputs, ["s"]);
+            p
+        };
+        let mut p = base();
+        let r1 = Selector::parse("robot=r1").unwrap();
+        let acc = p.accept_version("v3", "", program(V3), 200, r1).unwrap();
+        assert_eq!(acc.reset_outputs, ["t"]);
+        let mut p = base();
+        let both = Selector::parse("robot=r1,r2").unwrap();
+        let acc = p.accept_version("v3", "", program(V3), 200, both).unwrap();
+        assert_eq!(acc.reset_outputs, ["s", "t"]);
+        // Every robot but r1 runs the base at 199: all of them start `s` and `t` afresh.
+        let mut p = base();
+        let acc = p
+            .accept_version("v3", "", program(V3), 200, Selector::all())
+            .unwrap();
+        assert_eq!(acc.reset_outputs, ["s", "t"]);
+        // A rule starting after the new one does not count; one for r1 back to the base does.
+        let mut p = base();
+        let r1 = || Selector::parse("robot=r1").unwrap();
+        p.accept_version("v3", "", program(V3), 300, r1()).unwrap();
+        let acc = p.accept_version("v2", "", program(V2), 250, r1()).unwrap();
+        assert_eq!(acc.reset_outputs, Vec::<String>::new());
+    }
+
+    const COUNT: &str = "in x: Events[Int]\ndef n = count(x)\nout n\n";
+
+    fn idle_processor(spec: &str, idle: Duration) -> Processor {
+        Processor::new(
+            program(spec),
+            Options {
+                passthrough: false,
+                instance_by: vec!["robot".into()],
+                instance_idle: Some(idle),
+                max_ahead: None,
+                ..Options::default()
+            },
+        )
+        .unwrap()
+    }
+
+    /// Output lines sorted (instances on different processors interleave otherwise).
+    fn sorted(out: &str) -> Vec<String> {
+        let mut v: Vec<String> = out.lines().map(String::from).collect();
+        v.sort();
+        v
+    }
+
+    /// Whether an instance is evicted for idleness depends on its own silence only: robots r5
+    /// and r2 each silent 2.5 s past a 1 s limit both start afresh, on one processor (one
+    /// thread) as on two (two threads, one robot each).
+    #[test]
+    fn an_idle_instance_is_evicted_by_its_own_silence_alone() {
+        let t0 = Instant::now();
+        let first = "m,robot=r5 x=1i 1000\nm,robot=r2 x=1i 1000\n";
+        let second = "m,robot=r5 x=1i 2000\nm,robot=r2 x=1i 2000\n";
+        let run = |procs: &mut [Processor], text: &str, at: Instant| {
+            let mut out = String::new();
+            for line in text.lines() {
+                let i = if procs.len() > 1 && line.contains("r2") {
+                    1
+                } else {
+                    0
+                };
+                procs[i].set_wall(Wall { at, ns: 0 });
+                out.push_str(&feed(&mut procs[i], &format!("{line}\n")));
+            }
+            out
+        };
+        let idle = Duration::from_secs(1);
+        let mut one = [idle_processor(COUNT, idle)];
+        let mut two = [idle_processor(COUNT, idle), idle_processor(COUNT, idle)];
+        let later = t0 + Duration::from_millis(2500);
+        let mut a = run(&mut one, first, t0);
+        a.push_str(&run(&mut one, second, later));
+        let mut b = run(&mut two, first, t0);
+        b.push_str(&run(&mut two, second, later));
+        assert_eq!(
+            sorted(&a),
+            [
+                "tessla,robot=r2 n=1i 1000",
+                "tessla,robot=r2 n=1i 2000",
+                "tessla,robot=r5 n=1i 1000",
+                "tessla,robot=r5 n=1i 2000",
+            ]
+        );
+        assert_eq!(sorted(&a), sorted(&b));
+        assert_eq!(one[0].counters.evicted, 2);
+        assert_eq!(two[0].counters.evicted + two[1].counters.evicted, 2);
+        // Within the limit, both keep their count.
+        let mut p = idle_processor(COUNT, idle);
+        p.set_wall(Wall { at: t0, ns: 0 });
+        feed(&mut p, first);
+        p.set_wall(Wall {
+            at: t0 + Duration::from_millis(900),
+            ns: 0,
+        });
+        assert_eq!(
+            feed(&mut p, second),
+            "tessla,robot=r5 n=2i 2000\ntessla,robot=r2 n=2i 2000\n"
+        );
+        assert_eq!(p.counters.evicted, 0);
+    }
+
+    /// A silent instance idle past the limit before its watchdog falls due is evicted, its
+    /// `delay` never fires; the wall clock wakes the loop for the eviction itself.
+    #[test]
+    fn a_watchdog_due_after_the_idle_limit_does_not_fire() {
+        let spec = "in x: Events[Int]\n\
+                    def silent = delay(const(2000000000, x), x)\n\
+                    out silent\n";
+        let t0 = Instant::now();
+        let mut p = idle_processor(spec, Duration::from_secs(1));
+        p.set_wall(Wall { at: t0, ns: 0 });
+        feed(&mut p, "m,robot=r1 x=1i 1000000000\n");
+        // Evicting it is due at the idle limit, before the watchdog.
+        let next = p.next_deadline().unwrap();
+        assert!(next <= t0 + Duration::from_millis(1001), "{next:?}");
+        let mut out = Vec::new();
+        p.advance_wall(t0 + Duration::from_millis(2260), &mut out);
+        assert_eq!(String::from_utf8(out).unwrap(), "");
+        assert_eq!(p.counters.evicted, 1);
+        assert_eq!(p.instance_count(), 0);
+        assert_eq!(p.next_deadline(), None);
+        // With a longer limit, it fires.
+        let mut p = idle_processor(spec, Duration::from_secs(5));
+        p.set_wall(Wall { at: t0, ns: 0 });
+        feed(&mut p, "m,robot=r1 x=1i 1000000000\n");
+        let mut out = Vec::new();
+        p.advance_wall(t0 + Duration::from_millis(2260), &mut out);
+        assert_eq!(
+            String::from_utf8(out).unwrap(),
+            "tessla,robot=r1 silent=true 3000000000\n"
+        );
+        assert_eq!(p.counters.evicted, 0);
     }
 
     /// A spec over a list pattern and an exact field: the list's length, some elements and a

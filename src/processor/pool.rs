@@ -1,7 +1,9 @@
 //! The processor's monitor instances: which instance a record belongs to (one, or one per value
 //! of the `--instance-by` tags), creating it with the tags its output lines carry (the static
 //! `--tag`s and its instance tags), and evicting past `--max-instances` (this thread's share)
-//! or after `--instance-idle`. The step watchdog learns each instance's name here.
+//! or after `--instance-idle` (by its own silence only: at its next record, or by the wall
+//! clock when the input is silent, never because of other instances' records). The step
+//! watchdog learns each instance's name here.
 
 use super::clock::Anchor;
 use super::instances::{Key, Table};
@@ -23,6 +25,10 @@ pub(super) struct Instance {
     /// the next start of one that picks it (`i64::MAX`: none). Until the rules change or that
     /// start comes, its version stays.
     pub(super) settled: (usize, i64),
+    /// The latest event time its version was settled for: its first step's time, then the
+    /// largest time `Processor::settle` was asked for (a record's stamp, not the time a late
+    /// record is stepped at). The rules at the horizon give its version; saved with it.
+    pub(super) horizon: i64,
     pub(super) tags: Vec<(String, String)>,
     pub(super) recent: super::dedup::Recent,
     /// Never reused: tells this instance's queued deadlines from a former occupant's of its slot.
@@ -73,15 +79,28 @@ impl Pool {
         }
     }
 
-    /// The time instances are used at: the wall clock with `--instance-idle`, a constant
-    /// without (no clock read per record).
+    /// The time instances are used at: the wall clock `wall` with `--instance-idle`, a
+    /// constant without.
     #[inline]
-    pub(super) fn now(&self) -> Instant {
+    pub(super) fn now(&self, wall: Instant) -> Instant {
         if self.idle.is_some() {
-            Instant::now()
+            wall
         } else {
             self.epoch
         }
+    }
+
+    /// With `--instance-idle`: whether instance `slot` was idle past the limit at `at`.
+    pub(super) fn idle_at(&self, slot: usize, at: Instant) -> bool {
+        self.idle.is_some_and(|d| self.table.idle_at(slot, d, at))
+    }
+
+    /// With `--instance-idle`: when the least recently used instance falls idle past the limit
+    /// (the wall clock evicts it then, [`Pool::evict_idle`]).
+    pub(super) fn idle_due(&self) -> Option<Instant> {
+        let d = self.idle?;
+        let last = self.table.oldest_use()?;
+        Some(last + d + Duration::from_nanos(1))
     }
 
     /// Name every instance in `lane` (the watchdog's, set after instances were restored).
@@ -110,6 +129,12 @@ impl Pool {
             return i;
         }
         let key = key_of(&self.by, m);
+        // Its own silence past `--instance-idle` evicted it: it starts afresh.
+        if let Some(d) = self.idle
+            && let Some(i) = self.table.idle_slot(&key, d, now)
+        {
+            self.evict_slot(i, false, counters, lane);
+        }
         if let Some(i) = self.table.find(&key, now) {
             return i;
         }
@@ -152,6 +177,7 @@ impl Pool {
             tags.sort();
         }
         self.next_id += 1;
+        let horizon = monitor.clock();
         let i = self.table.insert(
             key,
             Instance {
@@ -159,6 +185,7 @@ impl Pool {
                 version,
                 // Never settled: the first step with rules looks.
                 settled: (usize::MAX, i64::MIN),
+                horizon,
                 tags,
                 recent: Default::default(),
                 id: self.next_id,
@@ -180,29 +207,64 @@ impl Pool {
         i
     }
 
-    /// Evict instances past `--max-instances` or idle too long. Nothing is pending in an
-    /// instance between records (each record is evaluated at once); its armed `delay`s are
-    /// dropped with it (their queue entries go stale).
+    /// Evict instances past `--max-instances` (least recently used first). Nothing is pending
+    /// in an instance between records (each record is evaluated at once); its armed `delay`s
+    /// are dropped with it (their queue entries go stale).
     #[inline]
     pub(super) fn evict(&mut self, now: Instant, counters: &mut Counters, lane: Option<&Lane>) {
-        // Most records: below the limit and no idle limit, nothing to look at.
+        // Most records: below the limit, nothing to look at.
+        if self.table.len() <= self.keep {
+            return;
+        }
+        self.evict_some(now, None, counters, lane);
+    }
+
+    /// Evict instances past `--max-instances`, and those idle past `--instance-idle` at `now`
+    /// (the wall clock, while the input is silent).
+    pub(super) fn evict_idle(
+        &mut self,
+        now: Instant,
+        counters: &mut Counters,
+        lane: Option<&Lane>,
+    ) {
         if self.idle.is_none() && self.table.len() <= self.keep {
             return;
         }
-        self.evict_some(now, counters, lane);
+        self.evict_some(now, self.idle, counters, lane);
     }
 
     #[inline(never)]
-    fn evict_some(&mut self, now: Instant, counters: &mut Counters, lane: Option<&Lane>) {
-        let max = self.keep;
-        let total = self.total;
-        while let Some(i) = self.table.evictable(max, self.idle, now) {
-            let full = self.table.len() > max;
-            let Some((key, _)) = self.table.remove(i) else {
+    fn evict_some(
+        &mut self,
+        now: Instant,
+        idle: Option<Duration>,
+        counters: &mut Counters,
+        lane: Option<&Lane>,
+    ) {
+        while let Some(i) = self.table.evictable(self.keep, idle, now) {
+            let full = self.table.len() > self.keep;
+            if !self.evict_slot(i, full, counters, lane) {
                 break;
-            };
+            }
+        }
+    }
+
+    /// Evict instance `slot` (`full`: for `--max-instances`, else for idleness), counted and
+    /// warned about; false when the slot is empty.
+    pub(super) fn evict_slot(
+        &mut self,
+        slot: usize,
+        full: bool,
+        counters: &mut Counters,
+        lane: Option<&Lane>,
+    ) -> bool {
+        let (max, total) = (self.keep, self.total);
+        let Some((key, _)) = self.table.remove(slot) else {
+            return false;
+        };
+        {
             if let Some(l) = lane {
-                l.forget(i);
+                l.forget(slot);
             }
             counters.evicted += 1;
             let by = &self.by;
@@ -223,6 +285,7 @@ impl Pool {
                 )
             });
         }
+        true
     }
 }
 

@@ -5,21 +5,26 @@
 use super::clock::{Anchor, Wall};
 use super::versions::{Rule, Selector, Version};
 use super::{Accepted, Processor, pool};
-use crate::telegraf::encode;
 use std::sync::Arc;
 use tessla_engine::{Monitor, OutputEvent, Program};
 
 impl Processor {
     /// Switch instance `slot` to the version its rules give it at `upto`, stepping through
-    /// every version start on the way: before each start its old version fires the `delay`s
-    /// due before it, then the instance continues in the new version (streams whose key is
-    /// unchanged keep their state). Its outputs go to `out`.
+    /// every version start from its horizon on the way: before each start its old version
+    /// fires the `delay`s due before it, then the instance continues in the new version
+    /// (streams whose key is unchanged keep their state). Its outputs go to `out`. The horizon
+    /// (not the monitor's clock, which a late record moves past its stamp) is where it stands:
+    /// the record's stamp decides its version, and a restart that restores the horizon decides
+    /// alike.
     pub(super) fn settle(&mut self, slot: usize, upto: i64, out: &mut Vec<u8>) {
         // Most steps: the rules have not changed since the instance last settled and no start
         // of one that picks it comes before `upto` (no key lookup, no copy per record).
         let rules = self.versions.rules.len();
         match self.pool.table.get_mut(slot) {
-            Some(inst) if inst.settled.0 == rules && upto < inst.settled.1 => return,
+            Some(inst) if inst.settled.0 == rules && upto < inst.settled.1 => {
+                inst.horizon = inst.horizon.max(upto);
+                return;
+            }
             Some(_) => {}
             None => return,
         }
@@ -29,7 +34,7 @@ impl Processor {
         let Some(inst) = self.pool.table.get_mut(slot) else {
             return;
         };
-        let mut cursor = inst.monitor.clock();
+        let mut cursor = inst.horizon;
         // First where the instance stands (a rule may have started at or before its clock),
         // then each start after it up to `upto`; `cursor` only grows.
         let mut next = if self.versions.target(&key, cursor) != inst.version {
@@ -61,6 +66,7 @@ impl Processor {
         }
         let after = self.versions.next_start(&key, cursor, i64::MAX);
         inst.settled = (rules, after.unwrap_or(i64::MAX));
+        inst.horizon = inst.horizon.max(upto);
     }
 
     /// Run `program` from now on in place of the base version (a spec reload): `carry` turns
@@ -75,7 +81,7 @@ impl Processor {
         mut carry: impl FnMut(&Monitor) -> Monitor,
     ) -> Result<(), String> {
         let label = self.versions.base().label.clone();
-        let base = Version::new(id.to_string(), label, program)?;
+        let base = Version::new(id.to_string(), label, program, &self.opts.measurement)?;
         self.end_of_read();
         for inst in self.pool.table.values_mut() {
             if inst.version == 0 {
@@ -85,7 +91,6 @@ impl Processor {
                 }
             }
         }
-        self.emitter.encode = encode::Scratch::default();
         self.wiring = super::wiring::WiringCheck::new(&base.bindings);
         if let Some(slot) = self.versions.list.first_mut() {
             *slot = base;
@@ -137,7 +142,8 @@ impl Processor {
             ));
         }
         if self.versions.find(id).is_none() {
-            let v = Version::new(id.to_string(), String::new(), Arc::clone(program))
+            let m = &self.opts.measurement;
+            let v = Version::new(id.to_string(), String::new(), Arc::clone(program), m)
                 .map_err(|e| format!("its input annotations: {e}"))?;
             super::versions::check_against(&v, samples)?;
         }
@@ -174,14 +180,21 @@ impl Processor {
         let version = match self.versions.find(id) {
             Some(v) => v,
             None => {
-                let v = Version::new(id.to_string(), label.to_string(), program)
+                let m = &self.opts.measurement;
+                let v = Version::new(id.to_string(), label.to_string(), program, m)
                     .map_err(|e| format!("its input annotations: {e}"))?;
                 self.versions.list.push(v);
                 self.capture = self.versions.list_to_capture();
                 self.versions.list.len() - 1
             }
         };
-        let reset_outputs = self.versions.get(version).reset_from(self.versions.base());
+        let reset_outputs = self.versions.reset_for(version, from, &selector);
+        if !self.versions.has_rules() {
+            // Without rules no step settled a version: each instance stands at its clock.
+            for inst in self.pool.table.values_mut() {
+                inst.horizon = inst.horizon.max(inst.monitor.clock());
+            }
+        }
         self.versions.rules.push(Rule {
             version,
             from,

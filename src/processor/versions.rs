@@ -8,7 +8,7 @@
 
 use super::instances::Key;
 use crate::telegraf::binding::{self, FieldPattern, InputBinding};
-use crate::telegraf::encode::{self, Encoding};
+use crate::telegraf::encode;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::sync::Arc;
@@ -26,16 +26,23 @@ pub struct Version {
     /// Every node's stable key (`snapshot::node_keys`): a switch carries state by them.
     pub(super) keys: Vec<u64>,
     pub(super) bindings: Vec<InputBinding>,
-    pub(super) encodings: Vec<Encoding>,
+    /// How its outputs are written, prepared once: only its own instances' lines use it.
+    pub(super) encodings: encode::Prepared,
 }
 
 impl Version {
-    /// Fails when an input annotation is malformed.
-    pub fn new(id: String, label: String, program: Arc<Program>) -> Result<Version, String> {
+    /// Fails when an input annotation is malformed. `measurement`: `--measurement`, where
+    /// outputs without an annotation go.
+    pub fn new(
+        id: String,
+        label: String,
+        program: Arc<Program>,
+        measurement: &str,
+    ) -> Result<Version, String> {
         Ok(Version {
             keys: snapshot::node_keys(&program),
             bindings: binding::bindings(&program)?,
-            encodings: encode::encodings(&program),
+            encodings: encode::Prepared::new(encode::encodings(&program), measurement),
             id,
             label,
             program,
@@ -160,7 +167,10 @@ impl Versions {
         let list = self
             .list
             .iter()
-            .map(|v| Version::new(v.id.clone(), v.label.clone(), Arc::clone(&v.program)))
+            .map(|v| {
+                let m = v.encodings.default_measurement();
+                Version::new(v.id.clone(), v.label.clone(), Arc::clone(&v.program), m)
+            })
             .collect::<Result<Vec<_>, _>>()?;
         Ok(Versions {
             list,
@@ -200,11 +210,96 @@ impl Versions {
             .min()
     }
 
+    /// The outputs that start afresh in the instances `selector` picks when they switch to
+    /// version `new` at `from` (a rule not accepted yet): those whose definition differs between
+    /// the version such an instance runs just before `from` and `new`, each once, in `new`'s
+    /// order. Exact whatever instances are live: it looks at representative keys (see
+    /// [`Versions::representatives`]); when there would be too many of them, at every version
+    /// some instance could run before.
+    pub fn reset_for(&self, new: usize, from: i64, selector: &Selector) -> Vec<String> {
+        let before = from.saturating_sub(1);
+        let mut olds: Vec<usize> = match self.representatives(selector) {
+            Some(keys) => keys
+                .iter()
+                .filter(|k| selector.matches(&self.by, k))
+                .map(|k| self.target(k, before))
+                .collect(),
+            None => std::iter::once(0)
+                .chain(self.rules.iter().map(|r| r.version))
+                .collect(),
+        };
+        olds.sort_unstable();
+        olds.dedup();
+        let new_version = self.get(new);
+        let mut reset = std::collections::HashSet::new();
+        for old in olds.into_iter().filter(|&o| o != new) {
+            reset.extend(new_version.reset_from(self.get(old)));
+        }
+        new_version
+            .program
+            .outputs
+            .iter()
+            .map(|o| &o.name)
+            .filter(|n| reset.remove(*n))
+            .cloned()
+            .collect()
+    }
+
+    /// Keys standing for every instance `selector` may pick, as far as the rules tell them
+    /// apart: per `--instance-by` tag, the values `selector` names for it, or, when it names
+    /// none, each value a rule's selector names for it, one value none names, and the tag
+    /// absent. `None`: more than [`REPRESENTATIVES`] of them.
+    fn representatives(&self, selector: &Selector) -> Option<Vec<Key>> {
+        let mut keys: Vec<Key> = vec![Vec::new()];
+        for tag in &self.by {
+            let named = |s: &Selector| -> Vec<String> {
+                s.clauses()
+                    .iter()
+                    .filter(|(t, _)| t == tag)
+                    .flat_map(|(_, vs)| vs.iter().cloned())
+                    .collect()
+            };
+            let mut values: Vec<Option<String>> = named(selector).into_iter().map(Some).collect();
+            if values.is_empty() {
+                let mut all: Vec<String> =
+                    self.rules.iter().flat_map(|r| named(&r.selector)).collect();
+                all.sort_unstable();
+                all.dedup();
+                let mut other = String::from("~");
+                while all.contains(&other) {
+                    other.push('~');
+                }
+                values = all.into_iter().map(Some).collect();
+                values.push(Some(other));
+                values.push(None);
+            }
+            values.sort_unstable();
+            values.dedup();
+            if keys.len().saturating_mul(values.len()) > REPRESENTATIVES {
+                return None;
+            }
+            keys = keys
+                .iter()
+                .flat_map(|k| {
+                    values.iter().map(move |v| {
+                        let mut k = k.clone();
+                        k.push(v.clone());
+                        k
+                    })
+                })
+                .collect();
+        }
+        Some(keys)
+    }
+
     /// Whether any version holds a `delay`.
     pub fn has_delays(&self) -> bool {
         self.list.iter().any(|v| !v.program.delays.is_empty())
     }
 }
+
+/// Most representative keys [`Versions::reset_for`] looks at (a few per rollout in practice).
+const REPRESENTATIVES: usize = 4096;
 
 /// Which instances a rollout is for: `TAG=V1,V2[;TAG=V3...]` (every clause must hold); empty:
 /// every instance.
@@ -218,6 +313,11 @@ impl Selector {
     /// Every instance.
     pub fn all() -> Selector {
         Selector::default()
+    }
+
+    /// Its clauses: a tag and the values it accepts (every clause must hold).
+    pub fn clauses(&self) -> &[(String, Vec<String>)] {
+        &self.clauses
     }
 
     pub fn is_all(&self) -> bool {
@@ -316,7 +416,7 @@ mod tests {
             files: [("t.tessla".to_string(), spec.to_string())].into(),
         };
         let loaded = tessla_engine::load_with("t.tessla", &resolver, &Default::default()).unwrap();
-        Version::new("v".into(), String::new(), loaded.program).unwrap()
+        Version::new("v".into(), String::new(), loaded.program, "tessla").unwrap()
     }
 
     /// The list read apart is the one indexed pattern of every version held, and none while

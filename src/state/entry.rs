@@ -111,6 +111,7 @@ struct EntryOut<'a> {
     written: u64,
     program: &'a SavedProgram,
     key: &'a Key,
+    horizon: i64,
     monitor: Snapshot,
 }
 
@@ -119,23 +120,30 @@ struct EntryOut<'a> {
 struct EntryIn {
     program: SavedProgram,
     key: Key,
+    /// Absent in entries written before it was saved.
+    #[serde(default)]
+    horizon: Option<i64>,
     monitor: Snapshot,
 }
 
-/// One instance's state as read back from any backend: the program it ran and its monitor.
+/// One instance's state as read back from any backend: the program it ran, its horizon (the
+/// event time whose version it ran, `Processor::saved_instances`; `None`: not recorded) and its
+/// monitor.
 pub struct Saved {
     pub program: SavedProgram,
+    pub horizon: Option<i64>,
     pub monitor: Snapshot,
 }
 
 /// The bytes of instance `key`'s entry (JSON, as the file), its monitor snapshotted with the
-/// keys of its own program (looked up in `programs`); the second value counts stream values
-/// that are functions and cannot be saved.
+/// keys of its own program (looked up in `programs`) and its `horizon`; the second value counts
+/// stream values that are functions and cannot be saved.
 pub fn encode_entry(
     programs: &mut Programs,
     fingerprint: &str,
     key: &Key,
     monitor: &Monitor,
+    horizon: i64,
 ) -> (Vec<u8>, usize) {
     let i = programs.index(monitor.program());
     let Some(known) = programs.list.get(i) else {
@@ -150,6 +158,7 @@ pub fn encode_entry(
         written: unix_now(),
         program: &known.saved,
         key,
+        horizon,
         monitor: snap,
     };
     // Serialising owned plain data to memory cannot fail; an empty entry would be rejected.
@@ -221,6 +230,7 @@ pub fn decode_entry(bytes: &[u8], fingerprint: &str, key: &Key) -> Result<Saved,
     }
     Ok(Saved {
         program: entry.program,
+        horizon: entry.horizon,
         monitor: entry.monitor,
     })
 }

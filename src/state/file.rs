@@ -29,6 +29,10 @@ struct SavedInstance {
     key: Key,
     /// The program it ran: an index into [`StateFile::programs`].
     program: usize,
+    /// The event time whose version it ran (`Processor::saved_instances`); absent in files
+    /// written before it was saved (then its clock).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    horizon: Option<i64>,
     monitor: Snapshot,
 }
 
@@ -49,6 +53,7 @@ struct StateFile {
 struct SavedRef<'a> {
     key: &'a Key,
     program: usize,
+    horizon: i64,
     monitor: Snapshot,
 }
 
@@ -65,15 +70,16 @@ struct HeaderOut<'a> {
 /// Instances per encoding thread below which one thread does it all.
 const PER_THREAD: usize = 512;
 
-/// One instance to save: its key, its monitor, and the index of its program in [`Programs`].
-type Instance<'a> = (&'a Key, &'a tessla_engine::Monitor, usize);
+/// One instance to save: its key, its monitor, the index of its program in [`Programs`] and
+/// its horizon.
+type Instance<'a> = (&'a Key, &'a tessla_engine::Monitor, usize, i64);
 
 /// The JSON of `instances`, comma-separated, and the count of stream values that could not be
 /// saved. `keys`: the node keys of each program, by index.
 fn encode_instances(instances: &[Instance<'_>], keys: &[&[u64]]) -> io::Result<(Vec<u8>, usize)> {
     let mut out = Vec::with_capacity(instances.len() * 2048);
     let mut unsaved = 0;
-    for (i, &(key, m, program)) in instances.iter().enumerate() {
+    for (i, &(key, m, program, horizon)) in instances.iter().enumerate() {
         let monitor = snapshot::snapshot_with_keys(m, keys.get(program).copied().unwrap_or(&[]));
         unsaved += monitor.unsaved;
         if i > 0 {
@@ -84,6 +90,7 @@ fn encode_instances(instances: &[Instance<'_>], keys: &[&[u64]]) -> io::Result<(
             &SavedRef {
                 key,
                 program,
+                horizon,
                 monitor,
             },
         )
@@ -101,8 +108,8 @@ fn encode_instances(instances: &[Instance<'_>], keys: &[&[u64]]) -> io::Result<(
 pub fn save(path: &Path, proc: &Processor, ctx: &Context) -> io::Result<usize> {
     let mut programs = Programs::default();
     let monitors: Vec<Instance<'_>> = proc
-        .monitors()
-        .map(|(k, m)| (k, m, programs.index(m.program())))
+        .saved_instances()
+        .map(|(k, m, h)| (k, m, programs.index(m.program()), h))
         .collect();
     let keys = programs.node_keys();
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -257,9 +264,9 @@ fn load_quiet(path: &Path, proc: &mut Processor, ctx: &Context) -> (Outcome, Vec
                 let Some(saved) = file.programs.get(s.program) else {
                     continue;
                 };
-                let (m, note) = restorer.restore(proc, &s.key, saved, &s.monitor);
+                let (m, note) = restorer.restore(proc, &s.key, saved, &s.monitor, s.horizon);
                 notes.extend(note);
-                proc.restore_instance(s.key, m);
+                proc.restore_instance_at(s.key, m, s.horizon);
             }
             (Outcome::Restored(n), notes)
         }
@@ -447,5 +454,79 @@ mod tests {
         ] {
             assert_ne!(fingerprint(&other), fp, "{other:?}");
         }
+    }
+
+    /// A rollout from T = 1000 for r1; r1's record stamped T - 1 arrives when its last step is
+    /// at T - 1, so it is stepped at T by the old version (the stamp decides). Two late records
+    /// stamped before T after it are judged by the old version too, whether or not the process
+    /// was stopped and restarted with its state in between.
+    #[test]
+    fn a_restart_keeps_the_version_the_record_stamps_give() {
+        const V1: &str = "in x: Events[Int]\ndef v = x\nout v\n";
+        const V2: &str = "in x: Events[Int]\ndef v = x * 10\nout v\n";
+        let ctx = Context {
+            instance_by: vec!["robot".into()],
+            ..Context::default()
+        };
+        let rolled = || {
+            let mut p = processor(V1);
+            let r1 = Selector::parse("robot=r1").unwrap();
+            p.accept_version("v2", "", program(V2), 1000, r1).unwrap();
+            p
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("state.json");
+        let run = |restart: bool| {
+            let mut p = rolled();
+            let mut out = feed(&mut p, "m,robot=r1 x=1i 999\nm,robot=r1 x=2i 999\n");
+            if restart {
+                assert_eq!(save(&path, &p, &ctx).unwrap(), 1);
+                p = rolled();
+                assert_eq!(load_quiet(&path, &mut p, &ctx).0, Outcome::Restored(1));
+            }
+            out.push_str(&feed(&mut p, "m,robot=r1 x=3i 500\nm,robot=r1 x=4i 500\n"));
+            out.push_str(&feed(&mut p, "m,robot=r1 x=5i 1100\n"));
+            out
+        };
+        let once = run(false);
+        assert_eq!(
+            once,
+            "tessla,robot=r1 v=1i 999\ntessla,robot=r1 v=2i 1000\n\
+             tessla,robot=r1 v=3i 1001\ntessla,robot=r1 v=4i 1002\n\
+             tessla,robot=r1 v=50i 1100\n"
+        );
+        assert_eq!(run(true), once);
+    }
+
+    /// A file written before instances carried their horizon still loads: each instance is
+    /// restored into the version its clock gives.
+    #[test]
+    fn a_file_without_horizons_restores_each_instance_at_its_clock() {
+        const V1: &str = "in x: Events[Int]\ndef v = x\nout v\n";
+        const V2: &str = "in x: Events[Int]\ndef v = x * 10\nout v\n";
+        let ctx = Context {
+            instance_by: vec!["robot".into()],
+            ..Context::default()
+        };
+        let rolled = || {
+            let mut p = processor(V1);
+            let r1 = Selector::parse("robot=r1").unwrap();
+            p.accept_version("v2", "", program(V2), 1000, r1).unwrap();
+            p
+        };
+        let mut p = rolled();
+        feed(&mut p, "m,robot=r1 x=1i 999\nm,robot=r1 x=2i 999\n");
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("state.json");
+        save(&path, &p, &ctx).unwrap();
+        let text = fs::read_to_string(&path).unwrap();
+        assert!(text.contains("\"horizon\":999,"), "{text}");
+        fs::write(&path, text.replace("\"horizon\":999,", "")).unwrap();
+        let mut q = rolled();
+        assert_eq!(load_quiet(&path, &mut q, &ctx).0, Outcome::Restored(1));
+        assert_eq!(
+            feed(&mut q, "m,robot=r1 x=3i 500\n"),
+            "tessla,robot=r1 v=30i 1001\n"
+        );
     }
 }

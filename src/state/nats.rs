@@ -199,7 +199,7 @@ impl Backend for NatsBackend {
             Ok(saved) => {
                 let (monitor, note) =
                     self.restorer
-                        .restore(proc, key, &saved.program, &saved.monitor);
+                        .restore(proc, key, &saved.program, &saved.monitor, saved.horizon);
                 if let Some(note) = note {
                     log::log(Level::Info, &note);
                 }
@@ -207,7 +207,7 @@ impl Backend for NatsBackend {
                     Level::Debug,
                     &format!("state: restored {name} from {}", self.url.shown()),
                 );
-                proc.restore_instance(key.clone(), monitor);
+                proc.restore_instance_at(key.clone(), monitor, saved.horizon);
             }
             Err(why) => {
                 let aside = self.set_aside(&name, entry.value);
@@ -231,9 +231,10 @@ impl Backend for NatsBackend {
         let mut programs = Programs::default();
         let mut unsaved = 0;
         let entries: Vec<(String, bytes::Bytes)> = proc
-            .monitors()
-            .map(|(key, m)| {
-                let (bytes, u) = entry::encode_entry(&mut programs, &self.fingerprint, key, m);
+            .saved_instances()
+            .map(|(key, m, horizon)| {
+                let fp = &self.fingerprint;
+                let (bytes, u) = entry::encode_entry(&mut programs, fp, key, m, horizon);
                 unsaved += u;
                 (kv_key(key), bytes::Bytes::from(bytes))
             })

@@ -1,6 +1,7 @@
 //! Saved instances turned back into monitors, the same way for every backend and the same way
 //! as a SIGHUP reload carries them: each instance continues in the program its key runs now
-//! (`Processor::program_for` at its saved clock), every stream whose key the saved program had
+//! (`Processor::program_for` at its saved horizon, or clock for state without one: the version
+//! it ran, whatever late records moved its clock past), every stream whose key the saved program had
 //! keeps its value and armed timer, every other starts afresh.
 //!
 //! Owns: the running programs' node keys, computed once per program however many instances
@@ -41,8 +42,8 @@ impl Restorer {
         }
     }
 
-    /// Instance `key`'s monitor, continued from `snap` (saved by a monitor of `saved`) in the
-    /// program it runs in `proc`. The second value is the line to log (info) when `saved` is
+    /// Instance `key`'s monitor, continued from `snap` (saved by a monitor of `saved`, at
+    /// `horizon`: see `Processor::restore_instance_at`) in the program it runs in `proc`. The second value is the line to log (info) when `saved` is
     /// another program and this pair was not reported yet: what starts afresh.
     pub fn restore(
         &mut self,
@@ -50,12 +51,14 @@ impl Restorer {
         key: &Key,
         saved: &SavedProgram,
         snap: &Snapshot,
+        horizon: Option<i64>,
     ) -> (Monitor, Option<String>) {
         let clock = [snap.pending, snap.last_evaluated]
             .into_iter()
             .flatten()
             .fold(snap.t0, i64::max);
-        let running = running_for(&mut self.running, proc.program_for(key, clock));
+        let at = horizon.unwrap_or(clock);
+        let running = running_for(&mut self.running, proc.program_for(key, at));
         let monitor =
             snapshot::restore_with_keys(Arc::clone(&running.program), snap, &running.node_keys);
         let mut note = None;

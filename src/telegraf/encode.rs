@@ -94,20 +94,64 @@ fn field_value(v: &Value) -> Result<Option<FieldValue>, String> {
     }))
 }
 
-/// Buffers reused from step to step (no allocation per step once warm), and each output's
-/// measurement and field key escaped once. A `Scratch` serves one set of encodings and one
-/// default measurement: start a new one when they change (a reload).
-#[derive(Debug, Default)]
-pub struct Scratch {
+/// A set of encodings prepared for writing, once (a processor prepares each spec version's
+/// when it takes the version in): each output's measurement and field key escaped, the metric
+/// each goes to, and whether all go to one. Serves only the encodings and default measurement
+/// it was built from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Prepared {
+    encodings: Vec<Encoding>,
+    default_measurement: String,
     /// Per encoding: its measurement escaped (`None`: not writable) and `key=` escaped
     /// (`None`: not writable).
-    prepared: Vec<Prepared>,
+    names: Vec<Names>,
     /// Per encoding: the metric its fields go to, as the first encoding index of that metric
     /// (a connector output is its own metric; the others share one per measurement).
     metric: Vec<usize>,
     /// The metric every output goes to, when there is one and its measurement is writable
     /// (the usual case: outputs without annotations).
     one_metric: Option<usize>,
+}
+
+impl Prepared {
+    pub fn new(encodings: Vec<Encoding>, default_measurement: &str) -> Prepared {
+        let names: Vec<Names> = encodings
+            .iter()
+            .map(|e| prepare(e, default_measurement))
+            .collect();
+        let metric = metrics(&encodings, default_measurement);
+        let one_metric = metric.first().copied().filter(|&g| {
+            metric.iter().all(|&m| m == g) && names.get(g).is_some_and(|p| p.0.is_some())
+        });
+        Prepared {
+            encodings,
+            default_measurement: default_measurement.to_string(),
+            names,
+            metric,
+            one_metric,
+        }
+    }
+
+    /// How each output (by index) is written.
+    pub fn encodings(&self) -> &[Encoding] {
+        &self.encodings
+    }
+
+    /// The measurement of outputs without an annotation.
+    pub fn default_measurement(&self) -> &str {
+        &self.default_measurement
+    }
+
+    /// Whether it was prepared from `encodings` and `default_measurement`.
+    fn serves(&self, encodings: &[Encoding], default_measurement: &str) -> bool {
+        self.default_measurement == default_measurement && self.encodings == encodings
+    }
+}
+
+/// Buffers reused from step to step (no allocation per step once warm), whatever encodings
+/// they write.
+#[derive(Debug, Default)]
+pub struct Scratch {
     /// The step's metrics in first-appearance order: (its `metric` index, whether values
     /// without a line-protocol form are reported while it is written: the one-metric case).
     groups: Vec<(usize, bool)>,
@@ -117,10 +161,13 @@ pub struct Scratch {
     name: String,
     line: String,
     floats: Floats,
+    /// [`encode_step_with`]'s last encodings prepared: used again while the same encodings
+    /// come (compared each step), prepared afresh when others do.
+    last: Option<Prepared>,
 }
 
 /// An encoding's measurement escaped and its field key escaped with `=` (`None`: not writable).
-type Prepared = (Option<String>, Option<String>);
+type Names = (Option<String>, Option<String>);
 
 /// Measurement, field key and whether it is a connector metric, for one encoding.
 fn target<'a>(enc: &'a Encoding, default_measurement: &'a str) -> (&'a str, &'a str, bool) {
@@ -131,7 +178,7 @@ fn target<'a>(enc: &'a Encoding, default_measurement: &'a str) -> (&'a str, &'a 
     }
 }
 
-fn prepare(enc: &Encoding, default_measurement: &str) -> Prepared {
+fn prepare(enc: &Encoding, default_measurement: &str) -> Names {
     let (measurement, field, _) = target(enc, default_measurement);
     let m = lineproto::measurement_is_writable(measurement).then(|| {
         let mut s = String::new();
@@ -197,8 +244,9 @@ pub fn encode_step(
     )
 }
 
-/// [`encode_step`] with buffers and escaped names kept in `scratch` between steps. The line is
-/// the one [`lineproto::LineWriter`] writes (a test compares them).
+/// [`encode_step`] with buffers kept in `scratch` between steps, and the encodings prepared
+/// again only when they differ from the last step's (a caller with several sets of encodings
+/// prepares each once and calls [`encode_prepared`]).
 pub fn encode_step_with<E: StepEvent>(
     scratch: &mut Scratch,
     ts: i64,
@@ -208,26 +256,28 @@ pub fn encode_step_with<E: StepEvent>(
     tags: &[(String, String)],
     out: &mut Vec<u8>,
 ) -> Vec<Dropped> {
-    if scratch.prepared.len() != encodings.len() {
-        scratch.prepared = encodings
-            .iter()
-            .map(|e| prepare(e, default_measurement))
-            .collect();
-        scratch.metric = metrics(encodings, default_measurement);
-        scratch.one_metric = scratch.metric.first().copied().filter(|&g| {
-            scratch.metric.iter().all(|&m| m == g)
-                && scratch.prepared.get(g).is_some_and(|p| p.0.is_some())
-        });
-    }
-    encode(
-        scratch,
-        ts,
-        events,
-        encodings,
-        default_measurement,
-        tags,
-        out,
-    )
+    let prepared = match scratch.last.take() {
+        Some(p) if p.serves(encodings, default_measurement) => p,
+        _ => Prepared::new(encodings.to_vec(), default_measurement),
+    };
+    let dropped = encode_prepared(scratch, &prepared, ts, events, tags, out);
+    scratch.last = Some(prepared);
+    dropped
+}
+
+/// Encode the events of one step (all at `ts`) into `out` by encodings prepared once, with
+/// the buffers of `scratch`; returns the dropped values. The line is the one
+/// [`lineproto::LineWriter`] writes (a test compares them).
+#[inline]
+pub fn encode_prepared<E: StepEvent>(
+    scratch: &mut Scratch,
+    prepared: &Prepared,
+    ts: i64,
+    events: &[E],
+    tags: &[(String, String)],
+    out: &mut Vec<u8>,
+) -> Vec<Dropped> {
+    encode(scratch, prepared, ts, events, tags, out)
 }
 
 /// Per encoding, the first encoding index of the metric its fields go to.
@@ -424,7 +474,7 @@ impl Writer<'_> {
     fn put(
         &mut self,
         idx: usize,
-        key: Option<&Prepared>,
+        key: Option<&Names>,
         path: &str,
         v: &Value,
         leaf: Option<&Value>,
@@ -511,28 +561,32 @@ fn drop_value(
     }
 }
 
-/// [`encode_step_with`] once the encodings are prepared: metrics told apart by index, values
-/// written straight into the line. A value is one field; a record or tuple is one field per
-/// member (the rare case, off the scalar path).
+/// [`encode_prepared`]: metrics told apart by index, values written straight into the line.
+/// A value is one field; a record or tuple is one field per member (the rare case, off the
+/// scalar path).
 fn encode<E: StepEvent>(
     scratch: &mut Scratch,
+    prepared: &Prepared,
     ts: i64,
     events: &[E],
-    encodings: &[Encoding],
-    default_measurement: &str,
     tags: &[(String, String)],
     out: &mut Vec<u8>,
 ) -> Vec<Dropped> {
     let Scratch {
-        prepared,
-        metric,
-        one_metric,
         groups,
         path,
         name,
         line,
         floats,
+        last: _,
     } = scratch;
+    let Prepared {
+        encodings,
+        default_measurement,
+        names: prepared,
+        metric,
+        one_metric,
+    } = prepared;
     let mut dropped = Vec::new();
     let mut w = Writer {
         encodings,
@@ -812,13 +866,16 @@ mod tests {
             vec![(4, Value::Str(Arc::from("x\"y"))), (0, Value::Bool(true))],
         ];
         let mut scratch = Scratch::default();
+        let prepared = Prepared::new(encodings, "m");
+        let general_path = Prepared {
+            one_metric: None,
+            ..prepared.clone()
+        };
         let mut n_dropped = 0;
         for events in &steps {
             let (mut fast, mut general) = (Vec::new(), Vec::new());
-            let d = encode_step_with(&mut scratch, 5, events, &encodings, "m", &[], &mut fast);
-            let one_metric = scratch.one_metric.take();
-            let dg = encode_step_with(&mut scratch, 5, events, &encodings, "m", &[], &mut general);
-            scratch.one_metric = one_metric;
+            let d = encode_prepared(&mut scratch, &prepared, 5, events, &[], &mut fast);
+            let dg = encode_prepared(&mut scratch, &general_path, 5, events, &[], &mut general);
             assert_eq!(
                 String::from_utf8_lossy(&fast),
                 String::from_utf8_lossy(&general)
@@ -828,6 +885,38 @@ mod tests {
         }
         // NaN, the error value and infinity.
         assert_eq!(n_dropped, 3);
-        assert!(scratch.one_metric.is_some());
+        assert!(prepared.one_metric.is_some());
+    }
+
+    /// One scratch serving two sets of encodings with as many outputs in turn (instances on
+    /// two spec versions): each step is written by its own encodings' names.
+    #[test]
+    fn a_scratch_shared_by_two_sets_of_encodings_writes_each_ones_names() {
+        let set = |names: [&str; 2]| -> Vec<Encoding> {
+            names
+                .iter()
+                .map(|n| Encoding::Default((*n).into()))
+                .collect()
+        };
+        let (ab, cd) = (set(["a", "b"]), set(["c", "d"]));
+        let (pab, pcd) = (
+            Prepared::new(ab.clone(), "t"),
+            Prepared::new(cd.clone(), "t"),
+        );
+        let events = [(0, Value::Int(1)), (1, Value::Int(2))];
+        let mut scratch = Scratch::default();
+        for _ in 0..2 {
+            for (enc, prepared, line) in [
+                (&ab, &pab, "t a=1i,b=2i 9\n"),
+                (&cd, &pcd, "t c=1i,d=2i 9\n"),
+            ] {
+                let mut out = Vec::new();
+                encode_prepared(&mut scratch, prepared, 9, &events, &[], &mut out);
+                assert_eq!(String::from_utf8_lossy(&out), line);
+                let mut out = Vec::new();
+                encode_step_with(&mut scratch, 9, &events, enc, "t", &[], &mut out);
+                assert_eq!(String::from_utf8_lossy(&out), line);
+            }
+        }
     }
 }
