@@ -111,7 +111,7 @@ pub fn reload(
     let Some(first) = procs.first() else {
         return Reloaded::Refused("no processor".into());
     };
-    let checked = Version::new(String::new(), String::new(), Arc::clone(&new))
+    let checked = Version::new(String::new(), String::new(), Arc::clone(&new), "tessla")
         .and_then(|v| versions::check_against(&v, samples));
     if let Err(e) = checked {
         log::log(
