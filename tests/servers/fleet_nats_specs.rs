@@ -448,6 +448,111 @@ fn a_rollback_publishes_the_version_in_force_before() {
     );
 }
 
+/// Defect 4 of the issue "One fleet, one truth": a rollback skips aborted rollouts (it undoes
+/// the last committed one); a rollout left undecided (its publisher died before counting the
+/// votes) holds every later publish until `spec decide` counts the votes or `spec abort`
+/// aborts it, and a decision is never changed.
+#[test]
+fn a_rollback_skips_aborted_rollouts_and_an_undecided_one_is_decided_first() {
+    use crate::support::live_child::LiveChild;
+    let server = nats_server("");
+    let port = server.port;
+    let url = format!("nats://127.0.0.1:{port}/specs_c");
+    let s = Setup::new();
+    let base = child::write(s.dir.path(), "base.tessla", BASE_SPEC);
+    let new = child::write(s.dir.path(), "new.tessla", NEW_SPEC);
+    let bad = child::write(s.dir.path(), "bad.tessla", "in x: Events[Bool]\nout x\n");
+    // The bucket first, then a process that has seen an Int `x`.
+    published(&s.publish(&url, &new, &["--select", "robot=none"]), 1);
+    let mut p = LiveChild::spawn(&channel_run(&url, &s, &base));
+    p.write(&format!("m,robot=r1 x=1i {}\n", ts(0)));
+    p.wait_out("the first answer", |l| l.contains(" c=1i,y=2i "));
+    let v_new = published(&s.publish(&url, &new, &[]), 2);
+    let out = s.publish(&url, &bad, &[]);
+    assert_eq!(out.status.code(), Some(5), "{}", child::text(&out.stdout));
+    // The rollback undoes rollout 2 (the aborted 3 was never in force); rollout 1 picks only
+    // robot=none, so what was in force before rollout 2 is the base.
+    let out = s.rollback(&url, &[]);
+    let text = child::text(&out.stdout);
+    assert!(out.status.success(), "{text}{}", child::text(&out.stderr));
+    assert!(
+        text.starts_with("rollout 4: version base")
+            && text.contains(&format!("(`rollback of {v_new}`)"))
+            && text.contains("rolls back rollout 2 to the spec each process started with")
+            && text.contains("committed: all 1 processes accepted it"),
+        "{text}"
+    );
+    // A signed rollout whose publisher died before deciding: publishing waits for it.
+    let operator =
+        nkeys::KeyPair::from_seed(std::fs::read_to_string(&s.seed).unwrap().trim()).unwrap();
+    let record = raw(port, "specs_c", async |kv| {
+        kv.get("rollout.2").await.unwrap().unwrap()
+    });
+    let mut r5: Rollout = sign::Record::<Rollout>::parse(&record).body.unwrap();
+    r5.revision = 5;
+    r5.label = "orphan".into();
+    let sealed = sign::seal(&r5, &operator).unwrap();
+    raw(port, "specs_c", async |kv| {
+        kv.create("rollout.5", sealed.into()).await.unwrap();
+    });
+    let out = s.publish(&url, &new, &[]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        child::text(&out.stderr).contains("rollout 5")
+            && child::text(&out.stderr).contains("is undecided")
+            && child::text(&out.stderr).contains("spec decide 5"),
+        "{}",
+        child::text(&out.stderr)
+    );
+    // The running process voted on it when it arrived: `spec decide` counts that vote.
+    p.wait_out("the vote on the orphan", |l| {
+        l.contains(",outcome=accepted,") && l.contains("revision=5i")
+    });
+    let decide = |args: &[&str]| {
+        let mut all = vec![
+            args[0],
+            args[1],
+            "--channel",
+            url.as_str(),
+            "--sign-key-file",
+            s.seed.to_str().unwrap(),
+        ];
+        all.extend_from_slice(&args[2..]);
+        spec(&all, &[])
+    };
+    let out = decide(&["decide", "5"]);
+    let text = child::text(&out.stdout);
+    assert!(
+        out.status.success() && text.contains("committed: all 1 processes accepted it"),
+        "{text}{}",
+        child::text(&out.stderr)
+    );
+    p.wait_out("the orphan committed", |l| {
+        l.contains(",outcome=committed,") && l.contains("revision=5i")
+    });
+    // Decided once: neither abort nor decide changes it.
+    for args in [["abort", "5"], ["decide", "5"]] {
+        let out = decide(&args);
+        assert_eq!(out.status.code(), Some(2));
+        assert!(
+            child::text(&out.stderr).contains("is decided already (committed)"),
+            "{}",
+            child::text(&out.stderr)
+        );
+    }
+    let status = child::text(&spec(&["status", "--channel", &url], &[]).stdout);
+    for want in [
+        "DECISION",
+        "committed",
+        "aborted",
+        "voted accepted, committed",
+    ] {
+        assert!(status.contains(want), "`{want}` in\n{status}");
+    }
+    let (_, err, code) = p.finish();
+    assert_eq!(code, 0, "{err}");
+}
+
 /// The bucket `bucket` on `port`, opened by a raw client (what someone with write access
 /// could do without the operator's key).
 fn raw<T>(
