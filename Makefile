@@ -1,5 +1,5 @@
 # Every command the README mentions lives here. `make run` and `make test` are the README's first two.
-.PHONY: run test setup build install install-files deb profiling readme-run bench bench-criterion bench-process bench-nats bench-telegraf shutdown-save rollout-bench soak fmt lint ci fixtures conformance fuzz reproduce
+.PHONY: run test setup build install install-files deb profiling readme-run bench bench-criterion bench-process bench-nats bench-telegraf shutdown-save rollout-bench soak fmt lint ci fixtures conformance fuzz reproduce combinations
 
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
@@ -140,6 +140,12 @@ lint:
 
 ci:
 	bash .ci/run
+
+# The combination test with more schedules than `make test` runs (README, "Tests and TeSSLa's
+# suite"): SEEDS schedules (default 2000), seeds 0 to SEEDS-1; a failure prints its seed.
+SEEDS ?= 2000
+combinations:
+	COMBINATION_SEEDS=$(SEEDS) $(CARGO) test --release --test integration cli::combinations -- --nocapture
 
 # Build every cargo-fuzz target and run each for FUZZ_SECONDS (default 60); fails on a crash.
 # Long runs and their findings: RELIABILITY.md.

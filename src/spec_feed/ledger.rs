@@ -5,7 +5,8 @@
 //! decisions are acted on in revision order, each once: the lowest revision not acted on yet
 //! goes first as soon as it is decided, and everything after it waits for it. A rollout this
 //! process could not verify (unsigned, signed by a key it does not trust, its bundle not
-//! matching) and that is undecided is passed over: nothing could put it in force here.
+//! matching) that is still undecided when a later one is decided is passed over: nothing could
+//! put it in force here.
 
 use super::{Arrival, Decision};
 use crate::log::{self, Level};
@@ -39,7 +40,8 @@ pub struct Ledger {
 impl Ledger {
     /// A decision arrived. The first one for a revision counts (the channel creates it once).
     pub fn decided(&mut self, revision: u64, decision: Result<Decision, String>) {
-        if revision <= self.done && self.froms.contains_key(&revision) {
+        // Acted on, or passed over: a decision cannot change it now.
+        if revision <= self.done {
             return;
         }
         let e = self.entries.entry(revision).or_default();
@@ -79,8 +81,15 @@ impl Ledger {
                 // A decision whose rollout has not arrived yet.
                 return None;
             };
+            // An unverifiable rollout still undecided is passed over once a later one is
+            // decided (until then its own decision may still come).
+            let later_decided = || {
+                self.entries
+                    .range(revision + 1..)
+                    .any(|(_, l)| l.decision.is_some() && l.arrival.is_some())
+            };
             let step = match &e.decision {
-                None if arrival.bundle.is_err() => None,
+                None if arrival.bundle.is_err() && later_decided() => None,
                 None => return None,
                 Some(Err(why)) => Some(Step::Abort(
                     arrival.clone(),
@@ -224,6 +233,18 @@ mod tests {
     fn unverifiable_rollouts_and_bad_decisions_never_put_anything_in_force() {
         let mut l = Ledger::default();
         assert!(l.proposed(arrival(1, false)).is_some(), "voted on: refused");
+        // Its own abort arriving later is acted on (it is not passed over before).
+        assert!(names(&mut l).is_empty());
+        l.decided(1, decision(1, false));
+        assert_eq!(names(&mut l), ["abort 1 (refused by p0)"]);
+        // Undecided, with a later one decided: passed over.
+        assert!(l.proposed(arrival(4, false)).is_some());
+        l.proposed(arrival(5, true));
+        l.decided(5, decision(5, true));
+        assert_eq!(names(&mut l), ["commit 5"]);
+        l.decided(4, decision(4, true));
+        assert!(names(&mut l).is_empty(), "passed over for good");
+        let mut l = Ledger::default();
         l.proposed(arrival(2, true));
         l.decided(2, decision(3, true));
         l.proposed(arrival(3, true));

@@ -3,6 +3,7 @@
 
 mod broken_specs;
 mod check_cli;
+mod combinations;
 mod connector_include;
 #[cfg(feature = "tools")]
 mod first_hour;
