@@ -34,7 +34,7 @@ use crate::log;
 use crate::telegraf::encode;
 use crate::watchdog::Lane;
 use clock::{Anchor, Deadlines, Wall};
-use emit::Emitter;
+use emit::{Emitter, Fired};
 use lineproto::{Metric, Record, RecordRef, parse_record_into};
 use pool::{Instance, Pool, describe, instance_note};
 use std::sync::Arc;
@@ -463,9 +463,7 @@ impl Processor {
         // The delay firings before `ts` first, so their outputs precede this record's
         // pass-through.
         let events = &mut self.emitter.events;
-        monitor.advance_to(ts, &mut |e: OutputEvent<'_>| {
-            events.push((e.ts, e.output, e.value.clone()))
-        });
+        monitor.advance_to(ts, &mut |e: OutputEvent<'_>| events.push(Fired::of(e)));
         let encodings = &self.versions.get(inst.version).encodings;
         self.emitter
             .emit(encodings, &inst.tags, &mut self.counters, out);
@@ -556,9 +554,8 @@ impl Processor {
                     continue;
                 };
                 let events = &mut self.emitter.events;
-                inst.monitor.advance_to(upto, &mut |e: OutputEvent<'_>| {
-                    events.push((e.ts, e.output, e.value.clone()))
-                });
+                inst.monitor
+                    .advance_to(upto, &mut |e: OutputEvent<'_>| events.push(Fired::of(e)));
                 let encodings = &self.versions.get(inst.version).encodings;
                 self.emitter
                     .emit(encodings, &inst.tags, &mut self.counters, out);
@@ -588,7 +585,7 @@ impl Processor {
         };
         let version = self.versions.get(inst.version);
         let events = &mut self.emitter.events;
-        let mut sink = |e: OutputEvent<'_>| events.push((e.ts, e.output, e.value.clone()));
+        let mut sink = |e: OutputEvent<'_>| events.push(Fired::of(e));
         for b in &version.bindings {
             if !b.matches(metric) {
                 continue;

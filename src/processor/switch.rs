@@ -3,6 +3,7 @@
 //! at each step ([`versions`](super::versions) owns the table and the rules).
 
 use super::clock::{Anchor, Wall};
+use super::emit::Fired;
 use super::versions::{Rule, Selector, Version};
 use super::{Accepted, Processor, pool};
 use std::sync::Arc;
@@ -47,9 +48,8 @@ impl Processor {
             if target != inst.version {
                 // The old version's firings before the start.
                 let events = &mut self.emitter.events;
-                inst.monitor.advance_to(at, &mut |e: OutputEvent<'_>| {
-                    events.push((e.ts, e.output, e.value.clone()))
-                });
+                inst.monitor
+                    .advance_to(at, &mut |e: OutputEvent<'_>| events.push(Fired::of(e)));
                 let old = self.versions.get(inst.version);
                 self.emitter
                     .emit(&old.encodings, &inst.tags, &mut self.counters, out);
