@@ -6,7 +6,7 @@
 //! from `TESSLA_SET`; UDP mode never echoes input records (Telegraf already routes the robot
 //! metric to its other outputs, and an echo sent back to Telegraf is one step from a feedback
 //! loop); a shared NATS store runs on stdin/stdout only; the number of threads that step records
-//! is decided here alone ([`threads`]); UDP addresses must resolve (a bad command line, exit 2)
+//! is decided here alone (`threads`); UDP addresses must resolve (a bad command line, exit 2)
 //! and the listening one must be free (exit 3).
 
 use super::args::{Bound, InstanceArgs, Late, OutputArgs, RunArgs, SPEC_ENV, TimeArgs};
@@ -31,7 +31,7 @@ pub struct RunConfig {
     pub channel: Option<ChannelConfig>,
     pub processor: processor::Options,
     pub transport: Transport,
-    /// How many threads step records (1: the calling thread only), final ([`threads`]).
+    /// How many threads step records (1: the calling thread only), final (`threads` below).
     pub threads: usize,
     pub state: Option<StateConfig>,
     /// `--step-timeout` (zero: no watchdog).

@@ -1,6 +1,6 @@
 //! The record's way through the processor: parse it (into the reused scratch metric), route it
 //! to its instance, step it and write its pass-through and outputs. Whether its time is accepted
-//! is [`time_policy`](super::time_policy)'s; the deadlines it arms are [`wall`](super::wall)'s.
+//! is `time_policy`'s; the deadlines it arms are `wall`'s.
 
 use super::Processor;
 use super::emit::Fired;
