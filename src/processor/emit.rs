@@ -59,7 +59,7 @@ impl Emitter {
             return;
         }
         let mut rest = &self.events[..];
-        while let Some(ts) = rest.first().map(|e| e.ts) {
+        while let Some(&Fired { ts, .. }) = rest.first() {
             // One timestamp's events, encoded in place.
             let n = rest.iter().take_while(|e| e.ts == ts).count();
             let (step, tail) = rest.split_at(n);

@@ -12,6 +12,7 @@ use lineproto::{Metric, RecordRef};
 impl Processor {
     /// Whether `ts` is beyond `--max-ahead` of the wall clock: then the record is refused
     /// (passed through, not evaluated), warned about and counted, and `true` is returned.
+    #[inline]
     pub(super) fn refuse_ahead(&mut self, rec: &RecordRef<'_>, metric: &Metric, ts: i64) -> bool {
         let Some(bound) = self.opts.max_ahead else {
             return false;

@@ -14,6 +14,7 @@ use tessla_engine::OutputEvent;
 impl Processor {
     /// Note instance `slot`'s last record at `ts` and queue its next `delay` firing by the wall
     /// clock. Without a `delay` in the program this is one comparison.
+    #[inline]
     pub(super) fn schedule(&mut self, slot: usize, ts: i64) {
         if !self.has_delays {
             return;

@@ -553,6 +553,7 @@ fn drop_value(
 /// [`encode_prepared`]: metrics told apart by index, values written straight into the line.
 /// A value is one field; a record or tuple is one field per member (the rare case, off the
 /// scalar path).
+#[inline]
 fn encode<E: StepEvent>(
     scratch: &mut Scratch,
     prepared: &Prepared,
