@@ -5,10 +5,9 @@
 //! The rules: without `--spec` the spec comes from `TESSLA_SPEC`, without `--set` the overrides
 //! from `TESSLA_SET`; UDP mode never echoes input records (Telegraf already routes the robot
 //! metric to its other outputs, and an echo sent back to Telegraf is one step from a feedback
-//! loop); a shared NATS store runs on stdin/stdout only; instances are spread over threads only
-//! on stdin without `--state` (the state file holds one processor's instances; UDP answers
-//! datagram by datagram); UDP addresses must resolve (a bad command line, exit 2) and the
-//! listening one must be free (exit 3).
+//! loop); a shared NATS store runs on stdin/stdout only; the number of threads that step records
+//! is decided here alone (`threads`); UDP addresses must resolve (a bad command line, exit 2)
+//! and the listening one must be free (exit 3).
 
 use super::args::{Bound, InstanceArgs, Late, OutputArgs, RunArgs, SPEC_ENV, TimeArgs};
 use super::error::CliError;
@@ -32,6 +31,8 @@ pub struct RunConfig {
     pub channel: Option<ChannelConfig>,
     pub processor: processor::Options,
     pub transport: Transport,
+    /// How many threads step records (1: the calling thread only), final (`threads` below).
+    pub threads: usize,
     pub state: Option<StateConfig>,
     /// `--step-timeout` (zero: no watchdog).
     pub step_timeout: Duration,
@@ -110,20 +111,16 @@ impl RunConfig {
                     max_datagram: args.transport.udp_max_datagram,
                 }
             }
-            None => Transport::Stdio {
-                threads: match (&state, args.instances.threads) {
-                    (Some(_), _) => 1,
-                    (None, Some(n)) => n,
-                    (None, None) => std::thread::available_parallelism().map_or(1, |n| n.get()),
-                },
-            },
+            None => Transport::Stdio,
         };
+        let threads = threads(args.instances.threads, &processor, state.is_some(), udp);
         Ok(RunConfig {
             spec,
             watch_spec: args.watch_spec,
             channel,
             processor,
             transport,
+            threads,
             state,
             step_timeout: args.step_timeout,
         })
@@ -159,6 +156,19 @@ fn from_env(args: &mut RunArgs) {
             &format!("--set from {SET_ENV}: {}", args.spec_options.set.join(" ")),
         );
     }
+}
+
+/// How many threads step records, the one place this is decided: instances are spread over
+/// threads only with `--instance-by`, on stdin, without `--state` (the state file holds one
+/// processor's instances, and a shared store restores each instance as it arrives on the
+/// calling thread; UDP answers datagram by datagram); then `--threads`, by default the machine's
+/// cores, and never more than `--max-instances` (each thread keeps its even part of it).
+fn threads(asked: Option<usize>, processor: &processor::Options, state: bool, udp: bool) -> usize {
+    if processor.instance_by.is_empty() || state || udp {
+        return 1;
+    }
+    let n = asked.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    n.clamp(1, processor.max_instances.max(1))
 }
 
 /// The processor's options from the time, instance and output groups.
@@ -224,4 +234,30 @@ fn check_udp(listen: &str, send: &str) -> Result<(), CliError> {
             flag = "--udp-listen"
         ))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The thread count is final when it leaves here: one without `--instance-by`, with
+    /// `--state` or on UDP; `--threads` otherwise, never above `--max-instances`, at least one.
+    #[test]
+    fn the_thread_count_is_decided_here() {
+        let by = processor::Options {
+            instance_by: vec!["robot".to_string()],
+            max_instances: 3,
+            ..processor::Options::default()
+        };
+        assert_eq!(threads(Some(2), &by, false, false), 2);
+        assert_eq!(threads(Some(8), &by, false, false), 3);
+        assert_eq!(threads(Some(0), &by, false, false), 1);
+        assert_eq!(threads(Some(2), &by, true, false), 1);
+        assert_eq!(threads(Some(2), &by, false, true), 1);
+        assert_eq!(
+            threads(Some(2), &processor::Options::default(), false, false),
+            1
+        );
+        assert!((1..=3).contains(&threads(None, &by, false, false)));
+    }
 }

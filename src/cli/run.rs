@@ -63,7 +63,7 @@ pub fn run(args: RunArgs) -> CliResult {
         shared,
     });
     let setup = Setup {
-        threads: config.transport.threads(),
+        threads: config.threads,
         updates: &mut updates,
         store,
         watch,

@@ -4,12 +4,43 @@
 
 use super::Counters;
 use crate::log;
-use crate::telegraf::encode::{self, Prepared};
-use tessla_engine::Value;
+use crate::telegraf::encode::{self, Prepared, StepEvent};
+use tessla_engine::{OutputEvent, Value};
+
+/// One output event of a step, as the monitor produced it: its TeSSLa time, the output's index
+/// and its value (kept in [`Emitter::events`] until the step is written).
+pub(super) struct Fired {
+    pub(super) ts: i64,
+    pub(super) output: usize,
+    pub(super) value: Value,
+}
+
+impl Fired {
+    /// The monitor's event, its value copied out of the monitor.
+    #[inline]
+    pub(super) fn of(e: OutputEvent<'_>) -> Fired {
+        Fired {
+            ts: e.ts,
+            output: e.output,
+            value: e.value.clone(),
+        }
+    }
+}
+
+impl StepEvent for Fired {
+    #[inline]
+    fn output(&self) -> usize {
+        self.output
+    }
+    #[inline]
+    fn value(&self) -> &Value {
+        &self.value
+    }
+}
 
 /// What writing a step's outputs needs, apart from the instance.
 pub(super) struct Emitter {
-    pub(super) events: Vec<(i64, usize, Value)>,
+    pub(super) events: Vec<Fired>,
     /// Scratch: the encoder's buffers (the same whatever version writes).
     pub(super) encode: encode::Scratch,
 }
@@ -28,9 +59,9 @@ impl Emitter {
             return;
         }
         let mut rest = &self.events[..];
-        while let Some(&(ts, _, _)) = rest.first() {
+        while let Some(&Fired { ts, .. }) = rest.first() {
             // One timestamp's events, encoded in place.
-            let n = rest.iter().take_while(|e| e.0 == ts).count();
+            let n = rest.iter().take_while(|e| e.ts == ts).count();
             let (step, tail) = rest.split_at(n);
             rest = tail;
             counters.outputs += step.len() as u64;

@@ -4,8 +4,12 @@
 //! "absent"), slots that stay valid while an instance lives, least-recently-used order for
 //! `--max-instances`, and wall-clock idleness for `--instance-idle`.
 //! What an instance holds is up to the caller (the step loop stores a monitor and its tags).
-//! Also: which worker thread a record's instance belongs to ([`shard_of`], `--threads`).
+//! Also: the instance key of a record, read in one place ([`key_values`] from its bytes,
+//! [`key_of`] from a parsed metric), and so which worker thread a record's instance belongs to
+//! ([`shard_of`], `--threads`) and which instance a shared store restores for it
+//! ([`record_key`]).
 
+use lineproto::Metric;
 use std::collections::{BTreeMap, HashMap};
 use std::time::{Duration, Instant};
 
@@ -173,45 +177,123 @@ impl<T> Table<T> {
     }
 }
 
-/// Which of `shards` workers owns the instance of the record `bytes` (its `instance_by` tag
-/// values hashed; the same key always gives the same shard, so an instance lives in one worker).
-/// Read from the raw series key when it holds no backslash or quote and no instance tag twice
-/// (the values are then exactly the parsed ones); otherwise from the parsed record. A record
-/// that does not parse goes to shard 0 (it only produces its error there).
+/// The values of the `instance_by` tags in a parsed metric: its instance key.
+pub fn key_of(instance_by: &[String], m: &Metric) -> Key {
+    instance_by
+        .iter()
+        .map(|t| m.tag(t).map(str::to_string))
+        .collect()
+}
+
+/// What [`key_values`] hands the values of a record's instance tags to.
+pub trait KeySink {
+    /// The value of the next instance tag, in `--instance-by` order (`None`: absent).
+    fn value(&mut self, v: Option<&[u8]>);
+    /// Forget the values given so far: they start again from the first tag.
+    fn restart(&mut self);
+}
+
+/// The instance key of the record `bytes`, the one routine every caller reads it with (the
+/// `--threads` shard, [`shard_of`]; a shared store's restore, [`record_key`]): the value of
+/// each `instance_by` tag in order, given to `sink`; `false` when the record does not parse
+/// (then nothing is given, or `restart` was the last call). Read from the raw series key when it
+/// holds no backslash or quote and no instance tag twice (the values are then exactly the
+/// parsed ones, as [`key_of`] reads them); otherwise from the parsed record.
 ///
 /// It runs for every record of a `--threads` run, on the thread that routes every record, so
-/// it finds the end of the series key with `memchr` (a vectorised search) and hashes with
-/// `FxHasher` (rustc-hash: a multiply per word, the high bits rotated down by `finish`) instead
-/// of the keyed SipHash of `DefaultHasher`.
-pub fn shard_of(bytes: &[u8], instance_by: &[String], shards: usize) -> usize {
-    use std::hash::{Hash, Hasher};
-    if shards <= 1 {
-        return 0;
-    }
-    let mut h = rustc_hash::FxHasher::default();
-    let mut from_raw = false;
+/// it finds the end of the series key with `memchr` (a vectorised search) and reads the tags in
+/// one loop, without allocating.
+#[inline]
+pub fn key_values<S: KeySink>(bytes: &[u8], instance_by: &[String], sink: &mut S) -> bool {
     if let Some(series) = plain_series(bytes) {
-        from_raw = true;
+        let mut from_raw = true;
         for t in instance_by {
             match raw_tag(series, t.as_bytes()) {
-                Some(v) => v.hash(&mut h),
+                Some(v) => sink.value(v),
                 None => {
                     from_raw = false;
                     break;
                 }
             }
         }
-    }
-    if !from_raw {
-        let Ok(Some(m)) = lineproto::parse_record(bytes) else {
-            return 0;
-        };
-        h = rustc_hash::FxHasher::default();
-        for t in instance_by {
-            m.tag(t).map(str::as_bytes).hash(&mut h);
+        if from_raw {
+            return true;
         }
+        sink.restart();
     }
-    (h.finish() % shards as u64) as usize
+    let Ok(Some(m)) = lineproto::parse_record(bytes) else {
+        return false;
+    };
+    for t in instance_by {
+        sink.value(m.tag(t).map(str::as_bytes));
+    }
+    true
+}
+
+/// Which of `shards` workers owns the instance of the record `bytes`: its instance key
+/// ([`key_values`]) hashed, so the same key always gives the same shard and an instance lives
+/// in one worker. A record that does not parse goes to shard 0 (it only produces its error
+/// there). Hashed with `FxHasher` (rustc-hash: a multiply per word, the high bits rotated down
+/// by `finish`) instead of the keyed SipHash of `DefaultHasher`.
+pub fn shard_of(bytes: &[u8], instance_by: &[String], shards: usize) -> usize {
+    use std::hash::Hasher;
+    if shards <= 1 {
+        return 0;
+    }
+    let mut h = ShardHash(rustc_hash::FxHasher::default());
+    if !key_values(bytes, instance_by, &mut h) {
+        return 0;
+    }
+    (h.0.finish() % shards as u64) as usize
+}
+
+/// The hash of an instance key, for [`shard_of`].
+struct ShardHash(rustc_hash::FxHasher);
+
+impl KeySink for ShardHash {
+    #[inline]
+    fn value(&mut self, v: Option<&[u8]>) {
+        std::hash::Hash::hash(&v, &mut self.0);
+    }
+    #[inline]
+    fn restart(&mut self) {
+        self.0 = rustc_hash::FxHasher::default();
+    }
+}
+
+/// The instance key of the record `bytes` ([`key_values`]) as the processor's instances hold
+/// it; `None` when the record does not parse (or a tag value is not UTF-8, which the parser
+/// refuses).
+pub fn record_key(bytes: &[u8], instance_by: &[String]) -> Option<Key> {
+    let mut sink = KeyCollect {
+        key: Vec::with_capacity(instance_by.len()),
+        utf8: true,
+    };
+    (key_values(bytes, instance_by, &mut sink) && sink.utf8).then_some(sink.key)
+}
+
+/// An instance key collected from [`key_values`], for [`record_key`].
+struct KeyCollect {
+    key: Key,
+    /// Every value given was UTF-8.
+    utf8: bool,
+}
+
+impl KeySink for KeyCollect {
+    fn value(&mut self, v: Option<&[u8]>) {
+        let v = v.and_then(|b| match std::str::from_utf8(b) {
+            Ok(s) => Some(s.to_string()),
+            Err(_) => {
+                self.utf8 = false;
+                None
+            }
+        });
+        self.key.push(v);
+    }
+    fn restart(&mut self) {
+        self.key.clear();
+        self.utf8 = true;
+    }
 }
 
 /// The series key of `bytes` (up to the first space, tab or line end) when it is plain: not
@@ -403,6 +485,84 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The key read from a record's bytes is the one the processor reads from the parsed
+    /// metric ([`key_of`]), and its shard is that key's hash, over many random records: escaped
+    /// and quoted tags, missing tags, a tag twice, any tag order, any `--instance-by`.
+    #[test]
+    fn the_key_from_the_bytes_is_the_parsed_metrics_key() {
+        use rand::seq::SliceRandom;
+        use rand::{Rng, SeedableRng};
+        use std::hash::{Hash, Hasher};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(36);
+        let pieces = [
+            "a", "r1", "tb3", "\\ ", "\\,", "\\=", "\"", "é", "x", "=", "\\\\", "#",
+        ];
+        let names = ["robot", "zone", "host", "a"];
+        let bys: [&[&str]; 5] = [
+            &["robot"],
+            &["zone", "robot"],
+            &["robot", "missing"],
+            &[],
+            &["a"],
+        ];
+        let value = |rng: &mut rand_chacha::ChaCha8Rng| -> String {
+            (0..rng.random_range(1..4))
+                .map(|_| pieces[rng.random_range(0..pieces.len())])
+                .collect()
+        };
+        let mut parsed = 0;
+        for _ in 0..20_000 {
+            let mut tags = Vec::new();
+            for n in names {
+                if rng.random_bool(0.6) {
+                    tags.push(format!("{n}={}", value(&mut rng)));
+                }
+            }
+            if rng.random_bool(0.1) {
+                tags.push(format!("robot={}", value(&mut rng)));
+            }
+            tags.shuffle(&mut rng);
+            let mut line = if rng.random_bool(0.1) {
+                format!("m{}", value(&mut rng))
+            } else {
+                "m".to_string()
+            };
+            for t in &tags {
+                line.push(',');
+                line.push_str(t);
+            }
+            line.push_str(match rng.random_range(0..3) {
+                0 => " x=1i 5\n",
+                1 => " s=\"a b,c=d\"",
+                _ => "\tx=2",
+            });
+            let by: Vec<String> = bys[rng.random_range(0..bys.len())]
+                .iter()
+                .map(|s| s.to_string())
+                .collect();
+            let bytes = line.as_bytes();
+            let Ok(Some(m)) = lineproto::parse_record(bytes) else {
+                continue;
+            };
+            parsed += 1;
+            let key = key_of(&by, &m);
+            assert_eq!(
+                record_key(bytes, &by),
+                Some(key.clone()),
+                "{line:?} by {by:?}"
+            );
+            let mut h = rustc_hash::FxHasher::default();
+            for v in &key {
+                v.as_deref().map(str::as_bytes).hash(&mut h);
+            }
+            for n in [2, 3, 5] {
+                let want = (h.finish() % n as u64) as usize;
+                assert_eq!(shard_of(bytes, &by, n), want, "{line:?} by {by:?}");
+            }
+        }
+        assert!(parsed > 10_000, "{parsed} records parsed");
     }
 
     /// A fleet's robots spread evenly: 10,000 robot names over 2, 3 and 4 shards, each shard

@@ -6,7 +6,7 @@
 //! watchdog learns each instance's name here.
 
 use super::clock::Anchor;
-use super::instances::{Key, Table};
+use super::instances::{Key, Table, key_of};
 use super::versions::Versions;
 use super::{Counters, Options};
 use crate::log;
@@ -308,14 +308,6 @@ pub(super) fn describe(instance_by: &[String], key: &Key) -> String {
         .map(|(k, v)| format!("{k}={}", v.as_deref().unwrap_or("(absent)")))
         .collect::<Vec<_>>()
         .join(",")
-}
-
-/// The values of the `instance_by` tags in `m`.
-pub(super) fn key_of(instance_by: &[String], m: &Metric) -> Key {
-    instance_by
-        .iter()
-        .map(|t| m.tag(t).map(str::to_string))
-        .collect()
 }
 
 /// " (instance robot=a)" for the instance of `m`, or nothing without `--instance-by`. Built

@@ -2,7 +2,7 @@
 //! accepting a rollout's version, and switching an instance to the version its rules give it
 //! at each step ([`versions`](super::versions) owns the table and the rules).
 
-use super::clock::{Anchor, Wall};
+use super::emit::Fired;
 use super::versions::{Rule, Selector, Version};
 use super::{Accepted, Processor, pool};
 use std::sync::Arc;
@@ -47,9 +47,8 @@ impl Processor {
             if target != inst.version {
                 // The old version's firings before the start.
                 let events = &mut self.emitter.events;
-                inst.monitor.advance_to(at, &mut |e: OutputEvent<'_>| {
-                    events.push((e.ts, e.output, e.value.clone()))
-                });
+                inst.monitor
+                    .advance_to(at, &mut |e: OutputEvent<'_>| events.push(Fired::of(e)));
                 let old = self.versions.get(inst.version);
                 self.emitter
                     .emit(&old.encodings, &inst.tags, &mut self.counters, out);
@@ -98,23 +97,6 @@ impl Processor {
         self.capture = self.versions.list_to_capture();
         self.requeue_all();
         Ok(())
-    }
-
-    /// Queue every instance's next `delay` firing afresh (after its program changed).
-    pub(super) fn requeue_all(&mut self) {
-        self.has_delays = self.versions.has_delays() && self.opts.allowed_lateness.is_some();
-        self.deadlines.clear();
-        let (at, lateness) = (Wall::now().at, self.lateness());
-        for (slot, inst) in self.pool.table.slots_mut() {
-            inst.queued = None;
-            if inst.anchor.is_none() {
-                let ts = inst.monitor.clock();
-                inst.anchor = Some(Anchor { ts, at });
-            }
-            if self.has_delays {
-                Self::queue(&mut self.deadlines, inst, slot, lateness);
-            }
-        }
     }
 
     /// Check a new version against this processor: its input annotations, that the selector

@@ -89,7 +89,9 @@ pub struct SharedStore {
 
 /// What the loop runs with besides its processor, source and sink.
 pub struct Setup<'a> {
-    /// Threads to spread `--instance-by` instances over (1: the calling thread only).
+    /// Threads to spread `--instance-by` instances over (1: the calling thread only), as
+    /// `cli/config.rs` decided (one with a store: it holds one processor's instances, and a
+    /// shared one restores each as it arrives on the calling thread).
     pub threads: usize,
     /// New spec versions: SIGHUP, a watched spec file, a fleet's spec channel.
     pub updates: &'a mut Updates,
@@ -140,10 +142,6 @@ pub async fn run<S: Source, K: Sink>(
     if let Some(s) = store.as_mut() {
         s.backend.load(proc);
     }
-    // A store holds one processor's instances, and a shared one restores each as it arrives on
-    // this thread: with a store, records are stepped here alone. (`run` asks for one thread
-    // then already; this keeps a caller that does not from losing restores.)
-    let threads = if store.is_some() { 1 } else { threads };
     let interval = store.as_ref().and_then(|s| s.interval);
     let mut shards = Shards::new(proc, threads, &watch).map_err(std::io::Error::other)?;
     let mut l = Loop {

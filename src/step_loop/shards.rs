@@ -84,19 +84,16 @@ pub(super) struct Shards {
 }
 
 impl Shards {
-    /// `--max-instances` stays the total: each shard keeps its even part of it (so never more
-    /// threads than that total).
+    /// `threads` as `cli/config.rs` decided it (at least 1). `--max-instances` stays the total:
+    /// each shard keeps its even part of it.
     pub(super) fn new(
         proc: &mut Processor,
         threads: usize,
         watch: &Watch,
     ) -> Result<Shards, String> {
         let total = proc.max_instances().max(1);
-        let threads = if proc.instance_by().is_empty() {
-            1
-        } else {
-            threads.clamp(1, total)
-        };
+        // Not a rule, a guard: no shard without a thread, no division by zero.
+        let threads = threads.max(1);
         let share = |shard: usize| total / threads + usize::from(shard < total % threads);
         proc.keep_instances(share(0));
         let (done_tx, done) = mpsc::channel::<Done>();

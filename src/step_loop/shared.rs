@@ -10,7 +10,7 @@
 use crate::log::{self, Level};
 use crate::processor::Processor;
 use crate::processor::clock::Wall;
-use crate::processor::instances::Key;
+use crate::processor::instances::{self, Key};
 use crate::state::Backend;
 use crate::state::lease::Lease;
 use crate::watchdog::Watch;
@@ -66,47 +66,16 @@ impl Shared {
         self.active && self.lease.as_ref().is_none_or(|l| l.holding())
     }
 
-    /// The instance key and timestamp of a record, if it parses.
-    fn key_of(&mut self, rec: RecordRef<'_>) -> Option<(Key, Option<i64>)> {
+    /// The instance key and timestamp of a record, if it parses (a buffered record before its
+    /// replay: its timestamp decides whether the restored state covers it).
+    fn key_and_time(&mut self, rec: RecordRef<'_>) -> Option<(Key, Option<i64>)> {
         if rec.oversized || !matches!(parse_record_into(rec.bytes, &mut self.scratch), Ok(true)) {
             return None;
         }
-        let key = self
-            .instance_by
-            .iter()
-            .map(|t| self.scratch.tag(t).map(str::to_string))
-            .collect();
-        Some((key, self.scratch.timestamp))
-    }
-
-    /// The instance key of a record from its measurement and tags alone (the step loop parses
-    /// the whole record afterwards; a lidar record's fields cost most of a parse). Falls back
-    /// to [`Loop::key_of`] when the short form does not parse.
-    fn key_only(&mut self, rec: RecordRef<'_>) -> Option<Key> {
-        let bytes = rec.bytes;
-        let start = bytes
-            .iter()
-            .position(|b| !b.is_ascii_whitespace())
-            .unwrap_or(bytes.len());
-        let mut i = start;
-        while i < bytes.len() && bytes[i] != b' ' && bytes[i] != b'\n' {
-            i += if bytes[i] == b'\\' { 2 } else { 1 };
-        }
-        let series = bytes.get(start..i.min(bytes.len())).unwrap_or_default();
-        if !rec.oversized && !series.is_empty() && series[0] != b'#' {
-            let mut head = Vec::with_capacity(series.len() + 5);
-            head.extend_from_slice(series);
-            head.extend_from_slice(b" _=0i");
-            if matches!(parse_record_into(&head, &mut self.scratch), Ok(true)) {
-                return Some(
-                    self.instance_by
-                        .iter()
-                        .map(|t| self.scratch.tag(t).map(str::to_string))
-                        .collect(),
-                );
-            }
-        }
-        self.key_of(rec).map(|(k, _)| k)
+        Some((
+            instances::key_of(&self.instance_by, &self.scratch),
+            self.scratch.timestamp,
+        ))
     }
 
     /// Step `rec`, or keep it for replay while standing by. A record's instance is restored
@@ -122,7 +91,11 @@ impl Shared {
             self.keep(rec.to_record());
             return;
         }
-        if let Some(key) = self.key_only(rec) {
+        // The key from the record's series key alone, by the routine that picks a `--threads`
+        // shard: the processor parses the record once, right after.
+        if !rec.oversized
+            && let Some(key) = instances::record_key(rec.bytes, &self.instance_by)
+        {
             backend.arriving(&key, proc);
         }
         proc.record_ref(rec, out);
@@ -199,7 +172,7 @@ impl Shared {
         self.buffered_bytes = 0;
         let mut keyed = Vec::with_capacity(buffer.len());
         for (at, rec) in buffer {
-            let k = self.key_of(rec.view());
+            let k = self.key_and_time(rec.view());
             if let Some((key, _)) = &k {
                 backend.arriving(key, proc);
             }

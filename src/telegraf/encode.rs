@@ -195,7 +195,7 @@ fn prepare(enc: &Encoding, default_measurement: &str) -> Names {
 }
 
 /// One output event of a step: the output's index and its value (`(output, value)`, or the
-/// processor's `(ts, output, value)`).
+/// processor's `Fired`, which also holds its time).
 pub trait StepEvent {
     fn output(&self) -> usize;
     fn value(&self) -> &Value;
@@ -209,17 +209,6 @@ impl StepEvent for (usize, Value) {
     #[inline]
     fn value(&self) -> &Value {
         &self.1
-    }
-}
-
-impl StepEvent for (i64, usize, Value) {
-    #[inline]
-    fn output(&self) -> usize {
-        self.1
-    }
-    #[inline]
-    fn value(&self) -> &Value {
-        &self.2
     }
 }
 
@@ -564,6 +553,7 @@ fn drop_value(
 /// [`encode_prepared`]: metrics told apart by index, values written straight into the line.
 /// A value is one field; a record or tuple is one field per member (the rare case, off the
 /// scalar path).
+#[inline]
 fn encode<E: StepEvent>(
     scratch: &mut Scratch,
     prepared: &Prepared,

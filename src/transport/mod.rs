@@ -15,8 +15,8 @@ use crate::step_loop::{Ending, Setup};
 /// Where records come from and outputs go.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Transport {
-    /// stdin/stdout, instances spread over `threads` threads.
-    Stdio { threads: usize },
+    /// stdin/stdout (instances spread over the run's threads).
+    Stdio,
     /// The connector's UDP wiring: datagrams in on `listen`, out to `send`, at most
     /// `max_datagram` bytes each.
     Udp {
@@ -26,16 +26,6 @@ pub enum Transport {
     },
 }
 
-impl Transport {
-    /// How many threads may step records (UDP answers datagram by datagram: one).
-    pub fn threads(&self) -> usize {
-        match self {
-            Transport::Stdio { threads } => *threads,
-            Transport::Udp { .. } => 1,
-        }
-    }
-}
-
 /// Run `proc` on `transport` until its input ends, a signal, or a closed output.
 pub async fn run(
     transport: &Transport,
@@ -43,7 +33,7 @@ pub async fn run(
     setup: Setup<'_>,
 ) -> std::io::Result<Ending> {
     match transport {
-        Transport::Stdio { .. } => stdio::run(proc, setup).await,
+        Transport::Stdio => stdio::run(proc, setup).await,
         Transport::Udp {
             listen,
             send,
