@@ -8,7 +8,8 @@ and `lease=p1`, `--spec-channel`, `--version-tag spec_version`), each fed record
 robots at about 200 per second with the current time. Then it publishes `--reps` versions in
 turn (two specs alternating, each from the time of its publish) and times, for each, the
 moment the command starts until both processes have written their `tessla_spec ...
-outcome=accepted` status line. At the end it checks every record got exactly one output line,
+outcome=committed` status line (the proposal, both processes' votes, the decision, and both
+acting on it). At the end it checks every record got exactly one output line,
 and that each robot's version tags change only at publishes (never back and forth).
 
 Usage: python3 bench/spec_rollout.py [--bin target/release/tessla-telegraf] [--reps 10]
@@ -102,10 +103,10 @@ def main():
             while None in done:
                 for p in range(2):
                     for t, l in lines[p][seen[p]:]:
-                        if l.startswith("tessla_spec,") and "outcome=accepted" in l and f"revision={revision}i" in l:
+                        if l.startswith("tessla_spec,") and "outcome=committed" in l and f"revision={revision}i" in l:
                             done[p] = t
                 if time.monotonic() - t0 > 30:
-                    sys.exit(f"rollout {revision} not accepted by both within 30 s")
+                    sys.exit(f"rollout {revision} not committed in both within 30 s")
                 time.sleep(0.002)
             waits.append(max(done) - t0)
             after_cmd.append(max(done) - t1)

@@ -86,6 +86,16 @@ fn format(level: Level, msg: &str) -> String {
 
 /// A warning of kind `kind`, rate-limited per kind. Returns whether it was printed.
 pub fn warn_limited(kind: &'static str, msg: impl FnOnce() -> String) -> bool {
+    limited(Level::Warn, kind, msg)
+}
+
+/// An error of kind `kind`, rate-limited per kind as [`warn_limited`] is.
+pub fn error_limited(kind: &'static str, msg: impl FnOnce() -> String) -> bool {
+    limited(Level::Error, kind, msg)
+}
+
+/// A message at `level` of kind `kind`: the first ten, then every thousandth with the count.
+fn limited(level: Level, kind: &'static str, msg: impl FnOnce() -> String) -> bool {
     let n = match COUNTS.lock() {
         Ok(mut c) => {
             let n = c.get_or_insert_with(HashMap::new).entry(kind).or_insert(0);
@@ -95,19 +105,16 @@ pub fn warn_limited(kind: &'static str, msg: impl FnOnce() -> String) -> bool {
         Err(_) => 1,
     };
     if n <= 10 {
-        log(Level::Warn, &msg());
+        log(level, &msg());
         if n == 10 {
             log(
-                Level::Warn,
-                &format!("{kind}: further warnings of this kind are rate-limited"),
+                level,
+                &format!("{kind}: further messages of this kind are rate-limited"),
             );
         }
         true
     } else if n % 1000 == 0 {
-        log(
-            Level::Warn,
-            &format!("{kind}: {n} so far; latest: {}", msg()),
-        );
+        log(level, &format!("{kind}: {n} so far; latest: {}", msg()));
         true
     } else {
         false

@@ -21,6 +21,9 @@ pub struct Counters {
     pub duplicates: u64,
     /// Instances switched to another spec version ([`versions`](super::versions)).
     pub switched: u64,
+    /// Times a robot's record did not fit the version a rollout gave it, so it stayed on the
+    /// last version it can run ([`Versions::target_fitting`](super::versions::Versions::target_fitting)).
+    pub unfit: u64,
 }
 
 impl Counters {
@@ -39,6 +42,7 @@ impl Counters {
             evicted,
             duplicates,
             switched,
+            unfit,
         } = other;
         self.records += records;
         self.events += events;
@@ -51,6 +55,7 @@ impl Counters {
         self.evicted += evicted;
         self.duplicates += duplicates;
         self.switched += switched;
+        self.unfit += unfit;
     }
 }
 
@@ -77,6 +82,12 @@ impl Processor {
         }
         if c.switched > 0 {
             s.push_str(&format!(", {} switched spec version", c.switched));
+        }
+        if c.unfit > 0 {
+            s.push_str(&format!(
+                ", {} kept a version a rollout's could not read",
+                c.unfit
+            ));
         }
         s
     }

@@ -26,7 +26,29 @@ pub struct Recent {
     newest: Option<i64>,
 }
 
+/// How many of an instance's newest records are saved with it (`--state`): a message the broker
+/// redelivers after a restart is still recognised as a repeat of one of them.
+pub const SAVED: usize = 8;
+
 impl Recent {
+    /// Its newest [`SAVED`] records (time, digest), oldest first: what `--state` keeps.
+    pub fn saved(&self) -> Vec<(i64, u64)> {
+        let (old, new) = self.seen.split_at(self.next.min(self.seen.len()));
+        let all: Vec<(i64, u64)> = new.iter().chain(old).copied().collect();
+        all[all.len().saturating_sub(SAVED)..].to_vec()
+    }
+
+    /// The window of an instance restored with `saved` ([`Recent::saved`]).
+    pub fn restored(saved: &[(i64, u64)]) -> Recent {
+        let seen: Vec<(i64, u64)> = saved.iter().rev().take(WINDOW).rev().copied().collect();
+        Recent {
+            newest: seen.iter().map(|&(t, _)| t).max(),
+            // The ring is overwritten from the start once it is full.
+            next: 0,
+            seen,
+        }
+    }
+
     /// Whether `m` (timestamp `ts`) repeats a recent record; if not, it is remembered.
     pub fn is_duplicate(&mut self, ts: i64, m: &Metric, keys: &mut ListKeys) -> bool {
         let d = digest(m, keys);

@@ -38,6 +38,7 @@ mod wall;
 pub mod wiring;
 
 pub use counters::Counters;
+pub use state_hooks::Continuity;
 
 use self::instances::Key;
 use self::versions::{Version, Versions};

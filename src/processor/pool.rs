@@ -29,6 +29,9 @@ pub(super) struct Instance {
     /// largest time `Processor::settle` was asked for (a record's stamp, not the time a late
     /// record is stepped at). The rules at the horizon give its version; saved with it.
     pub(super) horizon: i64,
+    /// Rules (by index) whose version this instance's records do not fit: it stays on the last
+    /// version it can run ([`Versions::target_fitting`]). Saved with it.
+    pub(super) unfit: Vec<usize>,
     pub(super) tags: Vec<(String, String)>,
     pub(super) recent: super::dedup::Recent,
     /// Never reused: tells this instance's queued deadlines from a former occupant's of its slot.
@@ -139,14 +142,26 @@ impl Pool {
             return i;
         }
         counters.instances += 1;
+        let mut unfit = Vec::new();
         let v = if versions.has_rules() {
-            versions.target(&key, ts)
+            let by = &self.by;
+            // A new instance would otherwise start in the base version.
+            versions.target_fitting(&key, ts, (m, 0), &mut unfit, |rule, why| {
+                counters.unfit += 1;
+                warn_unfit(by, &key, versions, rule, &why);
+            })
         } else {
             0
         };
         let version = versions.get(v);
         let monitor = Monitor::starting_at(Arc::clone(&version.program), ts);
-        self.insert(key, monitor, (v, &version.id), now, lane)
+        let slot = self.insert(key, monitor, (v, &version.id), now, lane);
+        if !unfit.is_empty()
+            && let Some(inst) = self.table.get_mut(slot)
+        {
+            inst.unfit = unfit;
+        }
+        slot
     }
 
     /// Add instance `key` (absent from the table) running `monitor`; returns its slot.
@@ -185,6 +200,7 @@ impl Pool {
                 version,
                 // Never settled: the first step with rules looks.
                 settled: (usize::MAX, i64::MIN),
+                unfit: Vec::new(),
                 horizon,
                 tags,
                 recent: Default::default(),
@@ -287,6 +303,19 @@ impl Pool {
         }
         true
     }
+}
+
+/// The error of a robot whose record does not fit the version a rollout gives it (rate-limited):
+/// it stays on the last version it can run.
+pub(super) fn warn_unfit(by: &[String], key: &Key, versions: &Versions, rule: usize, why: &str) {
+    log::error_limited("unfit version", || {
+        let (id, from) = versions.rule_id(rule).unwrap_or_default();
+        format!(
+            "spec version {id} (in force from {}) cannot read the records of monitor instance {}: {why}; it stays on the last version it can run (counted as `unfit` in the summary)",
+            crate::spec_feed::status::show_time(from),
+            describe(by, key)
+        )
+    });
 }
 
 /// Set tag `name` to `value` in `tags` (sorted by name, as [`Pool::insert`] makes them).

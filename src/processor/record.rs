@@ -117,7 +117,7 @@ impl Processor {
             l.instance(slot);
         }
         if self.versions.has_rules() {
-            self.settle(slot, ts, out);
+            self.settle(slot, ts, Some(metric), out);
         }
         let Some(inst) = self.pool.table.get_mut(slot) else {
             return;

@@ -16,7 +16,17 @@ impl Processor {
     /// (not the monitor's clock, which a late record moves past its stamp) is where it stands:
     /// the record's stamp decides its version, and a restart that restores the horizon decides
     /// alike.
-    pub(super) fn settle(&mut self, slot: usize, upto: i64, out: &mut Vec<u8>) {
+    ///
+    /// `metric`: the record that asks (none for a `delay` firing by the wall clock): a version
+    /// it does not fit is passed over for this instance from now on, which stays on the last
+    /// version it can run ([`super::versions::Versions::target_fitting`]).
+    pub(super) fn settle(
+        &mut self,
+        slot: usize,
+        upto: i64,
+        metric: Option<&lineproto::Metric>,
+        out: &mut Vec<u8>,
+    ) {
         // Most steps: the rules have not changed since the instance last settled and no start
         // of one that picks it comes before `upto` (no key lookup, no copy per record).
         let rules = self.versions.rules.len();
@@ -37,13 +47,29 @@ impl Processor {
         let mut cursor = inst.horizon;
         // First where the instance stands (a rule may have started at or before its clock),
         // then each start after it up to `upto`; `cursor` only grows.
-        let mut next = if self.versions.target(&key, cursor) != inst.version {
+        let mut next = if self.versions.target_skipping(&key, cursor, &inst.unfit).0 != inst.version
+        {
             Some(cursor)
         } else {
             self.versions.next_start(&key, cursor, upto)
         };
         while let Some(at) = next {
-            let target = self.versions.target(&key, at);
+            let mut target = self.versions.target_skipping(&key, at, &inst.unfit).0;
+            if target != inst.version
+                && let Some(m) = metric
+            {
+                let (by, counters) = (&self.opts.instance_by, &mut self.counters);
+                target = self.versions.target_fitting(
+                    &key,
+                    at,
+                    (m, inst.version),
+                    &mut inst.unfit,
+                    |rule, why| {
+                        counters.unfit += 1;
+                        pool::warn_unfit(by, &key, &self.versions, rule, &why);
+                    },
+                );
+            }
             if target != inst.version {
                 // The old version's firings before the start.
                 let events = &mut self.emitter.events;

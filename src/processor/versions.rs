@@ -100,6 +100,18 @@ pub fn check_against(v: &Version, samples: &[lineproto::Metric]) -> Result<(), S
     Ok(())
 }
 
+/// Whether version `v` can read `m`: `Err` names an input whose field `m` carries but does not
+/// convert to the input's type (a metric that feeds none of its inputs fits: nothing in it
+/// contradicts the version).
+pub fn fits(v: &Version, m: &lineproto::Metric) -> Result<(), String> {
+    for b in v.bindings.iter().filter(|b| b.matches(m)) {
+        if let Some(Err(e)) = b.extract(m) {
+            return Err(format!("input `{}`: {}", b.name, e.reason));
+        }
+    }
+    Ok(())
+}
+
 /// From event time `from` on, the instances `selector` picks run version `version` (an index
 /// into the versions of [`Versions`]).
 #[derive(Clone)]
@@ -193,11 +205,59 @@ impl Versions {
 
     /// The version instance `key` runs at event time `t`.
     pub fn target(&self, key: &Key, t: i64) -> usize {
+        self.target_skipping(key, t, &[]).0
+    }
+
+    /// [`Versions::target`] passing over the rules (by index) in `unfit`, whose versions the
+    /// instance's records do not fit: the version and the rule that gives it (`None`: the
+    /// base).
+    pub fn target_skipping(&self, key: &Key, t: i64, unfit: &[usize]) -> (usize, Option<usize>) {
         self.rules
             .iter()
+            .enumerate()
             .rev()
-            .find(|r| r.from <= t && r.selector.matches(&self.by, key))
-            .map_or(0, |r| r.version)
+            .find(|(i, r)| r.from <= t && !unfit.contains(i) && r.selector.matches(&self.by, key))
+            .map_or((0, None), |(i, r)| (r.version, Some(i)))
+    }
+
+    /// The version instance `key` (running `current`) runs at `t`, passing over the rules in
+    /// `unfit` and those whose version record `m` does not fit ([`fits`]) while `current`
+    /// reads it (a record no version reads, a bad value, says nothing about the new one): each
+    /// of those is added to `unfit` and handed to `refused` with why. Robots stay on the last
+    /// version they can run.
+    pub fn target_fitting(
+        &self,
+        key: &Key,
+        t: i64,
+        (m, current): (&lineproto::Metric, usize),
+        unfit: &mut Vec<usize>,
+        mut refused: impl FnMut(usize, String),
+    ) -> usize {
+        loop {
+            let (v, rule) = self.target_skipping(key, t, unfit);
+            let Some(rule) = rule else { return v };
+            if v == current {
+                return v;
+            }
+            match fits(self.get(v), m) {
+                Err(why) if fits(self.get(current), m).is_ok() => {
+                    unfit.push(rule);
+                    refused(rule, why);
+                }
+                _ => return v,
+            }
+        }
+    }
+
+    /// A rule's identity across processes and restarts: its version's id and its start.
+    pub fn rule_id(&self, rule: usize) -> Option<(String, i64)> {
+        let r = self.rules.get(rule)?;
+        Some((self.get(r.version).id.clone(), r.from))
+    }
+
+    /// The index of the rule with identity `id` ([`Versions::rule_id`]), if held.
+    pub fn rule_of(&self, id: &(String, i64)) -> Option<usize> {
+        (0..self.rules.len()).find(|&i| self.rule_id(i).as_ref() == Some(id))
     }
 
     /// The first time in `(after, upto]` at which a rule picking `key` starts, if any: where

@@ -85,7 +85,7 @@ impl Processor {
                 let upto = anchor.time_at(now, lateness).saturating_add(1);
                 if self.versions.has_rules() {
                     // Firings from a version's start on are the new version's.
-                    self.settle(slot, upto.saturating_sub(1), out);
+                    self.settle(slot, upto.saturating_sub(1), None, out);
                 }
                 let Some(inst) = self.pool.table.get_mut(slot) else {
                     continue;

@@ -361,7 +361,7 @@ impl Updates {
     /// against every metric any of them has seen): this process's vote. Nothing changes.
     fn vote(&mut self, a: &Arrival, procs: &[&mut Processor]) -> Outcome {
         let r = &a.rollout;
-        let checked = self.check(a, procs);
+        let checked = self.check(a, procs, true);
         let (accepted, reason) = match &checked {
             Ok(_) => (true, String::new()),
             Err(e) => (false, e.clone()),
@@ -398,16 +398,19 @@ impl Updates {
     }
 
     /// Every check a rollout passes before it may run here: its record and bundle, compiling
-    /// with this process's options, and the processors' checks (selector, annotations, the
-    /// bindings against every thread's samples at once).
+    /// with this process's options, and the processors' checks (selector, annotations; with
+    /// `data`, the bindings against every thread's samples at once: the vote. Once committed,
+    /// whether the data fits is decided robot by robot, from each robot's own records, the same
+    /// in every process: `Versions::target_fitting`).
     fn check(
         &mut self,
         a: &Arrival,
         procs: &[&mut Processor],
+        data: bool,
     ) -> Result<Arc<tessla_engine::Program>, String> {
         let program = self.program_of(a, procs)?;
         let id = Self::version_id(&a.rollout, procs);
-        let samples = samples_of(procs);
+        let samples = if data { samples_of(procs) } else { Vec::new() };
         if let Some(p) = procs.first() {
             p.check_version(&id, &program, &a.rollout.selector, &samples)?;
         }
@@ -415,8 +418,10 @@ impl Updates {
     }
 
     /// The fleet committed a rollout: put it in force in every processor from its start. A
-    /// version this process cannot run (it does not compile with its options, or its inputs do
-    /// not fit what arrives here) is a loud error: its robots stay on the versions they run.
+    /// version this process cannot run (it does not compile with its options, its annotations
+    /// or selector do not fit here) is a loud error: its robots stay on the versions they run.
+    /// A robot whose records do not fit it stays on the last version it can run (decided per
+    /// robot, at its records).
     fn commit(&mut self, a: &Arrival, procs: &mut [&mut Processor]) -> Outcome {
         let r = &a.rollout;
         let cannot = |reason: String| {
@@ -439,7 +444,7 @@ impl Updates {
                 ..Outcome::default()
             }
         };
-        let program = match self.check(a, procs) {
+        let program = match self.check(a, procs, false) {
             Ok(p) => p,
             Err(e) => return cannot(e),
         };
@@ -796,17 +801,66 @@ mod tests {
         );
     }
 
-    /// A committed version this process cannot run (here: its inputs do not fit the metrics
-    /// it receives) is reported as unrunnable, loudly, and its robots keep their version: no
-    /// output is silently lost.
+    /// A committed version a robot's records do not fit: that robot stays on the last version
+    /// it can run (loud and counted: no output silently lost), decided from its own records,
+    /// while a robot whose records fit switches; the same in every process and thread.
     #[test]
-    fn a_committed_version_that_cannot_run_here_is_unrunnable_and_changes_nothing() {
+    fn a_robot_whose_records_do_not_fit_a_committed_version_stays_on_its_own() {
         let stand = Stand::default();
         let mut p = processor();
         feed(&mut p, "m,robot=r1 y=1.5 100\n");
         let mut u = updates(
             &stand,
             vec![proposal(1, BOOL_SPEC, 1000), decision(1, BOOL_SPEC, true)],
+        );
+        let mut out = Vec::new();
+        u.tick(&mut [&mut p], &mut out);
+        assert_eq!(words(&stand), ["1 committed"]);
+        let base = bundle(BASE_SPEC).id();
+        let new = bundle(BOOL_SPEC).id();
+        let after = feed(&mut p, "m,robot=r1 y=2.5 2000\nm,robot=r2 y=true 2000\n");
+        assert!(
+            after.contains(&format!("tessla,robot=r1,v={base} n=2i 2000")),
+            "{after}"
+        );
+        assert!(
+            after.contains(&format!("tessla,robot=r2,v={new} n=1i,b=true 2000")),
+            "{after}"
+        );
+        assert_eq!(p.counters.unfit, 1);
+        assert!(p.summary().contains("1 kept a version"), "{}", p.summary());
+        // Sticky: r1's next records stay on its version without another error.
+        let again = feed(&mut p, "m,robot=r1 y=3.5 3000\n");
+        assert!(again.contains(&format!("v={base} n=3i")), "{again}");
+        assert_eq!(p.counters.unfit, 1);
+    }
+
+    /// A committed version this process cannot run (here: its selector names a tag that does
+    /// not choose instances in this process) is reported as unrunnable, loudly, and changes
+    /// nothing.
+    #[test]
+    fn a_committed_version_that_cannot_run_here_is_unrunnable_and_changes_nothing() {
+        let stand = Stand::default();
+        let mut p = processor();
+        feed(&mut p, "m,robot=r1 y=1.5 100\n");
+        let Event::Proposal(mut a) = proposal(1, BASE_SPEC.replace("n", "k").as_str(), 1000) else {
+            unreachable!()
+        };
+        a.rollout.selector = Selector::parse("site=lab").unwrap();
+        let Event::Decision { decision, .. } =
+            decision(1, BASE_SPEC.replace("n", "k").as_str(), true)
+        else {
+            unreachable!()
+        };
+        let mut u = updates(
+            &stand,
+            vec![
+                Event::Proposal(a),
+                Event::Decision {
+                    revision: 1,
+                    decision,
+                },
+            ],
         );
         let mut out = Vec::new();
         u.tick(&mut [&mut p], &mut out);

@@ -6,8 +6,8 @@
 //! be saved ([`warn_unsaved`]).
 
 use crate::log::{self, Level};
-use crate::processor::carry;
 use crate::processor::instances::Key;
+use crate::processor::{Continuity, carry};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use tessla_engine::runtime::snapshot::{self, Snapshot};
@@ -111,7 +111,14 @@ struct EntryOut<'a> {
     written: u64,
     program: &'a SavedProgram,
     key: &'a Key,
-    horizon: i64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    spec_version: Option<&'a str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    horizon: Option<i64>,
+    #[serde(skip_serializing_if = "<[_]>::is_empty")]
+    recent: &'a [(i64, u64)],
+    #[serde(skip_serializing_if = "<[_]>::is_empty")]
+    unfit: &'a [(String, i64)],
     monitor: Snapshot,
 }
 
@@ -120,9 +127,15 @@ struct EntryOut<'a> {
 struct EntryIn {
     program: SavedProgram,
     key: Key,
-    /// Absent in entries written before it was saved.
+    /// Absent in entries written before they were saved.
+    #[serde(default)]
+    spec_version: Option<String>,
     #[serde(default)]
     horizon: Option<i64>,
+    #[serde(default)]
+    recent: Vec<(i64, u64)>,
+    #[serde(default)]
+    unfit: Vec<(String, i64)>,
     monitor: Snapshot,
 }
 
@@ -131,7 +144,7 @@ struct EntryIn {
 /// monitor.
 pub struct Saved {
     pub program: SavedProgram,
-    pub horizon: Option<i64>,
+    pub continuity: Continuity,
     pub monitor: Snapshot,
 }
 
@@ -143,7 +156,7 @@ pub fn encode_entry(
     fingerprint: &str,
     key: &Key,
     monitor: &Monitor,
-    horizon: i64,
+    c: &Continuity,
 ) -> (Vec<u8>, usize) {
     let i = programs.index(monitor.program());
     let Some(known) = programs.list.get(i) else {
@@ -158,7 +171,10 @@ pub fn encode_entry(
         written: unix_now(),
         program: &known.saved,
         key,
-        horizon,
+        spec_version: c.version.as_deref(),
+        horizon: c.horizon,
+        recent: &c.recent,
+        unfit: &c.unfit,
         monitor: snap,
     };
     // Serialising owned plain data to memory cannot fail; an empty entry would be rejected.
@@ -230,7 +246,12 @@ pub fn decode_entry(bytes: &[u8], fingerprint: &str, key: &Key) -> Result<Saved,
     }
     Ok(Saved {
         program: entry.program,
-        horizon: entry.horizon,
+        continuity: Continuity {
+            version: entry.spec_version,
+            horizon: entry.horizon,
+            recent: entry.recent,
+            unfit: entry.unfit,
+        },
         monitor: entry.monitor,
     })
 }

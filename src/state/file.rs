@@ -15,6 +15,7 @@ use super::entry::{self, MAGIC, Programs, SavedProgram, VERSION, unix_now, warn_
 use super::restore::Restorer;
 use super::{Backend, Context, fingerprint};
 use crate::log::{self, Level};
+use crate::processor::Continuity;
 use crate::processor::Processor;
 use crate::processor::instances::Key;
 use serde::{Deserialize, Serialize};
@@ -29,10 +30,19 @@ struct SavedInstance {
     key: Key,
     /// The program it ran: an index into [`StateFile::programs`].
     program: usize,
+    /// The id of the spec version it ran (`processor::Continuity`); absent in older files.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    spec_version: Option<String>,
     /// The event time whose version it ran (`Processor::saved_instances`); absent in files
     /// written before it was saved (then its clock).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     horizon: Option<i64>,
+    /// Its newest records (time, digest) and the rollouts its records did not fit
+    /// (`processor::Continuity`); absent in older files.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    recent: Vec<(i64, u64)>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    unfit: Vec<(String, i64)>,
     monitor: Snapshot,
 }
 
@@ -53,7 +63,14 @@ struct StateFile {
 struct SavedRef<'a> {
     key: &'a Key,
     program: usize,
-    horizon: i64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    spec_version: Option<&'a str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    horizon: Option<i64>,
+    #[serde(skip_serializing_if = "<[_]>::is_empty")]
+    recent: &'a [(i64, u64)],
+    #[serde(skip_serializing_if = "<[_]>::is_empty")]
+    unfit: &'a [(String, i64)],
     monitor: Snapshot,
 }
 
@@ -71,15 +88,16 @@ struct HeaderOut<'a> {
 const PER_THREAD: usize = 512;
 
 /// One instance to save: its key, its monitor, the index of its program in [`Programs`] and
-/// its horizon.
-type Instance<'a> = (&'a Key, &'a tessla_engine::Monitor, usize, i64);
+/// what it carries besides.
+type Instance<'a> = (&'a Key, &'a tessla_engine::Monitor, usize, Continuity);
 
 /// The JSON of `instances`, comma-separated, and the count of stream values that could not be
 /// saved. `keys`: the node keys of each program, by index.
 fn encode_instances(instances: &[Instance<'_>], keys: &[&[u64]]) -> io::Result<(Vec<u8>, usize)> {
     let mut out = Vec::with_capacity(instances.len() * 2048);
     let mut unsaved = 0;
-    for (i, &(key, m, program, horizon)) in instances.iter().enumerate() {
+    for (i, (key, m, program, c)) in instances.iter().enumerate() {
+        let (key, m, program) = (*key, *m, *program);
         let monitor = snapshot::snapshot_with_keys(m, keys.get(program).copied().unwrap_or(&[]));
         unsaved += monitor.unsaved;
         if i > 0 {
@@ -90,7 +108,10 @@ fn encode_instances(instances: &[Instance<'_>], keys: &[&[u64]]) -> io::Result<(
             &SavedRef {
                 key,
                 program,
-                horizon,
+                spec_version: c.version.as_deref(),
+                horizon: c.horizon,
+                recent: &c.recent,
+                unfit: &c.unfit,
                 monitor,
             },
         )
@@ -264,9 +285,15 @@ fn load_quiet(path: &Path, proc: &mut Processor, ctx: &Context) -> (Outcome, Vec
                 let Some(saved) = file.programs.get(s.program) else {
                     continue;
                 };
-                let (m, note) = restorer.restore(proc, &s.key, saved, &s.monitor, s.horizon);
+                let c = Continuity {
+                    version: s.spec_version,
+                    horizon: s.horizon,
+                    recent: s.recent,
+                    unfit: s.unfit,
+                };
+                let (m, note) = restorer.restore(proc, &s.key, saved, &s.monitor, &c);
                 notes.extend(note);
-                proc.restore_instance_at(s.key, m, s.horizon);
+                proc.restore_instance_at(s.key, m, c);
             }
             (Outcome::Restored(n), notes)
         }
@@ -454,6 +481,54 @@ mod tests {
         ] {
             assert_ne!(fingerprint(&other), fp, "{other:?}");
         }
+    }
+
+    /// A message the broker redelivers after a restart (the same record again) is still a
+    /// repeat: each instance's newest records are saved with it. A robot that stayed on its
+    /// version because its records did not fit a rollout's stays there after the restart.
+    #[test]
+    fn a_restart_keeps_what_recognises_repeats_and_what_a_robot_could_not_read() {
+        const V1: &str = "in x: Events[Int]\ndef v = x\nout v\n";
+        const V2: &str = "in x: Events[Bool]\ndef v = x\nout v\n";
+        let ctx = Context {
+            instance_by: vec!["robot".into()],
+            ..Context::default()
+        };
+        let rolled = || {
+            let mut p = processor(V1);
+            p.accept_version("v2", "", program(V2), 1000, Selector::all())
+                .unwrap();
+            p
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("state.json");
+        let run = |restart: bool| {
+            let mut p = rolled();
+            let mut out = feed(&mut p, "m,robot=r1 x=1i 500\nm,robot=r1 x=2i 1100\n");
+            if restart {
+                assert_eq!(save(&path, &p, &ctx).unwrap(), 1);
+                p = rolled();
+                assert_eq!(load_quiet(&path, &mut p, &ctx).0, Outcome::Restored(1));
+            }
+            // The second record again (redelivered), then a new one.
+            out.push_str(&feed(
+                &mut p,
+                "m,robot=r1 x=2i 1100\nm,robot=r1 x=3i 1200\n",
+            ));
+            (out, p.counters.duplicates)
+        };
+        let once = run(false);
+        assert_eq!(
+            once.0,
+            "tessla,robot=r1 v=1i 500\ntessla,robot=r1 v=2i 1100\ntessla,robot=r1 v=3i 1200\n"
+        );
+        assert_eq!(once.1, 1);
+        let restarted = run(true);
+        assert_eq!(restarted.0, once.0);
+        assert_eq!(
+            restarted.1, 1,
+            "the redelivered record is a repeat after the restart too"
+        );
     }
 
     /// A rollout from T = 1000 for r1; r1's record stamped T - 1 arrives when its last step is

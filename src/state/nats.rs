@@ -197,9 +197,13 @@ impl Backend for NatsBackend {
         };
         match entry::decode_entry(&entry.value, &self.fingerprint, key) {
             Ok(saved) => {
-                let (monitor, note) =
-                    self.restorer
-                        .restore(proc, key, &saved.program, &saved.monitor, saved.horizon);
+                let (monitor, note) = self.restorer.restore(
+                    proc,
+                    key,
+                    &saved.program,
+                    &saved.monitor,
+                    &saved.continuity,
+                );
                 if let Some(note) = note {
                     log::log(Level::Info, &note);
                 }
@@ -207,7 +211,7 @@ impl Backend for NatsBackend {
                     Level::Debug,
                     &format!("state: restored {name} from {}", self.url.shown()),
                 );
-                proc.restore_instance_at(key.clone(), monitor, saved.horizon);
+                proc.restore_instance_at(key.clone(), monitor, saved.continuity);
             }
             Err(why) => {
                 let aside = self.set_aside(&name, entry.value);
@@ -232,9 +236,9 @@ impl Backend for NatsBackend {
         let mut unsaved = 0;
         let entries: Vec<(String, bytes::Bytes)> = proc
             .saved_instances()
-            .map(|(key, m, horizon)| {
+            .map(|(key, m, c)| {
                 let fp = &self.fingerprint;
-                let (bytes, u) = entry::encode_entry(&mut programs, fp, key, m, horizon);
+                let (bytes, u) = entry::encode_entry(&mut programs, fp, key, m, &c);
                 unsaved += u;
                 (kv_key(key), bytes::Bytes::from(bytes))
             })

@@ -9,9 +9,9 @@
 //! (once per pair of saved and running program, in the wording of `processor::carry`).
 
 use super::entry::{SavedProgram, program_fingerprint};
-use crate::processor::Processor;
 use crate::processor::carry::Reset;
 use crate::processor::instances::Key;
+use crate::processor::{Continuity, Processor};
 use std::collections::HashSet;
 use std::sync::Arc;
 use tessla_engine::runtime::snapshot::{self, Snapshot};
@@ -42,8 +42,9 @@ impl Restorer {
         }
     }
 
-    /// Instance `key`'s monitor, continued from `snap` (saved by a monitor of `saved`, at
-    /// `horizon`: see `Processor::restore_instance_at`) in the program it runs in `proc`. The second value is the line to log (info) when `saved` is
+    /// Instance `key`'s monitor, continued from `snap` (saved by a monitor of `saved`, with
+    /// `c`: see `Processor::restore_instance_at`) in the program it runs in `proc`. The second
+    /// value is the line to log (info) when `saved` is
     /// another program and this pair was not reported yet: what starts afresh.
     pub fn restore(
         &mut self,
@@ -51,14 +52,13 @@ impl Restorer {
         key: &Key,
         saved: &SavedProgram,
         snap: &Snapshot,
-        horizon: Option<i64>,
+        c: &Continuity,
     ) -> (Monitor, Option<String>) {
         let clock = [snap.pending, snap.last_evaluated]
             .into_iter()
             .flatten()
             .fold(snap.t0, i64::max);
-        let at = horizon.unwrap_or(clock);
-        let running = running_for(&mut self.running, proc.program_for(key, at));
+        let running = running_for(&mut self.running, proc.program_for_saved(key, c, clock));
         let monitor =
             snapshot::restore_with_keys(Arc::clone(&running.program), snap, &running.node_keys);
         let mut note = None;

@@ -36,7 +36,7 @@
 //! since the save by the rollouts known at the replay: `late_instances`), and
 //! `--max-instances` over threads or partitions (each thread and process keeps its own share).
 //!
-//! `COMBINATION_SEEDS=N` runs N schedules (default 60; `make combinations SEEDS=N`),
+//! `COMBINATION_SEEDS=N` runs N schedules (default 300; `make combinations SEEDS=N`),
 //! `COMBINATION_SEED=S` one: a failure prints its seed and its schedule.
 
 use rand::{Rng, SeedableRng};
@@ -270,7 +270,7 @@ fn generate(seed: u64) -> Schedule {
             63..78 => Op::Publish {
                 what: match rng.random_range(0..12) {
                     0 => What::Broken,
-                    1 => What::Broken, // TEMP
+                    1 => What::Incompatible,
                     _ => What::Pool(rng.random_range(0..POOL.len())),
                 },
                 select: rng.random_bool(0.4).then(|| {
@@ -462,7 +462,9 @@ struct Run {
     /// Per revision: the decision.
     decisions: Vec<(u64, Result<Decision, String>)>,
     outcomes: Vec<Vec<Outcome>>,
-    versions: BTreeMap<String, usize>,
+    /// Every version id the schedule published: its place in [`POOL`] (`None`: the
+    /// incompatible one, whose only output is `c`).
+    versions: BTreeMap<String, Option<usize>>,
 }
 
 fn line(robot: usize, kind: Kind, x: i64, ts: i64) -> String {
@@ -520,7 +522,7 @@ fn run(s: &Schedule, dir: &Path, oracle: Option<&[(u64, Result<Decision, String>
     .unwrap()
     .1
     .id();
-    versions.insert(base_id, 0);
+    versions.insert(base_id, Some(0));
     let (threads, n_part, standby) = match (&s.fleet, oracle) {
         (_, Some(_)) => (1, 1, false),
         (Fleet::Threads { threads, .. }, None) => (*threads, 1, false),
@@ -568,7 +570,7 @@ fn run(s: &Schedule, dir: &Path, oracle: Option<&[(u64, Result<Decision, String>
                 if !matches!(kind, Kind::Ahead) {
                     last[*robot] = last[*robot].max(ts);
                 }
-                let text = line(*robot, *kind, if matches!(kind, Kind::Equal) { x + 1000 } else { *x } /* TEMP */, T0 + ts);
+                let text = line(*robot, *kind, *x, T0 + ts);
                 let k = if n_part == 1 { 0 } else { robot % n_part };
                 let part = &mut parts[k];
                 part.active.record(&world, w, &text);
@@ -594,8 +596,14 @@ fn run(s: &Schedule, dir: &Path, oracle: Option<&[(u64, Result<Decision, String>
                     What::Incompatible => INCOMPATIBLE.into(),
                 };
                 let b = bundle(&text);
-                if let What::Pool(i) = what {
-                    versions.insert(b.id(), *i);
+                match what {
+                    What::Pool(i) => {
+                        versions.insert(b.id(), Some(*i));
+                    }
+                    What::Incompatible => {
+                        versions.insert(b.id(), None);
+                    }
+                    What::Broken => {}
                 }
                 let selector = match select {
                     None => Selector::all(),
@@ -628,14 +636,11 @@ fn run(s: &Schedule, dir: &Path, oracle: Option<&[(u64, Result<Decision, String>
                 };
                 let proposal = Event::Proposal(arrival);
                 let decision = match oracle {
-                    Some(given) => {
-                        let d = given
-                            .iter()
-                            .find(|(r, _)| *r == revision)
-                            .map(|(_, d)| d.clone())
-                            .unwrap_or_else(|| Err("no decision".into()));
-                        d
-                    }
+                    Some(given) => given
+                        .iter()
+                        .find(|(r, _)| *r == revision)
+                        .map(|(_, d)| d.clone())
+                        .unwrap_or_else(|| Err("no decision".into())),
                     None => {
                         // Every live process votes; the rule decides.
                         let mut votes = Vec::new();
@@ -844,9 +849,18 @@ fn labels(run: &Run) -> Vec<String> {
             problems.push(format!("no version tag: {l}"));
             continue;
         };
-        let Some(v) = run.versions.get(id).and_then(|i| POOL.get(*i)) else {
-            problems.push(format!("version {id} is none the schedule published: {l}"));
-            continue;
+        let v = match run.versions.get(id) {
+            Some(Some(i)) => &POOL[*i],
+            Some(None) => {
+                if fields.split(',').any(|f| !f.starts_with("c=")) {
+                    problems.push(format!("fields the incompatible version lacks: {l}"));
+                }
+                continue;
+            }
+            None => {
+                problems.push(format!("version {id} is none the schedule published: {l}"));
+                continue;
+            }
         };
         for f in fields.split(',') {
             let (k, val) = f.split_once('=').unwrap_or((f, ""));
@@ -921,7 +935,7 @@ fn every_schedule_gives_the_one_process_oracles_lines() {
             let n: u64 = std::env::var("COMBINATION_SEEDS")
                 .ok()
                 .and_then(|s| s.parse().ok())
-                .unwrap_or(60);
+                .unwrap_or(300);
             (0..n).collect()
         }
     };
