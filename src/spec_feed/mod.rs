@@ -835,6 +835,29 @@ mod tests {
         assert_eq!(p.counters.unfit, 1);
     }
 
+    /// Found by the combination test: a record with a value no version reads (a bad value)
+    /// says nothing against a new version; the robot switches as its next good record would
+    /// have, and the bad value is dropped as before.
+    #[test]
+    fn a_bad_value_does_not_keep_a_robot_off_a_new_version() {
+        let stand = Stand::default();
+        let mut p = processor();
+        feed(&mut p, "m,robot=r1 y=1.5 100\n");
+        const INT_SPEC: &str = "in y: Events[Int]\ndef n = count(y)\nout n\n";
+        let mut u = updates(
+            &stand,
+            vec![proposal(1, INT_SPEC, 1000), decision(1, INT_SPEC, true)],
+        );
+        let mut out = Vec::new();
+        u.tick(&mut [&mut p], &mut out);
+        // `"oops"` is neither Float (the base) nor Int (the new version).
+        feed(&mut p, "m,robot=r1 y=\"oops\" 1100\n");
+        let after = feed(&mut p, "m,robot=r1 y=2i 1200\n");
+        let new = bundle(INT_SPEC).id();
+        assert!(after.contains(&format!("v={new}")), "{after}");
+        assert_eq!(p.counters.unfit, 0);
+    }
+
     /// A committed version this process cannot run (here: its selector names a tag that does
     /// not choose instances in this process) is reported as unrunnable, loudly, and changes
     /// nothing.

@@ -531,6 +531,49 @@ mod tests {
         );
     }
 
+    /// Found by the combination test: a rollout committed while a robot was silent, starting
+    /// before the robot's last record (late for it), switches the robot at its next record,
+    /// where that record's fit is checked. A restart in between restored the robot straight
+    /// into the new version (no record to check, a different carry), so a robot that would
+    /// have stayed off it (its records do not fit) lost its count. Saved with its version, it
+    /// is restored into the version it ran and switches (or not) at its next record, as
+    /// without the restart.
+    #[test]
+    fn a_restart_does_not_switch_a_robot_to_a_rollout_committed_while_it_was_silent() {
+        const V1: &str = "in x: Events[Int]\ndef c = count(x)\nout c\n";
+        const V2: &str = "in x: Events[Bool]\ndef c = count(x)\nout c\n";
+        let ctx = Context {
+            instance_by: vec!["robot".into()],
+            ..Context::default()
+        };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("state.json");
+        let run = |restart: bool| {
+            let mut p = processor(V1);
+            let mut out = feed(&mut p, "m,robot=r1 x=1i 500\nm,robot=r1 x=2i 600\n");
+            // Committed while r1 is silent, from before its last record.
+            let late = |p: &mut Processor| {
+                p.accept_version("v2", "", program(V2), 550, Selector::all())
+                    .unwrap();
+            };
+            late(&mut p);
+            if restart {
+                save(&path, &p, &ctx).unwrap();
+                p = processor(V1);
+                late(&mut p);
+                assert_eq!(load_quiet(&path, &mut p, &ctx).0, Outcome::Restored(1));
+            }
+            out.push_str(&feed(&mut p, "m,robot=r1 x=3i 700\n"));
+            out
+        };
+        let once = run(false);
+        assert_eq!(
+            once, "tessla,robot=r1 c=1i 500\ntessla,robot=r1 c=2i 600\ntessla,robot=r1 c=3i 700\n",
+            "r1's Int does not fit the Bool version: it stays, its count goes on"
+        );
+        assert_eq!(run(true), once);
+    }
+
     /// A rollout from T = 1000 for r1; r1's record stamped T - 1 arrives when its last step is
     /// at T - 1, so it is stepped at T by the old version (the stamp decides). Two late records
     /// stamped before T after it are judged by the old version too, whether or not the process

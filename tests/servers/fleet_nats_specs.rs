@@ -22,7 +22,7 @@ use tessla_telegraf::spec_feed::{Arrival, Event, Outcome, Rollout, sign};
 
 /// A single nats-server with JetStream on a free port (killed on drop); fails the test when
 /// nats-server is not installed.
-fn nats_server(conf: &str) -> servers::Server {
+pub(super) fn nats_server(conf: &str) -> servers::Server {
     let binary = nats_cluster::require_nats_server().unwrap_or_else(|| {
         panic!("nats-server is needed by the spec channel's tests (apt-get install nats-server)")
     });
@@ -36,14 +36,14 @@ fn nats_server(conf: &str) -> servers::Server {
 }
 
 /// A spec folder, the operator's key (made by `spec keygen`) and a channel URL.
-struct Setup {
-    dir: tempfile::TempDir,
-    seed: PathBuf,
-    public: String,
+pub(super) struct Setup {
+    pub(super) dir: tempfile::TempDir,
+    pub(super) seed: PathBuf,
+    pub(super) public: String,
 }
 
 impl Setup {
-    fn new() -> Setup {
+    pub(super) fn new() -> Setup {
         let dir = tempfile::tempdir().unwrap();
         let seed = dir.path().join("operator.seed");
         let out = spec(&["keygen", "--seed-file", seed.to_str().unwrap()], &[]);
@@ -78,7 +78,7 @@ impl Setup {
     }
 
     /// `spec publish SPEC --channel URL --sign-key-file SEED ARGS...`.
-    fn publish(&self, url: &str, spec_file: &Path, args: &[&str]) -> Output {
+    pub(super) fn publish(&self, url: &str, spec_file: &Path, args: &[&str]) -> Output {
         let mut all = vec![
             "publish",
             spec_file.to_str().unwrap(),
@@ -116,7 +116,7 @@ fn spec(args: &[&str], env: &[(&str, &str)]) -> Output {
 }
 
 /// The version id of a `rollout N: version ID ...` line.
-fn published(out: &Output, revision: u64) -> String {
+pub(super) fn published(out: &Output, revision: u64) -> String {
     let text = child::text(&out.stdout);
     assert!(out.status.success(), "{text}{}", child::text(&out.stderr));
     let prefix = format!("rollout {revision}: version ");
@@ -857,10 +857,11 @@ fn a_login_without_the_channel_permissions_is_told_what_it_needs() {
 
 /// The base spec of the end-to-end tests: a count that a new version keeps, and `y`, which it
 /// changes.
-const BASE_SPEC: &str = "in x: Events[Int]\ndef c = count(x)\ndef y = x + 1\nout c\nout y\n";
+pub(super) const BASE_SPEC: &str =
+    "in x: Events[Int]\ndef c = count(x)\ndef y = x + 1\nout c\nout y\n";
 const NEW_SPEC: &str = "in x: Events[Int]\ndef c = count(x)\ndef y = x * 10\nout c\nout y\n";
 /// Event time of step `k` of the end-to-end input (in the past: no `--max-ahead` refusal).
-fn ts(k: i64) -> i64 {
+pub(super) fn ts(k: i64) -> i64 {
     1_700_000_000_000_000_000 + k * 100_000_000
 }
 
@@ -877,7 +878,7 @@ fn records(robots: &[&str], ks: std::ops::Range<i64>) -> String {
 
 /// `run BASE` following the channel at `url`, one instance per robot, outputs tagged with their
 /// version.
-fn channel_run<'a>(url: &'a str, s: &'a Setup, base: &'a Path) -> Vec<&'a str> {
+pub(super) fn channel_run<'a>(url: &'a str, s: &'a Setup, base: &'a Path) -> Vec<&'a str> {
     vec![
         "run",
         "--spec",

@@ -3,6 +3,7 @@
 //! folder and stopped on drop. A missing server skips its test (and leaves a note for `make
 //! test`'s banner, tools/test-skips.sh); `REQUIRE_SERVERS=1` makes it a failure.
 
+mod combinations_nats;
 mod fleet_nats;
 mod fleet_nats_security;
 mod fleet_nats_specs;

@@ -1,0 +1,198 @@
+//! The combination test's smaller set on real parts: seeded schedules run by real
+//! `tessla-telegraf run` processes, two partitions of a fleet on a real nats-server (state in a
+//! JetStream bucket with a lease per partition, `--spec-channel`), with real `spec publish`
+//! (fleet-wide, canary, renamed and data-incompatible versions, one that does not compile) and
+//! restarts of a partition's process in the middle. The oracle is one process started after
+//! everything, fed every record in order: it reads the same rollouts and decisions at start.
+//! Every publish starts at the next record's time, so a rollout known from the start judges
+//! each record as one arriving in the middle does (the documented way to get one switch point
+//! everywhere, `--from`). Every line, robot by robot, must equal the oracle's.
+
+use super::fleet_nats_specs::{BASE_SPEC, Setup, channel_run, nats_server, published, ts};
+use crate::support::child;
+use crate::support::live_child::LiveChild;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::collections::BTreeMap;
+
+/// Versions a schedule publishes: renamed (`z`), one that reads `x` as a Bool (refused by a
+/// process that has seen an Int, so aborted), one that does not compile (refused at publish).
+const VERSIONS: &[&str] = &[
+    BASE_SPEC,
+    "in x: Events[Int]\ndef c = count(x)\ndef y = x * 10\nout c\nout y\n",
+    "in x: Events[Int]\ndef c = count(x)\ndef z = x + 500\nout c\nout z\n",
+    "in x: Events[Bool]\ndef c = count(x)\nout c\n",
+    "in x: Events[Int]\nout x + true\n",
+];
+
+/// One partition's process, and the sync robot whose answer says it has stepped all before.
+struct Part {
+    child: Option<LiveChild>,
+    lease: &'static str,
+    sync: &'static str,
+}
+
+fn by_robot(lines: impl Iterator<Item = String>) -> BTreeMap<String, Vec<String>> {
+    let mut m: BTreeMap<String, Vec<String>> = BTreeMap::new();
+    for l in lines.filter(|l| l.starts_with("tessla,")) {
+        let robot = l
+            .split(' ')
+            .next()
+            .and_then(|h| h.split(',').find_map(|t| t.strip_prefix("robot=")))
+            .unwrap_or("")
+            .to_string();
+        m.entry(robot).or_default().push(l);
+    }
+    m
+}
+
+#[test]
+fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
+    let server = nats_server("");
+    let url = format!("nats://127.0.0.1:{}", server.port);
+    let s = Setup::new();
+    let base = child::write(s.dir.path(), "base.tessla", BASE_SPEC);
+    let specs: Vec<_> = VERSIONS
+        .iter()
+        .enumerate()
+        .map(|(i, v)| child::write(s.dir.path(), &format!("v{i}.tessla"), v))
+        .collect();
+    // The bucket first (the first publish makes it): a rollout for no robot.
+    published(&s.publish(&url, &specs[0], &["--select", "robot=none"]), 1);
+    let mut revision = 1;
+    let (mut total, mut restarts) = (0, 0);
+    for seed in 0..3u64 {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let state = format!("{url}/state_{seed}");
+        let args = |lease: &str| {
+            let mut a: Vec<String> = channel_run(&url, &s, &base)
+                .into_iter()
+                .map(String::from)
+                .collect();
+            a.extend(["--state".into(), format!("{state}?lease={lease}")]);
+            a
+        };
+        let spawn = |lease: &str| {
+            let a = args(lease);
+            LiveChild::spawn(&a.iter().map(String::as_str).collect::<Vec<_>>())
+        };
+        let mut parts = [
+            Part {
+                child: Some(spawn("p0")),
+                lease: "p0",
+                sync: "s0",
+            },
+            Part {
+                child: Some(spawn("p1")),
+                lease: "p1",
+                sync: "s1",
+            },
+        ];
+        let mut fleet_out: Vec<String> = Vec::new();
+        let mut records: Vec<String> = Vec::new();
+        let mut k = 10 * seed as i64 * 100;
+        let mut last: BTreeMap<usize, i64> = BTreeMap::new();
+        for _ in 0..24 {
+            match rng.random_range(0..10) {
+                0..6 => {
+                    // A batch of records, then each partition's sync robot.
+                    for _ in 0..rng.random_range(1..5) {
+                        let robot = rng.random_range(0..4usize);
+                        k += 1;
+                        let t = match rng.random_range(0..8) {
+                            0 => last.get(&robot).map_or(ts(k), |l| l - 20_000_000),
+                            1 => *last.get(&robot).unwrap_or(&ts(k)),
+                            _ => ts(k),
+                        };
+                        let l = last.entry(robot).or_insert(t);
+                        *l = (*l).max(t);
+                        let line = format!("m,robot=r{robot} x={}i {t}\n", rng.random_range(0..50));
+                        let p = &mut parts[robot % 2];
+                        p.child.as_mut().unwrap().write(&line);
+                        records.push(line);
+                    }
+                    k += 1;
+                    for p in &mut parts {
+                        let line = format!("m,robot={} x=1i {}\n", p.sync, ts(k));
+                        let c = p.child.as_mut().unwrap();
+                        c.write(&line);
+                        let want = format!(" {}", ts(k));
+                        let sync = format!("robot={},", p.sync);
+                        c.wait_out("the sync record's answer", |l| {
+                            l.contains(&sync) && l.trim_end().ends_with(&want)
+                        });
+                        records.push(line);
+                    }
+                }
+                6..8 => {
+                    let v = rng.random_range(0..VERSIONS.len());
+                    let from = (ts(k + 1)).to_string();
+                    let mut a = vec!["--from", from.as_str()];
+                    if rng.random_bool(0.4) {
+                        a.extend(["--select", "robot=r1,r2,s0"]);
+                    }
+                    let out = s.publish(&url, &specs[v], &a);
+                    match (v, out.status.code()) {
+                        (4, Some(2)) => {}
+                        (3, Some(5)) | (_, Some(0)) => revision += 1,
+                        (_, code) => panic!(
+                            "seed {seed}: publish of version {v}: exit {code:?}\n{}{}",
+                            child::text(&out.stdout),
+                            child::text(&out.stderr)
+                        ),
+                    }
+                    // Every process has acted on the decision before the next record.
+                    for p in &mut parts {
+                        let r = format!("revision={revision}i");
+                        if v != 4 {
+                            p.child.as_mut().unwrap().wait_out("the decision", |l| {
+                                l.starts_with("tessla_spec,")
+                                    && l.contains(&r)
+                                    && (l.contains(",outcome=committed,")
+                                        || l.contains(",outcome=aborted,"))
+                            });
+                        }
+                    }
+                }
+                _ => {
+                    // A restart of one partition's process: it saves, releases its lease; the
+                    // next one takes it and restores each robot at its first record.
+                    let p = &mut parts[rng.random_range(0..2usize)];
+                    let (out, err, code) = p.child.take().unwrap().finish();
+                    assert_eq!(code, 0, "{err}");
+                    fleet_out.extend(out.lines().map(String::from));
+                    p.child = Some(spawn(p.lease));
+                    restarts += 1;
+                }
+            }
+        }
+        for p in &mut parts {
+            let (out, err, code) = p.child.take().unwrap().finish();
+            assert_eq!(code, 0, "{err}");
+            fleet_out.extend(out.lines().map(String::from));
+        }
+        // The oracle: one process, its own state bucket, every record in order.
+        let oracle_state = format!("{url}/oracle_{seed}");
+        let mut a = channel_run(&url, &s, &base);
+        a.extend(["--state", oracle_state.as_str()]);
+        let (out, err, code) = child::run_text(&a, &records.concat());
+        assert_eq!(code, 0, "{err}");
+        let (got, want) = (
+            by_robot(fleet_out.into_iter()),
+            by_robot(out.lines().map(String::from)),
+        );
+        assert_eq!(
+            got, want,
+            "seed {seed}: the fleet's lines (left) against one process's (right)"
+        );
+        total += want.values().map(Vec::len).sum::<usize>();
+    }
+    eprintln!(
+        "combinations on real processes: {total} lines equal to one process's; {} rollouts, {restarts} restarts",
+        revision - 1
+    );
+    assert!(
+        total > 100 && restarts > 0 && revision > 3,
+        "{total} lines compared"
+    );
+}
