@@ -372,6 +372,31 @@ async fn read_all(store: &kv::Store, trust: &[String]) -> Result<Vec<Event>, Str
     Ok(out)
 }
 
+/// How long one reading of the channel at start may take before it is tried again.
+const READ_PATIENCE: Duration = Duration::from_secs(10);
+
+/// [`read_all`] with a bound: a listing the server leaves unfinished (its consumer stalled) is
+/// started again, at most three times in all, then it is an error: a process never hangs
+/// silently at start.
+async fn read_patiently(store: &kv::Store, trust: &[String]) -> Result<Vec<Event>, String> {
+    for attempt in 1..=3 {
+        match tokio::time::timeout(READ_PATIENCE, read_all(store, trust)).await {
+            Ok(got) => return got,
+            Err(_) => log::log(
+                Level::Warn,
+                &format!(
+                    "spec: reading the spec channel's rollouts took over {} s (try {attempt} of 3); reading again",
+                    READ_PATIENCE.as_secs()
+                ),
+            ),
+        }
+    }
+    Err(format!(
+        "its rollouts could not be read within {} s, three times; is the server overloaded?",
+        READ_PATIENCE.as_secs()
+    ))
+}
+
 /// A running process's view of the channel (module doc).
 pub struct NatsFeed {
     url: Url,
@@ -406,7 +431,7 @@ impl NatsFeed {
             .call(async move {
                 let opened = open(u.clone(), false).await?;
                 let first = match &opened.store {
-                    Some(store) => read_all(store, &t).await.map_err(|e| {
+                    Some(store) => read_patiently(store, &t).await.map_err(|e| {
                         Failure::Io(match violation(&opened.violations) {
                             Some(v) => denied(&u, &v),
                             None => format!("spec channel {}: {e}", u.shown()),
@@ -866,13 +891,23 @@ impl Operator {
         })
     }
 
+    /// Run one request of the command on the NATS thread, bounded by [`READ_PATIENCE`] (three
+    /// times for a listing): a stalled server makes the command fail with exit 3, never hang.
     fn run<T: Send + 'static>(
         &self,
         f: impl std::future::Future<Output = T> + Send + 'static,
     ) -> Result<T, Failure> {
+        let patience = READ_PATIENCE * 3;
         self.conn
-            .call(f)
-            .ok_or_else(|| Failure::Io("the NATS thread stopped".to_string()))
+            .call(async move { tokio::time::timeout(patience, f).await })
+            .ok_or_else(|| Failure::Io("the NATS thread stopped".to_string()))?
+            .map_err(|_| {
+                Failure::Io(format!(
+                    "spec channel {}: the server did not answer within {} s",
+                    self.url.shown(),
+                    patience.as_secs()
+                ))
+            })
     }
 
     /// Every rollout, in revision order.
