@@ -835,6 +835,41 @@ mod tests {
         assert_eq!(p.counters.unfit, 1);
     }
 
+    /// Defect 5's other half: a SIGHUP reload is checked as a rollout is, bindings included,
+    /// against every thread's metrics: a spec that cannot read what arrives is refused and the
+    /// running one stays.
+    #[test]
+    fn a_sighup_reload_checks_its_bindings_against_every_threads_metrics() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("spec.tessla");
+        std::fs::write(&path, BOOL_SPEC).unwrap();
+        let reload = |procs: &mut [&mut Processor]| {
+            let mut u = Updates::new(
+                SpecSource {
+                    path: Some(path.clone()),
+                    options: Default::default(),
+                },
+                false,
+                "",
+            );
+            let mut out = Vec::new();
+            u.hangup(procs, &mut out);
+            let text = String::from_utf8(out).unwrap();
+            text.contains("outcome=accepted")
+        };
+        // One thread saw a Float `y`, the other a Bool: the Bool spec reads one of them.
+        let (mut a, mut b) = (processor(), processor());
+        feed(&mut a, "m,robot=r5 y=1.5 100\n");
+        feed(&mut b, "m,robot=r2 y=true 100\n");
+        assert!(reload(&mut [&mut a, &mut b]));
+        // Only Floats seen: refused, the running spec stays.
+        let mut c = processor();
+        feed(&mut c, "m,robot=r5 y=1.5 100\n");
+        assert!(!reload(&mut [&mut c]));
+        let after = feed(&mut c, "m,robot=r5 y=2.5 200\n");
+        assert!(after.contains("n=2i"), "{after}");
+    }
+
     /// Found by the combination test: a record with a value no version reads (a bad value)
     /// says nothing against a new version; the robot switches as its next good record would
     /// have, and the bad value is dropped as before.
