@@ -135,6 +135,17 @@ pub fn human_ns(ns: i64) -> String {
     humantime::format_duration(d).to_string()
 }
 
+/// An event time for messages: RFC 3339 with nanoseconds.
+pub fn show_time(ns: i64) -> String {
+    match u64::try_from(ns) {
+        Ok(n) => humantime::format_rfc3339_nanos(
+            std::time::UNIX_EPOCH + std::time::Duration::from_nanos(n),
+        )
+        .to_string(),
+        Err(_) => format!("{ns} ns"),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -312,7 +312,7 @@ pub(super) fn warn_unfit(by: &[String], key: &Key, versions: &Versions, rule: us
         let (id, from) = versions.rule_id(rule).unwrap_or_default();
         format!(
             "spec version {id} (in force from {}) cannot read the records of monitor instance {}: {why}; it stays on the last version it can run (counted as `unfit` in the summary)",
-            crate::spec_feed::status::show_time(from),
+            super::clock::show_time(from),
             describe(by, key)
         )
     });

@@ -22,16 +22,9 @@ pub fn now_ns() -> i64 {
         .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
 }
 
-/// An event time for messages: RFC 3339 with nanoseconds.
-pub fn show_time(ns: i64) -> String {
-    match u64::try_from(ns) {
-        Ok(n) => humantime::format_rfc3339_nanos(
-            std::time::UNIX_EPOCH + std::time::Duration::from_nanos(n),
-        )
-        .to_string(),
-        Err(_) => format!("{ns} ns"),
-    }
-}
+/// An event time for messages (its home is the processor's clock, which names rollouts'
+/// starts in its own messages).
+pub use crate::processor::clock::show_time;
 
 /// Append the status line of `o` (version in force from `from`) to `out`.
 pub fn write_line(out: &mut Vec<u8>, host: &str, partition: &str, o: &Outcome, from: i64) {
