@@ -278,29 +278,27 @@ impl Pool {
         let Some((key, _)) = self.table.remove(slot) else {
             return false;
         };
-        {
-            if let Some(l) = lane {
-                l.forget(slot);
-            }
-            counters.evicted += 1;
-            let by = &self.by;
-            log::warn_limited("instance evicted", || {
-                let why = if full {
-                    format!("least recently used, --max-instances {total}")
-                } else {
-                    "idle longer than --instance-idle".to_string()
-                };
-                let share = if full && max != total {
-                    format!(" (the threads share the total: this one keeps {max})")
-                } else {
-                    String::new()
-                };
-                format!(
-                    "monitor instance {} evicted ({why}); its state starts afresh with its next record{share}",
-                    describe(by, &key)
-                )
-            });
+        if let Some(l) = lane {
+            l.forget(slot);
         }
+        counters.evicted += 1;
+        let by = &self.by;
+        log::warn_limited("instance evicted", || {
+            let why = if full {
+                format!("least recently used, --max-instances {total}")
+            } else {
+                "idle longer than --instance-idle".to_string()
+            };
+            let share = if full && max != total {
+                format!(" (the threads share the total: this one keeps {max})")
+            } else {
+                String::new()
+            };
+            format!(
+                "monitor instance {} evicted ({why}); its state starts afresh with its next record{share}",
+                describe(by, &key)
+            )
+        });
         true
     }
 }

@@ -99,6 +99,19 @@ pub struct Outcome {
 }
 
 impl Outcome {
+    /// What this process made of rollout `r`, in `phase`: `accepted` or why not (`reason`).
+    fn of(r: &Rollout, phase: Phase, accepted: bool, reason: String) -> Outcome {
+        Outcome {
+            revision: r.revision,
+            id: r.id.clone(),
+            label: r.label.clone(),
+            accepted,
+            reason,
+            phase,
+            ..Outcome::default()
+        }
+    }
+
     /// The status metric's `outcome` tag and `spec status`'s word: `accepted`/`refused` (a
     /// reload, or a vote), `committed`, `unrunnable` (committed, but it cannot run here),
     /// `aborted`.
@@ -296,15 +309,7 @@ impl Updates {
                             label_note(&a.rollout.label)
                         ),
                     );
-                    Outcome {
-                        revision: a.rollout.revision,
-                        id: a.rollout.id.clone(),
-                        label: a.rollout.label.clone(),
-                        accepted: false,
-                        reason: why,
-                        phase: Phase::Aborted,
-                        ..Outcome::default()
-                    }
+                    Outcome::of(&a.rollout, Phase::Aborted, false, why)
                 }
             };
             let from = self.ledger.from_of(outcome.revision);
@@ -387,14 +392,7 @@ impl Updates {
                 ),
             );
         }
-        Outcome {
-            revision: r.revision,
-            id: r.id.clone(),
-            label: r.label.clone(),
-            accepted,
-            reason,
-            ..Outcome::default()
-        }
+        Outcome::of(r, Phase::Check, accepted, reason)
     }
 
     /// Every check a rollout passes before it may run here: its record and bundle, compiling
@@ -434,15 +432,7 @@ impl Updates {
                     label_note(&r.label)
                 ),
             );
-            Outcome {
-                revision: r.revision,
-                id: r.id.clone(),
-                label: r.label.clone(),
-                accepted: false,
-                reason,
-                phase: Phase::Committed,
-                ..Outcome::default()
-            }
+            Outcome::of(r, Phase::Committed, false, reason)
         };
         let program = match self.check(a, procs, false) {
             Ok(p) => p,
@@ -506,14 +496,9 @@ impl Updates {
             ),
         );
         Outcome {
-            revision: r.revision,
-            id: r.id.clone(),
-            label: r.label.clone(),
-            accepted: true,
             reset_outputs: reset,
             late_instances: late,
-            phase: Phase::Committed,
-            ..Outcome::default()
+            ..Outcome::of(r, Phase::Committed, true, String::new())
         }
     }
 

@@ -458,19 +458,33 @@ impl NatsFeed {
         let (tx, arrivals) = mpsc::channel();
         let (status, status_rx) = tokio::sync::watch::channel(None);
         let (store_tx, store_rx) = tokio::sync::watch::channel(opened.store.clone());
-        conn.handle.spawn(follow(
+        // Every new rollout and decision, checked, to the feed.
+        let (t, txx) = (Arc::clone(&trust), tx.clone());
+        conn.handle.spawn(watch_keys(
             url.clone(),
             store_rx.clone(),
+            "rollout",
+            revision_of,
             known,
-            Arc::clone(&trust),
-            tx.clone(),
+            move |store, revision, entry| {
+                let (t, tx) = (Arc::clone(&t), txx.clone());
+                async move {
+                    let a = arrival(&store, revision, &entry.value, &t).await;
+                    tx.send(Event::Proposal(a)).is_ok()
+                }
+            },
         ));
-        conn.handle.spawn(follow_decisions(
+        conn.handle.spawn(watch_keys(
             url.clone(),
             store_rx.clone(),
+            "decision",
+            decided_revision_of,
             decided,
-            trust,
-            tx,
+            move |_, revision, entry| {
+                let decision = decision_of(revision, &entry.value, &trust);
+                let sent = tx.send(Event::Decision { revision, decision }).is_ok();
+                async move { sent }
+            },
         ));
         conn.handle
             .spawn(find_bucket(opened.js, url.clone(), opened.store, store_tx));
@@ -633,20 +647,23 @@ async fn bucket(store: &mut tokio::sync::watch::Receiver<Option<kv::Store>>) -> 
         .and_then(|s| s.clone())
 }
 
-/// Watch `prefix.>` (from the start of its history) and hand each new put whose key `of` reads
-/// a revision from, not in `known`, to `each`; a watch that ends (the connection lost for
-/// long) is started again. Returns when `each` says the feed is gone.
+/// Once the bucket exists, watch `prefix.>` (from the start of its history) and hand each new
+/// put whose key `of` reads a revision from, not in `known`, to `each`; a watch that ends (the
+/// connection lost for long) is started again. Returns when `each` says the feed is gone.
 async fn watch_keys<F, Fut>(
-    url: &Url,
-    store: &kv::Store,
+    url: Url,
+    mut store: tokio::sync::watch::Receiver<Option<kv::Store>>,
     prefix: &str,
     of: fn(&str) -> Option<u64>,
     mut known: BTreeSet<u64>,
     mut each: F,
 ) where
-    F: FnMut(u64, kv::Entry) -> Fut,
+    F: FnMut(kv::Store, u64, kv::Entry) -> Fut,
     Fut: std::future::Future<Output = bool>,
 {
+    let Some(store) = bucket(&mut store).await else {
+        return;
+    };
     let mut warned = false;
     loop {
         match store.watch_with_history(format!("{prefix}.>")).await {
@@ -670,7 +687,7 @@ async fn watch_keys<F, Fut>(
                     if !known.insert(revision) {
                         continue;
                     }
-                    if !each(revision, entry).await {
+                    if !each(store.clone(), revision, entry).await {
                         return;
                     }
                 }
@@ -689,61 +706,6 @@ async fn watch_keys<F, Fut>(
         }
         tokio::time::sleep(Duration::from_secs(1)).await;
     }
-}
-
-/// Send every new rollout, checked, to the feed (once the bucket exists).
-async fn follow(
-    url: Url,
-    mut store: tokio::sync::watch::Receiver<Option<kv::Store>>,
-    known: BTreeSet<u64>,
-    trust: Arc<[String]>,
-    tx: mpsc::Sender<Event>,
-) {
-    let Some(store) = bucket(&mut store).await else {
-        return;
-    };
-    let s = store.clone();
-    watch_keys(
-        &url,
-        &store,
-        "rollout",
-        revision_of,
-        known,
-        |revision, entry| {
-            let (s, trust, tx) = (s.clone(), Arc::clone(&trust), tx.clone());
-            async move {
-                let a = arrival(&s, revision, &entry.value, &trust).await;
-                tx.send(Event::Proposal(a)).is_ok()
-            }
-        },
-    )
-    .await;
-}
-
-/// Send every new decision, checked, to the feed (once the bucket exists).
-async fn follow_decisions(
-    url: Url,
-    mut store: tokio::sync::watch::Receiver<Option<kv::Store>>,
-    known: BTreeSet<u64>,
-    trust: Arc<[String]>,
-    tx: mpsc::Sender<Event>,
-) {
-    let Some(store) = bucket(&mut store).await else {
-        return;
-    };
-    watch_keys(
-        &url,
-        &store,
-        "decision",
-        decided_revision_of,
-        known,
-        |revision, entry| {
-            let decision = decision_of(revision, &entry.value, &trust);
-            let sent = tx.send(Event::Decision { revision, decision }).is_ok();
-            async move { sent }
-        },
-    )
-    .await;
 }
 
 /// Put the newest status whenever there is one (once the bucket exists), and again every
