@@ -2,14 +2,19 @@
 //! Telegraf restarts it.
 //!
 //! Why: Telegraf's `processors.execd` restarts a child only when it exits. A child stuck in a
-//! step (an evaluation that does not end, or a write to a stdout nobody reads) stays alive,
-//! Telegraf blocks writing to its full stdin pipe, and the robot's input stalls at
-//! `mqtt_consumer`'s `max_undelivered_messages` for good. A stuck step cannot notice itself, so a
-//! thread of its own watches it.
+//! step (an evaluation that does not end) stays alive, Telegraf blocks writing to its full stdin
+//! pipe, and the robot's input stalls at `mqtt_consumer`'s `max_undelivered_messages` for good. A
+//! stuck step cannot notice itself, so a thread of its own watches it.
+//!
+//! A write that blocks is not a stuck step: its reader (Telegraf) is alive and busy elsewhere,
+//! for example parsing a huge metric we passed through (its parse grows with the square of the
+//! field count: 19 s for 110,000 fields). That is backpressure: ending the process then would lose
+//! what is in the pipes and the state since the last save, and answer nothing sooner. So a write
+//! stalled past the bound is only warned about ([`Phase::Writing`]), and the process waits.
 //!
 //! Owns: the shared marks the step loops and the processors leave ([`Watch`], [`Lane`]), and the
 //! watching thread ([`spawn`]) that logs what was stuck (the phase, the record's line, the
-//! instance, for how long) and exits with [`EXIT_CODE`].
+//! instance, for how long) and exits with [`EXIT_CODE`], or warns about a blocked write.
 //!
 //! Cost on the record path: a processor with a lane does four relaxed atomic stores per record
 //! (its progress count, the line, the instance slot cleared and then set) on cache lines only its
@@ -37,7 +42,8 @@ pub enum Phase {
     Delays = 2,
     /// Reloading the spec (SIGHUP).
     Reload = 3,
-    /// Writing outputs to stdout (blocks while the reader does not read).
+    /// Writing outputs to stdout (blocks while the reader does not read): watched, but a stall
+    /// here is backpressure, warned about and waited for, never a reason to exit.
     Writing = 4,
 }
 
@@ -222,8 +228,8 @@ pub fn tick(bound: Duration) -> Duration {
 }
 
 /// Start the watching thread: when the loop stays in one busy phase without progress for
-/// `bound`, log an `E!` line and exit the process with [`EXIT_CODE`]. `None` (`--step-timeout
-/// 0`): no thread.
+/// `bound`, log an `E!` line and exit the process with [`EXIT_CODE`]; in [`Phase::Writing`], a
+/// `W!` line instead (once per stall) and go on waiting. `None` (`--step-timeout 0`): no thread.
 pub fn spawn(watch: Arc<Watch>, bound: Option<Duration>) -> std::io::Result<()> {
     let Some(bound) = bound.filter(|b| !b.is_zero()) else {
         return Ok(());
@@ -238,15 +244,44 @@ fn watch_loop(watch: &Watch, bound: Duration) {
     let tick = tick(bound);
     let mut last = watch.sample();
     let mut since = Instant::now();
+    let mut warned = false;
     loop {
         std::thread::sleep(tick);
         let now = watch.sample();
         if now.0 == Phase::Idle || now != last {
+            if warned {
+                crate::log::log(
+                    crate::log::Level::Info,
+                    &format!(
+                        "stdout: our reader read again after {:.1} s; nothing was lost",
+                        since.elapsed().as_secs_f64()
+                    ),
+                );
+            }
+            warned = false;
             last = now;
             since = Instant::now();
             continue;
         }
         let stalled = since.elapsed();
+        if stalled >= bound && now.0 == Phase::Writing {
+            if !warned {
+                warned = true;
+                crate::log::log(
+                    crate::log::Level::Warn,
+                    &format!(
+                        "stdout: our reader has not read for {:.1} s (--step-timeout {}){}; \
+                         waiting: a blocked write is backpressure, not a hung step (Telegraf \
+                         may be parsing a large metric: the echo of a record with tens of \
+                         thousands of fields takes it seconds; README, \"A step that hangs\")",
+                        stalled.as_secs_f64(),
+                        humantime::format_duration(bound),
+                        watch.describe(),
+                    ),
+                );
+            }
+            continue;
+        }
         if stalled >= bound {
             crate::log::log(
                 crate::log::Level::Error,

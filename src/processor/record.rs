@@ -96,6 +96,7 @@ impl Processor {
             });
         }
         let ts = metric.timestamp.unwrap_or(self.wall.ns);
+        let own = ts;
         if self.refuse_ahead(rec, metric, ts) {
             self.passthrough(rec, out);
             return;
@@ -153,7 +154,7 @@ impl Processor {
             .emit(encodings, &inst.tags, &mut self.counters, out);
         self.passthrough(rec, out);
         if !dropped {
-            self.push_fields(metric, rec.line, ts, slot, out);
+            self.push_fields(metric, rec.line, (ts, own), slot, out);
         }
         self.schedule(slot, ts);
         self.pool
@@ -168,8 +169,16 @@ impl Processor {
     }
 
     /// Feed the metric's bound fields to instance `slot` as events at `ts`, evaluate the step
-    /// and write its outputs.
-    fn push_fields(&mut self, metric: &Metric, line: u64, ts: i64, slot: usize, out: &mut Vec<u8>) {
+    /// and write its outputs. `own` is the record's own time (`ts` unless it was late and
+    /// shifted): the `@TelegrafTime` inputs get it when the record's fields made the step.
+    fn push_fields(
+        &mut self,
+        metric: &Metric,
+        line: u64,
+        (ts, own): (i64, i64),
+        slot: usize,
+        out: &mut Vec<u8>,
+    ) {
         self.wiring.observe(metric, &self.versions.base().bindings);
         let Some(inst) = self.pool.table.get_mut(slot) else {
             return;
@@ -177,6 +186,7 @@ impl Processor {
         let version = self.versions.get(inst.version);
         let events = &mut self.emitter.events;
         let mut sink = |e: OutputEvent<'_>| events.push(Fired::of(e));
+        let before = self.counters.events;
         for b in &version.bindings {
             if !b.matches(metric) {
                 continue;
@@ -212,6 +222,15 @@ impl Processor {
                         });
                     }
                 },
+            }
+        }
+        if self.counters.events != before {
+            // Not counted as events (those are the record's field values). Cannot fail: an
+            // `@TelegrafTime` input has no field binding, and the step is the fields' own.
+            for t in &version.times {
+                let _ = inst
+                    .monitor
+                    .push(ts, t.input, tessla_engine::Value::Int(own), &mut sink);
             }
         }
         inst.monitor.flush(&mut sink);

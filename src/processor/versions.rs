@@ -7,7 +7,7 @@
 //! started with.
 
 use super::instances::Key;
-use crate::telegraf::binding::{self, FieldPattern, InputBinding};
+use crate::telegraf::binding::{self, FieldPattern, InputBinding, TimeBinding};
 use crate::telegraf::encode;
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -26,6 +26,8 @@ pub struct Version {
     /// Every node's stable key (`snapshot::node_keys`): a switch carries state by them.
     pub(super) keys: Vec<u64>,
     pub(super) bindings: Vec<InputBinding>,
+    /// Its `@TelegrafTime` inputs: the record's own time at each step a record makes.
+    pub(super) times: Vec<TimeBinding>,
     /// How its outputs are written, prepared once: only its own instances' lines use it.
     pub(super) encodings: encode::Prepared,
 }
@@ -42,6 +44,7 @@ impl Version {
         Ok(Version {
             keys: snapshot::node_keys(&program),
             bindings: binding::bindings(&program)?,
+            times: binding::time_bindings(&program)?,
             encodings: encode::Prepared::new(encode::encodings(&program), measurement),
             id,
             label,

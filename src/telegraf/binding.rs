@@ -4,8 +4,10 @@
 //! without it binds to the field of the same name in any metric), field patterns ending in `_*`
 //! that gather `name_0 .. name_N` into one `List[Float]` (a missing index becomes NaN), the
 //! list's known length (`@TelegrafListLength(n)`: a record up to a quarter short is filled up
-//! with NaN, a longer or much shorter one is warned about and kept as it came), and the lossless conversions from line-protocol
-//! values to [`Value`]s of the input's type.
+//! with NaN, a longer or much shorter one is warned about and kept as it came), the record's own
+//! time (`@TelegrafTime`: an `Events[Int]` input that gets the timestamp of the record that made
+//! the step, even when a late record is stepped after the monitor's clock), and the lossless
+//! conversions from line-protocol values to [`Value`]s of the input's type.
 
 use lineproto::{FieldValue, Metric, Prefix, list_index};
 use std::cell::Cell;
@@ -49,10 +51,56 @@ fn str_arg<'a>(args: &'a [(String, Value)], name: &str, pos: usize) -> Option<&'
         })
 }
 
-/// The bindings of every input of `program`, or a message naming a bad annotation.
+/// An input that carries the record's own time: `@TelegrafTime` on an `Events[Int]` input. At
+/// each step a record's fields make, it gets that record's timestamp (ns; Telegraf's metric
+/// time), which differs from the step's time when the record was late and stepped after the
+/// monitor's clock (`--late shift`): what was measured when, not when it was evaluated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimeBinding {
+    pub input: usize,
+    pub name: String,
+}
+
+/// The inputs of `program` marked `@TelegrafTime`, or a message naming one that is not an
+/// `Events[Int]`.
+pub fn time_bindings(program: &Program) -> Result<Vec<TimeBinding>, String> {
+    let mut out = Vec::new();
+    for (i, info) in program.inputs.iter().enumerate() {
+        if !is_time_input(info) {
+            continue;
+        }
+        if info.ty != Type::Int {
+            return Err(format!(
+                "input `{}`: @TelegrafTime gives the record's timestamp in ns, so the input must be Events[Int], found Events[{}]",
+                info.name, info.ty
+            ));
+        }
+        if info.annotations.iter().any(|a| a.name == "TelegrafIn") {
+            return Err(format!(
+                "input `{}`: @TelegrafTime and @TelegrafIn on one input; keep one (@TelegrafTime: the record's time, @TelegrafIn: a field)",
+                info.name
+            ));
+        }
+        out.push(TimeBinding {
+            input: i,
+            name: info.name.clone(),
+        });
+    }
+    Ok(out)
+}
+
+fn is_time_input(info: &tessla_engine::InputInfo) -> bool {
+    info.annotations.iter().any(|a| a.name == "TelegrafTime")
+}
+
+/// The bindings of every input of `program` that reads a field (every input but those marked
+/// `@TelegrafTime`: [`time_bindings`]), or a message naming a bad annotation.
 pub fn bindings(program: &Program) -> Result<Vec<InputBinding>, String> {
     let mut out = Vec::new();
     for (i, info) in program.inputs.iter().enumerate() {
+        if is_time_input(info) {
+            continue;
+        }
         let ann = info.annotations.iter().find(|a| a.name == "TelegrafIn");
         let (measurement, tags, field) = match ann {
             None => (None, Vec::new(), FieldPattern::Exact(info.name.clone())),
