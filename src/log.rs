@@ -165,6 +165,19 @@ pub fn mask(text: &str) -> String {
     out
 }
 
+/// `s` at most `max` bytes long, cut at a character boundary and followed by "… (N bytes)" when
+/// longer: a warning about a 1 MB value stays one readable line.
+pub fn cut(s: &str, max: usize) -> std::borrow::Cow<'_, str> {
+    if s.len() <= max {
+        return std::borrow::Cow::Borrowed(s);
+    }
+    let mut end = max;
+    while !s.is_char_boundary(end) {
+        end -= 1;
+    }
+    std::borrow::Cow::Owned(format!("{}… ({} bytes)", &s[..end], s.len()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -218,5 +231,13 @@ mod tests {
         assert_eq!(mask("nats://u:p@ss@h/b"), "nats://u:***@h/b");
         assert_eq!(mask("`nats:/u:pw@h:1/b`"), "`nats:/u:***@h:1/b`");
         assert_eq!(mask("a: /x and 12:30"), "a: /x and 12:30");
+    }
+
+    #[test]
+    fn a_long_text_is_cut_at_a_character_boundary_with_its_size() {
+        assert_eq!(cut("short", 10), "short");
+        assert_eq!(cut("ééé", 3), "é… (6 bytes)");
+        let long = "x".repeat(1_000_000);
+        assert_eq!(cut(&long, 4), "xxxx… (1000000 bytes)");
     }
 }

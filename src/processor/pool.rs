@@ -337,15 +337,28 @@ pub(super) fn describe(instance_by: &[String], key: &Key) -> String {
         .join(",")
 }
 
-/// " (instance robot=a)" for the instance of `m`, or nothing without `--instance-by`. Built
-/// only inside a warning's closure: a rate-limited warning costs no allocation.
+/// " (instance robot=a)" for the instance of `m`; without `--instance-by` (one instance), the
+/// record's measurement and tags, which name the robot (" (mqtt_consumer,host=tb3,topic=tessla)"),
+/// cut at [`NOTE_MAX`] bytes with the full size said. Built only inside a warning's closure: a
+/// rate-limited warning costs no allocation.
 pub(super) fn instance_note(instance_by: &[String], m: &Metric) -> String {
-    if instance_by.is_empty() {
-        String::new()
+    let what = if instance_by.is_empty() {
+        let mut s = m.measurement.clone();
+        for (k, v) in &m.tags {
+            s.push(',');
+            s.push_str(k);
+            s.push('=');
+            s.push_str(v);
+        }
+        s
     } else {
         format!(
-            " (instance {})",
+            "instance {}",
             describe(instance_by, &key_of(instance_by, m))
         )
-    }
+    };
+    format!(" ({})", crate::log::cut(&what, NOTE_MAX))
 }
+
+/// Longest instance or tag description in a warning.
+const NOTE_MAX: usize = 200;

@@ -4,6 +4,7 @@
 
 use super::Processor;
 use super::emit::Fired;
+use super::pool::instance_note;
 use super::time_policy;
 use crate::log;
 use lineproto::{Metric, Record, RecordRef, parse_record_into};
@@ -88,10 +89,13 @@ impl Processor {
     /// its own step, evaluated at once.
     fn record_metric(&mut self, rec: &RecordRef<'_>, metric: &Metric, out: &mut Vec<u8>) {
         if metric.overwritten > 0 {
+            let by = &self.opts.instance_by;
             log::warn_limited("repeated field", || {
                 format!(
-                    "line {}: {} field value(s) overwritten by a later value of the same key; the last value is used, as Telegraf does",
-                    rec.line, metric.overwritten
+                    "line {}{}: {} field value(s) overwritten by a later value of the same key; the last value is used, as Telegraf does",
+                    rec.line,
+                    instance_note(by, metric),
+                    metric.overwritten
                 )
             });
         }
@@ -127,10 +131,12 @@ impl Processor {
             && inst.recent.is_duplicate(t, metric, &mut self.list_keys)
         {
             self.counters.duplicates += 1;
+            let by = &self.opts.instance_by;
             log::warn_limited("duplicate", || {
                 format!(
-                    "line {}: exact repeat of a recent record (a redelivered message); dropped",
-                    rec.line
+                    "line {}{}: exact repeat of a recent record (a redelivered message); dropped",
+                    rec.line,
+                    instance_note(by, metric)
                 )
             });
             return;
@@ -184,6 +190,7 @@ impl Processor {
             return;
         };
         let version = self.versions.get(inst.version);
+        let by = &self.opts.instance_by;
         let events = &mut self.emitter.events;
         let mut sink = |e: OutputEvent<'_>| events.push(Fired::of(e));
         let before = self.counters.events;
@@ -197,8 +204,10 @@ impl Processor {
                     self.counters.dropped_values += 1;
                     log::warn_limited("conversion", || {
                         format!(
-                            "line {line}: input `{}`: {}; value skipped",
-                            e.input, e.reason
+                            "line {line}{}: input `{}`: {}; value skipped",
+                            instance_note(by, metric),
+                            e.input,
+                            e.reason
                         )
                     });
                 }
@@ -218,7 +227,11 @@ impl Processor {
                             }
                         };
                         log::warn_limited("input event", || {
-                            format!("line {line}: input `{}`: {why}; value skipped", b.name)
+                            format!(
+                                "line {line}{}: input `{}`: {why}; value skipped",
+                                instance_note(by, metric),
+                                b.name
+                            )
                         });
                     }
                 },

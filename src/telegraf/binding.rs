@@ -429,9 +429,18 @@ fn whole(f: f64) -> Option<i64> {
     (f.fract() == 0.0 && f.abs() < 9.2e18).then_some(f as i64)
 }
 
-/// A field value as line protocol writes it.
+/// Longest string value shown whole in a message.
+const SHOW_MAX: usize = 64;
+
+/// A field value as line protocol writes it; a string longer than 64 bytes is cut, with its size
+/// (a warning about a 1 MB string stays one readable line).
 pub fn show_field(v: &FieldValue) -> String {
     match v {
+        FieldValue::Str(s) if s.len() > SHOW_MAX => {
+            let head = crate::log::cut(s, SHOW_MAX);
+            let head = head.split('…').next().unwrap_or_default();
+            format!("{head:?}… (a string of {} bytes)", s.len())
+        }
         FieldValue::Str(s) => format!("{s:?}"),
         FieldValue::Float(f) => f.to_string(),
         FieldValue::Int(i) => format!("{i}i"),

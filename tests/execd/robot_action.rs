@@ -592,3 +592,48 @@ fn the_summary_and_the_report_show_reasons_and_the_cap() {
         assert!(speeds.contains(label), "the speeds plot marks `{label}`");
     }
 }
+
+/// Issue 46: a robot whose link dropped sends its queued messages late, after a newer one (or a
+/// silence) moved its monitor's clock. Each late message is a step of its own just after the
+/// clock, but its action's `valid_until` counts from the message's own time, so a robot's gate
+/// refuses it as stale; before the fix it counted from the shifted step, up to 1.25 s too late.
+#[test]
+fn a_late_messages_action_is_valid_until_its_own_time_plus_the_validity() {
+    let beams = scan(360, 2.0, 2.0);
+    let ms = 1_000_000i64;
+    // Two messages, a silence past max_silence (robot_silent fires), one after the link came back,
+    // then the queue the robot's client sent late, in order.
+    let mut times = vec![TS, TS + 200 * ms, TS + 2_000 * ms];
+    times.extend((2..=9).map(|i| TS + i * 200 * ms));
+    let input: String = times
+        .iter()
+        .map(|&t| message(0.1, 0.1, &beams, t))
+        .collect();
+    for s in [
+        "robot.tessla",
+        "p1_braking.tessla",
+        "p2_tolerance.tessla",
+        "p3_lidar.tessla",
+    ] {
+        let (actions, err) = metrics(&["--spec", &spec(s), "--no-passthrough"], &input, "action");
+        assert_eq!(actions.len(), times.len(), "{s}: {err}");
+        assert!(err.contains("8 late records"), "{s}: {err}");
+        for (k, (a, &own)) in actions.iter().zip(&times).enumerate() {
+            let at = a.timestamp.unwrap();
+            assert_eq!(int(a, "valid_until"), own + 400 * ms, "{s}: {a:?}");
+            if k < 3 {
+                assert_eq!(at, own, "{s}: {a:?}");
+            } else {
+                // Late: stepped after the clock; all but the newest (1.8 s, valid until 2.2 s)
+                // already stale by the monitor's own clock.
+                assert!(at > TS + 2_000 * ms, "{s}: {a:?}");
+                let stale = own < TS + 1_600 * ms + 1;
+                assert_eq!(int(a, "valid_until") < at, stale, "{s}: {a:?}");
+            }
+        }
+    }
+    // `trace` and a spec without @TelegrafTime events: the action's own time, as before.
+    let (out, err, code) = run_all(&["check", &spec("robot.tessla")], "");
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("message_time"), "{out}");
+}

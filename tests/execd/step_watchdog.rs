@@ -164,14 +164,23 @@ fn a_stdout_not_read_past_the_bound_is_waited_for_and_every_record_is_answered()
     );
     // The reader reads again: everything comes, and the child ends normally at the end of input.
     let mut out = String::new();
-    child.stdout.take().unwrap().read_to_string(&mut out).unwrap();
+    child
+        .stdout
+        .take()
+        .unwrap()
+        .read_to_string(&mut out)
+        .unwrap();
     let status = child.wait().unwrap();
     assert!(writer.join().unwrap(), "every record was written");
     errs.join().unwrap();
     log.extend(rx.try_iter());
     assert_eq!(status.code(), Some(0), "{log:?}");
     let count = |m: &str| out.lines().filter(|l| l.starts_with(m)).count() as i64;
-    assert_eq!(count("mqtt_consumer,"), RECORDS, "every record passed through");
+    assert_eq!(
+        count("mqtt_consumer,"),
+        RECORDS,
+        "every record passed through"
+    );
     assert_eq!(count("tessla "), RECORDS, "every record answered");
     assert!(!log.iter().any(|l| l.starts_with("E! ")), "{log:?}");
 }
