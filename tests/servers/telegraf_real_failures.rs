@@ -679,3 +679,128 @@ fn the_broker_down_for_30_s_makes_late_and_repeated_actions_the_robot_refuses() 
         );
     }
 }
+
+/// Issue 46: a robot that publishes at QoS 1 and takes its actions on one connection, with its own
+/// time in each message (`json_time_key`), whose link drops for 1.3 s three times (its client
+/// queues and sends the queue late) and whose broker is down for 10 s. A silence moves the
+/// monitor's clock (`robot_silent` fires), so the queued messages come late and are stepped after
+/// it; their actions must still be valid only until their own message's time plus 400 ms. Every
+/// action's `valid_until` is checked against the robot's own record of what it sent (it must be
+/// a sent message's time plus the validity: a validity counted from a moved clock is not), and
+/// the robot's gate must refuse every action it receives past that time: zero stale actions
+/// applied.
+#[test]
+fn link_gaps_and_a_broker_outage_let_no_stale_action_through_the_robots_gate() {
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use tessla_telegraf::simulate::closed_loop::Action;
+    use tessla_telegraf::simulate::gate::{Gate, Verdict};
+    const VALIDITY: i64 = 400_000_000;
+    for (version, bin) in real_telegraf::versions() {
+        if servers::require("mosquitto", "mosquitto").is_none() {
+            return;
+        }
+        let Some(influx) = servers::Influxd::start() else {
+            return;
+        };
+        let port = servers::free_port();
+        let broker = mosquitto_on(port);
+        let state = tempfile::tempdir().unwrap();
+        let conf = Rewrite::robot(port, Some(&influx.url("")))
+            .state_in(state.path())
+            .robots_time()
+            .apply(&real_telegraf::shipped("telegraf/telegraf.conf"));
+        let stop = Arc::new(AtomicBool::new(false));
+        let telegraf = Telegraf::start(version, &bin, &conf, &[]);
+        std::thread::sleep(Duration::from_secs(1));
+        // One connection: the robot publishes on it and receives its actions on it.
+        let (robot, actions) = robust_client(port, "robot", Some("action"), stop.clone());
+        let payloads = messages(32 * 5);
+        let start = Instant::now();
+        let mut broker = Some(broker);
+        let mut sent = std::collections::BTreeSet::new();
+        let mut queue: Vec<Vec<u8>> = Vec::new();
+        // Link gaps of 1.3 s at 4 s, 8 s and 12 s; the broker down from 18 s to 28 s.
+        let gap = |k: usize| [20usize, 40, 60].iter().any(|&g| (g..g + 7).contains(&k));
+        for (k, p) in payloads.iter().enumerate() {
+            let due = start + Duration::from_millis(200 * k as u64);
+            if let Some(wait) = due.checked_duration_since(Instant::now()) {
+                std::thread::sleep(wait);
+            }
+            if k == 18 * 5 {
+                drop(broker.take());
+            }
+            if k == 28 * 5 {
+                broker = Some(mosquitto_on(port));
+            }
+            // The robot's time, as Telegraf's float64 reading keeps it exactly (a multiple of 4 µs).
+            let t = real_telegraf_now() / 4096 * 4096;
+            sent.insert(t);
+            let mut json: serde_json::Value = serde_json::from_slice(p).unwrap();
+            json["time"] = serde_json::json!(t);
+            let payload = serde_json::to_vec(&json).unwrap();
+            if gap(k) {
+                queue.push(payload);
+                continue;
+            }
+            for q in queue.drain(..).chain(std::iter::once(payload)) {
+                let _ = robot.try_publish("tessla", rumqttc::QoS::AtLeastOnce, false, q);
+            }
+        }
+        std::thread::sleep(Duration::from_secs(5));
+        let log = telegraf.stop();
+        stop.store(true, Ordering::Relaxed);
+        let mut gate = Gate::default();
+        let (mut received, mut stale, mut applied) = (0, 0, 0);
+        let mut not_a_message = Vec::new();
+        while let Ok((at, payload)) = actions.try_recv() {
+            received += 1;
+            let row = real_telegraf::action_row(&payload);
+            let int = |k: &str| match row.fields.get(k) {
+                Some(real_telegraf::Field::Int(i)) => Some(*i),
+                _ => None,
+            };
+            let (seq, until) = (int("seq"), int("valid_until"));
+            let Some(until) = until else {
+                panic!("Telegraf {version}: an action without valid_until: {row:?}");
+            };
+            if !sent.contains(&(until - VALIDITY)) {
+                not_a_message.push(until);
+            }
+            let action = Action {
+                speed: 0.0,
+                augmented: false,
+                speed_mse: None,
+                seq,
+                valid_until: Some(until),
+                time_ns: Some(row.time * 1_000_000),
+            };
+            let verdict = gate.judge(&action, at);
+            // The data behind the action is its message's: older than the validity, refused.
+            if at > until {
+                stale += 1;
+                assert_eq!(verdict, Verdict::RefusedStale, "Telegraf {version}");
+            } else if matches!(verdict, Verdict::Accepted | Verdict::Restarted) {
+                applied += 1;
+                assert!(at - (until - VALIDITY) <= VALIDITY, "Telegraf {version}");
+            }
+        }
+        assert!(
+            not_a_message.is_empty(),
+            "Telegraf {version}: {} actions valid until a time no message had plus 400 ms (a moved clock's): {not_a_message:?}\n{log}",
+            not_a_message.len()
+        );
+        assert!(
+            received > 60 && applied > 40,
+            "Telegraf {version}: {received} actions, {applied} applied\n{log}"
+        );
+        assert!(
+            log.contains("late record"),
+            "Telegraf {version}: the link gaps made no late record: the test did not test\n{log}"
+        );
+        assert_eq!(gate.refused_stale, stale, "every stale action is refused");
+        eprintln!(
+            "Telegraf {version}: 3 link gaps of 1.3 s and the broker down 10 s at 5 Hz: {received} actions reached the robot, {applied} applied, {stale} stale (all refused), 0 stale applied"
+        );
+    }
+}
