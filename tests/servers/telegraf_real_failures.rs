@@ -804,3 +804,45 @@ fn link_gaps_and_a_broker_outage_let_no_stale_action_through_the_robots_gate() {
         );
     }
 }
+
+/// Issue 46: one huge record (a scan of 60,000 beams, about 0.5 MB) among ordinary ones, with a
+/// step watchdog of 2 s. Whatever Telegraf does with it (the echo it re-parses in time growing
+/// with the square of the field count, seconds for this one), the monitor does not take the
+/// blocked write for a hung step: the same child answers every record after it.
+#[test]
+fn a_huge_record_costs_its_own_time_and_every_record_after_it_is_answered() {
+    for (version, bin) in real_telegraf::versions() {
+        let Some(s) =
+            setup(|c: String| c.replacen("\"run\"", "\"run\", \"--step-timeout\", \"2s\"", 1))
+        else {
+            return;
+        };
+        let telegraf = Telegraf::start(version, &bin, &s.conf, &[]);
+        wait_subscribed(&s.broker, "telegraf-tessla-in", "tessla", 0);
+        let child = telegraf.wait_child(&[], Duration::from_secs(10));
+        let mut payloads = messages(31);
+        let mut huge: serde_json::Value = serde_json::from_slice(&payloads[10]).unwrap();
+        huge["lidar"] = serde_json::json!(vec![1.5f64; 60_000]);
+        payloads[10] = serde_json::to_vec(&huge).unwrap();
+        publish_at(s.broker.port, &payloads, 5.0, |_| {});
+        wait_echoed(&s.influx, 31, || telegraf.log());
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while count(&s.influx, "SELECT count(seq) FROM action") < 31 {
+            assert!(
+                Instant::now() < deadline,
+                "Telegraf {version}: {} of 31 actions\n{}",
+                count(&s.influx, "SELECT count(seq) FROM action"),
+                telegraf.log()
+            );
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        assert_eq!(
+            telegraf.children(),
+            vec![child],
+            "Telegraf {version}: the same child"
+        );
+        let log = telegraf.stop();
+        assert!(!log.contains("exit status 4"), "Telegraf {version}:\n{log}");
+        assert_eq!(echoed(&s.influx).values().sum::<usize>(), 31);
+    }
+}
