@@ -675,10 +675,12 @@ pub fn execd_args(conf: &str) -> Vec<String> {
 }
 
 /// An offline `run` with `args` (less `--state` and `--state-interval`: it starts from nothing,
-/// as the monitor under Telegraf did) over `input`, no echo: its output.
+/// as the monitor under Telegraf did) over `input`, no echo (`--no-passthrough` once): its
+/// output.
 pub fn offline(args: &[String], input: &str) -> String {
     use std::io::Write;
     let mut args = args.to_vec();
+    args.retain(|a| a != "--no-passthrough");
     for flag in ["--state", "--state-interval"] {
         if let Some(i) = args.iter().position(|a| a == flag) {
             args.drain(i..i + 2);
