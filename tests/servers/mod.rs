@@ -24,3 +24,4 @@ mod telegraf_real_failures;
 #[cfg(feature = "tools")]
 mod telegraf_real_nats;
 mod telegraf_real_versions;
+mod telegraf_wiring;
