@@ -101,9 +101,10 @@ fn clone_wiring_passes_each_record_once_with_our_lines_and_starlark_writes_the_s
     assert_eq!(verdicts.len(), N, "a verdict metric for every record");
     assert_eq!(actions.len(), N, "an action for every record");
     assert!(
-        actions
-            .iter()
-            .any(|a| a.fields.get("reason").is_some_and(|r| *r == real_telegraf::Field::Str("p2".into()))),
+        actions.iter().any(|a| a
+            .fields
+            .get("reason")
+            .is_some_and(|r| *r == real_telegraf::Field::Str("p2".into()))),
         "some actions are corrections"
     );
     for (version, bin) in real_telegraf::versions() {
