@@ -17,6 +17,12 @@ Starlark's cost in the same round:
                    only the tagged copy, removes the tag) with --no-passthrough: the original
                    goes round the processor; Telegraf parses only the verdicts and the action
   clone+upstream   the same with `influx_parser_type = "upstream"` on processors.execd
+  execd alone      processors.execd with --no-passthrough and no clone: the record is not kept
+                   (the NATS partition confs, whose only output takes the actions); not the
+                   same output as Starlark's, so no ratio
+  (and, after the table, our binary alone on the same records, without Telegraf)
+  clone+null child the clone wiring with a child that reads and writes nothing (`cat >
+                   /dev/null`): what feeding any execd child costs Telegraf, before any output
   starlark 1       bench/p2.star with `one_metric = true`: the verdicts inside the action metric
   clone 1          execd clone running bench/p2_one_metric.tessla: the same one metric
 
@@ -60,6 +66,12 @@ def processors(variant, binary):
         one = "true" if variant.endswith(" 1") else "false"
         return (f'[[processors.starlark]]\n  namepass = ["mqtt_consumer"]\n  script = "{STAR}"\n'
                 f'  [processors.starlark.constants]\n    one_metric = {one}\n')
+    if variant == "clone+null child":
+        return processors("execd clone", binary).replace(
+            toml_list(run + ["--no-passthrough"]), toml_list(["sh", "-c", "cat > /dev/null"]))
+    if variant == "execd alone":
+        return (f'[[processors.execd]]\n  namepass = ["mqtt_consumer"]\n'
+                f'  command = {toml_list(run + ["--no-passthrough"])}\n')
     if variant == "execd echo":
         return (f'[[processors.execd]]\n  namepass = ["mqtt_consumer"]\n  command = {toml_list(run)}\n')
     upstream = '  influx_parser_type = "upstream"\n' if variant == "clone+upstream" else ""
@@ -87,7 +99,8 @@ def cpu_of(telegraf, path):
     return (after.children_user - before.children_user) + (after.children_system - before.children_system)
 
 
-VARIANTS = ["floor", "starlark", "execd echo", "execd clone", "clone+upstream", "starlark 1", "clone 1"]
+VARIANTS = ["floor", "starlark", "execd echo", "execd clone", "clone+upstream", "execd alone", "clone+null child",
+            "starlark 1", "clone 1"]
 
 
 def main():
@@ -125,10 +138,21 @@ def main():
     for v in variants:
         ratio = "-"
         base = "starlark 1" if v.endswith(" 1") else "starlark"
-        if v != "floor" and not v.startswith("starlark") and base in per:
+        if v not in ("floor", "execd alone", "clone+null child") and not v.startswith("starlark") and base in per:
             ratio = f"{statistics.median(p / s for p, s in zip(per[v], per[base])):.2f}"
         above = "-" if v == "floor" else f"{statistics.median(per[v]):.2f}"
         print(f"| {v} | {statistics.median(cpu[v]):.2f} | {above} | {ratio} |")
+    # Our child's own share: the binary alone on the same records (no Telegraf), CPU per record.
+    alone = []
+    for _ in range(a.reps):
+        with open(records, "rb") as f:
+            before = os.times()
+            subprocess.run([a.bin, "run", "--spec", str(SPEC), "--no-passthrough", "--log-level", "warn"],
+                           stdin=f, stdout=subprocess.DEVNULL, check=True)
+            after = os.times()
+        alone.append((after.children_user - before.children_user) + (after.children_system - before.children_system))
+    print(f"\nour binary alone (no Telegraf), `run --spec specs/p2_tolerance.tessla --no-passthrough` on the "
+          f"same records: {statistics.median(alone) / a.records * 1e6:.2f} µs/record (median of {a.reps})")
 
 
 if __name__ == "__main__":
