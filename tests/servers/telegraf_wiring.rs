@@ -7,11 +7,16 @@
 //!   verdicts and actions beside it are what an offline run computes, and the tag is on none;
 //! - the same wiring with `influx_parser_type = "upstream"` gives the same output;
 //! - `processors.starlark` running `bench/p2.star` (the in-Telegraf yardstick of `make
-//!   bench-telegraf`) writes the same metrics as our binary running `specs/p2_tolerance.tessla`.
+//!   bench-telegraf`) writes the same metrics as our binary running `specs/p2_tolerance.tessla`;
+//! - why `telegraf.conf` keeps the echo: with a real Mosquitto and InfluxDB unreachable, the
+//!   shipped conf answers every robot message, and the same conf with the clone wiring stops
+//!   answering after a few (the record the clone keeps is acknowledged to the broker only once
+//!   InfluxDB took it, and the broker sends at most `max_inflight_messages` unacknowledged).
 
-use crate::support::BIN;
-use crate::support::real_telegraf::{self, Row, parse_lines};
+use crate::support::real_telegraf::{self, Rewrite, Row, Telegraf, parse_lines};
+use crate::support::{BIN, mqtt_client, recorded, servers};
 use std::process::Command;
+use std::time::Duration;
 
 const T0: i64 = 1_700_000_000_000_000_000;
 const N: usize = 60;
@@ -176,6 +181,64 @@ fn one_metric_spec_and_starlark_write_the_same_single_metric() {
                 actions,
                 "Telegraf {version}, {name}: the one metric of an offline run"
             );
+        }
+    }
+}
+
+#[test]
+fn with_influxdb_down_the_echo_answers_every_message_and_the_clone_wiring_stops() {
+    let fixture = recorded::recorded_run_path();
+    let records = std::fs::read_to_string(&fixture)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'))
+        .count();
+    let text = real_telegraf::shipped("telegraf/telegraf.conf");
+    for (version, bin) in real_telegraf::versions() {
+        for clone in [false, true] {
+            let Some(broker) = real_telegraf::broker() else {
+                return;
+            };
+            let state = tempfile::tempdir().unwrap();
+            // InfluxDB on a port where nothing listens: every write is refused.
+            let down = format!("http://127.0.0.1:{}", servers::free_port());
+            let mut conf = Rewrite::robot(broker.port, Some(&down))
+                .state_in(state.path())
+                .apply(&text);
+            if clone {
+                conf = real_telegraf::clone_wiring(&conf).unwrap();
+            }
+            let actions = mqtt_client::subscribe(broker.port, "action", "robot");
+            let telegraf = Telegraf::start(version, &bin, &conf, &[]);
+            real_telegraf::wait_subscribed(&broker, "telegraf-tessla-in", "tessla", 0);
+            let out = Command::new(BIN)
+                .args(["replay", fixture.to_str().unwrap()])
+                .args(["--broker", &broker.url()])
+                .args(["--topic", "tessla", "--speed", "0"])
+                .output()
+                .unwrap();
+            assert!(
+                out.status.success(),
+                "replay: {}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+            let wait = Duration::from_secs(if clone { 15 } else { 60 });
+            let got = mqtt_client::collect(&actions, records, wait);
+            let log = telegraf.stop();
+            if clone {
+                assert!(
+                    got.len() <= records / 4,
+                    "Telegraf {version}, clone wiring: {} of {records} answered with InfluxDB down \
+                     (expected the broker's in-flight window, 20)\n{log}",
+                    got.len()
+                );
+            } else {
+                assert_eq!(
+                    got.len(),
+                    records,
+                    "Telegraf {version}, the echo: every message answered with InfluxDB down\n{log}"
+                );
+            }
         }
     }
 }
