@@ -99,14 +99,22 @@ bench-nats: build
 	$(CARGO) run --release --example fleet_nats -- --robots 64 --reps 3
 
 # Robot to action through the real Telegraf (BENCHMARKS.md, "Robot to action through Telegraf"):
-# the delay from a robot's MQTT publish to its action on its topic, through Mosquitto, Telegraf
-# (tools/build-telegraf.sh) running the shipped conf and the release binary, p50/p90/p99 at 5 Hz
-# for 1 robot (telegraf.conf) and 1,000 (telegraf-fleet.conf), with and without the lidar.
+# first P2 inside one Telegraf, ours (processors.execd, echo and clone wirings) against the same
+# P2 in processors.starlark (bench/p2.star), paired: CPU per record above the no-processor floor
+# (bench/telegraf_p2.py); then the delay from a robot's MQTT publish to its action on its topic,
+# through Mosquitto, Telegraf (tools/build-telegraf.sh) running the shipped conf and the release
+# binary, p50/p90/p99 at 5 Hz: 1 robot on Mosquitto's default (Nagle on) and with
+# set_tcp_nodelay (as shipped), then 1 robot (telegraf.conf) and 1,000 (telegraf-fleet.conf),
+# with and without the lidar.
 DELAY_ROBOTS ?= 1 1000
 DELAY_SECONDS ?= 30
+P2_RECORDS ?= 200000
+P2_REPS ?= 5
 bench-telegraf: build
 	bash tools/build-telegraf.sh
+	python3 bench/telegraf_p2.py --records $(P2_RECORDS) --reps $(P2_REPS)
 	$(CARGO) build --release --example telegraf_delay
+	./target/release/examples/telegraf_delay --robots 1 --seconds $(DELAY_SECONDS) --warmup 5 --tcp-nodelay off
 	for r in $(DELAY_ROBOTS); do \
 	  ./target/release/examples/telegraf_delay --robots $$r --seconds $(DELAY_SECONDS) --warmup 5; \
 	  ./target/release/examples/telegraf_delay --robots $$r --seconds $(DELAY_SECONDS) --warmup 5 --no-lidar; \

@@ -7,11 +7,20 @@
 //! Each robot publishes the recorded run's messages (the robot's JSON, 360 lidar beams, QoS 1)
 //! at `--hz` (5), the robots spread evenly over the period; actions are matched to publishes
 //! in order, per robot. One robot runs `telegraf/telegraf.conf`, several run
-//! `telegraf/telegraf-fleet.conf` (one topic per robot, one monitor instance each).
+//! `telegraf/telegraf-fleet.conf` (one topic per robot, one monitor instance each); `--conf
+//! PATH` runs another conf of the same shape. The robots publish and subscribe to their actions
+//! (QoS 1) on ONE connection, as a robot's MQTT client does: the broker then writes the PUBACK
+//! of a publish and, soon after, the action on the same socket, which is where Nagle's
+//! algorithm holds the second small write (about 40 ms, until the robot's delayed ACK) unless
+//! the broker sets `set_tcp_nodelay true` (telegraf/mosquitto/mosquitto.conf; here the default,
+//! `--tcp-nodelay off` runs Mosquitto's default). Several robots share that one connection.
 //!
 //! Run: `cargo build --release && cargo run --release --example telegraf_delay --
 //!       [--robots 1] [--seconds 20] [--warmup 3] [--hz 5] [--telegraf v1.39.3] [--set KEY=VALUE]
-//!       [--no-lidar]`
+//!       [--no-lidar] [--tcp-nodelay on|off] [--conf PATH] [--clone]`
+//! `--clone` runs the conf with the clone wiring (README, "Telegraf never re-parses the robot's
+//! record": processors.clone tags a copy, processors.execd takes only the copy and runs with
+//! --no-passthrough) instead of the echo.
 //! `--set agent.flush_interval=1s` (a key of the conf: `section.key`, the first table of that
 //! section) tries a setting; `--no-lidar` sends the messages without their 360 beams (P1 and
 //! P3 then judge an empty scan), to see what the lidar costs Telegraf. Prints one line: `robots=.. sent=.. answered=.. lost=..
@@ -43,6 +52,12 @@ struct Args {
     sets: Vec<(String, String)>,
     /// Leave the 360 lidar beams out of the robot's messages (`--no-lidar`).
     no_lidar: bool,
+    /// Mosquitto's `set_tcp_nodelay` (`--tcp-nodelay on|off`, on as shipped).
+    nodelay: bool,
+    /// The conf to run instead of the shipped one (`--conf PATH`).
+    conf: Option<String>,
+    /// Rewire the conf's processor to the clone wiring (`--clone`).
+    clone: bool,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -54,6 +69,9 @@ fn parse_args() -> Result<Args, String> {
         version: "v1.39.3".into(),
         sets: Vec::new(),
         no_lidar: false,
+        nodelay: true,
+        conf: None,
+        clone: false,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -84,6 +102,15 @@ fn parse_args() -> Result<Args, String> {
                 a.sets.push((k.to_string(), v.to_string()));
             }
             "--no-lidar" => a.no_lidar = true,
+            "--tcp-nodelay" => {
+                a.nodelay = match val("--tcp-nodelay")?.as_str() {
+                    "on" => true,
+                    "off" => false,
+                    other => return Err(format!("--tcp-nodelay {other}: on or off")),
+                }
+            }
+            "--conf" => a.conf = Some(val("--conf")?),
+            "--clone" => a.clone = true,
             "--bench" => {}
             other => return Err(format!("unknown argument `{other}`")),
         }
@@ -159,8 +186,11 @@ fn run(args: &Args) -> Result<(), String> {
     }
     let telegraf_bin = real_telegraf::binary(&args.version)
         .ok_or(format!("Telegraf {} not built", args.version))?;
-    let broker =
-        real_telegraf::broker_with("max_queued_messages 100000\n").ok_or("mosquitto missing")?;
+    let broker = real_telegraf::broker_with(&format!(
+        "max_queued_messages 100000\nset_tcp_nodelay {}\n",
+        args.nodelay
+    ))
+    .ok_or("mosquitto missing")?;
     let influx = servers::Influxd::start().ok_or("influxd missing")?;
     let fleet = args.robots > 1;
     let (conf_path, client_id, subscription) = if fleet {
@@ -173,10 +203,16 @@ fn run(args: &Args) -> Result<(), String> {
         ("telegraf/telegraf.conf", "telegraf-tessla-in", "tessla")
     };
     let state = tempfile::tempdir().map_err(|e| e.to_string())?;
-    let text = real_telegraf::shipped(conf_path);
+    let text = match &args.conf {
+        Some(path) => std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?,
+        None => real_telegraf::shipped(conf_path),
+    };
     let rewrite =
         real_telegraf::Rewrite::robot(broker.port, Some(&influx.url(""))).state_in(state.path());
     let mut conf = rewrite.apply(&text);
+    if args.clone {
+        conf = real_telegraf::clone_wiring(&conf)?;
+    }
     for (k, v) in &args.sets {
         conf = set_key(&conf, k, v)?;
     }
@@ -219,10 +255,13 @@ fn run(args: &Args) -> Result<(), String> {
     } else {
         "action".to_string()
     };
-    let mut sub_opts = MqttOptions::new("delay-robots", "127.0.0.1", broker.port);
-    sub_opts.set_max_packet_size(1 << 20, 1 << 20);
-    let (sub, mut sub_conn) = Client::new(sub_opts, 65536);
-    sub.subscribe(&sub_filter, QoS::AtLeastOnce)
+    // The robots' one connection: their actions' subscription and their publishes.
+    let mut opts = MqttOptions::new("delay-robots", "127.0.0.1", broker.port);
+    opts.set_max_packet_size(1 << 20, 1 << 20);
+    opts.set_inflight(u16::MAX);
+    let (publisher, mut sub_conn) = Client::new(opts, 65536);
+    publisher
+        .subscribe(&sub_filter, QoS::AtLeastOnce)
         .map_err(|e| e.to_string())?;
     let (ready_tx, ready_rx) = std::sync::mpsc::channel();
     {
@@ -230,7 +269,6 @@ fn run(args: &Args) -> Result<(), String> {
         let delays = delays.clone();
         let fleet_topics = fleet;
         std::thread::spawn(move || {
-            let _sub = sub;
             for event in sub_conn.iter() {
                 match event {
                     Ok(Event::Incoming(Packet::SubAck(_))) => {
@@ -269,12 +307,6 @@ fn run(args: &Args) -> Result<(), String> {
 
     let telegraf = real_telegraf::Telegraf::start(&args.version, &telegraf_bin, &conf, &[]);
     real_telegraf::wait_subscribed(&broker, client_id, subscription, 0);
-
-    let mut pub_opts = MqttOptions::new("delay-publisher", "127.0.0.1", broker.port);
-    pub_opts.set_max_packet_size(1 << 20, 1 << 20);
-    pub_opts.set_inflight(u16::MAX);
-    let (publisher, mut pub_conn) = Client::new(pub_opts, 65536);
-    std::thread::spawn(move || for _ in pub_conn.iter() {});
 
     let period = Duration::from_secs_f64(1.0 / args.hz);
     let start = Instant::now();
@@ -318,11 +350,12 @@ fn run(args: &Args) -> Result<(), String> {
     counted.sort_by(f64::total_cmp);
     let errors = log.lines().filter(|l| l.contains(" E! ")).count();
     println!(
-        "telegraf={} robots={} hz={} lidar={} sent={} answered={} lost={} counted={} p50_ms={:.2} p90_ms={:.2} p99_ms={:.2} max_ms={:.2} telegraf_errors={}",
+        "telegraf={} robots={} hz={} lidar={} tcp_nodelay={} sent={} answered={} lost={} counted={} p50_ms={:.2} p90_ms={:.2} p99_ms={:.2} max_ms={:.2} telegraf_errors={}",
         args.version,
         args.robots,
         args.hz,
         !args.no_lidar,
+        args.nodelay,
         published,
         answered,
         published.saturating_sub(answered),

@@ -17,7 +17,7 @@ VERSIONS_DEFAULT="v1.33.2 v1.33.3 v1.39.3"
 # data_format options select.
 TAGS="custom"
 for p in inputs.mqtt_consumer inputs.nats_consumer inputs.socket_listener inputs.file inputs.internal \
-    processors.execd processors.regex \
+    processors.execd processors.regex processors.clone processors.starlark \
     outputs.mqtt outputs.influxdb outputs.file outputs.socket_writer outputs.nats outputs.discard \
     parsers.json parsers.influx serializers.json serializers.influx; do
     TAGS="$TAGS,$p"

@@ -24,3 +24,5 @@ mod telegraf_real_failures;
 #[cfg(feature = "tools")]
 mod telegraf_real_nats;
 mod telegraf_real_versions;
+#[cfg(feature = "tools")]
+mod telegraf_wiring;

@@ -140,6 +140,38 @@ impl Rewrite {
     }
 }
 
+/// The conf with its `processors.execd` rewired: `processors.clone` (order 1) adds the tag
+/// `tessla_copy` to a copy of each robot metric; the execd processor (order 2) takes only that
+/// copy (`tagpass`), removes the tag (`tagexclude`) and runs with `--no-passthrough`.
+pub fn clone_wiring(conf: &str) -> Result<String, String> {
+    let header = "[[processors.execd]]\n";
+    let at = conf
+        .find(header)
+        .ok_or("the conf has no [[processors.execd]]")?;
+    let command = conf[at..]
+        .find("command = [")
+        .map(|c| at + c)
+        .ok_or("the execd processor has no command")?;
+    let end = conf[command..]
+        .find(']')
+        .map(|e| command + e)
+        .ok_or("the execd command does not end")?;
+    let next = conf[at + header.len()..]
+        .find("\n[")
+        .map(|n| at + header.len() + n + 1)
+        .unwrap_or(conf.len());
+    Ok(format!(
+        "{}[[processors.clone]]\n  order = 1\n  namepass = [\"mqtt_consumer\"]\n  \
+         [processors.clone.tags]\n    tessla_copy = \"1\"\n\n{header}  order = 2\n  \
+         tagexclude = [\"tessla_copy\"]\n{}, \"--no-passthrough\"{}  \
+         [processors.execd.tagpass]\n    tessla_copy = [\"1\"]\n\n{}",
+        &conf[..at],
+        &conf[at + header.len()..end],
+        &conf[end..next],
+        &conf[next..]
+    ))
+}
+
 /// A running Telegraf: `telegraf --config FILE` in a temporary folder, its log (stderr) in
 /// `telegraf.log` there. Killed on drop unless stopped.
 pub struct Telegraf {
@@ -675,10 +707,12 @@ pub fn execd_args(conf: &str) -> Vec<String> {
 }
 
 /// An offline `run` with `args` (less `--state` and `--state-interval`: it starts from nothing,
-/// as the monitor under Telegraf did) over `input`, no echo: its output.
+/// as the monitor under Telegraf did) over `input`, no echo (`--no-passthrough` once): its
+/// output.
 pub fn offline(args: &[String], input: &str) -> String {
     use std::io::Write;
     let mut args = args.to_vec();
+    args.retain(|a| a != "--no-passthrough");
     for flag in ["--state", "--state-interval"] {
         if let Some(i) = args.iter().position(|a| a == flag) {
             args.drain(i..i + 2);
