@@ -411,32 +411,50 @@ impl Builder<'_> {
 }
 
 impl Plan {
-    /// The plan of `p`, if every node it evaluates has a form here and every value a scalar
-    /// type; `kernel(n)` is node `n`'s function as a [`Kernel`] (`slift`, `fold`, `reduce`).
-    pub fn build(p: &ir::Program, kernel: impl Fn(NodeId) -> Option<Kernel>) -> Option<Plan> {
-        Plan::try_build(p, kernel).ok()
-    }
-
-    fn try_build(
+    /// The plan of `p`, if every node it evaluates has a form here; `kernel(n)` is node `n`'s
+    /// function as a [`Kernel`] (`slift`, `fold`, `reduce`). Without a plan: the nodes that have
+    /// no form here, in evaluation order (empty when the program has none to name).
+    pub fn build(
         p: &ir::Program,
         kernel: impl Fn(NodeId) -> Option<Kernel>,
-    ) -> Result<Plan, NoPlan> {
+    ) -> Result<Plan, Vec<NodeId>> {
         let n = p.nodes.len();
-        if !p.delays.is_empty() || p.last_slot.len() != n {
-            return Err(NoPlan);
+        let never = u32::try_from(n).map_err(|_| Vec::new())?;
+        if p.last_slot.len() != n {
+            return Err(Vec::new());
         }
         let b = Builder {
             p,
             kinds: kinds(p, &kernel),
-            never: need(u32::try_from(n).ok())?,
+            never,
             consts: RefCell::new(Vec::new()),
         };
         let mut evaluated = vec![false; n];
         let mut instrs = Vec::with_capacity(n);
+        let mut slow = Vec::new();
         for &i in &p.order {
-            *need(evaluated.get_mut(i))? = true;
-            instrs.push(b.instr(i, kernel(i))?);
+            match (evaluated.get_mut(i), b.instr(i, kernel(i))) {
+                (Some(e), Ok(instr)) => {
+                    *e = true;
+                    instrs.push(instr);
+                }
+                _ => slow.push(i),
+            }
         }
+        if !slow.is_empty() {
+            return Err(slow);
+        }
+        if !p.delays.is_empty() {
+            return Err(p.delays.clone());
+        }
+        Plan::assemble(&b, instrs, &evaluated).map_err(|_| Vec::new())
+    }
+
+    /// The plan of the nodes' instructions: a `nil` for each node never evaluated, the slots
+    /// kept across steps, the outputs.
+    fn assemble(b: &Builder<'_>, instrs: Vec<Instr>, evaluated: &[bool]) -> Result<Plan, NoPlan> {
+        let p = b.p;
+        let n = p.nodes.len();
         // A node never evaluated has no event (no step reads one; the slots are shared by every
         // program on a thread, so they are emptied anyway).
         let mut all: Vec<Instr> = (0..n)
@@ -463,7 +481,7 @@ impl Plan {
             kept_refs,
             kept,
             outputs,
-            consts: b.consts.into_inner(),
+            consts: b.consts.take(),
         })
     }
 }
