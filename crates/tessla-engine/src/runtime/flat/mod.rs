@@ -617,8 +617,11 @@ fn cur_of(cur: &[Slot], n: u32) -> Slot {
 #[inline(always)]
 fn kept_of(last: &[Option<Value>], slot: u32, kind: Kind) -> Option<Option<u64>> {
     match last.get(slot as usize) {
-        Some(Some(_)) if kind == Kind::Val => Some(Some(Ref::Last(slot).bits())),
-        Some(Some(v)) => kind.bits(v).map(Some),
+        Some(Some(v)) => match kind.bits(v) {
+            Some(b) => Some(Some(b)),
+            None if kind == Kind::Val => Some(Some(Ref::Last(slot).bits())),
+            None => None,
+        },
         _ => Some(None),
     }
 }
@@ -714,20 +717,35 @@ impl Plan {
                 }
             }
         }
-        // A value kept from another kept slot is copied before any slot is written (the kept
-        // slot it refers to may be written in this loop).
-        let mut moved: Vec<(u32, Value)> = Vec::new();
         if self.kept_refs {
+            self.keep_values(cur, st.inputs, st.last);
+        } else {
             for &(n, slot, kind) in &self.kept {
                 let c = cur_of(cur, n);
                 if c.has
-                    && kind == Kind::Val
-                    && let Ref::Last(from) = Ref::of(c.bits)
-                    && from != slot
-                    && let Some(v) = vals.get(c.bits)
+                    && let Some(l) = st.last.get_mut(slot as usize)
                 {
-                    moved.push((slot, v.clone()));
+                    keep(l, kind, c.bits);
                 }
+            }
+        }
+        true
+    }
+
+    /// Keep the kept nodes' events when some are of [`Kind::Val`]: a value kept from another
+    /// kept slot is copied before any slot is written (the slot it refers to may be written
+    /// here), one from an input or a constant is cloned.
+    fn keep_values(&self, cur: &[Slot], inputs: &[Option<Value>], last: &mut [Option<Value>]) {
+        let mut moved: Vec<(u32, Value)> = Vec::new();
+        for &(n, slot, kind) in &self.kept {
+            let c = cur_of(cur, n);
+            if c.has
+                && kind == Kind::Val
+                && let Ref::Last(from) = Ref::of(c.bits)
+                && from != slot
+                && let Some(Some(v)) = last.get(from as usize)
+            {
+                moved.push((slot, v.clone()));
             }
         }
         for &(n, slot, kind) in &self.kept {
@@ -736,7 +754,7 @@ impl Plan {
                 continue;
             }
             if kind != Kind::Val {
-                if let Some(l) = st.last.get_mut(slot as usize) {
+                if let Some(l) = last.get_mut(slot as usize) {
                     keep(l, kind, c.bits);
                 }
                 continue;
@@ -744,19 +762,18 @@ impl Plan {
             let v = match Ref::of(c.bits) {
                 // Its own slot, or copied above.
                 Ref::Last(_) => continue,
-                Ref::Input(i) => st.inputs.get(i as usize).and_then(Option::as_ref),
+                Ref::Input(i) => inputs.get(i as usize).and_then(Option::as_ref),
                 Ref::Const(i) => self.consts.get(i as usize),
             };
-            if let (Some(v), Some(l)) = (v, st.last.get_mut(slot as usize)) {
+            if let (Some(v), Some(l)) = (v, last.get_mut(slot as usize)) {
                 replace(l, v.clone());
             }
         }
         for (slot, v) in moved {
-            if let Some(l) = st.last.get_mut(slot as usize) {
+            if let Some(l) = last.get_mut(slot as usize) {
                 replace(l, v);
             }
         }
-        true
     }
 
     /// The step's events into `cur`; `None` as soon as one has no scalar answer.
@@ -774,8 +791,11 @@ impl Plan {
                 Instr::Input { dst, input, kind } => (
                     dst,
                     match st.inputs.get(*input as usize) {
-                        Some(Some(_)) if *kind == Kind::Val => some(Ref::Input(*input).bits()),
-                        Some(Some(v)) => some(kind.bits(v)?),
+                        Some(Some(v)) => match kind.bits(v) {
+                            Some(b) => some(b),
+                            None if *kind == Kind::Val => some(Ref::Input(*input).bits()),
+                            None => return None,
+                        },
                         _ => NONE,
                     },
                 ),
