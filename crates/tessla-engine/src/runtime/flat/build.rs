@@ -474,11 +474,11 @@ impl Plan {
             .iter()
             .map(|o| Ok((b.idx(*o)?, b.kind(*o)?)))
             .collect::<Result<_, NoPlan>>()?;
-        let kept_refs = kept.iter().any(|k| k.2 == Kind::Val);
+        let (vals, kept): (Vec<_>, Vec<_>) = kept.into_iter().partition(|k| k.2 == Kind::Val);
         Ok(Plan {
             instrs: all,
             slots: n + 1,
-            kept_refs,
+            kept_vals: vals.into_iter().map(|(n, s, _)| (n, s)).collect(),
             kept,
             outputs,
             consts: b.consts.take(),

@@ -539,14 +539,14 @@ pub struct Plan {
     instrs: Vec<Instr>,
     /// Number of slots: one per node and one that never has an event.
     slots: usize,
-    /// (node, slot, kind) of each node kept across steps.
+    /// (node, slot, kind) of each node of a scalar kind kept across steps.
     kept: Vec<(u32, u32, Kind)>,
+    /// (node, slot) of each node of [`Kind::Val`] kept across steps.
+    kept_vals: Vec<(u32, u32)>,
     /// The node of each output, with its kind.
     outputs: Vec<(u32, Kind)>,
     /// The values of [`Kind::Val`] constants, by index.
     consts: Vec<Value>,
-    /// Whether a kept node is of [`Kind::Val`] (its event may refer to another kept slot).
-    kept_refs: bool,
 }
 
 /// The program has no plan (some node or type has no form here).
@@ -717,30 +717,28 @@ impl Plan {
                 }
             }
         }
-        if self.kept_refs {
-            self.keep_values(cur, st.inputs, st.last);
-        } else {
-            for &(n, slot, kind) in &self.kept {
-                let c = cur_of(cur, n);
-                if c.has
-                    && let Some(l) = st.last.get_mut(slot as usize)
-                {
-                    keep(l, kind, c.bits);
-                }
+        for &(n, slot, kind) in &self.kept {
+            let c = cur_of(cur, n);
+            if c.has
+                && let Some(l) = st.last.get_mut(slot as usize)
+            {
+                keep(l, kind, c.bits);
             }
+        }
+        if !self.kept_vals.is_empty() {
+            self.keep_values(cur, st.inputs, st.last);
         }
         true
     }
 
-    /// Keep the kept nodes' events when some are of [`Kind::Val`]: a value kept from another
-    /// kept slot is copied before any slot is written (the slot it refers to may be written
-    /// here), one from an input or a constant is cloned.
+    /// Keep the events of the kept nodes of [`Kind::Val`]: one kept from another kept slot is
+    /// copied before any of them is written (the slot it refers to may be written here; the
+    /// scalars' slots are never referred to), one from an input or a constant is cloned.
     fn keep_values(&self, cur: &[Slot], inputs: &[Option<Value>], last: &mut [Option<Value>]) {
         let mut moved: Vec<(u32, Value)> = Vec::new();
-        for &(n, slot, kind) in &self.kept {
+        for &(n, slot) in &self.kept_vals {
             let c = cur_of(cur, n);
             if c.has
-                && kind == Kind::Val
                 && let Ref::Last(from) = Ref::of(c.bits)
                 && from != slot
                 && let Some(Some(v)) = last.get(from as usize)
@@ -748,15 +746,9 @@ impl Plan {
                 moved.push((slot, v.clone()));
             }
         }
-        for &(n, slot, kind) in &self.kept {
+        for &(n, slot) in &self.kept_vals {
             let c = cur_of(cur, n);
             if !c.has {
-                continue;
-            }
-            if kind != Kind::Val {
-                if let Some(l) = last.get_mut(slot as usize) {
-                    keep(l, kind, c.bits);
-                }
                 continue;
             }
             let v = match Ref::of(c.bits) {
