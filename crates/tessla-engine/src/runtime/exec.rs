@@ -1,8 +1,8 @@
 //! The closure compiler: value code ([`Code`], data in the IR) compiled into Rust closures, once
 //! per program, when its first monitor is created.
 //!
-//! Owns: [`Program`] (what monitors run: the IR with its compiled code, made once and shared),
-//! [`Exec`] (compiled code: a context and a frame in, a value out), [`Ctx`] (the compiled
+//! Owns: [`Program`] (what monitors run: the IR with its compiled code, made once and shared;
+//! its listing for `check --ir`, [`Listing`], which ends with how its step runs), [`Exec`] (compiled code: a context and a frame in, a value out), [`Ctx`] (the compiled
 //! function table and node functions of one program), [`compile`], [`compile_program`], the
 //! semantics of [`Prim`]itives and [`LiftFn`]s, function values ([`FnClosure`],
 //! [`native_value`]), the [`Fast`] forms of node functions that are one operator or native on

@@ -1,6 +1,7 @@
-//! Making a [`Plan`]: the kind (`Unit`, `Bool`, `Int`, `Float`, or another value only moved) of
-//! every node, inferred from the nodes' forms, and each node's instruction with its operands'
-//! kinds checked. A program with a node or a type the plan has no form for gets no plan.
+//! Making a [`Plan`]: the kind (`Unit`, `Bool`, `Int`, `Float`, or another value only moved or
+//! compared) of every node, inferred from the nodes' forms, and each node's instruction with its
+//! operands' kinds checked. A program with a node the plan has no form for gets no plan; the
+//! nodes without one are handed back (`check --ir` names them).
 
 use super::{
     CONST, FArg, Instr, KArg, Kernel, Kind, LiftOp, NoPlan, Op1, Op2, Plan, Ref, Src, need,
