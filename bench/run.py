@@ -23,9 +23,15 @@ Two `trace` yardsticks from public data in ../shared/corpora (skipped with a not
 Also: spec load (start-up of `run` on empty input), answer latency at 1k and 10k lines/s
 (bench/latency.rs) beside its floor (the same tool's `--echo` child, which only echoes each line), and a check that the Python baseline writes exactly what tessla-telegraf writes.
 
+With --base BINARY (another tessla-telegraf, e.g. main's built in the same session into its own
+target dir), the primes and Auction sections run it beside this tree's binary, and every command of
+those sections is measured alternately (paired runs: one run of each in turn, REPS rounds), so a
+ratio is not skewed by load that changes between the commands. The binary is
+$CARGO_TARGET_DIR/release/tessla-telegraf (target/ without it).
+
 Usage: python3 bench/run.py [--reps N] [--no-build] [--no-rtlola] [--latency-reps N] [--latency-only]
                            [--only p2,lidar,fleet,startup,latency,primes,auction]
-                           [--auction-prefix N] [--out target/bench-results.md]
+                           [--auction-prefix N] [--base BINARY] [--out target/bench-results.md]
 """
 import argparse
 import os
@@ -39,8 +45,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-BIN = ROOT / "target/release/tessla-telegraf"
-EXAMPLES = ROOT / "target/release/examples"
+TARGET = Path(os.environ.get("CARGO_TARGET_DIR") or ROOT / "target")
+BIN = TARGET / "release/tessla-telegraf"
+EXAMPLES = TARGET / "release/examples"
 P2_SPEC = ROOT / "bench/p2.tessla"
 P2_LOLA = ROOT / "bench/p2.lola"
 AUCTION_SPEC = ROOT / "bench/auction.tessla"
@@ -113,6 +120,26 @@ def measure(name, cmd, input_path, records, reps):
     log(f"   {name:<34} wall {wall:7.3f} s  cpu {cpu:7.3f} s  {row['rate']:>12,.0f}/s  "
         f"{row['cpu_rate']:>12,.0f}/cpu-s  rss {row['rss_mb']:6.1f} MB")
     return row
+
+
+def measure_paired(cmds, input_path, records, reps):
+    """Rows of several commands run alternately: round k runs each command once, in turn."""
+    runs = {name: [] for name, _ in cmds}
+    for _ in range(reps):
+        for name, cmd in cmds:
+            runs[name].append(timed(cmd, input_path))
+    rows = []
+    for name, _ in cmds:
+        med = [statistics.median(x) for x in zip(*runs[name])]
+        wall, user, sys_, rss = med
+        cpu = user + sys_
+        rows.append({"name": name, "wall": wall, "cpu": cpu, "rss_mb": rss / 1024, "records": records,
+                     "rate": records / wall if wall > 0 else float("inf"),
+                     "cpu_rate": records / cpu if cpu > 0 else float("inf"),
+                     "walls": [r[0] for r in runs[name]]})
+        log(f"   {name:<34} wall {wall:7.3f} s  cpu {cpu:7.3f} s  {rows[-1]['rate']:>12,.0f}/s  "
+            f"{rows[-1]['cpu_rate']:>12,.0f}/cpu-s  rss {rows[-1]['rss_mb']:6.1f} MB (paired)")
+    return rows
 
 
 def count_lines(path):
@@ -213,7 +240,7 @@ def latency_section(reps):
     return "\n".join(lines) + "\n"
 
 
-def primes_section(reps):
+def primes_section(reps, base=None):
     """VAMOS primes x10 through `trace`, beside TeSSLa's compiled monitor when it is given."""
     spec, src = PRIMES_DIR / "primes.tessla", PRIMES_DIR / "gen_tessla_input/primes.in"
     title = "### Trace: VAMOS primes.tessla, its 80,000-event trace x10 (timestamps shifted)\n"
@@ -231,12 +258,16 @@ def primes_section(reps):
                     f.write(f"{int(ts) + 40000 * k}:{rest}\n")
     n = count_lines(data)
     log(f"== primes: {n:,} events")
-    ours = measure("tessla-telegraf trace primes.tessla (stdin)", [str(BIN), "trace", str(spec)], data, n, reps)
-    rows = [measure("cat (pipe floor)", ["cat"], data, n, reps), ours]
     peer = os.environ.get("TESSLA_PRIMES_MONITOR")
     note = ""
+    cmds = [("cat (pipe floor)", ["cat"]), ("tessla-telegraf trace primes.tessla (stdin)", [str(BIN), "trace", str(spec)])]
+    if base:
+        cmds.append((f"base: {base} trace primes.tessla", [str(base), "trace", str(spec)]))
     if peer and Path(peer).exists():
-        rows.append(measure("TeSSLa 1.2.3 compiled monitor (Rust back end)", [peer], data, n, reps))
+        cmds.append(("TeSSLa 1.2.3 compiled monitor (Rust back end)", [peer]))
+    rows = measure_paired(cmds, data, n, reps)
+    ours = rows[1]
+    if peer and Path(peer).exists():
         mine = subprocess.run([str(BIN), "trace", str(spec), str(data)], capture_output=True).stdout
         with open(data, "rb") as f:
             theirs = subprocess.run([peer], stdin=f, capture_output=True).stdout
@@ -249,7 +280,7 @@ def primes_section(reps):
     return table(title[4:].strip(), "events", rows, ours) + note
 
 
-def auction_section(reps, rtlola, prefix):
+def auction_section(reps, rtlola, prefix, base=None):
     """bench/auction.tessla on the CRV traces; rtlola-cli on a prefix, beside ours on it."""
     title = "### Auction (CRV 2016, one Map of item states): bench/auction.tessla, bench/auction.lola\n"
     traces = [AUCTION_DIR / f"auction_trace_invalid{i}" for i in (1, 2, 3)]
@@ -276,8 +307,10 @@ def auction_section(reps, rtlola, prefix):
     for name, tin, _ in conv:
         n = count_lines(tin)
         log(f"== auction: {name}, {n:,} events")
-        rows.append(measure(f"tessla-telegraf trace auction.tessla, {name}", [str(BIN), "trace", str(AUCTION_SPEC)],
-                            tin, n, reps))
+        cmds = [(f"tessla-telegraf trace auction.tessla, {name}", [str(BIN), "trace", str(AUCTION_SPEC)])]
+        if base:
+            cmds.append((f"base: {base}, {name}", [str(base), "trace", str(AUCTION_SPEC)]))
+        rows.extend(measure_paired(cmds, tin, n, reps))
     out.append(table(title[4:].strip() + ", whole traces", "events", rows, rows[0]))
     log(f"== auction: the first {prefix:,} events of {conv[0][0]}")
     ours = measure(f"tessla-telegraf trace auction.tessla, first {prefix:,}", [str(BIN), "trace", str(AUCTION_SPEC)],
@@ -304,6 +337,8 @@ def main():
     ap.add_argument("--latency-reps", type=int, default=3, help="runs of each latency row (median shown)")
     ap.add_argument("--latency-only", action="store_true", help="only the latency table (after the build)")
     ap.add_argument("--only", default=",".join(SECTIONS), help="comma-separated sections: " + ",".join(SECTIONS))
+    ap.add_argument("--base", default=None,
+                    help="another tessla-telegraf binary run beside ours, paired, in the primes and auction sections")
     ap.add_argument("--auction-prefix", type=int, default=10_000,
                     help="events of the first Auction trace that rtlola-cli and ours both run")
     a = ap.parse_args()
@@ -408,9 +443,9 @@ def main():
         report.append("\n".join(lines) + "\n")
 
     if "primes" in only:
-        report.append(primes_section(a.reps))
+        report.append(primes_section(a.reps, a.base))
     if "auction" in only:
-        report.append(auction_section(a.reps, rtlola, a.auction_prefix))
+        report.append(auction_section(a.reps, rtlola, a.auction_prefix, a.base))
     if "latency" in only:
         report.append(latency_section(a.latency_reps))
 

@@ -1,7 +1,8 @@
 //! The flat plan (`runtime::flat`) computes what the general step computes: specs made of every
 //! node form the plan has, run over random traces of scalars (NaN, ±0, infinities, integers at
 //! the edge of 64 bits, silent inputs) once with the plan and once by the general step alone,
-//! must send the same events. The integer overflows in them make the plan hand steps to the
+//! must send the same events; tuples and strings (values the plan moves and compares by
+//! reference), and VAMOS primes, alike. The integer overflows in them make the plan hand steps to the
 //! general step and take them back, so the turns are tested too.
 
 use std::sync::Arc;
@@ -71,6 +72,32 @@ const LIFTS: &str = "in x: Events[Float]\nin n: Events[Int]\nin b: Events[Bool]\
     def r = rising(b)\ndef f = falling(b)\n\
     out o\nout p\nout pn\nout fe\nout r\nout f\n";
 
+/// Values the plan only moves or compares, by reference (tuples, strings): `==`, `!=`, `last`
+/// (and a `last` of a `last`, kept from another kept slot), `on`, `merge`, `filter`, `count`,
+/// `if`, `default` and `defaultFrom` with a tuple, `pure` of strings.
+const VALUES: &str = "in p: Events[(Int, Int)]\nin q: Events[(Int, Int)]\nin s: Events[String]\n\
+    in n: Events[Int]\nin b: Events[Bool]\n\
+    def eqpq = p == q\ndef nepq = p != q\ndef lp = last(p, n)\ndef llp = last(lp, b)\n\
+    def op = on(b, p)\ndef mp = merge(p, q)\ndef fp = filter(p, b)\ndef cp = count(p)\n\
+    def ip = if b then p else q\ndef dp = default(p, (7, 7))\ndef dfp = defaultFrom(p, q)\n\
+    def sa = s == \"a\"\ndef ls = last(s, b)\ndef eqlast = op == lp\ndef ps = pure(s)\n\
+    out eqpq\nout nepq\nout lp\nout llp\nout op\nout mp\nout fp\nout cp\nout ip\n\
+    out dp\nout dfp\nout sa\nout ls\nout eqlast\nout ps\n";
+
+/// VAMOS `primes.tessla` (ista-vamos/shamon, experiments/tessla_compare): tuple inputs,
+/// `resetCount`, `count`, `sum`, `on` and `==` of tuples.
+const PRIMES: &str = "in primes1: Events[(Int, Int)]\nin primes2: Events[(Int, Int)]\n\
+    in holes1: Events[Int]\nin holes2: Events[Int]\n\
+    def dropped1 = merge(if resetCount(primes1, holes1) < last(holes1, primes1) \
+    then 0 else sum(holes1), 0)\n\
+    def dropped2 = merge(if resetCount(primes2, holes2) < last(holes2, primes2) \
+    then 0 else sum(holes2), 0)\n\
+    def pos1 = merge(count(primes1), 0) + dropped1\n\
+    def pos2 = merge(count(primes2), 0) + dropped2\n\
+    def positions_same = unitIf(pos1 == pos2)\n\
+    def p1 = on(positions_same, primes1)\ndef p2 = on(positions_same, primes2)\n\
+    out p1 == p2 as ok\nout pos1\nout pos2\n";
+
 /// A fixed-seed generator (ChaCha) of inputs, so a failure reproduces.
 struct Rng(rand_chacha::ChaCha8Rng);
 
@@ -94,6 +121,14 @@ impl Rng {
                 _ => self.below(2001) as i64 - 1000,
             }),
             Type::Bool => Value::Bool(self.below(2) == 0),
+            // Few distinct values, so that equal ones meet often.
+            Type::Tuple(ts) => Value::Tuple(
+                ts.iter()
+                    .map(|_| Value::Int(self.below(3) as i64))
+                    .collect::<Vec<_>>()
+                    .into(),
+            ),
+            Type::String => Value::Str(["a", "b", ""][self.below(3) as usize].into()),
             other => panic!("no values of {other}"),
         }
     }
@@ -125,7 +160,7 @@ fn outputs(program: &Arc<Program>, seed: u64, steps: usize) -> Vec<String> {
 
 #[test]
 fn the_plan_sends_what_the_general_step_sends() {
-    for spec in [EVERY_FORM, RECURSION, MOVED, LIFTS] {
+    for spec in [EVERY_FORM, RECURSION, MOVED, LIFTS, VALUES, PRIMES] {
         let (flat, general) = both(spec);
         assert!(flat.exec().plan().is_some(), "no plan for\n{spec}");
         assert!(general.exec().plan().is_none());
@@ -177,21 +212,21 @@ fn overflow_hands_the_step_to_the_general_step() {
 }
 
 #[test]
-fn only_programs_of_scalars_without_delays_have_a_plan() {
+fn programs_with_delays_or_computed_values_have_no_plan() {
     for spec in [
-        // A list input.
+        // A list's size (a native on a value the plan only moves).
         "in l: Events[List[Float]]\ndef n = List.size(l)\nout n\n",
-        // A string.
-        "in s: Events[String]\ndef t = s\nout t\n",
         // A delay.
         "in x: Events[Int]\ndef d = delay(x, x)\nout d\n",
     ] {
         assert!(load(spec).exec().plan().is_none(), "a plan for\n{spec}");
     }
-    assert!(
-        load("in x: Events[Float]\ndef y = x *. 2.0\nout y\n")
-            .exec()
-            .plan()
-            .is_some()
-    );
+    for spec in [
+        "in x: Events[Float]\ndef y = x *. 2.0\nout y\n",
+        // Strings and tuples, moved and compared.
+        "in s: Events[String]\ndef t = s\nout t\n",
+        "in p: Events[(Int, Float)]\nin q: Events[(Int, Float)]\ndef e = p == q\nout e\n",
+    ] {
+        assert!(load(spec).exec().plan().is_some(), "no plan for\n{spec}");
+    }
 }

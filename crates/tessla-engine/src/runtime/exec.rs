@@ -1,8 +1,8 @@
 //! The closure compiler: value code ([`Code`], data in the IR) compiled into Rust closures, once
 //! per program, when its first monitor is created.
 //!
-//! Owns: [`Program`] (what monitors run: the IR with its compiled code, made once and shared),
-//! [`Exec`] (compiled code: a context and a frame in, a value out), [`Ctx`] (the compiled
+//! Owns: [`Program`] (what monitors run: the IR with its compiled code, made once and shared;
+//! its listing for `check --ir`, [`Listing`], which ends with how its step runs), [`Exec`] (compiled code: a context and a frame in, a value out), [`Ctx`] (the compiled
 //! function table and node functions of one program), [`compile`], [`compile_program`], the
 //! semantics of [`Prim`]itives and [`LiftFn`]s, function values ([`FnClosure`],
 //! [`native_value`]), the [`Fast`] forms of node functions that are one operator or native on
@@ -20,7 +20,7 @@
 
 use crate::ir::code::{Callee, Code, FnId, LiftFn, Prim};
 use crate::ir::scalar_op;
-use crate::ir::{self, Node};
+use crate::ir::{self, Node, NodeId};
 use crate::ir::{BinOp, UnaryOp};
 use crate::runtime::collections;
 use crate::runtime::flat::{IntOp, KArg, Kernel, Plan};
@@ -43,8 +43,9 @@ pub struct Ctx {
     nodes: Vec<Option<Exec>>,
     /// Per node: its function as a [`Fast`] form, when it has one.
     fast: Vec<Option<Fast>>,
-    /// The program's step as a flat plan, when it has one (see `runtime::flat`).
-    plan: Option<Plan>,
+    /// The program's step as a flat plan, when it has one (see `runtime::flat`); without one,
+    /// the nodes that have no form in it (empty: none to name, or the plan is not used).
+    plan: Result<Plan, Vec<NodeId>>,
     me: Weak<Ctx>,
 }
 
@@ -70,7 +71,13 @@ impl Ctx {
     /// The program's flat plan, if it has one.
     #[inline]
     pub fn plan(&self) -> Option<&Plan> {
-        self.plan.as_ref()
+        self.plan.as_ref().ok()
+    }
+
+    /// The nodes that have no form in the flat plan, when the program has none (they make every
+    /// node run by the general step).
+    pub fn slow_nodes(&self) -> Option<&[NodeId]> {
+        self.plan.as_ref().err().map(Vec::as_slice)
     }
 
     /// Call function `id` with `frame`, nested in the calls running now ([`nested_call`]: a
@@ -115,7 +122,7 @@ fn context(
     fns: Vec<Option<Exec>>,
     nodes: Vec<Option<Exec>>,
     fast: Vec<Option<Fast>>,
-    plan: Option<Plan>,
+    plan: Result<Plan, Vec<NodeId>>,
 ) -> Arc<Ctx> {
     let n = fns.len();
     Arc::new_cyclic(|me| Ctx {
@@ -176,6 +183,51 @@ impl Program {
     }
 }
 
+/// The listing of a program (`check --ir`): the IR's ([`ir::Program::ir`]), then how its step
+/// runs: as a flat plan, or by the general step, with the nodes that keep it from a plan.
+pub struct Listing<'a>(&'a Program);
+
+impl Program {
+    /// A readable listing of the program and of how its step runs (implements `Display`).
+    pub fn ir(&self) -> Listing<'_> {
+        Listing(self)
+    }
+}
+
+impl std::fmt::Display for Listing<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let p = self.0;
+        write!(f, "{}", p.ir.ir())?;
+        let cx = p.exec();
+        match (cx.plan(), cx.slow_nodes()) {
+            (Some(_), _) => writeln!(
+                f,
+                "-- step: the flat plan, one typed instruction per node (no node falls back to the general step)"
+            ),
+            (None, Some(slow)) if !slow.is_empty() => {
+                let names: Vec<String> = slow.iter().map(|n| format!("n{n}")).collect();
+                writeln!(
+                    f,
+                    "-- step: the general step, for all {} nodes (slower): no flat plan, since {} {} no form in it: {}",
+                    p.order.len(),
+                    if slow.len() == 1 {
+                        "this node"
+                    } else {
+                        "these nodes"
+                    },
+                    if slow.len() == 1 { "has" } else { "have" },
+                    names.join(", ")
+                )
+            }
+            (None, _) => writeln!(
+                f,
+                "-- step: the general step, for all {} nodes",
+                p.order.len()
+            ),
+        }
+    }
+}
+
 impl From<ir::Program> for Program {
     fn from(ir: ir::Program) -> Program {
         Program::new(ir)
@@ -232,7 +284,7 @@ fn compile_program_with(p: &ir::Program, flat: bool) -> Arc<Ctx> {
             (None, _) => None,
         })
     } else {
-        None
+        Err(Vec::new())
     };
     context(fns, nodes, fast, plan)
 }
@@ -825,7 +877,7 @@ mod tests {
                 .collect(),
             Vec::new(),
             Vec::new(),
-            None,
+            Err(Vec::new()),
         );
         let codes = [
             bin(BinOp::FAdd, Code::Slot(0), Code::Slot(1)),

@@ -1,15 +1,18 @@
-//! Making a [`Plan`]: the kind (`Unit`, `Bool`, `Int`, `Float`, or another value only moved) of
-//! every node, inferred from the nodes' forms, and each node's instruction with its operands'
-//! kinds checked. A program with a node or a type the plan has no form for gets no plan.
+//! Making a [`Plan`]: the kind (`Unit`, `Bool`, `Int`, `Float`, or another value only moved or
+//! compared) of every node, inferred from the nodes' forms, and each node's instruction with its
+//! operands' kinds checked. A program with a node the plan has no form for gets no plan; the
+//! nodes without one are handed back (`check --ir` names them).
 
-use super::{CONST, FArg, Instr, KArg, Kernel, Kind, LiftOp, NoPlan, Op1, Op2, Plan, Src, need};
+use super::{
+    CONST, FArg, Instr, KArg, Kernel, Kind, LiftOp, NoPlan, Op1, Op2, Plan, Ref, Src, need,
+};
 use crate::ir::{self, LiftFn, NO_SLOT, Node, NodeId, SArg};
 use crate::value::Value;
 use std::cell::RefCell;
 
-/// The kind of a constant: a scalar's, else [`Kind::Other`].
+/// The kind of a constant: a scalar's, else [`Kind::Val`].
 fn const_kind(v: &Value) -> Kind {
-    Kind::of_value(v).map_or(Kind::Other, |(k, _)| k)
+    Kind::of_value(v).map_or(Kind::Val, |(k, _)| k)
 }
 
 /// The kind of each node, as far as the nodes' forms tell: inputs by their declared type,
@@ -29,7 +32,7 @@ fn kinds(p: &ir::Program, kernel: &impl Fn(NodeId) -> Option<Kernel>) -> Vec<Opt
                 SArg::Const(v) => Some(const_kind(v)),
             };
             let kind = match p.nodes.get(i) {
-                Some(Node::Input(j)) => p.inputs.get(*j).and_then(|inp| Kind::of_type(&inp.ty)),
+                Some(Node::Input(j)) => p.inputs.get(*j).map(|inp| Kind::of_type(&inp.ty)),
                 Some(Node::Const(v) | Node::Default { value: v, .. }) => Some(const_kind(v)),
                 Some(Node::Fold { init, .. }) => Some(const_kind(init)),
                 Some(Node::Alias(n)) | Some(Node::Last { value: n, .. }) => k(n),
@@ -96,7 +99,7 @@ struct Builder<'a> {
     kinds: Vec<Option<Kind>>,
     /// The slot that never has an event (after the nodes').
     never: u32,
-    /// The constants of [`Kind::Other`] met so far ([`Plan::consts`]).
+    /// The constants of [`Kind::Val`] met so far ([`Plan::consts`]).
     consts: RefCell<Vec<Value>>,
 }
 
@@ -113,17 +116,21 @@ impl Builder<'_> {
         need(self.p.last_slot.get(n).copied())
     }
 
-    /// A constant's kind and bits: a scalar's, or its index among the plan's constants.
-    fn const_bits(&self, v: &Value) -> (Kind, u64) {
-        Kind::of_value(v).unwrap_or_else(|| {
-            let mut consts = self.consts.borrow_mut();
-            consts.push(v.clone());
-            (Kind::Other, consts.len() as u64 - 1)
-        })
+    /// A constant's kind and bits: a scalar's, or a reference to it among the plan's constants.
+    fn const_bits(&self, v: &Value) -> Result<(Kind, u64), NoPlan> {
+        match Kind::of_value(v) {
+            Some(kb) => Ok(kb),
+            None => {
+                let mut consts = self.consts.borrow_mut();
+                let i = need(u32::try_from(consts.len()).ok())?;
+                consts.push(v.clone());
+                Ok((Kind::Val, Ref::Const(i).bits()))
+            }
+        }
     }
 
     fn constant(&self, v: &Value) -> Result<Src, NoPlan> {
-        let (kind, k) = self.const_bits(v);
+        let (kind, k) = self.const_bits(v)?;
         Ok(Src {
             n: self.never,
             slot: CONST,
@@ -196,7 +203,11 @@ impl Builder<'_> {
             }
             Kernel::Eq { ne, a, b } => {
                 let (a, b) = (operand(a)?, operand(b)?);
-                self.op2(dst, need(Op2::eq(*ne, a.kind))?, a, b)?
+                if a.kind == Kind::Val && b.kind == Kind::Val {
+                    Instr::EqVal { dst, ne: *ne, a, b }
+                } else {
+                    self.op2(dst, need(Op2::eq(*ne, a.kind))?, a, b)?
+                }
             }
             Kernel::Not(a) | Kernel::FNeg(a) | Kernel::IntToFloat(a) => {
                 let op = match k {
@@ -213,7 +224,7 @@ impl Builder<'_> {
                 Instr::SConst {
                     dst,
                     args: srcs.clone().into_boxed_slice(),
-                    bits: self.const_bits(v).1,
+                    bits: self.const_bits(v)?.1,
                 }
             }
             Kernel::Pick(a) => {
@@ -241,7 +252,7 @@ impl Builder<'_> {
                 KArg::Arg(1) => Ok((FArg::X, x)),
                 KArg::Arg(_) => Err(NoPlan),
                 KArg::Const(v) => {
-                    let (kind, bits) = self.const_bits(v);
+                    let (kind, bits) = self.const_bits(v)?;
                     Ok((FArg::Const(bits), kind))
                 }
             }
@@ -266,7 +277,7 @@ impl Builder<'_> {
         let dst = self.idx(i)?;
         let kind = self.kind(i)?;
         let bits = |v: &Value| -> Result<u64, NoPlan> {
-            match self.const_bits(v) {
+            match self.const_bits(v)? {
                 (k, b) if k == kind => Ok(b),
                 _ => Err(NoPlan),
             }
@@ -401,35 +412,50 @@ impl Builder<'_> {
 }
 
 impl Plan {
-    /// The plan of `p`, if every node it evaluates has a form here and every value a scalar
-    /// type; `kernel(n)` is node `n`'s function as a [`Kernel`] (`slift`, `fold`, `reduce`).
-    pub fn build(p: &ir::Program, kernel: impl Fn(NodeId) -> Option<Kernel>) -> Option<Plan> {
-        Plan::try_build(p, kernel).ok()
-    }
-
-    fn try_build(
+    /// The plan of `p`, if every node it evaluates has a form here; `kernel(n)` is node `n`'s
+    /// function as a [`Kernel`] (`slift`, `fold`, `reduce`). Without a plan: the nodes that have
+    /// no form here, in evaluation order (empty when the program has none to name).
+    pub fn build(
         p: &ir::Program,
         kernel: impl Fn(NodeId) -> Option<Kernel>,
-    ) -> Result<Plan, NoPlan> {
+    ) -> Result<Plan, Vec<NodeId>> {
         let n = p.nodes.len();
-        if !p.delays.is_empty() || p.last_slot.len() != n {
-            return Err(NoPlan);
-        }
-        if p.inputs.iter().any(|i| Kind::of_type(&i.ty).is_none()) {
-            return Err(NoPlan);
+        let never = u32::try_from(n).map_err(|_| Vec::new())?;
+        if p.last_slot.len() != n {
+            return Err(Vec::new());
         }
         let b = Builder {
             p,
             kinds: kinds(p, &kernel),
-            never: need(u32::try_from(n).ok())?,
+            never,
             consts: RefCell::new(Vec::new()),
         };
         let mut evaluated = vec![false; n];
         let mut instrs = Vec::with_capacity(n);
+        let mut slow = Vec::new();
         for &i in &p.order {
-            *need(evaluated.get_mut(i))? = true;
-            instrs.push(b.instr(i, kernel(i))?);
+            match (evaluated.get_mut(i), b.instr(i, kernel(i))) {
+                (Some(e), Ok(instr)) => {
+                    *e = true;
+                    instrs.push(instr);
+                }
+                _ => slow.push(i),
+            }
         }
+        if !slow.is_empty() {
+            return Err(slow);
+        }
+        if !p.delays.is_empty() {
+            return Err(p.delays.clone());
+        }
+        Plan::assemble(&b, instrs, &evaluated).map_err(|_| Vec::new())
+    }
+
+    /// The plan of the nodes' instructions: a `nil` for each node never evaluated, the slots
+    /// kept across steps, the outputs.
+    fn assemble(b: &Builder<'_>, instrs: Vec<Instr>, evaluated: &[bool]) -> Result<Plan, NoPlan> {
+        let p = b.p;
+        let n = p.nodes.len();
         // A node never evaluated has no event (no step reads one; the slots are shared by every
         // program on a thread, so they are emptied anyway).
         let mut all: Vec<Instr> = (0..n)
@@ -449,12 +475,14 @@ impl Plan {
             .iter()
             .map(|o| Ok((b.idx(*o)?, b.kind(*o)?)))
             .collect::<Result<_, NoPlan>>()?;
+        let (vals, kept): (Vec<_>, Vec<_>) = kept.into_iter().partition(|k| k.2 == Kind::Val);
         Ok(Plan {
             instrs: all,
             slots: n + 1,
+            kept_vals: vals.into_iter().map(|(n, s, _)| (n, s)).collect(),
             kept,
             outputs,
-            consts: b.consts.into_inner(),
+            consts: b.consts.take(),
         })
     }
 }

@@ -1,5 +1,5 @@
-//! The flat plan: a program whose streams carry scalars (and constants that are only passed
-//! on), run as a list of typed instructions over plain slots.
+//! The flat plan: a program whose streams carry scalars, and values that are only passed on or
+//! compared (tuples, strings, constants), run as a list of typed instructions over plain slots.
 //!
 //! Owns: [`Plan`] (made once per program by `runtime::exec`, beside its compiled code, when
 //! every node the program evaluates has a form here; `build` makes it), [`Kernel`] (a node
@@ -13,9 +13,14 @@
 //! are known when the plan is made, so here each node is one instruction of a known type on a
 //! 64-bit slot, with nothing to test but presence and nothing to drop.
 //!
+//! A value that is not a scalar ([`Kind::Val`]: a tuple input, a string constant) is never
+//! copied during the step: its slot holds a reference to where it already is (this step's input
+//! event, a kept value, a constant), an output is sent by reference, and only a kept one is
+//! cloned into the monitor's state (for a tuple, one reference count).
+//!
 //! The plan computes exactly what the general step does. Whatever it has no scalar answer for
 //! (an `Int` overflow, a kept value that is an error value or a big integer, an input value of
-//! another type) makes it give up before it has sent or changed anything: [`Plan::step`]
+//! another type, `==` on an error value) makes it give up before it has sent or changed anything: [`Plan::step`]
 //! returns `false` and the monitor runs the general step on the same state. The plan reads and
 //! writes the monitor's state as the general step keeps it (`Option<Value>` per kept node), so
 //! the two can take turns at any step.
@@ -30,20 +35,79 @@ enum Kind {
     Bool,
     Int,
     Float,
-    /// Any other value: one of the plan's constants ([`Plan::consts`], by index), only ever
-    /// moved (a string a lift sends, passed on by a filter), never computed on.
-    Other,
+    /// Any other value (a tuple, a string, an option, ...), only ever moved or compared with
+    /// `==`/`!=`, never computed on: its bits are a reference ([`Ref`]) to an input event, a
+    /// kept value or one of the plan's constants, which stay in place for the whole step.
+    Val,
+}
+
+/// Where a [`Kind::Val`] value is: the tag in the high 32 bits of its slot's bits, the index in
+/// the low 32.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Ref {
+    /// This step's event of input `i` ([`StepState::inputs`]).
+    Input(u32),
+    /// The value kept in slot `i` of [`StepState::last`].
+    Last(u32),
+    /// The plan's constant `i` ([`Plan::consts`]).
+    Const(u32),
+}
+
+impl Ref {
+    const INPUT: u64 = 0;
+    const LAST: u64 = 1;
+    const CONST: u64 = 2;
+
+    #[inline(always)]
+    fn bits(self) -> u64 {
+        match self {
+            Ref::Input(i) => (Ref::INPUT << 32) | u64::from(i),
+            Ref::Last(i) => (Ref::LAST << 32) | u64::from(i),
+            Ref::Const(i) => (Ref::CONST << 32) | u64::from(i),
+        }
+    }
+
+    #[inline(always)]
+    fn of(bits: u64) -> Ref {
+        let i = bits as u32;
+        match bits >> 32 {
+            Ref::INPUT => Ref::Input(i),
+            Ref::LAST => Ref::Last(i),
+            _ => Ref::Const(i),
+        }
+    }
+}
+
+/// What a step's references ([`Ref`]) point into.
+#[derive(Clone, Copy)]
+struct Vals<'a> {
+    inputs: &'a [Option<Value>],
+    last: &'a [Option<Value>],
+    consts: &'a [Value],
+}
+
+impl<'a> Vals<'a> {
+    /// The value `bits` refers to (`None` only for a reference out of range or to an empty
+    /// slot, which a plan never makes).
+    #[inline(always)]
+    fn get(self, bits: u64) -> Option<&'a Value> {
+        match Ref::of(bits) {
+            Ref::Input(i) => self.inputs.get(i as usize)?.as_ref(),
+            Ref::Last(i) => self.last.get(i as usize)?.as_ref(),
+            Ref::Const(i) => self.consts.get(i as usize),
+        }
+    }
 }
 
 impl Kind {
-    fn of_type(t: &ir::Type) -> Option<Kind> {
-        Some(match t {
+    fn of_type(t: &ir::Type) -> Kind {
+        match t {
             ir::Type::Unit => Kind::Unit,
             ir::Type::Bool => Kind::Bool,
             ir::Type::Int => Kind::Int,
             ir::Type::Float => Kind::Float,
-            _ => return None,
-        })
+            _ => Kind::Val,
+        }
     }
 
     /// The kind and bits of a scalar value.
@@ -68,43 +132,6 @@ impl Kind {
             _ => None,
         }
     }
-
-    /// The bits of `v` read as this kind: a scalar's, or the index of a constant equal to it.
-    #[inline(always)]
-    fn read(self, v: &Value, consts: &[Value]) -> Option<u64> {
-        match self.bits(v) {
-            Some(b) => Some(b),
-            None if self == Kind::Other => constant_index(v, consts),
-            None => None,
-        }
-    }
-
-    #[inline(always)]
-    fn value(self, bits: u64, consts: &[Value]) -> Value {
-        match self {
-            Kind::Float => Value::Float(f64::from_bits(bits)),
-            Kind::Int => Value::Int(bits as i64),
-            Kind::Bool => Value::Bool(bits != 0),
-            Kind::Unit => Value::Unit,
-            Kind::Other => other_value(bits, consts),
-        }
-    }
-}
-
-/// The index of a constant equal to `v` (a kept value of [`Kind::Other`]); `None` for a value
-/// that is none of them (the general step made it: it runs the step).
-#[inline(never)]
-fn constant_index(v: &Value, consts: &[Value]) -> Option<u64> {
-    consts.iter().position(|c| c == v).map(|i| i as u64)
-}
-
-#[inline(never)]
-fn other_value(bits: u64, consts: &[Value]) -> Value {
-    usize::try_from(bits)
-        .ok()
-        .and_then(|i| consts.get(i))
-        .cloned()
-        .unwrap_or(Value::Unit)
 }
 
 /// This step's event of a node: its bits (an `f64`'s, an `i64`'s, 0 or 1), when it has one.
@@ -222,7 +249,7 @@ impl Op2 {
             (Kind::Float, true) => Op2::FNe,
             (Kind::Int | Kind::Bool, false) => Op2::BitsEq,
             (Kind::Int | Kind::Bool, true) => Op2::BitsNe,
-            (Kind::Unit | Kind::Other, _) => return None,
+            (Kind::Unit | Kind::Val, _) => return None,
         })
     }
 
@@ -328,7 +355,7 @@ enum LiftOp {
 impl LiftOp {
     /// The events of the arguments in; the node's event out.
     #[inline(always)]
-    fn run(self, a: [Slot; 3], kind: Kind, consts: &[Value]) -> Slot {
+    fn run(self, a: [Slot; 3], kind: Kind, vals: Vals<'_>) -> Slot {
         let [x, y, z] = a;
         match self {
             LiftOp::First => x,
@@ -338,7 +365,7 @@ impl LiftOp {
                 _ => NONE,
             },
             LiftOp::Distinct => {
-                if x.has && y.has && same_value(kind, x.bits, y.bits, consts) {
+                if x.has && y.has && same_value(kind, x.bits, y.bits, vals) {
                     NONE
                 } else {
                     x
@@ -363,10 +390,10 @@ impl LiftOp {
 /// Whether two values of `kind` are equal as values compare (`==` on floats: NaN is not equal
 /// to itself, 0.0 equals -0.0).
 #[inline(always)]
-fn same_value(kind: Kind, a: u64, b: u64, consts: &[Value]) -> bool {
+fn same_value(kind: Kind, a: u64, b: u64, vals: Vals<'_>) -> bool {
     match kind {
         Kind::Float => f64::from_bits(a) == f64::from_bits(b),
-        Kind::Other => other_value(a, consts) == other_value(b, consts),
+        Kind::Val => vals.get(a) == vals.get(b),
         Kind::Unit | Kind::Bool | Kind::Int => a == b,
     }
 }
@@ -443,6 +470,13 @@ enum Instr {
         op: Op1,
         a: Src,
     },
+    /// `==` (`ne: false`) or `!=` on two values of [`Kind::Val`].
+    EqVal {
+        dst: u32,
+        ne: bool,
+        a: Src,
+        b: Src,
+    },
     /// A signal lift of a constant (`unitIf`'s `()`): fires like a lift of `args`.
     SConst {
         dst: u32,
@@ -505,11 +539,13 @@ pub struct Plan {
     instrs: Vec<Instr>,
     /// Number of slots: one per node and one that never has an event.
     slots: usize,
-    /// (node, slot, kind) of each node kept across steps.
+    /// (node, slot, kind) of each node of a scalar kind kept across steps.
     kept: Vec<(u32, u32, Kind)>,
+    /// (node, slot) of each node of [`Kind::Val`] kept across steps.
+    kept_vals: Vec<(u32, u32)>,
     /// The node of each output, with its kind.
     outputs: Vec<(u32, Kind)>,
-    /// The values of [`Kind::Other`] constants, by index.
+    /// The values of [`Kind::Val`] constants, by index.
     consts: Vec<Value>,
 }
 
@@ -534,24 +570,39 @@ pub struct StepState<'a> {
     pub last: &'a mut [Option<Value>],
 }
 
-/// Keep a node's event in its slot of the monitor's state: a scalar over one of its kind is
-/// written in place (the usual case: the slot had the node's previous event).
+/// Keep a node's scalar event in its slot of the monitor's state: written in place over one of
+/// its kind (the usual case: the slot had the node's previous event).
 #[inline(always)]
-fn keep(l: &mut Option<Value>, kind: Kind, bits: u64, consts: &[Value]) {
+fn keep(l: &mut Option<Value>, kind: Kind, bits: u64) {
     match (kind, &mut *l) {
         (Kind::Float, Some(Value::Float(x))) => *x = f64::from_bits(bits),
         (Kind::Int, Some(Value::Int(x))) => *x = bits as i64,
         (Kind::Bool, Some(Value::Bool(x))) => *x = bits != 0,
-        _ => {
-            let old = l.replace(kind.value(bits, consts));
-            match old {
-                // Scalars need no drop.
-                None | Some(Value::Unit | Value::Bool(_) | Value::Int(_) | Value::Float(_)) => {
-                    std::mem::forget(old)
-                }
-                old => drop(old),
-            }
+        _ => replace(l, scalar(kind, bits)),
+    }
+}
+
+/// Put `v` in a kept slot, dropping what was there only when it needs a drop.
+#[inline(always)]
+fn replace(l: &mut Option<Value>, v: Value) {
+    let old = l.replace(v);
+    match old {
+        // Scalars need no drop.
+        None | Some(Value::Unit | Value::Bool(_) | Value::Int(_) | Value::Float(_)) => {
+            std::mem::forget(old)
         }
+        old => drop(old),
+    }
+}
+
+/// The value of scalar bits of `kind` (a [`Kind::Val`]'s are not: see [`Vals::get`]).
+#[inline(always)]
+fn scalar(kind: Kind, bits: u64) -> Value {
+    match kind {
+        Kind::Float => Value::Float(f64::from_bits(bits)),
+        Kind::Int => Value::Int(bits as i64),
+        Kind::Bool => Value::Bool(bits != 0),
+        Kind::Unit | Kind::Val => Value::Unit,
     }
 }
 
@@ -564,28 +615,27 @@ fn cur_of(cur: &[Slot], n: u32) -> Slot {
 /// The value kept in `slot` (`Some(None)` for none or [`NO_SLOT`]); `None`: not a scalar of
 /// `kind` (an error value, a big integer).
 #[inline(always)]
-fn kept_of(last: &[Option<Value>], consts: &[Value], slot: u32, kind: Kind) -> Option<Option<u64>> {
+fn kept_of(last: &[Option<Value>], slot: u32, kind: Kind) -> Option<Option<u64>> {
     match last.get(slot as usize) {
-        Some(Some(v)) => kind.read(v, consts).map(Some),
+        Some(Some(v)) => match kind.bits(v) {
+            Some(b) => Some(Some(b)),
+            None if kind == Kind::Val => Some(Some(Ref::Last(slot).bits())),
+            None => None,
+        },
         _ => Some(None),
     }
 }
 
 /// An operand's value: this step's event, else the latest one, or the constant.
 #[inline(always)]
-fn value_of(
-    cur: &[Slot],
-    last: &[Option<Value>],
-    consts: &[Value],
-    a: &Src,
-) -> Option<Option<u64>> {
+fn value_of(cur: &[Slot], last: &[Option<Value>], a: &Src) -> Option<Option<u64>> {
     let c = cur_of(cur, a.n);
     if c.has {
         Some(Some(c.bits))
     } else if a.slot == CONST {
         Some(Some(a.k))
     } else {
-        kept_of(last, consts, a.slot, a.kind)
+        kept_of(last, a.slot, a.kind)
     }
 }
 
@@ -597,13 +647,13 @@ fn has_event(cur: &[Slot], a: &Src) -> bool {
 /// Whether a signal lift of `args` fires: one has an event and every one has a value (`None`: a
 /// kept value the plan cannot read).
 #[inline(always)]
-fn fires(cur: &[Slot], last: &[Option<Value>], consts: &[Value], args: &[Src]) -> Option<bool> {
+fn fires(cur: &[Slot], last: &[Option<Value>], args: &[Src]) -> Option<bool> {
     if !args.iter().any(|a| has_event(cur, a)) {
         return Some(false);
     }
     let mut all = true;
     for a in args {
-        all &= value_of(cur, last, consts, a)?.is_some();
+        all &= value_of(cur, last, a)?.is_some();
     }
     Some(all)
 }
@@ -646,14 +696,22 @@ impl Plan {
         if self.eval(&st, cur).is_none() {
             return false;
         }
+        let vals = Vals {
+            inputs: st.inputs,
+            last: st.last,
+            consts: &self.consts,
+        };
         for (out, &(n, kind)) in self.outputs.iter().enumerate() {
             let c = cur_of(cur, n);
             if c.has {
-                let v = kind.value(c.bits, &self.consts);
-                sink(out, &v);
-                if kind == Kind::Other {
-                    drop(v);
+                if kind == Kind::Val {
+                    // Sent by reference: no copy of the value.
+                    if let Some(v) = vals.get(c.bits) {
+                        sink(out, v);
+                    }
                 } else {
+                    let v = scalar(kind, c.bits);
+                    sink(out, &v);
                     // A scalar: nothing to drop.
                     std::mem::forget(v);
                 }
@@ -664,35 +722,97 @@ impl Plan {
             if c.has
                 && let Some(l) = st.last.get_mut(slot as usize)
             {
-                keep(l, kind, c.bits, &self.consts);
+                keep(l, kind, c.bits);
             }
         }
+        if !self.kept_vals.is_empty() {
+            self.keep_values(cur, st.inputs, st.last);
+        }
         true
+    }
+
+    /// Keep the events of the kept nodes of [`Kind::Val`]: one kept from another kept slot is
+    /// copied before any of them is written (the slot it refers to may be written here; the
+    /// scalars' slots are never referred to), one from an input or a constant is cloned.
+    fn keep_values(&self, cur: &[Slot], inputs: &[Option<Value>], last: &mut [Option<Value>]) {
+        let mut moved: Vec<(u32, Value)> = Vec::new();
+        for &(n, slot) in &self.kept_vals {
+            let c = cur_of(cur, n);
+            if c.has
+                && let Ref::Last(from) = Ref::of(c.bits)
+                && from != slot
+                && let Some(Some(v)) = last.get(from as usize)
+            {
+                moved.push((slot, v.clone()));
+            }
+        }
+        for &(n, slot) in &self.kept_vals {
+            let c = cur_of(cur, n);
+            if !c.has {
+                continue;
+            }
+            let v = match Ref::of(c.bits) {
+                // Its own slot, or copied above.
+                Ref::Last(_) => continue,
+                Ref::Input(i) => inputs.get(i as usize).and_then(Option::as_ref),
+                Ref::Const(i) => self.consts.get(i as usize),
+            };
+            if let (Some(v), Some(l)) = (v, last.get_mut(slot as usize)) {
+                replace(l, v.clone());
+            }
+        }
+        for (slot, v) in moved {
+            if let Some(l) = last.get_mut(slot as usize) {
+                replace(l, v);
+            }
+        }
     }
 
     /// The step's events into `cur`; `None` as soon as one has no scalar answer.
     #[inline(always)]
     fn eval(&self, st: &StepState<'_>, cur: &mut [Slot]) -> Option<()> {
         let last = &*st.last;
-        let consts = &self.consts[..];
+        let vals = Vals {
+            inputs: st.inputs,
+            last,
+            consts: &self.consts,
+        };
         for instr in &self.instrs {
             let (dst, v) = match instr {
                 Instr::Nil { dst } => (dst, NONE),
                 Instr::Input { dst, input, kind } => (
                     dst,
                     match st.inputs.get(*input as usize) {
-                        Some(Some(v)) => some(kind.bits(v)?),
+                        Some(Some(v)) => match kind.bits(v) {
+                            Some(b) => some(b),
+                            None if *kind == Kind::Val => some(Ref::Input(*input).bits()),
+                            None => return None,
+                        },
                         _ => NONE,
                     },
                 ),
+                Instr::EqVal { dst, ne, a, b } => {
+                    if !has_event(cur, a) && !has_event(cur, b) {
+                        (dst, NONE)
+                    } else {
+                        match (value_of(cur, last, a)?, value_of(cur, last, b)?) {
+                            (Some(x), Some(y)) => {
+                                let (x, y) = (vals.get(x)?, vals.get(y)?);
+                                // An error value propagates: the general step's.
+                                if matches!(x, Value::Error(_)) || matches!(y, Value::Error(_)) {
+                                    return None;
+                                }
+                                (dst, some(u64::from((x == y) != *ne)))
+                            }
+                            _ => (dst, NONE),
+                        }
+                    }
+                }
                 Instr::Op2 { dst, op, a, b } => {
                     if !has_event(cur, a) && !has_event(cur, b) {
                         (dst, NONE)
                     } else {
-                        match (
-                            value_of(cur, last, consts, a)?,
-                            value_of(cur, last, consts, b)?,
-                        ) {
+                        match (value_of(cur, last, a)?, value_of(cur, last, b)?) {
                             (Some(x), Some(y)) => (dst, some(op.run(x, y)?)),
                             _ => (dst, NONE),
                         }
@@ -700,7 +820,7 @@ impl Plan {
                 }
                 Instr::Op1 { dst, op, a } => (
                     dst,
-                    match (has_event(cur, a), value_of(cur, last, consts, a)?) {
+                    match (has_event(cur, a), value_of(cur, last, a)?) {
                         (true, Some(x)) => some(op.run(x)),
                         _ => NONE,
                     },
@@ -715,9 +835,9 @@ impl Plan {
                         (dst, NONE)
                     } else {
                         match (
-                            value_of(cur, last, consts, cond)?,
-                            value_of(cur, last, consts, then)?,
-                            value_of(cur, last, consts, other)?,
+                            value_of(cur, last, cond)?,
+                            value_of(cur, last, then)?,
+                            value_of(cur, last, other)?,
                         ) {
                             (Some(c), Some(t), Some(e)) => (dst, some(if c != 0 { t } else { e })),
                             _ => (dst, NONE),
@@ -741,7 +861,7 @@ impl Plan {
                             some(*init)
                         }
                     } else if x.has {
-                        match kept_of(last, consts, acc.slot, acc.kind)? {
+                        match kept_of(last, acc.slot, acc.kind)? {
                             Some(s) => some(op.fold(*a, *b, s, x.bits)?),
                             None => NONE,
                         }
@@ -760,7 +880,7 @@ impl Plan {
                 } => {
                     let x = cur_of(cur, *stream);
                     let v = if x.has {
-                        match kept_of(last, consts, acc.slot, acc.kind)? {
+                        match kept_of(last, acc.slot, acc.kind)? {
                             Some(s) => some(op.fold(*a, *b, s, x.bits)?),
                             None => x,
                         }
@@ -786,7 +906,7 @@ impl Plan {
                 } => (
                     dst,
                     if cur_of(cur, *trigger).has {
-                        match kept_of(last, consts, value.slot, value.kind)? {
+                        match kept_of(last, value.slot, value.kind)? {
                             Some(v) => some(v),
                             None => NONE,
                         }
@@ -803,8 +923,8 @@ impl Plan {
                     let v = if s.has {
                         s
                     } else {
-                        let s_never = kept_of(last, consts, stream.slot, stream.kind)?.is_none();
-                        let d_first = kept_of(last, consts, from.slot, from.kind)?.is_none();
+                        let s_never = kept_of(last, stream.slot, stream.kind)?.is_none();
+                        let d_first = kept_of(last, from.slot, from.kind)?.is_none();
                         if s_never && d_first {
                             cur_of(cur, from.n)
                         } else {
@@ -815,7 +935,7 @@ impl Plan {
                 }
                 Instr::SConst { dst, args, bits } => (
                     dst,
-                    if fires(cur, last, consts, args)? {
+                    if fires(cur, last, args)? {
                         some(*bits)
                     } else {
                         NONE
@@ -835,14 +955,12 @@ impl Plan {
                     if !(a[0].has || a[1].has || a[2].has) {
                         (dst, NONE)
                     } else {
-                        (dst, f.run(a, *kind, consts))
+                        (dst, f.run(a, *kind, vals))
                     }
                 }
                 Instr::SPick { dst, args, pick } => {
                     let v = match args.get(*pick) {
-                        Some(a) if fires(cur, last, consts, args)? => {
-                            value_of(cur, last, consts, a)?
-                        }
+                        Some(a) if fires(cur, last, args)? => value_of(cur, last, a)?,
                         _ => None,
                     };
                     (dst, v.map_or(NONE, some))
@@ -856,7 +974,7 @@ impl Plan {
                 ),
                 Instr::Filter { dst, stream, cond } => {
                     let s = cur_of(cur, *stream);
-                    let v = if s.has && value_of(cur, last, consts, cond)? == Some(1) {
+                    let v = if s.has && value_of(cur, last, cond)? == Some(1) {
                         s
                     } else {
                         NONE
