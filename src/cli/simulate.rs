@@ -49,6 +49,10 @@ pub struct SimulateArgs {
     /// Seconds from a message to its action taking effect (the twin's round trip).
     #[arg(long, value_name = "S", default_value_t = 0.2)]
     pub delay: f64,
+    /// The robot's link drops at AT seconds for SECONDS (repeatable): its client holds its
+    /// messages and sends them late, with their own times, when the link returns.
+    #[arg(long, value_name = "AT:SECONDS")]
+    pub link_drop: Vec<String>,
     /// Stop after this many seconds (default: the program's length).
     #[arg(long, value_name = "S")]
     pub duration: Option<f64>,
@@ -144,6 +148,18 @@ fn scenario_of(args: &SimulateArgs) -> Result<Scenario, CliError> {
     if let Some(d) = args.duration {
         s.duration = positive("duration", d).map_err(spec)?;
     }
+    for d in &args.link_drop {
+        let parsed = d
+            .split_once(':')
+            .and_then(|(a, l)| Some((a.trim().parse::<f64>().ok()?, l.trim().parse::<f64>().ok()?)))
+            .filter(|&(a, l)| a.is_finite() && l.is_finite() && a >= 0.0 && l > 0.0);
+        let Some(drop) = parsed else {
+            return Err(spec(format!(
+                "--link-drop {d}: expected AT:SECONDS, two numbers (e.g. 12:1.5: the link drops 12 s into the run for 1.5 s)"
+            )));
+        };
+        s.link_drops.push(drop);
+    }
     s.lidar.spike_rate = probability("spike-rate", args.spike_rate).map_err(spec)?;
     s.lidar.dropout_rate = probability("dropout-rate", args.dropout_rate).map_err(spec)?;
     Ok(s)
@@ -176,6 +192,12 @@ pub fn run(args: SimulateArgs) -> CliResult {
             return Err(bad(&format!(
                 "--broker {b}: TLS is not supported by simulate (a local broker: mqtt://HOST:PORT)"
             )));
+        }
+        Some(Ok(_)) if !scenario.link_drops.is_empty() => {
+            return Err(bad(
+                "--link-drop runs in-process only: the MQTT twin waits for each answer in lock \
+                 step (tests/servers/telegraf_real_failures.rs drops a real robot's link)",
+            ));
         }
         Some(Ok(b)) => Some(b),
         Some(Err(e)) => return Err(bad(&e)),
@@ -279,6 +301,10 @@ fn in_process(
         let processor = Processor::new(Arc::clone(program), Options::default())
             .map_err(|e| format!("spec: {e}"))?;
         let mut twin = InProcess::new(processor);
+        if !scenario.link_drops.is_empty() {
+            // A held message is late only if the silence moved the monitor's clock meanwhile.
+            twin = twin.live(scenario.start_ns);
+        }
         let outcome = if on == chosen_on {
             closed_loop::run(scenario, on, &mut twin, file)?
         } else {

@@ -50,6 +50,10 @@ pub struct Scenario {
     pub dt: f64,
     /// s: length of the run (at most the program's duration).
     pub duration: f64,
+    /// (start s, length s): while the robot's link is down its client holds its messages, and
+    /// sends them, in order and with their own times, with the first message after it returns
+    /// (a QoS 1 client that queues while reconnecting).
+    pub link_drops: Vec<(f64, f64)>,
 }
 
 /// 2023-11-14T22:13:20Z: a fixed start, so a run's output depends on the seed only.
@@ -121,7 +125,10 @@ pub struct Reply {
 /// The monitors, in-process or behind a broker.
 pub trait Twin {
     /// Hand over one message (`line` is its line-protocol form) and return the answer.
-    fn exchange(&mut self, line: &str, message: &Message) -> Result<Reply, String>;
+    /// `arrival_ns`: the robot's clock when the message reaches the twin (its own time, or later
+    /// when a link drop held it back).
+    fn exchange(&mut self, line: &str, message: &Message, arrival_ns: i64)
+    -> Result<Reply, String>;
 }
 
 /// A run's measures.
@@ -148,6 +155,12 @@ pub struct Outcome {
     pub refused_repeated: usize,
     /// Actions accepted from a restarted monitor: a lower `seq` with a newer timestamp.
     pub monitor_restarts: usize,
+    /// Messages a link drop held back and sent late.
+    pub messages_held: usize,
+    /// ms: the age of the oldest data behind an action the robot accepted (its arrival on the
+    /// robot's clock minus its message's time): what the robot acted on, judged by the robot's
+    /// own record of what it sent, not by the action's `valid_until`.
+    pub oldest_applied_ms: f64,
 }
 
 /// Run `scenario` against `twin`; `monitor_on` decides whether actions are executed. Every
@@ -195,7 +208,11 @@ pub fn run(
         refused_stale: 0,
         refused_repeated: 0,
         monitor_restarts: 0,
+        messages_held: 0,
+        oldest_applied_ms: 0.0,
     };
+    // (message, its time in s, the program's speed when it was sent) held by a link drop.
+    let mut held: Vec<(Message, f64, f64)> = Vec::new();
     let mut gate = Gate::default();
     let delay_ns = (s.delay * 1e9).round() as i64;
     let mut sum_sq = 0.0;
@@ -221,25 +238,42 @@ pub fn run(
         let reported: f64 = message.actual_speed_text().parse().unwrap_or(actual);
         sum_sq += (expected - reported).powi(2);
         outcome.messages += 1;
-        let reply = twin.exchange(&message.to_line(&s.host), &message)?;
-        out.write_all(&reply.lines)
-            .map_err(|e| format!("cannot write the output: {e}"))?;
-        if let Some(a) = reply.action {
-            outcome.actions += 1;
-            if a.augmented {
-                outcome.interventions += 1;
-            }
-            if a.speed_mse.is_some() {
-                outcome.spec_mse = a.speed_mse;
-            }
-            // The robot judges the action when it arrives (README, "What a robot must do with
-            // an action"); with the monitor off it would not execute it anyway.
-            let clock = reply
-                .received_ns
-                .unwrap_or_else(|| message.time_ns.saturating_add(delay_ns));
-            let accepted = gate.judge(&a, clock).accepted();
-            if monitor_on && accepted && a.speed.is_finite() {
-                pending.push_back((t + s.delay, expected, a.speed));
+        if s.link_drops.iter().any(|&(a, l)| t >= a && t < a + l) {
+            outcome.messages_held += 1;
+            held.push((message, t, expected));
+        } else {
+            // The link is up: what it held goes first, arriving now, then this message.
+            let arrival_ns = message.time_ns;
+            for (message, _, expected) in held
+                .drain(..)
+                .chain(std::iter::once((message, t, expected)))
+            {
+                let reply = twin.exchange(&message.to_line(&s.host), &message, arrival_ns)?;
+                out.write_all(&reply.lines)
+                    .map_err(|e| format!("cannot write the output: {e}"))?;
+                let Some(a) = reply.action else {
+                    continue;
+                };
+                outcome.actions += 1;
+                if a.augmented {
+                    outcome.interventions += 1;
+                }
+                if a.speed_mse.is_some() {
+                    outcome.spec_mse = a.speed_mse;
+                }
+                // The robot judges the action when it arrives (README, "What a robot must do
+                // with an action"); with the monitor off it would not execute it anyway.
+                let clock = reply
+                    .received_ns
+                    .unwrap_or_else(|| arrival_ns.saturating_add(delay_ns));
+                let accepted = gate.judge(&a, clock).accepted();
+                if accepted {
+                    let age = clock.saturating_sub(message.time_ns) as f64 / 1e6;
+                    outcome.oldest_applied_ms = outcome.oldest_applied_ms.max(age);
+                }
+                if monitor_on && accepted && a.speed.is_finite() {
+                    pending.push_back((t + s.delay, expected, a.speed));
+                }
             }
         }
         if k == periods {
@@ -287,7 +321,7 @@ mod tests {
     }
 
     impl Twin for Fixed {
-        fn exchange(&mut self, line: &str, message: &Message) -> Result<Reply, String> {
+        fn exchange(&mut self, line: &str, message: &Message, _: i64) -> Result<Reply, String> {
             assert!(line.starts_with("mqtt_consumer,host=sim,topic=tessla "));
             self.seen.push(message.expected_speed);
             Ok(Reply {

@@ -3,22 +3,40 @@
 //! line protocol it writes.
 //!
 //! Owns: feeding one message as one record and evaluating its step at once (as the stdio
-//! transport does when no more input is waiting), and reading an `action` metric into an
-//! [`Action`] ([`action_of`], shared with the MQTT twin).
+//! transport does when no more input is waiting), live time on the robot's clock when asked
+//! ([`InProcess::live`]: the silence before a message fires its `delay`s as a real run's wall
+//! clock does, so a message a link drop held back comes late), and reading an `action` metric
+//! into an [`Action`] ([`action_of`], shared with the MQTT twin).
 
 use super::closed_loop::{Message, Reply, Twin};
 use super::gate::Action;
 use crate::processor::Processor;
+use crate::processor::clock::Wall;
 use lineproto::{FieldValue, Metric, Record, RecordSplitter, parse_record};
+use std::time::{Duration, Instant};
 
 pub struct InProcess {
     processor: Processor,
     line: u64,
+    /// With live time: an instant standing for the robot's clock at `start_ns`.
+    live: Option<(Instant, i64)>,
 }
 
 impl InProcess {
     pub fn new(processor: Processor) -> InProcess {
-        InProcess { processor, line: 0 }
+        InProcess {
+            processor,
+            line: 0,
+            live: None,
+        }
+    }
+
+    /// The processor's wall clock follows the robot's clock from `start_ns` on: before each
+    /// message, the `delay`s due by its arrival fire (a silent link's `robot_silent`), as in a
+    /// real run, so a message held back by a link drop is late when it comes.
+    pub fn live(mut self, start_ns: i64) -> InProcess {
+        self.live = Some((Instant::now(), start_ns));
+        self
     }
 
     /// The processor's summary line (records, events, outputs, errors).
@@ -28,7 +46,12 @@ impl InProcess {
 }
 
 impl Twin for InProcess {
-    fn exchange(&mut self, line: &str, _message: &Message) -> Result<Reply, String> {
+    fn exchange(
+        &mut self,
+        line: &str,
+        _message: &Message,
+        arrival_ns: i64,
+    ) -> Result<Reply, String> {
         self.line += 1;
         let record = Record {
             bytes: line.as_bytes().to_vec(),
@@ -36,6 +59,12 @@ impl Twin for InProcess {
             oversized: false,
         };
         let mut lines = Vec::new();
+        if let Some((base, start_ns)) = self.live {
+            let since = u64::try_from(arrival_ns.saturating_sub(start_ns)).unwrap_or(0);
+            let at = base + Duration::from_nanos(since);
+            self.processor.advance_wall(at, &mut lines);
+            self.processor.set_wall(Wall { at, ns: arrival_ns });
+        }
         self.processor.record(&record, &mut lines);
         self.processor.end_of_read();
         let action = metrics(&lines)

@@ -187,7 +187,7 @@ fn metric_of(json: &Value) -> Option<Metric> {
 }
 
 impl Twin for MqttTwin {
-    fn exchange(&mut self, line: &str, message: &Message) -> Result<Reply, String> {
+    fn exchange(&mut self, line: &str, message: &Message, _: i64) -> Result<Reply, String> {
         // An action that arrived after its message timed out belongs to no message now.
         while self.actions.try_recv().is_ok() {}
         let options = MessageOptions {

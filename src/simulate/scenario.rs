@@ -56,5 +56,6 @@ pub fn build(terrain: TerrainChoice, program: Program, seed: u64) -> Scenario {
         start_ns: START_NS,
         dt: 0.005,
         duration,
+        link_drops: Vec::new(),
     }
 }

@@ -78,6 +78,12 @@ impl Summary {
                 "actions the robot refused: {} stale (past valid_until), {} repeated (seq); monitor restarts seen: {}\n",
                 a.refused_stale, a.refused_repeated, a.monitor_restarts
             ));
+            if a.messages_held > 0 {
+                s.push_str(&format!(
+                    "link drops: {} messages held and sent late; the oldest data behind an applied action: {:.0} ms\n",
+                    a.messages_held, a.oldest_applied_ms
+                ));
+            }
         }
         s
     }
