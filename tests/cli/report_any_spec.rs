@@ -185,3 +185,33 @@ fn a_closed_pipe_ends_report_quietly() {
         "{err}"
     );
 }
+
+/// The README's first action (`examples/first-spec/dock.tessla`): `report` shows the command as
+/// a mark and the count as steps, as the README says.
+#[test]
+fn the_first_action_is_reported_as_the_readme_says() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = run_in(
+        &root(),
+        &[
+            "run",
+            "--no-passthrough",
+            "--spec",
+            "examples/first-spec/dock.tessla",
+        ],
+        &std::fs::read(root().join("examples/first-spec/battery.lp")).unwrap(),
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    write(dir.path(), "dock.lp", &text(&out.stdout));
+    let out = run_in(dir.path(), &["report", "dock.lp", "-o", "r"], b"");
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out.stderr));
+    let html = std::fs::read_to_string(dir.path().join("r/index.html")).unwrap();
+    let row = |id: &str| {
+        html.lines()
+            .find(|l| l.contains(&format!("<tr id=\"output-{id}\">")))
+            .unwrap_or_else(|| panic!("{id}: {html}"))
+            .to_string()
+    };
+    assert!(row("command").contains("marks"), "{html}");
+    assert!(row("alerts").contains("steps"), "{html}");
+}
