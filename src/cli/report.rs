@@ -42,11 +42,8 @@ pub fn run(args: ReportArgs) -> CliResult {
         })?;
         (text, args.file.display().to_string())
     };
-    if args.timeline {
-        print!(
-            "{}",
-            crate::report::timeline(&text, &name, 80, &args.telemetry)
-        );
+    if args.timeline && !say(&crate::report::timeline(&text, &name, 80, &args.telemetry))? {
+        return Ok(());
     }
     let output = match (&args.output, args.summary || args.timeline) {
         (Some(dir), _) => dir.clone(),
@@ -55,7 +52,7 @@ pub fn run(args: ReportArgs) -> CliResult {
             let s = crate::report::summarize(&text, &args.telemetry);
             warn_missing(&s, &name);
             if args.summary {
-                print!("{}", s.text(&name));
+                say(&s.text(&name))?;
             }
             return Ok(());
         }
@@ -65,18 +62,18 @@ pub fn run(args: ReportArgs) -> CliResult {
         .map_err(|e| CliError::io(format!("report: {e}")))?;
     let s = &written.summary;
     warn_missing(s, &name);
-    if args.summary {
-        print!("{}", s.text(&name));
-    }
-    println!("{}", written.html.display());
+    let mut files = format!("{}\n", written.html.display());
     for svg in &written.svgs {
-        println!("{}", svg.display());
+        files.push_str(&format!("{}\n", svg.display()));
+    }
+    if args.summary && !say(&s.text(&name))? || !say(&files)? {
+        return Ok(());
     }
     let mse = s
         .mse
         .map_or_else(|| "no data".to_string(), |v| format!("{v:.6e}"));
     let mut line = format!("I! report: {} records", s.records);
-    if s.missing_robot.len() < 5 {
+    if s.robot {
         line.push_str(&format!(
             "; MSE expected/actual speed {mse}; P1 violated {} unknown {}; P2 violated {}; \
              P3 spikes {} dropouts {}",
@@ -98,8 +95,20 @@ pub fn run(args: ReportArgs) -> CliResult {
     Ok(())
 }
 
-/// One warning naming the robot spec's outputs the run lacks (the report then shows the spec's
-/// own outputs and verdicts, and leaves the robot's lines and plots out).
+/// Write `text` to stdout: `Ok(false)` when the reader closed it (`report … | head`), which ends
+/// the command quietly, as other command-line tools do.
+fn say(text: &str) -> Result<bool, CliError> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Ok(()) => Ok(true),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(false),
+        Err(e) => Err(CliError::io(format!("report: cannot write to stdout: {e}"))),
+    }
+}
+
+/// One warning naming the robot spec's outputs a run of the robot spec lacks (the report then
+/// leaves their lines and plots out); none for another spec's run.
 fn warn_missing(s: &crate::report::stats::Summary, source: &str) {
     if s.missing_robot.is_empty() {
         return;

@@ -79,13 +79,18 @@ pub fn run(args: RunArgs) -> CliResult {
 /// its partition lease.
 fn open_store(s: &StateConfig) -> Result<(Box<dyn Backend>, Option<SharedStore>), CliError> {
     match &s.target {
-        Target::File(path) => Ok((
-            Box::new(FileBackend {
-                path: path.clone(),
-                ctx: s.context.clone(),
-            }),
-            None,
-        )),
+        Target::File(path) => {
+            // A folder that is missing or not writable is said now, not at the first save.
+            crate::state::file::check_writable(path)
+                .map_err(|m| CliError::io(format!("state: {m}")))?;
+            Ok((
+                Box::new(FileBackend {
+                    path: path.clone(),
+                    ctx: s.context.clone(),
+                }),
+                None,
+            ))
+        }
         Target::Nats(url) => {
             let backend = NatsBackend::connect(url, &s.context).map_err(|e| match e {
                 Failure::Config(m) => CliError::spec(format!("state: {m}")),

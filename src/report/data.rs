@@ -1,5 +1,11 @@
 //! A run as read from line protocol: every record, owned, with its time in seconds since the
 //! first timestamp. Records that do not parse are counted and skipped.
+//!
+//! Two kinds of lines are kept out of the run's clock and counts (counted apart): the status
+//! metric `tessla_spec` (stamped with the wall clock, not the robot's time), and records that
+//! `run` refused as stamped ahead of the clock (`--max-ahead`) and passed through with their
+//! future stamps: a record more than [`AHEAD_S`] ahead of the run's clock so far, after which the
+//! run's time comes back (or, at the end of the file, more than a day ahead).
 
 use influxdb_line_protocol::{FieldValue as LpValue, parse_lines, split_lines};
 
@@ -68,6 +74,14 @@ impl Record {
 /// The measurement that carries the robot's telemetry by default (Telegraf's MQTT input).
 pub const TELEMETRY: &str = "mqtt_consumer";
 
+/// The status metric's measurement (`crate::spec_feed::status::MEASUREMENT`, named here so the
+/// report depends on no other layer).
+pub const STATUS: &str = "tessla_spec";
+
+/// `run`'s default `--max-ahead`, in seconds: a record this far beyond the run's clock that the
+/// run's time then comes back from was refused as ahead and only passed through.
+pub const AHEAD_S: i64 = 10;
+
 /// Every record of a run, in file order.
 #[derive(Debug, Clone, Default)]
 pub struct Run {
@@ -76,9 +90,21 @@ pub struct Run {
     pub start_ns: Option<i64>,
     /// Records that were not line protocol.
     pub skipped: usize,
+    /// Status lines (`tessla_spec`) left out of the run.
+    pub status_lines: usize,
+    /// Records stamped ahead of the clock (refused by `run`) left out of the run.
+    pub ahead: usize,
     /// Measurements that hold telemetry passed through, not the spec's outputs
     /// (`report --telemetry`; [`Run::parse`] sets `mqtt_consumer`).
     pub telemetry: Vec<String>,
+}
+
+/// A record as read, before its time is known.
+struct Raw {
+    measurement: String,
+    tags: Vec<(String, String)>,
+    fields: Vec<(String, Value)>,
+    ns: Option<i64>,
 }
 
 impl Run {
@@ -87,43 +113,92 @@ impl Run {
             telemetry: vec![TELEMETRY.to_string()],
             ..Run::default()
         };
-        let mut previous_t = 0.0;
+        let mut raws: Vec<Raw> = Vec::new();
         for chunk in split_lines(text) {
             for parsed in parse_lines(chunk.trim_end_matches('\r')) {
                 let Ok(line) = parsed else {
                     run.skipped += 1;
                     continue;
                 };
-                let t = match line.timestamp {
-                    Some(ns) => {
-                        let start = *run.start_ns.get_or_insert(ns);
-                        (i128::from(ns) - i128::from(start)) as f64 / 1e9
-                    }
-                    None => previous_t,
-                };
-                previous_t = t;
-                let tags = line
-                    .series
-                    .tag_set
-                    .iter()
-                    .flatten()
-                    .map(|(k, v)| (k.to_string(), v.to_string()))
-                    .collect();
-                let fields = line
-                    .field_set
-                    .iter()
-                    .map(|(k, v)| (k.to_string(), convert(v)))
-                    .collect();
-                run.records.push(Record {
+                if line.series.measurement.as_str() == STATUS {
+                    run.status_lines += 1;
+                    continue;
+                }
+                raws.push(Raw {
                     measurement: line.series.measurement.to_string(),
-                    tags,
-                    fields,
-                    t,
+                    tags: line
+                        .series
+                        .tag_set
+                        .iter()
+                        .flatten()
+                        .map(|(k, v)| (k.to_string(), v.to_string()))
+                        .collect(),
+                    fields: line
+                        .field_set
+                        .iter()
+                        .map(|(k, v)| (k.to_string(), convert(v)))
+                        .collect(),
+                    ns: line.timestamp,
                 });
             }
         }
+        let ahead = ahead_of_the_clock(&raws);
+        let mut previous_t = 0.0;
+        for (raw, ahead) in raws.into_iter().zip(ahead) {
+            if ahead {
+                run.ahead += 1;
+                continue;
+            }
+            let t = match raw.ns {
+                Some(ns) => {
+                    let start = *run.start_ns.get_or_insert(ns);
+                    (i128::from(ns) - i128::from(start)) as f64 / 1e9
+                }
+                None => previous_t,
+            };
+            previous_t = t;
+            run.records.push(Record {
+                measurement: raw.measurement,
+                tags: raw.tags,
+                fields: raw.fields,
+                t,
+            });
+        }
         run
     }
+}
+
+/// Which records were refused as ahead of the clock: stamped more than [`AHEAD_S`] beyond the
+/// latest time so far, with a later record back at or before that bound (the run's time came
+/// back: the wall clock had not moved on), or, with none later, more than a day beyond it.
+fn ahead_of_the_clock(raws: &[Raw]) -> Vec<bool> {
+    const S: i64 = 1_000_000_000;
+    // The earliest stamp after each record.
+    let mut later_min = vec![i64::MAX; raws.len()];
+    let mut min = i64::MAX;
+    for (i, raw) in raws.iter().enumerate().rev() {
+        later_min[i] = min;
+        if let Some(ns) = raw.ns {
+            min = min.min(ns);
+        }
+    }
+    let mut clock: Option<i64> = None;
+    let mut out = Vec::with_capacity(raws.len());
+    for (raw, later) in raws.iter().zip(later_min) {
+        let ahead = match (raw.ns, clock) {
+            (Some(ns), Some(c)) => {
+                let bound = c.saturating_add(AHEAD_S * S);
+                ns > bound
+                    && (later <= bound || (later == i64::MAX && ns > c.saturating_add(86_400 * S)))
+            }
+            _ => false,
+        };
+        if !ahead && let Some(ns) = raw.ns {
+            clock = Some(clock.map_or(ns, |c| c.max(ns)));
+        }
+        out.push(ahead);
+    }
+    out
 }
 
 fn convert(value: &LpValue<'_>) -> Value {
@@ -164,5 +239,31 @@ mod tests {
             run.records[1].field("p1_status").map(Value::as_text),
             Some("ok".into())
         );
+    }
+
+    #[test]
+    fn status_lines_and_records_ahead_stay_out_of_the_clock() {
+        let s = 1_000_000_000i64;
+        let t0 = 1_700_000_000 * s;
+        let wall = 1_790_000_000 * s;
+        let run = Run::parse(&format!(
+            "tessla_spec,host=h,outcome=accepted revision=1i {wall}\n\
+             mqtt_consumer battery=12.0 {t0}\n\
+             mqtt_consumer battery=11.0 {}\n\
+             mqtt_consumer battery=10.0 {}\n\
+             mqtt_consumer battery=9.0 {}\n\
+             mqtt_consumer battery=8.0 {}\n",
+            t0 + s,
+            t0 + 3_000 * s,
+            t0 + 2 * s,
+            t0 + 60 * s,
+        ));
+        assert_eq!((run.status_lines, run.ahead), (1, 1));
+        assert_eq!(run.start_ns, Some(t0));
+        let times: Vec<f64> = run.records.iter().map(|r| r.t).collect();
+        assert_eq!(times, [0.0, 1.0, 2.0, 60.0], "a real gap (to 60 s) stays");
+        // The last record: more than a day ahead is refused, a minute is a gap.
+        let end = |gap: i64| Run::parse(&format!("m x=1 {t0}\nm x=2 {}\n", t0 + gap * s)).ahead;
+        assert_eq!((end(100_000), end(60)), (1, 0));
     }
 }

@@ -3,7 +3,9 @@
 //! precision in a `data-value` attribute, for tools and tests.
 
 use super::data::Run;
+use super::outputs::{Output, Outputs};
 use super::stats::Summary;
+use super::text::short;
 
 /// Escape text for HTML/XML content and attribute values.
 pub fn escape(text: &str) -> String {
@@ -44,7 +46,13 @@ fn fmt_opt(value: Option<f64>) -> String {
 }
 
 /// The whole page. `plots` are `(file name, title)` of the SVGs next to the page.
-pub fn page(source_name: &str, s: &Summary, plots: &[(&str, &str)], run: &Run) -> String {
+pub fn page(
+    source_name: &str,
+    s: &Summary,
+    plots: &[(&str, &str)],
+    run: &Run,
+    outputs: &Outputs,
+) -> String {
     let mut out = String::new();
     out.push_str("<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\"/>\n");
     out.push_str(&format!(
@@ -57,16 +65,26 @@ pub fn page(source_name: &str, s: &Summary, plots: &[(&str, &str)], run: &Run) -
          img{max-width:100%}</style>\n</head>\n<body>\n",
     );
     out.push_str(&format!(
-        "<h1>Run report</h1>\n<p>Source: <code>{}</code>; {} records over {:.1} s{}.</p>\n",
+        "<h1>Run report</h1>\n<p>Source: <code>{}</code>; <span id=\"steps\" data-value=\"{}\">{} steps</span>, {} records over {} s{}.</p>\n",
         escape(source_name),
+        s.steps,
+        s.steps,
         s.records,
-        s.duration_s,
+        short(s.duration_s),
         if s.skipped > 0 {
             format!(", {} lines skipped (not line protocol)", s.skipped)
         } else {
             String::new()
         }
     ));
+    if s.status_lines + s.ahead > 0 {
+        out.push_str(&format!(
+            "<p id=\"left-out\">Left out of the run's clock and counts: {} status lines \
+             (<code>tessla_spec</code>, stamped with the wall clock) and {} records stamped \
+             ahead of the clock (refused by <code>run</code>, passed through).</p>\n",
+            s.status_lines, s.ahead
+        ));
+    }
     let measurements = {
         let mut names: Vec<&str> = run.records.iter().map(|r| r.measurement.as_str()).collect();
         names.sort_unstable();
@@ -75,23 +93,40 @@ pub fn page(source_name: &str, s: &Summary, plots: &[(&str, &str)], run: &Run) -
     };
     out.push_str(&format!("<p>Measurements: {}</p>\n", escape(&measurements)));
 
-    out.push_str("<h2>Mean squared error</h2>\n<table id=\"mse\">\n");
-    out.push_str(&number_row(
-        "mse-telemetry",
-        &format!(
-            "MSE expected vs actual speed, from the telemetry ({} pairs) [(m/s)²]",
-            s.mse_pairs
-        ),
-        s.mse,
-        fmt_opt(s.mse),
-    ));
-    out.push_str(&number_row(
-        "mse-spec",
-        "speed_mse reported by the spec at the end [(m/s)²]",
-        s.spec_mse,
-        fmt_opt(s.spec_mse),
-    ));
-    out.push_str("</table>\n");
+    outputs_table(&mut out, outputs);
+    if !s.splits.is_empty() {
+        out.push_str("<h2>Per instance</h2>\n<table id=\"splits\">\n");
+        for (key, values) in &s.splits {
+            for (value, n) in values {
+                out.push_str(&count_row(
+                    &format!("split-{key}-{value}"),
+                    &format!("{key} = {value}: steps"),
+                    *n,
+                    None,
+                ));
+            }
+        }
+        out.push_str("</table>\n");
+    }
+    if s.mse.is_some() || s.spec_mse.is_some() {
+        out.push_str("<h2>Mean squared error</h2>\n<table id=\"mse\">\n");
+        out.push_str(&number_row(
+            "mse-telemetry",
+            &format!(
+                "MSE expected vs actual speed, from the telemetry ({} pairs) [(m/s)²]",
+                s.mse_pairs
+            ),
+            s.mse,
+            fmt_opt(s.mse),
+        ));
+        out.push_str(&number_row(
+            "mse-spec",
+            "speed_mse reported by the spec at the end [(m/s)²]",
+            s.spec_mse,
+            fmt_opt(s.spec_mse),
+        ));
+        out.push_str("</table>\n");
+    }
 
     if let Some(silence) = &s.silence {
         out.push_str("<h2>Robot silent</h2>\n<table id=\"silence\">\n");
@@ -123,11 +158,7 @@ pub fn page(source_name: &str, s: &Summary, plots: &[(&str, &str)], run: &Run) -
         }
         out.push_str("</table>\n");
     }
-    if s.missing_robot.len() == 5 {
-        out.push_str(
-            "<p>The run has none of the robot spec's outputs: no robot counts or plots.</p>\n",
-        );
-    } else {
+    if s.robot {
         robot_rows(&mut out, s);
     }
     out.push_str("<h2>Plots</h2>\n");
@@ -141,6 +172,50 @@ pub fn page(source_name: &str, s: &Summary, plots: &[(&str, &str)], run: &Run) -
     }
     out.push_str("</body>\n</html>\n");
     out
+}
+
+/// Every output of the spec: its kind (as plotted), its events, its last value.
+fn outputs_table(out: &mut String, outputs: &Outputs) {
+    if outputs.numeric.is_empty() && outputs.verdicts.is_empty() {
+        out.push_str("<p id=\"no-outputs\">The run has no outputs of a spec.</p>\n");
+        return;
+    }
+    out.push_str(
+        "<h2>Outputs</h2>\n<table id=\"outputs\">\n<tr><th>output</th><th>shown as</th>\
+         <th>events</th><th>last value</th></tr>\n",
+    );
+    let row = |out: &mut String, name: &str, kind: &str, n: usize, last: String| {
+        out.push_str(&format!(
+            "<tr id=\"output-{}\"><th scope=\"row\">{}</th><td>{kind}</td>\
+             <td data-value=\"{n}\">{n}</td><td>{}</td></tr>\n",
+            escape(name),
+            escape(name),
+            escape(&last)
+        ));
+    };
+    for o in &outputs.numeric {
+        let last = o.points.last().map_or_else(String::new, |(_, v)| short(*v));
+        row(
+            out,
+            &o.name,
+            super::plots::numeric_kind(o),
+            o.points.len(),
+            last,
+        );
+    }
+    for o in &outputs.verdicts {
+        let last = o.points.last().map_or_else(String::new, |(_, v)| v.clone());
+        row(out, &o.name, verdict_kind(o), o.points.len(), last);
+    }
+    out.push_str("</table>\n");
+}
+
+fn verdict_kind(o: &Output<String>) -> &'static str {
+    if super::plots::is_event(o) {
+        "marks (one value: events)"
+    } else {
+        "timeline (values over time)"
+    }
 }
 
 /// The robot spec's violation counts.

@@ -102,7 +102,7 @@ pub fn write_report(
             .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
         svgs.push(path);
     }
-    let page = html::page(source_name, &summary, &titles, &run);
+    let page = html::page(source_name, &summary, &titles, &run, &outputs);
     let html_path = dir.join("index.html");
     std::fs::write(&html_path, page)
         .map_err(|e| format!("cannot write {}: {e}", html_path.display()))?;

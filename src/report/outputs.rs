@@ -9,6 +9,9 @@
 //! An output is named by its field, or by its measurement when the field is `value` (the
 //! connector's `@TelegrafOut` form); `action` fields that repeat another measurement's field are
 //! shown once, from the other measurement (the robot's action copies its verdicts).
+//! A fleet's outputs are per instance (tag set): the run's steps are each instance's, totalled,
+//! and [`Outputs::splits`] counts them per value of each tag that differs (`robot`,
+//! `spec_version`).
 
 use super::data::{Run, Value};
 use super::series::Picked;
@@ -21,7 +24,13 @@ pub struct Output<T> {
     /// The output's name (its field, or its measurement for a `value` field), with the
     /// instance's tags in brackets when the run has more than one tag set.
     pub name: String,
+    /// The name without the instance's tags.
+    pub base: String,
+    /// The instance's tags, `k=v,...` (empty when the run has one tag set).
+    pub instance: String,
     pub points: Vec<(f64, T)>,
+    /// Every value was a line-protocol integer (a count, a TeSSLa `Int`).
+    pub ints: bool,
 }
 
 /// The spec's outputs found in a run.
@@ -67,25 +76,32 @@ impl Outputs {
         let mut out = Outputs::default();
         for r in run.records.iter().filter(|r| ours(&r.measurement)) {
             for (f, v) in &r.fields {
-                let mut name = label(&r.measurement, f);
-                if r.measurement == "action" && elsewhere.contains(&name) {
+                let base = label(&r.measurement, f);
+                if r.measurement == "action" && elsewhere.contains(&base) {
                     continue;
                 }
-                if show_tags && !r.tags.is_empty() {
+                let instance = if show_tags {
                     let tags: Vec<String> =
                         r.tags.iter().map(|(k, v)| format!("{k}={v}")).collect();
-                    name = format!("{name}[{}]", tags.join(","));
-                }
+                    tags.join(",")
+                } else {
+                    String::new()
+                };
+                let key = Key {
+                    base: &base,
+                    instance: &instance,
+                    int: matches!(v, Value::Int(_)),
+                };
                 match v {
                     Value::Float(_) | Value::Int(_) => {
                         if let Some(x) = v.as_f64() {
-                            push(&mut out.numeric, name, (r.t, x));
+                            push(&mut out.numeric, key, (r.t, x));
                         }
                     }
-                    Value::Bool(b) => push(&mut out.verdicts, name, (r.t, b.to_string())),
+                    Value::Bool(b) => push(&mut out.verdicts, key, (r.t, b.to_string())),
                     Value::Str(s) => match v.as_f64() {
-                        Some(x) => push(&mut out.numeric, name, (r.t, x)),
-                        None => push(&mut out.verdicts, name, (r.t, s.clone())),
+                        Some(x) => push(&mut out.numeric, key, (r.t, x)),
+                        None => push(&mut out.verdicts, key, (r.t, s.clone())),
                     },
                 }
             }
@@ -112,13 +128,95 @@ impl Outputs {
     }
 }
 
-fn push<T>(list: &mut Vec<Output<T>>, name: String, point: (f64, T)) {
-    match list.iter_mut().find(|o| o.name == name) {
-        Some(o) => o.points.push(point),
+/// Which output a value belongs to, and whether it was an integer.
+struct Key<'a> {
+    base: &'a str,
+    instance: &'a str,
+    int: bool,
+}
+
+fn push<T>(list: &mut Vec<Output<T>>, key: Key<'_>, point: (f64, T)) {
+    match list
+        .iter_mut()
+        .find(|o| o.base == key.base && o.instance == key.instance)
+    {
+        Some(o) => {
+            o.points.push(point);
+            o.ints &= key.int;
+        }
         None => list.push(Output {
-            name,
+            name: if key.instance.is_empty() {
+                key.base.to_string()
+            } else {
+                format!("{}[{}]", key.base, key.instance)
+            },
+            base: key.base.to_string(),
+            instance: key.instance.to_string(),
             points: vec![point],
+            ints: key.int,
         }),
+    }
+}
+
+impl Outputs {
+    /// The instances (tag sets, `k=v,...`) with outputs, in order of appearance; one empty
+    /// string when the run has one tag set.
+    pub fn instances(&self) -> Vec<&str> {
+        let mut out: Vec<&str> = Vec::new();
+        let all = self
+            .numeric
+            .iter()
+            .map(|o| o.instance.as_str())
+            .chain(self.verdicts.iter().map(|o| o.instance.as_str()));
+        for i in all {
+            if !out.contains(&i) {
+                out.push(i);
+            }
+        }
+        out
+    }
+
+    /// The steps of one instance: the events of its most frequent output.
+    pub fn steps_of(&self, instance: &str) -> usize {
+        let numeric = self.numeric.iter().filter(|o| o.instance == instance);
+        let verdicts = self.verdicts.iter().filter(|o| o.instance == instance);
+        numeric
+            .map(|o| o.points.len())
+            .chain(verdicts.map(|o| o.points.len()))
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// The steps of the run: each instance's, totalled.
+    pub fn steps(&self) -> usize {
+        self.instances().iter().map(|i| self.steps_of(i)).sum()
+    }
+
+    /// A fleet's splits: for each tag whose value differs between instances (`robot`,
+    /// `spec_version`, ...), its values with the steps of the instances that carry each, in
+    /// order of appearance. Empty for a run of one instance.
+    pub fn splits(&self) -> Vec<(String, Vec<(String, usize)>)> {
+        let mut keys: Vec<(String, Vec<(String, usize)>)> = Vec::new();
+        let instances = self.instances();
+        for instance in &instances {
+            let steps = self.steps_of(instance);
+            for (k, v) in instance.split(',').filter_map(|kv| kv.split_once('=')) {
+                let i = match keys.iter().position(|(key, _)| key == k) {
+                    Some(i) => i,
+                    None => {
+                        keys.push((k.to_string(), Vec::new()));
+                        keys.len() - 1
+                    }
+                };
+                let values = &mut keys[i].1;
+                match values.iter_mut().find(|(value, _)| value == v) {
+                    Some((_, n)) => *n += steps,
+                    None => values.push((v.to_string(), steps)),
+                }
+            }
+        }
+        keys.retain(|(_, values)| values.len() > 1);
+        keys
     }
 }
 
@@ -132,8 +230,9 @@ pub fn timeline(picked: &Picked, outputs: &Outputs, width: usize) -> String {
     let mut changes: Vec<(f64, String)> = Vec::new();
     for o in &outputs.verdicts {
         // The action's flags are shown with the runs of augmented actions.
-        let base = o.name.split('[').next().unwrap_or(&o.name);
-        if !picked.augmented.is_empty() && ["reason", "augmented", "p2_augmented"].contains(&base) {
+        if !picked.augmented.is_empty()
+            && ["reason", "augmented", "p2_augmented"].contains(&o.base.as_str())
+        {
             continue;
         }
         let mut last: Option<&str> = None;

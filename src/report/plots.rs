@@ -6,13 +6,17 @@
 //! - `p1.svg`: P1's margin `Ldist − Bdist` over time, each step coloured by its status;
 //! - `p3.svg`: P3's spikes and dropouts per scan;
 //! - `mse.svg`: the running MSE between expected and actual speed;
-//! - `outputs.svg`: any spec's numeric outputs over time, one panel each;
-//! - `verdicts.svg`: any spec's verdicts, the steps per value counted up over time.
+//! - `outputs.svg`: any spec's numeric outputs over time, one panel each, drawn by their shape
+//!   ([`numeric_kind`]): a single event as a mark, integers and other counts as steps held until
+//!   the next event, other numbers as a line through marks;
+//! - `verdicts.svg`: any spec's verdicts (Bool and text outputs) on a timeline, one row each
+//!   ([`is_event`]): a verdict with values as bands of colour, each value held until the next,
+//!   an output with one value only (an event such as a `Unit` alert or a command) as marks.
 //!
 //! The robot's charts are drawn only when the run has their data; the robot's silent periods
 //! (`robot_silent`) are shaded on them. Legends sit right of the plotting area, never on the data.
 
-use super::outputs::Outputs;
+use super::outputs::{Output, Outputs};
 use super::series::Picked;
 use super::text::short;
 use plotters::coord::Shift;
@@ -35,10 +39,7 @@ pub const FILES: [(&str, &str); 6] = [
     ("p3.svg", "P3 lidar: spikes and dropouts per scan"),
     ("mse.svg", "Running mean squared error of the speed"),
     ("outputs.svg", "The spec's numeric outputs"),
-    (
-        "verdicts.svg",
-        "The spec's verdicts: steps per value, counted up",
-    ),
+    ("verdicts.svg", "The spec's verdicts and events over time"),
 ];
 
 const SIZE: (u32, u32) = (960, 420);
@@ -91,7 +92,9 @@ pub fn render_all(picked: &Picked, outputs: &Outputs) -> Result<Vec<Plot>, Strin
                 render(title, size, |root| numeric(root, picked, outputs, title))
             }
             "verdicts.svg" if !outputs.verdicts.is_empty() => {
-                render(title, SIZE, |root| verdicts(root, picked, outputs, title))
+                let rows = outputs.verdicts.len().min(MOST) as u32;
+                let size = (SIZE.0, SIZE.1.max(120 + 40 * rows));
+                render(title, size, |root| verdicts(root, picked, outputs, title))
             }
             _ => continue,
         }?;
@@ -535,19 +538,36 @@ fn numeric(root: &Root<'_>, picked: &Picked, outputs: &Outputs, title: &str) -> 
             .draw()?;
         silent_periods(&mut chart, &mut legend, picked, &ys)?;
         let color = PALETTE[i % PALETTE.len()];
-        line(
-            &mut chart,
-            &mut legend,
-            &output.points,
-            color,
-            2,
-            &output.name,
-        )?;
+        let end = time_span(picked).end;
+        let radius = if output.points.len() <= 30 { 4 } else { 2 };
+        match numeric_kind(output) {
+            STEPS => {
+                line(
+                    &mut chart,
+                    &mut legend,
+                    &held(&output.points, end),
+                    color,
+                    2,
+                    &output.name,
+                )?;
+            }
+            LINE => {
+                line(
+                    &mut chart,
+                    &mut legend,
+                    &output.points,
+                    color,
+                    2,
+                    &output.name,
+                )?;
+            }
+            _ => legend.push((output.name.clone(), Mark::Circle(color))),
+        }
         chart.draw_series(
             output
                 .points
                 .iter()
-                .map(|p| Circle::new(*p, 2, color.filled())),
+                .map(|p| Circle::new(*p, radius, color.filled())),
         )?;
         drop(chart);
         legend_box(area, &legend, 8)?;
@@ -555,49 +575,163 @@ fn numeric(root: &Root<'_>, picked: &Picked, outputs: &Outputs, title: &str) -> 
     Ok(())
 }
 
-/// Any spec's verdicts: for each verdict and value (at most [`MOST`] lines), the steps with
-/// that value counted up over time.
+/// How [`numeric`] draws an output: a single event as a mark.
+pub const MARK: &str = "mark (a single event)";
+/// Integers and other counts (whole numbers that never fall) as steps.
+pub const STEPS: &str = "steps (held until the next event)";
+/// Other numbers as a line through marks.
+pub const LINE: &str = "line";
+
+/// The shape of a numeric output, as [`numeric`] draws it: [`MARK`], [`STEPS`] or [`LINE`].
+pub fn numeric_kind(o: &Output<f64>) -> &'static str {
+    let whole = o.points.iter().all(|(_, v)| v.fract() == 0.0);
+    let rising = o.points.windows(2).all(|w| w[0].1 <= w[1].1);
+    if o.points.len() <= 1 {
+        MARK
+    } else if o.ints || (whole && rising) {
+        STEPS
+    } else {
+        LINE
+    }
+}
+
+/// Whether a verdict is drawn as marks: it has one value only (an event that happens, such as
+/// a `Unit` alert `true` or a command), so a band of colour would say nothing.
+pub fn is_event<T: PartialEq>(o: &Output<T>) -> bool {
+    o.points
+        .iter()
+        .all(|(_, v)| Some(v) == o.points.first().map(|(_, f)| f))
+}
+
+/// `points` as steps: each value held until the next point, the last until `end`.
+fn held(points: &[(f64, f64)], end: f64) -> Vec<(f64, f64)> {
+    let mut out = Vec::with_capacity(points.len() * 2 + 1);
+    for (i, (t, v)) in points.iter().enumerate() {
+        if i > 0 {
+            out.push((*t, points[i - 1].1));
+        }
+        out.push((*t, *v));
+    }
+    if let Some((t, v)) = points.last() {
+        out.push((end.max(*t), *v));
+    }
+    out
+}
+
+/// The colour of a verdict's value: `true` red, `false` green, others in order of appearance.
+fn value_color(value: &str, others: &mut Vec<String>) -> RGBColor {
+    const OTHERS: [RGBColor; 10] = [
+        EXPECTED,
+        DROPOUT,
+        SILENT,
+        RGBColor(140, 86, 75),
+        RGBColor(227, 119, 194),
+        RGBColor(127, 127, 127),
+        RGBColor(188, 189, 34),
+        RGBColor(23, 190, 207),
+        AUGMENTED,
+        RGBColor(128, 128, 0),
+    ];
+    match value {
+        "true" => ACTUAL,
+        "false" => ACTION,
+        _ => {
+            let i = others.iter().position(|v| v == value).unwrap_or_else(|| {
+                others.push(value.to_string());
+                others.len() - 1
+            });
+            OTHERS[i % OTHERS.len()]
+        }
+    }
+}
+
+/// Any spec's verdicts on a timeline (at most [`MOST`] rows, the first on top): a verdict's
+/// values as bands, each held until its next value (the last to the run's end); an output with
+/// one value as marks at its events.
 fn verdicts(root: &Root<'_>, picked: &Picked, outputs: &Outputs, title: &str) -> DrawResult {
-    let mut lines: Vec<(String, Vec<(f64, f64)>)> = Vec::new();
-    for o in &outputs.verdicts {
-        let mut values: Vec<&str> = Vec::new();
-        for (_, v) in &o.points {
-            if !values.contains(&v.as_str()) {
-                values.push(v);
+    let rows: Vec<&Output<String>> = outputs.verdicts.iter().take(MOST).collect();
+    let n = rows.len();
+    let names: Vec<String> = rows
+        .iter()
+        .map(|o| {
+            if o.name.chars().count() > 30 {
+                format!("{}…", o.name.chars().take(29).collect::<String>())
+            } else {
+                o.name.clone()
+            }
+        })
+        .collect();
+    let widest = names.iter().map(|s| s.chars().count()).max().unwrap_or(0) as u32;
+    let y_of = |i: usize| (n - 1 - i) as f64;
+    let label = |v: &f64| {
+        let i = v.round();
+        if (v - i).abs() > 1e-6 || i < 0.0 || i as usize >= n {
+            return String::new();
+        }
+        names.get(n - 1 - i as usize).cloned().unwrap_or_default()
+    };
+    let ys = -0.5..(n as f64 - 0.5);
+    let span = time_span(picked);
+    let end = span.end;
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, ("sans-serif", 20))
+        .margin(12)
+        .margin_right(LEGEND_W)
+        .x_label_area_size(40)
+        .y_label_area_size((widest * 7 + 16).clamp(40, 230))
+        .build_cartesian_2d(span, ys.clone())?;
+    chart
+        .configure_mesh()
+        .disable_y_mesh()
+        .y_labels(n.max(1))
+        .x_desc("time [s]")
+        .x_label_formatter(&|v| short(*v))
+        .y_label_formatter(&label)
+        .draw()?;
+    let mut legend = Legend::new();
+    silent_periods(&mut chart, &mut legend, picked, &ys)?;
+    let mut others = Vec::new();
+    for (i, o) in rows.iter().enumerate() {
+        let y = y_of(i);
+        if is_event(o) {
+            let value = o.points.first().map_or("", |(_, v)| v.as_str());
+            let color = value_color(value, &mut others);
+            chart.draw_series(
+                o.points
+                    .iter()
+                    .map(|(t, _)| TriangleMarker::new((*t, y), 7, color.filled())),
+            )?;
+            let entry = (format!("{value} (event)"), Mark::Triangle(color));
+            if !legend.iter().any(|(l, _)| *l == entry.0) {
+                legend.push(entry);
+            }
+            continue;
+        }
+        let mut bands: Vec<(f64, f64, &str)> = Vec::new();
+        for (k, (t, v)) in o.points.iter().enumerate() {
+            let to = o.points.get(k + 1).map_or(end.max(*t), |(u, _)| *u);
+            match bands.last_mut() {
+                Some(last) if last.2 == v.as_str() => last.1 = to,
+                _ => bands.push((*t, to, v.as_str())),
             }
         }
-        for value in values {
-            let mut n = 0.0;
-            let points = o
-                .points
-                .iter()
-                .filter(|(_, v)| v == value)
-                .map(|(t, _)| {
-                    n += 1.0;
-                    (*t, n)
-                })
-                .collect();
-            lines.push((format!("{} {value}", o.name), points));
+        for (from, to, value) in bands {
+            let color = value_color(value, &mut others);
+            chart.draw_series([Rectangle::new(
+                [(from, y - 0.3), (to, y + 0.3)],
+                color.mix(0.7).filled(),
+            )])?;
+            // The change itself, visible even when the band is too short to see.
+            chart.draw_series([PathElement::new(
+                vec![(from, y - 0.38), (from, y + 0.38)],
+                color.stroke_width(2),
+            )])?;
+            if !legend.iter().any(|(l, _)| l == value) {
+                legend.push((value.to_string(), Mark::Band(color)));
+            }
         }
     }
-    lines.truncate(MOST);
-    let ys = span(
-        lines.iter().flat_map(|(_, p)| p.iter().map(|(_, v)| *v)),
-        true,
-    );
-    let mut legend = Legend::new();
-    let mut chart = chart(root, picked, title, ys.clone(), "steps so far", 64)?;
-    silent_periods(&mut chart, &mut legend, picked, &ys)?;
-    for (i, (label, points)) in lines.iter().enumerate() {
-        line(
-            &mut chart,
-            &mut legend,
-            points,
-            PALETTE[i % PALETTE.len()],
-            2,
-            label,
-        )?;
-    }
+    legend.truncate(MOST);
     drop(chart);
     legend_box(root, &legend, 40)
 }

@@ -42,8 +42,19 @@ pub struct Summary {
     pub verdicts: Vec<(String, Vec<(String, usize)>)>,
     /// The robot's silent periods, when the run has `robot_silent`.
     pub silence: Option<super::series::Silence>,
-    /// The robot spec's outputs this report looks for that the run does not have.
+    /// The robot spec's outputs this report looks for that the run does not have (empty when
+    /// the run has none of the robot spec's own outputs: then it is another spec's run).
     pub missing_robot: Vec<&'static str>,
+    /// Whether the run has any of the robot spec's own outputs (`p1_status`, `p2_violated`,
+    /// `p3_spikes`, `speed_mse`): only then the robot's sections are shown.
+    pub robot: bool,
+    /// The steps of the run: each instance's (its most frequent output's events), totalled.
+    pub steps: usize,
+    /// A fleet's splits (tags whose value differs between instances): steps per value.
+    pub splits: Vec<(String, Vec<(String, usize)>)>,
+    /// Status lines (`tessla_spec`) and records refused as ahead of the clock, left out.
+    pub status_lines: usize,
+    pub ahead: usize,
 }
 
 /// Verdicts the robot's lines of the summary already show.
@@ -79,18 +90,27 @@ impl Summary {
                 !ROBOT_VERDICTS.contains(&base)
             })
             .collect();
+        let robot = !(picked.p1_status.is_empty()
+            && picked.p2_violated.is_empty()
+            && picked.p3_spikes.is_empty()
+            && picked.speed_mse.is_empty());
         let missing_robot = [
             ("p1_status", picked.p1_status.is_empty()),
             ("p2_violated", picked.p2_violated.is_empty()),
             ("p3_spikes", picked.p3_spikes.is_empty()),
-            ("action", picked.augmented.is_empty()),
+            ("action.augmented", picked.augmented.is_empty()),
             ("speed_mse", picked.speed_mse.is_empty()),
         ]
         .into_iter()
-        .filter(|(_, absent)| *absent)
+        .filter(|(_, absent)| robot && *absent)
         .map(|(name, _)| name)
         .collect();
         Summary {
+            robot,
+            steps: outputs.steps(),
+            splits: outputs.splits(),
+            status_lines: run.status_lines,
+            ahead: run.ahead,
             verdicts,
             silence: super::series::Silence::from_run(run),
             missing_robot,
@@ -165,15 +185,9 @@ impl Summary {
     /// other verdicts of the spec with their steps per value.
     pub fn text(&self, source: &str) -> String {
         use super::text::{short, wrap};
-        let steps = self.actions.max(self.p2_steps).max(self.p3_scans).max(
-            self.verdicts
-                .iter()
-                .map(|(_, c)| c.iter().map(|(_, n)| n).sum::<usize>())
-                .max()
-                .unwrap_or(0),
-        );
         let mut out = format!(
-            "summary of {source}: {steps} steps over {} s\n",
+            "summary of {source}: {} steps over {} s\n",
+            self.steps,
             short(self.duration_s)
         );
         // A line of the summary; one starting with two spaces goes under the previous line.
@@ -181,6 +195,21 @@ impl Summary {
             let head = if text.starts_with("  ") { "    " } else { "  " };
             out.push_str(&wrap(head, &text, 80, 2));
         };
+        let left_out: Vec<String> = [
+            (self.status_lines, "status lines (tessla_spec)"),
+            (self.ahead, "records stamped ahead of the clock"),
+        ]
+        .iter()
+        .filter(|(n, _)| *n > 0)
+        .map(|(n, what)| format!("{n} {what}"))
+        .collect();
+        if !left_out.is_empty() {
+            line(format!("left out of the clock: {}", left_out.join(", ")));
+        }
+        for (key, values) in &self.splits {
+            let values: Vec<String> = values.iter().map(|(v, n)| format!("{v} {n}")).collect();
+            line(format!("steps per {key}: {}", values.join(", ")));
+        }
         let p1_steps = self.p1_violated + self.p1_unknown + self.p1_ok;
         if p1_steps > 0 {
             line(format!(

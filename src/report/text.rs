@@ -3,7 +3,8 @@
 //! Owns: [`short`] (a number in at most 4 significant digits) and [`wrap`] (word-wrapping under a
 //! head); they depend on nothing else in the report.
 
-/// A number for people: at most 4 significant digits, never `-0`.
+/// A number for people: at most 4 significant digits (a whole number from 1000 to a million in
+/// full), never `-0`.
 pub fn short(v: f64) -> String {
     if v == 0.0 || !v.is_finite() {
         return if v.is_finite() {
@@ -13,13 +14,13 @@ pub fn short(v: f64) -> String {
         };
     }
     let s = if v.abs() >= 1e-3 && v.abs() < 1e6 {
-        let text = format!("{v:.4}");
-        let text = text.trim_end_matches('0').trim_end_matches('.').to_string();
-        if v.abs() >= 100.0 {
-            format!("{v:.1}")
-                .trim_end_matches('0')
-                .trim_end_matches('.')
-                .to_string()
+        // Four significant digits: as many decimals as the magnitude leaves (none from 1000 on,
+        // where the whole number is shown).
+        let magnitude = v.abs().log10().floor() as i32;
+        let decimals = usize::try_from(3 - magnitude).unwrap_or(0);
+        let text = format!("{v:.decimals$}");
+        if text.contains('.') {
+            text.trim_end_matches('0').trim_end_matches('.').to_string()
         } else {
             text
         }
@@ -77,6 +78,11 @@ mod tests {
         assert_eq!(short(0.099999999), "0.1");
         assert_eq!(short(-0.00004), "-4e-5");
         assert_eq!(short(123.456), "123.5");
+        assert_eq!(short(80.6455), "80.65");
+        assert_eq!(short(9.99996), "10");
+        assert_eq!(short(1.5999999999999996), "1.6");
+        assert_eq!(short(4321.7), "4322");
+        assert_eq!(short(0.0012346), "0.001235");
     }
 
     #[test]

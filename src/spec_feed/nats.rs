@@ -190,9 +190,9 @@ async fn open(url: Url, create: bool) -> Result<Opened, Failure> {
         })?)
     } else if create {
         let store = crate::state::nats::create(&js, &url).await.map_err(|e| {
-            match violation(&violations) {
-                Some(v) => Failure::Io(denied(&url, &v)),
-                None => Failure::Io(e),
+            match (violation(&violations), e) {
+                (Some(v), _) => Failure::Io(denied(&url, &v)),
+                (None, e) => e,
             }
         })?;
         log::log(

@@ -335,6 +335,59 @@ fn check(text: &[u8], ctx: &Context) -> Result<StateFile, String> {
     Ok(file)
 }
 
+/// Whether `--state FILE` can be saved: its folder exists and a file can be made in it, and the
+/// path is not a folder. Checked at start, so a mistake is found before a run's state is lost
+/// at its end; the message says what to do.
+pub fn check_writable(path: &Path) -> Result<(), String> {
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let shown = path.display();
+    let folder = dir.display();
+    match fs::metadata(&dir) {
+        Ok(m) if m.is_dir() => {}
+        Ok(_) => {
+            return Err(format!(
+                "--state {shown}: {folder} is not a folder: give --state a file in a folder"
+            ));
+        }
+        Err(e) if e.kind() == io::ErrorKind::NotFound => {
+            return Err(format!(
+                "--state {shown}: the folder {folder} does not exist: create it \
+                 (`mkdir -p {folder}`, writable for the user Telegraf runs as; the systemd \
+                 drop-in's StateDirectory= makes /var/lib/tessla-telegraf) or give --state a \
+                 file in a folder that exists"
+            ));
+        }
+        Err(e) => {
+            return Err(format!(
+                "--state {shown}: cannot read the folder {folder}: {e}"
+            ));
+        }
+    }
+    if path.is_dir() {
+        return Err(format!(
+            "--state {shown} is a folder: give --state a file name, e.g. {}",
+            path.join("monitor.state").display()
+        ));
+    }
+    // A file made and removed in the folder, as the save's temporary file will be.
+    let probe = dir.join(format!(".tessla-telegraf-probe-{}", std::process::id()));
+    match OpenOptions::new().write(true).create_new(true).open(&probe) {
+        Ok(_) => {
+            let _ = fs::remove_file(&probe);
+            Ok(())
+        }
+        Err(e) if e.kind() == io::ErrorKind::AlreadyExists => Ok(()),
+        Err(e) => Err(format!(
+            "--state {shown}: cannot write in {folder} ({e}): make it writable for the user \
+             Telegraf runs as (e.g. `sudo chown telegraf {folder}`) or give --state a file in \
+             a folder you can write"
+        )),
+    }
+}
+
 /// `--state FILE`: [`load`] at start, [`save`] at the save points.
 pub struct FileBackend {
     pub path: PathBuf,
@@ -359,6 +412,22 @@ impl Backend for FileBackend {
 mod tests {
     use super::*;
     use crate::processor::Options;
+
+    #[test]
+    fn a_state_file_that_cannot_be_saved_is_found_at_start() {
+        let dir = tempfile::tempdir().unwrap();
+        assert_eq!(check_writable(&dir.path().join("m.state")), Ok(()));
+        let missing = dir.path().join("nope/m.state");
+        let e = check_writable(&missing).unwrap_err();
+        assert!(e.contains("does not exist: create it (`mkdir -p "), "{e}");
+        let e = check_writable(dir.path()).unwrap_err();
+        assert!(e.contains("is a folder: give --state a file name"), "{e}");
+        assert_eq!(
+            std::fs::read_dir(dir.path()).unwrap().count(),
+            0,
+            "the probe is removed"
+        );
+    }
     use crate::processor::tests::program;
     use crate::processor::versions::Selector;
     use lineproto::RecordSplitter;

@@ -74,7 +74,8 @@ async fn open(url: Url) -> Result<kv::Store, Failure> {
                 );
                 return Ok(store);
             }
-            Err(e) => last = e,
+            Err(Failure::Io(e)) => last = e,
+            Err(config) => return Err(config),
         }
         if let Some(v) = violation(&violations) {
             return Err(Failure::Io(permission_failure(&url, &v)));
@@ -83,7 +84,10 @@ async fn open(url: Url) -> Result<kv::Store, Failure> {
     Err(Failure::Io(last))
 }
 
-pub(crate) async fn create(js: &jetstream::Context, url: &Url) -> Result<kv::Store, String> {
+/// Create the bucket of `url`. A replica count the server cannot honour (`replicas=3` on a
+/// single server, not a cluster) is [`Failure::Config`] naming the URL option and the value that
+/// works; any other failure is [`Failure::Io`].
+pub(crate) async fn create(js: &jetstream::Context, url: &Url) -> Result<kv::Store, Failure> {
     // The bucket as `nats kv add` makes it, except that reads go to the stream leader
     // (allow_direct off): a process taking over must see every entry its predecessor wrote.
     let config = stream::Config {
@@ -97,12 +101,36 @@ pub(crate) async fn create(js: &jetstream::Context, url: &Url) -> Result<kv::Sto
         allow_direct: false,
         ..Default::default()
     };
-    js.get_or_create_stream(config)
-        .await
-        .map_err(|e| format!("cannot create bucket {}: {e}", url.bucket))?;
+    js.get_or_create_stream(config).await.map_err(|e| {
+        let text = e.to_string();
+        if url.replicas > 1 && replicas_refused(&text) {
+            Failure::Config(replicas_message(url, &text))
+        } else {
+            Failure::Io(format!("cannot create bucket {}: {text}", url.bucket))
+        }
+    })?;
     js.get_key_value(url.bucket.clone())
         .await
-        .map_err(|e| format!("cannot open bucket {}: {e}", url.bucket))
+        .map_err(|e| Failure::Io(format!("cannot open bucket {}: {e}", url.bucket)))
+}
+
+/// Whether the server refused a bucket for its replica count (nats-server: "replicas > 1 not
+/// supported in non-clustered mode").
+fn replicas_refused(error: &str) -> bool {
+    error.contains("non-clustered mode") || error.contains("insufficient resources")
+}
+
+/// What to write instead of the URL's `replicas=N` the server refused.
+pub(crate) fn replicas_message(url: &Url, error: &str) -> String {
+    format!(
+        "the URL option replicas={} of {} asks for {} copies of bucket {}, which the server \
+         cannot keep ({error}): a single nats-server (not a cluster) takes replicas=1; a \
+         cluster takes at most its number of servers",
+        url.replicas,
+        url.shown(),
+        url.replicas,
+        url.bucket
+    )
 }
 
 /// The bucket backend of `--state nats://...`.

@@ -91,3 +91,37 @@ fn tessla_set_takes_a_string_with_spaces() {
         "{err}"
     );
 }
+
+/// The `delay` trap (issue 47): a constant delay stream is one event at t = 0, so the watchdog
+/// is armed once and the first message cancels it. `check` says where, and what to write; a
+/// watchdog written right, and a one-shot timer reset by `()` only, are not warned about.
+#[test]
+fn check_warns_about_a_delay_armed_only_at_time_zero() {
+    let spec = "in battery: Events[Float]\n\
+                def max_silence = 2000000000\n\
+                def silent = delay(max_silence, battery)\n\
+                def watchdog = delay(const(max_silence, battery), battery)\n\
+                def at_start = delay(const(5000000000, ()), ())\n\
+                def never = delay(const(0, battery), battery)\n\
+                out silent\nout watchdog\nout at_start\nout never\n";
+    let (code, _, err) = check(&[], spec);
+    assert_eq!(code, Some(0), "a warning, not an error: {err}");
+    assert!(
+        err.contains("warning: this `delay` is armed only at time 0"),
+        "{err}"
+    );
+    assert!(err.contains("spec.tessla:3:14"), "the place: {err}");
+    assert!(
+        err.contains("write `delay(const(max_silence, battery), battery)`"),
+        "what to write instead: {err}"
+    );
+    assert_eq!(
+        err.matches("armed only at time 0").count(),
+        1,
+        "the watchdog and the timer at start are right: {err}"
+    );
+    assert!(
+        err.contains("this `delay` waits 0 (a delay must be positive)") && err.contains(":6:"),
+        "{err}"
+    );
+}

@@ -94,7 +94,7 @@ fn an_undeclared_telegraf_annotation_gets_the_include_line_to_add() {
         "{err}"
     );
     assert!(
-        err.contains("help: add this line at the top of the spec: include \"Telegraf.tessla\""),
+        err.contains("help: add this line at the top of the spec: include \"telegraf.tessla\""),
         "{err}"
     );
 }

@@ -15,6 +15,8 @@ mod prelude;
 #[cfg(feature = "tools")]
 mod readme_commands;
 #[cfg(feature = "tools")]
+mod report_any_spec;
+#[cfg(feature = "tools")]
 mod simulate;
 mod state_suite;
 mod stdlib;

@@ -643,3 +643,29 @@ fn state_interval_needs_state() {
     assert_eq!(code, 2, "{err}");
     assert!(err.contains("--state"), "{err}");
 }
+
+/// A `--state` file in a folder that does not exist is said at start (issue 47), with what to
+/// do, before any input is read: not at the end of a run whose state is then lost.
+#[test]
+fn a_state_folder_that_does_not_exist_stops_the_run_at_start() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("missing/robot.state");
+    let out = std::process::Command::new(crate::support::BIN)
+        .args(["run", "--state", s(&state)])
+        .stdin(std::process::Stdio::null())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(3), "{err}");
+    let folder = dir.path().join("missing");
+    assert!(
+        err.contains(&format!(
+            "E! state: --state {}: the folder {} does not exist: create it (`mkdir -p {}`",
+            s(&state),
+            s(&folder),
+            s(&folder)
+        )),
+        "{err}"
+    );
+    assert!(!folder.exists(), "nothing is made behind the user's back");
+}

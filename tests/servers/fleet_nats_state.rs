@@ -395,3 +395,32 @@ fn a_holder_whose_lease_is_taken_stops_stepping_and_stands_by() {
         "{err}"
     );
 }
+
+/// `replicas=3` on a single nats-server (issue 47): said at start, exit 2, naming the URL option
+/// and the value that works; the same URL with `replicas=1` runs.
+#[test]
+fn replicas_a_single_server_cannot_keep_name_the_option_and_the_value_that_works() {
+    let Some(nats) = nats_cluster::require_nats_server() else {
+        return;
+    };
+    let port = nats_cluster::free_port();
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("js");
+    let conf = format!(
+        "listen: 127.0.0.1:{port}\njetstream {{ store_dir: \"{}\" }}\n",
+        store.display()
+    );
+    let server =
+        crate::support::servers::Server::start(&nats, &["-c"], dir, port, "nats.conf", &conf);
+    let url = |replicas: u32| format!("nats://127.0.0.1:{port}/solo?replicas={replicas}");
+    let (_, err, code) = run(&["--state", &url(3)], "m x=1 1\n");
+    assert_eq!(code, 2, "{err}\n{}", server.log());
+    assert!(
+        err.contains(&format!(
+            "E! state: the URL option replicas=3 of nats://127.0.0.1:{port}/solo asks for 3 copies"
+        )) && err.contains("a single nats-server (not a cluster) takes replicas=1"),
+        "{err}"
+    );
+    let (_, err, code) = run(&["--state", &url(1)], "m x=1 1\n");
+    assert_eq!(code, 0, "{err}");
+}

@@ -20,7 +20,9 @@
 //! By concern: `names`
 //! (local scopes over the resolved globals, definitions on first use, externs),
 //! `expr` (each expression form, operators), `call` (calls and arguments), `closure`
-//! (value-level functions into the function table, function values, constant folding), `stream` (the stream operators), `time` (base time and time units), `overrides` (`--set`). Names and signatures of
+//! (value-level functions into the function table, function values, constant folding), `stream` (the stream operators), `time` (base time and time units), `overrides` (`--set`),
+//! `traps` (warnings about specs that check but cannot do what they say: a `delay` armed once).
+//! Names and signatures of
 //! builtins are `crate::builtins`, operator semantics `crate::runtime::ops`, format strings
 //! `crate::runtime::format`, evaluation order and cross-step slots `crate::ir::schedule`.
 
@@ -38,6 +40,7 @@ mod objects;
 mod overrides;
 mod stream;
 pub mod time;
+mod traps;
 
 use crate::ir::{
     Annotation, BinOp, Callee, Code, FnId, Function, InputInfo, LiftFn, Node, NodeId, OutputInfo,
@@ -193,6 +196,8 @@ struct Graph {
     unit_node: Option<NodeId>,
     inputs: Vec<InputInfo>,
     input_nodes: Vec<NodeId>,
+    /// Each `delay` call: its delay stream, its reset stream and its place (`traps`).
+    delays_at: Vec<(NodeId, NodeId, Span)>,
 }
 
 /// The function table being built (`closure`) and constant folding over it.
@@ -253,6 +258,7 @@ impl<'a> Compiler<'a> {
                 unit_node: None,
                 inputs: Vec::new(),
                 input_nodes: Vec::new(),
+                delays_at: Vec::new(),
             },
             table: Functions {
                 functions: Vec::new(),
@@ -439,6 +445,7 @@ impl<'a> Compiler<'a> {
             }
         }
         drop(env);
+        self.warn_delay_traps();
         self.break_cycles();
         if self.diags.iter().any(|d| d.is_error()) {
             return Err(self.diags);
@@ -496,7 +503,7 @@ impl<'a> Compiler<'a> {
                     )
                     .with_help(if a.name.name.starts_with("Telegraf") {
                         // The connector's annotations come with the connector (and with us).
-                        "add this line at the top of the spec: include \"Telegraf.tessla\" \
+                        "add this line at the top of the spec: include \"telegraf.tessla\" \
                          (the Telegraf annotations, bundled when no such file is beside the \
                          spec)"
                             .to_string()

@@ -28,10 +28,12 @@ impl Compiler<'_> {
                     trigger: s,
                 }
             }
-            StreamOp::Delay => Node::Delay {
-                delay: self.stream_arg(&args, 0, span)?,
-                reset: self.stream_arg(&args, 1, span)?,
-            },
+            StreamOp::Delay => {
+                let delay = self.stream_arg(&args, 0, span)?;
+                let reset = self.stream_arg(&args, 1, span)?;
+                self.graph.delays_at.push((delay, reset, span));
+                Node::Delay { delay, reset }
+            }
             StreamOp::Default => Node::Default {
                 stream: self.stream_arg(&args, 0, span)?,
                 value: self.const_arg(&args, 1, span)?,
