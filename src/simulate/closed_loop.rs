@@ -51,8 +51,8 @@ pub struct Scenario {
     /// s: length of the run (at most the program's duration).
     pub duration: f64,
     /// (start s, length s): while the robot's link is down its client holds its messages, and
-    /// sends them, in order and with their own times, with the first message after it returns
-    /// (a QoS 1 client that queues while reconnecting).
+    /// sends them, in order and with their own times, when it returns (a QoS 1 client that
+    /// queues while reconnecting).
     pub link_drops: Vec<(f64, f64)>,
 }
 
@@ -211,7 +211,7 @@ pub fn run(
         messages_held: 0,
         oldest_applied_ms: 0.0,
     };
-    // (message, its time in s, the program's speed when it was sent) held by a link drop.
+    // (message, the program's speed when it was sent, s: when the link returns) held by a drop.
     let mut held: Vec<(Message, f64, f64)> = Vec::new();
     let mut gate = Gate::default();
     let delay_ns = (s.delay * 1e9).round() as i64;
@@ -238,16 +238,16 @@ pub fn run(
         let reported: f64 = message.actual_speed_text().parse().unwrap_or(actual);
         sum_sq += (expected - reported).powi(2);
         outcome.messages += 1;
-        if s.link_drops.iter().any(|&(a, l)| t >= a && t < a + l) {
+        if let Some(&(a, l)) = s.link_drops.iter().find(|&&(a, l)| t >= a && t < a + l) {
             outcome.messages_held += 1;
-            held.push((message, t, expected));
+            held.push((message, expected, a + l));
         } else {
-            // The link is up: what it held goes first, arriving now, then this message.
-            let arrival_ns = message.time_ns;
-            for (message, _, expected) in held
+            // The link is up: what it held went when it came back, then this message.
+            for (message, expected, arrival) in held
                 .drain(..)
-                .chain(std::iter::once((message, t, expected)))
+                .chain(std::iter::once((message, expected, t)))
             {
+                let arrival_ns = s.start_ns.saturating_add((arrival * 1e9).round() as i64);
                 let reply = twin.exchange(&message.to_line(&s.host), &message, arrival_ns)?;
                 out.write_all(&reply.lines)
                     .map_err(|e| format!("cannot write the output: {e}"))?;
@@ -272,7 +272,7 @@ pub fn run(
                     outcome.oldest_applied_ms = outcome.oldest_applied_ms.max(age);
                 }
                 if monitor_on && accepted && a.speed.is_finite() {
-                    pending.push_back((t + s.delay, expected, a.speed));
+                    pending.push_back((arrival + s.delay, expected, a.speed));
                 }
             }
         }

@@ -244,3 +244,57 @@ fn bad_options_are_named() {
         assert!(err.contains(needle), "{args:?}: {err}");
     }
 }
+
+/// Issue 46 in the closed loop: the robot (5 Hz, a 20 ms twin) loses its link twice for a
+/// little longer than `max_silence` plus `--allowed-lateness` (1.25 s), and once for 10 s; its
+/// client holds the messages and sends them when the link returns. The silence moves the
+/// monitor's clock, so the held messages are late records, stepped after it; their actions must
+/// be refused as stale by the robot's gate, and no action the robot applies may rest on data older
+/// than the validity (400 ms), judged by the robot's own record of when it sent each message.
+/// With `valid_until` counted from the shifted step (before the fix) the robot applied actions
+/// computed from data 1.17 s old and refused none.
+#[test]
+fn link_drops_let_no_stale_action_through_the_robots_gate() {
+    let drops = [
+        "--period",
+        "0.2",
+        "--delay",
+        "0.02",
+        "--link-drop",
+        "4.9:1.2",
+        "--link-drop",
+        "12.9:1.25",
+        "--link-drop",
+        "20.1:10",
+    ];
+    let s = summary(&drops);
+    let a = &s["augmented"];
+    assert_eq!(f(&a["messages_held"]), 62.0, "{a}");
+    assert!(
+        f(&a["refused_stale"]) >= 50.0,
+        "the held messages' actions: {a}"
+    );
+    assert!(
+        f(&a["oldest_applied_ms"]) <= 400.0,
+        "an applied action rested on older data than its validity: {a}"
+    );
+    // The table says so too, and the late records are warned about.
+    let out = simulate(&drops);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains(
+            "link drops: 62 messages held and sent late; the oldest data behind an applied action: "
+        ),
+        "{text}"
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("before its instance's last step"), "{err}");
+    // A malformed drop is named.
+    let out = simulate(&["--link-drop", "5"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("--link-drop 5: expected AT:SECONDS"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
