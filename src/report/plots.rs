@@ -620,18 +620,8 @@ fn held(points: &[(f64, f64)], end: f64) -> Vec<(f64, f64)> {
 
 /// The colour of a verdict's value: `true` red, `false` green, others in order of appearance.
 fn value_color(value: &str, others: &mut Vec<String>) -> RGBColor {
-    const OTHERS: [RGBColor; 10] = [
-        EXPECTED,
-        DROPOUT,
-        SILENT,
-        RGBColor(140, 86, 75),
-        RGBColor(227, 119, 194),
-        RGBColor(127, 127, 127),
-        RGBColor(188, 189, 34),
-        RGBColor(23, 190, 207),
-        AUGMENTED,
-        RGBColor(128, 128, 0),
-    ];
+    // The palette without the two colours `true` and `false` have.
+    let palette = || PALETTE.iter().filter(|c| **c != ACTUAL && **c != ACTION);
     match value {
         "true" => ACTUAL,
         "false" => ACTION,
@@ -640,7 +630,10 @@ fn value_color(value: &str, others: &mut Vec<String>) -> RGBColor {
                 others.push(value.to_string());
                 others.len() - 1
             });
-            OTHERS[i % OTHERS.len()]
+            palette()
+                .nth(i % palette().count())
+                .copied()
+                .unwrap_or(EXPECTED)
         }
     }
 }

@@ -587,6 +587,31 @@ fn mosquitto_on(port: u16) -> servers::Server {
     )
 }
 
+/// What the broker tests share: InfluxDB, a Mosquitto of the test's own (to kill and start
+/// again) on a free port, a state folder and the shipped `telegraf.conf` pointed at them (with the
+/// robot's own time in each message when `robots_time`). `None` without the servers.
+fn broker_run(
+    robots_time: bool,
+) -> Option<(
+    servers::Influxd,
+    u16,
+    servers::Server,
+    tempfile::TempDir,
+    String,
+)> {
+    servers::require("mosquitto", "mosquitto")?;
+    let influx = servers::Influxd::start()?;
+    let port = servers::free_port();
+    let broker = mosquitto_on(port);
+    let state = tempfile::tempdir().unwrap();
+    let mut rewrite = Rewrite::robot(port, Some(&influx.url(""))).state_in(state.path());
+    if robots_time {
+        rewrite = rewrite.robots_time();
+    }
+    let conf = rewrite.apply(&real_telegraf::shipped("telegraf/telegraf.conf"));
+    Some((influx, port, broker, state, conf))
+}
+
 #[test]
 fn the_broker_down_for_30_s_makes_late_and_repeated_actions_the_robot_refuses() {
     use std::sync::Arc;
@@ -594,18 +619,9 @@ fn the_broker_down_for_30_s_makes_late_and_repeated_actions_the_robot_refuses() 
     use tessla_telegraf::simulate::closed_loop::Action;
     use tessla_telegraf::simulate::gate::{Gate, Verdict};
     for (version, bin) in real_telegraf::versions() {
-        if servers::require("mosquitto", "mosquitto").is_none() {
-            return;
-        }
-        let Some(influx) = servers::Influxd::start() else {
+        let Some((_influx, port, broker, _state, conf)) = broker_run(false) else {
             return;
         };
-        let port = servers::free_port();
-        let broker = mosquitto_on(port);
-        let state = tempfile::tempdir().unwrap();
-        let conf = Rewrite::robot(port, Some(&influx.url("")))
-            .state_in(state.path())
-            .apply(&real_telegraf::shipped("telegraf/telegraf.conf"));
         let stop = Arc::new(AtomicBool::new(false));
         let (_robot_in, actions) = robust_client(port, "robot-in", Some("action"), stop.clone());
         let telegraf = Telegraf::start(version, &bin, &conf, &[]);
@@ -700,19 +716,9 @@ fn link_gaps_and_a_broker_outage_let_no_stale_action_through_the_robots_gate() {
     use tessla_telegraf::simulate::gate::{Gate, Verdict};
     const VALIDITY: i64 = 400_000_000;
     for (version, bin) in real_telegraf::versions() {
-        if servers::require("mosquitto", "mosquitto").is_none() {
-            return;
-        }
-        let Some(influx) = servers::Influxd::start() else {
+        let Some((_influx, port, broker, _state, conf)) = broker_run(true) else {
             return;
         };
-        let port = servers::free_port();
-        let broker = mosquitto_on(port);
-        let state = tempfile::tempdir().unwrap();
-        let conf = Rewrite::robot(port, Some(&influx.url("")))
-            .state_in(state.path())
-            .robots_time()
-            .apply(&real_telegraf::shipped("telegraf/telegraf.conf"));
         let stop = Arc::new(AtomicBool::new(false));
         let telegraf = Telegraf::start(version, &bin, &conf, &[]);
         std::thread::sleep(Duration::from_secs(1));
