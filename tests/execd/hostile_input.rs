@@ -322,7 +322,13 @@ fn decreasing_and_repeated_timestamps_are_reported_and_answered() {
     assert!(!f.stderr.contains("second event"), "{}", f.stderr);
     assert!(f.stderr.contains(", 1 late records,"), "{}", f.stderr);
     assert!(f.stderr.contains(", 0 dropped values,"), "{}", f.stderr);
-    assert!(f.stderr.contains("line 6: exact repeat"), "{}", f.stderr);
+    // The warning names the robot by the record's measurement and tags (no --instance-by).
+    assert!(
+        f.stderr
+            .contains("line 6 (mqtt_consumer,host=turtlebot3,topic=tessla): exact repeat"),
+        "{}",
+        f.stderr
+    );
     assert!(f.stderr.contains(", 1 duplicates"), "{}", f.stderr);
     // --late drop: the late record's events are dropped, the rest answered.
     let mut input = robot(1000);
@@ -354,7 +360,8 @@ fn duplicate_field_keys_are_reported_and_the_last_wins_as_in_telegraf() {
         "tessla x=1i 1000\ntessla x=3i 2000\ntessla x=4i 3000\n"
     );
     assert!(
-        f.stderr.contains("line 2: 1 field value(s) overwritten"),
+        f.stderr
+            .contains("line 2 (m): 1 field value(s) overwritten"),
         "{}",
         f.stderr
     );

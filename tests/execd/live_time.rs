@@ -251,7 +251,7 @@ fn a_late_alarm_is_reported_however_the_input_was_read() {
         assert_eq!(f.stdout_text(), expected, "{}", f.stderr);
         assert!(
             f.stderr.contains(
-                "line 3: timestamp 1700000005000000000 is 5s before its instance's last step at 1700000010000000000; evaluated as a step of its own at 1700000010000000001 (--late shift)"
+                "line 3: timestamp 1700000005000000000 is 5s before its instance's last step at 1700000010000000000 (robot); evaluated as a step of its own at 1700000010000000001 (--late shift)"
             ),
             "{}",
             f.stderr
@@ -313,7 +313,8 @@ fn a_wrong_timestamp_cannot_move_the_clock() {
     assert!(
         f.stderr
             .contains(&format!("line 3: timestamp {} is ", now + hour))
-            && f.stderr.contains("ahead of the wall clock; refused"),
+            // The warning names the robot: the record's measurement and tags.
+            && f.stderr.contains("ahead of the wall clock (robot); refused"),
         "{}",
         f.stderr
     );
