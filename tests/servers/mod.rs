@@ -18,6 +18,8 @@ mod security_mqtt;
 #[cfg(feature = "tools")]
 mod simulate_mqtt;
 #[cfg(feature = "tools")]
+mod telegraf_broker_persistence;
+#[cfg(feature = "tools")]
 mod telegraf_real;
 #[cfg(feature = "tools")]
 mod telegraf_real_failures;

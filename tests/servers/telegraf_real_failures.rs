@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 use tessla_telegraf::replay::message::{MessageOptions, to_json};
 
 /// The recorded run's messages as the robot's JSON, each with `"seq": k` added.
-fn messages(n: usize) -> Vec<Vec<u8>> {
+pub(super) fn messages(n: usize) -> Vec<Vec<u8>> {
     let text = std::fs::read_to_string(recorded::recorded_run_path()).unwrap();
     let recording = tessla_telegraf::replay::read_lp::read(&text, None);
     let options = MessageOptions {
@@ -40,7 +40,7 @@ fn messages(n: usize) -> Vec<Vec<u8>> {
 }
 
 /// The `seq` of every record the monitor echoed into InfluxDB, with how often.
-fn echoed(influx: &servers::Influxd) -> BTreeMap<i64, usize> {
+pub(super) fn echoed(influx: &servers::Influxd) -> BTreeMap<i64, usize> {
     let (status, v) = influx.query(Some("telegraf"), "SELECT seq FROM mqtt_consumer");
     assert_eq!(status, 200, "{v}");
     let mut out = BTreeMap::new();
@@ -532,7 +532,7 @@ fn a_hung_child_ends_itself_by_its_watchdog_and_telegraf_restarts_it() {
 /// A client of the test's own that survives the broker going away: it connects again and again
 /// (a robot's client does), subscribing anew each time when `subscribe` names a topic. Every
 /// message received is sent with its arrival (ns since the epoch).
-fn robust_client(
+pub(super) fn robust_client(
     port: u16,
     id: &str,
     subscribe: Option<&str>,
