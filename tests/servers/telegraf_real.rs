@@ -42,7 +42,7 @@ fn replay(path: &std::path::Path, port: u16, topic: &str) {
 }
 
 /// As [`replay`], at `speed` times the recorded pace (`0`: as fast as possible).
-fn replay_at(path: &std::path::Path, port: u16, topic: &str, speed: &str) {
+pub(super) fn replay_at(path: &std::path::Path, port: u16, topic: &str, speed: &str) {
     let out = Command::new(BIN)
         .args(["replay", path.to_str().unwrap()])
         .args(["--broker", &format!("mqtt://127.0.0.1:{port}")])

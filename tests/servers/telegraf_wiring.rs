@@ -211,17 +211,7 @@ fn with_influxdb_down_the_echo_answers_every_message_and_the_clone_wiring_stops(
             let actions = mqtt_client::subscribe(broker.port, "action", "robot");
             let telegraf = Telegraf::start(version, &bin, &conf, &[]);
             real_telegraf::wait_subscribed(&broker, "telegraf-tessla-in", "tessla", 0);
-            let out = Command::new(BIN)
-                .args(["replay", fixture.to_str().unwrap()])
-                .args(["--broker", &broker.url()])
-                .args(["--topic", "tessla", "--speed", "0"])
-                .output()
-                .unwrap();
-            assert!(
-                out.status.success(),
-                "replay: {}",
-                String::from_utf8_lossy(&out.stderr)
-            );
+            super::telegraf_real::replay_at(&fixture, broker.port, "tessla", "0");
             let wait = Duration::from_secs(if clone { 15 } else { 60 });
             let got = mqtt_client::collect(&actions, records, wait);
             let log = telegraf.stop();
