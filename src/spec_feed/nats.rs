@@ -236,19 +236,31 @@ async fn revisions(store: &kv::Store) -> Result<Vec<u64>, String> {
 
 /// The revisions of every key `of` reads a revision from, in order.
 async fn numbered_keys(store: &kv::Store, of: fn(&str) -> Option<u64>) -> Result<Vec<u64>, String> {
-    let mut keys = store
-        .keys()
-        .await
-        .map_err(|e| format!("cannot list the spec channel's keys: {e}"))?;
-    let mut out = Vec::new();
-    while let Some(k) = keys.next().await {
-        let k = k.map_err(|e| format!("cannot list the spec channel's keys: {e}"))?;
-        if let Some(r) = of(&k) {
-            out.push(r);
-        }
-    }
+    let mut out: Vec<u64> = key_names(store).await?.iter().filter_map(|k| of(k)).collect();
     out.sort_unstable();
     out.dedup();
+    Ok(out)
+}
+
+/// Every key of the bucket (a deleted one too: its marker is a message; readers take `Put`
+/// entries only), from the stream's subject list: requests and answers, no consumer.
+/// `Store::keys` creates an ordered push consumer per call and waits until it reports everything
+/// delivered; the status keys every process rewrites every 2 s kept that from ending within the
+/// 30 s bound on a loaded machine (a rollback in the real-process tests failed so).
+async fn key_names(store: &kv::Store) -> Result<Vec<String>, String> {
+    let bad = |e: &dyn std::fmt::Display| format!("cannot list the spec channel's keys: {e}");
+    let mut subjects = store
+        .stream
+        .info_with_subjects(format!("{}>", store.prefix))
+        .await
+        .map_err(|e| bad(&e))?;
+    let mut out = Vec::new();
+    while let Some(s) = subjects.next().await {
+        let (subject, _) = s.map_err(|e| bad(&e))?;
+        if let Some(k) = subject.strip_prefix(store.prefix.as_str()) {
+            out.push(k.to_string());
+        }
+    }
     Ok(out)
 }
 
@@ -906,14 +918,11 @@ impl Operator {
             return Ok(Vec::new());
         };
         let got = self.run(async move {
-            let mut keys = store.keys().await.map_err(|e| e.to_string())?;
-            let mut names = Vec::new();
-            while let Some(k) = keys.next().await {
-                let k = k.map_err(|e| e.to_string())?;
-                if k.starts_with("status.") {
-                    names.push(k);
-                }
-            }
+            let mut names: Vec<String> = key_names(&store)
+                .await?
+                .into_iter()
+                .filter(|k| k.starts_with("status."))
+                .collect();
             names.sort();
             let mut out = Vec::new();
             for k in names {
