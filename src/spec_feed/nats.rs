@@ -236,7 +236,11 @@ async fn revisions(store: &kv::Store) -> Result<Vec<u64>, String> {
 
 /// The revisions of every key `of` reads a revision from, in order.
 async fn numbered_keys(store: &kv::Store, of: fn(&str) -> Option<u64>) -> Result<Vec<u64>, String> {
-    let mut out: Vec<u64> = key_names(store).await?.iter().filter_map(|k| of(k)).collect();
+    let mut out: Vec<u64> = key_names(store)
+        .await?
+        .iter()
+        .filter_map(|k| of(k))
+        .collect();
     out.sort_unstable();
     out.dedup();
     Ok(out)
