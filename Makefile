@@ -1,5 +1,5 @@
 # Every command the README mentions lives here. `make run` and `make test` are the README's first two.
-.PHONY: run test setup build install install-files deb profiling readme-run bench bench-criterion bench-process bench-nats bench-telegraf shutdown-save rollout-bench soak fmt lint ci fixtures conformance fuzz reproduce combinations
+.PHONY: run test setup build install install-files deb profiling readme-run bench bench-criterion bench-process bench-nats bench-telegraf shutdown-save rollout-bench soak fmt lint ci fixtures conformance fuzz reproduce combinations crates-package
 
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
@@ -196,3 +196,11 @@ outputs-compare: build
 	bash tools/outputs.sh $(BASE) $(CURDIR)/target/outputs-base
 	bash tools/outputs.sh target/release/tessla-telegraf $(CURDIR)/target/outputs-new
 	diff -r target/outputs-base target/outputs-new && echo "outputs-compare: identical"
+
+# The four library crates as crates.io would receive them: each packaged and its packaged copy
+# built (`cargo package` resolves the crates' dependencies on one another through a local
+# registry), and every crate's documentation without a warning (a broken or private link fails).
+LIB_CRATES = -p tessla-syntax -p tessla-engine -p tessla-trace -p lineproto
+crates-package:
+	$(CARGO) package $(LIB_CRATES) --allow-dirty
+	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --no-deps --workspace

@@ -277,7 +277,7 @@ impl Versions {
     /// version `new` at `from` (a rule not accepted yet): those whose definition differs between
     /// the version such an instance runs just before `from` and `new`, each once, in `new`'s
     /// order. Exact whatever instances are live: it looks at representative keys (see
-    /// [`Versions::representatives`]); when there would be too many of them, at every version
+    /// `Versions::representatives`); when there would be too many of them, at every version
     /// some instance could run before.
     pub fn reset_for(&self, new: usize, from: i64, selector: &Selector) -> Vec<String> {
         let before = from.saturating_sub(1);

@@ -575,14 +575,14 @@ fn numeric(root: &Root<'_>, picked: &Picked, outputs: &Outputs, title: &str) -> 
     Ok(())
 }
 
-/// How [`numeric`] draws an output: a single event as a mark.
+/// How `numeric` draws an output: a single event as a mark.
 pub const MARK: &str = "mark (a single event)";
 /// Integers and other counts (whole numbers that never fall) as steps.
 pub const STEPS: &str = "steps (held until the next event)";
 /// Other numbers as a line through marks.
 pub const LINE: &str = "line";
 
-/// The shape of a numeric output, as [`numeric`] draws it: [`MARK`], [`STEPS`] or [`LINE`].
+/// The shape of a numeric output, as `numeric` draws it: [`MARK`], [`STEPS`] or [`LINE`].
 pub fn numeric_kind(o: &Output<f64>) -> &'static str {
     let whole = o.points.iter().all(|(_, v)| v.fract() == 0.0);
     let rising = o.points.windows(2).all(|w| w[0].1 <= w[1].1);

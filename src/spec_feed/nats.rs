@@ -592,7 +592,7 @@ impl NatsFeed {
 
 impl Drop for NatsFeed {
     /// The process stops: its status is written once more, marked stopped, so a publisher
-    /// does not wait for its vote (best effort, at most [`crate::state::nats_conn::REQUEST_TIMEOUT`]).
+    /// does not wait for its vote (best effort, at most `REQUEST_TIMEOUT`).
     fn drop(&mut self) {
         let Some((key, mut status)) = self.status.borrow().clone() else {
             return;
@@ -841,7 +841,7 @@ impl Operator {
     }
 
     /// Whether this command made the bucket (processes started before it exist look for it
-    /// every [`LOOK_AGAIN`] and report within a [`HEARTBEAT`] of finding it).
+    /// every `LOOK_AGAIN` and report within a [`HEARTBEAT`] of finding it).
     pub fn created(&self) -> bool {
         self.created
     }

@@ -5,7 +5,7 @@
 //! steps its records, and the read's outputs are written once all threads are done (the sink
 //! writes the workers' outputs behind the reader's, not copied), so a record is still answered
 //! before the next read's records are stepped (the next read itself may be taken meanwhile:
-//! [`Shards::process`] runs the loop's read-ahead while a worker finishes). Each instance's
+//! `Shards::process` runs the loop's read-ahead while a worker finishes). Each instance's
 //! outputs keep their order; the order between instances within one read follows the threads.
 //! The records are handed over in one reused byte buffer per thread (no allocation per record).
 //! A thread waiting for the other side spins briefly before it sleeps (`SPIN`): waking a

@@ -3,7 +3,9 @@
 //! Owns: cutting a byte stream into records ([`split`], quote-aware: a string field may hold a raw
 //! newline), parsing one record into a [`Metric`] ([`parse`]; the record types in `metric`, on the `influxdb-line-protocol`
 //! crate with Telegraf's rules applied on top; a list pattern's elements read apart in `list`),
-//! and writing metrics back with Telegraf's escaping ([`write`]). No I/O happens here.
+//! and writing metrics back with Telegraf's escaping ([`write`](mod@write)). No I/O happens here.
+//!
+#![doc = include_str!("../README.md")]
 
 mod fast;
 mod list;

@@ -4,7 +4,7 @@
 //! and the places where Telegraf's parser (influxdata/telegraf
 //! `plugins/parsers/influx/machine.go.rl`) differs from the crate (`influxdb-line-protocol`
 //! 2.0.0): a trailing `\r` is accepted, `#` comment lines and blank lines are "no metric", the
-//! grammar differences handled in [`crate::telegraf_rules`] (tabs, `.5`, leading zeros, `\\`, ...),
+//! grammar differences handled in `crate::telegraf_rules` (tabs, `.5`, leading zeros, `\\`, ...),
 //! out-of-range floats (`1e400`, which the crate reads as infinity) are rejected as Telegraf does,
 //! and a repeated tag or field key keeps the last value (Telegraf overwrites).
 //!
@@ -59,7 +59,7 @@ fn excerpt(text: &str) -> String {
 /// Parse one record (as cut by [`crate::RecordSplitter`]). `Ok(None)`: a blank or comment line.
 ///
 /// Plain records (the usual output of Telegraf's serializers) take a hand-written fast path
-/// ([`crate::fast`]); every other record takes the full path below with the same result.
+/// (`crate::fast`); every other record takes the full path below with the same result.
 pub fn parse_record(bytes: &[u8]) -> Result<Option<Metric>, ParseError> {
     let mut m = Metric::default();
     Ok(parse_record_into(bytes, &mut m)?.then_some(m))

@@ -267,7 +267,7 @@ pub fn write_string(out: &mut String, s: &str) {
 /// `cargo bench -p lineproto --bench codec -- format_f64`; float formatting was the largest
 /// single item of a P2 record's profile); only its exponent form is rewritten here. The two differ where the value lies exactly halfway
 /// between two shortest candidates (zmij, like ryu, rounds such a tie to even, `Display` up:
-/// exactly 1658206780088562.25 is `...562.2` for zmij, `...562.3` for `Display`); [`is_tie`] finds those
+/// exactly 1658206780088562.25 is `...562.2` for zmij, `...562.3` for `Display`); `is_tie` finds those
 /// values exactly and they are written by `Display` itself. A test compares both on millions of
 /// values.
 pub fn write_float(out: &mut String, f: f64) {

@@ -16,6 +16,8 @@
 //! sides: `ir` and `value` (what events and IR constants carry). The front end reaches the
 //! runtime only through the builtins table (`builtins`); no runtime module imports the front
 //! end, and no two modules import each other.
+//!
+#![doc = include_str!("../README.md")]
 
 pub mod builtins;
 pub mod front;

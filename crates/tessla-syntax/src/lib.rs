@@ -2,6 +2,8 @@
 //!
 //! Owns: source files and spans (`source`), diagnostics and their rendering (`diag`), the AST
 //! (`ast`), and parsing. It knows nothing about types or evaluation (see `tessla-engine`).
+//!
+#![doc = include_str!("../README.md")]
 
 pub mod ast;
 pub mod diag;

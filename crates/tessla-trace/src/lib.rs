@@ -7,6 +7,8 @@
 //! timestamps and two events on one stream at one timestamp are errors that stop the run: the
 //! outputs of the steps before are kept, the pending step is dropped (as TeSSLa does). An error
 //! value reaching an output stops the run at that step.
+//!
+#![doc = include_str!("../README.md")]
 
 pub mod ctf;
 mod fast;

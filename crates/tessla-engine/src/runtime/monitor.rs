@@ -74,7 +74,7 @@ impl std::error::Error for InputError {}
 
 /// The state of one program instance: only what must persist between steps. Cheap to clone
 /// (the program is shared). Per-step scratch (this step's event of each node, argument buffers)
-/// lives in a per-thread buffer shared by all instances, see [`Scratch`].
+/// lives in a per-thread buffer shared by all instances, see `Scratch`.
 ///
 /// Layout: `inputs` (one slot per input, filled between steps), `last` (one slot per node read
 /// across steps, indexed by [`Program::last_slot`]), `targets` (one armed target per `delay`

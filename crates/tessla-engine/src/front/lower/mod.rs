@@ -1,6 +1,6 @@
 //! Lowering: from the checked syntax of a spec to a [`Program`] (the IR the monitor runs).
 //!
-//! Every expression becomes a [`Term`]: a constant, a stream node, value code over a frame of
+//! Every expression becomes a `Term`: a constant, a stream node, value code over a frame of
 //! variables ([`Code`], data: used inside function bodies and lambdas), or a function. Functions
 //! applied to stream arguments are expanded in place (TeSSLa's macros); operators and liftable
 //! functions on streams become signal lifts; value-level functions are lowered once into the
@@ -154,9 +154,9 @@ struct Fail;
 type R<T> = Result<T, Fail>;
 
 /// The lowering of one checked spec. Its state, by concern: the spec it reads, the
-/// definitions' lowering states ([`Defs`]), the stream graph being built ([`Graph`]), the
-/// function table ([`Functions`]), the time settings ([`TimeSettings`]), how deep it is
-/// ([`Depth`]) and the diagnostics.
+/// definitions' lowering states (`Defs`), the stream graph being built (`Graph`), the
+/// function table (`Functions`), the time settings (`TimeSettings`), how deep it is
+/// (`Depth`) and the diagnostics.
 pub struct Compiler<'a> {
     sources: &'a SourceMap,
     /// The resolve pass's result: what every global name means (`crate::front::resolve`).
@@ -312,7 +312,7 @@ impl<'a> Compiler<'a> {
         self
     }
 
-    /// Set the unit of the base time (see [`parse_base_parts`]) for time literal conversion.
+    /// Set the unit of the base time (see `parse_base_parts`) for time literal conversion.
     pub fn with_base_unit(mut self, unit_fs: i128) -> Self {
         self.time.base_unit = Some(unit_fs);
         self

@@ -1,7 +1,7 @@
 //! Time in a spec: the base time (`--base-time`, a case's `baseTime`) and the units of time
 //! literals (`5 s`), in femtoseconds.
 //!
-//! Owns: [`parse_base_parts`] (the base time as count and unit) and [`unit_factor`]; the
+//! Owns: [`parse_base_parts`] (the base time as count and unit) and `unit_factor`; the
 //! lowering converts a literal `n unit` to `n * unit / base` (`lower`'s `ExprKind::Int`).
 
 /// The length of a time unit in femtoseconds.

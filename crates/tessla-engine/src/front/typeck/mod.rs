@@ -33,7 +33,7 @@
 //! makes; the lowering writes no type rule the checker owns.
 //!
 //! This file is the driver ([`check`]: inputs, definitions, annotations, outputs), the
-//! [`Checker`] state and its scopes. Each rule lives in one file, by concern: `ty` (types,
+//! `Checker` state and its scopes. Each rule lives in one file, by concern: `ty` (types,
 //! unification), `infer` (expressions), `operators`, `calls` (application, named arguments,
 //! type arguments), `defs` (definitions, recursion), `names` (lookup, written types),
 //! `signatures` (builtins from the table, prelude declarations), `annotations`, `liftable`.

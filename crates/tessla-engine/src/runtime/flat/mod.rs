@@ -13,7 +13,7 @@
 //! are known when the plan is made, so here each node is one instruction of a known type on a
 //! 64-bit slot, with nothing to test but presence and nothing to drop.
 //!
-//! A value that is not a scalar ([`Kind::Val`]: a tuple input, a string constant) is never
+//! A value that is not a scalar (`Kind::Val`: a tuple input, a string constant) is never
 //! copied during the step: its slot holds a reference to where it already is (this step's input
 //! event, a kept value, a constant), an output is sent by reference, and only a kept one is
 //! cloned into the monitor's state (for a tuple, one reference count).

@@ -186,7 +186,7 @@ pub fn string_format(a: &[Value]) -> Value {
 /// the trace has none). Not an identifier, so no TeSSLa record has it.
 pub const CTF_MARKER: &str = "$ctf";
 
-/// `CTF.getInt(event, key)`: the integer member at `key` (TeSSLa's key rules: see [`ctf_get`]).
+/// `CTF.getInt(event, key)`: the integer member at `key` (TeSSLa's key rules: see `ctf_get`).
 pub fn ctf_get_int(a: &[Value]) -> Value {
     ctf_get(a, "Int", |v| matches!(v, Value::Int(_) | Value::BigInt(_)))
 }
