@@ -2,11 +2,13 @@
 //! run in-process against a one-process oracle (Jepsen's checkers and FoundationDB's
 //! simulation are the models).
 //!
-//! A schedule mixes, for three to five robots: records in order, at equal times, late, ahead of
-//! the clock, with bad values and over-long; silences past `--instance-idle` and past a
-//! watchdog `delay`; publishes (fleet-wide, canary, renamed, added and removed outputs, a spec
-//! that does not compile, one that reads the data as the wrong type, one signed by a key
-//! nobody trusts, and a forged decision), rollbacks (a publish of an earlier version), SIGHUP;
+//! A schedule mixes, for three to five robots: records in order, at equal times, late (stepped
+//! after the clock, or dropped: `--late drop`), ahead of the clock, with bad values and
+//! over-long; silences past `--instance-idle` and past a watchdog `delay`; publishes
+//! (fleet-wide, canary, renamed, added and removed outputs, an input of the record's own time
+//! added and removed (`@TelegrafTime`), a spec that does not compile, one that reads the data
+//! as the wrong type, one signed by a key nobody trusts, and a forged decision), rollbacks (a
+//! publish of an earlier version), SIGHUP;
 //! and, per schedule, one of two fleets:
 //! - **threads**: one process with 1 to 3 threads (no `--state`: the only way threads run),
 //!   `--allowed-lateness` on (watchdogs fire by the wall clock), maybe `--instance-idle`;
@@ -48,7 +50,7 @@ use std::time::{Duration, Instant};
 use tessla_telegraf::processor::clock::Wall;
 use tessla_telegraf::processor::instances::shard_of;
 use tessla_telegraf::processor::versions::Selector;
-use tessla_telegraf::processor::{Options, Processor};
+use tessla_telegraf::processor::{LateMode, Options, Processor};
 use tessla_telegraf::spec_feed::bundle::{Bundle, BundleFile, Link};
 use tessla_telegraf::spec_feed::decide::{self, Tally};
 use tessla_telegraf::spec_feed::reload::SpecSource;
@@ -65,12 +67,15 @@ const MS: i64 = 1_000_000;
 const MAX_RECORD: usize = 64 * 1024;
 
 /// A version of the pool: its output named `name` writes `x * 10 + k`; `quiet` is the
-/// watchdog (`delay` 300 ms after each record), `d` an added output.
+/// watchdog (`delay` 300 ms after each record), `d` an added output; `stamp` reads each
+/// record's own time (`@TelegrafTime`) and writes `lag`, how far its step is after it (0, or
+/// more for a late record stepped after its robot's clock).
 struct Version {
     name: &'static str,
     k: i64,
     quiet: bool,
     extra: bool,
+    stamp: bool,
 }
 
 const POOL: &[Version] = &[
@@ -79,12 +84,14 @@ const POOL: &[Version] = &[
         k: 0,
         quiet: true,
         extra: false,
+        stamp: false,
     },
     Version {
         name: "v",
         k: 1,
         quiet: true,
         extra: false,
+        stamp: false,
     },
     // Renamed.
     Version {
@@ -92,6 +99,7 @@ const POOL: &[Version] = &[
         k: 2,
         quiet: true,
         extra: false,
+        stamp: false,
     },
     // An output added.
     Version {
@@ -99,6 +107,7 @@ const POOL: &[Version] = &[
         k: 3,
         quiet: true,
         extra: true,
+        stamp: false,
     },
     // The watchdog removed, renamed.
     Version {
@@ -106,6 +115,15 @@ const POOL: &[Version] = &[
         k: 4,
         quiet: false,
         extra: false,
+        stamp: false,
+    },
+    // The record's own time added as an input (and dropped again by any other version).
+    Version {
+        name: "v",
+        k: 5,
+        quiet: true,
+        extra: false,
+        stamp: true,
     },
 ];
 
@@ -119,6 +137,11 @@ fn spec_text(v: &Version) -> String {
     }
     if v.extra {
         s.push_str("def d = x + 1000\nout d\n");
+    }
+    if v.stamp {
+        s.push_str(
+            "def @TelegrafTime\n@TelegrafTime\nin mt: Events[Int]\ndef lag = on(x, time(x) - mt)\nout lag\n",
+        );
     }
     s
 }
@@ -216,6 +239,8 @@ struct Schedule {
     robots: usize,
     fleet: Fleet,
     ops: Vec<Op>,
+    /// `--late drop` instead of the default `shift`.
+    late_drop: bool,
 }
 
 fn generate(seed: u64) -> Schedule {
@@ -306,7 +331,13 @@ fn generate(seed: u64) -> Schedule {
         };
         ops.push(op);
     }
-    Schedule { robots, fleet, ops }
+    let late_drop = rng.random_bool(0.25);
+    Schedule {
+        robots,
+        fleet,
+        ops,
+        late_drop,
+    }
 }
 
 /// A channel stand-in: what the bus delivered, and what the process reported.
@@ -483,6 +514,11 @@ fn options(s: &Schedule) -> Options {
         passthrough: false,
         instance_by: vec!["robot".into()],
         version_tag: Some("spec_version".into()),
+        late: if s.late_drop {
+            LateMode::Drop
+        } else {
+            LateMode::Shift
+        },
         ..Options::default()
     };
     match s.fleet {
@@ -868,6 +904,14 @@ fn labels(run: &Run) -> Vec<String> {
                 "c" => true,
                 "quiet" => v.quiet,
                 "d" => v.extra,
+                // A step is never before the record's own time; a late record's is after it.
+                "lag" => {
+                    v.stamp
+                        && val
+                            .trim_end_matches('i')
+                            .parse::<i64>()
+                            .is_ok_and(|n| n >= 0)
+                }
                 _ if k == v.name => val
                     .trim_end_matches('i')
                     .parse::<i64>()
@@ -885,7 +929,23 @@ fn labels(run: &Run) -> Vec<String> {
     problems
 }
 
-fn check(seed: u64) -> Result<(usize, usize), String> {
+/// Lines of `bytes` whose `lag` is above 0: a late record's step, after its own time.
+fn late_lags(bytes: &[u8]) -> usize {
+    lines_of(bytes)
+        .iter()
+        .filter(|l| {
+            l.split(' ').nth(1).is_some_and(|fields| {
+                fields.split(',').any(|f| {
+                    f.strip_prefix("lag=")
+                        .and_then(|v| v.trim_end_matches('i').parse::<i64>().ok())
+                        .is_some_and(|n| n > 0)
+                })
+            })
+        })
+        .count()
+}
+
+fn check(seed: u64) -> Result<(usize, usize, usize), String> {
     let s = generate(seed);
     let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
     let fleet = run(&s, dir.path(), None);
@@ -916,7 +976,11 @@ fn check(seed: u64) -> Result<(usize, usize), String> {
         }
     }
     if problems.is_empty() {
-        Ok((lines_of(&fleet.lines).len(), fleet.repeats))
+        Ok((
+            lines_of(&fleet.lines).len(),
+            fleet.repeats,
+            late_lags(&fleet.lines),
+        ))
     } else {
         Err(format!(
             "seed {seed} (replay: COMBINATION_SEED={seed} cargo test --test integration cli::combinations -- --nocapture):\n{}\nschedule: {s:#?}\noutcomes: {:?}\noracle outcomes: {:?}",
@@ -939,22 +1003,27 @@ fn every_schedule_gives_the_one_process_oracles_lines() {
             (0..n).collect()
         }
     };
-    let (mut lines, mut repeats) = (0, 0);
+    let (mut lines, mut repeats, mut lags) = (0, 0, 0);
     for seed in &seeds {
         match check(*seed) {
-            Ok((l, r)) => {
+            Ok((l, r, g)) => {
                 lines += l;
                 repeats += r;
+                lags += g;
             }
             Err(e) => panic!("{e}"),
         }
     }
     eprintln!(
-        "combinations: {} schedules, {lines} lines equal to the oracle's, {repeats} repeated after crashes",
+        "combinations: {} schedules, {lines} lines equal to the oracle's, {repeats} repeated after crashes, {lags} late records' steps carrying their own time",
         seeds.len()
     );
     assert!(
         lines > seeds.len() * 10,
         "schedules that write nothing prove nothing"
+    );
+    assert!(
+        seeds.len() < 50 || lags > 0,
+        "no late record was stepped under a version that reads its own time"
     );
 }
