@@ -1,6 +1,7 @@
 //! Tokens of TeSSLa 1.2 source text.
 //!
-//! Owns: turning text into [`Token`]s with spans: identifiers, numbers, operators, significant
+//! Owns: the keywords ([`Kw`]) and punctuation marks ([`Punct`]) of TeSSLa 1.2, and turning
+//! text into [`Token`]s with spans: identifiers, numbers, operators, significant
 //! newlines, and string literals (with `${expr}`/`$id` interpolation lexed into nested token lists,
 //! and `f"..."` format specifiers). Comments (`#`, `--`, doc lines `---`/`##`) and escaped newlines
 //! are skipped; the newline ending a comment is kept, since newlines end statements.
@@ -21,7 +22,7 @@ pub enum Tok {
         format: bool,
     },
     /// An operator or punctuation, e.g. `+.`, `(`, `=>`.
-    Punct(&'static str),
+    Punct(Punct),
     Newline,
     Eof,
 }
@@ -43,12 +44,259 @@ pub struct Token {
     pub span: Span,
 }
 
-/// Longest first, so that `>=.` wins over `>=` and `>`.
-const PUNCTS: &[&str] = &[
-    ">=.", "<=.", "&&", "||", "==", "!=", "<=", ">=", "<<", ">>", "<.", ">.", "+.", "-.", "*.",
-    "/.", ":=", "=>", "@@", "+", "-", "*", "/", "%", "<", ">", "=", "!", "~", "&", "|", "^", "(",
-    ")", "[", "]", "{", "}", ",", ";", ":", ".", "@",
+/// A reserved word of TeSSLa 1.2. The lexer reads words as [`Tok::Ident`] (a keyword may still
+/// name a record field or a member); the parser asks [`Tok::is_kw`] where a keyword may stand
+/// and refuses one where a name must.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Kw {
+    /// `def`
+    Def,
+    /// `liftable`
+    Liftable,
+    /// `in`
+    In,
+    /// `out`
+    Out,
+    /// `as`
+    As,
+    /// `if`
+    If,
+    /// `then`
+    Then,
+    /// `else`
+    Else,
+    /// `static`
+    Static,
+    /// `include`
+    Include,
+    /// `type`
+    Type,
+    /// `module`
+    Module,
+    /// `import`
+    Import,
+    /// `extern`
+    Extern,
+    /// `where`
+    Where,
+    /// `return`
+    Return,
+    /// `strict`
+    Strict,
+    /// `lazy`
+    Lazy,
+    /// `__root__`
+    Root,
+}
+
+const KEYWORDS: &[(&str, Kw)] = &[
+    ("def", Kw::Def),
+    ("liftable", Kw::Liftable),
+    ("in", Kw::In),
+    ("out", Kw::Out),
+    ("as", Kw::As),
+    ("if", Kw::If),
+    ("then", Kw::Then),
+    ("else", Kw::Else),
+    ("static", Kw::Static),
+    ("include", Kw::Include),
+    ("type", Kw::Type),
+    ("module", Kw::Module),
+    ("import", Kw::Import),
+    ("extern", Kw::Extern),
+    ("where", Kw::Where),
+    ("return", Kw::Return),
+    ("strict", Kw::Strict),
+    ("lazy", Kw::Lazy),
+    ("__root__", Kw::Root),
 ];
+
+impl Kw {
+    /// The keyword `word` is, if it is one.
+    pub fn of(word: &str) -> Option<Kw> {
+        KEYWORDS.iter().find(|(w, _)| *w == word).map(|(_, k)| *k)
+    }
+
+    /// The keyword as written.
+    pub fn as_str(self) -> &'static str {
+        KEYWORDS
+            .iter()
+            .find(|(_, k)| *k == self)
+            .map_or("?", |(w, _)| w)
+    }
+}
+
+impl std::fmt::Display for Kw {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl Tok {
+    /// Whether this token is the keyword `k`.
+    pub fn is_kw(&self, k: Kw) -> bool {
+        matches!(self, Tok::Ident(s) if s == k.as_str())
+    }
+
+    /// Whether this token is the punctuation mark `p`.
+    pub fn is_punct(&self, p: Punct) -> bool {
+        *self == Tok::Punct(p)
+    }
+}
+
+/// An operator or punctuation mark of TeSSLa 1.2.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Punct {
+    /// `>=.`
+    FGe,
+    /// `<=.`
+    FLe,
+    /// `&&`
+    AndAnd,
+    /// `||`
+    OrOr,
+    /// `==`
+    EqEq,
+    /// `!=`
+    NotEq,
+    /// `<=`
+    Le,
+    /// `>=`
+    Ge,
+    /// `<<`
+    Shl,
+    /// `>>`
+    Shr,
+    /// `<.`
+    FLt,
+    /// `>.`
+    FGt,
+    /// `+.`
+    FPlus,
+    /// `-.`
+    FMinus,
+    /// `*.`
+    FStar,
+    /// `/.`
+    FSlash,
+    /// `:=`
+    ColonEq,
+    /// `=>`
+    FatArrow,
+    /// `@@`
+    AtAt,
+    /// `+`
+    Plus,
+    /// `-`
+    Minus,
+    /// `*`
+    Star,
+    /// `/`
+    Slash,
+    /// `%`
+    Percent,
+    /// `<`
+    Lt,
+    /// `>`
+    Gt,
+    /// `=`
+    Eq,
+    /// `!`
+    Bang,
+    /// `~`
+    Tilde,
+    /// `&`
+    Amp,
+    /// `|`
+    Pipe,
+    /// `^`
+    Caret,
+    /// `(`
+    LParen,
+    /// `)`
+    RParen,
+    /// `[`
+    LBracket,
+    /// `]`
+    RBracket,
+    /// `{`
+    LBrace,
+    /// `}`
+    RBrace,
+    /// `,`
+    Comma,
+    /// `;`
+    Semi,
+    /// `:`
+    Colon,
+    /// `.`
+    Dot,
+    /// `@`
+    At,
+}
+
+/// Every punctuation mark with its text, longest first, so that `>=.` wins over `>=` and `>`.
+const PUNCTS: &[(&str, Punct)] = &[
+    (">=.", Punct::FGe),
+    ("<=.", Punct::FLe),
+    ("&&", Punct::AndAnd),
+    ("||", Punct::OrOr),
+    ("==", Punct::EqEq),
+    ("!=", Punct::NotEq),
+    ("<=", Punct::Le),
+    (">=", Punct::Ge),
+    ("<<", Punct::Shl),
+    (">>", Punct::Shr),
+    ("<.", Punct::FLt),
+    (">.", Punct::FGt),
+    ("+.", Punct::FPlus),
+    ("-.", Punct::FMinus),
+    ("*.", Punct::FStar),
+    ("/.", Punct::FSlash),
+    (":=", Punct::ColonEq),
+    ("=>", Punct::FatArrow),
+    ("@@", Punct::AtAt),
+    ("+", Punct::Plus),
+    ("-", Punct::Minus),
+    ("*", Punct::Star),
+    ("/", Punct::Slash),
+    ("%", Punct::Percent),
+    ("<", Punct::Lt),
+    (">", Punct::Gt),
+    ("=", Punct::Eq),
+    ("!", Punct::Bang),
+    ("~", Punct::Tilde),
+    ("&", Punct::Amp),
+    ("|", Punct::Pipe),
+    ("^", Punct::Caret),
+    ("(", Punct::LParen),
+    (")", Punct::RParen),
+    ("[", Punct::LBracket),
+    ("]", Punct::RBracket),
+    ("{", Punct::LBrace),
+    ("}", Punct::RBrace),
+    (",", Punct::Comma),
+    (";", Punct::Semi),
+    (":", Punct::Colon),
+    (".", Punct::Dot),
+    ("@", Punct::At),
+];
+
+impl Punct {
+    /// The mark as written in source text.
+    pub fn as_str(self) -> &'static str {
+        PUNCTS
+            .iter()
+            .find(|(_, p)| *p == self)
+            .map_or("?", |(text, _)| text)
+    }
+}
+
+impl std::fmt::Display for Punct {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
 
 pub struct Lexer<'a> {
     text: &'a str,
@@ -176,12 +424,14 @@ impl<'a> Lexer<'a> {
                 self.bump();
                 self.bump();
                 depth += 1;
-                Tok::Punct("{")
-            } else if let Some(p) = PUNCTS.iter().find(|p| self.rest().starts_with(**p)) {
-                self.pos += p.len();
-                match *p {
-                    "{" => depth += 1,
-                    "}" => depth = depth.saturating_sub(1),
+                Tok::Punct(Punct::LBrace)
+            } else if let Some(&(text, p)) =
+                PUNCTS.iter().find(|(t, _)| self.rest().starts_with(*t))
+            {
+                self.pos += text.len();
+                match p {
+                    Punct::LBrace => depth += 1,
+                    Punct::RBrace => depth = depth.saturating_sub(1),
                     _ => {}
                 }
                 Tok::Punct(p)
