@@ -5,10 +5,13 @@
 //! "All" as `.*`, `$timeFilter`, `$__interval`), returns rows of a type the panel draws; a panel
 //! that stays empty fails. Picking one robot keeps that robot's series only.
 //!
-//! Run with the newest pinned Telegraf build only (the conf's wiring is what is tested here;
+//! Confs: telegraf.conf, telegraf-fleet.conf, telegraf-p0.conf (NATS, with an InfluxDB output
+//! added) and a conf for a user's spec written here. Run with the newest pinned Telegraf build only (the conf's wiring is what is tested here;
 //! tests/servers/telegraf_real.rs runs each conf under both builds).
 
+use super::telegraf_real_nats as nats;
 use crate::support::dashboards;
+use crate::support::nats_cluster;
 use crate::support::real_telegraf;
 use crate::support::recorded;
 use crate::support::servers;
@@ -64,7 +67,7 @@ fn count(influx: &servers::Influxd, db: &str, measurement: &str, field: &str) ->
 /// Poll until `measurement` holds `want` points with `field` (Telegraf flushes every 100 ms).
 fn wait_points(
     influx: &servers::Influxd,
-    telegraf: &Telegraf,
+    log: &dyn Fn() -> String,
     measurement: &str,
     field: &str,
     want: u64,
@@ -78,7 +81,7 @@ fn wait_points(
         assert!(
             Instant::now() < deadline,
             "{got} of {want} {measurement}.{field} points in InfluxDB; Telegraf log:\n{}",
-            telegraf.log()
+            log()
         );
         std::thread::sleep(Duration::from_millis(250));
     }
@@ -263,7 +266,7 @@ fn robot_dashboard_on(
     }
     wait_points(
         &influx,
-        &telegraf,
+        &|| telegraf.log(),
         "action",
         "speed",
         (records * topics.len()) as u64,
@@ -405,11 +408,17 @@ fn any_spec_dashboard_on_a_users_spec_under_real_telegraf() {
     }
     // battery.lp: 7 records a robot, the battery falls below 11 V once: one command, and
     // alerts 0 at the first record and 1 at the fall.
-    wait_points(&influx, &telegraf, "battery_check", "total_drop", 14);
-    wait_points(&influx, &telegraf, "battery_check", "alerts", 4);
+    wait_points(
+        &influx,
+        &|| telegraf.log(),
+        "battery_check",
+        "total_drop",
+        14,
+    );
+    wait_points(&influx, &|| telegraf.log(), "battery_check", "alerts", 4);
     // The robot's own time: 1700000000 s to 1700000010 s.
     let range = (1_699_999_990_000_000_000, 1_700_000_020_000_000_000);
-    wait_points(&influx, &telegraf, "action", "command", 2);
+    wait_points(&influx, &|| telegraf.log(), "action", "command", 2);
 
     let none = picks(&[]);
     let measurements = variable_values(&influx, ANY_SPEC, "measurement", &none);
@@ -471,4 +480,105 @@ fn any_spec_dashboard_on_a_users_spec_under_real_telegraf() {
     }
     let log = telegraf.stop();
     real_telegraf::assert_no_error(version, &log);
+}
+
+/// The NATS partition conf (telegraf/fleet-nats/telegraf-p0.conf, rewritten onto the test's
+/// secured 3-node cluster as tests/servers/telegraf_real_nats.rs does) with an InfluxDB output
+/// added, as a user who wants the dashboards adds one (the shipped NATS confs write actions to
+/// MQTT only). Partition 0's two robots publish through the MQTT gateway. The robot variable
+/// lists them (tag `robot`); every panel answers. Not applicable: the telemetry query of the
+/// speeds panel (`mqtt_consumer`), since the conf runs `--no-passthrough` (no robot record
+/// reaches an output); the panel answers with the actions.
+#[test]
+fn robot_dashboard_on_a_nats_partition_conf_under_real_telegraf() {
+    let _fleet = nats_cluster::one_fleet_at_a_time();
+    let Some((version, bin)) = real_telegraf::versions().pop() else {
+        return;
+    };
+    let Some(influx) = servers::Influxd::start() else {
+        return;
+    };
+    let robots = nats::robot_ids();
+    let Some(cluster) =
+        nats_cluster::Cluster::start_secured(&nats_cluster::shipped_mapping(), &robots)
+    else {
+        return;
+    };
+    let ours: Vec<String> = robots
+        .iter()
+        .filter(|r| nats::partition_of(r) == 0)
+        .cloned()
+        .collect();
+    // 70 records (14 s at the recorded pace): P2 violations from record 61. The first P1
+    // violation (record 265) and P1 `unknown` (251) come later: the main and fleet confs' tests
+    // cover those queries; here their panels answer with P2's.
+    let records = nats::recorded_head(70);
+    let conf = format!(
+        "{}\n[[outputs.influxdb]]\n  urls = [\"{}\"]\n  database = \"telegraf\"\n",
+        nats::rewritten(0, &cluster),
+        influx.url("")
+    );
+    nats::warm_up_mqtt(&cluster, &records[0]);
+    let env = [
+        ("FLEET_PASSWORD", cluster.password("fleet-p0")),
+        ("TESSLA_MEMBER", "a".to_string()),
+    ];
+    let env: Vec<(&str, &str)> = env.iter().map(|(k, v)| (*k, v.as_str())).collect();
+    let member = nats::Member::start("p0-a", version, &bin, &conf, &env);
+    let mut leases = nats::Leases::new(&cluster);
+    leases.wait_for(0, member.monitor(), Duration::from_secs(60), &|| {
+        member.log()
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("head.lp");
+    std::fs::write(&file, records.join("\n") + "\n").unwrap();
+    let mut publishers: Vec<std::process::Child> = ours
+        .iter()
+        .enumerate()
+        .map(|(k, id)| nats::robot(&cluster, k % 3, id, &file))
+        .collect();
+    for p in &mut publishers {
+        let status = p.wait().unwrap();
+        assert!(status.success(), "a robot's replay failed");
+    }
+    wait_points(
+        &influx,
+        &|| member.log(),
+        "action",
+        "speed",
+        (records.len() * ours.len()) as u64,
+    );
+    // The robot's own time (json_time_key): the recorded run's, a minute either side.
+    let time_of = |line: &String| -> i64 {
+        line.rsplit(' ')
+            .next()
+            .and_then(|t| t.parse().ok())
+            .unwrap()
+    };
+    let range = (
+        time_of(&records[0]) - 60_000_000_000,
+        time_of(&records[records.len() - 1]) + 60_000_000_000,
+    );
+    let all = picks(&[("robot", Pick::All), ("spec_version", Pick::All)]);
+    let listed = variable_values(&influx, ROBOT, "robot", &all);
+    assert_eq!(listed, ours.iter().cloned().collect::<BTreeSet<_>>());
+    let versions = variable_values(&influx, ROBOT, "spec_version", &all);
+    assert_eq!(versions.len(), 1, "{versions:?}");
+    let mut allowed = NEVER_IN_THE_RECORDED_RUN.to_vec();
+    allowed.extend(["FROM \"mqtt_consumer\"", "'violated'", "'unknown'", "'p1'"]);
+    let answers = panels_answer(&influx, ROBOT, &all, range, |_| true);
+    assert_all_answer("telegraf-p0.conf", &answers, &allowed);
+    let one = ours[0].clone();
+    let chosen = picks(&[
+        ("robot", Pick::Values(vec![one.clone()])),
+        ("spec_version", Pick::All),
+    ]);
+    let answers = panels_answer(&influx, ROBOT, &chosen, range, |t| {
+        t.get("robot") == Some(&one)
+    });
+    assert_all_answer(
+        &format!("telegraf-p0.conf, robot {one}"),
+        &answers,
+        &allowed,
+    );
 }
