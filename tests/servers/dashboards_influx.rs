@@ -6,8 +6,9 @@
 //! that stays empty fails. Picking one robot keeps that robot's series only.
 //!
 //! Confs: telegraf.conf, telegraf-fleet.conf, telegraf-p0.conf (NATS, with an InfluxDB output
-//! added) and a conf for a user's spec written here. Run with the newest pinned Telegraf build only (the conf's wiring is what is tested here;
-//! tests/servers/telegraf_real.rs runs each conf under both builds).
+//! added) and a conf for a user's spec written here. Run with the newest pinned Telegraf build
+//! only (the conf's wiring is what is tested here; tests/servers/telegraf_real.rs runs each
+//! conf under both builds).
 
 use super::telegraf_real_nats as nats;
 use crate::support::dashboards;
