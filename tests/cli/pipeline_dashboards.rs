@@ -200,4 +200,11 @@ fn every_robot_panel_selects_robots_and_versions_and_names_no_topic() {
             "{panel:?}: a fixed topic: {query}"
         );
     }
+    // The InfluxDB 2 template: no fixed topic either (each robot's tag set stays a table).
+    for (chart, query) in flux_queries() {
+        assert!(
+            !query.contains("r.topic ==") && !query.contains("r[\"topic\"] =="),
+            "{chart:?}: a fixed topic: {query}"
+        );
+    }
 }
