@@ -5,7 +5,9 @@
 # certificates with telegraf/fleet-nats/make-test-certs.sh) and babeltrace2 (the reference CTF reader
 # that tests/cli/trace_ctf.rs checks `trace --ctf` against). Then Telegraf itself, built from its Go
 # module at the two pinned versions the tests run under (tools/build-telegraf.sh; cached, so a
-# second run costs nothing). Idempotent: does nothing when everything is present. Needs root (or
+# second run costs nothing), and Grafana's dashboard schema (@grafana/schema with the TypeScript
+# compiler that checks the dashboards against it, pinned in tools/grafana-schema/package-lock.json;
+# npm, from the Debian package, installs them there). Idempotent: does nothing when everything is present. Needs root (or
 # sudo) only when a Debian package is missing. Without Go, or without the Go module proxy, the
 # Telegraf tests skip with the loud banner at the end of `make test`; with REQUIRE_SERVERS=1 (CI)
 # a Telegraf that cannot be built fails the set-up.
@@ -23,6 +25,22 @@ build_telegraf() {
     echo "setup: Telegraf not built; the tests under the real Telegraf will skip (make test says so)" >&2
 }
 
+# The dashboards' schema check (tests/cli/pipeline_dashboards.rs runs tools/grafana-schema/check.mjs).
+install_schema_check() {
+    if [ -d tools/grafana-schema/node_modules/@grafana/schema ] \
+        && [ -x tools/grafana-schema/node_modules/.bin/tsc ]; then
+        return 0
+    fi
+    if (cd tools/grafana-schema && npm ci --no-audit --no-fund); then
+        return 0
+    fi
+    if [ "${REQUIRE_SERVERS:-}" = 1 ]; then
+        echo "setup: REQUIRE_SERVERS=1 and tools/grafana-schema could not be installed (above)" >&2
+        exit 1
+    fi
+    echo "setup: Grafana's schema not installed; the dashboards' schema test will skip" >&2
+}
+
 need=()
 command -v mosquitto >/dev/null 2>&1 || [ -x /usr/sbin/mosquitto ] || need+=(mosquitto)
 command -v influxd >/dev/null 2>&1 || [ -x /usr/bin/influxd ] || need+=(influxdb)
@@ -30,9 +48,11 @@ command -v nats-server >/dev/null 2>&1 || [ -x /usr/bin/nats-server ] || need+=(
 command -v python3 >/dev/null 2>&1 || need+=(python3)
 command -v openssl >/dev/null 2>&1 || need+=(openssl)
 command -v babeltrace2 >/dev/null 2>&1 || need+=(babeltrace2)
+command -v npm >/dev/null 2>&1 || need+=(npm)
 
 if [ ${#need[@]} -eq 0 ]; then
     build_telegraf
+    install_schema_check
     exit 0
 fi
 
@@ -52,3 +72,4 @@ for svc in mosquitto influxdb nats-server; do
     $sudo systemctl stop "$svc" >/dev/null 2>&1 || $sudo service "$svc" stop >/dev/null 2>&1 || true
 done
 build_telegraf
+install_schema_check

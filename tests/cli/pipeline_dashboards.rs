@@ -123,3 +123,88 @@ fn every_dashboard_name_is_emitted_by_the_bundled_spec() {
         emitted
     );
 }
+
+/// `node tools/grafana-schema/check.mjs FILES...`, or `None` (after saying why, a failure with
+/// `REQUIRE_SERVERS=1`) when the schema check is not installed (`tools/setup.sh` installs it).
+fn grafana_schema_check(files: &[&std::path::Path]) -> Option<std::process::Output> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/grafana-schema");
+    let installed = dir.join("node_modules/@grafana/schema").is_dir()
+        && dir.join("node_modules/.bin/tsc").is_file();
+    let node = crate::support::servers::require("node", "nodejs")?;
+    if !installed {
+        let hint = "tools/grafana-schema is not installed: run `bash tools/setup.sh` \
+                    (or `cd tools/grafana-schema && npm ci`)";
+        assert!(
+            std::env::var("REQUIRE_SERVERS").map_or(true, |v| v != "1"),
+            "REQUIRE_SERVERS=1 but {hint}"
+        );
+        eprintln!("SKIPPED: {hint}");
+        return None;
+    }
+    Some(
+        std::process::Command::new(node)
+            .arg(dir.join("check.mjs"))
+            .args(files)
+            .output()
+            .unwrap(),
+    )
+}
+
+#[test]
+fn dashboards_check_against_grafanas_schema() {
+    let ours = [
+        dashboards::dashboards_dir().join(dashboards::ROBOT),
+        dashboards::dashboards_dir().join(dashboards::ANY_SPEC),
+    ];
+    let refs: Vec<&std::path::Path> = ours.iter().map(|p| p.as_path()).collect();
+    let Some(out) = grafana_schema_check(&refs) else {
+        return;
+    };
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // The check can fail: a misspelt variable option and a width that is not a number.
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(&ours[1]).unwrap();
+    let mut bad: serde_json::Value = serde_json::from_str(&text).unwrap();
+    bad["templating"]["list"][0]["multy"] = serde_json::Value::Bool(true);
+    bad["panels"][0]["gridPos"]["w"] = serde_json::Value::String("wide".into());
+    let path = dir.path().join("bad.json");
+    std::fs::write(&path, bad.to_string()).unwrap();
+    let out = grafana_schema_check(&[path.as_path()]).unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(err.contains("'\"multy\"' does not exist"), "{err}");
+    assert!(
+        err.contains("Type 'string' is not assignable to type 'number'"),
+        "{err}"
+    );
+}
+
+#[test]
+fn every_robot_panel_selects_robots_and_versions_and_names_no_topic() {
+    for (panel, query) in influxql_queries() {
+        assert!(
+            dashboards::without_selection(&query).is_some(),
+            "{panel:?}: no robot selection in {query}"
+        );
+        assert!(
+            query.contains(" GROUP BY ") && query.contains("\"robot\""),
+            "{panel:?}: not one series per robot: {query}"
+        );
+        assert!(
+            !query.contains("\"topic\" = '"),
+            "{panel:?}: a fixed topic: {query}"
+        );
+    }
+    // The InfluxDB 2 template: no fixed topic either (each robot's tag set stays a table).
+    for (chart, query) in flux_queries() {
+        assert!(
+            !query.contains("r.topic ==") && !query.contains("r[\"topic\"] =="),
+            "{chart:?}: a fixed topic: {query}"
+        );
+    }
+}

@@ -4,6 +4,8 @@
 //! test`'s banner, tools/test-skips.sh); `REQUIRE_SERVERS=1` makes it a failure.
 
 mod combinations_nats;
+#[cfg(feature = "tools")]
+mod dashboards_influx;
 mod fleet_nats;
 mod fleet_nats_security;
 mod fleet_nats_specs;

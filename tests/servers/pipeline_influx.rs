@@ -6,7 +6,9 @@ use crate::support::dashboards;
 use crate::support::recorded;
 use crate::support::servers;
 
-use dashboards::{Expected, Point, expected_answer, influxql_queries, points};
+use dashboards::{
+    Expected, Pick, Point, expected_answer, fill, influxql_queries, points, without_selection,
+};
 use serde_json::Value;
 
 const DB: &str = "tessla";
@@ -67,13 +69,14 @@ fn check_output_in_influxdb(output: &str) {
     let last = pts.iter().map(|p| p.time).max().unwrap();
     let mut answered = 0;
     for (panel, query) in influxql_queries() {
-        let want = expected_answer(&query, &pts);
-        let concrete = query
-            .replace(
-                "$timeFilter",
-                &format!("time >= {first} AND time <= {last}"),
-            )
-            .replace("$__interval", "1s");
+        // All robots and versions: the selection matches every point (absent tags too).
+        let plain = without_selection(&query).expect("a robot and version selection");
+        let want = expected_answer(&plain, &pts);
+        let picks = [("robot", Pick::All), ("spec_version", Pick::All)]
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), v))
+            .collect();
+        let concrete = fill(&query, &picks, (first, last), "1s");
         let (status, json) = influx.query(Some(DB), &concrete);
         assert_eq!(status, 200, "{panel}: {concrete}: {json}");
         let got = answer(&json, matches!(want, Expected::Aggregate(_)));

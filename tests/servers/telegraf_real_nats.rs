@@ -69,7 +69,7 @@ const BUCKET: &str = "tessla_state";
 /// The partition the shipped mapping (`{{partition(2,1)}}`: nats-server's FNV-1a of the robot
 /// id, modulo 2) gives `robot`. Checked by the run: partition 1's primary steps exactly its
 /// robots' records (its summary), partition 0's standby answers its robots after the kill.
-fn partition_of(robot: &str) -> usize {
+pub(super) fn partition_of(robot: &str) -> usize {
     let mut h: u32 = 2_166_136_261;
     for b in robot.bytes() {
         h ^= u32::from(b);
@@ -79,7 +79,7 @@ fn partition_of(robot: &str) -> usize {
 }
 
 /// `ROBOTS` robot ids, half in each partition.
-fn robot_ids() -> Vec<String> {
+pub(super) fn robot_ids() -> Vec<String> {
     let mut picked = Vec::new();
     let mut per = [0usize; 2];
     for k in 0.. {
@@ -97,7 +97,7 @@ fn robot_ids() -> Vec<String> {
 }
 
 /// The first `n` records of the recorded run.
-fn recorded_head(n: usize) -> Vec<String> {
+pub(super) fn recorded_head(n: usize) -> Vec<String> {
     let text = std::fs::read_to_string(recorded::recorded_run_path()).unwrap();
     let lines: Vec<String> = text
         .lines()
@@ -114,7 +114,7 @@ fn recorded_head(n: usize) -> Vec<String> {
 }
 
 /// The partition conf `p` with its endpoints moved onto the test cluster.
-fn rewritten(p: usize, cluster: &Cluster) -> String {
+pub(super) fn rewritten(p: usize, cluster: &Cluster) -> String {
     let text = real_telegraf::shipped(&format!("telegraf/fleet-nats/telegraf-p{p}.conf"));
     let ca = cluster.certs().join("ca.pem").display().to_string();
     let mut r = Rewrite::new()
@@ -145,7 +145,7 @@ fn rewritten(p: usize, cluster: &Cluster) -> String {
 /// (stderr) kept there. (`real_telegraf::Telegraf::start` waits for a "Connected" line, which
 /// `inputs.nats_consumer` never logs: it says "Started the NATS consumer service" once
 /// connected and subscribed.) Killed with its children on drop.
-struct Member {
+pub(super) struct Member {
     name: String,
     version: String,
     child: Option<Child>,
@@ -153,7 +153,13 @@ struct Member {
 }
 
 impl Member {
-    fn start(name: &str, version: &str, binary: &Path, conf: &str, env: &[(&str, &str)]) -> Member {
+    pub(super) fn start(
+        name: &str,
+        version: &str,
+        binary: &Path,
+        conf: &str,
+        env: &[(&str, &str)],
+    ) -> Member {
         let dir = tempfile::tempdir().unwrap();
         let conf_path = dir.path().join("telegraf.conf");
         std::fs::write(&conf_path, conf).unwrap();
@@ -190,7 +196,7 @@ impl Member {
         self.child.as_ref().map(|c| c.id()).unwrap_or(0)
     }
 
-    fn log(&self) -> String {
+    pub(super) fn log(&self) -> String {
         std::fs::read_to_string(self.dir.path().join("telegraf.log")).unwrap_or_default()
     }
 
@@ -218,7 +224,7 @@ impl Member {
     }
 
     /// The execd child (the monitor), once Telegraf has started it.
-    fn monitor(&self) -> u32 {
+    pub(super) fn monitor(&self) -> u32 {
         let deadline = Instant::now() + Duration::from_secs(60);
         loop {
             if let Some(&pid) = real_telegraf::children_of(self.pid()).first() {
@@ -389,7 +395,7 @@ fn gateway(cluster: &Cluster, n: usize) -> [String; 4] {
 
 /// Until the MQTT gateway of every node accepts a client (its first connection sets up its
 /// JetStream streams).
-fn warm_up_mqtt(cluster: &Cluster, first_record: &str) {
+pub(super) fn warm_up_mqtt(cluster: &Cluster, first_record: &str) {
     let dir = tempfile::tempdir().unwrap();
     let one = dir.path().join("one.lp");
     std::fs::write(&one, format!("{first_record}\n")).unwrap();
@@ -418,7 +424,7 @@ fn warm_up_mqtt(cluster: &Cluster, first_record: &str) {
 
 /// A robot publishing `file` at the recorded pace as its JSON (time under `time`, actualSpeed
 /// as a string, QoS 0 as the README asks of robots) on `robots/<robot>/telemetry`.
-fn robot(cluster: &Cluster, n: usize, id: &str, file: &Path) -> Child {
+pub(super) fn robot(cluster: &Cluster, n: usize, id: &str, file: &Path) -> Child {
     Command::new(BIN)
         .args(["replay", file.to_str().unwrap()])
         .args(["--topic", &format!("robots/{id}/telemetry")])
@@ -437,7 +443,7 @@ fn robot(cluster: &Cluster, n: usize, id: &str, file: &Path) -> Child {
 
 /// The partitions' lease keys, read as admin over one connection (kept between reads, so that
 /// a takeover is timed to a poll, not to a TLS handshake).
-struct Leases {
+pub(super) struct Leases {
     rt: tokio::runtime::Runtime,
     url: String,
     login: Login,
@@ -445,7 +451,7 @@ struct Leases {
 }
 
 impl Leases {
-    fn new(cluster: &Cluster) -> Leases {
+    pub(super) fn new(cluster: &Cluster) -> Leases {
         Leases {
             rt: tokio::runtime::Builder::new_current_thread()
                 .enable_all()
@@ -484,7 +490,7 @@ impl Leases {
     }
 
     /// Wait until monitor `pid` holds `partition`'s lease; returns when it was first seen.
-    fn wait_for(
+    pub(super) fn wait_for(
         &mut self,
         partition: usize,
         pid: u32,

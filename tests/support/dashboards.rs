@@ -17,20 +17,158 @@ fn read_json(name: &str) -> Value {
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
-/// `(panel title, query)` of every InfluxQL target of the Grafana dashboard.
-pub fn influxql_queries() -> Vec<(String, String)> {
-    let dash = read_json("grafana-influxql.json");
+/// The robot dashboard and the dashboard for any spec.
+pub const ROBOT: &str = "grafana-influxql.json";
+pub const ANY_SPEC: &str = "grafana-influxql-any-spec.json";
+
+/// A panel of a Grafana dashboard: its title, the InfluxQL query of each target, and the field
+/// types it drops (`filterFields` transformations excluding `byType`).
+#[derive(Debug, Clone)]
+pub struct Panel {
+    pub title: String,
+    pub queries: Vec<String>,
+    pub drops: Vec<String>,
+}
+
+/// The panels of an InfluxQL dashboard.
+pub fn influxql_panels(file: &str) -> Vec<Panel> {
+    let dash = read_json(file);
     let mut out = Vec::new();
     for panel in dash["panels"].as_array().expect("panels") {
-        let title = panel["title"].as_str().unwrap_or("?").to_string();
-        for target in panel["targets"].as_array().expect("targets") {
-            out.push((
-                title.clone(),
-                target["query"].as_str().expect("query").to_string(),
-            ));
-        }
+        let drops = panel["transformations"]
+            .as_array()
+            .map(|ts| {
+                ts.iter()
+                    .filter(|t| t["id"] == "filterFields")
+                    .filter(|t| t["options"]["exclude"]["id"] == "byType")
+                    .filter_map(|t| t["options"]["exclude"]["options"].as_str())
+                    .map(str::to_string)
+                    .collect()
+            })
+            .unwrap_or_default();
+        out.push(Panel {
+            title: panel["title"].as_str().unwrap_or("?").to_string(),
+            queries: panel["targets"]
+                .as_array()
+                .expect("targets")
+                .iter()
+                .map(|t| t["query"].as_str().expect("query").to_string())
+                .collect(),
+            drops,
+        });
     }
     out
+}
+
+/// `(name, query)` of every template variable of a dashboard.
+pub fn variables(file: &str) -> Vec<(String, String)> {
+    let dash = read_json(file);
+    dash["templating"]["list"]
+        .as_array()
+        .expect("templating.list")
+        .iter()
+        .map(|v| {
+            (
+                v["name"].as_str().expect("name").to_string(),
+                v["query"].as_str().expect("query").to_string(),
+            )
+        })
+        .collect()
+}
+
+/// `(panel title, query)` of every InfluxQL target of the robot dashboard.
+pub fn influxql_queries() -> Vec<(String, String)> {
+    influxql_panels(ROBOT)
+        .into_iter()
+        .flat_map(|p| p.queries.into_iter().map(move |q| (p.title.clone(), q)))
+        .collect()
+}
+
+/// The robot and spec-version selection every robot-dashboard query carries: which robot (the
+/// tag --instance-by names: `topic` or `robot`) and which spec version, one series each.
+pub const ROBOT_FILTER: &str =
+    "(\"topic\" =~ /^${robot:regex}$/ OR \"robot\" =~ /^${robot:regex}$/) AND ";
+pub const VERSION_FILTER: &str = "\"spec_version\" =~ /^${spec_version:regex}$/ AND ";
+pub const BY_INSTANCE: &str = "\"topic\", \"robot\", \"spec_version\"";
+
+/// The query without its robot and version selection (absent tags match it: `.*` matches the
+/// empty value), or `None` when it lacks one.
+pub fn without_selection(query: &str) -> Option<String> {
+    if !query.contains(ROBOT_FILTER) {
+        return None;
+    }
+    let q = query.replace(ROBOT_FILTER, "").replace(VERSION_FILTER, "");
+    let q = q
+        .replace(&format!(", {BY_INSTANCE}"), "")
+        .replace(&format!(" GROUP BY {BY_INSTANCE}"), "")
+        .replace(" GROUP BY \"topic\", \"robot\"", "");
+    Some(q)
+}
+
+/// What a user picked for a variable.
+#[derive(Debug, Clone)]
+pub enum Pick {
+    /// "All": the variable's custom all value `.*`, not escaped.
+    All,
+    /// One or more values.
+    Values(Vec<String>),
+    /// A single-valued variable's value.
+    Raw(String),
+}
+
+/// Grafana's `regex` format: each value regex-escaped (slashes too, for `/.../` literals), several
+/// joined as `(a|b)`.
+fn regex_format(values: &[String]) -> String {
+    let escaped: Vec<String> = values
+        .iter()
+        .map(|v| {
+            let mut out = String::new();
+            for c in v.chars() {
+                if "\\^$*+?.()|[]{}/".contains(c) {
+                    out.push('\\');
+                }
+                out.push(c);
+            }
+            out
+        })
+        .collect();
+    match escaped.as_slice() {
+        [one] => one.clone(),
+        _ => format!("({})", escaped.join("|")),
+    }
+}
+
+/// The query as Grafana sends it: `${name:regex}` / `${name:raw}` / `$name` replaced by the
+/// pick, `$timeFilter` by the range in ns, `$__interval` by `interval`.
+pub fn fill(
+    query: &str,
+    picks: &BTreeMap<String, Pick>,
+    range: (i64, i64),
+    interval: &str,
+) -> String {
+    let mut q = query
+        .replace(
+            "$timeFilter",
+            &format!("time >= {} AND time <= {}", range.0, range.1),
+        )
+        .replace("$__interval", interval);
+    for (name, pick) in picks {
+        let value = match pick {
+            Pick::All => ".*".to_string(),
+            Pick::Values(v) => regex_format(v),
+            Pick::Raw(v) => v.clone(),
+        };
+        let raw = match pick {
+            Pick::Raw(v) => v.clone(),
+            Pick::Values(v) => v.join(","),
+            Pick::All => ".*".to_string(),
+        };
+        q = q
+            .replace(&format!("${{{name}:regex}}"), &value)
+            .replace(&format!("${{{name}:raw}}"), &raw);
+    }
+    assert!(!q.contains("${"), "a variable left unfilled: {q}");
+    q
 }
 
 /// `(chart name, query)` of every Flux query of the InfluxDB 2 template.
@@ -75,6 +213,8 @@ fn quoted_identifiers(text: &str) -> Vec<String> {
 
 /// Names used by an InfluxQL `SELECT ... FROM "m" WHERE ... [GROUP BY ...]`.
 pub fn influxql_refs(query: &str) -> Refs {
+    let stripped = without_selection(query);
+    let query = stripped.as_deref().unwrap_or(query);
     let upper = query.to_uppercase();
     let from = upper.find(" FROM ").expect("FROM");
     let where_at = upper.find(" WHERE ").unwrap_or(query.len());
