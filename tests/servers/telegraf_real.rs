@@ -406,7 +406,11 @@ fn first_spec_example_conf_under_real_telegraf_answers_each_robot_and_fills_infl
         let inboxes: Vec<_> = robots
             .iter()
             .map(|r| {
-                mqtt_client::subscribe(broker.port, &format!("tessla/{r}/action"), &format!("{r}"))
+                mqtt_client::subscribe(
+                    broker.port,
+                    &format!("tessla/{r}/action"),
+                    &format!("robot-{r}"),
+                )
             })
             .collect();
         let telegraf = Telegraf::start(version, &bin, &conf, &[]);
