@@ -16,6 +16,9 @@ mkdir -p "$share/man/man1" "$share/bash-completion/completions" "$share/zsh/vend
 "$bin" completions zsh > "$share/zsh/vendor-completions/_tessla-telegraf"
 "$bin" completions fish > "$share/fish/vendor_completions.d/tessla-telegraf.fish"
 cp specs/telegraf.tessla "$share/tessla-telegraf/"
+# The first spec's specs where its telegraf.conf names them (README, "Your first spec").
+mkdir -p "$share/tessla-telegraf/first-spec"
+cp examples/first-spec/*.tessla "$share/tessla-telegraf/first-spec/"
 cp README.md RELIABILITY.md "$doc/"
 cp docs/*.md "$doc/"
 cp -rL examples/. "$doc/examples/"

@@ -2,13 +2,14 @@
 # Installs what the tests need on a fresh Debian/Ubuntu machine: the Rust toolchain is assumed
 # (rustup), the MQTT broker, InfluxDB 1.x and nats-server (the fleet tests' 3-node cluster) come
 # from Debian packages, and the openssl command line (the security tests make their TEST-ONLY
-# certificates with telegraf/fleet-nats/make-test-certs.sh) and babeltrace2 (the reference CTF reader
-# that tests/cli/trace_ctf.rs checks `trace --ctf` against). Then Telegraf itself, built from its Go
+# certificates with telegraf/fleet-nats/make-test-certs.sh), babeltrace2 (the reference CTF reader
+# that tests/cli/trace_ctf.rs checks `trace --ctf` against) and chromium (tests/cli/report_chromium.rs
+# renders `report`'s page headless and takes screenshots). Then Telegraf itself, built from its Go
 # module at the two pinned versions the tests run under (tools/build-telegraf.sh; cached, so a
 # second run costs nothing), and Grafana's dashboard schema (@grafana/schema with the TypeScript
 # compiler that checks the dashboards against it, pinned in tools/grafana-schema/package-lock.json;
-# npm, from the Debian package, installs them there). Idempotent: does nothing when everything is present. Needs root (or
-# sudo) only when a Debian package is missing. Without Go, or without the Go module proxy, the
+# npm, from the Debian package, installs them there). Idempotent: does nothing when everything
+# is present. Needs root (or sudo) only when a Debian package is missing. Without Go, or without the Go module proxy, the
 # Telegraf tests skip with the loud banner at the end of `make test`; with REQUIRE_SERVERS=1 (CI)
 # a Telegraf that cannot be built fails the set-up.
 set -euo pipefail
@@ -49,6 +50,7 @@ command -v python3 >/dev/null 2>&1 || need+=(python3)
 command -v openssl >/dev/null 2>&1 || need+=(openssl)
 command -v babeltrace2 >/dev/null 2>&1 || need+=(babeltrace2)
 command -v npm >/dev/null 2>&1 || need+=(npm)
+command -v chromium >/dev/null 2>&1 || need+=(chromium)
 
 if [ ${#need[@]} -eq 0 ]; then
     build_telegraf

@@ -1,4 +1,4 @@
-//! `tessla-telegraf spec publish|decide|abort|list|status|rollback|keygen`: the operator's
+//! `tessla-telegraf spec publish|decide|abort|list|status|rollback|keygen|init`: the operator's
 //! command for the fleet's spec channel (`spec_feed::nats`). It logs in with the URL, TLS and
 //! credential options of `--state` (`--channel URL`) and signs what it publishes and decides
 //! with the operator's seed (`--sign-key-file FILE` or `TESSLA_SIGN_KEY`, never on the command
@@ -14,7 +14,7 @@ use super::spec::{SpecOptions, load_options, require_outputs};
 use crate::processor::versions::Selector;
 use crate::spec_feed::bundle::Bundle;
 use crate::spec_feed::decide;
-use crate::spec_feed::nats::{Decided, Listed, Operator, Status, parse_url};
+use crate::spec_feed::nats::{Decided, LIVE, Listed, Operator, Reported, Status, parse_url};
 use crate::spec_feed::sign::read_signing_key;
 use crate::spec_feed::status::{now_ns, show_time};
 use crate::spec_feed::{BASE, Decision, Phase, Rollout};
@@ -53,6 +53,16 @@ pub enum SpecAction {
     /// Make the operator's signing key: a seed (secret, for `spec publish`) and its public key
     /// (for every process's --spec-trust).
     Keygen(KeygenArgs),
+    /// Create the channel's bucket (what the first `spec publish` does, `replicas=N` from the
+    /// URL), so that the processes following it report their status before any rollout;
+    /// nothing is changed when it exists.
+    Init(InitArgs),
+}
+
+#[derive(Debug, Args, Clone)]
+pub struct InitArgs {
+    #[command(flatten)]
+    pub channel: ChannelArgs,
 }
 
 /// The channel and how to log in to it.
@@ -203,7 +213,21 @@ pub fn run(args: SpecArgs) -> CliResult {
         SpecAction::Status(a) => status(a),
         SpecAction::Rollback(a) => rollback(a),
         SpecAction::Keygen(a) => keygen(a),
+        SpecAction::Init(a) => init(a),
     }
+}
+
+fn init(a: InitArgs) -> CliResult {
+    let op = Operator::connect(&a.channel.channel, true).map_err(failure)?;
+    print(&format!(
+        "spec channel {}: {}\n",
+        op.url().shown(),
+        if op.created() {
+            "bucket created"
+        } else {
+            "bucket exists already"
+        }
+    ))
 }
 
 fn failure(f: Failure) -> CliError {
@@ -700,6 +724,37 @@ fn table(head: &[&str], rows: &[Vec<String>]) -> String {
     out
 }
 
+/// What a status key says of its process: renewed within [`LIVE`] (by the server's clock),
+/// marked stopped as it ended, or neither (a crash, a lost connection, or a key of a process
+/// restarted since under a new pid): silent, and no voter on a new rollout.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Liveness {
+    Live = 0,
+    Silent = 1,
+    Stopped = 2,
+}
+
+impl Liveness {
+    fn word(self) -> &'static str {
+        match self {
+            Liveness::Live => "live",
+            Liveness::Silent => "silent",
+            Liveness::Stopped => "stopped",
+        }
+    }
+}
+
+fn liveness(r: &Reported, s: &Status, now: i64) -> Liveness {
+    let live = i64::try_from(LIVE.as_nanos()).unwrap_or(i64::MAX);
+    if s.stopped {
+        Liveness::Stopped
+    } else if now.saturating_sub(r.written) > live {
+        Liveness::Silent
+    } else {
+        Liveness::Live
+    }
+}
+
 fn status(a: ListArgs) -> CliResult {
     let op = Operator::connect(&a.channel.channel, false).map_err(failure)?;
     let listed = op.rollouts().map_err(failure)?;
@@ -709,6 +764,7 @@ fn status(a: ListArgs) -> CliResult {
         .iter()
         .filter_map(|r| r.status.as_ref().ok().cloned())
         .collect();
+    let now = now_ns();
     if a.json {
         let processes: Vec<Value> = keyed
             .iter()
@@ -716,6 +772,7 @@ fn status(a: ListArgs) -> CliResult {
                 Ok(s) => {
                     let mut v = serde_json::to_value(s).unwrap_or(Value::Null);
                     v["key"] = json!(r.key);
+                    v["state"] = json!(liveness(r, s, now).word());
                     v
                 }
                 Err(why) => json!({ "key": r.key, "problem": why }),
@@ -733,12 +790,23 @@ fn status(a: ListArgs) -> CliResult {
     }
     let mut out = format!("Rollouts in {}\n", op.url().shown());
     out.push_str(&rollout_table(&listed, &decided, Some(&statuses)));
-    out.push_str(&format!("\nProcesses ({})\n", keyed.len()));
+    let mut live = [0usize; 3];
+    for r in &keyed {
+        if let Ok(s) = &r.status {
+            live[liveness(r, s, now) as usize] += 1;
+        }
+    }
+    out.push_str(&format!(
+        "\nProcesses ({}: {} live, {} silent, {} stopped)\n",
+        keyed.len(),
+        live[Liveness::Live as usize],
+        live[Liveness::Silent as usize],
+        live[Liveness::Stopped as usize]
+    ));
     if keyed.is_empty() {
         out.push_str("no process has reported yet\n");
         return print(&out);
     }
-    let now = now_ns();
     let mut rows = Vec::new();
     for r in &keyed {
         let k = &r.key;
@@ -758,7 +826,12 @@ fn status(a: ListArgs) -> CliResult {
                 continue;
             }
         };
-        let ago = format!("{}s ago", (now - s.time).max(0) / 1_000_000_000);
+        let secs = (now - r.written).max(0) / 1_000_000_000;
+        let ago = match liveness(r, s, now) {
+            Liveness::Live => format!("{secs}s ago"),
+            Liveness::Silent => format!("{secs}s ago, silent"),
+            Liveness::Stopped => format!("stopped {secs}s ago"),
+        };
         // Each rollout's latest outcome in this process, in revision order.
         let mut latest: Vec<&crate::spec_feed::Outcome> = Vec::new();
         for o in &s.outcomes {
@@ -987,6 +1060,33 @@ fn write_secret(path: &Path, seed: &str) -> CliResult {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_status_key_reads_live_silent_or_stopped() {
+        const S: i64 = 1_000_000_000;
+        let now = 100 * S;
+        let at = |written: i64, stopped: bool| {
+            let s = Status {
+                host: "h".into(),
+                partition: "p0".into(),
+                pid: 7,
+                time: written,
+                outcomes: Vec::new(),
+                stopped,
+            };
+            let r = Reported {
+                key: "status.vh.vp0.pid7".into(),
+                status: Ok(s.clone()),
+                written,
+            };
+            liveness(&r, &s, now)
+        };
+        assert_eq!(at(now - 2 * S, false), Liveness::Live);
+        // No heartbeat for longer than LIVE: a crash, or a process restarted under a new pid.
+        assert_eq!(at(now - 11 * S, false), Liveness::Silent);
+        assert_eq!(at(now - 2 * S, true), Liveness::Stopped);
+        assert_eq!(at(now - 600 * S, true), Liveness::Stopped);
+    }
 
     fn r(revision: u64, id: &str, sel: &str) -> Rollout {
         Rollout {

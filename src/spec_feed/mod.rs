@@ -129,7 +129,7 @@ impl Outcome {
 /// One process's vote on a rollout, as the decision records it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Vote {
-    /// The process's status key (`status.<host>.<partition or pid>`).
+    /// The process's status key (`status.<host>.<partition>.pid<N>`, or `status.<host>.pid<N>`).
     pub process: String,
     /// `Some(true)`: it accepted; `Some(false)`: it refused (`reason`); `None`: it did not
     /// answer before the deadline (counted as a refusal).

@@ -9,8 +9,9 @@
 //!   revision (the later one retries with the next);
 //! - `decision.<revision>`: the fleet's signed decision on that rollout ([`Decision`]: commit
 //!   or abort, with the votes), created once with the KV `create`;
-//! - `status.<host>.<partition or pid>`: a process's outcomes ([`Status`]): its votes and what
-//!   each decision did there, rewritten every [`HEARTBEAT`] so a publisher sees it is alive.
+//! - `status.<host>.<partition>.pid<N>` (`status.<host>.pid<N>` without a partition): a
+//!   process's outcomes ([`Status`]): its votes and what each decision did there, rewritten
+//!   every [`HEARTBEAT`] so a publisher sees it is alive.
 //!
 //! Two sides: [`NatsFeed`], what a running process follows (every rollout and decision
 //! verified against the trusted keys and a rollout's bundle against its digest, handed to the
@@ -104,16 +105,23 @@ pub struct Status {
     pub stopped: bool,
 }
 
-/// The status key of a process: `status.<host>.<partition>`, or `status.<host>.pid<N>` without
-/// a partition (host and partition written as the state bucket writes a tag value: injective,
-/// only characters NATS allows).
+/// The status key of a process: `status.<host>.<partition>.pid<N>`, or `status.<host>.pid<N>`
+/// without a partition (host and partition written as the state bucket writes a tag value:
+/// injective, only characters NATS allows). The pid keeps apart the processes of one host that
+/// run one partition (its primary and its standbys); a restarted process writes a new key and
+/// its old one, no longer renewed, reads as stopped or silent (`spec status`), and is no voter.
+/// Keys written by earlier versions (`status.<host>.<partition>`) are still read: the status
+/// names its own host, partition and pid.
 pub fn status_key(host: &str, partition: &str, pid: u32) -> String {
-    let who = if partition.is_empty() {
-        format!("pid{pid}")
+    if partition.is_empty() {
+        format!("status.{}.pid{pid}", kv_key_part_of(host))
     } else {
-        kv_key_part_of(partition)
-    };
-    format!("status.{}.{who}", kv_key_part_of(host))
+        format!(
+            "status.{}.{}.pid{pid}",
+            kv_key_part_of(host),
+            kv_key_part_of(partition)
+        )
+    }
 }
 
 fn rollout_key(revision: u64) -> String {
@@ -1132,7 +1140,9 @@ mod tests {
         assert_eq!(revision_of("rollout.012"), None);
         assert_eq!(revision_of("rollout.+1"), None);
         assert_eq!(revision_of("bundle.12"), None);
-        assert_eq!(status_key("h.1", "p0", 7), "status.vh_2e1.vp0");
+        assert_eq!(status_key("h.1", "p0", 7), "status.vh_2e1.vp0.pid7");
         assert_eq!(status_key("h", "", 7), "status.vh.pid7");
+        // A primary and its standby on one host: two keys.
+        assert_ne!(status_key("h", "p0", 7), status_key("h", "p0", 8));
     }
 }

@@ -606,6 +606,9 @@ fn the_package_assets_hold_man_page_completions_docs_and_a_systemd_drop_in() {
         "share/zsh/vendor-completions/_tessla-telegraf",
         "share/fish/vendor_completions.d/tessla-telegraf.fish",
         "share/tessla-telegraf/telegraf.tessla",
+        // Where examples/first-spec/telegraf.conf names them.
+        "share/tessla-telegraf/first-spec/dock.tessla",
+        "share/tessla-telegraf/first-spec/battery.tessla",
         "share/doc/tessla-telegraf/README.md",
         "share/doc/tessla-telegraf/telegraf/telegraf.conf",
         "share/doc/tessla-telegraf/telegraf/dashboards/grafana-influxql.json",

@@ -17,6 +17,8 @@ mod readme_commands;
 #[cfg(feature = "tools")]
 mod report_any_spec;
 #[cfg(feature = "tools")]
+mod report_chromium;
+#[cfg(feature = "tools")]
 mod simulate;
 mod state_suite;
 mod stdlib;

@@ -12,7 +12,7 @@ use child::{root, run_in, text, write};
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 
-const SPEC: &str = r#"include "telegraf.tessla"
+pub(super) const SPEC: &str = r#"include "telegraf.tessla"
 @TelegrafIn("mqtt_consumer", "", "battery")
 in battery: Events[Float]
 def low = battery <. 20.0
@@ -28,11 +28,11 @@ def silent = delay(const(2000000000, battery), battery)
 @TelegrafField("action", "command") out command
 "#;
 
-const S: i64 = 1_000_000_000;
-const T0: i64 = 1_700_000_000 * S;
+pub(super) const S: i64 = 1_000_000_000;
+pub(super) const T0: i64 = 1_700_000_000 * S;
 
 /// Two robots for 10 s, robot b silent from 3 s to 8 s; run as a fleet of version `version`.
-fn fleet_run(dir: &std::path::Path, version: &str) -> String {
+pub(super) fn fleet_run(dir: &std::path::Path, version: &str) -> String {
     // The version tag is the spec's hash: a comment makes another version.
     let spec = write(
         dir,

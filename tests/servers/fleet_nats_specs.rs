@@ -299,7 +299,10 @@ fn publish_list_status_and_a_process_following_the_channel() {
         .find(|p| p["host"] == "host-a")
         .unwrap();
     assert_eq!(a_status["partition"], "p0");
-    assert_eq!(a_status["key"], "status.vhost-a.vp0");
+    assert_eq!(
+        a_status["key"],
+        format!("status.vhost-a.vp0.pid{}", std::process::id())
+    );
     assert_eq!(a_status["outcomes"][1]["accepted"], false);
 
     let table = child::text(&spec(&["status", "--channel", &url], &[]).stdout);
@@ -1162,4 +1165,115 @@ fn a_restart_after_an_aborted_rollout_and_a_start_after_a_commit_follow_the_deci
             format!("tessla,robot=r9,spec_version={v_new} c=2i,y=20i {}", ts(6)),
         ]
     );
+}
+
+/// Several processes on one host (issue 47: four Telegrafs showed as two): the primary and the
+/// standby of one partition and a process of another each keep a status key of their own, so
+/// `spec status` lists all three, live, each with its pid; a key in the earlier format
+/// (`status.<host>.<partition>`) is still read; a process that stopped reads as stopped. The
+/// channel's bucket is made by `spec init` before any rollout.
+#[test]
+fn spec_status_lists_every_process_of_one_host_each_by_its_pid() {
+    use crate::support::live_child::LiveChild;
+    let server = nats_server("");
+    let url = format!("nats://127.0.0.1:{}", server.port);
+    let s = Setup::new();
+    let base = child::write(s.dir.path(), "base.tessla", BASE_SPEC);
+    let out = spec(&["init", "--channel", &url], &[]);
+    assert!(
+        child::text(&out.stdout).contains(": bucket created"),
+        "{}{}",
+        child::text(&out.stdout),
+        child::text(&out.stderr)
+    );
+    let out = spec(&["init", "--channel", &url], &[]);
+    assert!(
+        child::text(&out.stdout).contains(": bucket exists already"),
+        "{}",
+        child::text(&out.stdout)
+    );
+    // A key an earlier version wrote, for a process that has stopped since.
+    let old = serde_json::json!({
+        "host": "old-host", "partition": "p0", "pid": 1, "time": 1, "outcomes": [], "stopped": true
+    });
+    raw(server.port, "tessla_specs", async |kv| {
+        kv.put("status.vold-host.vp0", old.to_string().into())
+            .await
+            .unwrap()
+    });
+
+    let state = |p: &str| format!("{url}/tessla_state?lease={p}&ttl=3s");
+    let (s0, s1) = (state("p0"), state("p1"));
+    let spawn = |state: &str| {
+        let mut args = channel_run(&url, &s, &base);
+        args.extend(["--state", state]);
+        LiveChild::spawn(&args)
+    };
+    let mut procs = vec![spawn(&s0), spawn(&s0), spawn(&s1)];
+    let pids: Vec<u64> = procs.iter().map(|p| u64::from(p.pid())).collect();
+    let live = |v: &serde_json::Value| {
+        v["processes"]
+            .as_array()
+            .map(|a| a.iter().filter(|p| p["state"] == "live").count())
+            .unwrap_or(0)
+    };
+    let listed = until("three live processes", || {
+        let v = json(&spec(&["status", "--channel", &url, "--json"], &[]));
+        (live(&v) == 3).then_some(v)
+    });
+    let processes = listed["processes"].as_array().unwrap();
+    assert_eq!(processes.len(), 4, "{listed:#}");
+    let old_listed = processes
+        .iter()
+        .find(|p| p["key"] == "status.vold-host.vp0")
+        .unwrap_or_else(|| panic!("the earlier key is read: {listed:#}"));
+    assert_eq!(old_listed["state"], "stopped");
+    let mut ours: Vec<(String, u64)> = processes
+        .iter()
+        .filter(|p| p["state"] == "live")
+        .map(|p| {
+            let pid = p["pid"].as_u64().unwrap();
+            let key = p["key"].as_str().unwrap().to_string();
+            let partition = p["partition"].as_str().unwrap();
+            assert!(
+                key.ends_with(&format!(".v{partition}.pid{pid}")),
+                "{key} names its partition and pid"
+            );
+            (partition.to_string(), pid)
+        })
+        .collect();
+    ours.sort();
+    let mut want = vec![
+        ("p0".to_string(), pids[0]),
+        ("p0".to_string(), pids[1]),
+        ("p1".to_string(), pids[2]),
+    ];
+    want.sort();
+    assert_eq!(ours, want);
+    let table = child::text(&spec(&["status", "--channel", &url], &[]).stdout);
+    assert!(
+        table.contains("Processes (4: 3 live, 0 silent, 1 stopped)"),
+        "{table}"
+    );
+
+    // The standby stops (stdin closed, as Telegraf stops it): its key says so.
+    let (_, err, code) = procs.remove(1).finish();
+    assert_eq!(code, 0, "{err}");
+    until("the standby stopped", || {
+        let v = json(&spec(&["status", "--channel", &url, "--json"], &[]));
+        v["processes"]
+            .as_array()
+            .and_then(|a| a.iter().find(|p| p["pid"].as_u64() == Some(pids[1])))
+            .is_some_and(|p| p["state"] == "stopped")
+            .then_some(())
+    });
+    let table = child::text(&spec(&["status", "--channel", &url], &[]).stdout);
+    assert!(
+        table.contains("Processes (4: 2 live, 0 silent, 2 stopped)") && table.contains("stopped "),
+        "{table}"
+    );
+    for p in procs {
+        let (_, err, code) = p.finish();
+        assert_eq!(code, 0, "{err}");
+    }
 }

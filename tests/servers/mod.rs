@@ -10,6 +10,8 @@ mod fleet_nats;
 mod fleet_nats_security;
 mod fleet_nats_specs;
 mod fleet_nats_state;
+#[cfg(feature = "tools")]
+mod fleet_one_machine;
 mod pipeline_influx;
 #[cfg(feature = "tools")]
 mod pipeline_mqtt;

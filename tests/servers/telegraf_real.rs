@@ -380,64 +380,147 @@ impl Drop for Monitor {
     }
 }
 
+/// The first spec's conf as shipped (README, "Your first spec"), only its endpoints and
+/// install paths rewritten: two robots' JSON on tessla/r1 and tessla/r2, `topic_parsing` makes
+/// the `robot` tag, one dock.tessla monitor per robot (`--instance-by robot`); each robot gets
+/// its own `return_to_dock` on tessla/<robot>/action, and InfluxDB holds the records, the
+/// verdicts and the actions, value for value as an offline run over those records.
 #[test]
-fn first_spec_example_conf_under_real_telegraf_matches_an_offline_run() {
+fn first_spec_example_conf_under_real_telegraf_answers_each_robot_and_fills_influxdb() {
     let text = real_telegraf::shipped("examples/first-spec/telegraf.conf");
-    let bin_dir = std::path::Path::new(BIN).parent().unwrap().to_path_buf();
-    let path = format!(
-        "{}:{}",
-        bin_dir.display(),
-        std::env::var("PATH").unwrap_or_default()
-    );
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let robots = ["r1", "r2"];
     for (version, bin) in real_telegraf::versions() {
         let Some(broker) = broker() else { return };
+        let Some(influx) = servers::Influxd::start() else {
+            return;
+        };
         let state = tempfile::tempdir().unwrap();
-        let conf = Rewrite::new()
+        let conf = Rewrite::robot(broker.port, Some(&influx.url("")))
             .replace(
-                "tcp://127.0.0.1:1883",
-                format!("tcp://127.0.0.1:{}", broker.port),
+                "/usr/share/tessla-telegraf/first-spec/",
+                format!("{}/", root.join("examples/first-spec").display()),
             )
             .state_in(state.path())
             .apply(&text);
-        // As the README runs it: from the repository's folder, `tessla-telegraf` on PATH.
-        let telegraf = Telegraf::start(version, &bin, &conf, &[("PATH", &path)]);
-        wait_subscribed(&broker, "", "tessla", 0);
-        let battery =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("examples/first-spec/battery.lp");
+        let inboxes: Vec<_> = robots
+            .iter()
+            .map(|r| {
+                mqtt_client::subscribe(
+                    broker.port,
+                    &format!("tessla/{r}/action"),
+                    &format!("robot-{r}"),
+                )
+            })
+            .collect();
+        let telegraf = Telegraf::start(version, &bin, &conf, &[]);
+        wait_subscribed(&broker, "", "tessla/+", 0);
+        let battery = root.join("examples/first-spec/battery.lp");
         let sent = std::fs::read_to_string(&battery)
             .unwrap()
             .lines()
             .filter(|l| !l.trim().is_empty() && !l.starts_with('#'))
             .count();
-        replay(&battery, broker.port, "tessla");
-        telegraf.wait_for(
-            |_| {
-                telegraf
-                    .stdout()
-                    .lines()
-                    .filter(|l| l.starts_with("mqtt_consumer"))
-                    .count()
-                    >= sent
-            },
-            Duration::from_secs(30),
-            "every message on its stdout",
+        for r in robots {
+            replay(&battery, broker.port, &format!("tessla/{r}"));
+        }
+        // One fall below low_voltage in battery.lp: one action per robot, on its own topic.
+        let mut actions = Vec::new();
+        for (r, inbox) in robots.iter().zip(&inboxes) {
+            let got = mqtt_client::collect(inbox, 1, Duration::from_secs(60));
+            assert_eq!(
+                got.len(),
+                1,
+                "Telegraf {version}: no action on tessla/{r}/action; log:\n{}",
+                telegraf.log()
+            );
+            let row = real_telegraf::action_row(&got[0].1);
+            assert_eq!(
+                row.tags.get("robot").map(String::as_str),
+                Some(*r),
+                "{row:?}"
+            );
+            assert_eq!(
+                row.fields.get("command"),
+                Some(&real_telegraf::Field::Str("return_to_dock".into())),
+                "{row:?}"
+            );
+            actions.push(row);
+        }
+        let total = sent * robots.len();
+        let count = |m: &str| real_telegraf::influx_rows(&influx, "telegraf", m).len();
+        let wait_rows = |m: &str, n: usize| {
+            let deadline = Instant::now() + Duration::from_secs(60);
+            while count(m) < n {
+                assert!(
+                    Instant::now() < deadline,
+                    "Telegraf {version}: InfluxDB never held {n} rows of {m} (it has {}); log:\n{}",
+                    count(m),
+                    telegraf.log()
+                );
+                std::thread::sleep(Duration::from_millis(200));
+            }
+        };
+        wait_rows("mqtt_consumer", total);
+        wait_rows("action", robots.len());
+        let records = real_telegraf::influx_rows(&influx, "telegraf", "mqtt_consumer");
+        assert_eq!(records.len(), total, "robot records in InfluxDB");
+        for r in &records {
+            let robot = r.tags.get("robot").map(String::as_str).unwrap_or("");
+            assert!(
+                robots.contains(&robot),
+                "a record without its robot tag: {r:?}"
+            );
+            assert_eq!(
+                r.tags.get("topic"),
+                Some(&format!("tessla/{robot}")),
+                "{r:?}"
+            );
+            assert!(!r.tags.contains_key("tessla_copy"), "{r:?}");
+        }
+        let want = offline(
+            &execd_args(&conf),
+            &real_telegraf::to_lines("mqtt_consumer", &records),
         );
-        let (log, out) = telegraf.stop_with_stdout();
+        let want_checks = by_instance(real_telegraf::parse_lines(&want, "battery_check"));
+        // alerts=0 at the first record, alerts=1 at the fall: per robot.
+        assert_eq!(want_checks.len(), 2 * robots.len(), "{want}");
+        wait_rows("battery_check", want_checks.len());
+        let log = telegraf.stop();
         assert_no_error(version, &log);
-        let records: Vec<&str> = out
-            .lines()
-            .filter(|l| l.starts_with("mqtt_consumer"))
-            .collect();
-        assert_eq!(records.len(), sent);
-        let want = offline(&execd_args(&conf), &(records.join("\n") + "\n"));
-        let want_checks = real_telegraf::parse_lines(&want, "battery_check");
-        assert!(!want_checks.is_empty());
+        // Nothing extra arrived on the robots' topics (one fall, one action each).
+        for (r, inbox) in robots.iter().zip(&inboxes) {
+            assert!(
+                inbox.try_recv().is_err(),
+                "Telegraf {version}: a second action on tessla/{r}/action"
+            );
+        }
+        let want_actions = by_instance(real_telegraf::parse_lines(&want, "action"));
+        assert_eq!(want_actions.len(), robots.len(), "{want}");
         assert_same(
-            &format!("Telegraf {version}: battery_check on stdout"),
-            &real_telegraf::parse_lines(&out, "battery_check"),
+            &format!("Telegraf {version}: actions on MQTT"),
+            &by_instance(actions),
+            &want_actions,
+            1_000_000,
+            &[],
+        );
+        assert_same(
+            &format!("Telegraf {version}: actions in InfluxDB"),
+            &by_instance(real_telegraf::influx_rows(&influx, "telegraf", "action")),
+            &want_actions,
+            1,
+            &[],
+        );
+        assert_same(
+            &format!("Telegraf {version}: battery_check in InfluxDB"),
+            &by_instance(real_telegraf::influx_rows(
+                &influx,
+                "telegraf",
+                "battery_check",
+            )),
             &want_checks,
             1,
-            &["silent"],
+            &[],
         );
     }
 }
@@ -526,6 +609,10 @@ fn every_mqtt_conf_passes_telegraf_test() {
                 (
                     "/var/lib/tessla-telegraf",
                     state.path().display().to_string(),
+                ),
+                (
+                    "/usr/share/tessla-telegraf/first-spec/",
+                    format!("{}/examples/first-spec/", env!("CARGO_MANIFEST_DIR")),
                 ),
                 (
                     "udp://127.0.0.1:1654",

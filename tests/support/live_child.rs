@@ -146,6 +146,10 @@ impl LiveChild {
         drop(self.stdin.take());
     }
 
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
     pub fn signal(&self, sig: &str) {
         let pid = self.child.id().to_string();
         assert!(
