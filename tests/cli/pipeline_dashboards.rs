@@ -200,11 +200,48 @@ fn every_robot_panel_selects_robots_and_versions_and_names_no_topic() {
             "{panel:?}: a fixed topic: {query}"
         );
     }
-    // The InfluxDB 2 template: no fixed topic either (each robot's tag set stays a table).
-    for (chart, query) in flux_queries() {
+    // The InfluxDB 2 template: no fixed topic either, and every chart of both dashboards
+    // selects by the robot variable (the `robot` or `topic` tag) and, on our outputs, by the
+    // spec version (the robot's own telemetry has no version).
+    let robot = "filter(fn: (r) => v.robot == \"All\" or r.robot == v.robot or r.topic == v.robot)";
+    let version =
+        "filter(fn: (r) => v.spec_version == \"All\" or r.spec_version == v.spec_version)";
+    let any_spec = dashboards::flux_any_spec_queries();
+    assert!(any_spec.len() >= 4, "the any-spec dashboard's charts");
+    for (chart, query) in flux_queries().into_iter().chain(any_spec.clone()) {
+        let fixed = query.replace(" == v.robot", "");
         assert!(
-            !query.contains("r.topic ==") && !query.contains("r[\"topic\"] =="),
+            !fixed.contains("r.topic ==") && !fixed.contains("r[\"topic\"] =="),
             "{chart:?}: a fixed topic: {query}"
+        );
+        assert!(
+            query.contains(robot),
+            "{chart:?}: no robot selection: {query}"
+        );
+        assert!(
+            query.contains("\"mqtt_consumer\"") || query.contains(version),
+            "{chart:?}: no spec-version selection: {query}"
+        );
+    }
+    // The any-spec dashboard names no output: the measurement and the field are variables.
+    for (chart, query) in any_spec {
+        assert!(
+            query.contains("r._measurement == v.measurement and r._field == v.field"),
+            "{chart:?}: not the chosen measurement and field: {query}"
+        );
+    }
+    let template = dashboards::read_json("influxdb2-template.json");
+    let variables: Vec<&str> = template
+        .as_array()
+        .expect("a template is an array")
+        .iter()
+        .filter(|r| r["kind"] == "Variable")
+        .filter_map(|r| r["spec"]["name"].as_str())
+        .collect();
+    for v in ["bucket", "robot", "spec_version", "measurement", "field"] {
+        assert!(
+            variables.contains(&v),
+            "variable {v} in the template: {variables:?}"
         );
     }
 }

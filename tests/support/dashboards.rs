@@ -11,7 +11,8 @@ pub fn dashboards_dir() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("telegraf/dashboards")
 }
 
-fn read_json(name: &str) -> Value {
+/// The dashboard file `name` of `telegraf/dashboards`, parsed.
+pub fn read_json(name: &str) -> Value {
     let path = dashboards_dir().join(name);
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
@@ -171,12 +172,22 @@ pub fn fill(
     q
 }
 
-/// `(chart name, query)` of every Flux query of the InfluxDB 2 template.
+/// `(chart name, query)` of every Flux query of the InfluxDB 2 template's robot dashboard.
 pub fn flux_queries() -> Vec<(String, String)> {
+    flux_dashboard_queries("tessla-robot-monitors")
+}
+
+/// Every query of the InfluxDB 2 template's dashboard for any spec.
+pub fn flux_any_spec_queries() -> Vec<(String, String)> {
+    flux_dashboard_queries("tessla-any-spec")
+}
+
+/// Every (chart, query) of the template's dashboard named `name`.
+fn flux_dashboard_queries(name: &str) -> Vec<(String, String)> {
     let template = read_json("influxdb2-template.json");
     let mut out = Vec::new();
     for resource in template.as_array().expect("a template is an array") {
-        if resource["kind"] != "Dashboard" {
+        if resource["kind"] != "Dashboard" || resource["metadata"]["name"] != name {
             continue;
         }
         for chart in resource["spec"]["charts"].as_array().expect("charts") {
@@ -268,6 +279,14 @@ pub fn flux_refs(query: &str) -> Refs {
             .take_while(|c| c.is_alphanumeric() || *c == '_')
             .collect();
         let after = rest[name.len()..].trim_start();
+        // A comparison with a dashboard variable (`r.robot == v.robot`) selects, it names
+        // nothing the spec must write.
+        if after
+            .strip_prefix("==")
+            .is_some_and(|s| s.trim_start().starts_with("v."))
+        {
+            continue;
+        }
         let literal = after
             .strip_prefix("==")
             .map(str::trim_start)
