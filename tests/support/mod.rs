@@ -7,11 +7,12 @@
 //! siblings as `super::...`, which is the includer's root there.
 
 pub mod child;
-pub mod dashboards;
-pub mod live_child;
 // Without the `tools` feature the tests of `replay`, `simulate` and most of the real Telegraf's
 // are left out (tests/cli/mod.rs, tests/servers/mod.rs), and with them the only users of some
-// helpers of these three.
+// helpers of these four.
+#[cfg_attr(not(feature = "tools"), allow(dead_code))]
+pub mod dashboards;
+pub mod live_child;
 #[cfg_attr(not(feature = "tools"), allow(dead_code))]
 pub mod mqtt_client;
 pub mod nats_cluster;
