@@ -88,8 +88,8 @@ pub fn closest(pts: &mut [(u64, &str, f64, f64)]) -> Option<(usize, usize, f64)>
         }
     };
     build(&mut grid, best.2, 2);
-    for i in 2..pts.len() {
-        let (cx, cy) = cell(best.2, pts[i].2, pts[i].3);
+    for (i, p) in pts.iter().enumerate().skip(2) {
+        let (cx, cy) = cell(best.2, p.2, p.3);
         let mut found: Option<(usize, f64)> = None;
         for dx in -1..=1 {
             for dy in -1..=1 {
