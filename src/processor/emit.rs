@@ -66,7 +66,8 @@ impl Emitter {
             return;
         }
         if let Some(t) = &mut self.tap {
-            t.take(&self.events, from.0, from.1);
+            let events = self.events.iter().map(|e| (e.ts, e.output, &e.value));
+            t.take(events, from.0, from.1);
         }
         let mut rest = &self.events[..];
         while let Some(&Fired { ts, .. }) = rest.first() {

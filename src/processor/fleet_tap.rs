@@ -5,7 +5,6 @@
 //! maps). Collected while records are stepped, drained by the step loop after every read and
 //! every wall-clock advance, on the thread that owns the fleet level.
 
-use super::emit::Fired;
 use std::sync::Arc;
 use tessla_engine::{Program, Value};
 
@@ -48,8 +47,14 @@ impl Tap {
         }
     }
 
-    /// Keep the events of `events` that feed the fleet, from robot `key` running `program`.
-    pub(super) fn take(&mut self, events: &[Fired], key: &Arc<str>, program: &Arc<Program>) {
+    /// Keep the events (time, output index, value) that feed the fleet, from robot `key`
+    /// running `program`.
+    pub(super) fn take<'v>(
+        &mut self,
+        events: impl Iterator<Item = (i64, usize, &'v Value)>,
+        key: &Arc<str>,
+        program: &Arc<Program>,
+    ) {
         let i = match self
             .by_program
             .iter()
@@ -69,13 +74,13 @@ impl Tap {
         let Some((_, map)) = self.by_program.get(i) else {
             return;
         };
-        for e in events {
-            if let Some(Some(input)) = map.get(e.output) {
+        for (ts, output, value) in events {
+            if let Some(Some(input)) = map.get(output) {
                 self.got.changes.push(Change {
-                    ts: e.ts,
+                    ts,
                     key: Arc::clone(key),
                     input: *input,
-                    value: e.value.clone(),
+                    value: value.clone(),
                 });
             }
         }
