@@ -1,5 +1,5 @@
 # Every command the README mentions lives here. `make run` and `make test` are the README's first two.
-.PHONY: run test setup build install install-files deb profiling readme-run bench bench-criterion bench-process bench-nats bench-telegraf shutdown-save rollout-bench soak fmt lint ci fixtures conformance fuzz reproduce combinations crates-package
+.PHONY: run test setup build install install-files deb profiling readme-run bench bench-criterion bench-process bench-nats bench-fleet bench-telegraf shutdown-save rollout-bench soak fmt lint ci fixtures conformance fuzz reproduce combinations crates-package
 
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
@@ -92,6 +92,11 @@ bench-criterion:
 
 bench-process:
 	python3 bench/run.py --reps $(BENCH_REPS)
+
+# The fleet level (docs/fleet.md, BENCHMARKS.md "Fleet level"): cost per record at 1k and 10k
+# robots, memory per robot, the closest pair at 1k, 10k and 100k robots.
+bench-fleet: build
+	nice -n 5 python3 bench/fleet.py --reps 3 --bin $(or $(CARGO_TARGET_DIR),target)/release/tessla-telegraf
 
 # Fleet on NATS (BENCHMARKS.md, "Fleet on NATS"): throughput with 1, 2 and 4 partitions and the
 # standby's takeover time, on a 3-node nats-server cluster started on free loopback ports.

@@ -9,6 +9,7 @@
 
 pub mod bundled;
 pub mod cli;
+pub mod fleet;
 pub mod log;
 pub mod processor;
 #[cfg(feature = "tools")]

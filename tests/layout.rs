@@ -31,6 +31,8 @@ const ROOT_LAYERS: Layers = &[
     &["transport", "simulate", "replay", "report"],
     // The one step loop every transport plugs into.
     &["step_loop"],
+    // The fleet level: a spec over every robot's outputs, in event time.
+    &["fleet"],
     // New spec versions while running: the fleet's spec channel, a watched file, bundles.
     &["spec_feed"],
     // Where monitor state is kept (a file, a NATS bucket and its lease).

@@ -209,6 +209,15 @@ pub struct InstanceArgs {
     /// Evict a monitor instance that received no record for this long (wall clock): `30s`, `5m`, `1h`.
     #[arg(long, value_name = "DURATION", value_parser = humantime::parse_duration)]
     pub instance_idle: Option<std::time::Duration>,
+    /// A fleet spec (docs/fleet.md): a TeSSLa file whose inputs are robot-spec outputs seen as
+    /// maps from robot key (the --instance-by values) to latest value, `Events[Map[String, T]]`;
+    /// its outputs are written to measurement `tessla_fleet` (or as annotated).
+    #[arg(long, value_name = "FILE", requires = "instance_by")]
+    pub fleet_spec: Option<PathBuf>,
+    /// With --fleet-spec: a robot whose time stays this far behind the newest robot's no longer
+    /// holds the fleet level back, and leaves the fleet's maps this long after its last step.
+    #[arg(long, value_name = "DURATION", default_value = "2s", value_parser = humantime::parse_duration, requires = "fleet_spec")]
+    pub fleet_silence: std::time::Duration,
 }
 
 /// Transport: stdin/stdout (Telegraf's execd) unless UDP mode is asked for.

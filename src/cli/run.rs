@@ -8,7 +8,8 @@ use super::config::{RunConfig, StateConfig};
 use super::ending::{finish, runtime};
 use super::error::{CliError, CliResult};
 use super::spec::require_outputs;
-use crate::log::{self, Level};
+use crate::fleet::Level;
+use crate::log::{self, Level as LogLevel};
 use crate::processor::Processor;
 use crate::spec_feed::Updates;
 use crate::spec_feed::nats::NatsFeed;
@@ -22,17 +23,29 @@ use crate::watchdog::{self, Watch};
 use std::sync::Arc;
 
 pub fn run(args: RunArgs) -> CliResult {
+    let fleet_args = (
+        args.instances.fleet_spec.clone(),
+        args.instances.fleet_silence,
+        args.spec_options.clone(),
+    );
     let config = RunConfig::from_args(args)?;
     let (loaded, bundle) = config.spec.load().map_err(|e| CliError::spec(e.render()))?;
     if !loaded.warnings.is_empty() {
         log::log(
-            Level::Warn,
+            LogLevel::Warn,
             &tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false),
         );
     }
     require_outputs(&loaded.program, &config.spec_name()).map_err(CliError::spec)?;
+    let mut fleet = match &fleet_args.0 {
+        Some(path) => Some(fleet_level(path, &fleet_args, &loaded.program, &config)?),
+        None => None,
+    };
     let mut proc = Processor::new(loaded.program, config.processor.clone())
         .map_err(|e| CliError::spec(format!("spec: {e}")))?;
+    if let Some((_, names)) = &fleet {
+        proc.tap_fleet(names.clone());
+    }
     proc.name_base(&bundle.id(), "");
     let watch = Arc::new(Watch::default());
     proc.watch_with(watch.lane());
@@ -67,11 +80,44 @@ pub fn run(args: RunArgs) -> CliResult {
         updates: &mut updates,
         store,
         watch,
+        fleet: fleet.as_mut().map(|(l, _)| l),
     };
     let rt = runtime()?;
     let result = rt.block_on(transport::run(&config.transport, &mut proc, setup));
     proc.finish_wiring();
     finish(rt, result, &proc)
+}
+
+/// The fleet level of `--fleet-spec` (checked against the robot spec `robot`) and the robot
+/// outputs it reads; a fleet spec that does not check is a spec error (exit 2).
+fn fleet_level(
+    path: &std::path::Path,
+    (_, silence, spec_options): &(
+        Option<std::path::PathBuf>,
+        std::time::Duration,
+        super::spec::SpecOptions,
+    ),
+    robot: &tessla_engine::Program,
+    config: &RunConfig,
+) -> Result<(Level, Arc<[String]>), CliError> {
+    let options = super::spec::load_options(spec_options).map_err(CliError::spec)?;
+    let (loaded, names) = crate::fleet::check(path, robot, &options).map_err(CliError::spec)?;
+    if !loaded.warnings.is_empty() {
+        log::log(
+            LogLevel::Warn,
+            &tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false),
+        );
+    }
+    let silence = i64::try_from(silence.as_nanos()).unwrap_or(i64::MAX);
+    let level = Level::new(
+        loaded.program,
+        &names,
+        silence,
+        config.processor.tags.clone(),
+        config.processor.instance_by.clone(),
+    )
+    .map_err(|e| CliError::spec(format!("{}: {e}", path.display())))?;
+    Ok((level, Arc::from(names)))
 }
 
 /// The state store `--state` names, connected (a NATS bucket: a mistake in its URL's

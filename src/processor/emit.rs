@@ -1,11 +1,14 @@
 //! Writing a step's outputs: the events an instance's monitor produced in one step, collected
 //! and encoded as metrics, one group per timestamp, with the instance's tags, by the encodings
-//! of the version that computed them (each version's prepared once, in its `Version`).
+//! of the version that computed them (each version's prepared once, in its `Version`); with
+//! `--fleet-spec`, the events the fleet level reads are kept in the fleet tap as well.
 
 use super::Counters;
+use super::fleet_tap::Tap;
 use crate::log;
 use crate::telegraf::encode::{self, Prepared, StepEvent};
-use tessla_engine::{OutputEvent, Value};
+use std::sync::Arc;
+use tessla_engine::{OutputEvent, Program, Value};
 
 /// One output event of a step, as the monitor produced it: its TeSSLa time, the output's index
 /// and its value (kept in [`Emitter::events`] until the step is written).
@@ -43,20 +46,28 @@ pub(super) struct Emitter {
     pub(super) events: Vec<Fired>,
     /// Scratch: the encoder's buffers (the same whatever version writes).
     pub(super) encode: encode::Scratch,
+    /// With `--fleet-spec`: what the fleet level takes from this processor.
+    pub(super) tap: Option<Tap>,
 }
 
 impl Emitter {
     /// Write the collected events as metrics, one group per timestamp, by `encodings` (those
-    /// of the version whose monitor produced the events).
+    /// of the version whose monitor produced the events); `from`: the instance's fleet key and
+    /// the program that produced them, for the fleet tap.
     pub(super) fn emit(
         &mut self,
         encodings: &Prepared,
         tags: &[(String, String)],
+        from: (&Arc<str>, &Arc<Program>),
         counters: &mut Counters,
         out: &mut Vec<u8>,
     ) {
         if self.events.is_empty() {
             return;
+        }
+        if let Some(t) = &mut self.tap {
+            let events = self.events.iter().map(|e| (e.ts, e.output, &e.value));
+            t.take(events, from.0, from.1);
         }
         let mut rest = &self.events[..];
         while let Some(&Fired { ts, .. }) = rest.first() {

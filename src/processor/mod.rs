@@ -20,13 +20,15 @@
 //! instance key of a record, and the pool that routes to it, creates and evicts), writing a
 //! step's outputs (`emit`), what a monitor continuing in another program keeps and resets
 //! ([`carry`]), exact duplicates ([`dedup`]), spec versions and the switch between them
-//! ([`versions`], `switch`) and warnings about inputs no metric feeds ([`wiring`]).
+//! ([`versions`], `switch`), warnings about inputs no metric feeds ([`wiring`]) and what the
+//! fleet level reads from the instances ([`fleet_tap`]).
 
 pub mod carry;
 pub mod clock;
 mod counters;
 pub mod dedup;
 mod emit;
+pub mod fleet_tap;
 pub mod instances;
 mod pool;
 mod record;
@@ -169,6 +171,7 @@ impl Processor {
             emitter: Emitter {
                 events: Vec::new(),
                 encode: encode::Scratch::default(),
+                tap: None,
             },
             pool: Pool::new(&opts),
             opts,
@@ -186,10 +189,11 @@ impl Processor {
     /// A processor with this one's versions and options and no instances (a `--threads`
     /// worker).
     pub fn sibling(&self) -> Result<Processor, String> {
-        Ok(Self::with_versions(
-            self.versions.duplicate()?,
-            self.opts.clone(),
-        ))
+        let mut p = Self::with_versions(self.versions.duplicate()?, self.opts.clone());
+        if let Some(names) = self.fleet_outputs() {
+            p.tap_fleet(names);
+        }
+        Ok(p)
     }
 
     /// Name the spec the process started with (its bundle's id and a label): the value of

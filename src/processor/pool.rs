@@ -33,6 +33,8 @@ pub(super) struct Instance {
     /// version it can run ([`Versions::target_fitting`]). Saved with it.
     pub(super) unfit: Vec<usize>,
     pub(super) tags: Vec<(String, String)>,
+    /// Its key as the fleet level names it: the `--instance-by` values joined by `,`.
+    pub(super) fleet_key: Arc<str>,
     pub(super) recent: super::dedup::Recent,
     /// Never reused: tells this instance's queued deadlines from a former occupant's of its slot.
     pub(super) id: u64,
@@ -64,6 +66,8 @@ pub(super) struct Pool {
     /// Stands in for "now" when no idle limit needs the clock.
     epoch: Instant,
     next_id: u64,
+    /// With `--fleet-spec`: the fleet keys of the instances evicted since the last drain.
+    pub(super) left: Option<Vec<Arc<str>>>,
 }
 
 impl Pool {
@@ -79,6 +83,7 @@ impl Pool {
             single: None,
             epoch: Instant::now(),
             next_id: 0,
+            left: None,
         }
     }
 
@@ -193,6 +198,7 @@ impl Pool {
         }
         self.next_id += 1;
         let horizon = monitor.clock();
+        let fleet_key = fleet_key(&key);
         let i = self.table.insert(
             key,
             Instance {
@@ -203,6 +209,7 @@ impl Pool {
                 unfit: Vec::new(),
                 horizon,
                 tags,
+                fleet_key,
                 recent: Default::default(),
                 id: self.next_id,
                 anchor: None,
@@ -275,9 +282,12 @@ impl Pool {
         lane: Option<&Lane>,
     ) -> bool {
         let (max, total) = (self.keep, self.total);
-        let Some((key, _)) = self.table.remove(slot) else {
+        let Some((key, inst)) = self.table.remove(slot) else {
             return false;
         };
+        if let Some(left) = &mut self.left {
+            left.push(inst.fleet_key);
+        }
         if let Some(l) = lane {
             l.forget(slot);
         }
@@ -326,6 +336,13 @@ pub(super) fn set_tag(tags: &mut Vec<(String, String)>, name: &str, value: &str)
         }
         Err(i) => tags.insert(i, (name.to_string(), value.to_string())),
     }
+}
+
+/// The fleet level's name for instance `key`: its `--instance-by` values joined by `,` (an
+/// absent tag as the empty string).
+pub(super) fn fleet_key(key: &Key) -> Arc<str> {
+    let parts: Vec<&str> = key.iter().map(|v| v.as_deref().unwrap_or("")).collect();
+    Arc::from(parts.join(","))
 }
 
 pub(super) fn describe(instance_by: &[String], key: &Key) -> String {

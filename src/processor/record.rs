@@ -155,13 +155,19 @@ impl Processor {
         // pass-through.
         let events = &mut self.emitter.events;
         monitor.advance_to(ts, &mut |e: OutputEvent<'_>| events.push(Fired::of(e)));
-        let encodings = &self.versions.get(inst.version).encodings;
-        self.emitter
-            .emit(encodings, &inst.tags, &mut self.counters, out);
+        let version = self.versions.get(inst.version);
+        self.emitter.emit(
+            &version.encodings,
+            &inst.tags,
+            (&inst.fleet_key, &version.program),
+            &mut self.counters,
+            out,
+        );
         self.passthrough(rec, out);
         if !dropped {
             self.push_fields(metric, rec.line, (ts, own), slot, out);
         }
+        self.tap_clock(slot);
         self.schedule(slot, ts);
         self.pool
             .evict(now, &mut self.counters, self.lane.as_deref());
@@ -247,8 +253,13 @@ impl Processor {
             }
         }
         inst.monitor.flush(&mut sink);
-        self.emitter
-            .emit(&version.encodings, &inst.tags, &mut self.counters, out);
+        self.emitter.emit(
+            &version.encodings,
+            &inst.tags,
+            (&inst.fleet_key, &version.program),
+            &mut self.counters,
+            out,
+        );
     }
 
     /// No more input right now (the end of a read): evict instances past `--max-instances`

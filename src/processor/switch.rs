@@ -76,8 +76,13 @@ impl Processor {
                 inst.monitor
                     .advance_to(at, &mut |e: OutputEvent<'_>| events.push(Fired::of(e)));
                 let old = self.versions.get(inst.version);
-                self.emitter
-                    .emit(&old.encodings, &inst.tags, &mut self.counters, out);
+                self.emitter.emit(
+                    &old.encodings,
+                    &inst.tags,
+                    (&inst.fleet_key, &old.program),
+                    &mut self.counters,
+                    out,
+                );
                 let new = self.versions.get(target);
                 inst.monitor = new.carry(old, &inst.monitor);
                 inst.version = target;

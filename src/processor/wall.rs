@@ -93,9 +93,15 @@ impl Processor {
                 let events = &mut self.emitter.events;
                 inst.monitor
                     .advance_to(upto, &mut |e: OutputEvent<'_>| events.push(Fired::of(e)));
-                let encodings = &self.versions.get(inst.version).encodings;
-                self.emitter
-                    .emit(encodings, &inst.tags, &mut self.counters, out);
+                let version = self.versions.get(inst.version);
+                self.emitter.emit(
+                    &version.encodings,
+                    &inst.tags,
+                    (&inst.fleet_key, &version.program),
+                    &mut self.counters,
+                    out,
+                );
+                self.tap_clock(slot);
             }
             if let Some(inst) = self.pool.table.get_mut(slot) {
                 Self::queue(&mut self.deadlines, inst, slot, lateness);

@@ -9,7 +9,8 @@
 //! falls due while the input is silent ([`Processor::advance_wall`]); the signals (SIGTERM and
 //! SIGINT end the run, SIGHUP reloads the spec); the save points of a state store
 //! (`--state-interval`, and every ending) with its [`crate::state::Backend`]; the marks of the
-//! step watchdog. Stepping itself is on one thread or spread over several ([`shards`]), or with
+//! step watchdog; feeding the fleet level (`--fleet-spec`) after every read and every wall-clock
+//! advance. Stepping itself is on one thread or spread over several ([`shards`]), or with
 //! a store shared by a fleet ([`shared`]: instances restored as they arrive, the partition lease
 //! followed).
 //!
@@ -21,7 +22,8 @@
 pub mod shards;
 pub mod shared;
 
-use crate::log::{self, Level};
+use crate::fleet::Level;
+use crate::log::{self, Level as LogLevel};
 use crate::processor::Processor;
 use crate::processor::clock::Wall;
 use crate::spec_feed::Updates;
@@ -98,6 +100,8 @@ pub struct Setup<'a> {
     pub store: Option<Store<'a>>,
     /// Where the loop marks what it is doing, for the step watchdog (`--step-timeout`).
     pub watch: Arc<Watch>,
+    /// `--fleet-spec`: the fleet level, fed from every thread's instances after each read.
+    pub fleet: Option<&'a mut Level>,
 }
 
 /// How a run ended.
@@ -124,6 +128,7 @@ pub async fn run<S: Source, K: Sink>(
         updates,
         mut store,
         watch,
+        fleet,
     } = setup;
     let mut shared = store.as_mut().and_then(|s| {
         let sh = s.shared.take()?;
@@ -151,14 +156,15 @@ pub async fn run<S: Source, K: Sink>(
         backend: store.as_mut().map(|s| &mut *s.backend),
         out,
         watch: &watch,
+        fleet,
     };
     let r = l.run(source, sink, updates, interval).await;
     // Every ending (EOF, signal, closed output, I/O error) has evaluated what it could: save.
-    l.save(Level::Info);
+    l.save(LogLevel::Info);
     if let Some(s) = &l.shared {
         if !s.active {
             log::log(
-                Level::Info,
+                LogLevel::Info,
                 &format!(
                     "state: standing by at the end; nothing saved ({} records buffered, not stepped)",
                     s.buffered()
@@ -181,6 +187,7 @@ struct Loop<'p, 'b> {
     backend: Option<&'p mut (dyn Backend + 'b)>,
     out: Vec<u8>,
     watch: &'p Watch,
+    fleet: Option<&'p mut Level>,
 }
 
 impl Loop<'_, '_> {
@@ -228,7 +235,7 @@ impl Loop<'_, '_> {
                     continue;
                 }
                 _ = tick(&mut saves) => {
-                    self.save(Level::Debug);
+                    self.save(LogLevel::Debug);
                     continue;
                 }
                 _ = tick(&mut update_ticks) => {
@@ -259,6 +266,7 @@ impl Loop<'_, '_> {
                     advance_silent(self.proc, wall, &mut self.out);
                     let out = &mut self.out;
                     self.shards.each(|p| advance_silent(p, wall, out));
+                    self.fleet(false);
                     watch.set(Phase::Writing);
                     if self.write(sink).await.is_err() {
                         return Ok(Ending::OutputClosed);
@@ -281,6 +289,7 @@ impl Loop<'_, '_> {
                 }
             };
             self.records(&mut splitter, bytes, end_read, whole, &mut read_ahead)?;
+            self.fleet(false);
             if pending.is_some() {
                 std::mem::swap(&mut buf, &mut ahead);
             }
@@ -300,6 +309,7 @@ impl Loop<'_, '_> {
             self.records(&mut splitter, bytes, true, false, &mut || {})?;
         }
         self.records(&mut splitter, &[], true, true, &mut || {})?;
+        self.fleet(true);
         watch.set(Phase::Writing);
         if self.write(sink).await.is_err() {
             return Ok(Ending::OutputClosed);
@@ -316,6 +326,21 @@ impl Loop<'_, '_> {
         } else {
             updates.tick(&mut procs, &mut self.out);
         }
+    }
+
+    /// Feed the fleet level what every thread's instances produced and step it as far as its
+    /// watermark allows (`end`: the input ended, everything pending).
+    fn fleet(&mut self, end: bool) {
+        let Some(level) = self.fleet.as_deref_mut() else {
+            return;
+        };
+        let drained = self
+            .shards
+            .all(self.proc)
+            .into_iter()
+            .map(|p| p.fleet_drain())
+            .collect();
+        level.pump(drained, end, &mut self.out);
     }
 
     /// Stepping now: without a lease, or holding it.
@@ -381,7 +406,7 @@ impl Loop<'_, '_> {
 
     /// Save to the store, if any and if this process steps; success logged at `level`, failure
     /// as an error (never fatal).
-    fn save(&mut self, level: Level) {
+    fn save(&mut self, level: LogLevel) {
         if self.shared.as_ref().is_some_and(|s| !s.may_save()) {
             return;
         }
@@ -399,7 +424,7 @@ impl Loop<'_, '_> {
                 ),
             ),
             Err(e) => log::log(
-                Level::Error,
+                LogLevel::Error,
                 &format!("state: cannot save to {}: {e}", backend.describe()),
             ),
         }
@@ -573,6 +598,7 @@ mod tests {
             updates: &mut updates,
             store: None,
             watch: Arc::new(Watch::default()),
+            fleet: None,
         };
         let rt = tokio::runtime::Builder::new_current_thread()
             .enable_all()

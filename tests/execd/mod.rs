@@ -6,6 +6,7 @@ mod execd;
 mod execd_instances;
 mod execd_reload;
 mod execd_state;
+mod fleet;
 mod hostile_input;
 mod last_lines;
 mod live_time;

@@ -525,6 +525,7 @@ pub static BUILTINS: &[Builtin] = &[
     external("List_get", core::list_get),
     external("List_fold", core::list_fold),
     external("lidar_dropouts", natives::lidar::dropouts),
+    external("fleet_closest_pair", natives::fleet::closest_pair),
     external("lidar_spikes", natives::lidar::spikes),
     external("lidar_sector_min", natives::lidar::sector_min),
     external(

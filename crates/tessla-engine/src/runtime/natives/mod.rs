@@ -1,5 +1,5 @@
 //! Native (Rust) implementations of value functions: the core ones (`core`) and the robot's
-//! lidar functions (`lidar`).
+//! lidar functions (`lidar`) and the fleet's closest pair (`fleet`).
 //!
 //! Owns: the implementations. Names, kinds and signatures are in `crate::builtins`; a native
 //! reached only through `extern("name")` is declared with its TeSSLa signature in a library
@@ -9,4 +9,5 @@
 //! them through [`crate::value::Callable`]; their type is [`crate::value::NativeFn`].
 
 pub mod core;
+pub mod fleet;
 pub mod lidar;

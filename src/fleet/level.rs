@@ -1,0 +1,362 @@
+//! The fleet level's state and its event-time rule (docs/fleet.md, "Event time").
+//!
+//! Owns: the map per fleet input (robot key → latest value), the changes waiting for the
+//! watermark, each live robot's clock, and stepping the fleet monitor. The rule: the fleet steps
+//! time T once T is before the watermark W = max(min over live robots' clocks, newest clock −
+//! silence); a robot whose clock stays more than the silence behind W leaves every map at its
+//! clock + silence; an evicted robot leaves at the fleet's next step; a change at or before the
+//! fleet's last step (late) is stepped 1 ns after it. At the end of the input everything pending
+//! is stepped.
+
+use super::actions::Actions;
+use crate::log;
+use crate::processor::fleet_tap::Drained;
+use crate::telegraf::encode::{self, Prepared, StepEvent};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::sync::Arc;
+use tessla_engine::runtime::collections;
+use tessla_engine::{Monitor, OutputEvent, Program, Value};
+
+/// One pending change of a fleet map.
+#[derive(Debug, Clone)]
+struct Pend {
+    key: Arc<str>,
+    /// `None`: the robot leaves every map.
+    set: Option<(usize, Value)>,
+}
+
+/// One fleet output event, kept until its step is written.
+struct Ev {
+    output: usize,
+    value: Value,
+}
+
+impl StepEvent for Ev {
+    fn output(&self) -> usize {
+        self.output
+    }
+    fn value(&self) -> &Value {
+        &self.value
+    }
+}
+
+/// Counters of the fleet level (the summary's `fleet` part).
+#[derive(Debug, Default, Clone, PartialEq, Eq)]
+pub struct FleetCounters {
+    pub steps: u64,
+    pub changes: u64,
+    /// Changes that came at or before the fleet's last step (stepped 1 ns after it).
+    pub late: u64,
+    /// Robots that left the maps: silent past the bound, or evicted.
+    pub left: u64,
+    pub outputs: u64,
+}
+
+pub struct Level {
+    program: Arc<Program>,
+    /// Started at the fleet's first step.
+    monitor: Option<Monitor>,
+    /// Per fleet input (by index into the names the taps use): its input number in the program.
+    inputs: Vec<usize>,
+    maps: Vec<Value>,
+    pending: BTreeMap<i64, Vec<Pend>>,
+    clocks: HashMap<Arc<str>, i64>,
+    order: BTreeSet<(i64, Arc<str>)>,
+    /// The newest clock of any robot.
+    front: i64,
+    /// The fleet has stepped every time up to here.
+    done: i64,
+    silence: i64,
+    prepared: Prepared,
+    scratch: encode::Scratch,
+    actions: Actions,
+    tags: Vec<(String, String)>,
+    events: Vec<(i64, Ev)>,
+    pub counters: FleetCounters,
+}
+
+impl Level {
+    /// A level running `program` (checked by [`super::check`]) whose inputs read the robot
+    /// outputs `names`; `silence` in ns; `tags`: the static `--tag`s; `by`: `--instance-by`.
+    pub fn new(
+        program: Arc<Program>,
+        names: &[String],
+        silence: i64,
+        tags: Vec<(String, String)>,
+        by: Vec<String>,
+    ) -> Result<Level, String> {
+        let inputs = names
+            .iter()
+            .map(|n| {
+                program
+                    .inputs
+                    .iter()
+                    .position(|i| &i.name == n)
+                    .ok_or_else(|| format!("fleet spec: no input `{n}`"))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let actions = Actions::new(&program, by, tags.clone())?;
+        Ok(Level {
+            prepared: Prepared::new(encode::encodings(&program), super::MEASUREMENT),
+            monitor: None,
+            maps: inputs.iter().map(|_| collections::empty_map()).collect(),
+            inputs,
+            pending: BTreeMap::new(),
+            clocks: HashMap::new(),
+            order: BTreeSet::new(),
+            front: i64::MIN,
+            done: i64::MIN,
+            silence: silence.max(0),
+            scratch: encode::Scratch::default(),
+            actions,
+            tags,
+            events: Vec::new(),
+            counters: FleetCounters::default(),
+            program,
+        })
+    }
+
+    /// Take in what the processors collected, then step every time the watermark has passed
+    /// (`end`: the input ended, step everything pending); outputs appended to `out`.
+    pub fn pump(&mut self, drained: Vec<Drained>, end: bool, out: &mut Vec<u8>) {
+        for d in drained {
+            self.absorb(d);
+        }
+        let w = self.watermark();
+        self.expire(w);
+        let upto = if end { i64::MAX } else { w };
+        while let Some(entry) = self.pending.first_entry() {
+            if *entry.key() >= upto {
+                break;
+            }
+            let (t, pends) = entry.remove_entry();
+            self.step(t, pends, out);
+        }
+        if !end
+            && w > self.done.saturating_add(1)
+            && let Some(monitor) = &mut self.monitor
+        {
+            // The fleet's own delays fire up to the watermark.
+            let events = &mut self.events;
+            monitor.advance_to(w, &mut |e: OutputEvent<'_>| {
+                events.push((
+                    e.ts,
+                    Ev {
+                        output: e.output,
+                        value: e.value.clone(),
+                    },
+                ))
+            });
+            self.write(out);
+            self.done = self.done.max(w - 1);
+        }
+    }
+
+    /// The robots in the fleet now (live clocks).
+    pub fn robots(&self) -> usize {
+        self.clocks.len()
+    }
+
+    fn absorb(&mut self, d: Drained) {
+        for c in d.changes {
+            self.counters.changes += 1;
+            let t = if c.ts <= self.done {
+                self.counters.late += 1;
+                self.done.saturating_add(1)
+            } else {
+                c.ts
+            };
+            self.pending.entry(t).or_default().push(Pend {
+                key: c.key,
+                set: Some((c.input, c.value)),
+            });
+        }
+        for (key, clock) in d.clocks {
+            self.front = self.front.max(clock);
+            match self.clocks.get_mut(&key) {
+                Some(c) if *c == clock => {}
+                Some(c) => {
+                    self.order.remove(&(*c, Arc::clone(&key)));
+                    *c = clock;
+                    self.order.insert((clock, key));
+                }
+                None => {
+                    self.clocks.insert(Arc::clone(&key), clock);
+                    self.order.insert((clock, key));
+                }
+            }
+        }
+        for key in d.left {
+            if let Some(c) = self.clocks.remove(&key) {
+                self.order.remove(&(c, Arc::clone(&key)));
+                let t = c.saturating_add(1).max(self.done.saturating_add(1));
+                self.pending
+                    .entry(t)
+                    .or_default()
+                    .push(Pend { key, set: None });
+            }
+        }
+    }
+
+    /// Times before this are final: every live robot has passed them, or the robots that have
+    /// not are silent (more than the silence behind the newest).
+    fn watermark(&self) -> i64 {
+        let Some((min, _)) = self.order.first() else {
+            return self.front;
+        };
+        (*min).max(self.front.saturating_sub(self.silence))
+    }
+
+    /// Robots silent past the bound before `w` leave the maps at their clock + silence.
+    fn expire(&mut self, w: i64) {
+        while let Some((c, _)) = self.order.first() {
+            let leave = c.saturating_add(self.silence);
+            if leave >= w {
+                break;
+            }
+            let Some((_, key)) = self.order.pop_first() else {
+                break;
+            };
+            self.clocks.remove(&key);
+            let t = leave.max(self.done.saturating_add(1));
+            self.pending
+                .entry(t)
+                .or_default()
+                .push(Pend { key, set: None });
+        }
+    }
+
+    /// Apply the changes at `t` (leavings first, then values, each in key order) and step the
+    /// fleet monitor with the maps that changed.
+    fn step(&mut self, t: i64, mut pends: Vec<Pend>, out: &mut Vec<u8>) {
+        pends.sort_by(|a, b| {
+            (a.set.is_some(), &a.key, a.set.as_ref().map(|s| s.0)).cmp(&(
+                b.set.is_some(),
+                &b.key,
+                b.set.as_ref().map(|s| s.0),
+            ))
+        });
+        let mut changed = vec![false; self.maps.len()];
+        for p in pends {
+            let key = Value::Str(Arc::clone(&p.key));
+            match p.set {
+                None => {
+                    let mut gone = false;
+                    for (i, m) in self.maps.iter_mut().enumerate() {
+                        if let Value::Bool(true) =
+                            collections::map_contains(&[m.clone(), key.clone()])
+                        {
+                            *m = collections::map_remove(&[m.clone(), key.clone()]);
+                            if let Some(c) = changed.get_mut(i) {
+                                *c = true;
+                            }
+                            gone = true;
+                        }
+                    }
+                    if gone {
+                        self.counters.left += 1;
+                    }
+                }
+                Some((i, v)) => {
+                    let Some(m) = self.maps.get_mut(i) else {
+                        continue;
+                    };
+                    let old = collections::map_get_or_else(&[m.clone(), key.clone(), Value::Unit]);
+                    let had = matches!(
+                        collections::map_contains(&[m.clone(), key.clone()]),
+                        Value::Bool(true)
+                    );
+                    if had && old == v {
+                        continue;
+                    }
+                    *m = collections::map_add(&[m.clone(), key, v]);
+                    if let Some(c) = changed.get_mut(i) {
+                        *c = true;
+                    }
+                }
+            }
+        }
+        if !changed.iter().any(|&c| c) {
+            self.done = self.done.max(t);
+            return;
+        }
+        let events = &mut self.events;
+        let mut sink = |e: OutputEvent<'_>| {
+            events.push((
+                e.ts,
+                Ev {
+                    output: e.output,
+                    value: e.value.clone(),
+                },
+            ))
+        };
+        let program = &self.program;
+        let monitor = self
+            .monitor
+            .get_or_insert_with(|| Monitor::starting_at(Arc::clone(program), t));
+        for (i, c) in changed.iter().enumerate() {
+            if !c {
+                continue;
+            }
+            let (Some(&input), Some(m)) = (self.inputs.get(i), self.maps.get(i)) else {
+                continue;
+            };
+            if let Err(e) = monitor.push(t, input, m.clone(), &mut sink) {
+                log::warn_limited("fleet step", || {
+                    format!("fleet level: the step at {t} refused a map: {e:?}")
+                });
+            }
+        }
+        monitor.flush(&mut sink);
+        self.counters.steps += 1;
+        self.done = self.done.max(t);
+        self.write(out);
+    }
+
+    /// Write the collected output events, one group per timestamp; coordinated actions as one
+    /// `action` metric per addressed robot.
+    fn write(&mut self, out: &mut Vec<u8>) {
+        if self.events.is_empty() {
+            return;
+        }
+        let events = std::mem::take(&mut self.events);
+        let mut rest = &events[..];
+        let mut plain: Vec<Ev> = Vec::new();
+        while let Some((ts, _)) = rest.first() {
+            let ts = *ts;
+            let n = rest.iter().take_while(|e| e.0 == ts).count();
+            let (step, tail) = rest.split_at(n);
+            rest = tail;
+            plain.clear();
+            for (_, e) in step {
+                self.counters.outputs += 1;
+                if self.actions.is_action(e.output) {
+                    self.actions.write(ts, e.output, &e.value, out);
+                } else {
+                    plain.push(Ev {
+                        output: e.output,
+                        value: e.value.clone(),
+                    });
+                }
+            }
+            if !plain.is_empty() {
+                let dropped = encode::encode_prepared(
+                    &mut self.scratch,
+                    &self.prepared,
+                    ts,
+                    &plain,
+                    &self.tags,
+                    out,
+                );
+                for d in dropped {
+                    log::warn_limited("fleet output value", || {
+                        format!(
+                            "fleet output `{}` at {ts}: {}; field dropped",
+                            d.output, d.reason
+                        )
+                    });
+                }
+            }
+        }
+    }
+}

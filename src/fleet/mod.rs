@@ -1,0 +1,158 @@
+//! The fleet level (`run --fleet-spec FILE`, docs/fleet.md): a plain TeSSLa spec over the whole
+//! fleet, whose inputs are robot-spec outputs seen as maps from robot key to latest value.
+//!
+//! Owns: loading and checking the fleet spec against the robot spec (each input names a robot
+//! output and has type `Events[Map[String, T]]` for that output's `T`; a fleet spec that does
+//! not check is refused with the usual diagnostics), the fleet's maps, its event-time rule
+//! (the watermark over live robots, robots silent past `--fleet-silence` or evicted leaving the
+//! maps, late changes stepped 1 ns after the fleet's last step: [`level`]), writing its outputs as
+//! line protocol by the Telegraf annotations (default measurement `tessla_fleet`) and its
+//! coordinated actions, one `action` metric per addressed robot ([`actions`]). The robot side
+//! of it is `crate::processor::fleet_tap`; the step loop drains every processor's tap into the
+//! level after each read.
+
+pub mod actions;
+pub mod level;
+
+pub use level::Level;
+
+use std::path::Path;
+use tessla_engine::{LoadOptions, Program};
+use tessla_syntax::ast::{Statement, Type as SynType};
+use tessla_syntax::diag::{Category, Diagnostic};
+use tessla_syntax::source::SourceMap;
+
+/// The measurement of fleet outputs without a Telegraf annotation.
+pub const MEASUREMENT: &str = "tessla_fleet";
+
+/// `--fleet-silence`: a robot whose clock stays this far (event time) behind the newest robot's
+/// no longer holds the fleet back, and leaves the fleet's maps this long after its last step.
+/// Two seconds are ten periods of the robots' 5 Hz messages: a Wi-Fi retry or a broker hiccup
+/// passes in far less, a robot switched off or out of range does not.
+pub const DEFAULT_SILENCE: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// The bundled library a fleet spec may include (`include "fleet.tessla"`).
+pub const LIBRARY: &str = include_str!("../../specs/lib/fleet.tessla");
+
+/// How the fleet spec is loaded: the robot spec's base time and `--set`s, and the bundled
+/// `fleet.tessla` and `Telegraf.tessla` for includes that are not beside it.
+pub fn load_options(robot: &LoadOptions) -> LoadOptions {
+    let mut o = robot.clone();
+    o.bundled_includes = vec![
+        ("fleet.tessla".into(), LIBRARY.into()),
+        (
+            "Telegraf.tessla".into(),
+            include_str!("../../specs/telegraf.tessla").into(),
+        ),
+    ];
+    o.on_bundled_include = None;
+    o
+}
+
+/// Load the fleet spec at `path` and check its inputs against the robot spec's outputs: the
+/// fleet program and, per fleet input (in the fleet program's order), the robot output it reads.
+/// Errors are rendered diagnostics (file, line, column).
+pub fn check(
+    path: &Path,
+    robot: &Program,
+    options: &LoadOptions,
+) -> Result<(tessla_engine::Loaded, Vec<String>), String> {
+    let loaded = tessla_engine::load_file(path, &load_options(options)).map_err(|e| e.render())?;
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| format!("{}: cannot read the fleet spec: {e}", path.display()))?;
+    let mut sources = SourceMap::new();
+    let file = sources.add(path.display().to_string(), Some(path), text.clone());
+    let (ast, _) = tessla_syntax::parser::parse(&text, file);
+    let mut diags = Vec::new();
+    let mut names = Vec::new();
+    for input in &loaded.program.inputs {
+        let decl = ast.statements.iter().find_map(|s| match s {
+            Statement::In { name, ty, .. } if name.name == input.name => Some((name, ty)),
+            _ => None,
+        });
+        let Some((name, ty)) = decl else {
+            diags.push(Diagnostic::error(
+                Category::Other,
+                None,
+                format!(
+                    "fleet spec input `{}` is not declared in {} itself (declare the fleet's inputs in the fleet spec, not in an include)",
+                    input.name,
+                    path.display()
+                ),
+            ));
+            continue;
+        };
+        let Some(out) = robot.outputs.iter().find(|o| o.name == input.name) else {
+            let known: Vec<&str> = robot.outputs.iter().map(|o| o.name.as_str()).collect();
+            diags.push(Diagnostic::error(
+                Category::Name,
+                Some(name.span),
+                format!(
+                    "fleet spec input `{}` is not an output of the robot spec (its outputs: {})",
+                    input.name,
+                    known.join(", ")
+                ),
+            ));
+            continue;
+        };
+        let want = format!("Events[Map[String, {}]]", out.ty);
+        let got = show_type(ty);
+        if !out.ty.is_known() {
+            diags.push(Diagnostic::error(
+                Category::Type,
+                Some(ty.span()),
+                format!(
+                    "fleet spec input `{}`: the robot output's type is not one the fleet level can carry (a map, set or function)",
+                    input.name
+                ),
+            ));
+        } else if got != want {
+            diags.push(Diagnostic::error(
+                Category::Type,
+                Some(ty.span()),
+                format!(
+                    "fleet spec input `{}` has type {got}; robot output `{}` is Events[{}], so the fleet reads it as {want}",
+                    input.name, out.name, out.ty
+                ),
+            ));
+        }
+        names.push(input.name.clone());
+    }
+    if loaded.program.outputs.is_empty() {
+        diags.push(Diagnostic::error(
+            Category::Other,
+            None,
+            format!("{}: the fleet spec has no outputs", path.display()),
+        ));
+    }
+    if !diags.is_empty() {
+        return Err(tessla_syntax::diag::render(&diags, &sources, false));
+    }
+    Ok((loaded, names))
+}
+
+/// A syntax type in TeSSLa's notation, as the engine prints types (`Map[String, (Float, Float)]`).
+fn show_type(t: &SynType) -> String {
+    match t {
+        SynType::Name(id) => id.name.clone(),
+        SynType::App { name, args, .. } => format!(
+            "{}[{}]",
+            name.name,
+            args.iter().map(show_type).collect::<Vec<_>>().join(", ")
+        ),
+        SynType::Tuple { elems, .. } if elems.is_empty() => "Unit".into(),
+        SynType::Tuple { elems, .. } => format!(
+            "({})",
+            elems.iter().map(show_type).collect::<Vec<_>>().join(", ")
+        ),
+        SynType::Record { fields, .. } => format!(
+            "{{{}}}",
+            fields
+                .iter()
+                .map(|(n, t)| format!("{}: {}", n.name, show_type(t)))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        SynType::Function { .. } => "a function".into(),
+    }
+}
