@@ -51,12 +51,15 @@ enum Ref {
     Last(u32),
     /// The plan's constant `i` ([`Plan::consts`]).
     Const(u32),
+    /// The value node `i` computed this step by a call ([`Instr::Call`]), in [`Scratch::temps`].
+    Temp(u32),
 }
 
 impl Ref {
     const INPUT: u64 = 0;
     const LAST: u64 = 1;
     const CONST: u64 = 2;
+    const TEMP: u64 = 3;
 
     #[inline(always)]
     fn bits(self) -> u64 {
@@ -64,6 +67,7 @@ impl Ref {
             Ref::Input(i) => (Ref::INPUT << 32) | u64::from(i),
             Ref::Last(i) => (Ref::LAST << 32) | u64::from(i),
             Ref::Const(i) => (Ref::CONST << 32) | u64::from(i),
+            Ref::Temp(i) => (Ref::TEMP << 32) | u64::from(i),
         }
     }
 
@@ -73,7 +77,8 @@ impl Ref {
         match bits >> 32 {
             Ref::INPUT => Ref::Input(i),
             Ref::LAST => Ref::Last(i),
-            _ => Ref::Const(i),
+            Ref::CONST => Ref::Const(i),
+            _ => Ref::Temp(i),
         }
     }
 }
@@ -84,6 +89,7 @@ struct Vals<'a> {
     inputs: &'a [Option<Value>],
     last: &'a [Option<Value>],
     consts: &'a [Value],
+    temps: &'a [Option<Value>],
 }
 
 impl<'a> Vals<'a> {
@@ -95,6 +101,7 @@ impl<'a> Vals<'a> {
             Ref::Input(i) => self.inputs.get(i as usize)?.as_ref(),
             Ref::Last(i) => self.last.get(i as usize)?.as_ref(),
             Ref::Const(i) => self.consts.get(i as usize),
+            Ref::Temp(i) => self.temps.get(i as usize)?.as_ref(),
         }
     }
 }
@@ -420,6 +427,22 @@ enum FArg {
     Const(u64),
 }
 
+/// How an [`Instr::Call`] node takes its operands: the general step's semantics of its form.
+#[derive(Clone, Copy, Debug)]
+enum CallMode {
+    /// A signal lift (`slift`, an operator): fires when one argument has an event and every one
+    /// has a value; the function gets their values.
+    Signal,
+    /// An event lift (`lift`): fires when one argument has an event; the function gets the
+    /// events.
+    Events,
+    /// A `fold` (operands: its own kept value, the stream); `init` is its initial value (a
+    /// reference to one of the plan's constants).
+    Fold { init: u64 },
+    /// A `reduce` (operands: its own kept value, the stream).
+    Reduce,
+}
+
 /// One node's evaluation; `dst` is the node.
 #[derive(Clone, Debug)]
 enum Instr {
@@ -531,6 +554,21 @@ enum Instr {
         a: FArg,
         b: FArg,
     },
+    /// A node whose function the plan has no typed form for (a native, a user function, a
+    /// `lift` of a function, a `fold` over a Map, an operator on values that are not scalars):
+    /// the monitor's code for node `node` computes its value (the caller handed to
+    /// [`Plan::step`]), which goes to [`Scratch::temps`]; the node is of [`Kind::Val`].
+    Call {
+        dst: u32,
+        node: u32,
+        args: Box<[Src]>,
+        mode: CallMode,
+    },
+    /// `time` of a node of [`Kind::Val`]: the timestamp as a value in [`Scratch::temps`].
+    TimeVal {
+        dst: u32,
+        src: u32,
+    },
 }
 
 /// A program's step as flat instructions (see the module's documentation).
@@ -547,6 +585,89 @@ pub struct Plan {
     outputs: Vec<(u32, Kind)>,
     /// The values of [`Kind::Val`] constants, by index.
     consts: Vec<Value>,
+    /// The nodes whose values go to [`Scratch::temps`] (emptied after each step).
+    temp_nodes: Vec<u32>,
+}
+
+/// A thread's working memory for plans, shared by every monitor on it.
+#[derive(Default)]
+pub struct Scratch {
+    /// This step's event of each node.
+    slots: Vec<Slot>,
+    /// The values [`Instr::Call`] computed this step, by node (empty between steps).
+    temps: Vec<Option<Value>>,
+}
+
+/// An operand of a call, held for the call: none, a scalar made from its bits, or a reference
+/// to a value where it is.
+enum Held<'a> {
+    No,
+    Own(Value),
+    Ref(&'a Value),
+}
+
+impl<'a> Held<'a> {
+    /// `None`: a reference to nothing (a plan never makes one).
+    #[inline(always)]
+    fn of(kind: Kind, bits: Option<u64>, vals: Vals<'a>) -> Option<Held<'a>> {
+        Some(match bits {
+            None => Held::No,
+            Some(b) if kind == Kind::Val => Held::Ref(vals.get(b)?),
+            Some(b) => Held::Own(scalar(kind, b)),
+        })
+    }
+
+    #[inline(always)]
+    fn get(&self) -> Option<&Value> {
+        match self {
+            Held::No => None,
+            Held::Own(v) => Some(v),
+            Held::Ref(r) => Some(r),
+        }
+    }
+}
+
+/// Call node `node`'s function on its operands, each (kind, bits if it has a value); up to four
+/// on the stack. `None`: an operand the plan cannot read.
+fn call_node<'a, C>(
+    call: &mut C,
+    node: u32,
+    ops: impl ExactSizeIterator<Item = Option<(Kind, Option<u64>)>>,
+    vals: Vals<'a>,
+) -> Option<Option<Value>>
+where
+    C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
+{
+    let n = ops.len();
+    if n <= 4 {
+        let mut held = [Held::No, Held::No, Held::No, Held::No];
+        for (h, o) in held.iter_mut().zip(ops) {
+            let (k, b) = o?;
+            *h = Held::of(k, b, vals)?;
+        }
+        let refs = [held[0].get(), held[1].get(), held[2].get(), held[3].get()];
+        Some(call(node as usize, refs.get(..n)?))
+    } else {
+        let held: Vec<Held<'a>> = ops
+            .map(|o| o.and_then(|(k, b)| Held::of(k, b, vals)))
+            .collect::<Option<_>>()?;
+        let refs: Vec<Option<&Value>> = held.iter().map(Held::get).collect();
+        Some(call(node as usize, &refs))
+    }
+}
+
+/// Whether a condition of `kind` holds: a `Bool`'s bits, or a value of [`Kind::Val`] that is a
+/// `Bool`; `None` for any other value (an error value: the general step's to propagate).
+#[inline(always)]
+fn cond_of(kind: Kind, bits: u64, vals: Vals<'_>) -> Option<bool> {
+    if kind == Kind::Val {
+        match vals.get(bits)? {
+            Value::Bool(b) => Some(*b),
+            _ => None,
+        }
+    } else {
+        Some(bits != 0)
+    }
 }
 
 /// The program has no plan (some node or type has no form here).
@@ -585,7 +706,13 @@ fn keep(l: &mut Option<Value>, kind: Kind, bits: u64) {
 /// Put `v` in a kept slot, dropping what was there only when it needs a drop.
 #[inline(always)]
 fn replace(l: &mut Option<Value>, v: Value) {
-    let old = l.replace(v);
+    replace_opt(l, Some(v));
+}
+
+/// Put `v` in a slot, dropping what was there only when it needs a drop.
+#[inline(always)]
+fn replace_opt(l: &mut Option<Value>, v: Option<Value>) {
+    let old = std::mem::replace(l, v);
     match old {
         // Scalars need no drop.
         None | Some(Value::Unit | Value::Bool(_) | Value::Int(_) | Value::Float(_)) => {
@@ -682,24 +809,33 @@ impl Plan {
     /// Evaluate one step into `cur` (the thread's slots), send the outputs to `sink` and keep the
     /// values read across steps in `st.last`. `false`: the plan has no scalar answer for this
     /// step; nothing was sent or changed, and the general step must run it.
+    /// `call(node, operands)` computes node `node`'s value the general step's way (its
+    /// [`Instr::Call`]s): the operands of a signal lift, an operator, a `fold` or a `reduce` are
+    /// all there; a `lift`'s are its arguments' events.
     #[inline]
-    pub fn step<F: FnMut(usize, &Value)>(
-        &self,
-        st: StepState<'_>,
-        cur: &mut Vec<Slot>,
-        sink: &mut F,
-    ) -> bool {
+    pub fn step<F, C>(&self, st: StepState<'_>, sc: &mut Scratch, call: &mut C, sink: &mut F) -> bool
+    where
+        F: FnMut(usize, &Value),
+        C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
+    {
+        let Scratch { slots: cur, temps } = sc;
         if cur.len() != self.slots {
             cur.clear();
             cur.resize(self.slots, NONE);
         }
-        if self.eval(&st, cur).is_none() {
+        if !self.temp_nodes.is_empty() && temps.len() != self.slots {
+            temps.clear();
+            temps.resize_with(self.slots, || None);
+        }
+        if self.eval(&st, cur, temps, call).is_none() {
+            self.clear_temps(temps);
             return false;
         }
         let vals = Vals {
             inputs: st.inputs,
             last: st.last,
             consts: &self.consts,
+            temps,
         };
         for (out, &(n, kind)) in self.outputs.iter().enumerate() {
             let c = cur_of(cur, n);
@@ -726,15 +862,32 @@ impl Plan {
             }
         }
         if !self.kept_vals.is_empty() {
-            self.keep_values(cur, st.inputs, st.last);
+            self.keep_values(cur, st.inputs, st.last, temps);
         }
+        self.clear_temps(temps);
         true
+    }
+
+    /// Drop the values calls computed this step.
+    #[inline(always)]
+    fn clear_temps(&self, temps: &mut [Option<Value>]) {
+        for &n in &self.temp_nodes {
+            if let Some(t) = temps.get_mut(n as usize) {
+                replace_opt(t, None);
+            }
+        }
     }
 
     /// Keep the events of the kept nodes of [`Kind::Val`]: one kept from another kept slot is
     /// copied before any of them is written (the slot it refers to may be written here; the
     /// scalars' slots are never referred to), one from an input or a constant is cloned.
-    fn keep_values(&self, cur: &[Slot], inputs: &[Option<Value>], last: &mut [Option<Value>]) {
+    fn keep_values(
+        &self,
+        cur: &[Slot],
+        inputs: &[Option<Value>],
+        last: &mut [Option<Value>],
+        temps: &[Option<Value>],
+    ) {
         let mut moved: Vec<(u32, Value)> = Vec::new();
         for &(n, slot) in &self.kept_vals {
             let c = cur_of(cur, n);
@@ -756,6 +909,7 @@ impl Plan {
                 Ref::Last(_) => continue,
                 Ref::Input(i) => inputs.get(i as usize).and_then(Option::as_ref),
                 Ref::Const(i) => self.consts.get(i as usize),
+                Ref::Temp(i) => temps.get(i as usize).and_then(Option::as_ref),
             };
             if let (Some(v), Some(l)) = (v, last.get_mut(slot as usize)) {
                 replace(l, v.clone());
@@ -770,13 +924,28 @@ impl Plan {
 
     /// The step's events into `cur`; `None` as soon as one has no scalar answer.
     #[inline(always)]
-    fn eval(&self, st: &StepState<'_>, cur: &mut [Slot]) -> Option<()> {
+    fn eval<C>(
+        &self,
+        st: &StepState<'_>,
+        cur: &mut [Slot],
+        temps: &mut [Option<Value>],
+        call: &mut C,
+    ) -> Option<()>
+    where
+        C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
+    {
         let last = &*st.last;
-        let vals = Vals {
-            inputs: st.inputs,
-            last,
-            consts: &self.consts,
-        };
+        // What references point into; `temps` as it is when read (calls write it).
+        macro_rules! vals {
+            () => {
+                Vals {
+                    inputs: st.inputs,
+                    last,
+                    consts: &self.consts,
+                    temps: &*temps,
+                }
+            };
+        }
         for instr in &self.instrs {
             let (dst, v) = match instr {
                 Instr::Nil { dst } => (dst, NONE),
@@ -797,6 +966,7 @@ impl Plan {
                     } else {
                         match (value_of(cur, last, a)?, value_of(cur, last, b)?) {
                             (Some(x), Some(y)) => {
+                                let vals = vals!();
                                 let (x, y) = (vals.get(x)?, vals.get(y)?);
                                 // An error value propagates: the general step's.
                                 if matches!(x, Value::Error(_)) || matches!(y, Value::Error(_)) {
@@ -839,7 +1009,10 @@ impl Plan {
                             value_of(cur, last, then)?,
                             value_of(cur, last, other)?,
                         ) {
-                            (Some(c), Some(t), Some(e)) => (dst, some(if c != 0 { t } else { e })),
+                            (Some(c), Some(t), Some(e)) => {
+                                let c = cond_of(cond.kind, c, vals!())?;
+                                (dst, some(if c { t } else { e }))
+                            }
                             _ => (dst, NONE),
                         }
                     }
@@ -955,7 +1128,7 @@ impl Plan {
                     if !(a[0].has || a[1].has || a[2].has) {
                         (dst, NONE)
                     } else {
-                        (dst, f.run(a, *kind, vals))
+                        (dst, f.run(a, *kind, vals!()))
                     }
                 }
                 Instr::SPick { dst, args, pick } => {
@@ -964,6 +1137,100 @@ impl Plan {
                         _ => None,
                     };
                     (dst, v.map_or(NONE, some))
+                }
+                Instr::Call {
+                    dst,
+                    node,
+                    args,
+                    mode,
+                } => {
+                    let r = match mode {
+                        CallMode::Signal => {
+                            if fires(cur, last, args)? {
+                                let ops = args
+                                    .iter()
+                                    .map(|a| Some((a.kind, value_of(cur, last, a)?)));
+                                call_node(call, *node, ops, vals!())?
+                            } else {
+                                None
+                            }
+                        }
+                        CallMode::Events => {
+                            if args.iter().any(|a| has_event(cur, a)) {
+                                let ops = args.iter().map(|a| {
+                                    let c = cur_of(cur, a.n);
+                                    Some((a.kind, c.has.then_some(c.bits)))
+                                });
+                                call_node(call, *node, ops, vals!())?
+                            } else {
+                                None
+                            }
+                        }
+                        CallMode::Fold { init } => {
+                            let (acc, x) = (args.first()?, args.get(1)?);
+                            let xs = cur_of(cur, x.n);
+                            let acc = if st.first {
+                                Some(*init)
+                            } else if xs.has {
+                                kept_of(last, acc.slot, Kind::Val)?
+                            } else {
+                                None
+                            };
+                            match acc {
+                                Some(a) if xs.has => {
+                                    let ops = [
+                                        Some((Kind::Val, Some(a))),
+                                        Some((x.kind, Some(xs.bits))),
+                                    ];
+                                    call_node(call, *node, ops.into_iter(), vals!())?
+                                }
+                                // The first step without an event: the initial value itself.
+                                Some(a) => {
+                                    if let Some(c) = cur.get_mut(*dst as usize) {
+                                        *c = some(a);
+                                    }
+                                    continue;
+                                }
+                                None => None,
+                            }
+                        }
+                        CallMode::Reduce => {
+                            let (acc, x) = (args.first()?, args.get(1)?);
+                            let xs = cur_of(cur, x.n);
+                            if !xs.has {
+                                None
+                            } else if let Some(a) = kept_of(last, acc.slot, Kind::Val)? {
+                                let ops = [
+                                    Some((Kind::Val, Some(a))),
+                                    Some((x.kind, Some(xs.bits))),
+                                ];
+                                call_node(call, *node, ops.into_iter(), vals!())?
+                            } else {
+                                // The first event: itself (of the node's kind, checked).
+                                if let Some(c) = cur.get_mut(*dst as usize) {
+                                    *c = xs;
+                                }
+                                continue;
+                            }
+                        }
+                    };
+                    let v = match r {
+                        Some(v) => {
+                            *temps.get_mut(*dst as usize)? = Some(v);
+                            some(Ref::Temp(*dst).bits())
+                        }
+                        None => NONE,
+                    };
+                    (dst, v)
+                }
+                Instr::TimeVal { dst, src } => {
+                    let v = if cur_of(cur, *src).has {
+                        *temps.get_mut(*dst as usize)? = Some(Value::Int(st.ts));
+                        some(Ref::Temp(*dst).bits())
+                    } else {
+                        NONE
+                    };
+                    (dst, v)
                 }
                 Instr::Merge { dst, args } => (
                     dst,
@@ -974,8 +1241,11 @@ impl Plan {
                 ),
                 Instr::Filter { dst, stream, cond } => {
                     let s = cur_of(cur, *stream);
-                    let v = if s.has && value_of(cur, last, cond)? == Some(1) {
-                        s
+                    let v = if s.has {
+                        match value_of(cur, last, cond)? {
+                            Some(c) if cond_of(cond.kind, c, vals!())? => s,
+                            _ => NONE,
+                        }
                     } else {
                         NONE
                     };
