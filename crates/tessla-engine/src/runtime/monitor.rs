@@ -281,6 +281,7 @@ impl Monitor {
                 first,
                 inputs: &self.inputs,
                 last: &mut self.last,
+                targets: &mut self.targets,
             };
             let mut send = |output, value: &Value| {
                 sink(OutputEvent { ts, output, value });

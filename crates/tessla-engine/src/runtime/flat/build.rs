@@ -52,6 +52,7 @@ fn kinds(
                     .and_then(k),
                 Some(Node::Nil) => Some(Kind::Unit),
                 Some(Node::Time(_)) => Some(Kind::Int),
+                Some(Node::Delay { .. }) => Some(Kind::Unit),
                 Some(Node::Lift { args, f }) => match lift_op(f, args.len()) {
                     Some(LiftOp::On) => args.get(1).and_then(k),
                     Some(LiftOp::First | LiftOp::Distinct | LiftOp::FirstOnly) => {
@@ -291,33 +292,43 @@ impl Builder<'_> {
                     CallMode::Events,
                 )?
             }
-            Node::Delay { .. } => return Err(NoPlan),
+            Node::Delay { delay, reset } => self.delay(dst, i, *delay, *reset, Value::Unit)?,
+        })
+    }
+
+    /// A `delay` node's instruction: fires with `unit` (its bits: a scalar's, or a reference
+    /// to the constant) when its armed target is now.
+    fn delay(
+        &self,
+        dst: u32,
+        i: NodeId,
+        delay: NodeId,
+        reset: NodeId,
+        unit: Value,
+    ) -> Result<Instr, NoPlan> {
+        let k = need(self.p.delays.iter().position(|d| *d == i))?;
+        let bits = if self.kind(i)? == Kind::Val {
+            self.val_const(&unit)?
+        } else {
+            0
+        };
+        let amount = self.src(&SArg::Stream(delay))?;
+        if !matches!(amount.kind, Kind::Int | Kind::Val) {
+            return Err(NoPlan);
+        }
+        Ok(Instr::Delay {
+            dst,
+            k: need(u32::try_from(k).ok())?,
+            bits,
+            amount,
+            reset: self.idx(reset)?,
         })
     }
 
     /// The nodes node `i` reads (made [`Kind::Val`] when its own instruction of that kind
     /// cannot take them as they are).
     fn reads(&self, i: NodeId) -> Vec<NodeId> {
-        let s = |a: &SArg| match a {
-            SArg::Stream(n) => Some(*n),
-            SArg::Const(_) => None,
-        };
-        match self.p.nodes.get(i) {
-            Some(Node::Alias(n) | Node::Time(n)) => vec![*n],
-            Some(Node::Last { value, trigger }) => vec![*value, *trigger],
-            Some(Node::Default { stream, .. })
-            | Some(Node::Reduce { stream, .. })
-            | Some(Node::Fold { stream, .. }) => vec![*stream],
-            Some(Node::DefaultFrom { stream, from }) => vec![*stream, *from],
-            Some(Node::Bin { a, b, .. }) => [a, b].into_iter().filter_map(s).collect(),
-            Some(Node::SLift { args, .. }) => args.iter().filter_map(s).collect(),
-            Some(Node::Ite { cond, then, other }) => {
-                [cond, then, other].into_iter().filter_map(s).collect()
-            }
-            Some(Node::Merge(args) | Node::Lift { args, .. }) => args.clone(),
-            Some(Node::Filter { stream, cond }) => vec![*stream, *cond],
-            _ => Vec::new(),
-        }
+        self.p.nodes.get(i).map(Node::all_deps).unwrap_or_default()
     }
 
     fn constant(&self, v: &Value) -> Result<Src, NoPlan> {
@@ -600,7 +611,7 @@ impl Builder<'_> {
                     kind,
                 }
             }
-            Node::Delay { .. } => return Err(NoPlan),
+            Node::Delay { delay, reset } => self.delay(dst, i, *delay, *reset, Value::Unit)?,
         })
     }
 }
@@ -617,9 +628,6 @@ impl Plan {
         let never = u32::try_from(n).map_err(|_| Vec::new())?;
         if p.last_slot.len() != n {
             return Err(Vec::new());
-        }
-        if !p.delays.is_empty() {
-            return Err(p.delays.clone());
         }
         // Nodes without a typed form are made `Kind::Val` (a call, or a move of values), then
         // the nodes they read when that form cannot take them as they are; until every node
@@ -699,10 +707,23 @@ impl Plan {
             .map(|o| Ok((b.idx(*o)?, b.kind(*o)?)))
             .collect::<Result<_, NoPlan>>()?;
         let (vals, kept): (Vec<_>, Vec<_>) = kept.into_iter().partition(|k| k.2 == Kind::Val);
-        let temp_nodes = all
+        let temp_nodes: Vec<u32> = all
             .iter()
             .filter_map(|i| match i {
                 Instr::Call { dst, .. } | Instr::TimeVal { dst, .. } => Some(*dst),
+                _ => None,
+            })
+            .collect();
+        let delays: Vec<_> = all
+            .iter()
+            .filter_map(|i| match i {
+                Instr::Delay {
+                    dst,
+                    k,
+                    amount,
+                    reset,
+                    ..
+                } => Some((*dst, *k, *amount, *reset)),
                 _ => None,
             })
             .collect();
@@ -713,7 +734,9 @@ impl Plan {
             kept,
             outputs,
             consts: b.consts.take(),
+            full: !temp_nodes.is_empty() || !delays.is_empty() || b.forced.iter().any(|f| *f),
             temp_nodes,
+            delays,
         })
     }
 }

@@ -569,6 +569,15 @@ enum Instr {
         dst: u32,
         src: u32,
     },
+    /// `delay`: an event (`bits`) when its target ([`StepState::targets`] `k`) is now; armed
+    /// after the step from `amount`'s event when `reset` has one or it fired ([`Plan::arm`]).
+    Delay {
+        dst: u32,
+        k: u32,
+        bits: u64,
+        amount: Src,
+        reset: u32,
+    },
 }
 
 /// A program's step as flat instructions (see the module's documentation).
@@ -587,6 +596,11 @@ pub struct Plan {
     consts: Vec<Value>,
     /// The nodes whose values go to [`Scratch::temps`] (emptied after each step).
     temp_nodes: Vec<u32>,
+    /// (node, its target's index, its amount, its reset) of each `delay`.
+    delays: Vec<(u32, u32, Src, u32)>,
+    /// Whether the plan has calls, nodes made [`Kind::Val`] or delays (else the step runs a
+    /// loop without their code: `eval`'s `FULL`).
+    full: bool,
 }
 
 /// A thread's working memory for plans, shared by every monitor on it.
@@ -689,6 +703,9 @@ pub struct StepState<'a> {
     pub inputs: &'a [Option<Value>],
     /// The latest values of the kept nodes; updated when the step completes.
     pub last: &'a mut [Option<Value>],
+    /// The armed target of each `delay` (`ir::Program::delays`); updated when the step
+    /// completes.
+    pub targets: &'a mut [Option<i64>],
 }
 
 /// Keep a node's scalar event in its slot of the monitor's state: written in place over one of
@@ -827,9 +844,35 @@ impl Plan {
             temps.clear();
             temps.resize_with(self.slots, || None);
         }
-        if self.eval(&st, cur, temps, call).is_none() {
+        let done = if self.full {
+            self.eval::<C, true>(&st, cur, temps, call)
+        } else {
+            self.eval::<C, false>(&st, cur, temps, call)
+        };
+        if done.is_none() {
             self.clear_temps(temps);
             return false;
+        }
+        // Up to four delays' new targets on the stack.
+        let mut few = [None; 4];
+        let mut many;
+        let arms: &mut [Option<Option<i64>>] = if self.delays.len() <= few.len() {
+            &mut few
+        } else {
+            many = vec![None; self.delays.len()];
+            &mut many
+        };
+        if !self.delays.is_empty() {
+            let vals = Vals {
+                inputs: st.inputs,
+                last: st.last,
+                consts: &self.consts,
+                temps,
+            };
+            if self.arm(st.ts, cur, vals, arms).is_none() {
+                self.clear_temps(temps);
+                return false;
+            }
         }
         let vals = Vals {
             inputs: st.inputs,
@@ -865,7 +908,50 @@ impl Plan {
             self.keep_values(cur, st.inputs, st.last, temps);
         }
         self.clear_temps(temps);
+        for (&(_, k, _, _), arm) in self.delays.iter().zip(arms.iter()) {
+            if let (Some(t), Some(a)) = (st.targets.get_mut(k as usize), arm) {
+                *t = *a;
+            }
+        }
         true
+    }
+
+    /// Each `delay`'s target after this step, as the general step arms it (`Some(target)`:
+    /// changed; a target is cleared when the delay fires or is reset, and set `amount` after now
+    /// when either happens with an amount): `None` when an amount is not positive (an error
+    /// value the general step sends).
+    fn arm(
+        &self,
+        ts: i64,
+        cur: &[Slot],
+        vals: Vals<'_>,
+        arms: &mut [Option<Option<i64>>],
+    ) -> Option<()> {
+        for (&(dst, _, amount, reset), arm) in self.delays.iter().zip(arms.iter_mut()) {
+            let fired = cur_of(cur, dst).has;
+            let reset_now = cur_of(cur, reset).has;
+            if !(fired || reset_now) {
+                continue;
+            }
+            let mut target = None;
+            let a = cur_of(cur, amount.n);
+            if a.has {
+                let d = match amount.kind {
+                    Kind::Val => match vals.get(a.bits)? {
+                        Value::Int(d) => Some(*d),
+                        _ => None,
+                    },
+                    _ => Some(a.bits as i64),
+                };
+                match d {
+                    Some(d) if d > 0 => target = Some(ts.saturating_add(d)),
+                    Some(_) => return None,
+                    None => {}
+                }
+            }
+            *arm = Some(target);
+        }
+        Some(())
     }
 
     /// Drop the values calls computed this step.
@@ -922,9 +1008,105 @@ impl Plan {
         }
     }
 
+    /// An [`Instr::Call`]'s event (out of line: the typed instructions' loop stays small).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn call<C>(
+        &self,
+        st: &StepState<'_>,
+        cur: &mut [Slot],
+        temps: &mut [Option<Value>],
+        call: &mut C,
+        dst: u32,
+        node: u32,
+        args: &[Src],
+        mode: CallMode,
+    ) -> Option<Slot>
+    where
+        C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
+    {
+        let last = &*st.last;
+        macro_rules! vals {
+            () => {
+                Vals {
+                    inputs: st.inputs,
+                    last,
+                    consts: &self.consts,
+                    temps: &*temps,
+                }
+            };
+        }
+        let r = match mode {
+            CallMode::Signal => {
+                if fires(cur, last, args)? {
+                    let ops = args
+                        .iter()
+                        .map(|a| Some((a.kind, value_of(cur, last, a)?)));
+                    call_node(call, node, ops, vals!())?
+                } else {
+                    None
+                }
+            }
+            CallMode::Events => {
+                if args.iter().any(|a| has_event(cur, a)) {
+                    let ops = args.iter().map(|a| {
+                        let c = cur_of(cur, a.n);
+                        Some((a.kind, c.has.then_some(c.bits)))
+                    });
+                    call_node(call, node, ops, vals!())?
+                } else {
+                    None
+                }
+            }
+            CallMode::Fold { init } => {
+                let (acc, x) = (args.first()?, args.get(1)?);
+                let xs = cur_of(cur, x.n);
+                let acc = if st.first {
+                    Some(init)
+                } else if xs.has {
+                    kept_of(last, acc.slot, Kind::Val)?
+                } else {
+                    None
+                };
+                match acc {
+                    Some(a) if xs.has => {
+                        let ops = [Some((Kind::Val, Some(a))), Some((x.kind, Some(xs.bits)))];
+                        call_node(call, node, ops.into_iter(), vals!())?
+                    }
+                    // The first step without an event: the initial value itself.
+                    Some(a) => return Some(some(a)),
+                    None => None,
+                }
+            }
+            CallMode::Reduce => {
+                let (acc, x) = (args.first()?, args.get(1)?);
+                let xs = cur_of(cur, x.n);
+                if !xs.has {
+                    None
+                } else if let Some(a) = kept_of(last, acc.slot, Kind::Val)? {
+                    let ops = [Some((Kind::Val, Some(a))), Some((x.kind, Some(xs.bits)))];
+                    call_node(call, node, ops.into_iter(), vals!())?
+                } else {
+                    // The first event: itself (of the node's kind, checked).
+                    return Some(xs);
+                }
+            }
+        };
+        Some(match r {
+            Some(v) => {
+                *temps.get_mut(dst as usize)? = Some(v);
+                some(Ref::Temp(dst).bits())
+            }
+            None => NONE,
+        })
+    }
+
     /// The step's events into `cur`; `None` as soon as one has no scalar answer.
     #[inline(always)]
-    fn eval<C>(
+    ///
+    /// `FULL`: the plan has calls, values made [`Kind::Val`] or delays ([`Plan::full`]);
+    /// without, their instructions are never met and their code is left out of the loop.
+    fn eval<C, const FULL: bool>(
         &self,
         st: &StepState<'_>,
         cur: &mut [Slot],
@@ -1010,7 +1192,11 @@ impl Plan {
                             value_of(cur, last, other)?,
                         ) {
                             (Some(c), Some(t), Some(e)) => {
-                                let c = cond_of(cond.kind, c, vals!())?;
+                                let c = if FULL {
+                                    cond_of(cond.kind, c, vals!())?
+                                } else {
+                                    c != 0
+                                };
                                 (dst, some(if c { t } else { e }))
                             }
                             _ => (dst, NONE),
@@ -1143,88 +1329,18 @@ impl Plan {
                     node,
                     args,
                     mode,
-                } => {
-                    let r = match mode {
-                        CallMode::Signal => {
-                            if fires(cur, last, args)? {
-                                let ops = args
-                                    .iter()
-                                    .map(|a| Some((a.kind, value_of(cur, last, a)?)));
-                                call_node(call, *node, ops, vals!())?
-                            } else {
-                                None
-                            }
-                        }
-                        CallMode::Events => {
-                            if args.iter().any(|a| has_event(cur, a)) {
-                                let ops = args.iter().map(|a| {
-                                    let c = cur_of(cur, a.n);
-                                    Some((a.kind, c.has.then_some(c.bits)))
-                                });
-                                call_node(call, *node, ops, vals!())?
-                            } else {
-                                None
-                            }
-                        }
-                        CallMode::Fold { init } => {
-                            let (acc, x) = (args.first()?, args.get(1)?);
-                            let xs = cur_of(cur, x.n);
-                            let acc = if st.first {
-                                Some(*init)
-                            } else if xs.has {
-                                kept_of(last, acc.slot, Kind::Val)?
-                            } else {
-                                None
-                            };
-                            match acc {
-                                Some(a) if xs.has => {
-                                    let ops = [
-                                        Some((Kind::Val, Some(a))),
-                                        Some((x.kind, Some(xs.bits))),
-                                    ];
-                                    call_node(call, *node, ops.into_iter(), vals!())?
-                                }
-                                // The first step without an event: the initial value itself.
-                                Some(a) => {
-                                    if let Some(c) = cur.get_mut(*dst as usize) {
-                                        *c = some(a);
-                                    }
-                                    continue;
-                                }
-                                None => None,
-                            }
-                        }
-                        CallMode::Reduce => {
-                            let (acc, x) = (args.first()?, args.get(1)?);
-                            let xs = cur_of(cur, x.n);
-                            if !xs.has {
-                                None
-                            } else if let Some(a) = kept_of(last, acc.slot, Kind::Val)? {
-                                let ops = [
-                                    Some((Kind::Val, Some(a))),
-                                    Some((x.kind, Some(xs.bits))),
-                                ];
-                                call_node(call, *node, ops.into_iter(), vals!())?
-                            } else {
-                                // The first event: itself (of the node's kind, checked).
-                                if let Some(c) = cur.get_mut(*dst as usize) {
-                                    *c = xs;
-                                }
-                                continue;
-                            }
-                        }
-                    };
-                    let v = match r {
-                        Some(v) => {
-                            *temps.get_mut(*dst as usize)? = Some(v);
-                            some(Ref::Temp(*dst).bits())
-                        }
-                        None => NONE,
-                    };
-                    (dst, v)
-                }
+                } => (
+                    dst,
+                    if FULL {
+                        self.call(st, cur, temps, call, *dst, *node, args, *mode)?
+                    } else {
+                        return None;
+                    },
+                ),
                 Instr::TimeVal { dst, src } => {
-                    let v = if cur_of(cur, *src).has {
+                    let v = if !FULL {
+                        return None;
+                    } else if cur_of(cur, *src).has {
                         *temps.get_mut(*dst as usize)? = Some(Value::Int(st.ts));
                         some(Ref::Temp(*dst).bits())
                     } else {
@@ -1232,6 +1348,16 @@ impl Plan {
                     };
                     (dst, v)
                 }
+                Instr::Delay { dst, k, bits, .. } => (
+                    dst,
+                    if !FULL {
+                        return None;
+                    } else if st.targets.get(*k as usize).copied().flatten() == Some(st.ts) {
+                        some(*bits)
+                    } else {
+                        NONE
+                    },
+                ),
                 Instr::Merge { dst, args } => (
                     dst,
                     args.iter()
@@ -1243,7 +1369,8 @@ impl Plan {
                     let s = cur_of(cur, *stream);
                     let v = if s.has {
                         match value_of(cur, last, cond)? {
-                            Some(c) if cond_of(cond.kind, c, vals!())? => s,
+                            Some(c) if FULL && cond_of(cond.kind, c, vals!())? => s,
+                            Some(1) if !FULL => s,
                             _ => NONE,
                         }
                     } else {
