@@ -275,7 +275,7 @@ impl Monitor {
         let program = &*self.program;
         let slots = &program.last_slot[..];
         let first = self.last_evaluated.is_none();
-        if let Some(plan) = program.exec().plan() {
+        if let Some(plan) = program.step_plan() {
             let st = StepState {
                 ts,
                 first,
@@ -703,12 +703,9 @@ fn call_node(program: &Program, cx: &Ctx, node: NodeId, a: &[Option<&Value>]) ->
                     .unwrap_or_else(|| crate::runtime::exec::binary(*bop, x, y)),
             )
         }
-        Node::Fold { .. } | Node::Reduce { .. } => Some(strict2(
-            cx,
-            node,
-            a.first().copied()??,
-            a.get(1).copied()??,
-        )),
+        Node::Fold { .. } | Node::Reduce { .. } => {
+            Some(strict2(cx, node, a.first().copied()??, a.get(1).copied()??))
+        }
         Node::SLift { .. } => {
             if let Some(fast) = cx.fast(node) {
                 let r = match a {

@@ -273,7 +273,9 @@ impl Builder<'_> {
                     cond,
                 }
             }
-            Node::Fold { stream: x, init, .. } => call(
+            Node::Fold {
+                stream: x, init, ..
+            } => call(
                 vec![self.kept(i)?, stream(*x)?],
                 CallMode::Fold {
                     init: self.val_const(init)?,
@@ -714,6 +716,7 @@ impl Plan {
                 _ => None,
             })
             .collect();
+        let calls = all.iter().any(|i| matches!(i, Instr::Call { .. }));
         let delays: Vec<_> = all
             .iter()
             .filter_map(|i| match i {
@@ -734,6 +737,7 @@ impl Plan {
             kept,
             outputs,
             consts: b.consts.take(),
+            calls,
             full: !temp_nodes.is_empty() || !delays.is_empty() || b.forced.iter().any(|f| *f),
             temp_nodes,
             delays,

@@ -601,6 +601,8 @@ pub struct Plan {
     /// Whether the plan has calls, nodes made [`Kind::Val`] or delays (else the step runs a
     /// loop without their code: `eval`'s `FULL`).
     full: bool,
+    /// Whether it has an [`Instr::Call`].
+    calls: bool,
 }
 
 /// A thread's working memory for plans, shared by every monitor on it.
@@ -610,6 +612,8 @@ pub struct Scratch {
     slots: Vec<Slot>,
     /// The values [`Instr::Call`] computed this step, by node (empty between steps).
     temps: Vec<Option<Value>>,
+    /// Each `delay`'s new target, when this step changes it.
+    arms: Vec<Option<Option<i64>>>,
 }
 
 /// An operand of a call, held for the call: none, a scalar made from its bits, or a reference
@@ -830,12 +834,22 @@ impl Plan {
     /// [`Instr::Call`]s): the operands of a signal lift, an operator, a `fold` or a `reduce` are
     /// all there; a `lift`'s are its arguments' events.
     #[inline]
-    pub fn step<F, C>(&self, st: StepState<'_>, sc: &mut Scratch, call: &mut C, sink: &mut F) -> bool
+    pub fn step<F, C>(
+        &self,
+        st: StepState<'_>,
+        sc: &mut Scratch,
+        call: &mut C,
+        sink: &mut F,
+    ) -> bool
     where
         F: FnMut(usize, &Value),
         C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
     {
-        let Scratch { slots: cur, temps } = sc;
+        let Scratch {
+            slots: cur,
+            temps,
+            arms,
+        } = sc;
         if cur.len() != self.slots {
             cur.clear();
             cur.resize(self.slots, NONE);
@@ -853,16 +867,9 @@ impl Plan {
             self.clear_temps(temps);
             return false;
         }
-        // Up to four delays' new targets on the stack.
-        let mut few = [None; 4];
-        let mut many;
-        let arms: &mut [Option<Option<i64>>] = if self.delays.len() <= few.len() {
-            &mut few
-        } else {
-            many = vec![None; self.delays.len()];
-            &mut many
-        };
         if !self.delays.is_empty() {
+            arms.clear();
+            arms.resize(self.delays.len(), None);
             let vals = Vals {
                 inputs: st.inputs,
                 last: st.last,
@@ -908,9 +915,11 @@ impl Plan {
             self.keep_values(cur, st.inputs, st.last, temps);
         }
         self.clear_temps(temps);
-        for (&(_, k, _, _), arm) in self.delays.iter().zip(arms.iter()) {
-            if let (Some(t), Some(a)) = (st.targets.get_mut(k as usize), arm) {
-                *t = *a;
+        if !self.delays.is_empty() {
+            for (&(_, k, _, _), arm) in self.delays.iter().zip(arms.iter()) {
+                if let (Some(t), Some(a)) = (st.targets.get_mut(k as usize), arm) {
+                    *t = *a;
+                }
             }
         }
         true
@@ -952,6 +961,27 @@ impl Plan {
             *arm = Some(target);
         }
         Some(())
+    }
+
+    /// Whether the plan calls compiled functions ([`Instr::Call`]). Measured (BENCHMARKS.md,
+    /// eleventh round): such a plan takes more instructions than the general step on the specs
+    /// that have calls (the robot monitors, lidar, Auction: 7% to 12%), so the monitor runs it only
+    /// without them.
+    #[inline]
+    pub fn has_calls(&self) -> bool {
+        self.calls
+    }
+
+    /// The nodes the plan computes by calling their compiled functions ([`Instr::Call`]), in
+    /// evaluation order (`check --ir` names them).
+    pub fn calls(&self) -> Vec<usize> {
+        self.instrs
+            .iter()
+            .filter_map(|i| match i {
+                Instr::Call { dst, .. } => Some(*dst as usize),
+                _ => None,
+            })
+            .collect()
     }
 
     /// Drop the values calls computed this step.
@@ -1039,9 +1069,7 @@ impl Plan {
         let r = match mode {
             CallMode::Signal => {
                 if fires(cur, last, args)? {
-                    let ops = args
-                        .iter()
-                        .map(|a| Some((a.kind, value_of(cur, last, a)?)));
+                    let ops = args.iter().map(|a| Some((a.kind, value_of(cur, last, a)?)));
                     call_node(call, node, ops, vals!())?
                 } else {
                     None
