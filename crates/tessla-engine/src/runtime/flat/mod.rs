@@ -833,7 +833,7 @@ impl Plan {
     /// `call(node, operands)` computes node `node`'s value the general step's way (its
     /// [`Instr::Call`]s): the operands of a signal lift, an operator, a `fold` or a `reduce` are
     /// all there; a `lift`'s are its arguments' events.
-    #[inline]
+    #[inline(always)]
     pub fn step<F, C>(
         &self,
         st: StepState<'_>,
