@@ -18,6 +18,12 @@
 //! event, a kept value, a constant), an output is sent by reference, and only a kept one is
 //! cloned into the monitor's state (for a tuple, one reference count).
 //!
+//! Every other node has a form too: `delay` (its target read in the step, armed after it), and
+//! a call ([`Instr::Call`]) of the node's compiled function for what has no typed form (natives,
+//! user functions, lifts of functions, folds over Maps): its value is kept for the step in
+//! [`Scratch::temps`]. A plan with calls costs more than the general step (measured), so the
+//! monitor runs it only when asked (`Program::with_calls`); `check --ir` names the calls.
+//!
 //! The plan computes exactly what the general step does. Whatever it has no scalar answer for
 //! (an `Int` overflow, a kept value that is an error value or a big integer, an input value of
 //! another type, `==` on an error value) makes it give up before it has sent or changed anything: [`Plan::step`]
