@@ -18,9 +18,9 @@ fn load(spec: &str) -> Program {
     Arc::try_unwrap(loaded.program).unwrap_or_else(|_| panic!("a loaded program is not shared yet"))
 }
 
-/// Both programs of `spec`: with its flat plan, and general only.
+/// Both programs of `spec`: with its flat plan (and its calls), and general only.
 fn both(spec: &str) -> (Arc<Program>, Arc<Program>) {
-    let flat = Arc::new(load(spec));
+    let flat = Arc::new(Program::with_calls(load(spec).into_ir()));
     let general = Arc::new(Program::general_only(load(spec).into_ir()));
     (flat, general)
 }
@@ -98,6 +98,52 @@ const PRIMES: &str = "in primes1: Events[(Int, Int)]\nin primes2: Events[(Int, I
     def p1 = on(positions_same, primes1)\ndef p2 = on(positions_same, primes2)\n\
     out p1 == p2 as ok\nout pos1\nout pos2\n";
 
+/// Nodes whose functions have no typed form, run by the plan as calls: a recursive user
+/// function, a function value applied, natives on strings and floats, a Map counted in a
+/// recursion through `last`, a Set folded, `slift` and `lift` of four arguments, `resetCount`,
+/// an operator on values, `if` on a computed condition, `time` and `filter` of computed values,
+/// error values (a missing key) sent and used as a condition (the general step's turn).
+const CALLS: &str = "in x: Events[Float]\nin n: Events[Int]\nin b: Events[Bool]\n\
+    in s: Events[String]\nin p: Events[(Int, Int)]\n\
+    def fib(k: Int): Int = if k < 2 then k else fib(k - 1) + fib(k - 2)\n\
+    def small = slift(n, (k: Int) => fib(if k < 0 then (0 - k) % 12 else k % 12))\n\
+    def apply(f: (Int) => Int, v: Int) = f(v)\n\
+    def twice = slift(n, (k: Int) => apply((v: Int) => v * 2 % 1000, k))\n\
+    def len = slift(s, (t: String) => if t == \"a\" then 1 else if t == \"\" then 0 else 2)\ndef cat = String.concat(s, s)\n\
+    def ab = abs(x)\ndef fl = sqrt(abs(x))\ndef ts = toString(n)\n\
+    liftable def getCount(counts: Map[Int, Int], key: Int) = \
+    if Map.contains(counts, key) then Map.get(counts, key) else 0\n\
+    liftable def incCount(counts: Map[Int, Int], key: Int) = \
+    Map.add(counts, key, getCount(counts, key) + 1)\n\
+    def key = slift(n, (k: Int) => k % 5)\n\
+    def counts: Events[Map[Int, Int]] = default(incCount(last(counts, key), key), Map.empty[Int, Int])\n\
+    def size = Map.size(counts)\n\
+    def seen = fold(key, Set.empty[Int], (acc: Set[Int], k: Int) => Set.add(acc, k))\n\
+    def nseen = Set.size(seen)\n\
+    def four = slift(x, n, b, s, (a: Float, k: Int, c: Bool, t: String) => \
+    if c && t == \"a\" then k % 3 else 0)\n\
+    def lfour = lift(x, n, b, s, (a: Option[Float], k: Option[Int], c: Option[Bool], t: Option[String]) => \
+    if isSome(k) && isSome(c) then Some(true) else None[Bool])\n\
+    def rc = resetCount(x, b)\n\
+    def eqs = cat == s\ndef big = if size > 2 then len else nseen\n\
+    def tl = time(len)\ndef fsz = filter(size, len > 0)\ndef lsz = last(size, x)\n\
+    def mixed = merge(len, n)\ndef sum4 = reduce(len, (a: Int, v: Int) => a + v)\n\
+    def fst = slift(p, (q: (Int, Int)) => q._1)\n\
+    def bad = Map.get(counts, 7)\ndef iffy = if Map.get(counts, 7) > 0 then 1 else 2\n\
+    out small\nout twice\nout len\nout cat\nout ab\nout fl\nout ts\nout counts\nout size\n\
+    out seen\nout nseen\nout four\nout lfour\nout rc\nout eqs\nout big\nout tl\n\
+    out fsz\nout lsz\nout mixed\nout sum4\nout fst\nout bad\nout iffy\n";
+
+/// `delay`s: `period` (re-armed by its own events), one reset by an input whose
+/// amount is sometimes not positive (an error value: the general step's turn), one of a
+/// computed value's node; `count` and `time` of their events.
+const DELAYS: &str = "in n: Events[Int]\nin b: Events[Bool]\n\
+    def amount = slift(n, (k: Int) => k % 4)\ndef d = delay(amount, b)\n\
+    def tick = period(3)\n\
+    def c = count(tick)\ndef t = time(d)\n\
+    def m = delay(const(2, String.concat(toString(n), \"!\")), n)\n\
+    out d\nout tick\nout c\nout t\nout m\n";
+
 /// A fixed-seed generator (ChaCha) of inputs, so a failure reproduces.
 struct Rng(rand_chacha::ChaCha8Rng);
 
@@ -160,9 +206,11 @@ fn outputs(program: &Arc<Program>, seed: u64, steps: usize) -> Vec<String> {
 
 #[test]
 fn the_plan_sends_what_the_general_step_sends() {
-    for spec in [EVERY_FORM, RECURSION, MOVED, LIFTS, VALUES, PRIMES] {
+    for spec in [
+        EVERY_FORM, RECURSION, MOVED, LIFTS, VALUES, PRIMES, CALLS, DELAYS,
+    ] {
         let (flat, general) = both(spec);
-        assert!(flat.exec().plan().is_some(), "no plan for\n{spec}");
+        assert!(flat.step_plan().is_some(), "no plan for\n{spec}");
         assert!(general.exec().plan().is_none());
         for seed in 1..=40u64 {
             let want = outputs(&general, seed, 300);
@@ -212,20 +260,16 @@ fn overflow_hands_the_step_to_the_general_step() {
 }
 
 #[test]
-fn programs_with_delays_or_computed_values_have_no_plan() {
+fn every_form_has_a_plan() {
     for spec in [
-        // A list's size (a native on a value the plan only moves).
-        "in l: Events[List[Float]]\ndef n = List.size(l)\nout n\n",
         // A delay.
         "in x: Events[Int]\ndef d = delay(x, x)\nout d\n",
-    ] {
-        assert!(load(spec).exec().plan().is_none(), "a plan for\n{spec}");
-    }
-    for spec in [
         "in x: Events[Float]\ndef y = x *. 2.0\nout y\n",
         // Strings and tuples, moved and compared.
         "in s: Events[String]\ndef t = s\nout t\n",
         "in p: Events[(Int, Float)]\nin q: Events[(Int, Float)]\ndef e = p == q\nout e\n",
+        // A list's size (a native on a value the plan only moves): a call.
+        "in l: Events[List[Float]]\ndef n = List.size(l)\nout n\n",
     ] {
         assert!(load(spec).exec().plan().is_some(), "no plan for\n{spec}");
     }

@@ -68,7 +68,7 @@ impl Ctx {
         self.fast.get(n).and_then(Option::as_ref)
     }
 
-    /// The program's flat plan, if it has one.
+    /// The program's flat plan, if it has one (with calls or without: [`Plan::has_calls`]).
     #[inline]
     pub fn plan(&self) -> Option<&Plan> {
         self.plan.as_ref().ok()
@@ -148,6 +148,9 @@ pub struct Program {
     exec: OnceLock<Arc<Ctx>>,
     /// Whether the program may run as a flat plan (`runtime::flat`) when it has one.
     flat: bool,
+    /// Whether it runs a plan that calls compiled functions ([`Plan::has_calls`]); by default
+    /// not (the general step costs less on them).
+    calls: bool,
 }
 
 impl Program {
@@ -157,7 +160,24 @@ impl Program {
             ir,
             exec: OnceLock::new(),
             flat: true,
+            calls: false,
         }
+    }
+
+    /// The IR, run as a flat plan whenever it has one, calls or not: what the plan's calls are
+    /// tested and measured with.
+    pub fn with_calls(ir: ir::Program) -> Program {
+        Program {
+            calls: true,
+            ..Program::new(ir)
+        }
+    }
+
+    /// The flat plan the monitor runs, if any: the program's, when it has no calls or runs them
+    /// ([`Program::with_calls`]).
+    #[inline]
+    pub fn step_plan(&self) -> Option<&Plan> {
+        self.exec().plan().filter(|p| self.calls || !p.has_calls())
     }
 
     /// The IR, always run by the general step, never as a flat plan: what the plan is tested
@@ -200,6 +220,25 @@ impl std::fmt::Display for Listing<'_> {
         write!(f, "{}", p.ir.ir())?;
         let cx = p.exec();
         match (cx.plan(), cx.slow_nodes()) {
+            (Some(plan), _) if plan.has_calls() => {
+                let names: Vec<String> = plan.calls().iter().map(|n| format!("n{n}")).collect();
+                writeln!(
+                    f,
+                    "-- step: the general step, for all {} nodes: the flat plan would call {} compiled {} on values, which costs more than the general step: {}",
+                    p.order.len(),
+                    if names.len() == 1 {
+                        "this node's"
+                    } else {
+                        "these nodes'"
+                    },
+                    if names.len() == 1 {
+                        "function"
+                    } else {
+                        "functions"
+                    },
+                    names.join(", ")
+                )
+            }
             (Some(_), _) => writeln!(
                 f,
                 "-- step: the flat plan, one typed instruction per node (no node falls back to the general step)"

@@ -28,7 +28,7 @@
 
 use crate::ir::{NO_SLOT, Node, NodeId, SArg};
 use crate::runtime::exec::{Ctx, Exec, Program};
-use crate::runtime::flat::{Slot, StepState};
+use crate::runtime::flat::{self, StepState};
 use crate::value::{RuntimeError, Value};
 
 use std::cell::RefCell;
@@ -105,8 +105,8 @@ struct Scratch {
     cur: Vec<Option<Value>>,
     /// Argument buffer of signal lifts with more than three arguments.
     args: Vec<Value>,
-    /// This step's event of each node, for a program run as a flat plan.
-    flat: Vec<Slot>,
+    /// The working memory of a program run as a flat plan.
+    flat: flat::Scratch,
 }
 
 thread_local! {
@@ -275,17 +275,20 @@ impl Monitor {
         let program = &*self.program;
         let slots = &program.last_slot[..];
         let first = self.last_evaluated.is_none();
-        if let Some(plan) = program.exec().plan() {
+        if let Some(plan) = program.step_plan() {
             let st = StepState {
                 ts,
                 first,
                 inputs: &self.inputs,
                 last: &mut self.last,
+                targets: &mut self.targets,
             };
             let mut send = |output, value: &Value| {
                 sink(OutputEvent { ts, output, value });
             };
-            if plan.step(st, &mut sc.flat, &mut send) {
+            let cx = &**program.exec();
+            let mut call = |node: NodeId, a: &[Option<&Value>]| call_node(program, cx, node, a);
+            if plan.step(st, &mut sc.flat, &mut call, &mut send) {
                 for i in self.inputs.iter_mut() {
                     release(i.take());
                 }
@@ -685,6 +688,47 @@ fn strict2(cx: &Ctx, node: NodeId, a: &Value, b: &Value) -> Value {
         return r;
     }
     call(cx, cx.node(node), &[a.clone(), b.clone()])
+}
+
+/// Node `node`'s value from its operands, for the flat plan's calls: what the general step
+/// computes for a signal lift, an operator, a `fold` or `reduce` (operands: the kept value, the
+/// event) and a `lift` (operands: the events).
+fn call_node(program: &Program, cx: &Ctx, node: NodeId, a: &[Option<&Value>]) -> Option<Value> {
+    match program.nodes.get(node)? {
+        Node::Lift { f, .. } => crate::runtime::exec::lift(cx, f, cx.node(node), a),
+        Node::Bin { op, bop, .. } => {
+            let (x, y) = (a.first().copied()??, a.get(1).copied()??);
+            Some(
+                op.eval_values(x, y)
+                    .unwrap_or_else(|| crate::runtime::exec::binary(*bop, x, y)),
+            )
+        }
+        Node::Fold { .. } | Node::Reduce { .. } => {
+            Some(strict2(cx, node, a.first().copied()??, a.get(1).copied()??))
+        }
+        Node::SLift { .. } => {
+            if let Some(fast) = cx.fast(node) {
+                let r = match a {
+                    [Some(x)] => fast.run(&[x]),
+                    [Some(x), Some(y)] => fast.run(&[x, y]),
+                    [Some(x), Some(y), Some(z)] => fast.run(&[x, y, z]),
+                    _ => None,
+                };
+                if r.is_some() {
+                    return r;
+                }
+            }
+            let f = cx.node(node);
+            let g = |v: &Option<&Value>| v.map(clone_value);
+            Some(match a {
+                [x] => call(cx, f, &[g(x)?]),
+                [x, y] => call(cx, f, &[g(x)?, g(y)?]),
+                [x, y, z] => call(cx, f, &[g(x)?, g(y)?, g(z)?]),
+                _ => call(cx, f, &a.iter().map(g).collect::<Option<Vec<_>>>()?),
+            })
+        }
+        _ => None,
+    }
 }
 
 /// Call a node's compiled function (every node that has code has one).

@@ -4,7 +4,8 @@
 //! nodes without one are handed back (`check --ir` names them).
 
 use super::{
-    CONST, FArg, Instr, KArg, Kernel, Kind, LiftOp, NoPlan, Op1, Op2, Plan, Ref, Src, need,
+    CONST, CallMode, FArg, Instr, KArg, Kernel, Kind, LiftOp, NoPlan, Op1, Op2, Plan, Ref, Src,
+    need,
 };
 use crate::ir::{self, LiftFn, NO_SLOT, Node, NodeId, SArg};
 use crate::value::Value;
@@ -18,8 +19,14 @@ fn const_kind(v: &Value) -> Kind {
 /// The kind of each node, as far as the nodes' forms tell: inputs by their declared type,
 /// constants by their value, operators by their result. `last` reads a node that may come
 /// later in the order, so this runs until nothing changes.
-fn kinds(p: &ir::Program, kernel: &impl Fn(NodeId) -> Option<Kernel>) -> Vec<Option<Kind>> {
-    let mut kinds: Vec<Option<Kind>> = vec![None; p.nodes.len()];
+fn kinds(
+    p: &ir::Program,
+    kernel: &impl Fn(NodeId) -> Option<Kernel>,
+    forced: &[bool],
+) -> Vec<Option<Kind>> {
+    let mut kinds: Vec<Option<Kind>> = (0..p.nodes.len())
+        .map(|i| forced.get(i).copied().unwrap_or(false).then_some(Kind::Val))
+        .collect();
     loop {
         let mut changed = false;
         for &i in &p.order {
@@ -45,6 +52,7 @@ fn kinds(p: &ir::Program, kernel: &impl Fn(NodeId) -> Option<Kernel>) -> Vec<Opt
                     .and_then(k),
                 Some(Node::Nil) => Some(Kind::Unit),
                 Some(Node::Time(_)) => Some(Kind::Int),
+                Some(Node::Delay { .. }) => Some(Kind::Unit),
                 Some(Node::Lift { args, f }) => match lift_op(f, args.len()) {
                     Some(LiftOp::On) => args.get(1).and_then(k),
                     Some(LiftOp::First | LiftOp::Distinct | LiftOp::FirstOnly) => {
@@ -93,6 +101,11 @@ fn lift_op(f: &LiftFn, n: usize) -> Option<LiftOp> {
     })
 }
 
+/// Node `n` as an operand (its event, else its kept value).
+fn stream_src(b: &Builder<'_>, n: NodeId) -> Result<Src, NoPlan> {
+    b.src(&SArg::Stream(n))
+}
+
 /// Makes a [`Plan`]: the checks that every operand has the kind its operator takes.
 struct Builder<'a> {
     p: &'a ir::Program,
@@ -101,6 +114,9 @@ struct Builder<'a> {
     never: u32,
     /// The constants of [`Kind::Val`] met so far ([`Plan::consts`]).
     consts: RefCell<Vec<Value>>,
+    /// The nodes made [`Kind::Val`] whatever their values (their instructions compute on
+    /// values: [`Builder::instr_val`]).
+    forced: Vec<bool>,
 }
 
 impl Builder<'_> {
@@ -127,6 +143,194 @@ impl Builder<'_> {
                 Ok((Kind::Val, Ref::Const(i).bits()))
             }
         }
+    }
+
+    /// A constant as a value of [`Kind::Val`] (a reference among the plan's constants), even a
+    /// scalar.
+    fn val_const(&self, v: &Value) -> Result<u64, NoPlan> {
+        let mut consts = self.consts.borrow_mut();
+        let i = need(u32::try_from(consts.len()).ok())?;
+        consts.push(v.clone());
+        Ok(Ref::Const(i).bits())
+    }
+
+    /// An operand that must be of [`Kind::Val`]: a constant made one, a stream checked.
+    fn vsrc(&self, a: &SArg) -> Result<Src, NoPlan> {
+        let src = match a {
+            SArg::Const(v) => Src {
+                n: self.never,
+                slot: CONST,
+                kind: Kind::Val,
+                k: self.val_const(v)?,
+            },
+            SArg::Stream(_) => self.src(a)?,
+        };
+        self.check(&src, Some(Kind::Val))?;
+        Ok(src)
+    }
+
+    /// Node `n` as an operand that must be of [`Kind::Val`] (or `nil`, which has no event).
+    fn vnode(&self, n: NodeId) -> Result<u32, NoPlan> {
+        if self.kind(n)? == Kind::Val || matches!(self.p.nodes.get(n), Some(Node::Nil)) {
+            self.idx(n)
+        } else {
+            Err(NoPlan)
+        }
+    }
+
+    /// The instruction of node `i` made [`Kind::Val`]: operators, lifts and folds whose
+    /// functions have no typed form are calls ([`Instr::Call`]); the forms that only move
+    /// values take operands of [`Kind::Val`]. `delay` has none.
+    fn instr_val(&self, i: NodeId) -> Result<Instr, NoPlan> {
+        let dst = self.idx(i)?;
+        let call = |args: Vec<Src>, mode: CallMode| -> Result<Instr, NoPlan> {
+            Ok(Instr::Call {
+                dst,
+                node: dst,
+                args: args.into_boxed_slice(),
+                mode,
+            })
+        };
+        let stream = |n: NodeId| self.src(&SArg::Stream(n));
+        Ok(match need(self.p.nodes.get(i))? {
+            Node::Input(k) => Instr::Input {
+                dst,
+                input: need(u32::try_from(*k).ok())?,
+                kind: Kind::Val,
+            },
+            Node::Nil => Instr::Nil { dst },
+            Node::Const(v) => Instr::Const {
+                dst,
+                bits: self.val_const(v)?,
+            },
+            Node::Alias(n) => Instr::Alias {
+                dst,
+                src: self.vnode(*n)?,
+            },
+            Node::Time(n) => Instr::TimeVal {
+                dst,
+                src: self.idx(*n)?,
+            },
+            Node::Last { value, trigger } => {
+                self.vnode(*value)?;
+                Instr::Last {
+                    dst,
+                    value: self.kept(*value)?,
+                    trigger: self.idx(*trigger)?,
+                }
+            }
+            Node::Default { stream, value } => Instr::Default {
+                dst,
+                stream: self.vnode(*stream)?,
+                bits: self.val_const(value)?,
+            },
+            Node::DefaultFrom { stream, from } => {
+                self.vnode(*stream)?;
+                self.vnode(*from)?;
+                Instr::DefaultFrom {
+                    dst,
+                    stream: stream_src(self, *stream)?,
+                    from: stream_src(self, *from)?,
+                }
+            }
+            Node::Bin { a, b, .. } => call(vec![self.src(a)?, self.src(b)?], CallMode::Signal)?,
+            Node::SLift { args, .. } => {
+                if args.is_empty() {
+                    return Err(NoPlan);
+                }
+                call(
+                    args.iter().map(|a| self.src(a)).collect::<Result<_, _>>()?,
+                    CallMode::Signal,
+                )?
+            }
+            Node::Ite { cond, then, other } => {
+                let cond = self.src(cond)?;
+                if !matches!(cond.kind, Kind::Bool | Kind::Val) {
+                    return Err(NoPlan);
+                }
+                Instr::Ite {
+                    dst,
+                    cond,
+                    then: self.vsrc(then)?,
+                    other: self.vsrc(other)?,
+                }
+            }
+            Node::Merge(args) => Instr::Merge {
+                dst,
+                args: args
+                    .iter()
+                    .map(|a| self.vnode(*a))
+                    .collect::<Result<_, _>>()?,
+            },
+            Node::Filter { stream, cond } => {
+                let cond = self.src(&SArg::Stream(*cond))?;
+                if !matches!(cond.kind, Kind::Bool | Kind::Val) {
+                    return Err(NoPlan);
+                }
+                Instr::Filter {
+                    dst,
+                    stream: self.vnode(*stream)?,
+                    cond,
+                }
+            }
+            Node::Fold {
+                stream: x, init, ..
+            } => call(
+                vec![self.kept(i)?, stream(*x)?],
+                CallMode::Fold {
+                    init: self.val_const(init)?,
+                },
+            )?,
+            Node::Reduce { stream: x, .. } => {
+                self.vnode(*x)?;
+                call(vec![self.kept(i)?, stream(*x)?], CallMode::Reduce)?
+            }
+            Node::Lift { args, .. } => {
+                if args.is_empty() {
+                    return Err(NoPlan);
+                }
+                call(
+                    args.iter().map(|a| stream(*a)).collect::<Result<_, _>>()?,
+                    CallMode::Events,
+                )?
+            }
+            Node::Delay { delay, reset } => self.delay(dst, i, *delay, *reset, Value::Unit)?,
+        })
+    }
+
+    /// A `delay` node's instruction: fires with `unit` (its bits: a scalar's, or a reference
+    /// to the constant) when its armed target is now.
+    fn delay(
+        &self,
+        dst: u32,
+        i: NodeId,
+        delay: NodeId,
+        reset: NodeId,
+        unit: Value,
+    ) -> Result<Instr, NoPlan> {
+        let k = need(self.p.delays.iter().position(|d| *d == i))?;
+        let bits = if self.kind(i)? == Kind::Val {
+            self.val_const(&unit)?
+        } else {
+            0
+        };
+        let amount = self.src(&SArg::Stream(delay))?;
+        if !matches!(amount.kind, Kind::Int | Kind::Val) {
+            return Err(NoPlan);
+        }
+        Ok(Instr::Delay {
+            dst,
+            k: need(u32::try_from(k).ok())?,
+            bits,
+            amount,
+            reset: self.idx(reset)?,
+        })
+    }
+
+    /// The nodes node `i` reads (made [`Kind::Val`] when its own instruction of that kind
+    /// cannot take them as they are).
+    fn reads(&self, i: NodeId) -> Vec<NodeId> {
+        self.p.nodes.get(i).map(Node::all_deps).unwrap_or_default()
     }
 
     fn constant(&self, v: &Value) -> Result<Src, NoPlan> {
@@ -274,6 +478,9 @@ impl Builder<'_> {
     }
 
     fn instr(&self, i: NodeId, kernel: Option<Kernel>) -> Result<Instr, NoPlan> {
+        if self.forced.get(i).copied().unwrap_or(false) {
+            return self.instr_val(i);
+        }
         let dst = self.idx(i)?;
         let kind = self.kind(i)?;
         let bits = |v: &Value| -> Result<u64, NoPlan> {
@@ -406,7 +613,7 @@ impl Builder<'_> {
                     kind,
                 }
             }
-            Node::Delay { .. } => return Err(NoPlan),
+            Node::Delay { delay, reset } => self.delay(dst, i, *delay, *reset, Value::Unit)?,
         })
     }
 }
@@ -424,31 +631,57 @@ impl Plan {
         if p.last_slot.len() != n {
             return Err(Vec::new());
         }
-        let b = Builder {
-            p,
-            kinds: kinds(p, &kernel),
-            never,
-            consts: RefCell::new(Vec::new()),
-        };
-        let mut evaluated = vec![false; n];
-        let mut instrs = Vec::with_capacity(n);
-        let mut slow = Vec::new();
-        for &i in &p.order {
-            match (evaluated.get_mut(i), b.instr(i, kernel(i))) {
-                (Some(e), Ok(instr)) => {
-                    *e = true;
-                    instrs.push(instr);
+        // Nodes without a typed form are made `Kind::Val` (a call, or a move of values), then
+        // the nodes they read when that form cannot take them as they are; until every node
+        // has an instruction or one has none of either kind.
+        let mut forced = vec![false; n];
+        loop {
+            let b = Builder {
+                p,
+                kinds: kinds(p, &kernel, &forced),
+                never,
+                consts: RefCell::new(Vec::new()),
+                forced: forced.clone(),
+            };
+            let mut evaluated = vec![false; n];
+            let mut instrs = Vec::with_capacity(n);
+            let mut slow = Vec::new();
+            let mut more = false;
+            for &i in &p.order {
+                match (evaluated.get_mut(i), b.instr(i, kernel(i))) {
+                    (Some(e), Ok(instr)) => {
+                        *e = true;
+                        instrs.push(instr);
+                    }
+                    (Some(_), Err(NoPlan)) if !forced[i] => {
+                        forced[i] = true;
+                        more = true;
+                    }
+                    (Some(_), Err(NoPlan)) => {
+                        let mut any = false;
+                        for r in b.reads(i) {
+                            if let Some(f) = forced.get_mut(r).filter(|f| !**f) {
+                                *f = true;
+                                any = true;
+                            }
+                        }
+                        if any {
+                            more = true;
+                        } else {
+                            slow.push(i);
+                        }
+                    }
+                    (None, _) => slow.push(i),
                 }
-                _ => slow.push(i),
             }
+            if more {
+                continue;
+            }
+            if !slow.is_empty() {
+                return Err(slow);
+            }
+            return Plan::assemble(&b, instrs, &evaluated).map_err(|_| Vec::new());
         }
-        if !slow.is_empty() {
-            return Err(slow);
-        }
-        if !p.delays.is_empty() {
-            return Err(p.delays.clone());
-        }
-        Plan::assemble(&b, instrs, &evaluated).map_err(|_| Vec::new())
     }
 
     /// The plan of the nodes' instructions: a `nil` for each node never evaluated, the slots
@@ -476,6 +709,27 @@ impl Plan {
             .map(|o| Ok((b.idx(*o)?, b.kind(*o)?)))
             .collect::<Result<_, NoPlan>>()?;
         let (vals, kept): (Vec<_>, Vec<_>) = kept.into_iter().partition(|k| k.2 == Kind::Val);
+        let temp_nodes: Vec<u32> = all
+            .iter()
+            .filter_map(|i| match i {
+                Instr::Call { dst, .. } | Instr::TimeVal { dst, .. } => Some(*dst),
+                _ => None,
+            })
+            .collect();
+        let calls = all.iter().any(|i| matches!(i, Instr::Call { .. }));
+        let delays: Vec<_> = all
+            .iter()
+            .filter_map(|i| match i {
+                Instr::Delay {
+                    dst,
+                    k,
+                    amount,
+                    reset,
+                    ..
+                } => Some((*dst, *k, *amount, *reset)),
+                _ => None,
+            })
+            .collect();
         Ok(Plan {
             instrs: all,
             slots: n + 1,
@@ -483,6 +737,10 @@ impl Plan {
             kept,
             outputs,
             consts: b.consts.take(),
+            calls,
+            full: !temp_nodes.is_empty() || !delays.is_empty() || b.forced.iter().any(|f| *f),
+            temp_nodes,
+            delays,
         })
     }
 }

@@ -18,6 +18,12 @@
 //! event, a kept value, a constant), an output is sent by reference, and only a kept one is
 //! cloned into the monitor's state (for a tuple, one reference count).
 //!
+//! Every other node has a form too: `delay` (its target read in the step, armed after it), and
+//! a call ([`Instr::Call`]) of the node's compiled function for what has no typed form (natives,
+//! user functions, lifts of functions, folds over Maps): its value is kept for the step in
+//! [`Scratch::temps`]. A plan with calls costs more than the general step (measured), so the
+//! monitor runs it only when asked (`Program::with_calls`); `check --ir` names the calls.
+//!
 //! The plan computes exactly what the general step does. Whatever it has no scalar answer for
 //! (an `Int` overflow, a kept value that is an error value or a big integer, an input value of
 //! another type, `==` on an error value) makes it give up before it has sent or changed anything: [`Plan::step`]
@@ -51,12 +57,15 @@ enum Ref {
     Last(u32),
     /// The plan's constant `i` ([`Plan::consts`]).
     Const(u32),
+    /// The value node `i` computed this step by a call ([`Instr::Call`]), in [`Scratch::temps`].
+    Temp(u32),
 }
 
 impl Ref {
     const INPUT: u64 = 0;
     const LAST: u64 = 1;
     const CONST: u64 = 2;
+    const TEMP: u64 = 3;
 
     #[inline(always)]
     fn bits(self) -> u64 {
@@ -64,6 +73,7 @@ impl Ref {
             Ref::Input(i) => (Ref::INPUT << 32) | u64::from(i),
             Ref::Last(i) => (Ref::LAST << 32) | u64::from(i),
             Ref::Const(i) => (Ref::CONST << 32) | u64::from(i),
+            Ref::Temp(i) => (Ref::TEMP << 32) | u64::from(i),
         }
     }
 
@@ -73,7 +83,8 @@ impl Ref {
         match bits >> 32 {
             Ref::INPUT => Ref::Input(i),
             Ref::LAST => Ref::Last(i),
-            _ => Ref::Const(i),
+            Ref::CONST => Ref::Const(i),
+            _ => Ref::Temp(i),
         }
     }
 }
@@ -84,6 +95,7 @@ struct Vals<'a> {
     inputs: &'a [Option<Value>],
     last: &'a [Option<Value>],
     consts: &'a [Value],
+    temps: &'a [Option<Value>],
 }
 
 impl<'a> Vals<'a> {
@@ -95,6 +107,7 @@ impl<'a> Vals<'a> {
             Ref::Input(i) => self.inputs.get(i as usize)?.as_ref(),
             Ref::Last(i) => self.last.get(i as usize)?.as_ref(),
             Ref::Const(i) => self.consts.get(i as usize),
+            Ref::Temp(i) => self.temps.get(i as usize)?.as_ref(),
         }
     }
 }
@@ -420,6 +433,22 @@ enum FArg {
     Const(u64),
 }
 
+/// How an [`Instr::Call`] node takes its operands: the general step's semantics of its form.
+#[derive(Clone, Copy, Debug)]
+enum CallMode {
+    /// A signal lift (`slift`, an operator): fires when one argument has an event and every one
+    /// has a value; the function gets their values.
+    Signal,
+    /// An event lift (`lift`): fires when one argument has an event; the function gets the
+    /// events.
+    Events,
+    /// A `fold` (operands: its own kept value, the stream); `init` is its initial value (a
+    /// reference to one of the plan's constants).
+    Fold { init: u64 },
+    /// A `reduce` (operands: its own kept value, the stream).
+    Reduce,
+}
+
 /// One node's evaluation; `dst` is the node.
 #[derive(Clone, Debug)]
 enum Instr {
@@ -531,6 +560,30 @@ enum Instr {
         a: FArg,
         b: FArg,
     },
+    /// A node whose function the plan has no typed form for (a native, a user function, a
+    /// `lift` of a function, a `fold` over a Map, an operator on values that are not scalars):
+    /// the monitor's code for node `node` computes its value (the caller handed to
+    /// [`Plan::step`]), which goes to [`Scratch::temps`]; the node is of [`Kind::Val`].
+    Call {
+        dst: u32,
+        node: u32,
+        args: Box<[Src]>,
+        mode: CallMode,
+    },
+    /// `time` of a node of [`Kind::Val`]: the timestamp as a value in [`Scratch::temps`].
+    TimeVal {
+        dst: u32,
+        src: u32,
+    },
+    /// `delay`: an event (`bits`) when its target ([`StepState::targets`] `k`) is now; armed
+    /// after the step from `amount`'s event when `reset` has one or it fired ([`Plan::arm`]).
+    Delay {
+        dst: u32,
+        k: u32,
+        bits: u64,
+        amount: Src,
+        reset: u32,
+    },
 }
 
 /// A program's step as flat instructions (see the module's documentation).
@@ -547,6 +600,98 @@ pub struct Plan {
     outputs: Vec<(u32, Kind)>,
     /// The values of [`Kind::Val`] constants, by index.
     consts: Vec<Value>,
+    /// The nodes whose values go to [`Scratch::temps`] (emptied after each step).
+    temp_nodes: Vec<u32>,
+    /// (node, its target's index, its amount, its reset) of each `delay`.
+    delays: Vec<(u32, u32, Src, u32)>,
+    /// Whether the plan has calls, nodes made [`Kind::Val`] or delays (else the step runs a
+    /// loop without their code: `eval`'s `FULL`).
+    full: bool,
+    /// Whether it has an [`Instr::Call`].
+    calls: bool,
+}
+
+/// A thread's working memory for plans, shared by every monitor on it.
+#[derive(Default)]
+pub struct Scratch {
+    /// This step's event of each node.
+    slots: Vec<Slot>,
+    /// The values [`Instr::Call`] computed this step, by node (empty between steps).
+    temps: Vec<Option<Value>>,
+    /// Each `delay`'s new target, when this step changes it.
+    arms: Vec<Option<Option<i64>>>,
+}
+
+/// An operand of a call, held for the call: none, a scalar made from its bits, or a reference
+/// to a value where it is.
+enum Held<'a> {
+    No,
+    Own(Value),
+    Ref(&'a Value),
+}
+
+impl<'a> Held<'a> {
+    /// `None`: a reference to nothing (a plan never makes one).
+    #[inline(always)]
+    fn of(kind: Kind, bits: Option<u64>, vals: Vals<'a>) -> Option<Held<'a>> {
+        Some(match bits {
+            None => Held::No,
+            Some(b) if kind == Kind::Val => Held::Ref(vals.get(b)?),
+            Some(b) => Held::Own(scalar(kind, b)),
+        })
+    }
+
+    #[inline(always)]
+    fn get(&self) -> Option<&Value> {
+        match self {
+            Held::No => None,
+            Held::Own(v) => Some(v),
+            Held::Ref(r) => Some(r),
+        }
+    }
+}
+
+/// Call node `node`'s function on its operands, each (kind, bits if it has a value); up to four
+/// on the stack. `None`: an operand the plan cannot read.
+fn call_node<'a, C>(
+    call: &mut C,
+    node: u32,
+    ops: impl ExactSizeIterator<Item = Option<(Kind, Option<u64>)>>,
+    vals: Vals<'a>,
+) -> Option<Option<Value>>
+where
+    C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
+{
+    let n = ops.len();
+    if n <= 4 {
+        let mut held = [Held::No, Held::No, Held::No, Held::No];
+        for (h, o) in held.iter_mut().zip(ops) {
+            let (k, b) = o?;
+            *h = Held::of(k, b, vals)?;
+        }
+        let refs = [held[0].get(), held[1].get(), held[2].get(), held[3].get()];
+        Some(call(node as usize, refs.get(..n)?))
+    } else {
+        let held: Vec<Held<'a>> = ops
+            .map(|o| o.and_then(|(k, b)| Held::of(k, b, vals)))
+            .collect::<Option<_>>()?;
+        let refs: Vec<Option<&Value>> = held.iter().map(Held::get).collect();
+        Some(call(node as usize, &refs))
+    }
+}
+
+/// Whether a condition of `kind` holds: a `Bool`'s bits, or a value of [`Kind::Val`] that is a
+/// `Bool`; `None` for any other value (an error value: the general step's to propagate).
+#[inline(always)]
+fn cond_of(kind: Kind, bits: u64, vals: Vals<'_>) -> Option<bool> {
+    if kind == Kind::Val {
+        match vals.get(bits)? {
+            Value::Bool(b) => Some(*b),
+            _ => None,
+        }
+    } else {
+        Some(bits != 0)
+    }
 }
 
 /// The program has no plan (some node or type has no form here).
@@ -568,6 +713,9 @@ pub struct StepState<'a> {
     pub inputs: &'a [Option<Value>],
     /// The latest values of the kept nodes; updated when the step completes.
     pub last: &'a mut [Option<Value>],
+    /// The armed target of each `delay` (`ir::Program::delays`); updated when the step
+    /// completes.
+    pub targets: &'a mut [Option<i64>],
 }
 
 /// Keep a node's scalar event in its slot of the monitor's state: written in place over one of
@@ -585,7 +733,13 @@ fn keep(l: &mut Option<Value>, kind: Kind, bits: u64) {
 /// Put `v` in a kept slot, dropping what was there only when it needs a drop.
 #[inline(always)]
 fn replace(l: &mut Option<Value>, v: Value) {
-    let old = l.replace(v);
+    replace_opt(l, Some(v));
+}
+
+/// Put `v` in a slot, dropping what was there only when it needs a drop.
+#[inline(always)]
+fn replace_opt(l: &mut Option<Value>, v: Option<Value>) {
+    let old = std::mem::replace(l, v);
     match old {
         // Scalars need no drop.
         None | Some(Value::Unit | Value::Bool(_) | Value::Int(_) | Value::Float(_)) => {
@@ -682,24 +836,62 @@ impl Plan {
     /// Evaluate one step into `cur` (the thread's slots), send the outputs to `sink` and keep the
     /// values read across steps in `st.last`. `false`: the plan has no scalar answer for this
     /// step; nothing was sent or changed, and the general step must run it.
-    #[inline]
-    pub fn step<F: FnMut(usize, &Value)>(
+    /// `call(node, operands)` computes node `node`'s value the general step's way (its
+    /// [`Instr::Call`]s): the operands of a signal lift, an operator, a `fold` or a `reduce` are
+    /// all there; a `lift`'s are its arguments' events.
+    #[inline(always)]
+    pub fn step<F, C>(
         &self,
         st: StepState<'_>,
-        cur: &mut Vec<Slot>,
+        sc: &mut Scratch,
+        call: &mut C,
         sink: &mut F,
-    ) -> bool {
+    ) -> bool
+    where
+        F: FnMut(usize, &Value),
+        C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
+    {
+        let Scratch {
+            slots: cur,
+            temps,
+            arms,
+        } = sc;
         if cur.len() != self.slots {
             cur.clear();
             cur.resize(self.slots, NONE);
         }
-        if self.eval(&st, cur).is_none() {
+        if !self.temp_nodes.is_empty() && temps.len() != self.slots {
+            temps.clear();
+            temps.resize_with(self.slots, || None);
+        }
+        let done = if self.full {
+            self.eval::<C, true>(&st, cur, temps, call)
+        } else {
+            self.eval::<C, false>(&st, cur, temps, call)
+        };
+        if done.is_none() {
+            self.clear_temps(temps);
             return false;
+        }
+        if !self.delays.is_empty() {
+            arms.clear();
+            arms.resize(self.delays.len(), None);
+            let vals = Vals {
+                inputs: st.inputs,
+                last: st.last,
+                consts: &self.consts,
+                temps,
+            };
+            if self.arm(st.ts, cur, vals, arms).is_none() {
+                self.clear_temps(temps);
+                return false;
+            }
         }
         let vals = Vals {
             inputs: st.inputs,
             last: st.last,
             consts: &self.consts,
+            temps,
         };
         for (out, &(n, kind)) in self.outputs.iter().enumerate() {
             let c = cur_of(cur, n);
@@ -726,15 +918,98 @@ impl Plan {
             }
         }
         if !self.kept_vals.is_empty() {
-            self.keep_values(cur, st.inputs, st.last);
+            self.keep_values(cur, st.inputs, st.last, temps);
+        }
+        self.clear_temps(temps);
+        if !self.delays.is_empty() {
+            for (&(_, k, _, _), arm) in self.delays.iter().zip(arms.iter()) {
+                if let (Some(t), Some(a)) = (st.targets.get_mut(k as usize), arm) {
+                    *t = *a;
+                }
+            }
         }
         true
+    }
+
+    /// Each `delay`'s target after this step, as the general step arms it (`Some(target)`:
+    /// changed; a target is cleared when the delay fires or is reset, and set `amount` after now
+    /// when either happens with an amount): `None` when an amount is not positive (an error
+    /// value the general step sends).
+    fn arm(
+        &self,
+        ts: i64,
+        cur: &[Slot],
+        vals: Vals<'_>,
+        arms: &mut [Option<Option<i64>>],
+    ) -> Option<()> {
+        for (&(dst, _, amount, reset), arm) in self.delays.iter().zip(arms.iter_mut()) {
+            let fired = cur_of(cur, dst).has;
+            let reset_now = cur_of(cur, reset).has;
+            if !(fired || reset_now) {
+                continue;
+            }
+            let mut target = None;
+            let a = cur_of(cur, amount.n);
+            if a.has {
+                let d = match amount.kind {
+                    Kind::Val => match vals.get(a.bits)? {
+                        Value::Int(d) => Some(*d),
+                        _ => None,
+                    },
+                    _ => Some(a.bits as i64),
+                };
+                match d {
+                    Some(d) if d > 0 => target = Some(ts.saturating_add(d)),
+                    Some(_) => return None,
+                    None => {}
+                }
+            }
+            *arm = Some(target);
+        }
+        Some(())
+    }
+
+    /// Whether the plan calls compiled functions ([`Instr::Call`]). Measured (BENCHMARKS.md,
+    /// eleventh round): such a plan takes more instructions than the general step on the specs
+    /// that have calls (the robot monitors, lidar, Auction: 7% to 12%), so the monitor runs it only
+    /// without them.
+    #[inline]
+    pub fn has_calls(&self) -> bool {
+        self.calls
+    }
+
+    /// The nodes the plan computes by calling their compiled functions ([`Instr::Call`]), in
+    /// evaluation order (`check --ir` names them).
+    pub fn calls(&self) -> Vec<usize> {
+        self.instrs
+            .iter()
+            .filter_map(|i| match i {
+                Instr::Call { dst, .. } => Some(*dst as usize),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Drop the values calls computed this step.
+    #[inline(always)]
+    fn clear_temps(&self, temps: &mut [Option<Value>]) {
+        for &n in &self.temp_nodes {
+            if let Some(t) = temps.get_mut(n as usize) {
+                replace_opt(t, None);
+            }
+        }
     }
 
     /// Keep the events of the kept nodes of [`Kind::Val`]: one kept from another kept slot is
     /// copied before any of them is written (the slot it refers to may be written here; the
     /// scalars' slots are never referred to), one from an input or a constant is cloned.
-    fn keep_values(&self, cur: &[Slot], inputs: &[Option<Value>], last: &mut [Option<Value>]) {
+    fn keep_values(
+        &self,
+        cur: &[Slot],
+        inputs: &[Option<Value>],
+        last: &mut [Option<Value>],
+        temps: &[Option<Value>],
+    ) {
         let mut moved: Vec<(u32, Value)> = Vec::new();
         for &(n, slot) in &self.kept_vals {
             let c = cur_of(cur, n);
@@ -756,6 +1031,7 @@ impl Plan {
                 Ref::Last(_) => continue,
                 Ref::Input(i) => inputs.get(i as usize).and_then(Option::as_ref),
                 Ref::Const(i) => self.consts.get(i as usize),
+                Ref::Temp(i) => temps.get(i as usize).and_then(Option::as_ref),
             };
             if let (Some(v), Some(l)) = (v, last.get_mut(slot as usize)) {
                 replace(l, v.clone());
@@ -768,15 +1044,124 @@ impl Plan {
         }
     }
 
+    /// An [`Instr::Call`]'s event (out of line: the typed instructions' loop stays small).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(never)]
+    fn call<C>(
+        &self,
+        st: &StepState<'_>,
+        cur: &mut [Slot],
+        temps: &mut [Option<Value>],
+        call: &mut C,
+        dst: u32,
+        node: u32,
+        args: &[Src],
+        mode: CallMode,
+    ) -> Option<Slot>
+    where
+        C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
+    {
+        let last = &*st.last;
+        macro_rules! vals {
+            () => {
+                Vals {
+                    inputs: st.inputs,
+                    last,
+                    consts: &self.consts,
+                    temps: &*temps,
+                }
+            };
+        }
+        let r = match mode {
+            CallMode::Signal => {
+                if fires(cur, last, args)? {
+                    let ops = args.iter().map(|a| Some((a.kind, value_of(cur, last, a)?)));
+                    call_node(call, node, ops, vals!())?
+                } else {
+                    None
+                }
+            }
+            CallMode::Events => {
+                if args.iter().any(|a| has_event(cur, a)) {
+                    let ops = args.iter().map(|a| {
+                        let c = cur_of(cur, a.n);
+                        Some((a.kind, c.has.then_some(c.bits)))
+                    });
+                    call_node(call, node, ops, vals!())?
+                } else {
+                    None
+                }
+            }
+            CallMode::Fold { init } => {
+                let (acc, x) = (args.first()?, args.get(1)?);
+                let xs = cur_of(cur, x.n);
+                let acc = if st.first {
+                    Some(init)
+                } else if xs.has {
+                    kept_of(last, acc.slot, Kind::Val)?
+                } else {
+                    None
+                };
+                match acc {
+                    Some(a) if xs.has => {
+                        let ops = [Some((Kind::Val, Some(a))), Some((x.kind, Some(xs.bits)))];
+                        call_node(call, node, ops.into_iter(), vals!())?
+                    }
+                    // The first step without an event: the initial value itself.
+                    Some(a) => return Some(some(a)),
+                    None => None,
+                }
+            }
+            CallMode::Reduce => {
+                let (acc, x) = (args.first()?, args.get(1)?);
+                let xs = cur_of(cur, x.n);
+                if !xs.has {
+                    None
+                } else if let Some(a) = kept_of(last, acc.slot, Kind::Val)? {
+                    let ops = [Some((Kind::Val, Some(a))), Some((x.kind, Some(xs.bits)))];
+                    call_node(call, node, ops.into_iter(), vals!())?
+                } else {
+                    // The first event: itself (of the node's kind, checked).
+                    return Some(xs);
+                }
+            }
+        };
+        Some(match r {
+            Some(v) => {
+                *temps.get_mut(dst as usize)? = Some(v);
+                some(Ref::Temp(dst).bits())
+            }
+            None => NONE,
+        })
+    }
+
     /// The step's events into `cur`; `None` as soon as one has no scalar answer.
     #[inline(always)]
-    fn eval(&self, st: &StepState<'_>, cur: &mut [Slot]) -> Option<()> {
+    ///
+    /// `FULL`: the plan has calls, values made [`Kind::Val`] or delays ([`Plan::full`]);
+    /// without, their instructions are never met and their code is left out of the loop.
+    fn eval<C, const FULL: bool>(
+        &self,
+        st: &StepState<'_>,
+        cur: &mut [Slot],
+        temps: &mut [Option<Value>],
+        call: &mut C,
+    ) -> Option<()>
+    where
+        C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
+    {
         let last = &*st.last;
-        let vals = Vals {
-            inputs: st.inputs,
-            last,
-            consts: &self.consts,
-        };
+        // What references point into; `temps` as it is when read (calls write it).
+        macro_rules! vals {
+            () => {
+                Vals {
+                    inputs: st.inputs,
+                    last,
+                    consts: &self.consts,
+                    temps: &*temps,
+                }
+            };
+        }
         for instr in &self.instrs {
             let (dst, v) = match instr {
                 Instr::Nil { dst } => (dst, NONE),
@@ -797,6 +1182,7 @@ impl Plan {
                     } else {
                         match (value_of(cur, last, a)?, value_of(cur, last, b)?) {
                             (Some(x), Some(y)) => {
+                                let vals = vals!();
                                 let (x, y) = (vals.get(x)?, vals.get(y)?);
                                 // An error value propagates: the general step's.
                                 if matches!(x, Value::Error(_)) || matches!(y, Value::Error(_)) {
@@ -839,7 +1225,14 @@ impl Plan {
                             value_of(cur, last, then)?,
                             value_of(cur, last, other)?,
                         ) {
-                            (Some(c), Some(t), Some(e)) => (dst, some(if c != 0 { t } else { e })),
+                            (Some(c), Some(t), Some(e)) => {
+                                let c = if FULL {
+                                    cond_of(cond.kind, c, vals!())?
+                                } else {
+                                    c != 0
+                                };
+                                (dst, some(if c { t } else { e }))
+                            }
                             _ => (dst, NONE),
                         }
                     }
@@ -955,7 +1348,7 @@ impl Plan {
                     if !(a[0].has || a[1].has || a[2].has) {
                         (dst, NONE)
                     } else {
-                        (dst, f.run(a, *kind, vals))
+                        (dst, f.run(a, *kind, vals!()))
                     }
                 }
                 Instr::SPick { dst, args, pick } => {
@@ -965,6 +1358,40 @@ impl Plan {
                     };
                     (dst, v.map_or(NONE, some))
                 }
+                Instr::Call {
+                    dst,
+                    node,
+                    args,
+                    mode,
+                } => (
+                    dst,
+                    if FULL {
+                        self.call(st, cur, temps, call, *dst, *node, args, *mode)?
+                    } else {
+                        return None;
+                    },
+                ),
+                Instr::TimeVal { dst, src } => {
+                    let v = if !FULL {
+                        return None;
+                    } else if cur_of(cur, *src).has {
+                        *temps.get_mut(*dst as usize)? = Some(Value::Int(st.ts));
+                        some(Ref::Temp(*dst).bits())
+                    } else {
+                        NONE
+                    };
+                    (dst, v)
+                }
+                Instr::Delay { dst, k, bits, .. } => (
+                    dst,
+                    if !FULL {
+                        return None;
+                    } else if st.targets.get(*k as usize).copied().flatten() == Some(st.ts) {
+                        some(*bits)
+                    } else {
+                        NONE
+                    },
+                ),
                 Instr::Merge { dst, args } => (
                     dst,
                     args.iter()
@@ -974,8 +1401,12 @@ impl Plan {
                 ),
                 Instr::Filter { dst, stream, cond } => {
                     let s = cur_of(cur, *stream);
-                    let v = if s.has && value_of(cur, last, cond)? == Some(1) {
-                        s
+                    let v = if s.has {
+                        match value_of(cur, last, cond)? {
+                            Some(c) if FULL && cond_of(cond.kind, c, vals!())? => s,
+                            Some(1) if !FULL => s,
+                            _ => NONE,
+                        }
                     } else {
                         NONE
                     };
