@@ -19,9 +19,9 @@
 //! cloned into the monitor's state (for a tuple, one reference count).
 //!
 //! Every other node has a form too: `delay` (its target read in the step, armed after it), and
-//! a call ([`Instr::Call`]) of the node's compiled function for what has no typed form (natives,
+//! a call (`Instr::Call`) of the node's compiled function for what has no typed form (natives,
 //! user functions, lifts of functions, folds over Maps): its value is kept for the step in
-//! [`Scratch::temps`]. A plan with calls costs more than the general step (measured), so the
+//! `Scratch::temps`. A plan with calls costs more than the general step (measured), so the
 //! monitor runs it only when asked (`Program::with_calls`); `check --ir` names the calls.
 //!
 //! The plan computes exactly what the general step does. Whatever it has no scalar answer for
@@ -837,7 +837,7 @@ impl Plan {
     /// values read across steps in `st.last`. `false`: the plan has no scalar answer for this
     /// step; nothing was sent or changed, and the general step must run it.
     /// `call(node, operands)` computes node `node`'s value the general step's way (its
-    /// [`Instr::Call`]s): the operands of a signal lift, an operator, a `fold` or a `reduce` are
+    /// `Instr::Call`s): the operands of a signal lift, an operator, a `fold` or a `reduce` are
     /// all there; a `lift`'s are its arguments' events.
     #[inline(always)]
     pub fn step<F, C>(
