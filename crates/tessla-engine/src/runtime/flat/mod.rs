@@ -57,7 +57,7 @@ enum Ref {
     Last(u32),
     /// The plan's constant `i` ([`Plan::consts`]).
     Const(u32),
-    /// The value node `i` computed this step by a call ([`Instr::Call`]), in [`Scratch::temps`].
+    /// The value node `i` computed this step by a call (`Instr::Call`), in [`Scratch::temps`].
     Temp(u32),
 }
 
@@ -433,7 +433,7 @@ enum FArg {
     Const(u64),
 }
 
-/// How an [`Instr::Call`] node takes its operands: the general step's semantics of its form.
+/// How an `Instr::Call` node takes its operands: the general step's semantics of its form.
 #[derive(Clone, Copy, Debug)]
 enum CallMode {
     /// A signal lift (`slift`, an operator): fires when one argument has an event and every one
@@ -607,7 +607,7 @@ pub struct Plan {
     /// Whether the plan has calls, nodes made [`Kind::Val`] or delays (else the step runs a
     /// loop without their code: `eval`'s `FULL`).
     full: bool,
-    /// Whether it has an [`Instr::Call`].
+    /// Whether it has an `Instr::Call`.
     calls: bool,
 }
 
@@ -616,7 +616,7 @@ pub struct Plan {
 pub struct Scratch {
     /// This step's event of each node.
     slots: Vec<Slot>,
-    /// The values [`Instr::Call`] computed this step, by node (empty between steps).
+    /// The values `Instr::Call` computed this step, by node (empty between steps).
     temps: Vec<Option<Value>>,
     /// Each `delay`'s new target, when this step changes it.
     arms: Vec<Option<Option<i64>>>,
@@ -969,7 +969,7 @@ impl Plan {
         Some(())
     }
 
-    /// Whether the plan calls compiled functions ([`Instr::Call`]). Measured (BENCHMARKS.md,
+    /// Whether the plan calls compiled functions (`Instr::Call`). Measured (BENCHMARKS.md,
     /// eleventh round): such a plan takes more instructions than the general step on the specs
     /// that have calls (the robot monitors, lidar, Auction: 7% to 12%), so the monitor runs it only
     /// without them.
@@ -978,7 +978,7 @@ impl Plan {
         self.calls
     }
 
-    /// The nodes the plan computes by calling their compiled functions ([`Instr::Call`]), in
+    /// The nodes the plan computes by calling their compiled functions (`Instr::Call`), in
     /// evaluation order (`check --ir` names them).
     pub fn calls(&self) -> Vec<usize> {
         self.instrs
@@ -1044,7 +1044,7 @@ impl Plan {
         }
     }
 
-    /// An [`Instr::Call`]'s event (out of line: the typed instructions' loop stays small).
+    /// An `Instr::Call`'s event (out of line: the typed instructions' loop stays small).
     #[allow(clippy::too_many_arguments)]
     #[inline(never)]
     fn call<C>(
