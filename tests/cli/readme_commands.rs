@@ -83,15 +83,25 @@ fn readme_commands(readme: &str) -> Vec<Cmd> {
             }
             let body = lines.get(start..end).unwrap_or_default();
             if sh {
+                // A line ending in `\` goes on on the next one, as in the reader's shell.
+                let mut pending: Option<(usize, String)> = None;
                 for (k, l) in body.iter().enumerate() {
                     let text = l.trim();
-                    if !text.is_empty() && !text.starts_with('#') {
-                        out.push(Cmd {
-                            line: start + k + 1,
-                            text: text.to_string(),
-                            expected: None,
-                        });
+                    let (line, mut joined) = match pending.take() {
+                        Some((line, head)) => (line, format!("{head} {text}")),
+                        None if text.is_empty() || text.starts_with('#') => continue,
+                        None => (start + k + 1, text.to_string()),
+                    };
+                    if let Some(head) = joined.strip_suffix('\\') {
+                        joined = head.trim_end().to_string();
+                        pending = Some((line, joined));
+                        continue;
                     }
+                    out.push(Cmd {
+                        line,
+                        text: joined,
+                        expected: None,
+                    });
                 }
             } else if marker && let Some(last) = out.last_mut() {
                 let mut text = body.join("\n");
