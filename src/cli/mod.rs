@@ -72,7 +72,7 @@ pub fn main() -> ExitCode {
         Err(e) => {
             match style {
                 Style::Log => {
-                    crate::log::log(crate::log::Level::Error, &e.message);
+                    log_error!("{}", e.message);
                     // Under Telegraf the message must reach its log before `Cmd.Wait` closes
                     // the pipes (a broken spec's diagnostic, at every restart).
                     ending::wait_until_read(std::time::Duration::from_secs(1));

@@ -9,7 +9,6 @@ use super::ending::{finish, runtime};
 use super::error::{CliError, CliResult};
 use super::spec::require_outputs;
 use crate::fleet::Level;
-use crate::log::{self, Level as LogLevel};
 use crate::processor::Processor;
 use crate::spec_feed::Updates;
 use crate::spec_feed::nats::NatsFeed;
@@ -31,9 +30,9 @@ pub fn run(args: RunArgs) -> CliResult {
     let config = RunConfig::from_args(args)?;
     let (loaded, bundle) = config.spec.load().map_err(|e| CliError::spec(e.render()))?;
     if !loaded.warnings.is_empty() {
-        log::log(
-            LogLevel::Warn,
-            &tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false),
+        log_warn!(
+            "{}",
+            tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false)
         );
     }
     require_outputs(&loaded.program, &config.spec_name()).map_err(CliError::spec)?;
@@ -103,9 +102,9 @@ fn fleet_level(
     let options = super::spec::load_options(spec_options).map_err(CliError::spec)?;
     let (loaded, names) = crate::fleet::check(path, robot, &options).map_err(CliError::spec)?;
     if !loaded.warnings.is_empty() {
-        log::log(
-            LogLevel::Warn,
-            &tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false),
+        log_warn!(
+            "{}",
+            tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false)
         );
     }
     let silence = i64::try_from(silence.as_nanos()).unwrap_or(i64::MAX);

@@ -7,7 +7,7 @@
 //! each record an instance's restored state already covers (timestamp not after its last
 //! evaluated step); on losing it, dropping every instance.
 
-use crate::log::{self, Level};
+use crate::log;
 use crate::processor::Processor;
 use crate::processor::clock::Wall;
 use crate::processor::instances::{self, Key};
@@ -138,12 +138,9 @@ impl Shared {
         if self.active && !holding {
             proc.end_of_read();
             self.active = false;
-            log::log(
-                Level::Warn,
-                &format!(
-                    "lease: not holding partition {} (renewal overdue or taken over); standing by",
-                    lease.name
-                ),
+            log_warn!(
+                "lease: not holding partition {} (renewal overdue or taken over); standing by",
+                lease.name
             );
         }
         if lost {
@@ -197,11 +194,8 @@ impl Shared {
             stepped += 1;
         }
         proc.end_of_read();
-        log::log(
-            Level::Info,
-            &format!(
-                "lease: holding partition {name}; replayed {stepped} buffered records ({skipped} already covered by the saved state)"
-            ),
+        log_info!(
+            "lease: holding partition {name}; replayed {stepped} buffered records ({skipped} already covered by the saved state)"
         );
     }
 }
