@@ -84,25 +84,41 @@ macro_rules! log_at {
 /// An `E! ` line: `log_error!("{x} failed")`, formatted only if errors are shown.
 #[macro_export]
 macro_rules! log_error {
-    ($($arg:tt)+) => { $crate::log_at!($crate::log::Level::Error, $($arg)+) };
+    ($($arg:tt)+) => {
+        if $crate::log::enabled($crate::log::Level::Error) {
+            $crate::log::log($crate::log::Level::Error, &::std::format!($($arg)+));
+        }
+    };
 }
 
 /// A `W! ` line: `log_warn!("{x} skipped")`, formatted only if warnings are shown.
 #[macro_export]
 macro_rules! log_warn {
-    ($($arg:tt)+) => { $crate::log_at!($crate::log::Level::Warn, $($arg)+) };
+    ($($arg:tt)+) => {
+        if $crate::log::enabled($crate::log::Level::Warn) {
+            $crate::log::log($crate::log::Level::Warn, &::std::format!($($arg)+));
+        }
+    };
 }
 
 /// An `I! ` line: `log_info!("{x} loaded")`, formatted only if info is shown.
 #[macro_export]
 macro_rules! log_info {
-    ($($arg:tt)+) => { $crate::log_at!($crate::log::Level::Info, $($arg)+) };
+    ($($arg:tt)+) => {
+        if $crate::log::enabled($crate::log::Level::Info) {
+            $crate::log::log($crate::log::Level::Info, &::std::format!($($arg)+));
+        }
+    };
 }
 
 /// A `D! ` line: `log_debug!("{x}")`, formatted only with `--log-level debug`.
 #[macro_export]
 macro_rules! log_debug {
-    ($($arg:tt)+) => { $crate::log_at!($crate::log::Level::Debug, $($arg)+) };
+    ($($arg:tt)+) => {
+        if $crate::log::enabled($crate::log::Level::Debug) {
+            $crate::log::log($crate::log::Level::Debug, &::std::format!($($arg)+));
+        }
+    };
 }
 
 /// The stderr text of one message: each line prefixed, cut (on a char boundary) to stay under
@@ -274,8 +290,8 @@ mod tests {
                 panic!("formatted a filtered message")
             }
         }
-        crate::log_debug!("{}", Boom);
-        crate::log_info!("{}", Boom);
+        log_debug!("{}", Boom);
+        log_info!("{}", Boom);
         set_level(Level::Debug);
         assert!(enabled(Level::Debug));
         set_level(Level::Info);
