@@ -11,7 +11,7 @@
 
 use super::args::{Bound, InstanceArgs, Late, OutputArgs, RunArgs, SPEC_ENV, TimeArgs};
 use super::error::CliError;
-use super::spec::{SET_ENV, load_options};
+use super::spec_options::{SET_ENV, load_options};
 use crate::log;
 use crate::processor::{self, LateMode};
 use crate::spec_feed::reload::SpecSource;

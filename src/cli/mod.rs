@@ -1,6 +1,6 @@
 //! Command line: the arguments as clap reads them ([`args`]), `run`'s converted once into what
 //! the core takes ([`config`]), one module per subcommand, the spec options they share
-//! ([`spec`]), and the one error type every subcommand returns ([`error`]). This module parses
+//! ([`spec_options`]), and the one error type every subcommand returns ([`error`]). This module parses
 //! and dispatches, then reports a failure in its subcommand's style.
 
 pub mod args;
@@ -16,8 +16,8 @@ pub mod report;
 pub mod run;
 #[cfg(feature = "tools")]
 pub mod simulate;
-pub mod spec;
 pub mod spec_cmd;
+pub mod spec_options;
 pub mod trace;
 
 pub use args::{Cli, Command};

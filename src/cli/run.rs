@@ -7,7 +7,7 @@ use super::args::RunArgs;
 use super::config::{RunConfig, StateConfig};
 use super::ending::{finish, runtime};
 use super::error::{CliError, CliResult};
-use super::spec::require_outputs;
+use super::spec_options::require_outputs;
 use crate::fleet::Level;
 use crate::processor::Processor;
 use crate::spec_feed::Updates;
@@ -94,12 +94,12 @@ fn fleet_level(
     (_, silence, spec_options): &(
         Option<std::path::PathBuf>,
         std::time::Duration,
-        super::spec::SpecOptions,
+        super::spec_options::SpecOptions,
     ),
     robot: &tessla_engine::Program,
     config: &RunConfig,
 ) -> Result<(Level, Arc<[String]>), CliError> {
-    let options = super::spec::load_options(spec_options).map_err(CliError::spec)?;
+    let options = super::spec_options::load_options(spec_options).map_err(CliError::spec)?;
     let (loaded, names) = crate::fleet::check(path, robot, &options).map_err(CliError::spec)?;
     if !loaded.warnings.is_empty() {
         log_warn!(

@@ -5,7 +5,7 @@
 //! the run `--monitor` chooses. With `--broker` the one chosen run drives the real pipeline.
 
 use super::error::{CliError, CliResult};
-use super::spec::{SpecOptions, load_options};
+use super::spec_options::{SpecOptions, load_options};
 use crate::log;
 use crate::processor::{Options, Processor};
 use crate::replay::mqtt::Broker;

@@ -4,7 +4,7 @@
 //! the wall clock is neither saved nor restored.
 
 use super::dedup::Recent;
-use super::instances::Key;
+use super::instance_table::Key;
 use super::pool::describe;
 use super::{Processor, clock};
 use crate::log;

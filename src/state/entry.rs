@@ -5,7 +5,7 @@
 //! ([`encode_entry`], [`decode_entry`]); the warning every backend gives for values that cannot
 //! be saved ([`warn_unsaved`]).
 
-use crate::processor::instances::Key;
+use crate::processor::instance_table::Key;
 use crate::processor::{Continuity, carry};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;

@@ -16,7 +16,7 @@ use super::restore::Restorer;
 use super::{Backend, Context, fingerprint};
 use crate::processor::Continuity;
 use crate::processor::Processor;
-use crate::processor::instances::Key;
+use crate::processor::instance_table::Key;
 use serde::{Deserialize, Serialize};
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, BufWriter, Write};

@@ -14,7 +14,7 @@ use super::restore::Restorer;
 use super::url::Url;
 use super::{Backend, Context, entry, fingerprint};
 use crate::processor::Processor;
-use crate::processor::instances::Key;
+use crate::processor::instance_table::Key;
 use async_nats::jetstream::kv;
 use async_nats::jetstream::{self, stream};
 use std::collections::HashSet;

@@ -10,7 +10,7 @@
 use crate::log;
 use crate::processor::Processor;
 use crate::processor::clock::Wall;
-use crate::processor::instances::{self, Key};
+use crate::processor::instance_table::{self, Key};
 use crate::state::Backend;
 use crate::state::lease::Lease;
 use crate::watchdog::Watch;
@@ -73,7 +73,7 @@ impl Shared {
             return None;
         }
         Some((
-            instances::key_of(&self.instance_by, &self.scratch),
+            instance_table::key_of(&self.instance_by, &self.scratch),
             self.scratch.timestamp,
         ))
     }
@@ -94,7 +94,7 @@ impl Shared {
         // The key from the record's series key alone, by the routine that picks a `--threads`
         // shard: the processor parses the record once, right after.
         if !rec.oversized
-            && let Some(key) = instances::record_key(rec.bytes, &self.instance_by)
+            && let Some(key) = instance_table::record_key(rec.bytes, &self.instance_by)
         {
             backend.arriving(&key, proc);
         }
