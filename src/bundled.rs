@@ -47,13 +47,10 @@ pub const LIBRARIES: &[(&str, &str)] =
 
 /// The `I!` line saying a bundled library served an include (`name` as written in `from`).
 pub fn say_bundled_include(name: &str, from: &str) {
-    crate::log::log(
-        crate::log::Level::Info,
-        &format!(
-            "{from}: include \"{name}\": no such file beside the spec, using the bundled \
+    log_info!(
+        "{from}: include \"{name}\": no such file beside the spec, using the bundled \
              Telegraf annotations (@TelegrafIn, @TelegrafOut, @TelegrafField, \
              @TelegrafListLength)"
-        ),
     );
 }
 

@@ -7,10 +7,13 @@
 //! events -> bytes out. [`transport`] moves the bytes (stdin/stdout, UDP); [`cli`] wires the
 //! subcommands. `replay`, `report` and `simulate` are built with the `tools` feature (default on).
 
+// First, so that its macros (`log_error!` .. `log_debug!`) are in scope in every module below.
+#[macro_use]
+pub mod log;
+
 pub mod bundled;
 pub mod cli;
 pub mod fleet;
-pub mod log;
 pub mod processor;
 #[cfg(feature = "tools")]
 pub mod replay;

@@ -15,8 +15,10 @@
 use std::collections::HashMap;
 use std::io::Write;
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicU8, Ordering};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default)]
+#[repr(u8)]
 pub enum Level {
     Error,
     Warn,
@@ -25,23 +27,27 @@ pub enum Level {
     Debug,
 }
 
-static LEVEL: Mutex<Level> = Mutex::new(Level::Info);
+/// The `--log-level` filter, as `Level as u8`: read on every message, so an atomic, not a lock.
+static LEVEL: AtomicU8 = AtomicU8::new(Level::Info as u8);
 static COUNTS: Mutex<Option<HashMap<&'static str, u64>>> = Mutex::new(None);
 
 /// Longest message text of one stderr line, in bytes (see the module doc).
 pub const MAX_LINE: usize = 60 * 1024;
 
 pub fn set_level(level: Level) {
-    if let Ok(mut l) = LEVEL.lock() {
-        *l = level;
-    }
+    LEVEL.store(level as u8, Ordering::Relaxed);
 }
 
-fn enabled(level: Level) -> bool {
-    LEVEL.lock().map(|l| level <= *l).unwrap_or(true)
+/// Whether a message at `level` passes the `--log-level` filter: the macros ask this before they
+/// format anything.
+#[inline]
+pub fn enabled(level: Level) -> bool {
+    level as u8 <= LEVEL.load(Ordering::Relaxed)
 }
 
-/// Print one message at `level` (every line of a multi-line message gets the prefix).
+/// Print one message at `level` if the filter lets it pass (every line of a multi-line message
+/// gets the prefix). The message is already built: prefer [`log_error!`](crate::log_error) and
+/// its siblings, which format only a message that will be printed.
 pub fn log(level: Level, msg: &str) {
     if !enabled(level) {
         return;
@@ -57,6 +63,62 @@ pub fn log(level: Level, msg: &str) {
     let _ = std::io::stderr()
         .lock()
         .write_all(format(level, msg).as_bytes());
+}
+
+/// Log at a [`Level`] given as a value: checks the level first, formats the
+/// [`format!`] arguments only when the message will be printed.
+///
+/// ```
+/// tessla_telegraf::log_at!(tessla_telegraf::log::Level::Debug, "not built at {}", "info");
+/// ```
+#[macro_export]
+macro_rules! log_at {
+    ($level:expr, $($arg:tt)+) => {{
+        let level: $crate::log::Level = $level;
+        if $crate::log::enabled(level) {
+            $crate::log::log(level, &::std::format!($($arg)+));
+        }
+    }};
+}
+
+/// An `E! ` line: `log_error!("{x} failed")`, formatted only if errors are shown.
+#[macro_export]
+macro_rules! log_error {
+    ($($arg:tt)+) => {
+        if $crate::log::enabled($crate::log::Level::Error) {
+            $crate::log::log($crate::log::Level::Error, &::std::format!($($arg)+));
+        }
+    };
+}
+
+/// A `W! ` line: `log_warn!("{x} skipped")`, formatted only if warnings are shown.
+#[macro_export]
+macro_rules! log_warn {
+    ($($arg:tt)+) => {
+        if $crate::log::enabled($crate::log::Level::Warn) {
+            $crate::log::log($crate::log::Level::Warn, &::std::format!($($arg)+));
+        }
+    };
+}
+
+/// An `I! ` line: `log_info!("{x} loaded")`, formatted only if info is shown.
+#[macro_export]
+macro_rules! log_info {
+    ($($arg:tt)+) => {
+        if $crate::log::enabled($crate::log::Level::Info) {
+            $crate::log::log($crate::log::Level::Info, &::std::format!($($arg)+));
+        }
+    };
+}
+
+/// A `D! ` line: `log_debug!("{x}")`, formatted only with `--log-level debug`.
+#[macro_export]
+macro_rules! log_debug {
+    ($($arg:tt)+) => {
+        if $crate::log::enabled($crate::log::Level::Debug) {
+            $crate::log::log($crate::log::Level::Debug, &::std::format!($($arg)+));
+        }
+    };
 }
 
 /// The stderr text of one message: each line prefixed, cut (on a char boundary) to stay under
@@ -105,16 +167,16 @@ fn limited(level: Level, kind: &'static str, msg: impl FnOnce() -> String) -> bo
         Err(_) => 1,
     };
     if n <= 10 {
-        log(level, &msg());
+        log_at!(level, "{}", msg());
         if n == 10 {
-            log(
+            log_at!(
                 level,
-                &format!("{kind}: further messages of this kind are rate-limited"),
+                "{kind}: further messages of this kind are rate-limited"
             );
         }
         true
     } else if n % 1000 == 0 {
-        log(level, &format!("{kind}: {n} so far; latest: {}", msg()));
+        log_at!(level, "{kind}: {n} so far; latest: {}", msg());
         true
     } else {
         false
@@ -213,6 +275,26 @@ mod tests {
         // A line up to the cap is kept whole.
         let exact = "y".repeat(MAX_LINE);
         assert_eq!(format(Level::Info, &exact), format!("I! {exact}\n"));
+    }
+
+    #[test]
+    fn the_filter_admits_levels_up_to_the_set_one() {
+        // The only test that sets the level: the others format, they do not print.
+        set_level(Level::Warn);
+        assert!(enabled(Level::Error) && enabled(Level::Warn));
+        assert!(!enabled(Level::Info) && !enabled(Level::Debug));
+        // A filtered message's arguments are never formatted.
+        struct Boom;
+        impl std::fmt::Display for Boom {
+            fn fmt(&self, _: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                panic!("formatted a filtered message")
+            }
+        }
+        log_debug!("{}", Boom);
+        log_info!("{}", Boom);
+        set_level(Level::Debug);
+        assert!(enabled(Level::Debug));
+        set_level(Level::Info);
     }
 
     #[test]

@@ -250,12 +250,9 @@ fn watch_loop(watch: &Watch, bound: Duration) {
         let now = watch.sample();
         if now.0 == Phase::Idle || now != last {
             if warned {
-                crate::log::log(
-                    crate::log::Level::Info,
-                    &format!(
-                        "stdout: our reader read again after {:.1} s; nothing was lost",
-                        since.elapsed().as_secs_f64()
-                    ),
+                log_info!(
+                    "stdout: our reader read again after {:.1} s; nothing was lost",
+                    since.elapsed().as_secs_f64()
                 );
             }
             warned = false;
@@ -267,33 +264,27 @@ fn watch_loop(watch: &Watch, bound: Duration) {
         if stalled >= bound && now.0 == Phase::Writing {
             if !warned {
                 warned = true;
-                crate::log::log(
-                    crate::log::Level::Warn,
-                    &format!(
-                        "stdout: our reader has not read for {:.1} s (--step-timeout {}){}; \
+                log_warn!(
+                    "stdout: our reader has not read for {:.1} s (--step-timeout {}){}; \
                          waiting: a blocked write is backpressure, not a hung step (Telegraf \
                          may be parsing a large metric: the echo of a record with tens of \
                          thousands of fields takes it seconds; README, \"A step that hangs\")",
-                        stalled.as_secs_f64(),
-                        humantime::format_duration(bound),
-                        watch.describe(),
-                    ),
+                    stalled.as_secs_f64(),
+                    humantime::format_duration(bound),
+                    watch.describe()
                 );
             }
             continue;
         }
         if stalled >= bound {
-            crate::log::log(
-                crate::log::Level::Error,
-                &format!(
-                    "step watchdog: no progress for {:.1} s (--step-timeout {}) while {}{}; \
+            log_error!(
+                "step watchdog: no progress for {:.1} s (--step-timeout {}) while {}{}; \
                      exiting with code {EXIT_CODE} so that Telegraf restarts the monitor \
                      (with --state it continues from the last save)",
-                    stalled.as_secs_f64(),
-                    humantime::format_duration(bound),
-                    now.0.doing(),
-                    watch.describe(),
-                ),
+                stalled.as_secs_f64(),
+                humantime::format_duration(bound),
+                now.0.doing(),
+                watch.describe()
             );
             // The stuck thread may hold stdout's lock: exit without waiting for it (the
             // standard library's exit only tries the lock).

@@ -3,7 +3,7 @@
 //! `run`'s arguments are converted once by [`super::config`].
 
 use super::log_level::LogLevel;
-use super::spec::SpecOptions;
+use super::spec_options::SpecOptions;
 use clap::{Args, Parser, Subcommand};
 use std::path::PathBuf;
 

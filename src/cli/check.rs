@@ -6,7 +6,7 @@
 
 use super::args::CheckArgs;
 use super::error::{CliError, CliResult};
-use super::spec::{load_options, require_outputs};
+use super::spec_options::{load_options, require_outputs};
 use std::io::Write;
 
 pub fn run(mut args: CheckArgs) -> CliResult {

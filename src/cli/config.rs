@@ -11,8 +11,8 @@
 
 use super::args::{Bound, InstanceArgs, Late, OutputArgs, RunArgs, SPEC_ENV, TimeArgs};
 use super::error::CliError;
-use super::spec::{SET_ENV, load_options};
-use crate::log::{self, Level};
+use super::spec_options::{SET_ENV, load_options};
+use crate::log;
 use crate::processor::{self, LateMode};
 use crate::spec_feed::reload::SpecSource;
 use crate::state::{self, Target};
@@ -142,19 +142,13 @@ fn from_env(args: &mut RunArgs) {
         && let Some(path) = std::env::var_os(SPEC_ENV).filter(|p| !p.is_empty())
     {
         let path = PathBuf::from(path);
-        log::log(
-            Level::Info,
-            &format!("spec from {SPEC_ENV}: {}", path.display()),
-        );
+        log_info!("spec from {SPEC_ENV}: {}", path.display());
         args.spec = Some(path);
     }
     let had_set = !args.spec_options.set.is_empty();
     args.spec_options.set_from_env();
     if !had_set && !args.spec_options.set.is_empty() {
-        log::log(
-            Level::Info,
-            &format!("--set from {SET_ENV}: {}", args.spec_options.set.join(" ")),
-        );
+        log_info!("--set from {SET_ENV}: {}", args.spec_options.set.join(" "));
     }
 }
 

@@ -3,7 +3,6 @@
 //! their reader before exiting ([`wait_until_read`]), so that Telegraf gets the last lines.
 
 use super::error::{CliError, CliResult};
-use crate::log::{self, Level};
 use crate::processor::Processor;
 use crate::step_loop::Ending;
 use std::time::{Duration, Instant};
@@ -23,9 +22,9 @@ pub fn finish(
     proc: &Processor,
 ) -> CliResult {
     if result.as_ref().is_ok_and(|e| *e == Ending::OutputClosed) {
-        log::log(Level::Info, "stdout was closed by its reader; stopping");
+        log_info!("stdout was closed by its reader; stopping");
     }
-    log::log(Level::Info, &proc.summary());
+    log_info!("{}", proc.summary());
     if matches!(result, Ok(Ending::Eof | Ending::Signal)) {
         wait_until_read(DRAIN_BOUND);
     }
@@ -73,14 +72,11 @@ pub fn wait_until_read(bound: Duration) {
             return;
         }
         if start.elapsed() >= bound {
-            log::log(
-                Level::Warn,
-                &format!(
-                    "{}: {} bytes still unread by the reader after {} s; exiting anyway",
-                    if out_left > 0 { "stdout" } else { "stderr" },
-                    if out_left > 0 { out_left } else { err_left },
-                    bound.as_secs_f64()
-                ),
+            log_warn!(
+                "{}: {} bytes still unread by the reader after {} s; exiting anyway",
+                if out_left > 0 { "stdout" } else { "stderr" },
+                if out_left > 0 { out_left } else { err_left },
+                bound.as_secs_f64()
             );
             return;
         }

@@ -1,6 +1,6 @@
 //! Command line: the arguments as clap reads them ([`args`]), `run`'s converted once into what
 //! the core takes ([`config`]), one module per subcommand, the spec options they share
-//! ([`spec`]), and the one error type every subcommand returns ([`error`]). This module parses
+//! ([`spec_options`]), and the one error type every subcommand returns ([`error`]). This module parses
 //! and dispatches, then reports a failure in its subcommand's style.
 
 pub mod args;
@@ -16,8 +16,8 @@ pub mod report;
 pub mod run;
 #[cfg(feature = "tools")]
 pub mod simulate;
-pub mod spec;
 pub mod spec_cmd;
+pub mod spec_options;
 pub mod trace;
 
 pub use args::{Cli, Command};
@@ -72,7 +72,7 @@ pub fn main() -> ExitCode {
         Err(e) => {
             match style {
                 Style::Log => {
-                    crate::log::log(crate::log::Level::Error, &e.message);
+                    log_error!("{}", e.message);
                     // Under Telegraf the message must reach its log before `Cmd.Wait` closes
                     // the pipes (a broken spec's diagnostic, at every restart).
                     ending::wait_until_read(std::time::Duration::from_secs(1));

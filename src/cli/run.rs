@@ -7,9 +7,8 @@ use super::args::RunArgs;
 use super::config::{RunConfig, StateConfig};
 use super::ending::{finish, runtime};
 use super::error::{CliError, CliResult};
-use super::spec::require_outputs;
+use super::spec_options::require_outputs;
 use crate::fleet::Level;
-use crate::log::{self, Level as LogLevel};
 use crate::processor::Processor;
 use crate::spec_feed::Updates;
 use crate::spec_feed::nats::NatsFeed;
@@ -31,9 +30,9 @@ pub fn run(args: RunArgs) -> CliResult {
     let config = RunConfig::from_args(args)?;
     let (loaded, bundle) = config.spec.load().map_err(|e| CliError::spec(e.render()))?;
     if !loaded.warnings.is_empty() {
-        log::log(
-            LogLevel::Warn,
-            &tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false),
+        log_warn!(
+            "{}",
+            tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false)
         );
     }
     require_outputs(&loaded.program, &config.spec_name()).map_err(CliError::spec)?;
@@ -95,17 +94,17 @@ fn fleet_level(
     (_, silence, spec_options): &(
         Option<std::path::PathBuf>,
         std::time::Duration,
-        super::spec::SpecOptions,
+        super::spec_options::SpecOptions,
     ),
     robot: &tessla_engine::Program,
     config: &RunConfig,
 ) -> Result<(Level, Arc<[String]>), CliError> {
-    let options = super::spec::load_options(spec_options).map_err(CliError::spec)?;
+    let options = super::spec_options::load_options(spec_options).map_err(CliError::spec)?;
     let (loaded, names) = crate::fleet::check(path, robot, &options).map_err(CliError::spec)?;
     if !loaded.warnings.is_empty() {
-        log::log(
-            LogLevel::Warn,
-            &tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false),
+        log_warn!(
+            "{}",
+            tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false)
         );
     }
     let silence = i64::try_from(silence.as_nanos()).unwrap_or(i64::MAX);

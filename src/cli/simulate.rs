@@ -5,8 +5,8 @@
 //! the run `--monitor` chooses. With `--broker` the one chosen run drives the real pipeline.
 
 use super::error::{CliError, CliResult};
-use super::spec::{SpecOptions, load_options};
-use crate::log::{self, Level};
+use super::spec_options::{SpecOptions, load_options};
+use crate::log;
 use crate::processor::{Options, Processor};
 use crate::replay::mqtt::Broker;
 use crate::simulate::closed_loop::{self, Outcome, Scenario};
@@ -174,9 +174,9 @@ fn load(args: &SimulateArgs) -> Result<Arc<tessla_engine::Program>, String> {
     }
     .map_err(|e| e.render())?;
     if !loaded.warnings.is_empty() {
-        log::log(
-            Level::Warn,
-            &tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false),
+        log_warn!(
+            "{}",
+            tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false)
         );
     }
     Ok(loaded.program)
@@ -209,10 +209,9 @@ pub fn run(args: SimulateArgs) -> CliResult {
     let program = match broker {
         Some(_) => {
             if args.spec.is_some() || !args.spec_options.set.is_empty() {
-                log::log(
-                    Level::Warn,
+                log_warn!(
                     "simulate: --spec and --set configure the in-process monitors; with --broker \
-                     the pipeline's own processor answers",
+                     the pipeline's own processor answers"
                 );
             }
             None
@@ -253,12 +252,9 @@ pub fn run(args: SimulateArgs) -> CliResult {
             let mut twin = twin.map_err(|e| CliError::io(format!("simulate: {e}")))?;
             let outcome = closed_loop::run(&scenario, chosen_on, &mut twin, &mut file);
             if twin.unanswered > 0 {
-                log::log(
-                    Level::Warn,
-                    &format!(
-                        "simulate: {} messages got no action from {broker}",
-                        twin.unanswered
-                    ),
+                log_warn!(
+                    "simulate: {} messages got no action from {broker}",
+                    twin.unanswered
                 );
             }
             let finished = twin.finish();
@@ -310,13 +306,10 @@ fn in_process(
         } else {
             closed_loop::run(scenario, on, &mut twin, &mut std::io::sink())?
         };
-        log::log(
-            Level::Debug,
-            &format!(
-                "monitor {}: {}",
-                if on { "on" } else { "off" },
-                twin.summary()
-            ),
+        log_debug!(
+            "monitor {}: {}",
+            if on { "on" } else { "off" },
+            twin.summary()
         );
         outcomes.push((on, outcome));
     }

@@ -10,7 +10,7 @@
 //! `--select` syntax, which version a rollback publishes, and the tables and JSON it prints.
 
 use super::error::{CliError, CliResult};
-use super::spec::{SpecOptions, load_options, require_outputs};
+use super::spec_options::{SpecOptions, load_options, require_outputs};
 use crate::processor::versions::Selector;
 use crate::spec_feed::bundle::Bundle;
 use crate::spec_feed::decide;

@@ -7,7 +7,7 @@
 
 use super::args::TraceArgs;
 use super::error::{CliError, CliResult};
-use super::spec::{load_options, require_outputs};
+use super::spec_options::{load_options, require_outputs};
 use crate::trace::{ErrorKind, Format, Options, run_stream_with};
 use std::cell::RefCell;
 use std::io::{BufReader, BufWriter, IsTerminal, Read, StdoutLock, Write};

@@ -16,8 +16,8 @@
 //! record's way (parse, route, step, write: `record`), the time policy (ahead
 //! refused, late shifted or dropped: `time_policy`), `delay`s fired by the wall clock (`wall`,
 //! on the deadline queue of [`clock`]), what `--state` saves and restores (`state_hooks`), the
-//! counters and the summary line (`counters`); the instances ([`instances`]: the table, the
-//! instance key of a record, and the pool that routes to it, creates and evicts), writing a
+//! counters and the summary line (`counters`); the instances ([`instance_table`]: the keyed table and
+//! the instance key of a record; `pool`: the monitors in it, routed to, created and evicted), writing a
 //! step's outputs (`emit`), what a monitor continuing in another program keeps and resets
 //! ([`carry`]), exact duplicates ([`dedup`]), spec versions and the switch between them
 //! ([`versions`], `switch`), warnings about inputs no metric feeds ([`wiring`]) and what the
@@ -29,7 +29,7 @@ mod counters;
 pub mod dedup;
 mod emit;
 pub mod fleet_tap;
-pub mod instances;
+pub mod instance_table;
 mod pool;
 mod record;
 mod state_hooks;
@@ -42,7 +42,7 @@ pub mod wiring;
 pub use counters::Counters;
 pub use state_hooks::Continuity;
 
-use self::instances::Key;
+use self::instance_table::Key;
 use self::versions::{Version, Versions};
 use crate::telegraf::encode;
 use crate::watchdog::Lane;

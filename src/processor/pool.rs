@@ -3,10 +3,11 @@
 //! `--tag`s and its instance tags), and evicting past `--max-instances` (this thread's share)
 //! or after `--instance-idle` (by its own silence only: at its next record, or by the wall
 //! clock when the input is silent, never because of other instances' records). The step
-//! watchdog learns each instance's name here.
+//! watchdog learns each instance's name here. The table that holds them, and the keys, are
+//! `instance_table.rs`'s.
 
 use super::clock::Anchor;
-use super::instances::{Key, Table, key_of};
+use super::instance_table::{Key, Table, key_of};
 use super::versions::Versions;
 use super::{Counters, Options};
 use crate::log;

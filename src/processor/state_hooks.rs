@@ -4,7 +4,7 @@
 //! the wall clock is neither saved nor restored.
 
 use super::dedup::Recent;
-use super::instances::Key;
+use super::instance_table::Key;
 use super::pool::describe;
 use super::{Processor, clock};
 use crate::log;
@@ -122,21 +122,18 @@ impl Processor {
     /// next start.
     pub fn restore_instance_at(&mut self, key: Key, monitor: Monitor, c: Continuity) {
         if let Some(ahead) = self.clock_ahead(&monitor) {
-            log::log(
-                log::Level::Warn,
-                &format!(
-                    "state: monitor instance {} saved with a clock {} ahead of the wall clock (beyond --max-ahead {}); it starts fresh",
-                    if self.opts.instance_by.is_empty() {
-                        "(the only one)".to_string()
-                    } else {
-                        describe(&self.opts.instance_by, &key)
-                    },
-                    clock::human_ns(ahead),
-                    self.opts
-                        .max_ahead
-                        .map(|d| humantime::format_duration(d).to_string())
-                        .unwrap_or_default()
-                ),
+            log_warn!(
+                "state: monitor instance {} saved with a clock {} ahead of the wall clock (beyond --max-ahead {}); it starts fresh",
+                if self.opts.instance_by.is_empty() {
+                    "(the only one)".to_string()
+                } else {
+                    describe(&self.opts.instance_by, &key)
+                },
+                clock::human_ns(ahead),
+                self.opts
+                    .max_ahead
+                    .map(|d| humantime::format_duration(d).to_string())
+                    .unwrap_or_default()
             );
             return;
         }

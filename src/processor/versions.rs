@@ -6,7 +6,7 @@
 //! picks the instance and whose start is at or before the time, else the spec the process
 //! started with.
 
-use super::instances::Key;
+use super::instance_table::Key;
 use crate::telegraf::binding::{self, FieldPattern, InputBinding, TimeBinding};
 use crate::telegraf::encode;
 use serde::{Deserialize, Serialize};

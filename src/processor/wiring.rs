@@ -13,7 +13,6 @@
 //! After the window it costs one branch per record. The processor calls [`WiringCheck::observe`]
 //! for each record and [`WiringCheck::finish`] when the input ends.
 
-use crate::log::{self, Level};
 use crate::telegraf::binding::{FieldPattern, InputBinding, show_field};
 use lineproto::{FieldValue, Metric, Prefix};
 use std::collections::{BTreeMap, BTreeSet};
@@ -217,24 +216,21 @@ impl WiringCheck {
         };
         for (seen, b) in self.inputs.iter().zip(bindings) {
             if seen.present == 0 {
-                log::log(Level::Warn, &self.unmatched(b, seen, &within));
+                log_warn!("{}", self.unmatched(b, seen, &within));
             } else if seen.converted == 0 {
-                log::log(Level::Warn, &not_converting(b, seen, &within));
+                log_warn!("{}", not_converting(b, seen, &within));
             } else if let Some(n) = b.length
                 && seen.max_len < n
             {
-                log::log(
-                    Level::Warn,
-                    &format!(
-                        "input `{}` ({}): lists had at most {} elements {within}, fewer than \
+                log_warn!(
+                    "input `{}` ({}): lists had at most {} elements {within}, fewer than \
                          @TelegrafListLength({n}); the missing ones are filled as dropouts. If the \
                          lidar has {} beams, set that length (bundled robot specs: --set lidar_beams={})",
-                        b.name,
-                        annotation(b),
-                        seen.max_len,
-                        seen.max_len,
-                        seen.max_len
-                    ),
+                    b.name,
+                    annotation(b),
+                    seen.max_len,
+                    seen.max_len,
+                    seen.max_len
                 );
             }
         }

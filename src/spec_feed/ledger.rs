@@ -9,7 +9,6 @@
 //! put it in force here.
 
 use super::{Arrival, Decision};
-use crate::log::{self, Level};
 use std::collections::BTreeMap;
 
 /// What to do next with a decided rollout.
@@ -55,12 +54,9 @@ impl Ledger {
     pub fn proposed(&mut self, a: Arrival) -> Option<Arrival> {
         let revision = a.rollout.revision;
         if revision <= self.done {
-            log::log(
-                Level::Warn,
-                &format!(
-                    "spec: rollout {revision} arrived after this process acted on rollout {}: ignored (rollouts take effect in revision order)",
-                    self.done
-                ),
+            log_warn!(
+                "spec: rollout {revision} arrived after this process acted on rollout {}: ignored (rollouts take effect in revision order)",
+                self.done
             );
             return None;
         }

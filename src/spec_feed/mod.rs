@@ -20,7 +20,6 @@ pub mod sign;
 pub mod status;
 pub mod watch;
 
-use crate::log::{self, Level};
 use crate::processor::Processor;
 use crate::processor::versions::Selector;
 use bundle::Bundle;
@@ -300,14 +299,11 @@ impl Updates {
             let outcome = match step {
                 Step::Commit(a) => self.commit(&a, procs),
                 Step::Abort(a, why) => {
-                    log::log(
-                        Level::Info,
-                        &format!(
-                            "spec: rollout {} (version {}{}) aborted by the fleet: {why}; nothing changes",
-                            a.rollout.revision,
-                            a.rollout.id,
-                            label_note(&a.rollout.label)
-                        ),
+                    log_info!(
+                        "spec: rollout {} (version {}{}) aborted by the fleet: {why}; nothing changes",
+                        a.rollout.revision,
+                        a.rollout.id,
+                        label_note(&a.rollout.label)
                     );
                     Outcome::of(&a.rollout, Phase::Aborted, false, why)
                 }
@@ -372,24 +368,18 @@ impl Updates {
             Err(e) => (false, e.clone()),
         };
         if accepted {
-            log::log(
-                Level::Info,
-                &format!(
-                    "spec: rollout {} (version {}{}) checks here: voted to commit it; it is put in force when the fleet commits it",
-                    r.revision,
-                    r.id,
-                    label_note(&r.label)
-                ),
+            log_info!(
+                "spec: rollout {} (version {}{}) checks here: voted to commit it; it is put in force when the fleet commits it",
+                r.revision,
+                r.id,
+                label_note(&r.label)
             );
         } else {
-            log::log(
-                Level::Error,
-                &format!(
-                    "spec: rollout {} (version {}{}) refused here: {reason}; voted to abort it",
-                    r.revision,
-                    r.id,
-                    label_note(&r.label)
-                ),
+            log_error!(
+                "spec: rollout {} (version {}{}) refused here: {reason}; voted to abort it",
+                r.revision,
+                r.id,
+                label_note(&r.label)
             );
         }
         Outcome::of(r, Phase::Check, accepted, reason)
@@ -423,14 +413,11 @@ impl Updates {
     fn commit(&mut self, a: &Arrival, procs: &mut [&mut Processor]) -> Outcome {
         let r = &a.rollout;
         let cannot = |reason: String| {
-            log::log(
-                Level::Error,
-                &format!(
-                    "spec: rollout {} (version {}{}) was committed by the fleet, but this process cannot run it: {reason}; the instances it picks stay on the versions they run (spec status shows it as unrunnable here)",
-                    r.revision,
-                    r.id,
-                    label_note(&r.label)
-                ),
+            log_error!(
+                "spec: rollout {} (version {}{}) was committed by the fleet, but this process cannot run it: {reason}; the instances it picks stay on the versions they run (spec status shows it as unrunnable here)",
+                r.revision,
+                r.id,
+                label_note(&r.label)
             );
             Outcome::of(r, Phase::Committed, false, reason)
         };
@@ -465,14 +452,11 @@ impl Updates {
             }
         }
         if late > 0 {
-            log::log(
-                Level::Warn,
-                &format!(
-                    "spec: rollout {} starts at {}, but {late} instances it picks had already stepped past it (by up to {}) when it was committed: they switch at their next step, and their records since its start were judged by the version before. For one switch point in every process, publish with a start a moment ahead (`spec publish --from +5s`)",
-                    r.revision,
-                    status::show_time(r.from),
-                    crate::processor::clock::human_ns(behind)
-                ),
+            log_warn!(
+                "spec: rollout {} starts at {}, but {late} instances it picks had already stepped past it (by up to {}) when it was committed: they switch at their next step, and their records since its start were judged by the version before. For one switch point in every process, publish with a start a moment ahead (`spec publish --from +5s`)",
+                r.revision,
+                status::show_time(r.from),
+                crate::processor::clock::human_ns(behind)
             );
         }
         let reset_note = if reset.is_empty() {
@@ -480,20 +464,17 @@ impl Updates {
         } else {
             format!("outputs starting afresh: {}", reset.join(", "))
         };
-        log::log(
-            Level::Info,
-            &format!(
-                "spec: rollout {} (version {}{}) committed by the fleet; in force from {} for {}; {reset_note}",
-                r.revision,
-                r.id,
-                label_note(&r.label),
-                status::show_time(r.from),
-                if r.selector.is_all() {
-                    "every instance".to_string()
-                } else {
-                    r.selector.to_string()
-                }
-            ),
+        log_info!(
+            "spec: rollout {} (version {}{}) committed by the fleet; in force from {} for {}; {reset_note}",
+            r.revision,
+            r.id,
+            label_note(&r.label),
+            status::show_time(r.from),
+            if r.selector.is_all() {
+                "every instance".to_string()
+            } else {
+                r.selector.to_string()
+            }
         );
         Outcome {
             reset_outputs: reset,

@@ -22,7 +22,7 @@ use super::bundle::Bundle;
 use super::sign::{self, Record};
 use super::status::now_ns;
 use super::{Arrival, BASE, Channel, Decision, Event, Outcome, Rollout};
-use crate::log::{self, Level, mask};
+use crate::log::{self, mask};
 use crate::processor::versions::Selector;
 use crate::state::kv_keys::kv_key_part_of;
 use crate::state::nats_conn::{Conn, Failure, connect, violation};
@@ -203,12 +203,10 @@ async fn open(url: Url, create: bool) -> Result<Opened, Failure> {
                 (None, e) => e,
             }
         })?;
-        log::log(
-            Level::Info,
-            &format!(
-                "spec: created the spec channel's bucket {} ({} replicas); every process names it with --spec-channel",
-                url.bucket, url.replicas
-            ),
+        log_info!(
+            "spec: created the spec channel's bucket {} ({} replicas); every process names it with --spec-channel",
+            url.bucket,
+            url.replicas
         );
         Some(store)
     } else {
@@ -406,12 +404,9 @@ async fn read_patiently(store: &kv::Store, trust: &[String]) -> Result<Vec<Event
     for attempt in 1..=3 {
         match tokio::time::timeout(READ_PATIENCE, read_all(store, trust)).await {
             Ok(got) => return got,
-            Err(_) => log::log(
-                Level::Warn,
-                &format!(
-                    "spec: reading the spec channel's rollouts took over {} s (try {attempt} of 3); reading again",
-                    READ_PATIENCE.as_secs()
-                ),
+            Err(_) => log_warn!(
+                "spec: reading the spec channel's rollouts took over {} s (try {attempt} of 3); reading again",
+                READ_PATIENCE.as_secs()
             ),
         }
     }
@@ -518,9 +513,9 @@ impl NatsFeed {
             store_rx.clone(),
             opened.violations,
         ));
-        log::log(
-            Level::Info,
-            &if exists {
+        log_info!(
+            "{}",
+            if exists {
                 format!(
                     "spec: following the spec channel {}: {rollouts} rollout(s) so far",
                     url.shown(),
@@ -532,7 +527,7 @@ impl NatsFeed {
                     url.shown(),
                     LOOK_AGAIN.as_secs()
                 )
-            },
+            }
         );
         Ok((
             NatsFeed {
@@ -559,16 +554,13 @@ impl NatsFeed {
         for e in got {
             let r = e.revision();
             if matches!(e, Event::Proposal(_)) && r <= self.last {
-                log::log(
-                    Level::Warn,
-                    &format!(
-                        "spec: {} arrived after rollout {} in {}: ignored (rollouts take effect in \
+                log_warn!(
+                    "spec: {} arrived after rollout {} in {}: ignored (rollouts take effect in \
                          revision order; publish with `tessla-telegraf spec publish`, which takes the \
                          next revision)",
-                        rollout_key(r),
-                        self.last,
-                        self.url.shown()
-                    ),
+                    rollout_key(r),
+                    self.last,
+                    self.url.shown()
                 );
                 continue;
             }
@@ -648,12 +640,9 @@ async fn find_bucket(
     loop {
         tokio::time::sleep(LOOK_AGAIN).await;
         if let Ok(s) = js.get_key_value(url.bucket.clone()).await {
-            log::log(
-                Level::Info,
-                &format!(
-                    "spec: the spec channel {} exists now; following it",
-                    url.shown()
-                ),
+            log_info!(
+                "spec: the spec channel {} exists now; following it",
+                url.shown()
             );
             let _ = store_tx.send(Some(s));
             // Keep the sender (and so the receivers' last value) alive.
@@ -718,12 +707,9 @@ async fn watch_keys<F, Fut>(
             }
             Err(e) if !warned => {
                 warned = true;
-                log::log(
-                    Level::Warn,
-                    &format!(
-                        "spec: cannot watch the spec channel {}: {e}; trying again every second",
-                        url.shown()
-                    ),
+                log_warn!(
+                    "spec: cannot watch the spec channel {}: {e}; trying again every second",
+                    url.shown()
                 );
             }
             Err(_) => {}
@@ -757,7 +743,7 @@ async fn write_status(
         let bytes = match serde_json::to_vec(&s) {
             Ok(b) => b,
             Err(e) => {
-                log::log(Level::Warn, &format!("spec: status not written: {e}"));
+                log_warn!("spec: status not written: {e}");
                 continue;
             }
         };
@@ -773,13 +759,10 @@ async fn write_status(
                     ),
                     None => e.to_string(),
                 };
-                log::log(
-                    Level::Warn,
-                    &format!(
-                        "spec: cannot write this process's status {key} to {}: {why}; `spec status` \
+                log_warn!(
+                    "spec: cannot write this process's status {key} to {}: {why}; `spec status` \
                          shows an older one, and a publisher counts this process as silent",
-                        url.shown()
-                    ),
+                    url.shown()
                 );
             }
             Err(_) => {}

@@ -8,7 +8,6 @@
 //! afresh are logged.
 
 use super::bundle::Bundle;
-use crate::log::{self, Level};
 use crate::processor::Processor;
 use crate::processor::carry::{self, Reset};
 use crate::processor::versions::{self, Version};
@@ -73,25 +72,22 @@ pub fn reload(
     procs: &mut [&mut Processor],
     samples: &[lineproto::Metric],
 ) -> Reloaded {
-    log::log(Level::Info, &format!("{why}: reloading {}", src.describe()));
+    log_info!("{why}: reloading {}", src.describe());
     let (loaded, bundle) = match src.load() {
         Ok(l) => l,
         Err(e) => {
             let diag = e.render();
-            log::log(
-                Level::Error,
-                &format!(
-                    "reload: {} has errors; the running spec stays in use\n{diag}",
-                    src.describe(),
-                ),
+            log_error!(
+                "reload: {} has errors; the running spec stays in use\n{diag}",
+                src.describe()
             );
             return Reloaded::Refused(diag);
         }
     };
     if !loaded.warnings.is_empty() {
-        log::log(
-            Level::Warn,
-            &tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false),
+        log_warn!(
+            "{}",
+            tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false)
         );
     }
     let new = loaded.program;
@@ -99,12 +95,9 @@ pub fn reload(
         // The same rule as at start-up (exit 2 there): a spec without outputs would silently
         // stop every verdict and action.
         let why = "it has no outputs, so it would check nothing and write nothing (add `out NAME` for each stream to report)";
-        log::log(
-            Level::Error,
-            &format!(
-                "reload: {}: {why}; the running spec stays in use",
-                src.describe()
-            ),
+        log_error!(
+            "reload: {}: {why}; the running spec stays in use",
+            src.describe()
         );
         return Reloaded::Refused(why.to_string());
     }
@@ -114,12 +107,9 @@ pub fn reload(
     let checked = Version::new(String::new(), String::new(), Arc::clone(&new), "tessla")
         .and_then(|v| versions::check_against(&v, samples));
     if let Err(e) = checked {
-        log::log(
-            Level::Error,
-            &format!(
-                "reload: {}: {e}; the running spec stays in use",
-                src.describe()
-            ),
+        log_error!(
+            "reload: {}: {e}; the running spec stays in use",
+            src.describe()
         );
         return Reloaded::Refused(e);
     }
@@ -136,23 +126,17 @@ pub fn reload(
         });
         if let Err(e) = result {
             // The same for every processor: the first refuses before any changed.
-            log::log(
-                Level::Error,
-                &format!(
-                    "reload: {}: {e}; the running spec stays in use",
-                    src.describe()
-                ),
+            log_error!(
+                "reload: {}: {e}; the running spec stays in use",
+                src.describe()
             );
             return Reloaded::Refused(e);
         }
         instances += proc.instance_count();
     }
-    log::log(
-        Level::Info,
-        &format!(
-            "reload: spec version {id} for {instances} instances; {}",
-            reset.describe()
-        ),
+    log_info!(
+        "reload: spec version {id} for {instances} instances; {}",
+        reset.describe()
     );
     let Reset {
         outputs: reset_outputs,

@@ -5,8 +5,7 @@
 //! ([`encode_entry`], [`decode_entry`]); the warning every backend gives for values that cannot
 //! be saved ([`warn_unsaved`]).
 
-use crate::log::{self, Level};
-use crate::processor::instances::Key;
+use crate::processor::instance_table::Key;
 use crate::processor::{Continuity, carry};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
@@ -185,11 +184,8 @@ pub fn encode_entry(
 /// be saved; nothing when there are none.
 pub fn warn_unsaved(unsaved: usize) {
     if unsaved > 0 {
-        log::log(
-            Level::Warn,
-            &format!(
-                "state: {unsaved} stream values are functions and cannot be saved; those streams restart empty"
-            ),
+        log_warn!(
+            "state: {unsaved} stream values are functions and cannot be saved; those streams restart empty"
         );
     }
 }

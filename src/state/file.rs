@@ -14,10 +14,9 @@
 use super::entry::{self, MAGIC, Programs, SavedProgram, VERSION, unix_now, warn_unsaved};
 use super::restore::Restorer;
 use super::{Backend, Context, fingerprint};
-use crate::log::{self, Level};
 use crate::processor::Continuity;
 use crate::processor::Processor;
-use crate::processor::instances::Key;
+use crate::processor::instance_table::Key;
 use serde::{Deserialize, Serialize};
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, BufWriter, Write};
@@ -238,31 +237,19 @@ pub fn load(path: &Path, proc: &mut Processor, ctx: &Context) -> Outcome {
     let (outcome, notes) = load_quiet(path, proc, ctx);
     let shown = path.display();
     match &outcome {
-        Outcome::Missing => log::log(
-            Level::Info,
-            &format!("state: {shown} does not exist yet; starting fresh"),
+        Outcome::Missing => log_info!("state: {shown} does not exist yet; starting fresh"),
+        Outcome::Restored(n) => log_info!("state: restored {n} monitor instances from {shown}"),
+        Outcome::Rejected(why, aside) => log_warn!(
+            "state: {shown} not used: {why}; {}; starting fresh",
+            match aside {
+                Some(p) => format!("renamed to {}", p.display()),
+                None => "could not rename it aside".into(),
+            }
         ),
-        Outcome::Restored(n) => log::log(
-            Level::Info,
-            &format!("state: restored {n} monitor instances from {shown}"),
-        ),
-        Outcome::Rejected(why, aside) => log::log(
-            Level::Warn,
-            &format!(
-                "state: {shown} not used: {why}; {}; starting fresh",
-                match aside {
-                    Some(p) => format!("renamed to {}", p.display()),
-                    None => "could not rename it aside".into(),
-                }
-            ),
-        ),
-        Outcome::Unreadable(e) => log::log(
-            Level::Warn,
-            &format!("state: cannot read {shown}: {e}; starting fresh"),
-        ),
+        Outcome::Unreadable(e) => log_warn!("state: cannot read {shown}: {e}; starting fresh"),
     }
     for note in notes {
-        log::log(Level::Info, &note);
+        log_info!("{}", note);
     }
     outcome
 }

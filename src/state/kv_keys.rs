@@ -1,7 +1,7 @@
 //! Names in the NATS key-value bucket: an instance key as a KV key ([`kv_key`]: injective, only
 //! characters NATS allows), a partition's lease key, and a lease key's partition name read back.
 
-use crate::processor::instances::Key;
+use crate::processor::instance_table::Key;
 
 /// One value of an instance key as NATS KV key characters: letters, digits and `-` as they
 /// are, any other byte as `_` and two hex digits; `v` before a present value, `n` for an

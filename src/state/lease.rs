@@ -6,7 +6,6 @@
 
 use super::kv_keys::{kv_key_part_of, partition_of};
 use super::nats_conn::{Conn, REQUEST_TIMEOUT, hostname};
-use crate::log::{self, Level};
 use async_nats::jetstream::{self, kv};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -118,19 +117,16 @@ impl Lease {
                 renewed: sent,
             };
         }
-        log::log(
-            Level::Info,
-            &format!(
-                "lease: partition {name}: {}",
-                if holding {
-                    format!("held by this process ({holder})")
-                } else {
-                    format!(
-                        "held by another process; standing by until it is released or lapses for {}",
-                        humantime::format_duration(ttl)
-                    )
-                }
-            ),
+        log_info!(
+            "lease: partition {name}: {}",
+            if holding {
+                format!("held by this process ({holder})")
+            } else {
+                format!(
+                    "held by another process; standing by until it is released or lapses for {}",
+                    humantime::format_duration(ttl)
+                )
+            }
         );
         conn.handle
             .spawn(lease_task(store.clone(), key, holder, ttl, shared, seen));
@@ -181,16 +177,10 @@ impl Lease {
             let _ = tx.send(store.delete_expect_revision(key, Some(revision)).await);
         });
         match rx.recv_timeout(REQUEST_TIMEOUT * 2) {
-            Ok(Ok(())) => log::log(
-                Level::Info,
-                &format!("lease: released partition {}", self.name),
-            ),
-            Ok(Err(e)) => log::log(
-                Level::Warn,
-                &format!(
-                    "lease: cannot release partition {}: {e}; the standby takes over after the TTL",
-                    self.name
-                ),
+            Ok(Ok(())) => log_info!("lease: released partition {}", self.name),
+            Ok(Err(e)) => log_warn!(
+                "lease: cannot release partition {}: {e}; the standby takes over after the TTL",
+                self.name
             ),
             Err(_) => {}
         }
@@ -267,21 +257,15 @@ async fn report_standby(store: kv::Store, own: String, ttl: Duration, since: Ins
     let waited = humantime::format_duration(Duration::from_secs(since.elapsed().as_secs()));
     let own_name = partition_of(&own);
     if free.is_empty() {
-        log::log(
-            Level::Info,
-            &format!(
-                "lease: partition {own_name}: standing by for {waited}; its holder renews the lease"
-            ),
+        log_info!(
+            "lease: partition {own_name}: standing by for {waited}; its holder renews the lease"
         );
     } else {
-        log::log(
-            Level::Warn,
-            &format!(
-                "lease: partition {own_name}: standing by for {waited}, while nobody holds partition(s) {}: \
+        log_warn!(
+            "lease: partition {own_name}: standing by for {waited}, while nobody holds partition(s) {}: \
                  their robots get no actions. If this Telegraf reads one of those partitions (the N in its \
                  nats_consumer subjects fleet.N.robots.*), its --state has the wrong ?lease= name",
-                free.join(", ")
-            ),
+            free.join(", ")
         );
     }
 }
@@ -327,18 +311,12 @@ async fn lease_task(
                         }
                     }
                     Err(e) if e.kind() == kv::UpdateErrorKind::WrongLastRevision => {
-                        log::log(
-                            Level::Warn,
-                            &format!("lease: {key} was taken over by another process; standing by"),
-                        );
+                        log_warn!("lease: {key} was taken over by another process; standing by");
                         s.mode = Mode::Standby;
                         s.lost = true;
                         seen = None;
                     }
-                    Err(e) => log::log(
-                        Level::Warn,
-                        &format!("lease: cannot renew {key}: {e}; retrying"),
-                    ),
+                    Err(e) => log_warn!("lease: cannot renew {key}: {e}; retrying"),
                 }
             }
             Mode::Standby => {
@@ -360,7 +338,7 @@ async fn lease_task(
                         revision,
                         renewed: sent,
                     };
-                    log::log(Level::Info, &format!("lease: {key} taken by {holder}"));
+                    log_info!("lease: {key} taken by {holder}");
                 }
             }
         }

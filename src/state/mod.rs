@@ -19,7 +19,7 @@ pub mod secrets;
 pub mod url;
 
 use crate::processor::Processor;
-use crate::processor::instances::Key;
+use crate::processor::instance_table::Key;
 use std::io;
 use std::path::PathBuf;
 use tessla_engine::runtime::snapshot;

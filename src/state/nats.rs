@@ -13,9 +13,8 @@ use super::nats_conn::{Conn, Failure, connect, err, permission_failure, violatio
 use super::restore::Restorer;
 use super::url::Url;
 use super::{Backend, Context, entry, fingerprint};
-use crate::log::{self, Level};
 use crate::processor::Processor;
-use crate::processor::instances::Key;
+use crate::processor::instance_table::Key;
 use async_nats::jetstream::kv;
 use async_nats::jetstream::{self, stream};
 use std::collections::HashSet;
@@ -65,12 +64,10 @@ async fn open(url: Url) -> Result<kv::Store, Failure> {
         }
         match create(&js, &url).await {
             Ok(store) => {
-                log::log(
-                    Level::Info,
-                    &format!(
-                        "state: created bucket {} ({} replicas); every process of the fleet must name this bucket",
-                        url.bucket, url.replicas
-                    ),
+                log_info!(
+                    "state: created bucket {} ({} replicas); every process of the fleet must name this bucket",
+                    url.bucket,
+                    url.replicas
                 );
                 return Ok(store);
             }
@@ -190,12 +187,9 @@ impl Backend for NatsBackend {
 
     /// Nothing is read at start: each instance is read when its first record arrives.
     fn load(&mut self, _proc: &mut Processor) {
-        log::log(
-            Level::Info,
-            &format!(
-                "state: using bucket {}; each instance is restored from it when its first record arrives",
-                self.url.shown()
-            ),
+        log_info!(
+            "state: using bucket {}; each instance is restored from it when its first record arrives",
+            self.url.shown()
         );
     }
 
@@ -212,12 +206,9 @@ impl Backend for NatsBackend {
             Some(Ok(Some(e))) if e.operation == kv::Operation::Put => e,
             Some(Ok(_)) => return,
             Some(Err(e)) => {
-                log::log(
-                    Level::Warn,
-                    &format!(
-                        "state: cannot read {name} from {}: {e}; the instance starts fresh",
-                        self.url.shown()
-                    ),
+                log_warn!(
+                    "state: cannot read {name} from {}: {e}; the instance starts fresh",
+                    self.url.shown()
                 );
                 return;
             }
@@ -233,26 +224,20 @@ impl Backend for NatsBackend {
                     &saved.continuity,
                 );
                 if let Some(note) = note {
-                    log::log(Level::Info, &note);
+                    log_info!("{}", note);
                 }
-                log::log(
-                    Level::Debug,
-                    &format!("state: restored {name} from {}", self.url.shown()),
-                );
+                log_debug!("state: restored {name} from {}", self.url.shown());
                 proc.restore_instance_at(key.clone(), monitor, saved.continuity);
             }
             Err(why) => {
                 let aside = self.set_aside(&name, entry.value);
-                log::log(
-                    Level::Warn,
-                    &format!(
-                        "state: {name} in {} not used: {why}; {}; the instance starts fresh",
-                        self.url.shown(),
-                        match aside {
-                            Some(a) => format!("put aside as {a}"),
-                            None => "could not put it aside".into(),
-                        }
-                    ),
+                log_warn!(
+                    "state: {name} in {} not used: {why}; {}; the instance starts fresh",
+                    self.url.shown(),
+                    match aside {
+                        Some(a) => format!("put aside as {a}"),
+                        None => "could not put it aside".into(),
+                    }
                 );
             }
         }

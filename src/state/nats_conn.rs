@@ -6,7 +6,7 @@
 use super::url::{Auth, Url};
 
 use super::secrets::SecretSource;
-use crate::log::{self, Level, mask};
+use crate::log::mask;
 use std::future::Future;
 use std::io;
 use std::sync::{Arc, Mutex};
@@ -90,10 +90,7 @@ async fn connect_options(
             async move {
                 if let async_nats::Event::ServerError(e) = event {
                     let text = e.to_string();
-                    log::log(
-                        Level::Debug,
-                        &format!("state: NATS server error: {}", mask(&text)),
-                    );
+                    log_debug!("state: NATS server error: {}", mask(&text));
                     if let Ok(mut v) = violations.lock() {
                         v.push(text);
                     }

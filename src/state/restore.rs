@@ -10,7 +10,7 @@
 
 use super::entry::{SavedProgram, program_fingerprint};
 use crate::processor::carry::Reset;
-use crate::processor::instances::Key;
+use crate::processor::instance_table::Key;
 use crate::processor::{Continuity, Processor};
 use std::collections::HashSet;
 use std::sync::Arc;

@@ -23,7 +23,7 @@ pub mod shards;
 pub mod shared;
 
 use crate::fleet::Level;
-use crate::log::{self, Level as LogLevel};
+use crate::log::Level as LogLevel;
 use crate::processor::Processor;
 use crate::processor::clock::Wall;
 use crate::spec_feed::Updates;
@@ -163,12 +163,9 @@ pub async fn run<S: Source, K: Sink>(
     l.save(LogLevel::Info);
     if let Some(s) = &l.shared {
         if !s.active {
-            log::log(
-                LogLevel::Info,
-                &format!(
-                    "state: standing by at the end; nothing saved ({} records buffered, not stepped)",
-                    s.buffered()
-                ),
+            log_info!(
+                "state: standing by at the end; nothing saved ({} records buffered, not stepped)",
+                s.buffered()
             );
         }
         if let Some(lease) = &s.lease {
@@ -415,18 +412,13 @@ impl Loop<'_, '_> {
         };
         let start = Instant::now();
         match backend.save(self.proc) {
-            Ok(n) => log::log(
+            Ok(n) => log_at!(
                 level,
-                &format!(
-                    "state: saved {n} monitor instances to {} in {} ms",
-                    backend.describe(),
-                    start.elapsed().as_millis()
-                ),
+                "state: saved {n} monitor instances to {} in {} ms",
+                backend.describe(),
+                start.elapsed().as_millis()
             ),
-            Err(e) => log::log(
-                LogLevel::Error,
-                &format!("state: cannot save to {}: {e}", backend.describe()),
-            ),
+            Err(e) => log_error!("state: cannot save to {}: {e}", backend.describe()),
         }
     }
 

@@ -13,7 +13,7 @@
 
 use crate::processor::Processor;
 use crate::processor::clock::Wall;
-use crate::processor::instances::shard_of;
+use crate::processor::instance_table::shard_of;
 use crate::watchdog::Watch;
 use lineproto::RecordRef;
 use std::sync::mpsc;

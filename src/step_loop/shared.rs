@@ -7,10 +7,10 @@
 //! each record an instance's restored state already covers (timestamp not after its last
 //! evaluated step); on losing it, dropping every instance.
 
-use crate::log::{self, Level};
+use crate::log;
 use crate::processor::Processor;
 use crate::processor::clock::Wall;
-use crate::processor::instances::{self, Key};
+use crate::processor::instance_table::{self, Key};
 use crate::state::Backend;
 use crate::state::lease::Lease;
 use crate::watchdog::Watch;
@@ -73,7 +73,7 @@ impl Shared {
             return None;
         }
         Some((
-            instances::key_of(&self.instance_by, &self.scratch),
+            instance_table::key_of(&self.instance_by, &self.scratch),
             self.scratch.timestamp,
         ))
     }
@@ -94,7 +94,7 @@ impl Shared {
         // The key from the record's series key alone, by the routine that picks a `--threads`
         // shard: the processor parses the record once, right after.
         if !rec.oversized
-            && let Some(key) = instances::record_key(rec.bytes, &self.instance_by)
+            && let Some(key) = instance_table::record_key(rec.bytes, &self.instance_by)
         {
             backend.arriving(&key, proc);
         }
@@ -138,12 +138,9 @@ impl Shared {
         if self.active && !holding {
             proc.end_of_read();
             self.active = false;
-            log::log(
-                Level::Warn,
-                &format!(
-                    "lease: not holding partition {} (renewal overdue or taken over); standing by",
-                    lease.name
-                ),
+            log_warn!(
+                "lease: not holding partition {} (renewal overdue or taken over); standing by",
+                lease.name
             );
         }
         if lost {
@@ -197,11 +194,8 @@ impl Shared {
             stepped += 1;
         }
         proc.end_of_read();
-        log::log(
-            Level::Info,
-            &format!(
-                "lease: holding partition {name}; replayed {stepped} buffered records ({skipped} already covered by the saved state)"
-            ),
+        log_info!(
+            "lease: holding partition {name}; replayed {stepped} buffered records ({skipped} already covered by the saved state)"
         );
     }
 }

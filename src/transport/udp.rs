@@ -28,12 +28,9 @@ pub async fn run(
     })
     .await?;
     out_sock.connect(send).await?;
-    crate::log::log(
-        crate::log::Level::Info,
-        &format!(
-            "udp: listening on {}, sending to {send}",
-            sock.local_addr()?
-        ),
+    log_info!(
+        "udp: listening on {}, sending to {send}",
+        sock.local_addr()?
     );
     let mut sink = Datagrams {
         sock: out_sock,

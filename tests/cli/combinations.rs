@@ -48,7 +48,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tessla_telegraf::processor::clock::Wall;
-use tessla_telegraf::processor::instances::shard_of;
+use tessla_telegraf::processor::instance_table::shard_of;
 use tessla_telegraf::processor::versions::Selector;
 use tessla_telegraf::processor::{LateMode, Options, Processor};
 use tessla_telegraf::spec_feed::bundle::{Bundle, BundleFile, Link};

@@ -1,7 +1,8 @@
 //! The spec every subcommand loads: the options that shape it (`--base-time`, `--set`, and
 //! `TESSLA_SET` without `--set`: [`SpecOptions`]), the engine's load options made from them
 //! ([`load_options`]), and the rule that a spec without outputs checks nothing
-//! ([`require_outputs`]).
+//! ([`require_outputs`]). Not the `spec` subcommand (the fleet's spec channel): that is
+//! `spec_cmd.rs`.
 
 use clap::Args;
 

@@ -3,7 +3,8 @@
 //! Owns: keys (the values of the instance tags in a metric; a missing tag is part of the key as
 //! "absent"), slots that stay valid while an instance lives, least-recently-used order for
 //! `--max-instances`, and wall-clock idleness for `--instance-idle`.
-//! What an instance holds is up to the caller (the step loop stores a monitor and its tags).
+//! What an instance holds is up to the caller (`pool.rs` stores a monitor and its tags, and decides
+//! when one is created and evicted).
 //! Also: the instance key of a record, read in one place ([`key_values`] from its bytes,
 //! [`key_of`] from a parsed metric), and so which worker thread a record's instance belongs to
 //! ([`shard_of`], `--threads`) and which instance a shared store restores for it
