@@ -3,6 +3,8 @@
 //! In-process (default) the run is made twice with the same seed, monitor off (the default
 //! robot) and on (the augmented robot), and the summary compares them; the output file holds
 //! the run `--monitor` chooses. With `--broker` the one chosen run drives the real pipeline.
+//! With `--shared-floor N` it writes the records of N robots sharing one floor (the fleet
+//! example's input, `crate::simulate::shared_floor`) and runs no monitor.
 
 use super::error::{CliError, CliResult};
 use super::spec_options::{SpecOptions, load_options};
@@ -88,6 +90,12 @@ pub struct SimulateArgs {
     /// Print the summary as one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Write the records of N robots sharing one floor (positions x, y; two of them in zone A
+    /// at times, lanes 0.4 m apart) to `--output` or stdout, for `run --fleet-spec
+    /// specs/fleet/fleet.tessla` (docs/fleet.md); no monitor runs. `--duration` (default 60 s)
+    /// and `--seed` apply.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub shared_floor: Option<u32>,
     /// Least severe messages written to stderr.
     #[arg(long, value_enum, default_value_t)]
     pub log_level: super::log_level::LogLevel,
@@ -165,6 +173,30 @@ fn scenario_of(args: &SimulateArgs) -> Result<Scenario, CliError> {
     Ok(s)
 }
 
+/// `--shared-floor N`: the robots' records, to `--output` or stdout.
+fn shared_floor(args: &SimulateArgs, robots: usize) -> CliResult {
+    let seconds = match args.duration {
+        Some(d) => positive("duration", d).map_err(|e| bad(&e))?,
+        None => 60.0,
+    };
+    let text = crate::simulate::shared_floor::records(
+        robots,
+        seconds,
+        closed_loop::START_NS,
+        args.seed,
+        "sim",
+    );
+    let written = match &args.output {
+        Some(path) => std::fs::write(path, text.as_bytes())
+            .map_err(|e| format!("cannot write {}: {e}", path.display())),
+        None => std::io::stdout()
+            .lock()
+            .write_all(text.as_bytes())
+            .map_err(|e| format!("stdout: {e}")),
+    };
+    written.map_err(|e| CliError::io(format!("simulate: {e}")))
+}
+
 /// The monitors' program from `--spec` (or the bundled one) and `--set`/`--base-time`.
 fn load(args: &SimulateArgs) -> Result<Arc<tessla_engine::Program>, String> {
     let options = load_options(&args.spec_options)?;
@@ -184,6 +216,9 @@ fn load(args: &SimulateArgs) -> Result<Arc<tessla_engine::Program>, String> {
 
 pub fn run(args: SimulateArgs) -> CliResult {
     log::set_level(args.log_level.level());
+    if let Some(robots) = args.shared_floor {
+        return shared_floor(&args, robots as usize);
+    }
     let scenario = scenario_of(&args)?;
     let broker = match args.broker.as_deref().map(str::parse::<Broker>) {
         None => None,

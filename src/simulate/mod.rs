@@ -4,8 +4,9 @@
 //! [`terrain`] (the ground along the path), [`program`] (the robot's expected-speed schedule),
 //! [`lidar`] (the 2-D map and the sensor's faults), [`closed_loop`] (the clock, the message,
 //! the measures), [`in_process`] and [`mqtt_twin`] (the two ways to reach the monitors),
-//! [`summary`] (the table and JSON printed at the end), and [`scenario`] (building a run from
-//! the named bundled parts). The command line lives in `crate::cli::simulate`; the model and
+//! [`summary`] (the table and JSON printed at the end), [`scenario`] (building a run from
+//! the named bundled parts), and [`shared_floor`] (robots sharing one floor, for the fleet
+//! example). The command line lives in `crate::cli::simulate`; the model and
 //! where its parameters come from are documented in docs/simulation.md.
 
 pub mod closed_loop;
@@ -16,6 +17,7 @@ pub mod mqtt_twin;
 pub mod program;
 pub mod robot;
 pub mod scenario;
+pub mod shared_floor;
 pub mod summary;
 pub mod terrain;
 

@@ -1,12 +1,43 @@
 //! The dashboards in telegraf/dashboards/ query only names the bundled spec actually emits:
 //! every measurement, field and tag of every InfluxQL and Flux query appears in what our binary
 //! prints for the recorded run (pass-through telemetry and verdicts). Renaming an output
-//! therefore fails this test instead of silently blanking a panel.
+//! therefore fails this test instead of silently blanking a panel. The fleet panels (measurement
+//! `tessla_fleet`) are checked against what the binary prints for the fleet example
+//! (`--fleet-spec specs/fleet/fleet.tessla` over tests/fixtures/fleet/three_robots.lp).
 
 use crate::support::dashboards;
 use crate::support::recorded;
 
-use dashboards::{Emitted, Refs, flux_queries, flux_refs, influxql_queries, influxql_refs};
+use dashboards::{
+    Emitted, Refs, flux_queries, flux_refs, influxql_queries, influxql_refs, is_fleet,
+};
+
+/// What the binary prints for the fleet example: the robots' own lines and the fleet level's.
+fn fleet_example_output() -> String {
+    use crate::support::child::{root, run_text};
+    let robot = root().join("specs/fleet/robot.tessla");
+    let fleet = root().join("specs/fleet/fleet.tessla");
+    let input = std::fs::read_to_string(root().join("tests/fixtures/fleet/three_robots.lp"))
+        .expect("the fleet fixture");
+    let (out, err, code) = run_text(
+        &[
+            "--spec",
+            robot.to_str().unwrap(),
+            "--instance-by",
+            "topic",
+            "--fleet-spec",
+            fleet.to_str().unwrap(),
+            "--max-ahead",
+            "off",
+            "--allowed-lateness",
+            "off",
+        ],
+        &input,
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(out.lines().any(|l| l.starts_with("tessla_fleet ")), "{out}");
+    out
+}
 
 fn set(names: &[&str]) -> std::collections::BTreeSet<String> {
     names.iter().map(|s| s.to_string()).collect()
@@ -94,7 +125,9 @@ fn dashboards_cover_the_issue_panels() {
 fn every_dashboard_name_is_emitted_by_the_bundled_spec() {
     let (_, output) = recorded::recorded_output();
     let emitted = Emitted::from_lines(&output);
+    let fleet_emitted = Emitted::from_lines(&fleet_example_output());
     let mut problems = Vec::new();
+    let mut fleet_queries = 0;
     for (kind, queries, refs_of) in [
         (
             "InfluxQL",
@@ -109,6 +142,13 @@ fn every_dashboard_name_is_emitted_by_the_bundled_spec() {
                 !refs.measurements.is_empty(),
                 "{kind} {panel:?}: no measurement in {query}"
             );
+            // A fleet panel reads what the fleet example writes, the others the robot spec's run.
+            let emitted = if is_fleet(&query) {
+                fleet_queries += 1;
+                &fleet_emitted
+            } else {
+                &emitted
+            };
             for missing in emitted.missing(&refs) {
                 problems.push(format!(
                     "{kind} panel {panel:?} queries {missing}, not emitted"
@@ -118,10 +158,47 @@ fn every_dashboard_name_is_emitted_by_the_bundled_spec() {
     }
     assert!(
         problems.is_empty(),
-        "{}\nemitted: {:#?}",
+        "{}\nemitted: {:#?}\nfleet: {:#?}",
         problems.join("\n"),
-        emitted
+        emitted,
+        fleet_emitted
     );
+    // Three fleet panels in each dashboard (P2 count, closest distance, zone A occupancy).
+    assert!(fleet_queries >= 6, "{fleet_queries} fleet queries");
+}
+
+/// The robot dashboard has a "Fleet" row, and both dashboards chart the fleet example's outputs
+/// from `tessla_fleet`. A fleet series has no robot tag and no spec version (the fleet level
+/// runs one spec over every robot), so fleet queries select neither; they name no robot tag.
+#[test]
+fn the_fleet_panels_show_the_examples_outputs_and_select_no_robot() {
+    assert!(
+        dashboards::row_titles(dashboards::ROBOT)
+            .iter()
+            .any(|t| t.starts_with("Fleet")),
+        "a Fleet row in the robot dashboard"
+    );
+    for queries in [influxql_queries(), flux_queries()] {
+        let fleet: Vec<&(String, String)> = queries.iter().filter(|(_, q)| is_fleet(q)).collect();
+        for name in [
+            "fleet_p2_violations",
+            "closest_distance",
+            "zone_a_occupancy",
+        ] {
+            assert!(
+                fleet.iter().any(|(_, q)| q.contains(name)),
+                "a fleet panel shows {name}: {fleet:#?}"
+            );
+        }
+        for (panel, query) in fleet {
+            for tag in ["topic", "robot", "spec_version"] {
+                assert!(
+                    !query.contains(&format!("\"{tag}\"")) && !query.contains(&format!("r.{tag}")),
+                    "{panel:?}: the fleet has no {tag} tag: {query}"
+                );
+            }
+        }
+    }
 }
 
 /// `node tools/grafana-schema/check.mjs FILES...`, or `None` (after saying why, a failure with
@@ -186,7 +263,9 @@ fn dashboards_check_against_grafanas_schema() {
 
 #[test]
 fn every_robot_panel_selects_robots_and_versions_and_names_no_topic() {
-    for (panel, query) in influxql_queries() {
+    // Fleet panels are the exception, checked by
+    // the_fleet_panels_show_the_examples_outputs_and_select_no_robot.
+    for (panel, query) in influxql_queries().into_iter().filter(|(_, q)| !is_fleet(q)) {
         assert!(
             dashboards::without_selection(&query).is_some(),
             "{panel:?}: no robot selection in {query}"
@@ -208,7 +287,11 @@ fn every_robot_panel_selects_robots_and_versions_and_names_no_topic() {
         "filter(fn: (r) => v.spec_version == \"All\" or r.spec_version == v.spec_version)";
     let any_spec = dashboards::flux_any_spec_queries();
     assert!(any_spec.len() >= 4, "the any-spec dashboard's charts");
-    for (chart, query) in flux_queries().into_iter().chain(any_spec.clone()) {
+    for (chart, query) in flux_queries()
+        .into_iter()
+        .filter(|(_, q)| !is_fleet(q))
+        .chain(any_spec.clone())
+    {
         let fixed = query.replace(" == v.robot", "");
         assert!(
             !fixed.contains("r.topic ==") && !fixed.contains("r[\"topic\"] =="),

@@ -298,3 +298,87 @@ fn link_drops_let_no_stale_action_through_the_robots_gate() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// `simulate --shared-floor 3` writes three robots sharing one floor; `run --fleet-spec
+/// specs/fleet/fleet.tessla` over them shows the fleet example at work: two robots in zone A
+/// at once (occupancy 2, a slow-down action to each of them, never to the third, on its lane
+/// outside the zone), the closest distance falling below 0.5 m, and the third robot's stall
+/// counted by the fleet's P2 violations.
+#[test]
+fn shared_floor_robots_fire_the_fleet_examples_slow_down() {
+    let dir = tempfile::tempdir().unwrap();
+    let records = dir.path().join("floor.lp");
+    let out = simulate(&[
+        "--shared-floor",
+        "3",
+        "--duration",
+        "30",
+        "--output",
+        records.to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let input = std::fs::read_to_string(&records).unwrap();
+    // 5 Hz for 30 s, three robots.
+    assert_eq!(input.lines().count(), 150 * 3);
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let robot = root.join("specs/fleet/robot.tessla");
+    let fleet = root.join("specs/fleet/fleet.tessla");
+    let (stdout, err, code) = crate::support::child::run_text(
+        &[
+            "--spec",
+            robot.to_str().unwrap(),
+            "--instance-by",
+            "topic",
+            "--fleet-spec",
+            fleet.to_str().unwrap(),
+            "--max-ahead",
+            "off",
+            "--allowed-lateness",
+            "off",
+            "--no-passthrough",
+        ],
+        &input,
+    );
+    assert_eq!(code, 0, "{err}");
+    let fleet_lines: Vec<&str> = stdout
+        .lines()
+        .filter(|l| l.starts_with("tessla_fleet "))
+        .collect();
+    let field = |name: &str| -> Vec<f64> {
+        fleet_lines
+            .iter()
+            .filter_map(|l| {
+                let fields = l.split(' ').nth(1)?;
+                let v = fields
+                    .split(',')
+                    .find_map(|f| f.strip_prefix(&format!("{name}=")))?;
+                v.trim_end_matches('i').parse().ok()
+            })
+            .collect()
+    };
+    let occupancy = field("zone_a_occupancy");
+    assert!(occupancy.contains(&2.0), "{occupancy:?}");
+    assert!(occupancy.iter().all(|&n| n <= 2.0), "{occupancy:?}");
+    let closest = field("closest_distance");
+    assert!(closest.iter().any(|&d| d < 0.5), "{closest:?}");
+    assert!(closest.iter().any(|&d| d > 0.5), "{closest:?}");
+    let p2 = field("fleet_p2_violations");
+    assert!(p2.contains(&1.0), "{p2:?}");
+    let actions: Vec<&str> = stdout
+        .lines()
+        .filter(|l| l.starts_with("action,source=fleet,"))
+        .collect();
+    for robot in ["tessla/tb3-1", "tessla/tb3-2"] {
+        assert!(
+            actions
+                .iter()
+                .any(|l| l.contains(&format!("topic={robot} ")) && l.contains("speed_limit=0.05")),
+            "no slow-down to {robot}: {actions:#?}"
+        );
+    }
+    assert!(!actions.iter().any(|l| l.contains("tb3-3")), "{actions:#?}");
+}

@@ -1,13 +1,16 @@
 //! Our output in a real InfluxDB 1.x: every line we print is accepted by its /write API (its
 //! parser is an independent check of our line protocol), every point is stored, and each
 //! InfluxQL dashboard panel query answers what the points say (worked out here without InfluxDB).
+//! The fleet example's output (`--fleet-spec`) too: its fleet panels answer what `tessla_fleet`
+//! holds.
 
 use crate::support::dashboards;
 use crate::support::recorded;
 use crate::support::servers;
 
 use dashboards::{
-    Expected, Pick, Point, expected_answer, fill, influxql_queries, points, without_selection,
+    Expected, Pick, Point, expected_answer, fill, influxql_queries, is_fleet, points,
+    without_selection,
 };
 use serde_json::Value;
 
@@ -35,11 +38,10 @@ fn answer(json: &Value, aggregate: bool) -> Expected {
     }
 }
 
-/// Write `output` to a fresh InfluxDB, check it all arrived, run every panel query.
-fn check_output_in_influxdb(output: &str) {
-    let Some(influx) = servers::Influxd::start() else {
-        return;
-    };
+/// Write `output` to a fresh InfluxDB, check it all arrived, run every panel query; the
+/// queries that returned data (`None`: no InfluxDB here).
+fn check_output_in_influxdb(output: &str) -> Option<Vec<String>> {
+    let influx = servers::Influxd::start()?;
     let (status, json) = influx.query(None, &format!("CREATE DATABASE \"{DB}\""));
     assert_eq!(status, 200, "{json}");
 
@@ -67,10 +69,15 @@ fn check_output_in_influxdb(output: &str) {
 
     let first = pts.iter().map(|p| p.time).min().unwrap();
     let last = pts.iter().map(|p| p.time).max().unwrap();
-    let mut answered = 0;
+    let mut answered = Vec::new();
     for (panel, query) in influxql_queries() {
-        // All robots and versions: the selection matches every point (absent tags too).
-        let plain = without_selection(&query).expect("a robot and version selection");
+        // All robots and versions: the selection matches every point (absent tags too). A fleet
+        // panel has no selection: one series for the fleet.
+        let plain = if is_fleet(&query) {
+            query.clone()
+        } else {
+            without_selection(&query).expect("a robot and version selection")
+        };
         let want = expected_answer(&plain, &pts);
         let picks = [("robot", Pick::All), ("spec_version", Pick::All)]
             .into_iter()
@@ -82,11 +89,11 @@ fn check_output_in_influxdb(output: &str) {
         let got = answer(&json, matches!(want, Expected::Aggregate(_)));
         assert_eq!(got, want, "panel {panel:?}: {concrete}");
         if got != Expected::Rows(0) && got != Expected::Aggregate(0.0) {
-            answered += 1;
+            answered.push(query);
         }
     }
-    assert!(answered >= 8, "only {answered} panel queries returned data");
     drop(influx);
+    Some(answered)
 }
 
 /// Output shaped as ours: pass-through telemetry (string actualSpeed, lidar fields, Telegraf's
@@ -124,11 +131,57 @@ fn synthetic_output() -> String {
 
 #[test]
 fn synthetic_output_is_stored_and_every_panel_answers() {
-    check_output_in_influxdb(&synthetic_output());
+    if let Some(answered) = check_output_in_influxdb(&synthetic_output()) {
+        assert!(answered.len() >= 8, "only {answered:#?} returned data");
+    }
 }
 
 #[test]
 fn recorded_run_output_is_stored_and_every_panel_answers() {
     let (_, output) = recorded::recorded_output();
-    check_output_in_influxdb(&output);
+    if let Some(answered) = check_output_in_influxdb(&output) {
+        assert!(answered.len() >= 8, "only {answered:#?} returned data");
+    }
+}
+
+/// The fleet example (tests/fixtures/fleet/three_robots.lp through `--fleet-spec
+/// specs/fleet/fleet.tessla`) in a real InfluxDB: every fleet panel returns what `tessla_fleet`
+/// holds, and each has data.
+#[test]
+fn fleet_example_output_is_stored_and_every_fleet_panel_answers() {
+    use crate::support::child::{root, run_text};
+    let robot = root().join("specs/fleet/robot.tessla");
+    let fleet = root().join("specs/fleet/fleet.tessla");
+    let input = std::fs::read_to_string(root().join("tests/fixtures/fleet/three_robots.lp"))
+        .expect("the fleet fixture");
+    let (output, err, code) = run_text(
+        &[
+            "--spec",
+            robot.to_str().unwrap(),
+            "--instance-by",
+            "topic",
+            "--fleet-spec",
+            fleet.to_str().unwrap(),
+            "--max-ahead",
+            "off",
+            "--allowed-lateness",
+            "off",
+        ],
+        &input,
+    );
+    assert_eq!(code, 0, "{err}");
+    let Some(answered) = check_output_in_influxdb(&output) else {
+        return;
+    };
+    let fleet: Vec<&String> = answered.iter().filter(|q| is_fleet(q)).collect();
+    for name in [
+        "fleet_p2_violations",
+        "closest_distance",
+        "zone_a_occupancy",
+    ] {
+        assert!(
+            fleet.iter().any(|q| q.contains(name)),
+            "no data for {name}: {fleet:#?}"
+        );
+    }
 }

@@ -36,6 +36,10 @@ pub fn influxql_panels(file: &str) -> Vec<Panel> {
     let dash = read_json(file);
     let mut out = Vec::new();
     for panel in dash["panels"].as_array().expect("panels") {
+        // A row only groups the panels below it: it has no query.
+        if panel["type"] == "row" {
+            continue;
+        }
         let drops = panel["transformations"]
             .as_array()
             .map(|ts| {
@@ -74,6 +78,27 @@ pub fn variables(file: &str) -> Vec<(String, String)> {
                 v["query"].as_str().expect("query").to_string(),
             )
         })
+        .collect()
+}
+
+/// The measurement of the fleet level's outputs (`--fleet-spec`, docs/fleet.md): one series for
+/// the whole fleet, with no robot tag and no spec version.
+pub const FLEET_MEASUREMENT: &str = "tessla_fleet";
+
+/// Whether an InfluxQL or Flux query reads the fleet level's outputs.
+pub fn is_fleet(query: &str) -> bool {
+    query.contains(&format!("FROM \"{FLEET_MEASUREMENT}\""))
+        || query.contains(&format!("r._measurement == \"{FLEET_MEASUREMENT}\""))
+}
+
+/// The titles of the robot dashboard's rows.
+pub fn row_titles(file: &str) -> Vec<String> {
+    read_json(file)["panels"]
+        .as_array()
+        .expect("panels")
+        .iter()
+        .filter(|p| p["type"] == "row")
+        .filter_map(|p| p["title"].as_str().map(str::to_string))
         .collect()
 }
 
