@@ -37,6 +37,9 @@ const ROOT_LAYERS: Layers = &[
     &["spec_feed"],
     // Where monitor state is kept (a file, a NATS bucket and its lease).
     &["state"],
+    // NATS as both the state store and the spec channel use it: the connection, the URL, its
+    // secrets, the key layout in a bucket (neither of the two owns it).
+    &["nats"],
     // The processor: instances, the live clock, duplicates, reloads, wiring diagnostics.
     &["processor"],
     // The Telegraf binding: records to input events, outputs to metrics.

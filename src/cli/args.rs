@@ -286,7 +286,7 @@ pub struct SpecChannelArgs {
     /// that fails is refused and the running versions stay. Every outcome is a `tessla_spec`
     /// metric and is written to the channel for `tessla-telegraf spec status`.
     #[arg(long, value_name = "nats://HOST:PORT[/BUCKET]", value_parser = crate::spec_feed::nats::parse_url)]
-    pub spec_channel: Option<crate::state::url::Url>,
+    pub spec_channel: Option<crate::nats::url::Url>,
     /// The operator's public key(s) (`tessla-telegraf spec keygen` prints one): a rollout not
     /// signed with one of them is refused. Needed with --spec-channel (or --spec-trust-file).
     #[arg(

@@ -40,7 +40,7 @@ pub struct RunConfig {
 
 /// `--spec-channel` with its trusted keys (at least one).
 pub struct ChannelConfig {
-    pub url: crate::state::url::Url,
+    pub url: crate::nats::url::Url,
     pub trust: Vec<String>,
 }
 

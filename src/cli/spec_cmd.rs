@@ -11,6 +11,8 @@
 
 use super::error::{CliError, CliResult};
 use super::spec_options::{SpecOptions, load_options, require_outputs};
+use crate::nats::conn::Failure;
+use crate::nats::url::Url;
 use crate::processor::versions::Selector;
 use crate::spec_feed::bundle::Bundle;
 use crate::spec_feed::decide;
@@ -18,8 +20,6 @@ use crate::spec_feed::nats::{Decided, LIVE, Listed, Operator, Reported, Status, 
 use crate::spec_feed::sign::read_signing_key;
 use crate::spec_feed::status::{now_ns, show_time};
 use crate::spec_feed::{BASE, Decision, Phase, Rollout};
-use crate::state::nats_conn::Failure;
-use crate::state::url::Url;
 use clap::{Args, Subcommand};
 use serde_json::{Value, json};
 use std::io::Write;

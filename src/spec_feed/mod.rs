@@ -231,7 +231,7 @@ impl Updates {
             source,
             watch,
             channel: None,
-            host: crate::state::nats_conn::hostname(),
+            host: crate::nats::conn::hostname(),
             partition: partition.to_string(),
             outcomes: Vec::new(),
             compiled: HashMap::new(),

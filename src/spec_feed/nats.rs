@@ -1,6 +1,6 @@
 //! The fleet's spec channel: a JetStream key-value bucket (default `tessla_specs`) beside the
 //! state bucket, named by a URL in `--state`'s syntax with its login and TLS options (the
-//! connection, its failures and their messages are `state::nats_conn`'s).
+//! connection, its failures and their messages are `nats::conn`'s).
 //!
 //! Owns the bucket's layout (`docs/state-and-reload.md`, "Spec versions across a fleet"):
 //! - `bundle.<id>`: a version's [`Bundle`] as JSON (`id` = [`Bundle::id`]);
@@ -23,10 +23,10 @@ use super::sign::{self, Record};
 use super::status::now_ns;
 use super::{Arrival, BASE, Channel, Decision, Event, Outcome, Rollout};
 use crate::log::{self, mask};
+use crate::nats::conn::{Conn, Failure, connect, violation};
+use crate::nats::kv_keys::kv_key_part_of;
+use crate::nats::url::{DEFAULT_TTL, Url};
 use crate::processor::versions::Selector;
-use crate::state::kv_keys::kv_key_part_of;
-use crate::state::nats_conn::{Conn, Failure, connect, violation};
-use crate::state::url::{DEFAULT_TTL, Url};
 use async_nats::jetstream::{self, kv};
 use futures_util::StreamExt;
 use serde::{Deserialize, Serialize};
@@ -607,7 +607,7 @@ impl Drop for NatsFeed {
         };
         let put = async move {
             tokio::time::timeout(
-                crate::state::nats_conn::REQUEST_TIMEOUT,
+                crate::nats::conn::REQUEST_TIMEOUT,
                 store.put(key.as_str(), bytes.into()),
             )
             .await

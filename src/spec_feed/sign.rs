@@ -16,7 +16,7 @@
 //! bundle; a decision names its rollout's revision and digest.
 
 use super::{Decision, Rollout};
-use crate::state::secrets::SecretSource;
+use crate::nats::secrets::SecretSource;
 use nkeys::KeyPair;
 use serde::Serialize;
 use serde::de::DeserializeOwned;

@@ -4,8 +4,8 @@
 //! the operator mistakes caught: a lease live in another bucket refuses the start, a long
 //! standby reports partitions nobody holds.
 
-use super::kv_keys::{kv_key_part_of, partition_of};
-use super::nats_conn::{Conn, REQUEST_TIMEOUT, hostname};
+use crate::nats::conn::{Conn, REQUEST_TIMEOUT, hostname};
+use crate::nats::kv_keys::{kv_key_part_of, partition_of};
 use async_nats::jetstream::{self, kv};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};

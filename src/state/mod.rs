@@ -10,14 +10,11 @@
 
 pub mod entry;
 pub mod file;
-pub mod kv_keys;
 pub mod lease;
 pub mod nats;
-pub mod nats_conn;
 pub mod restore;
-pub mod secrets;
-pub mod url;
 
+use crate::nats::url::Url;
 use crate::processor::Processor;
 use crate::processor::instance_table::Key;
 use std::io;
@@ -30,7 +27,7 @@ pub enum Target {
     /// `--state FILE`: one file, this module.
     File(PathBuf),
     /// `--state nats://HOST:PORT[,HOST:PORT...]/BUCKET[?options]`: a JetStream key-value bucket.
-    Nats(Box<url::Url>),
+    Nats(Box<Url>),
 }
 
 /// Parse `--state`: `nats://...` is a bucket, anything else a file path. Anything that looks
@@ -40,7 +37,7 @@ impl Target {
     pub fn parse(s: &str) -> Result<Target, String> {
         let lower = s.to_ascii_lowercase();
         if s.contains("://") || lower.starts_with("nats:") || lower.starts_with("tls:") {
-            url::Url::parse(s).map(|u| Target::Nats(Box::new(u)))
+            Url::parse(s).map(|u| Target::Nats(Box::new(u)))
         } else if s.is_empty() {
             Err("empty path".into())
         } else {

@@ -5,14 +5,14 @@
 //! guarantees are in `docs/state-and-reload.md` ("Shared state on NATS").
 
 use super::entry::Programs;
-use super::kv_keys::kv_key;
-use super::kv_keys::kv_key_part_of;
 use super::lease::Lease;
 use super::lease::lease_elsewhere;
-use super::nats_conn::{Conn, Failure, connect, err, permission_failure, violation};
 use super::restore::Restorer;
-use super::url::Url;
 use super::{Backend, Context, entry, fingerprint};
+use crate::nats::conn::{Conn, Failure, connect, err, permission_failure, violation};
+use crate::nats::kv_keys::kv_key;
+use crate::nats::kv_keys::kv_key_part_of;
+use crate::nats::url::Url;
 use crate::processor::Processor;
 use crate::processor::instance_table::Key;
 use async_nats::jetstream::kv;

@@ -56,7 +56,7 @@ impl Conn {
     }
 }
 
-pub(super) fn err(e: impl std::fmt::Display) -> io::Error {
+pub(crate) fn err(e: impl std::fmt::Display) -> io::Error {
     io::Error::other(e.to_string())
 }
 
@@ -191,7 +191,7 @@ fn connect_failure(url: &Url, e: &async_nats::ConnectError) -> String {
 
 /// An I/O error during the TLS handshake (the crate reports some as I/O): a certificate the
 /// client does not trust, or a TLS client meeting a plain server.
-pub(super) fn looks_like_tls(url: &Url, detail: &str) -> bool {
+pub(crate) fn looks_like_tls(url: &Url, detail: &str) -> bool {
     let d = detail.to_ascii_lowercase();
     d.contains("certificate")
         || d.contains("tls")
@@ -199,7 +199,7 @@ pub(super) fn looks_like_tls(url: &Url, detail: &str) -> bool {
         || (url.tls.required && !d.contains("refused"))
 }
 
-pub(super) fn tls_failure(at: &str, detail: &str) -> String {
+pub(crate) fn tls_failure(at: &str, detail: &str) -> String {
     format!(
         "TLS failed with {at}: {detail}; check tls-ca=PATH (the CA that signed the servers' \
              certificates), the server name in the URL against the certificate, and tls-cert/tls-key \

@@ -39,7 +39,7 @@ pub(crate) fn kv_key_part_of(name: &str) -> String {
 }
 
 /// The partition name of lease key `lease.v<name>` (its encoding undone for the usual names).
-pub(super) fn partition_of(key: &str) -> String {
+pub(crate) fn partition_of(key: &str) -> String {
     let part = key.strip_prefix("lease.v").unwrap_or(key);
     let mut out = String::new();
     let mut rest = part;

@@ -299,7 +299,7 @@ impl Url {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::state::secrets::{Secret, SecretSource};
+    use crate::nats::secrets::{Secret, SecretSource};
 
     #[test]
     fn urls_parse_with_their_options() {
