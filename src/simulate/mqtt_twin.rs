@@ -11,7 +11,7 @@
 use super::closed_loop::{Message, Reply, Twin};
 use super::gate::Action;
 use super::in_process::action_of;
-use crate::log::{self, Level};
+use crate::log;
 use crate::replay::Sample;
 use crate::replay::message::{MessageOptions, to_json};
 use crate::replay::mqtt::{Broker, Publisher};
@@ -72,7 +72,7 @@ impl MqttTwin {
                         if !ready {
                             let _ = ready_tx.send(Err(format!("MQTT broker {name}: {e}")));
                         } else {
-                            log::log(Level::Error, &format!("MQTT broker {name}: {e}"));
+                            log_error!("MQTT broker {name}: {e}");
                         }
                         return;
                     }
