@@ -9,6 +9,7 @@
 //! - 4: `run`'s step watchdog: a step made no progress for `--step-timeout`
 //! - 5: `spec publish`, `spec rollback`, `spec decide`: the fleet aborted the rollout
 
+use crate::nats::conn::Failure;
 use std::fmt;
 
 /// Why a subcommand failed, as its exit code says (README "Exit codes"); success is 0.
@@ -64,6 +65,26 @@ impl fmt::Display for CliError {
 }
 
 impl std::error::Error for CliError {}
+
+/// The one conversion of a NATS failure (state store, spec channel): a configuration mistake is
+/// exit 2, the connection exit 3; the message as the failure tells it (callers name the part
+/// with [`CliError::within`]).
+impl From<Failure> for CliError {
+    fn from(f: Failure) -> Self {
+        match f {
+            Failure::Config(m) => CliError::spec(m),
+            Failure::Io(m) => CliError::io(m),
+        }
+    }
+}
+
+impl CliError {
+    /// The same error, its message led by `what: ` (`state`, `spec channel`, `spec`).
+    pub fn within(mut self, what: &str) -> Self {
+        self.message = format!("{what}: {}", self.message);
+        self
+    }
+}
 
 /// What every subcommand returns.
 pub type CliResult = Result<(), CliError>;

@@ -9,7 +9,6 @@ use super::ending::{finish, runtime};
 use super::error::{CliError, CliResult};
 use super::spec_options::require_outputs;
 use crate::fleet::Level;
-use crate::nats::conn::Failure;
 use crate::processor::Processor;
 use crate::spec_feed::Updates;
 use crate::spec_feed::nats::NatsFeed;
@@ -63,10 +62,8 @@ pub fn run(args: RunArgs) -> CliResult {
     };
     let mut updates = Updates::new(config.spec.clone(), config.watch_spec, &partition);
     if let Some(ch) = &config.channel {
-        let (feed, first) = NatsFeed::connect(&ch.url, &ch.trust).map_err(|e| match e {
-            Failure::Config(m) => CliError::spec(format!("spec channel: {m}")),
-            Failure::Io(m) => CliError::io(format!("spec channel: {m}")),
-        })?;
+        let (feed, first) = NatsFeed::connect(&ch.url, &ch.trust)
+            .map_err(|e| CliError::from(e).within("spec channel"))?;
         updates.with_channel(Box::new(feed), first);
     }
     let store = backend.as_deref_mut().map(|backend| Store {
@@ -137,10 +134,8 @@ fn open_store(s: &StateConfig) -> Result<(Box<dyn Backend>, Option<SharedStore>)
             ))
         }
         Target::Nats(url) => {
-            let backend = NatsBackend::connect(url, &s.context).map_err(|e| match e {
-                Failure::Config(m) => CliError::spec(format!("state: {m}")),
-                Failure::Io(m) => CliError::io(format!("state: {m}")),
-            })?;
+            let backend = NatsBackend::connect(url, &s.context)
+                .map_err(|e| CliError::from(e).within("state"))?;
             let lease = backend.lease();
             Ok((
                 Box::new(backend),

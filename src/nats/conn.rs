@@ -62,9 +62,13 @@ pub(crate) fn err(e: impl std::fmt::Display) -> io::Error {
 
 /// Why connecting failed: a mistake in the URL's credentials or TLS files (exit 2), or the
 /// connection itself (exit 3; unreachable, refused credentials, TLS, permissions).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum Failure {
+    /// A mistake in the URL's credentials or TLS files.
+    #[error("{0}")]
     Config(String),
+    /// The connection: unreachable, refused credentials, TLS, permissions.
+    #[error("{0}")]
     Io(String),
 }
 

@@ -56,11 +56,9 @@ pub(super) fn init(a: InitArgs) -> CliResult {
     ))
 }
 
+/// A NATS failure of the `spec` command, its message led by `spec: `.
 pub(super) fn failure(f: Failure) -> CliError {
-    match f {
-        Failure::Config(m) => CliError::spec(format!("spec: {m}")),
-        Failure::Io(m) => CliError::io(format!("spec: {m}")),
-    }
+    CliError::from(f).within("spec")
 }
 
 pub(super) fn print(text: &str) -> CliResult {
