@@ -1,7 +1,8 @@
 //! Fleet throughput on NATS and standby takeover time, for `make bench-nats` (BENCHMARKS.md,
-//! "Fleet on NATS"). Starts a real 3-node nats-server cluster (tests/support/nats_cluster.rs)
-//! with the shipped subject mapping for 1, 2 and 4 partitions, one stand-in Telegraf per
-//! partition (tests/support/nats_standin.rs) running the release binary with
+//! "Fleet on NATS"). Starts a real 3-node nats-server cluster
+//! (crates/test-support/src/nats_cluster.rs) with the shipped subject mapping for 1, 2 and 4
+//! partitions, one stand-in Telegraf per partition (crates/test-support/src/nats_standin.rs)
+//! running the release binary with
 //! `--state nats://...?lease=p<N>`, and publishes the recorded run of `--robots` robots (JSON, as
 //! the robots send it, straight onto `robots.<id>.telemetry`) as fast as the cluster takes it.
 //!
@@ -13,16 +14,8 @@
 //! Run: `cargo build --release && cargo run --release --example fleet_nats -- [--robots 64]
 //!       [--reps 3] [--bin target/release/tessla-telegraf]`. Prints a markdown table.
 
-// The tests' helpers (tests/support/), of which this tool uses a part.
-#[path = "../tests/support/nats_cluster.rs"]
-#[allow(dead_code)]
-mod nats_cluster;
-#[path = "../tests/support/nats_standin.rs"]
-#[allow(dead_code)]
-mod nats_standin;
-#[path = "../tests/support/servers.rs"]
-#[allow(dead_code)]
-mod servers;
+// The tests' helpers (the dev-only crate test-support), of which this tool uses a part.
+use test_support::{nats_cluster, nats_standin};
 
 use influxdb_line_protocol::{FieldValue, parse_lines};
 use nats_cluster::Cluster;

@@ -26,13 +26,13 @@
 //! P3 then judge an empty scan), to see what the lidar costs Telegraf. Prints one line: `robots=.. sent=.. answered=.. lost=..
 //! p50_ms=.. p90_ms=.. p99_ms=.. max_ms=..` (the first `--warmup` seconds not counted).
 
-// The tests' helpers (tests/support/), of which this tool uses a part.
+// The tests' helpers, of which this tool uses a part: the servers from the dev-only crate
+// test-support; the real Telegraf's helpers by path (they run the binary, named as `BIN` below,
+// which the root crate's tests take from `CARGO_BIN_EXE_*`).
 #[path = "../tests/support/real_telegraf.rs"]
 #[allow(dead_code)]
 mod real_telegraf;
-#[path = "../tests/support/servers.rs"]
-#[allow(dead_code)]
-mod servers;
+use test_support::servers;
 
 use rumqttc::{Client, Event, MqttOptions, Packet, QoS};
 use std::collections::VecDeque;

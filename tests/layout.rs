@@ -100,6 +100,16 @@ const LINEPROTO_LAYERS: Layers = &[
     &["list"],
 ];
 
+/// test-support (dev-only): the NATS stand-in on the cluster on the servers; the TeSSLa suite's
+/// cases beside them; the workspace's folders under all.
+const TEST_SUPPORT_LAYERS: Layers = &[
+    &["lib"],
+    &["nats_standin", "tessla_suite"],
+    &["nats_cluster"],
+    &["servers"],
+    &["paths"],
+];
+
 struct Crate {
     /// The workspace member's folder (`.` for the root crate).
     dir: &'static str,
@@ -133,6 +143,11 @@ const LIBRARIES: &[Crate] = &[
     Crate {
         dir: "crates/lineproto",
         layers: LINEPROTO_LAYERS,
+        forbidden: &[],
+    },
+    Crate {
+        dir: "crates/test-support",
+        layers: TEST_SUPPORT_LAYERS,
         forbidden: &[],
     },
 ];

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # After `cargo test` (make test): say loudly which suites skipped and why. A test that skips
 # writes a note into the folder given here (target/tmp/skipped-suites: see
-# tests/support/tessla_suite.rs); no note, no skip.
+# crates/test-support/src/paths.rs); no note, no skip.
 set -u
 dir=${1:-target/tmp/skipped-suites}
 shopt -s nullglob

@@ -2,29 +2,27 @@
 //! ([`child`], [`live_child`]), the recorded run ([`recorded`]), real servers ([`servers`],
 //! [`nats_cluster`], [`real_telegraf`]) and the clients and stand-ins that talk to them.
 //!
-//! `bench/fleet_nats.rs` and `bench/telegraf_delay.rs` include some of these files by path, and
-//! crates/tessla-trace's conformance test includes `tessla_suite.rs`: a file here names its
-//! siblings as `super::...`, which is the includer's root there.
+//! The helpers other crates and tools share too (servers, the NATS cluster and stand-in,
+//! TeSSLa's suite) live in the dev-only crate `test-support` (crates/test-support) and are
+//! re-exported here under their old names. `bench/telegraf_delay.rs` still includes
+//! `real_telegraf.rs` by path (it runs the binary that only this crate's tests know by
+//! `CARGO_BIN_EXE_*`): a file here names its siblings as `super::...`.
 
 pub mod child;
 // Without the `tools` feature the tests of `replay`, `simulate` and most of the real Telegraf's
 // are left out (tests/cli/mod.rs, tests/servers/mod.rs), and with them the only users of some
-// helpers of these four.
+// helpers of these three.
 #[cfg_attr(not(feature = "tools"), allow(dead_code))]
 pub mod dashboards;
 pub mod live_child;
 #[cfg_attr(not(feature = "tools"), allow(dead_code))]
 pub mod mqtt_client;
-pub mod nats_cluster;
-pub mod nats_standin;
 #[cfg_attr(not(feature = "tools"), allow(dead_code))]
 pub mod real_telegraf;
 pub mod recorded;
-#[cfg_attr(not(feature = "tools"), allow(dead_code))]
-pub mod servers;
 pub mod stdlib_cases;
-pub mod tessla_suite;
 pub mod udp_ends;
+pub use test_support::{nats_cluster, nats_standin, servers, tessla_suite};
 
 /// The binary under test.
 pub const BIN: &str = env!("CARGO_BIN_EXE_tessla-telegraf");

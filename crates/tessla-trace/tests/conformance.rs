@@ -14,8 +14,7 @@
 //! `REQUIRE_TESSLA_SUITE=1`.
 
 // Shared with the workspace root's snapshot test (tests/cli/state_suite.rs).
-#[path = "../../../tests/support/tessla_suite.rs"]
-mod tessla_suite;
+use test_support::tessla_suite;
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;

@@ -12,8 +12,8 @@
 //!   `json_timestamp_units = "1ms"`: one message per action on `robots/<robot>/action`, i.e.
 //!   NATS subject `robots.<robot>.action` (published here directly on that subject).
 //!
-//! Needs its sibling `nats_cluster` (its [`super::nats_cluster::Login`]); bench/fleet_nats.rs
-//! includes both by path.
+//! Logs in as its sibling [`crate::nats_cluster`] says ([`crate::nats_cluster::Login`]);
+//! bench/fleet_nats.rs uses both.
 
 use influxdb_line_protocol::{FieldValue, parse_lines};
 use serde_json::{Map, Value, json};
@@ -170,7 +170,7 @@ impl NatsStandIn {
         nats_url: &str,
         partition: usize,
         args: &[String],
-        login: &super::nats_cluster::Login,
+        login: &crate::nats_cluster::Login,
     ) -> NatsStandIn {
         let login = login.clone();
         let mut child = Command::new(bin)

@@ -3,24 +3,12 @@
 //! `REQUIRE_TESSLA_SUITE=1` fails), every case descriptor with a spec, and the load options a
 //! descriptor asks for.
 //!
-//! Also included by path from a member crate's tests (crates/tessla-trace/tests/conformance.rs:
-//! `#[path = "../../../tests/support/tessla_suite.rs"]`), which uses a part of it; it needs
-//! `serde_json` and `tessla-engine`.
-#![allow(dead_code)]
+//! The root crate's tests and crates/tessla-trace/tests/conformance.rs use it.
 
 use std::path::{Path, PathBuf};
 use tessla_engine::LoadOptions;
 
-/// The workspace's root folder (the nearest folder above the including crate with a
-/// `Cargo.lock`), whichever member crate includes this file.
-pub fn workspace_root() -> PathBuf {
-    let manifest = Path::new(env!("CARGO_MANIFEST_DIR"));
-    manifest
-        .ancestors()
-        .find(|d| d.join("Cargo.lock").is_file())
-        .unwrap_or(manifest)
-        .to_path_buf()
-}
+pub use crate::paths::workspace_root;
 
 /// The suite's folder; `None` (with a note on stderr) when it is missing and may be skipped.
 /// Panics when it is missing and `REQUIRE_TESSLA_SUITE` is set.
@@ -48,7 +36,7 @@ pub fn suite_or_skip(test: &str) -> Option<PathBuf> {
 /// Leave a note that `test` was skipped, and why, for `make test` to print loudly at the end
 /// (`tools/test-skips.sh` reads `target/tmp/skipped-suites/`).
 pub fn note_skip(test: &str, why: &str) {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("skipped-suites");
+    let dir = crate::paths::skip_dir();
     // Best effort: the note only adds to the skip message above.
     let _ = std::fs::create_dir_all(&dir);
     let _ = std::fs::write(dir.join(test), format!("{why}\n"));

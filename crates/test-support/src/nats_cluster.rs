@@ -9,7 +9,7 @@
 //! `make-test-certs.sh`, and the users and permissions of `accounts.conf` (its example robots
 //! replaced by the test's), each with a password made for the run ([`Cluster::login`]).
 //!
-//! Needs its sibling `servers` (port and binary lookup); bench/fleet_nats.rs includes both by path.
+//! Uses its sibling [`crate::servers`] (port and binary lookup); bench/fleet_nats.rs uses both.
 
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
@@ -26,16 +26,16 @@ pub fn one_fleet_at_a_time() -> std::sync::MutexGuard<'static, ()> {
     FLEET.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-pub use super::servers::free_port;
+pub use crate::servers::free_port;
 
 /// `nats-server`, or `None` after explaining how to get it (panics when servers are required).
 pub fn require_nats_server() -> Option<PathBuf> {
-    super::servers::require("nats-server", "nats-server")
+    crate::servers::require("nats-server", "nats-server")
 }
 
 /// The shipped mapping (`telegraf/fleet-nats/mapping.conf`, 2 partitions).
 pub fn shipped_mapping() -> String {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("telegraf/fleet-nats/mapping.conf");
+    let path = crate::paths::workspace_root().join("telegraf/fleet-nats/mapping.conf");
     std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
@@ -107,7 +107,7 @@ impl Login {
 
 /// The shipped `accounts.conf` with its example robots replaced by `robots` (same entry each).
 pub fn shipped_accounts(robots: &[String]) -> String {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("telegraf/fleet-nats/accounts.conf");
+    let path = crate::paths::workspace_root().join("telegraf/fleet-nats/accounts.conf");
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let begin = text
         .find("# robots begin")
@@ -166,8 +166,7 @@ fn password_var(user: &str) -> String {
 
 /// Make the test certificates with the shipped script into `dir`.
 pub fn make_certs(dir: &Path) {
-    let script =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("telegraf/fleet-nats/make-test-certs.sh");
+    let script = crate::paths::workspace_root().join("telegraf/fleet-nats/make-test-certs.sh");
     let out = Command::new("bash")
         .arg(&script)
         .arg(dir)

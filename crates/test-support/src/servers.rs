@@ -61,12 +61,9 @@ pub fn require(name: &str, package: &str) -> Option<PathBuf> {
     eprintln!("SKIPPED: {hint}");
     // The note `make test` prints loudly at the end (tools/test-skips.sh), as
     // tessla_suite::note_skip leaves for a missing suite; best effort, the message above stands.
-    // (Only tests have a target tmp folder; the benchmarks that share this file do not.)
-    if let Some(tmp) = option_env!("CARGO_TARGET_TMPDIR") {
-        let dir = std::path::Path::new(tmp).join("skipped-suites");
-        let _ = std::fs::create_dir_all(&dir);
-        let _ = std::fs::write(dir.join(format!("needs-{name}")), format!("{hint}\n"));
-    }
+    let dir = crate::paths::skip_dir();
+    let _ = std::fs::create_dir_all(&dir);
+    let _ = std::fs::write(dir.join(format!("needs-{name}")), format!("{hint}\n"));
     None
 }
 
