@@ -325,7 +325,7 @@ fn parse_bound(s: &str) -> Result<Bound, String> {
 }
 
 /// `--state`, read as the store's own parser reads it.
-fn parse_state(s: &str) -> Result<crate::state::Target, String> {
+fn parse_state(s: &str) -> Result<crate::state::Target, crate::state::TargetError> {
     crate::state::Target::parse(s)
 }
 

@@ -73,6 +73,11 @@ pub enum Failure {
 }
 
 impl Failure {
+    /// A configuration mistake, told as `e` tells it.
+    pub fn config(e: impl std::fmt::Display) -> Failure {
+        Failure::Config(e.to_string())
+    }
+
     pub fn message(&self) -> &str {
         match self {
             Failure::Config(m) | Failure::Io(m) => m,
@@ -104,17 +109,17 @@ async fn connect_options(
     options = match &url.auth {
         Auth::None => options,
         Auth::UserPassword { user, password } => {
-            let password = password.read("NATS password").map_err(Failure::Config)?;
+            let password = password.read("NATS password").map_err(Failure::config)?;
             options.user_and_password(user.clone(), password.expose().to_string())
         }
         Auth::Token(t) => {
-            let token = t.read("NATS token").map_err(Failure::Config)?;
+            let token = t.read("NATS token").map_err(Failure::config)?;
             options.token(token.expose().to_string())
         }
         Auth::NKey(path) => {
             let seed = SecretSource::File(path.clone())
                 .read("NKey seed")
-                .map_err(Failure::Config)?;
+                .map_err(Failure::config)?;
             if !seed.expose().starts_with('S') {
                 return Err(Failure::Config(format!(
                     "{} does not hold an NKey seed (a line starting with `SU`, as `nk -gen user` writes it)",

@@ -41,12 +41,76 @@ pub struct Tls {
 pub const FORM: &str =
     "nats://HOST:PORT[,HOST:PORT...]/BUCKET[?lease=NAME&user=NAME&password-env=VAR&tls-ca=PATH...]";
 
+/// Why a `nats://` URL is refused. Every message shows the URL with its secrets masked
+/// (`shown`) and names what is at fault ([`Problem`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum UrlError {
+    /// The URL's shape (scheme, servers, bucket, the user-info): told with the expected form.
+    #[error("`{shown}`: {why} (expected {FORM})")]
+    Form { shown: String, why: Problem },
+    /// The bucket's name, an option, or the login the options make.
+    #[error("`{shown}`: {why}")]
+    Option { shown: String, why: Problem },
+}
+
+/// What is wrong in a `nats://` URL, as told after the URL itself.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Problem {
+    #[error(
+        "scheme `{0}://` is not a state store (a file: give its path; NATS over TLS: \
+         nats://...?tls-ca=PATH)"
+    )]
+    Scheme(String),
+    #[error(
+        "not a URL: `nats:` must be followed by `//` (to name a file called so, write ./nats:...)"
+    )]
+    NoSlashes,
+    #[error("no bucket")]
+    NoBucket,
+    #[error("no server")]
+    NoServer,
+    #[error("bucket `{0}` must be letters, digits, `_` or `-`")]
+    BadBucket(String),
+    #[error("the user or password is not UTF-8 once decoded")]
+    NotUtf8,
+    #[error(
+        "more than one way to authenticate (user and password, token, nkey-file, creds: pick one)"
+    )]
+    TwoLogins,
+    #[error("user={0} needs a password: password-env=VAR or password-file=PATH")]
+    NoPassword(String),
+    #[error("a password needs a user: user=NAME (or nats://USER@...)")]
+    NoUser,
+    #[error("`{0}` needs a value")]
+    NoValue(String),
+    #[error("ttl `{value}`: {why}")]
+    Ttl {
+        value: String,
+        why: humantime::DurationError,
+    },
+    #[error("ttl must be at least 200ms")]
+    TtlTooShort,
+    #[error("replicas must be 1 to 5")]
+    Replicas,
+    #[error("tls must be 1 or 0")]
+    TlsFlag,
+    /// An unknown option, shown without its value when it may hold a secret.
+    #[error(
+        "unknown option `{0}` (known: lease=NAME, ttl=DURATION, replicas=N, \
+         user=NAME, password-env=VAR, password-file=PATH, token-env=VAR, token-file=PATH, \
+         nkey-file=PATH, creds=PATH, tls=1, tls-ca=PATH, tls-cert=PATH, tls-key=PATH)"
+    )]
+    Unknown(String),
+    #[error("a client certificate needs both tls-cert=PATH and tls-key=PATH")]
+    HalfCertificate,
+}
+
 /// A user name or password as written in the URL, `%XX` escapes decoded.
-fn percent_decode(s: &str) -> Result<String, String> {
+fn percent_decode(s: &str) -> Result<String, Problem> {
     percent_encoding::percent_decode_str(s)
         .decode_utf8()
         .map(|d| d.into_owned())
-        .map_err(|_| "the user or password is not UTF-8 once decoded".to_string())
+        .map_err(|_| Problem::NotUtf8)
 }
 
 /// `host:port` of each server in `hosts` (comma-separated; the port defaults to 4222).
@@ -66,7 +130,7 @@ fn servers(hosts: &str) -> Vec<String> {
 }
 
 /// The login written before the `@`: `USER:PASSWORD`, or a token.
-fn userinfo_auth(userinfo: Option<&str>) -> Result<Auth, String> {
+fn userinfo_auth(userinfo: Option<&str>) -> Result<Auth, Problem> {
     Ok(match userinfo {
         None => Auth::None,
         Some(info) => match info.split_once(':') {
@@ -92,12 +156,9 @@ struct Login {
 
 impl Login {
     /// Take `a` as the way in, unless there is one already.
-    fn set(&mut self, a: Auth) -> Result<(), String> {
+    fn set(&mut self, a: Auth) -> Result<(), Problem> {
         if self.auth != Auth::None {
-            return Err(
-                "more than one way to authenticate (user and password, token, nkey-file, creds: pick one)"
-                    .into(),
-            );
+            return Err(Problem::TwoLogins);
         }
         self.auth = a;
         Ok(())
@@ -105,20 +166,16 @@ impl Login {
 
     /// The one way in: `user=` and a password option make a user and password, or complete the
     /// user-info's.
-    fn resolve(mut self) -> Result<Auth, String> {
+    fn resolve(mut self) -> Result<Auth, Problem> {
         match (self.user.take(), self.password.take()) {
             (Some(user), Some(password)) => self.set(Auth::UserPassword { user, password })?,
             (Some(user), None) => match &mut self.auth {
                 Auth::UserPassword { user: u, .. } => *u = user,
-                _ => {
-                    return Err(format!(
-                        "user={user} needs a password: password-env=VAR or password-file=PATH"
-                    ));
-                }
+                _ => return Err(Problem::NoPassword(user)),
             },
             (None, Some(password)) => match &mut self.auth {
                 Auth::UserPassword { password: p, .. } => *p = password,
-                _ => return Err("a password needs a user: user=NAME (or nats://USER@...)".into()),
+                _ => return Err(Problem::NoUser),
             },
             (None, None) => {}
         }
@@ -145,23 +202,20 @@ pub struct Url {
 impl Url {
     /// Parse `--state nats://...`. Every message names the option at fault and shows the URL
     /// with its secrets masked.
-    pub fn parse(s: &str) -> Result<Url, String> {
+    pub fn parse(s: &str) -> Result<Url, UrlError> {
         let shown = mask(s);
-        let form = |why: String| format!("`{shown}`: {why} (expected {FORM})");
+        let form = |why: Problem| UrlError::Form {
+            shown: shown.clone(),
+            why,
+        };
+        let option = |why: Problem| UrlError::Option {
+            shown: shown.clone(),
+            why,
+        };
         let rest = match s.split_once("://") {
             Some((scheme, rest)) if scheme.eq_ignore_ascii_case("nats") => rest,
-            Some((scheme, _)) => {
-                return Err(form(format!(
-                    "scheme `{scheme}://` is not a state store (a file: give its path; NATS over TLS: \
-                     nats://...?tls-ca=PATH)"
-                )));
-            }
-            None => {
-                return Err(form(
-                    "not a URL: `nats:` must be followed by `//` (to name a file called so, write ./nats:...)"
-                        .into(),
-                ));
-            }
+            Some((scheme, _)) => return Err(form(Problem::Scheme(scheme.to_string()))),
+            None => return Err(form(Problem::NoSlashes)),
         };
         let (rest, query) = rest.split_once('?').unwrap_or((rest, ""));
         // The user-info ends at the last `@` (a bucket name has none).
@@ -171,19 +225,17 @@ impl Url {
         };
         let (hosts, bucket) = rest
             .split_once('/')
-            .ok_or_else(|| form("no bucket".into()))?;
+            .ok_or_else(|| form(Problem::NoBucket))?;
         let servers = servers(hosts);
         if servers.is_empty() {
-            return Err(form("no server".into()));
+            return Err(form(Problem::NoServer));
         }
         if bucket.is_empty()
             || !bucket
                 .chars()
                 .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
         {
-            return Err(format!(
-                "`{shown}`: bucket `{bucket}` must be letters, digits, `_` or `-`"
-            ));
+            return Err(option(Problem::BadBucket(bucket.to_string())));
         }
         let mut url = Url {
             servers,
@@ -199,14 +251,11 @@ impl Url {
             ..Login::default()
         };
         for pair in query.split('&').filter(|p| !p.is_empty()) {
-            url.option(pair, &mut login)
-                .map_err(|why| format!("`{shown}`: {why}"))?;
+            url.option(pair, &mut login).map_err(option)?;
         }
-        url.auth = login.resolve().map_err(|why| format!("`{shown}`: {why}"))?;
+        url.auth = login.resolve().map_err(option)?;
         if url.tls.cert.is_some() != url.tls.key.is_some() {
-            return Err(format!(
-                "`{shown}`: a client certificate needs both tls-cert=PATH and tls-key=PATH"
-            ));
+            return Err(option(Problem::HalfCertificate));
         }
         if url.tls.ca.is_some() || url.tls.cert.is_some() {
             url.tls.required = true;
@@ -215,11 +264,11 @@ impl Url {
     }
 
     /// Apply one `KEY=VALUE` of the query; the login options are gathered in `login`.
-    fn option(&mut self, pair: &str, login: &mut Login) -> Result<(), String> {
+    fn option(&mut self, pair: &str, login: &mut Login) -> Result<(), Problem> {
         let (k, v) = pair.split_once('=').unwrap_or((pair, ""));
-        let path = || -> Result<std::path::PathBuf, String> {
+        let path = || -> Result<std::path::PathBuf, Problem> {
             if v.is_empty() {
-                Err(format!("`{k}` needs a value"))
+                Err(Problem::NoValue(k.to_string()))
             } else {
                 Ok(std::path::PathBuf::from(v))
             }
@@ -227,9 +276,12 @@ impl Url {
         match k {
             "lease" if !v.is_empty() => self.lease = Some(v.to_string()),
             "ttl" => {
-                self.ttl = humantime::parse_duration(v).map_err(|e| format!("ttl `{v}`: {e}"))?;
+                self.ttl = humantime::parse_duration(v).map_err(|why| Problem::Ttl {
+                    value: v.to_string(),
+                    why,
+                })?;
                 if self.ttl < Duration::from_millis(200) {
-                    return Err("ttl must be at least 200ms".into());
+                    return Err(Problem::TtlTooShort);
                 }
             }
             "replicas" => {
@@ -237,7 +289,7 @@ impl Url {
                     .parse()
                     .ok()
                     .filter(|n| (1..=5).contains(n))
-                    .ok_or("replicas must be 1 to 5")?;
+                    .ok_or(Problem::Replicas)?;
             }
             "user" if !v.is_empty() => login.user = Some(v.to_string()),
             "password-env" if !v.is_empty() => login.password = Some(SecretSource::Env(v.into())),
@@ -250,7 +302,7 @@ impl Url {
                 self.tls.required = match v {
                     "1" | "true" | "yes" | "" => true,
                     "0" | "false" | "no" => false,
-                    _ => return Err("tls must be 1 or 0".into()),
+                    _ => return Err(Problem::TlsFlag),
                 }
             }
             "tls-ca" => self.tls.ca = Some(path()?),
@@ -262,11 +314,7 @@ impl Url {
                 } else {
                     pair.to_string()
                 };
-                return Err(format!(
-                    "unknown option `{shown_pair}` (known: lease=NAME, ttl=DURATION, replicas=N, \
-                     user=NAME, password-env=VAR, password-file=PATH, token-env=VAR, token-file=PATH, \
-                     nkey-file=PATH, creds=PATH, tls=1, tls-ca=PATH, tls-cert=PATH, tls-key=PATH)"
-                ));
+                return Err(Problem::Unknown(shown_pair));
             }
         }
         Ok(())
@@ -365,10 +413,12 @@ mod tests {
             "nats:/a:1/b",
             "tls://a:1/b",
         ] {
-            let e = Url::parse(bad).unwrap_err();
+            let e = Url::parse(bad).unwrap_err().to_string();
             assert!(e.contains("nats://"), "{bad}: {e}");
         }
-        let e = Url::parse("nats://u:Sup3rSecret@a/b?x=1").unwrap_err();
+        let e = Url::parse("nats://u:Sup3rSecret@a/b?x=1")
+            .unwrap_err()
+            .to_string();
         assert!(!e.contains("Sup3rSecret") && e.contains("u:***@a/b"), "{e}");
     }
 }

@@ -16,7 +16,7 @@
 //! bundle; a decision names its rollout's revision and digest.
 
 use super::{Decision, Rollout};
-use crate::nats::secrets::SecretSource;
+use crate::nats::secrets::{SecretError, SecretSource};
 use nkeys::KeyPair;
 use serde::Serialize;
 use serde::de::DeserializeOwned;
@@ -109,52 +109,80 @@ fn message(domain: &[u8], body: &Value) -> Vec<u8> {
     m
 }
 
+/// Why an operator's key (a signing seed, a public key to trust) cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum KeyError {
+    #[error(
+        "it is not an NKey seed (a line starting with `S`, as `tessla-telegraf spec keygen` prints it)"
+    )]
+    NotASeed,
+    #[error("it is not a valid NKey seed ({0})")]
+    BadSeed(nkeys::error::Error),
+    /// Neither `--sign-key-file` nor [`SIGN_KEY_ENV`].
+    #[error(
+        "no signing key: give the operator's seed with --sign-key-file FILE or the \
+         environment variable {SIGN_KEY_ENV} (make one with `tessla-telegraf spec keygen`; \
+         every process must trust its public key with --spec-trust)"
+    )]
+    NoSigningKey,
+    #[error(transparent)]
+    Unreadable(#[from] SecretError),
+    /// The seed read from `origin` is no seed.
+    #[error("the signing seed from {origin}: {why}")]
+    Seed { origin: String, why: Box<KeyError> },
+    /// A seed where a public key belongs (its first two characters).
+    #[error(
+        "`{0}…` looks like a seed, which is secret: give the public key (the `public key:` line of \
+         `tessla-telegraf spec keygen`), and keep the seed on the operator's machine"
+    )]
+    SeedNotPublic(String),
+    #[error("`{key}` is not an NKey public key ({why})")]
+    NotAPublicKey {
+        key: String,
+        why: nkeys::error::Error,
+    },
+}
+
 /// The signing key from its seed (`S…`, as `spec keygen` or `nk -gen` writes it).
-pub fn signing_key(seed: &str) -> Result<KeyPair, String> {
+pub fn signing_key(seed: &str) -> Result<KeyPair, KeyError> {
     let seed = seed.trim();
     if !seed.starts_with('S') {
-        return Err(
-            "it is not an NKey seed (a line starting with `S`, as `tessla-telegraf spec keygen` prints it)"
-                .into(),
-        );
+        return Err(KeyError::NotASeed);
     }
-    KeyPair::from_seed(seed).map_err(|e| format!("it is not a valid NKey seed ({e})"))
+    KeyPair::from_seed(seed).map_err(KeyError::BadSeed)
 }
 
 /// The signing key of `spec publish`/`rollback`: the seed in `file`, or else in the environment
 /// variable [`SIGN_KEY_ENV`] (never on the command line, where `ps` shows it).
-pub fn read_signing_key(file: Option<&Path>) -> Result<KeyPair, String> {
+pub fn read_signing_key(file: Option<&Path>) -> Result<KeyPair, KeyError> {
     let source = match file {
         Some(f) => SecretSource::File(f.to_path_buf()),
         None => {
             if std::env::var_os(SIGN_KEY_ENV).is_none() {
-                return Err(format!(
-                    "no signing key: give the operator's seed with --sign-key-file FILE or the \
-                     environment variable {SIGN_KEY_ENV} (make one with `tessla-telegraf spec keygen`; \
-                     every process must trust its public key with --spec-trust)"
-                ));
+                return Err(KeyError::NoSigningKey);
             }
             SecretSource::Env(SIGN_KEY_ENV.into())
         }
     };
     let seed = source.read("signing seed")?;
-    signing_key(seed.expose())
-        .map_err(|e| format!("the signing seed from {}: {e}", source.origin()))
+    signing_key(seed.expose()).map_err(|e| KeyError::Seed {
+        origin: source.origin(),
+        why: Box::new(e),
+    })
 }
 
 /// A public key as `--spec-trust` gives it, checked (`O…`, `A…`, `U…`: any NKey public key).
-pub fn check_public_key(key: &str) -> Result<String, String> {
+pub fn check_public_key(key: &str) -> Result<String, KeyError> {
     let key = key.trim();
     if key.starts_with('S') {
-        return Err(format!(
-            "`{}…` looks like a seed, which is secret: give the public key (the `public key:` line of \
-             `tessla-telegraf spec keygen`), and keep the seed on the operator's machine",
-            key.chars().take(2).collect::<String>()
-        ));
+        return Err(KeyError::SeedNotPublic(key.chars().take(2).collect()));
     }
     KeyPair::from_public_key(key)
         .map(|_| key.to_string())
-        .map_err(|e| format!("`{key}` is not an NKey public key ({e})"))
+        .map_err(|why| KeyError::NotAPublicKey {
+            key: key.to_string(),
+            why,
+        })
 }
 
 /// The keys a process trusts: `--spec-trust KEY[,KEY]` and the lines of `--spec-trust-file`
@@ -430,7 +458,7 @@ mod tests {
             key.public_key()
         );
         assert!(signing_key(&key.public_key()).is_err());
-        let e = check_public_key(&seed).unwrap_err();
+        let e = check_public_key(&seed).unwrap_err().to_string();
         assert!(e.contains("seed") && !e.contains(&seed[2..]), "{e}");
         assert!(check_public_key("Onot-a-key").is_err());
         let dir = tempfile::tempdir().unwrap();

@@ -14,7 +14,7 @@ pub mod lease;
 pub mod nats;
 pub mod restore;
 
-use crate::nats::url::Url;
+use crate::nats::url::{Url, UrlError};
 use crate::processor::Processor;
 use crate::processor::instance_table::Key;
 use std::io;
@@ -30,16 +30,26 @@ pub enum Target {
     Nats(Box<Url>),
 }
 
+/// Why `--state` names no store.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TargetError {
+    /// A URL (it looks like one) that does not parse as a bucket's.
+    #[error(transparent)]
+    Url(#[from] UrlError),
+    #[error("empty path")]
+    EmptyPath,
+}
+
 /// Parse `--state`: `nats://...` is a bucket, anything else a file path. Anything that looks
 /// like a URL (`SCHEME://`, or `nats:` without `//`) is parsed as one, so a mistyped bucket URL
 /// is refused rather than taken as a file name.
 impl Target {
-    pub fn parse(s: &str) -> Result<Target, String> {
+    pub fn parse(s: &str) -> Result<Target, TargetError> {
         let lower = s.to_ascii_lowercase();
         if s.contains("://") || lower.starts_with("nats:") || lower.starts_with("tls:") {
-            Url::parse(s).map(|u| Target::Nats(Box::new(u)))
+            Ok(Target::Nats(Box::new(Url::parse(s)?)))
         } else if s.is_empty() {
-            Err("empty path".into())
+            Err(TargetError::EmptyPath)
         } else {
             Ok(Target::File(PathBuf::from(s)))
         }

@@ -31,7 +31,7 @@ pub use layout::{Status, status_key};
 pub use operator::{Decided, Listed, Operator, Reported};
 
 use crate::log::mask;
-use crate::nats::url::{DEFAULT_TTL, Url};
+use crate::nats::url::{DEFAULT_TTL, Url, UrlError};
 use std::time::Duration;
 
 /// The bucket a channel URL without one names.
@@ -52,16 +52,26 @@ pub const LIVE: Duration = Duration::from_secs(10);
 /// Parse a channel URL: `--state`'s syntax (`nats://HOST:PORT[,...][/BUCKET][?login, TLS,
 /// replicas]`), the bucket [`DEFAULT_BUCKET`] when none is named. The partition options of
 /// `--state` (`lease=`, `ttl=`) are refused: a channel has no lease.
-pub fn parse_url(s: &str) -> Result<Url, String> {
-    let url = Url::parse(&with_default_bucket(s)).map_err(|e| format!("spec channel {e}"))?;
+pub fn parse_url(s: &str) -> Result<Url, ChannelUrlError> {
+    let url = Url::parse(&with_default_bucket(s))?;
     if url.lease.is_some() || url.ttl != DEFAULT_TTL {
-        return Err(format!(
-            "spec channel `{}`: lease= and ttl= are --state's options (the partition lease); a \
-             spec channel has none",
-            mask(s)
-        ));
+        return Err(ChannelUrlError::Lease(mask(s)));
     }
     Ok(url)
+}
+
+/// Why a spec channel URL is refused.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ChannelUrlError {
+    /// Not a URL in `--state`'s syntax.
+    #[error("spec channel {0}")]
+    Url(#[from] UrlError),
+    /// A partition option (`lease=`, `ttl=`); the URL as shown, its secrets masked.
+    #[error(
+        "spec channel `{0}`: lease= and ttl= are --state's options (the partition lease); a \
+         spec channel has none"
+    )]
+    Lease(String),
 }
 
 /// `s` with `/tessla_specs` after the hosts when it names no bucket.
@@ -100,9 +110,11 @@ mod tests {
         assert_eq!((u.bucket.as_str(), u.replicas), (DEFAULT_BUCKET, 3));
         assert!(u.tls.required);
         assert_eq!(parse_url("nats://a/specs2").unwrap().bucket, "specs2");
-        let e = parse_url("nats://a/b?lease=p0").unwrap_err();
+        let e = parse_url("nats://a/b?lease=p0").unwrap_err().to_string();
         assert!(e.contains("lease="), "{e}");
-        let e = parse_url("nats://u:Secr3t@a/b?x=1").unwrap_err();
+        let e = parse_url("nats://u:Secr3t@a/b?x=1")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("spec channel") && !e.contains("Secr3t"), "{e}");
         assert!(parse_url("/a/file").is_err());
     }
