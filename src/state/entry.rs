@@ -200,45 +200,74 @@ fn show_key(key: &Key) -> String {
     format!("[{}]", values.join(", "))
 }
 
+/// Why saved state (a file, or an entry of a bucket) is not used; `what` is `file` or `entry`.
+#[derive(Debug, thiserror::Error)]
+pub enum StateError {
+    #[error("not a state {what} (corrupt or truncated: {source})")]
+    NotState {
+        what: String,
+        source: serde_json::Error,
+    },
+    #[error("not a state {what} (magic `{magic}`, expected `{MAGIC}`)")]
+    Magic { what: String, magic: String },
+    #[error("written in state format version {0}, this build reads version {VERSION}")]
+    Version(u32),
+    #[error(
+        "written for other options (fingerprint {theirs}, this run {ours}; --set, --base-time and --instance-by must match)"
+    )]
+    Fingerprint { theirs: String, ours: String },
+    #[error("corrupt state {what}: {source}")]
+    Corrupt {
+        what: String,
+        source: serde_json::Error,
+    },
+    /// An entry stored under another instance's name (shown as `[v1, v2]`).
+    #[error("the entry holds instance {held}, not {wanted}")]
+    OtherInstance { held: String, wanted: String },
+    /// A file's instance naming a program the file does not list.
+    #[error("corrupt state file: an instance names program {program}, the file lists {listed}")]
+    NoSuchProgram { program: usize, listed: usize },
+}
+
 /// Check the header of saved state (`what`: "file" or "entry", for the messages): its magic,
 /// format version and fingerprint (`fingerprint`: this run's options, [`super::fingerprint`]).
 /// `Err` says why it is not usable.
-pub fn check_header(bytes: &[u8], what: &str, fingerprint: &str) -> Result<(), String> {
-    let header: Header = serde_json::from_slice(bytes)
-        .map_err(|e| format!("not a state {what} (corrupt or truncated: {e})"))?;
+pub fn check_header(bytes: &[u8], what: &str, fingerprint: &str) -> Result<(), StateError> {
+    let header: Header = serde_json::from_slice(bytes).map_err(|source| StateError::NotState {
+        what: what.to_string(),
+        source,
+    })?;
     if header.magic != MAGIC {
-        return Err(format!(
-            "not a state {what} (magic `{}`, expected `{MAGIC}`)",
-            header.magic
-        ));
+        return Err(StateError::Magic {
+            what: what.to_string(),
+            magic: header.magic,
+        });
     }
     if header.version != VERSION {
-        return Err(format!(
-            "written in state format version {}, this build reads version {VERSION}",
-            header.version
-        ));
+        return Err(StateError::Version(header.version));
     }
     if header.fingerprint != fingerprint {
-        return Err(format!(
-            "written for other options (fingerprint {}, this run {fingerprint}; --set, --base-time and --instance-by must match)",
-            header.fingerprint
-        ));
+        return Err(StateError::Fingerprint {
+            theirs: header.fingerprint,
+            ours: fingerprint.to_string(),
+        });
     }
     Ok(())
 }
 
 /// Check an entry's bytes (magic, version, fingerprint, that it is `key`'s) and read what it
 /// saved; `Err` says why it is not usable.
-pub fn decode_entry(bytes: &[u8], fingerprint: &str, key: &Key) -> Result<Saved, String> {
+pub fn decode_entry(bytes: &[u8], fingerprint: &str, key: &Key) -> Result<Saved, StateError> {
     check_header(bytes, "entry", fingerprint)?;
-    let entry: EntryIn =
-        serde_json::from_slice(bytes).map_err(|e| format!("corrupt state entry: {e}"))?;
+    let entry: EntryIn = serde_json::from_slice(bytes).map_err(|source| StateError::Corrupt {
+        what: "entry".into(),
+        source,
+    })?;
     if &entry.key != key {
-        return Err(format!(
-            "the entry holds instance {}, not {}",
-            show_key(&entry.key),
-            show_key(key)
-        ));
+        return Err(StateError::OtherInstance {
+            held: show_key(&entry.key),
+            wanted: show_key(key),
+        });
     }
     Ok(Saved {
         program: entry.program,

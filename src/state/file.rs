@@ -11,7 +11,9 @@
 //! JSON rather than a binary format: it is readable when something goes wrong, floats are stored
 //! as their bits (exact, NaN included), and the size is measured in `docs/state-and-reload.md`.
 
-use super::entry::{self, MAGIC, Programs, SavedProgram, VERSION, unix_now, warn_unsaved};
+use super::entry::{
+    self, MAGIC, Programs, SavedProgram, StateError, VERSION, unix_now, warn_unsaved,
+};
 use super::restore::Restorer;
 use super::{Backend, Context, fingerprint};
 use crate::processor::Continuity;
@@ -287,7 +289,7 @@ fn load_quiet(path: &Path, proc: &mut Processor, ctx: &Context) -> (Outcome, Vec
         Err(why) => {
             let moved =
                 aside_name(path).and_then(|aside| fs::rename(path, &aside).ok().map(|()| aside));
-            (Outcome::Rejected(why, moved), Vec::new())
+            (Outcome::Rejected(why.to_string(), moved), Vec::new())
         }
     }
 }
@@ -304,20 +306,21 @@ fn aside_name(path: &Path) -> Option<PathBuf> {
 }
 
 /// Parse and validate the file's bytes.
-fn check(text: &[u8], ctx: &Context) -> Result<StateFile, String> {
+fn check(text: &[u8], ctx: &Context) -> Result<StateFile, StateError> {
     entry::check_header(text, "file", &fingerprint(ctx))?;
-    let file: StateFile =
-        serde_json::from_slice(text).map_err(|e| format!("corrupt state file: {e}"))?;
+    let file: StateFile = serde_json::from_slice(text).map_err(|source| StateError::Corrupt {
+        what: "file".into(),
+        source,
+    })?;
     if let Some(s) = file
         .instances
         .iter()
         .find(|s| s.program >= file.programs.len())
     {
-        return Err(format!(
-            "corrupt state file: an instance names program {}, the file lists {}",
-            s.program,
-            file.programs.len()
-        ));
+        return Err(StateError::NoSuchProgram {
+            program: s.program,
+            listed: file.programs.len(),
+        });
     }
     Ok(file)
 }
@@ -325,39 +328,32 @@ fn check(text: &[u8], ctx: &Context) -> Result<StateFile, String> {
 /// Whether `--state FILE` can be saved: its folder exists and a file can be made in it, and the
 /// path is not a folder. Checked at start, so a mistake is found before a run's state is lost
 /// at its end; the message says what to do.
-pub fn check_writable(path: &Path) -> Result<(), String> {
+pub fn check_writable(path: &Path) -> Result<(), WritableError> {
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
     };
-    let shown = path.display();
-    let folder = dir.display();
+    let shown = path.display().to_string();
+    let folder = dir.display().to_string();
     match fs::metadata(&dir) {
         Ok(m) if m.is_dir() => {}
-        Ok(_) => {
-            return Err(format!(
-                "--state {shown}: {folder} is not a folder: give --state a file in a folder"
-            ));
-        }
+        Ok(_) => return Err(WritableError::NotAFolder { shown, folder }),
         Err(e) if e.kind() == io::ErrorKind::NotFound => {
-            return Err(format!(
-                "--state {shown}: the folder {folder} does not exist: create it \
-                 (`mkdir -p {folder}`, writable for the user Telegraf runs as; the systemd \
-                 drop-in's StateDirectory= makes /var/lib/tessla-telegraf) or give --state a \
-                 file in a folder that exists"
-            ));
+            return Err(WritableError::NoFolder { shown, folder });
         }
-        Err(e) => {
-            return Err(format!(
-                "--state {shown}: cannot read the folder {folder}: {e}"
-            ));
+        Err(source) => {
+            return Err(WritableError::FolderUnreadable {
+                shown,
+                folder,
+                source,
+            });
         }
     }
     if path.is_dir() {
-        return Err(format!(
-            "--state {shown} is a folder: give --state a file name, e.g. {}",
-            path.join("monitor.state").display()
-        ));
+        return Err(WritableError::IsAFolder {
+            shown,
+            example: path.join("monitor.state").display().to_string(),
+        });
     }
     // A file made and removed in the folder, as the save's temporary file will be.
     let probe = dir.join(format!(".tessla-telegraf-probe-{}", std::process::id()));
@@ -367,12 +363,44 @@ pub fn check_writable(path: &Path) -> Result<(), String> {
             Ok(())
         }
         Err(e) if e.kind() == io::ErrorKind::AlreadyExists => Ok(()),
-        Err(e) => Err(format!(
-            "--state {shown}: cannot write in {folder} ({e}): make it writable for the user \
-             Telegraf runs as (e.g. `sudo chown telegraf {folder}`) or give --state a file in \
-             a folder you can write"
-        )),
+        Err(source) => Err(WritableError::NotWritable {
+            shown,
+            folder,
+            source,
+        }),
     }
+}
+
+/// Why `--state FILE` cannot be saved ([`check_writable`]): what is wrong and what to do.
+#[derive(Debug, thiserror::Error)]
+pub enum WritableError {
+    #[error("--state {shown}: {folder} is not a folder: give --state a file in a folder")]
+    NotAFolder { shown: String, folder: String },
+    #[error(
+        "--state {shown}: the folder {folder} does not exist: create it \
+         (`mkdir -p {folder}`, writable for the user Telegraf runs as; the systemd \
+         drop-in's StateDirectory= makes /var/lib/tessla-telegraf) or give --state a \
+         file in a folder that exists"
+    )]
+    NoFolder { shown: String, folder: String },
+    #[error("--state {shown}: cannot read the folder {folder}: {source}")]
+    FolderUnreadable {
+        shown: String,
+        folder: String,
+        source: io::Error,
+    },
+    #[error("--state {shown} is a folder: give --state a file name, e.g. {example}")]
+    IsAFolder { shown: String, example: String },
+    #[error(
+        "--state {shown}: cannot write in {folder} ({source}): make it writable for the user \
+         Telegraf runs as (e.g. `sudo chown telegraf {folder}`) or give --state a file in \
+         a folder you can write"
+    )]
+    NotWritable {
+        shown: String,
+        folder: String,
+        source: io::Error,
+    },
 }
 
 /// `--state FILE`: [`load`] at start, [`save`] at the save points.
@@ -403,11 +431,11 @@ mod tests {
     #[test]
     fn a_state_file_that_cannot_be_saved_is_found_at_start() {
         let dir = tempfile::tempdir().unwrap();
-        assert_eq!(check_writable(&dir.path().join("m.state")), Ok(()));
+        assert!(check_writable(&dir.path().join("m.state")).is_ok());
         let missing = dir.path().join("nope/m.state");
-        let e = check_writable(&missing).unwrap_err();
+        let e = check_writable(&missing).unwrap_err().to_string();
         assert!(e.contains("does not exist: create it (`mkdir -p "), "{e}");
-        let e = check_writable(dir.path()).unwrap_err();
+        let e = check_writable(dir.path()).unwrap_err().to_string();
         assert!(e.contains("is a folder: give --state a file name"), "{e}");
         assert_eq!(
             std::fs::read_dir(dir.path()).unwrap().count(),
