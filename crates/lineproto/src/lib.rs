@@ -6,6 +6,7 @@
 //! and writing metrics back with Telegraf's escaping ([`write`](mod@write)). No I/O happens here.
 //!
 #![doc = include_str!("../README.md")]
+#![deny(missing_docs)]
 
 mod fast;
 mod list;

@@ -275,6 +275,7 @@ pub struct Prefix<'a> {
 }
 
 impl<'a> Prefix<'a> {
+    /// The prefix `bytes`, read into a word now when it is at most 8 bytes long.
     pub fn new(bytes: &'a [u8]) -> Self {
         let word = (bytes.len() <= 8).then(|| {
             let mut w = [0u8; 8];

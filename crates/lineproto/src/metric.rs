@@ -6,20 +6,29 @@
 
 use crate::list::ListCapture;
 
+/// A field's value, in the line protocol's five types.
 #[derive(Debug, Clone, PartialEq)]
 pub enum FieldValue {
+    /// A float (`1.5`, `1e3`; a number without a suffix).
     Float(f64),
+    /// A signed integer (`42i`).
     Int(i64),
+    /// An unsigned integer (`42u`).
     UInt(u64),
+    /// A boolean (`t`, `true`, `F`, `false`, ...).
     Bool(bool),
+    /// A string (`"text"`, its escapes undone).
     Str(String),
 }
 
 /// One parsed metric. Tags keep input order; fields keep input order (last value of a key wins).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Metric {
+    /// The measurement's name, its escapes undone.
     pub measurement: String,
+    /// The tags as (key, value), escapes undone.
     pub tags: Vec<(String, String)>,
+    /// The fields as (key, value), escapes undone.
     pub fields: Vec<(String, FieldValue)>,
     /// Nanoseconds since the epoch, if the record had a timestamp.
     pub timestamp: Option<i64>,
@@ -31,6 +40,7 @@ pub struct Metric {
 }
 
 impl Metric {
+    /// The value of tag `key`, if the metric has it.
     pub fn tag(&self, key: &str) -> Option<&str> {
         self.tags
             .iter()
@@ -38,6 +48,7 @@ impl Metric {
             .map(|(_, v)| v.as_str())
     }
 
+    /// The value of field `key`, if the metric has it.
     pub fn field(&self, key: &str) -> Option<&FieldValue> {
         self.fields.iter().find(|(k, _)| k == key).map(|(_, v)| v)
     }

@@ -22,6 +22,7 @@ use influxdb_line_protocol::FieldValue as CrateValue;
 pub struct ParseError {
     /// 1-based column (in characters) where the problem was found, when known.
     pub column: usize,
+    /// What is wrong, in words (`missing fields`, `invalid number`, ...).
     pub reason: String,
     /// The start of the record, at most 60 characters, with control characters escaped.
     pub excerpt: String,

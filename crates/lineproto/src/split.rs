@@ -40,8 +40,11 @@ impl Record {
 /// splitter's buffer, for a record that spans reads): the same fields as [`Record`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RecordRef<'a> {
+    /// The record's bytes, as [`Record::bytes`].
     pub bytes: &'a [u8],
+    /// Its first physical input line (1-based), as [`Record::line`].
     pub line: u64,
+    /// Cut at the splitter's limit, as [`Record::oversized`].
     pub oversized: bool,
 }
 

@@ -133,6 +133,7 @@ pub struct LineWriter {
 }
 
 impl LineWriter {
+    /// A line for `measurement`; tags, then fields, then [`LineWriter::finish`].
     pub fn new(measurement: &str) -> LineWriter {
         // Room for a typical verdict metric (measurement, a few tags, several fields, timestamp)
         // without growing.
