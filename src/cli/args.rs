@@ -315,13 +315,18 @@ pub enum Late {
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Bound(pub Option<std::time::Duration>);
 
-fn parse_bound(s: &str) -> Result<Bound, String> {
+/// A bound that is neither a duration nor `off`.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0} (a duration such as `10s`, `5m`, or `off`)")]
+pub struct BoundError(humantime::DurationError);
+
+fn parse_bound(s: &str) -> Result<Bound, BoundError> {
     if s.eq_ignore_ascii_case("off") {
         return Ok(Bound(None));
     }
     humantime::parse_duration(s)
         .map(|d| Bound(Some(d)))
-        .map_err(|e| format!("{e} (a duration such as `10s`, `5m`, or `off`)"))
+        .map_err(BoundError)
 }
 
 /// `--state`, read as the store's own parser reads it.

@@ -62,7 +62,7 @@ impl RunConfig {
     pub fn from_args(mut args: RunArgs) -> Result<RunConfig, CliError> {
         log::set_level(args.output.log_level.level());
         from_env(&mut args);
-        let options = load_options(&args.spec_options).map_err(CliError::spec)?;
+        let options = load_options(&args.spec_options)?;
         let spec = SpecSource {
             path: args.spec.clone(),
             options,

@@ -133,7 +133,7 @@ pub fn run(args: ReplayArgs) -> CliResult {
 }
 
 fn replay(args: &ReplayArgs) -> CliResult {
-    let speed = pacing::check_speed(args.speed).map_err(CliError::spec)?;
+    let speed = pacing::check_speed(args.speed).map_err(|e| CliError::spec(e.to_string()))?;
     let qos = parse_qos(args.qos).map_err(CliError::spec)?;
     let broker: Broker = args.broker.parse().map_err(CliError::spec)?;
     let login = login(args, &broker)?;

@@ -34,7 +34,7 @@ pub fn run(args: RunArgs) -> CliResult {
             tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false)
         );
     }
-    require_outputs(&loaded.program, &config.spec_name()).map_err(CliError::spec)?;
+    require_outputs(&loaded.program, &config.spec_name())?;
     let mut fleet = match &fleet_args.0 {
         Some(path) => Some(fleet_level(path, &fleet_args, &loaded.program, &config)?),
         None => None,
@@ -96,7 +96,7 @@ fn fleet_level(
     robot: &tessla_engine::Program,
     config: &RunConfig,
 ) -> Result<(Level, Arc<[String]>), CliError> {
-    let options = super::spec_options::load_options(spec_options).map_err(CliError::spec)?;
+    let options = super::spec_options::load_options(spec_options)?;
     let (loaded, names) = crate::fleet::check(path, robot, &options).map_err(CliError::spec)?;
     if !loaded.warnings.is_empty() {
         log_warn!(

@@ -105,19 +105,28 @@ fn bad(msg: &str) -> CliError {
     CliError::spec(format!("simulate: {msg}"))
 }
 
-fn positive(name: &str, v: f64) -> Result<f64, String> {
+/// A number option out of its range (`name` without the dashes).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+enum OutOfRange {
+    #[error("--{0} {1}: must be a positive number")]
+    NotPositive(&'static str, f64),
+    #[error("--{0} {1}: must be between 0 and 1")]
+    NotProbability(&'static str, f64),
+}
+
+fn positive(name: &'static str, v: f64) -> Result<f64, OutOfRange> {
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {
-        Err(format!("--{name} {v}: must be a positive number"))
+        Err(OutOfRange::NotPositive(name, v))
     }
 }
 
-fn probability(name: &str, v: f64) -> Result<f64, String> {
+fn probability(name: &'static str, v: f64) -> Result<f64, OutOfRange> {
     if (0.0..=1.0).contains(&v) {
         Ok(v)
     } else {
-        Err(format!("--{name} {v}: must be between 0 and 1"))
+        Err(OutOfRange::NotProbability(name, v))
     }
 }
 
@@ -142,7 +151,7 @@ fn scenario_of(args: &SimulateArgs) -> Result<Scenario, CliError> {
     };
     let spec = |e: String| bad(&e);
     let mut s = scenario::build(terrain, program, args.seed);
-    s.period = positive("period", args.period).map_err(spec)?;
+    s.period = positive("period", args.period).map_err(|e| spec(e.to_string()))?;
     if s.period > 60.0 {
         return Err(spec(format!("--period {}: at most 60 s", args.period)));
     }
@@ -154,7 +163,7 @@ fn scenario_of(args: &SimulateArgs) -> Result<Scenario, CliError> {
     }
     s.delay = args.delay;
     if let Some(d) = args.duration {
-        s.duration = positive("duration", d).map_err(spec)?;
+        s.duration = positive("duration", d).map_err(|e| spec(e.to_string()))?;
     }
     for d in &args.link_drop {
         let parsed = d
@@ -168,15 +177,17 @@ fn scenario_of(args: &SimulateArgs) -> Result<Scenario, CliError> {
         };
         s.link_drops.push(drop);
     }
-    s.lidar.spike_rate = probability("spike-rate", args.spike_rate).map_err(spec)?;
-    s.lidar.dropout_rate = probability("dropout-rate", args.dropout_rate).map_err(spec)?;
+    s.lidar.spike_rate =
+        probability("spike-rate", args.spike_rate).map_err(|e| spec(e.to_string()))?;
+    s.lidar.dropout_rate =
+        probability("dropout-rate", args.dropout_rate).map_err(|e| spec(e.to_string()))?;
     Ok(s)
 }
 
 /// `--shared-floor N`: the robots' records, to `--output` or stdout.
 fn shared_floor(args: &SimulateArgs, robots: usize) -> CliResult {
     let seconds = match args.duration {
-        Some(d) => positive("duration", d).map_err(|e| bad(&e))?,
+        Some(d) => positive("duration", d).map_err(|e| bad(&e.to_string()))?,
         None => 60.0,
     };
     let text = crate::simulate::shared_floor::records(
@@ -199,7 +210,7 @@ fn shared_floor(args: &SimulateArgs, robots: usize) -> CliResult {
 
 /// The monitors' program from `--spec` (or the bundled one) and `--set`/`--base-time`.
 fn load(args: &SimulateArgs) -> Result<Arc<tessla_engine::Program>, String> {
-    let options = load_options(&args.spec_options)?;
+    let options = load_options(&args.spec_options).map_err(|e| e.to_string())?;
     let loaded = match &args.spec {
         Some(path) => tessla_engine::load_file(path, &options),
         None => crate::bundled::load(&options),
@@ -239,7 +250,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
     };
     let timeout = match positive("action-timeout", args.action_timeout) {
         Ok(t) => Duration::from_secs_f64(t),
-        Err(e) => return Err(bad(&e)),
+        Err(e) => return Err(bad(&e.to_string())),
     };
     let program = match broker {
         Some(_) => {

@@ -72,15 +72,36 @@ impl SpecOptions {
     }
 }
 
+/// Why the spec options or the spec they load cannot be used (a spec error, exit 2).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SpecOptionError {
+    /// A `--set` without `=`.
+    #[error("--set {0}: expected NAME=VALUE")]
+    BadSet(String),
+    /// The spec (named as given) has no `out`.
+    #[error(
+        "{0}: the spec has no outputs, so it would check nothing and write nothing; \
+         add `out NAME` for each stream to report (or `out *`); for a library of \
+         definitions that other specs include, use `check --library`"
+    )]
+    NoOutputs(String),
+}
+
+impl From<SpecOptionError> for crate::cli::error::CliError {
+    fn from(e: SpecOptionError) -> Self {
+        crate::cli::error::CliError::spec(e.to_string())
+    }
+}
+
 /// The engine's load options from the command line (`--base-time`, `--set NAME=VALUE`).
-pub fn load_options(o: &SpecOptions) -> Result<tessla_engine::LoadOptions, String> {
+pub fn load_options(o: &SpecOptions) -> Result<tessla_engine::LoadOptions, SpecOptionError> {
     let overrides = o
         .set
         .iter()
         .map(|s| {
             s.split_once('=')
                 .map(|(k, v)| (k.trim().to_string(), v.trim().to_string()))
-                .ok_or_else(|| format!("--set {s}: expected NAME=VALUE"))
+                .ok_or_else(|| SpecOptionError::BadSet(s.clone()))
         })
         .collect::<Result<Vec<_>, _>>()?;
     Ok(tessla_engine::LoadOptions {
@@ -97,13 +118,12 @@ pub fn load_options(o: &SpecOptions) -> Result<tessla_engine::LoadOptions, Strin
 
 /// A spec without outputs checks nothing and writes nothing: a spec error for `check`, `run`
 /// and `trace`.
-pub fn require_outputs(program: &tessla_engine::Program, spec: &str) -> Result<(), String> {
+pub fn require_outputs(
+    program: &tessla_engine::Program,
+    spec: &str,
+) -> Result<(), SpecOptionError> {
     if program.outputs.is_empty() {
-        Err(format!(
-            "{spec}: the spec has no outputs, so it would check nothing and write nothing; \
-             add `out NAME` for each stream to report (or `out *`); for a library of \
-             definitions that other specs include, use `check --library`"
-        ))
+        Err(SpecOptionError::NoOutputs(spec.to_string()))
     } else {
         Ok(())
     }

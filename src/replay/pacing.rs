@@ -7,14 +7,17 @@
 
 use std::time::Duration;
 
+/// A `--speed` that is negative or not a number.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("--speed must be a number >= 0 (0 = as fast as possible), not {0}")]
+pub struct SpeedError(pub f64);
+
 /// Check a `--speed` value: finite and not negative.
-pub fn check_speed(speed: f64) -> Result<f64, String> {
+pub fn check_speed(speed: f64) -> Result<f64, SpeedError> {
     if speed.is_finite() && speed >= 0.0 {
         Ok(speed)
     } else {
-        Err(format!(
-            "--speed must be a number >= 0 (0 = as fast as possible), not {speed}"
-        ))
+        Err(SpeedError(speed))
     }
 }
 

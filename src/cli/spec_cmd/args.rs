@@ -164,25 +164,51 @@ pub struct KeygenArgs {
 
 /// `--from`: RFC 3339, an integer count of nanoseconds since the Unix epoch, or `+DURATION`
 /// from now (`+2s`: a start every process of the fleet receives before it comes).
-pub fn parse_time(s: &str) -> Result<i64, String> {
+pub fn parse_time(s: &str) -> Result<i64, TimeError> {
     let s = s.trim();
     if let Ok(ns) = s.parse::<i64>() {
         return Ok(ns);
     }
+    let past_2262 = |_| TimeError::Past2262(s.to_string());
     if let Some(ahead) = s.strip_prefix('+') {
-        let d = humantime::parse_duration(ahead.trim())
-            .map_err(|e| format!("`{s}`: {e} (expected +DURATION, e.g. +2s)"))?;
+        let d = humantime::parse_duration(ahead.trim()).map_err(|why| TimeError::Ahead {
+            given: s.to_string(),
+            why,
+        })?;
         let now = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
-            .map_err(|_| "the clock is before 1970".to_string())?;
-        return i64::try_from((now + d).as_nanos())
-            .map_err(|_| format!("`{s}` is past the year 2262"));
+            .map_err(|_| TimeError::ClockBefore1970)?;
+        return i64::try_from((now + d).as_nanos()).map_err(past_2262);
     }
-    let t = humantime::parse_rfc3339_weak(s).map_err(|e| {
-        format!("`{s}`: {e} (expected RFC 3339, e.g. 2025-06-01T12:00:00Z, or nanoseconds since the Unix epoch)")
+    let t = humantime::parse_rfc3339_weak(s).map_err(|why| TimeError::At {
+        given: s.to_string(),
+        why,
     })?;
     let d = t
         .duration_since(std::time::UNIX_EPOCH)
-        .map_err(|_| format!("`{s}` is before 1970"))?;
-    i64::try_from(d.as_nanos()).map_err(|_| format!("`{s}` is past the year 2262"))
+        .map_err(|_| TimeError::Before1970(s.to_string()))?;
+    i64::try_from(d.as_nanos()).map_err(past_2262)
+}
+
+/// Why a `--from` time is refused (the time as given).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TimeError {
+    #[error("`{given}`: {why} (expected +DURATION, e.g. +2s)")]
+    Ahead {
+        given: String,
+        why: humantime::DurationError,
+    },
+    #[error(
+        "`{given}`: {why} (expected RFC 3339, e.g. 2025-06-01T12:00:00Z, or nanoseconds since the Unix epoch)"
+    )]
+    At {
+        given: String,
+        why: humantime::TimestampError,
+    },
+    #[error("the clock is before 1970")]
+    ClockBefore1970,
+    #[error("`{0}` is before 1970")]
+    Before1970(String),
+    #[error("`{0}` is past the year 2262")]
+    Past2262(String),
 }

@@ -166,7 +166,12 @@ mod tests {
             parse_time("2023-11-14T22:13:20.5Z"),
             Ok(1_700_000_000_500_000_000)
         );
-        assert!(parse_time("yesterday").unwrap_err().contains("RFC 3339"));
+        assert!(
+            parse_time("yesterday")
+                .unwrap_err()
+                .to_string()
+                .contains("RFC 3339")
+        );
         // `+DURATION`: that far from now.
         let before = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
@@ -177,7 +182,12 @@ mod tests {
             t >= before + 2_000_000_000 && t < before + 3_000_000_000,
             "{t}"
         );
-        assert!(parse_time("+soon").unwrap_err().contains("+DURATION"));
+        assert!(
+            parse_time("+soon")
+                .unwrap_err()
+                .to_string()
+                .contains("+DURATION")
+        );
     }
 
     #[test]

@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 pub(super) fn publish(a: PublishArgs) -> CliResult {
     let mut spec_options = a.spec_options.clone();
     spec_options.set_from_env();
-    let options = load_options(&spec_options).map_err(CliError::spec)?;
+    let options = load_options(&spec_options)?;
     let (bundle, loaded) = Bundle::read(&a.spec, &options).map_err(|e| {
         CliError::spec(format!(
             "{}\nspec publish: {} was not published: it does not check",
@@ -27,7 +27,7 @@ pub(super) fn publish(a: PublishArgs) -> CliResult {
             a.spec.display()
         ))
     })?;
-    require_outputs(&loaded.program, &a.spec.display().to_string()).map_err(CliError::spec)?;
+    require_outputs(&loaded.program, &a.spec.display().to_string())?;
     if !loaded.warnings.is_empty() {
         let text = tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false);
         let _ = std::io::stderr().lock().write_all(text.as_bytes());
