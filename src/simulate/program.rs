@@ -5,6 +5,8 @@
 //! line, `duration_s speed_mps` (spaces, tabs or commas), `#` starts a comment. After the last
 //! step the run ends.
 
+use super::InputError;
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct Program {
     /// (duration s, speed m/s); durations positive.
@@ -15,19 +17,17 @@ pub struct Program {
 const STEP_SECONDS: f64 = 20.0;
 
 impl Program {
-    pub fn from_steps(steps: Vec<(f64, f64)>) -> Result<Program, String> {
+    /// A program of `steps` (seconds, m/s); `Err` names the first bad step.
+    pub fn from_steps(steps: Vec<(f64, f64)>) -> Result<Program, InputError> {
         if steps.is_empty() {
-            return Err("no steps".into());
+            return Err(InputError::NoSteps);
         }
         for (i, (d, s)) in steps.iter().enumerate() {
             if !(d.is_finite() && *d > 0.0) {
-                return Err(format!(
-                    "step {}: duration {d} is not a positive number of seconds",
-                    i + 1
-                ));
+                return Err(InputError::BadDuration(i + 1, *d));
             }
             if !s.is_finite() {
-                return Err(format!("step {}: speed {s} is not a number", i + 1));
+                return Err(InputError::BadSpeed(i + 1, *s));
             }
         }
         Ok(Program { steps })
@@ -49,23 +49,23 @@ impl Program {
     }
 
     /// Read the file format described at the top of this module.
-    pub fn parse(text: &str) -> Result<Program, String> {
+    pub fn parse(text: &str) -> Result<Program, InputError> {
         let mut steps = Vec::new();
         for (n, cols) in super::data_rows(text) {
             let [d, s] = cols.as_slice() else {
-                return Err(format!(
-                    "line {}: expected `duration_s speed_mps`, found {} columns",
-                    n,
-                    cols.len()
-                ));
+                return Err(InputError::Columns {
+                    line: n,
+                    expected: "duration_s speed_mps",
+                    found: cols.len(),
+                });
             };
             let num = |c: &str| {
                 c.parse::<f64>()
-                    .map_err(|_| format!("line {}: {c:?} is not a number", n))
+                    .map_err(|_| InputError::NotANumber(n, c.to_string()))
             };
             steps.push((num(d)?, num(s)?));
         }
-        Program::from_steps(steps).map_err(|e| format!("{e} (program file)"))
+        Program::from_steps(steps).map_err(|e| InputError::ProgramFile(Box::new(e)))
     }
 
     /// Total duration (s).
@@ -110,9 +110,29 @@ mod tests {
         assert_eq!(p.speed_at(9.99), 0.05);
         assert_eq!(p.speed_at(10.0), 0.1);
         assert_eq!(p.speed_at(99.0), 0.1);
-        assert!(Program::parse("10\n").unwrap_err().contains("line 1"));
-        assert!(Program::parse("1 1\n0 1\n").unwrap_err().contains("step 2"));
-        assert!(Program::parse("a 1\n").unwrap_err().contains("line 1"));
-        assert!(Program::parse("").unwrap_err().contains("no steps"));
+        assert!(
+            Program::parse("10\n")
+                .unwrap_err()
+                .to_string()
+                .contains("line 1")
+        );
+        assert!(
+            Program::parse("1 1\n0 1\n")
+                .unwrap_err()
+                .to_string()
+                .contains("step 2")
+        );
+        assert!(
+            Program::parse("a 1\n")
+                .unwrap_err()
+                .to_string()
+                .contains("line 1")
+        );
+        assert!(
+            Program::parse("")
+                .unwrap_err()
+                .to_string()
+                .contains("no steps")
+        );
     }
 }

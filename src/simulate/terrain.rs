@@ -9,6 +9,7 @@
 //! `x` strictly increasing. Height and rolling coefficient are linear between points; before
 //! the first and after the last point the ground is flat with the nearest point's coefficient.
 
+use super::InputError;
 use super::robot::{Ground, source};
 use rand::Rng;
 use rand::SeedableRng;
@@ -38,52 +39,44 @@ const HALF_WIDTH: f64 = 0.4;
 
 impl Terrain {
     /// Build from points; `Err` names the first problem.
-    pub fn from_points(points: Vec<(f64, f64, f64)>) -> Result<Terrain, String> {
+    pub fn from_points(points: Vec<(f64, f64, f64)>) -> Result<Terrain, InputError> {
         if points.is_empty() {
-            return Err("no points".into());
+            return Err(InputError::NoPoints);
         }
         for (i, p) in points.iter().enumerate() {
             if !(p.0.is_finite() && p.1.is_finite() && p.2.is_finite()) {
-                return Err(format!("point {}: not a finite number", i + 1));
+                return Err(InputError::NotFinite(i + 1));
             }
             if p.2 < 0.0 {
-                return Err(format!(
-                    "point {}: rolling coefficient {} is negative",
-                    i + 1,
-                    p.2
-                ));
+                return Err(InputError::NegativeRolling(i + 1, p.2));
             }
             if i > 0 && points.get(i - 1).is_some_and(|q| q.0 >= p.0) {
-                return Err(format!(
-                    "point {}: x = {} is not after the previous point",
-                    i + 1,
-                    p.0
-                ));
+                return Err(InputError::NotAfter(i + 1, p.0));
             }
         }
         Ok(Terrain { points })
     }
 
     /// Read the file format described at the top of this module. Errors carry the line number.
-    pub fn parse(text: &str) -> Result<Terrain, String> {
+    pub fn parse(text: &str) -> Result<Terrain, InputError> {
         let mut points = Vec::new();
         for (n, cols) in super::data_rows(text) {
             if !(2..=3).contains(&cols.len()) {
-                return Err(format!(
-                    "line {}: expected `x height [rolling]`, found {} columns",
-                    n,
-                    cols.len()
-                ));
+                return Err(InputError::Columns {
+                    line: n,
+                    expected: "x height [rolling]",
+                    found: cols.len(),
+                });
             }
             let mut nums = [0.0, 0.0, source::MAT_ROLLING];
             for (slot, col) in nums.iter_mut().zip(&cols) {
                 *slot = col
                     .parse::<f64>()
-                    .map_err(|_| format!("line {}: {col:?} is not a number", n))?;
+                    .map_err(|_| InputError::NotANumber(n, col.to_string()))?;
             }
             points.push((nums[0], nums[1], nums[2]));
         }
-        Terrain::from_points(points).map_err(|e| format!("{e} (terrain file)"))
+        Terrain::from_points(points).map_err(|e| InputError::TerrainFile(Box::new(e)))
     }
 
     /// Write in the file format (the inverse of [`Terrain::parse`]).
@@ -221,23 +214,36 @@ mod tests {
 
     #[test]
     fn parse_errors_name_the_line() {
-        assert!(Terrain::parse("0 0\nx 1\n").unwrap_err().contains("line 2"));
+        assert!(
+            Terrain::parse("0 0\nx 1\n")
+                .unwrap_err()
+                .to_string()
+                .contains("line 2")
+        );
         assert!(
             Terrain::parse("0 0\n1 2 3 4\n")
                 .unwrap_err()
+                .to_string()
                 .contains("line 2")
         );
         assert!(
             Terrain::parse("1 0\n0 0\n")
                 .unwrap_err()
+                .to_string()
                 .contains("point 2")
         );
         assert!(
             Terrain::parse("# nothing\n")
                 .unwrap_err()
+                .to_string()
                 .contains("no points")
         );
-        assert!(Terrain::parse("0 0 -1\n").unwrap_err().contains("negative"));
+        assert!(
+            Terrain::parse("0 0 -1\n")
+                .unwrap_err()
+                .to_string()
+                .contains("negative")
+        );
     }
 
     #[test]
