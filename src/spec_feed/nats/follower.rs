@@ -1,6 +1,6 @@
 //! The running process's side of the spec channel ([`NatsFeed`]): every rollout and decision
 //! read at start, then watched for; each handed to the step loop; the process's outcomes
-//! written back to its status key, renewed every [`HEARTBEAT`](super::HEARTBEAT).
+//! written back to its status key, renewed every [`super::HEARTBEAT`].
 
 use super::bucket::*;
 use super::layout::*;

@@ -3,11 +3,12 @@
 //! connection, its failures and their messages are `nats::conn`'s).
 //!
 //! Owns the bucket's layout (`docs/state-and-reload.md`, "Spec versions across a fleet"):
-//! - `bundle.<id>`: a version's [`Bundle`] as JSON (`id` = [`Bundle::id`]);
+//! - `bundle.<id>`: a version's [`Bundle`](super::bundle::Bundle) as JSON (`id` =
+//!   [`Bundle::id`](super::bundle::Bundle::id));
 //! - `rollout.<revision>`: a signed rollout record ([`super::sign`]), revisions 1, 2, 3, …,
 //!   append-only: each is created with the KV `create`, so two publishers never take one
 //!   revision (the later one retries with the next);
-//! - `decision.<revision>`: the fleet's signed decision on that rollout ([`Decision`]: commit
+//! - `decision.<revision>`: the fleet's signed decision on that rollout ([`Decision`](super::Decision): commit
 //!   or abort, with the votes), created once with the KV `create`;
 //! - `status.<host>.<partition>.pid<N>` (`status.<host>.pid<N>` without a partition): a
 //!   process's outcomes ([`Status`]): its votes and what each decision did there, rewritten
