@@ -508,8 +508,8 @@ fn make_test_says_loudly_what_it_skipped() {
         "{said}"
     );
     assert!(!said.contains("tools/setup.sh"), "{said}");
-    // A missing server or tool (crates/test-support/src/servers.rs leaves `needs-<program>`) says how to
-    // install it.
+    // A missing server or tool (crates/test-support/src/servers.rs leaves `needs-<program>`)
+    // says how to install it.
     write(dir.path(), "needs-babeltrace2", "`babeltrace2` not found\n");
     let out = banner();
     let said = text(&out.stdout);
