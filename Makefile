@@ -1,5 +1,5 @@
 # Every command the README mentions lives here. `make run` and `make test` are the README's first two.
-.PHONY: run test setup build install install-files deb profiling readme-run bench bench-criterion bench-process bench-nats bench-fleet bench-telegraf shutdown-save rollout-bench soak fmt lint ci fixtures conformance fuzz reproduce combinations crates-package
+.PHONY: run test setup build book cli-md book-pictures install install-files deb profiling readme-run bench bench-criterion bench-process bench-nats bench-fleet bench-telegraf shutdown-save rollout-bench soak fmt lint ci fixtures conformance fuzz reproduce combinations crates-package
 
 CARGO ?= cargo
 RUN_FIXTURE ?= tests/fixtures/robot/recorded_run.lp
@@ -25,6 +25,20 @@ readme-run: build
 
 setup:
 	bash tools/setup.sh
+
+# The book (docs/book, mdBook; tools/setup.sh installs the pinned mdbook) into target/book: open
+# target/book/index.html. `make test` builds it too, checks every internal link and anchor, runs
+# its shell blocks and opens it in headless Chromium (tests/cli/book.rs).
+book:
+	mdbook build docs/book
+
+# The book's command-line chapter, made from the command line like the man page.
+cli-md: build
+	./target/release/tessla-telegraf cli-markdown > docs/book/src/cli.md
+
+# The book's pictures of `report`'s page and of one plot (headless Chromium).
+book-pictures: build
+	bash tools/book_pictures.sh ./target/release/tessla-telegraf
 
 # The test command (also what .ci/run calls). Suites that need TeSSLa's conformance cases skip
 # without them; tools/test-skips.sh then prints loudly which were skipped, why, and how to get
@@ -77,7 +91,7 @@ deb: build
 profiling:
 	$(CARGO) build --profile profiling
 
-# Benchmarks; figures in BENCHMARKS.md. Criterion guards of the hot paths (codec, binding, engine
+# Benchmarks; figures in the book's Benchmarks chapter. Criterion guards of the hot paths (codec, binding, engine
 # step, output formatting, whole record path), then the whole-process runs against the baselines
 # (cat, parse-only, Python, rtlola-cli; workloads generated once into target/bench-data) with
 # latency, peak RSS and spec load, written to target/bench-results.md.
@@ -93,17 +107,17 @@ bench-criterion:
 bench-process:
 	python3 bench/run.py --reps $(BENCH_REPS)
 
-# The fleet level (docs/fleet.md, BENCHMARKS.md "Fleet level"): cost per record at 1k and 10k
+# The fleet level (docs/fleet.md, the Benchmarks chapter, "Fleet level"): cost per record at 1k and 10k
 # robots, memory per robot, the closest pair at 1k, 10k and 100k robots.
 bench-fleet: build
 	nice -n 5 python3 bench/fleet.py --reps 3 --bin $(or $(CARGO_TARGET_DIR),target)/release/tessla-telegraf
 
-# Fleet on NATS (BENCHMARKS.md, "Fleet on NATS"): throughput with 1, 2 and 4 partitions and the
+# Fleet on NATS (the Benchmarks chapter, "Fleet on NATS"): throughput with 1, 2 and 4 partitions and the
 # standby's takeover time, on a 3-node nats-server cluster started on free loopback ports.
 bench-nats: build
 	$(CARGO) run --release --example fleet_nats -- --robots 64 --reps 3
 
-# Robot to action through the real Telegraf (BENCHMARKS.md, "Robot to action through Telegraf"):
+# Robot to action through the real Telegraf (the Benchmarks chapter, "Robot to action"):
 # first P2 inside one Telegraf, ours (processors.execd, echo and clone wirings) against the same
 # P2 in processors.starlark (bench/p2.star), paired: CPU per record above the no-processor floor
 # (bench/telegraf_p2.py); then the delay from a robot's MQTT publish to its action on its topic,
@@ -131,7 +145,7 @@ bench-telegraf: build
 # HOST:PORT,... --nats-options replicas=3" saves to a JetStream bucket instead of a file.
 SHUTDOWN_INSTANCES ?= 10000 50000 100000
 ROLLOUT_REPS ?= 10
-# Spec rollouts (BENCHMARKS.md, "Spec versions across a fleet"): publish -> both partitions of a
+# Spec rollouts (the Benchmarks chapter, "Spec versions across a fleet"): publish -> both partitions of a
 # two-process fleet running the new version, and no record lost or judged by a mix of versions.
 rollout-bench: build
 	python3 bench/spec_rollout.py --reps $(ROLLOUT_REPS)
@@ -161,7 +175,7 @@ combinations:
 	COMBINATION_SEEDS=$(SEEDS) $(CARGO) test --release --test integration cli::combinations -- --nocapture
 
 # Build every cargo-fuzz target and run each for FUZZ_SECONDS (default 60); fails on a crash.
-# Long runs and their findings: RELIABILITY.md.
+# Long runs and their findings: docs/book/src/reliability-record.md.
 fuzz:
 	bash tools/fuzz-ci.sh
 
@@ -183,14 +197,14 @@ stdlib:
 	UPDATE_STDLIB=1 $(CARGO) test --test integration cli::prelude:: -- --nocapture
 	grep -h 'pass$$' target/stdlib-summary.txt target/prelude-summary.txt
 
-# The README's example image, from the recorded-run fixture.
+# The book's example image (pipeline.md), from the recorded-run fixture.
 report-example: build
 	./target/release/tessla-telegraf run < tests/fixtures/robot/recorded_run.lp > target/out.lp
 	./target/release/tessla-telegraf report target/out.lp -o target/report
-	mkdir -p docs && cp target/report/speeds.svg docs/report-example.svg
+	mkdir -p docs/book/src/images && cp target/report/speeds.svg docs/book/src/images/report-example.svg
 
 # The paper's Table I in simulation: the bundled yoga-mat scenario with the monitor off and on,
-# sweeps over 20 seeds and a few gain/delta values; writes docs/reproduction.md and its plots.
+# sweeps over 20 seeds and a few gain/delta values; writes docs/book/src/reproduction.md and its plots.
 reproduce: build
 	nice -n 10 python3 tools/reproduce.py target/release/tessla-telegraf
 

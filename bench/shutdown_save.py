@@ -6,7 +6,7 @@ SIGTERM 5 s after stdin closed, SIGKILL 5 s later; on Windows a kill after 5 s.
 
 Each repetition: a fresh `tessla-telegraf run --no-passthrough --instance-by topic
 --max-instances N --state FILE` is fed the first two records of the recorded run for each of N
-`topic` values (the fleet input of docs/state-and-reload.md), then one record of a sentinel
+`topic` values (the fleet input of docs/book/src/state-and-reload.md), then one record of a sentinel
 robot; once the sentinel's output arrives (so every record before it was stepped), stdin is
 closed and the time to exit is measured. The `I! state: saved ... in T ms` line gives the save
 alone. Prints each repetition and the medians; the machine's load average is printed too

@@ -23,7 +23,7 @@ type Layers = &'static [&'static [&'static str]];
 /// [`Layers`]; `to` may be another crate (`::tessla_syntax`).
 type Forbidden = &'static [(&'static str, &'static str, &'static str)];
 
-/// The root crate, in the order a record travels (README, "Layout").
+/// The root crate, in the order a record travels (the book's Architecture chapter, "Layout").
 const ROOT_LAYERS: Layers = &[
     // The command line and the crate's roots.
     &["main", "lib", "cli"],

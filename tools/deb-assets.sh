@@ -19,8 +19,10 @@ cp specs/telegraf.tessla "$share/tessla-telegraf/"
 # The first spec's specs where its telegraf.conf names them (README, "Your first spec").
 mkdir -p "$share/tessla-telegraf/first-spec"
 cp examples/first-spec/*.tessla "$share/tessla-telegraf/first-spec/"
-cp README.md RELIABILITY.md "$doc/"
+cp README.md "$doc/"
 cp docs/*.md "$doc/"
+# The book's Markdown (docs/book/src: chapters, pictures).
+cp -r docs/book/src "$doc/book"
 cp -rL examples/. "$doc/examples/"
 cp telegraf/*.conf "$doc/telegraf/"
 cp -r telegraf/dashboards "$doc/telegraf/"

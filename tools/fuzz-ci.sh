@@ -19,7 +19,7 @@ fi
 suite=${TESSLA_SUITE:-$root/../shared/tessla-suite}
 
 # Extra libFuzzer flags per target. `spec`: leak detection off, during the run and at exit: it
-# was off for the recursive-function leak, which is fixed (RELIABILITY.md, finding 3); it stays
+# was off for the recursive-function leak, which is fixed (docs/book/src/reliability-record.md, finding 3); it stays
 # off in CI until a long run with leak detection on has shown no other leak.
 asan_for() {
   case $1 in

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Reproduce the paper's Table I with the simulated robot and write docs/reproduction.md.
+"""Reproduce the paper's Table I with the simulated robot and write docs/book/src/reproduction.md.
 
 Runs `tessla-telegraf simulate` (release build) on the bundled yoga-mat scenario with the monitor
 off and on, renders both runs with `tessla-telegraf report`, then sweeps 20 seeds of the bundled
@@ -20,7 +20,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 BIN = Path(sys.argv[1]) if len(sys.argv) > 1 else ROOT / "target" / "release" / "tessla-telegraf"
 WORK = ROOT / "target" / "reproduce"
-DOCS = ROOT / "docs"
+DOCS = ROOT / "docs" / "book" / "src"
 PLOTS = DOCS / "reproduction"
 SEEDS = range(1, 21)
 DEFAULT_GAIN, DEFAULT_DELTA = 0.5, 0.02

@@ -11,7 +11,9 @@
 # npm, from the Debian package, installs them there). Idempotent: does nothing when everything
 # is present. Needs root (or sudo) only when a Debian package is missing. Without Go, or without the Go module proxy, the
 # Telegraf tests skip with the loud banner at the end of `make test`; with REQUIRE_SERVERS=1 (CI)
-# a Telegraf that cannot be built fails the set-up.
+# a Telegraf that cannot be built fails the set-up. The book's builder, mdBook, comes from
+# crates.io at the pinned version (`cargo install --locked`, only the search feature: no server);
+# `make test` fails without it (tests/cli/book.rs).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -42,6 +44,16 @@ install_schema_check() {
     echo "setup: Grafana's schema not installed; the dashboards' schema test will skip" >&2
 }
 
+# mdBook, pinned: the book (docs/book) is built by `make book` and by the tests.
+MDBOOK_VERSION=0.4.52
+install_mdbook() {
+    if [ "$(mdbook --version 2>/dev/null)" = "mdbook v$MDBOOK_VERSION" ]; then
+        return 0
+    fi
+    echo "setup: installing mdbook $MDBOOK_VERSION (cargo install)" >&2
+    cargo install --locked mdbook --version "$MDBOOK_VERSION" --no-default-features --features search
+}
+
 need=()
 command -v mosquitto >/dev/null 2>&1 || [ -x /usr/sbin/mosquitto ] || need+=(mosquitto)
 command -v influxd >/dev/null 2>&1 || [ -x /usr/bin/influxd ] || need+=(influxdb)
@@ -53,6 +65,7 @@ command -v npm >/dev/null 2>&1 || need+=(npm)
 command -v chromium >/dev/null 2>&1 || need+=(chromium)
 
 if [ ${#need[@]} -eq 0 ]; then
+    install_mdbook
     build_telegraf
     install_schema_check
     exit 0
@@ -73,5 +86,6 @@ $sudo apt-get install -y -qq "${need[@]}"
 for svc in mosquitto influxdb nats-server; do
     $sudo systemctl stop "$svc" >/dev/null 2>&1 || $sudo service "$svc" stop >/dev/null 2>&1 || true
 done
+install_mdbook
 build_telegraf
 install_schema_check

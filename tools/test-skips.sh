@@ -19,8 +19,8 @@ done
 if ls "$dir" | grep -qv '^needs-'; then
 cat <<'TXT'
 Suites named after a test need TeSSLa's conformance cases (the TeSSLa project's back-end test
-suite, one folder per topic with a <case>.json descriptor per case: see the README, "Tests and
-TeSSLa's suite"). Put the folder at ../shared/tessla-suite beside this repository, or point
+suite, one folder per topic with a <case>.json descriptor per case: see the book, "TeSSLa reference",
+"Tests and TeSSLa's suite"). Put the folder at ../shared/tessla-suite beside this repository, or point
 TESSLA_SUITE at it:
   TESSLA_SUITE=/path/to/tessla-suite make test
 REQUIRE_TESSLA_SUITE=1 (as CI sets) turns a missing suite into a failure.

@@ -15,7 +15,7 @@ pub const VERSION: &str = concat!(
     "; implements TeSSLa 1.2)"
 );
 
-/// The exit codes, as `--help` and the man page list them (README, "Exit codes").
+/// The exit codes, as `--help` and the man page list them (the book, "Exit codes").
 pub const EXIT_CODES: &str = "Exit codes:
   0: success: input ended (EOF), SIGTERM/SIGINT after flushing, or stdout closed by the reader
   1: a runtime error in `trace` mode
@@ -64,6 +64,10 @@ pub enum Command {
     Completions(CompletionsArgs),
     /// Print the man page (roff), made from this command line (`make install` installs it).
     Manpage,
+    /// Print the book's command-line chapter (Markdown), made from this command line like the
+    /// man page (`make cli-md` writes docs/book/src/cli.md).
+    #[command(hide = true)]
+    CliMarkdown,
 }
 
 #[derive(Debug, Args, Clone)]
@@ -167,7 +171,7 @@ pub struct RunArgs {
 #[derive(Debug, Args, Clone, Default)]
 #[command(next_help_heading = "Time")]
 pub struct TimeArgs {
-    /// What to do with a record stamped before its instance's last step (README, "Time"): a
+    /// What to do with a record stamped before its instance's last step (the book, "Time"): a
     /// step of its own 1 ns after it, or dropped. A record with the same timestamp as the last
     /// step is always stepped 1 ns after it.
     #[arg(long, value_enum, default_value_t)]
@@ -242,7 +246,7 @@ pub struct StateArgs {
     /// Save every monitor instance's state to FILE on shutdown (EOF, SIGTERM, SIGINT) and
     /// continue from it at start, so a Telegraf restart or reload keeps the monitors' state.
     /// `nats://HOST:PORT[,...]/BUCKET[?lease=NAME&ttl=3s&replicas=3]`: a JetStream key-value
-    /// bucket shared by a fleet's processes (docs/state-and-reload.md).
+    /// bucket shared by a fleet's processes (docs/book/src/state-and-reload.md).
     #[arg(long, value_name = "FILE|nats://HOST:PORT/BUCKET", value_parser = parse_state)]
     pub state: Option<crate::state::Target>,
     /// Also save the state this often while running (`30s`, `5m`), so a crash or SIGKILL
@@ -276,7 +280,7 @@ pub struct OutputArgs {
 }
 
 /// Spec channel: new spec versions for a fleet, published by the operator with `tessla-telegraf
-/// spec publish` (docs/state-and-reload.md, "Spec versions across a fleet").
+/// spec publish` (docs/book/src/state-and-reload.md, "Spec versions across a fleet").
 #[derive(Debug, Args, Clone, Default)]
 #[command(next_help_heading = "Spec channel")]
 pub struct SpecChannelArgs {

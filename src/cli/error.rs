@@ -1,7 +1,7 @@
 //! The one error type every subcommand returns ([`CliError`]: the exit code and the message
 //! for stderr).
 //!
-//! Exit codes (documented in the README):
+//! Exit codes (documented in `--help` and the book, "With Telegraf", "Exit codes"):
 //! - 0: success (also: stdin EOF, SIGTERM/SIGINT after flushing, stdout closed by the reader)
 //! - 1: a runtime error in `trace` mode (decreasing timestamps, multiple events, error values)
 //! - 2: a spec error (parse, type, include ...) or a bad command line
@@ -12,7 +12,7 @@
 use crate::nats::conn::Failure;
 use std::fmt;
 
-/// Why a subcommand failed, as its exit code says (README "Exit codes"); success is 0.
+/// Why a subcommand failed, as its exit code says (the book, "Exit codes"); success is 0.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Code {
     /// 1: a runtime error in `trace` mode.

@@ -141,7 +141,7 @@ fn completions_and_the_man_page_come_from_the_command_line() {
     assert!(page.contains("report"), "the subcommands are listed");
 }
 
-/// The battery example's output (README "Your first spec").
+/// The battery example's output (the book, "Your first spec").
 fn battery_run() -> String {
     let out = run(
         &[
@@ -462,16 +462,16 @@ fn make_run_fits_one_screen_and_the_readme_shows_it() {
         makefile.contains("report --timeline --summary target/run.lp"),
         "make run prints what this test checks"
     );
-    // The README's block under "`make run` prints" is the real output.
-    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
-    let block = readme
+    // The book's block under "`make run` prints" (Getting started) is the real output.
+    let page = std::fs::read_to_string(root().join("docs/book/src/getting-started.md")).unwrap();
+    let block = page
         .split("<!-- make run output -->\n```\n")
         .nth(1)
         .and_then(|r| r.split("```").next())
-        .expect("the README shows make run's output after <!-- make run output -->");
+        .expect("getting-started.md shows make run's output after <!-- make run output -->");
     assert_eq!(
         block, screen,
-        "README's make run block is out of date: `make readme-run` rewrites it"
+        "the book's make run block (getting-started.md) is out of date: `make readme-run` rewrites it"
     );
 }
 
@@ -566,14 +566,7 @@ fn the_package_assets_hold_man_page_completions_docs_and_a_systemd_drop_in() {
     // A copy of the repository's layout with a Telegraf systemd drop-in added, as another
     // change may add one under telegraf/systemd/.
     let dir = tempfile::tempdir().unwrap();
-    for name in [
-        "specs",
-        "docs",
-        "examples",
-        "README.md",
-        "RELIABILITY.md",
-        "tools",
-    ] {
+    for name in ["specs", "docs", "examples", "README.md", "tools"] {
         link(dir.path(), name);
     }
     for name in [
@@ -610,6 +603,8 @@ fn the_package_assets_hold_man_page_completions_docs_and_a_systemd_drop_in() {
         "share/tessla-telegraf/first-spec/dock.tessla",
         "share/tessla-telegraf/first-spec/battery.tessla",
         "share/doc/tessla-telegraf/README.md",
+        "share/doc/tessla-telegraf/book/first-spec.md",
+        "share/doc/tessla-telegraf/fleet.md",
         "share/doc/tessla-telegraf/telegraf/telegraf.conf",
         "share/doc/tessla-telegraf/telegraf/dashboards/grafana-influxql.json",
         "share/doc/tessla-telegraf/examples/first-spec/battery.tessla",
@@ -643,9 +638,9 @@ fn check_lists_the_constants_of_a_spec_whose_annotations_are_bundled() {
 }
 
 #[test]
-fn the_readme_pitfalls_quote_what_check_says() {
+fn the_first_spec_pitfalls_quote_what_check_says() {
     let dir = tempfile::tempdir().unwrap();
-    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let readme = std::fs::read_to_string(root().join("docs/book/src/first-spec.md")).unwrap();
     let readme = readme.split_whitespace().collect::<Vec<_>>().join(" ");
     for (spec, says) in [
         (
@@ -678,7 +673,7 @@ fn the_readme_pitfalls_quote_what_check_says() {
         assert_eq!(out.status.code(), Some(code), "{err}");
         for s in says {
             assert!(err.contains(s), "check says `{s}`: {err}");
-            assert!(readme.contains(s), "the README quotes `{s}`");
+            assert!(readme.contains(s), "first-spec.md quotes `{s}`");
         }
     }
 }

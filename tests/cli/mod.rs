@@ -1,6 +1,8 @@
-//! The engine and the command line: `check`, `trace`, `report`, `simulate` and the README's
-//! commands run on files (or the engine in-process), the corpora of specs, the shipped files.
+//! The engine and the command line: `check`, `trace`, `report`, `simulate`, the README's and the
+//! book's commands run on files (or the engine in-process), the corpora of specs, the shipped files.
 
+#[cfg(feature = "tools")]
+mod book;
 mod broken_specs;
 mod check_cli;
 mod combinations;

@@ -1,10 +1,12 @@
-//! Every command in the README's `sh` blocks runs as printed (with this build's binary first on
-//! `PATH`), except the few listed in [`EXEMPT`] with the reason. A plain block right after the
-//! marker `<!-- output of the command above -->` must be exactly what the command before it
-//! prints on stdout.
+//! Every command in the `sh` blocks of the README and of every page of the book
+//! (`docs/book/src/*.md`, with the files its `{{#include ...}}` lines name put in) runs as printed
+//! (with this build's binary first on `PATH`), except the few listed in [`EXEMPT`] with the
+//! reason. A plain block right after the marker `<!-- output of the command above -->` must be
+//! exactly what the command before it prints on stdout.
 //!
-//! Commands run in a scratch folder that links the repository's `examples`, `specs`, `tests`
-//! and `telegraf` folders, so files they write (`out.lp`, `report/`, `target/...`) land there.
+//! Each page's commands run in order in a scratch folder of their own that links the
+//! repository's `examples`, `specs`, `tests` and `telegraf` folders, so files they write
+//! (`out.lp`, `report/`, `target/...`) land there.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -153,7 +155,7 @@ fn run(cmd: &str, dir: &Path) -> (Option<i32>, String, String) {
         }
         if start.elapsed() > Duration::from_secs(120) {
             let _ = child.kill();
-            panic!("README command did not end within 120 s: {cmd}");
+            panic!("command did not end within 120 s: {cmd}");
         }
         std::thread::sleep(Duration::from_millis(20));
     }
@@ -165,44 +167,97 @@ fn run(cmd: &str, dir: &Path) -> (Option<i32>, String, String) {
     )
 }
 
+/// The README and the book's pages (sorted by name), each with its `{{#include PATH}}` lines
+/// replaced by the file they name (PATH relative to the page, as mdBook reads it).
+pub fn documents() -> Vec<(String, String)> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut out = vec![(
+        "README.md".to_string(),
+        std::fs::read_to_string(root.join("README.md")).expect("README.md"),
+    )];
+    let src = root.join("docs/book/src");
+    let mut pages: Vec<PathBuf> = std::fs::read_dir(&src)
+        .expect("docs/book/src")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "md"))
+        .collect();
+    pages.sort();
+    for page in pages {
+        let text = std::fs::read_to_string(&page).expect("a book page");
+        let mut full = String::new();
+        for line in text.lines() {
+            match line
+                .trim()
+                .strip_prefix("{{#include ")
+                .and_then(|r| r.strip_suffix("}}"))
+            {
+                Some(path) => {
+                    let included = src.join(path.trim());
+                    let body = std::fs::read_to_string(&included).unwrap_or_else(|e| {
+                        panic!("{}: include {}: {e}", page.display(), included.display())
+                    });
+                    full.push_str(&body);
+                }
+                None => {
+                    full.push_str(line);
+                    full.push('\n');
+                }
+            }
+        }
+        let name = format!(
+            "docs/book/src/{}",
+            page.file_name().unwrap_or_default().to_string_lossy()
+        );
+        out.push((name, full));
+    }
+    out
+}
+
 #[test]
-fn every_readme_command_runs_as_printed() {
-    let readme = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("README.md"))
-        .expect("README.md");
-    let cmds = readme_commands(&readme);
-    assert!(cmds.len() >= 15, "found only {} commands", cmds.len());
-    let dir = scratch();
-    let (mut ran, mut compared) = (0, 0);
-    for cmd in &cmds {
-        if let Some((_, why)) = EXEMPT.iter().find(|(start, _)| cmd.text.starts_with(start)) {
-            eprintln!("README line {}: not run ({why}): {}", cmd.line, cmd.text);
+fn every_command_of_the_readme_and_the_book_runs_as_printed() {
+    let docs = documents();
+    assert!(docs.len() >= 15, "found only {} pages", docs.len());
+    let (mut all, mut ran, mut compared) = (Vec::new(), 0, 0);
+    for (name, text) in &docs {
+        let cmds = readme_commands(text);
+        if cmds.is_empty() {
             continue;
         }
-        let (code, stdout, stderr) = run(&cmd.text, dir.path());
-        assert_eq!(
-            code,
-            Some(0),
-            "README line {}: `{}` failed:\n{stderr}",
-            cmd.line,
-            cmd.text
-        );
-        ran += 1;
-        if let Some(expected) = &cmd.expected {
+        let dir = scratch();
+        for cmd in &cmds {
+            if let Some((_, why)) = EXEMPT.iter().find(|(start, _)| cmd.text.starts_with(start)) {
+                eprintln!("{name} line {}: not run ({why}): {}", cmd.line, cmd.text);
+                continue;
+            }
+            let (code, stdout, stderr) = run(&cmd.text, dir.path());
             assert_eq!(
-                &stdout, expected,
-                "README line {}: `{}` prints something else than the README shows",
-                cmd.line, cmd.text
+                code,
+                Some(0),
+                "{name} line {}: `{}` failed:\n{stderr}",
+                cmd.line,
+                cmd.text
             );
-            compared += 1;
+            ran += 1;
+            if let Some(expected) = &cmd.expected {
+                assert_eq!(
+                    &stdout, expected,
+                    "{name} line {}: `{}` prints something else than the page shows \
+                     (`make readme-run` rewrites the shown outputs)",
+                    cmd.line, cmd.text
+                );
+                compared += 1;
+            }
         }
+        all.extend(cmds);
     }
+    assert!(all.len() >= 15, "found only {} commands", all.len());
     assert!(ran >= 10, "ran only {ran} commands");
     assert!(compared >= 3, "compared only {compared} outputs");
     // Every exemption is still used: a stale one would hide nothing but mislead.
     for (start, _) in EXEMPT {
         assert!(
-            cmds.iter().any(|c| c.text.starts_with(start)),
-            "exemption `{start}` matches no README command"
+            all.iter().any(|c| c.text.starts_with(start)),
+            "exemption `{start}` matches no command of the README or the book"
         );
     }
 }

@@ -412,7 +412,7 @@ fn a_million_robots_stay_within_max_instances() {
     // Distinct robot tags streamed from a writer thread, one instance per robot, at most 1000
     // kept: memory stays bounded and every eviction is counted. 200k by default (a debug build
     // takes minutes for a million on a busy machine); HOSTILE_ROBOTS=1000000 for the full run
-    // (RELIABILITY.md).
+    // (docs/book/src/reliability-record.md).
     let robots: u64 = std::env::var("HOSTILE_ROBOTS")
         .ok()
         .and_then(|v| v.parse().ok())

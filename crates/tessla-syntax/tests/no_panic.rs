@@ -129,7 +129,7 @@ fn mutated_specs_never_panic() {
     }
 }
 
-/// Inputs the cargo-fuzz `spec` target found (fuzz/, RELIABILITY.md): each parses, with an
+/// Inputs the cargo-fuzz `spec` target found (fuzz/, docs/book/src/reliability-record.md): each parses, with an
 /// error diagnostic, within a deadline (the first hung the parser: an `include` inside a module).
 const FUZZ_FOUND: &[&str] = &[
     "module Foo {\n  ## c\ninclude \"empty\"\n}\n",
