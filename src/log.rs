@@ -52,7 +52,7 @@ pub fn log(level: Level, msg: &str) {
     if !enabled(level) {
         return;
     }
-    // A URL in a message never shows its password (README, "Security").
+    // A URL in a message never shows its password (the book, "Security").
     let masked;
     let msg = if msg.contains(":/") && msg.contains('@') {
         masked = crate::log::mask(msg);

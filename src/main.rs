@@ -1,4 +1,4 @@
-//! The `tessla-telegraf` binary: hands over to `cli`, whose exit code (README "Exit codes")
+//! The `tessla-telegraf` binary: hands over to `cli`, whose exit code (the book, "Exit codes")
 //! is the process's.
 
 use std::process::ExitCode;

@@ -27,7 +27,7 @@ use std::sync::atomic::{AtomicU8, AtomicU64, AtomicUsize, Ordering::Relaxed};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-/// The exit code of a run stopped by the watchdog (README, "Exit codes").
+/// The exit code of a run stopped by the watchdog (the book, "Exit codes").
 pub const EXIT_CODE: i32 = 4;
 
 /// What the step loop is doing.
@@ -268,7 +268,7 @@ fn watch_loop(watch: &Watch, bound: Duration) {
                     "stdout: our reader has not read for {:.1} s (--step-timeout {}){}; \
                          waiting: a blocked write is backpressure, not a hung step (Telegraf \
                          may be parsing a large metric: the echo of a record with tens of \
-                         thousands of fields takes it seconds; README, \"A step that hangs\")",
+                         thousands of fields takes it seconds; the book, \"With Telegraf\", \"A step that hangs\")",
                     stalled.as_secs_f64(),
                     humantime::format_duration(bound),
                     watch.describe()

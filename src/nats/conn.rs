@@ -181,12 +181,12 @@ fn connect_failure(url: &Url, e: &async_nats::ConnectError) -> String {
         K::AuthorizationViolation | K::Authentication if url.auth == Auth::None => format!(
             "authorization failed at {at}: the server requires credentials and none were given \
              ({detail}); add user=NAME&password-env=VAR (or token-env, nkey-file, creds) to --state \
-             (README, \"Security\")"
+             (the book, \"Security\")"
         ),
         K::AuthorizationViolation | K::Authentication => format!(
             "authorization failed at {at}: the server refused this process's credentials ({}; {detail}); \
              check the user and password, token, nkey-file or creds in --state against the server's \
-             accounts (README, \"Security\")",
+             accounts (the book, \"Security\")",
             url.identity()
         ),
         K::Tls => tls_failure(&at, &detail),

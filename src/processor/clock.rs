@@ -6,7 +6,7 @@
 //! from which the instance's time is estimated while its input is silent; and the queue of
 //! wall-clock deadlines at which an instance's next `delay` firing falls due ([`Deadlines`]).
 //!
-//! The model (README, "Time"): an instance's time moves with its records; while no record
+//! The model (the book, "Time on live input"): an instance's time moves with its records; while no record
 //! arrives it moves on with the wall clock from its last record, held back by
 //! `--allowed-lateness`, so a `delay` (a watchdog, a timeout, `period`) fires while the robot is
 //! quiet. Only instances with an armed `delay` are in the queue, and a record costs the queue

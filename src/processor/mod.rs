@@ -2,7 +2,7 @@
 //!
 //! Owns: routing each metric to its monitor instance (one, or one per value of the
 //! `--instance-by` tags, each with its own state, timestamps and late-record rule; evicted past
-//! `--max-instances` or after `--instance-idle`); the time model of live input (README, "Time"):
+//! `--max-instances` or after `--instance-idle`); the time model of live input (the book, "Time on live input"):
 //! every record is a step of its own, evaluated at once, so the outputs never depend on how the
 //! input was split into reads; a record not after its instance's last step is stepped 1 ns after
 //! it (`--late shift`) or dropped (`--late drop`, only when it is earlier); a record stamped

@@ -261,7 +261,7 @@ pub fn run(
                 if a.speed_mse.is_some() {
                     outcome.spec_mse = a.speed_mse;
                 }
-                // The robot judges the action when it arrives (README, "What a robot must do
+                // The robot judges the action when it arrives (the book, "What a robot must do
                 // with an action"); with the monitor off it would not execute it anyway.
                 let clock = reply
                     .received_ns

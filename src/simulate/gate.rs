@@ -1,4 +1,4 @@
-//! What the simulated robot does with an action before executing it (README, "What a robot must
+//! What the simulated robot does with an action before executing it (the book, "What a robot must
 //! do with an action"): refuse one that is stale or repeated, accept a restarted monitor's.
 //!
 //! Owns: the rule and its counts. An action carries `seq` (its number in its monitor instance:

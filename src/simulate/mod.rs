@@ -7,7 +7,7 @@
 //! [`summary`] (the table and JSON printed at the end), [`scenario`] (building a run from
 //! the named bundled parts), and [`shared_floor`] (robots sharing one floor, for the fleet
 //! example). The command line lives in `crate::cli::simulate`; the model and
-//! where its parameters come from are documented in docs/simulation.md.
+//! where its parameters come from are documented in docs/book/src/simulation.md.
 
 pub mod closed_loop;
 pub mod gate;

@@ -1,7 +1,7 @@
 //! The drive model of the simulated TurtleBot3 Burger: linear motion along the path only.
 //!
 //! Owns: the robot's physical parameters ([`Params`], every value with its source in
-//! `docs/simulation.md`) and one integration step ([`Robot::step`]). The commanded linear speed
+//! `docs/book/src/simulation.md`) and one integration step ([`Robot::step`]). The commanded linear speed
 //! is tracked by a velocity controller (proportional term with time constant `tau`, an
 //! integral term that compensates steady loads up to `integral_limit`, anti-windup), whose
 //! force is capped at the drive's force limit (motor torque or wheel traction, the smaller).
@@ -28,7 +28,7 @@ pub struct Params {
     pub force_limit: f64,
 }
 
-/// Physical constants the defaults are derived from (sources in docs/simulation.md).
+/// Physical constants the defaults are derived from (sources in docs/book/src/simulation.md).
 pub mod source {
     /// kg, ROBOTIS TurtleBot3 Burger specification.
     pub const MASS: f64 = 1.0;

@@ -4,7 +4,7 @@
 //! per point), the terrain file format ([`Terrain::parse`]), the bundled yoga-mat profile
 //! ([`Terrain::yoga_mat`]) and random mats of the same kind ([`Terrain::random`]).
 //!
-//! File format (documented in docs/simulation.md): one point per line, `x height [rolling]`
+//! File format (documented in docs/book/src/simulation.md): one point per line, `x height [rolling]`
 //! (metres, metres, coefficient; separated by spaces, tabs or commas); `#` starts a comment;
 //! `x` strictly increasing. Height and rolling coefficient are linear between points; before
 //! the first and after the last point the ground is flat with the nearest point's coefficient.

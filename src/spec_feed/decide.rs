@@ -1,5 +1,5 @@
 //! The fleet's decision on a rollout, from the votes of its processes: who votes, when the
-//! count is complete, and the rule (`docs/state-and-reload.md`, "One decision per rollout").
+//! count is complete, and the rule (`docs/book/src/state-and-reload.md`, "One decision per rollout").
 //!
 //! Voters are the processes alive when the rollout was proposed: those whose status key the
 //! server stored within [`LIVE`] before it (every process rewrites its key every

@@ -9,7 +9,7 @@
 //! ([`super::restore`]). Never fatal.
 //!
 //! JSON rather than a binary format: it is readable when something goes wrong, floats are stored
-//! as their bits (exact, NaN included), and the size is measured in `docs/state-and-reload.md`.
+//! as their bits (exact, NaN included), and the size is measured in `docs/book/src/state-and-reload.md`.
 
 use super::entry::{
     self, MAGIC, Programs, SavedProgram, StateError, VERSION, unix_now, warn_unsaved,

@@ -2,7 +2,7 @@
 //! of a fleet. Owns: opening the bucket (creating it when absent), one entry per instance (the format of [`super::entry`]), restoring an
 //! instance when its first record arrives, saving every instance, and setting a foreign or
 //! corrupt entry aside (`aside.<key>.<unix seconds>`, with a warning). The design and its
-//! guarantees are in `docs/state-and-reload.md` ("Shared state on NATS").
+//! guarantees are in `docs/book/src/state-and-reload.md` ("Shared state on NATS").
 
 use super::entry::Programs;
 use super::lease::Lease;

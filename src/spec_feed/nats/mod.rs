@@ -2,7 +2,7 @@
 //! state bucket, named by a URL in `--state`'s syntax with its login and TLS options (the
 //! connection, its failures and their messages are `nats::conn`'s).
 //!
-//! Owns the bucket's layout (`docs/state-and-reload.md`, "Spec versions across a fleet"):
+//! Owns the bucket's layout (`docs/book/src/state-and-reload.md`, "Spec versions across a fleet"):
 //! - `bundle.<id>`: a version's [`Bundle`](super::bundle::Bundle) as JSON (`id` =
 //!   [`Bundle::id`](super::bundle::Bundle::id));
 //! - `rollout.<revision>`: a signed rollout record ([`super::sign`]), revisions 1, 2, 3, …,
