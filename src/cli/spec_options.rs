@@ -72,7 +72,8 @@ impl SpecOptions {
     }
 }
 
-/// The engine's load options from the command line (`--base-time`, `--set NAME=VALUE`).
+/// The engine's load options from the command line (`--base-time`, `--set NAME=VALUE`), with
+/// this program's natives (`crate::natives`): every command that compiles a spec starts here.
 pub fn load_options(o: &SpecOptions) -> Result<tessla_engine::LoadOptions, String> {
     let overrides = o
         .set
@@ -92,6 +93,7 @@ pub fn load_options(o: &SpecOptions) -> Result<tessla_engine::LoadOptions, Strin
             .map(|(n, t)| (n.to_string(), t.to_string()))
             .collect(),
         on_bundled_include: Some(crate::bundled::say_bundled_include),
+        natives: crate::natives::natives().map_err(|e| e.to_string())?,
     })
 }
 
