@@ -10,13 +10,13 @@ use workload::{P2_LINE, lidar_line, unordered};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
-use tessla_engine::LoadOptions;
 use tessla_telegraf::telegraf::binding::bindings;
 
 fn bind(c: &mut Criterion, name: &str, line: &str) {
-    let program = tessla_telegraf::bundled::load(&LoadOptions::default())
-        .unwrap()
-        .program;
+    let program =
+        tessla_telegraf::bundled::load(&tessla_telegraf::natives::load_options().unwrap())
+            .unwrap()
+            .program;
     let bs = bindings(&program).unwrap();
     let metric = lineproto::parse_record(line.as_bytes()).unwrap().unwrap();
     let mut g = c.benchmark_group(format!("bind_{name}"));

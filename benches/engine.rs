@@ -46,7 +46,7 @@ fn robot_load(c: &mut Criterion) {
     c.bench_function("load bundled robot specs", |b| {
         b.iter(|| {
             black_box(
-                tessla_telegraf::bundled::load(&LoadOptions::default())
+                tessla_telegraf::bundled::load(&tessla_telegraf::natives::load_options().unwrap())
                     .unwrap()
                     .program
                     .nodes

@@ -66,7 +66,7 @@ fn benches(c: &mut Criterion) {
     let watch = tessla_telegraf::watchdog::Watch::default();
     watched.watch_with(watch.lane());
     run(c, "p2_spec_p2_record_watched", watched, P2_LINE);
-    let robot = tessla_telegraf::bundled::load(&LoadOptions::default())
+    let robot = tessla_telegraf::bundled::load(&tessla_telegraf::natives::load_options().unwrap())
         .unwrap()
         .program;
     run(

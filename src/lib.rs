@@ -14,6 +14,7 @@ pub mod log;
 pub mod bundled;
 pub mod cli;
 pub mod fleet;
+pub mod natives;
 pub mod nats;
 pub mod processor;
 #[cfg(feature = "tools")]

@@ -16,7 +16,11 @@ fn program() -> Arc<Program> {
     static P: OnceLock<Arc<Program>> = OnceLock::new();
     P.get_or_init(|| {
         tessla_telegraf::log::set_level(tessla_telegraf::log::Level::Error);
-        match tessla_telegraf::bundled::load(&Default::default()) {
+        let options = match tessla_telegraf::natives::load_options() {
+            Ok(o) => o,
+            Err(e) => panic!("natives: {e}"),
+        };
+        match tessla_telegraf::bundled::load(&options) {
             Ok(l) => l.program,
             Err(e) => panic!("bundled spec does not load: {}", e.render()),
         }

@@ -18,7 +18,11 @@ fuzz_target!(|data: &[u8]| {
         .collect();
     files.insert("main.tessla".into(), text.to_string());
     let resolver = MemResolver { files };
-    match tessla_engine::load_with("main.tessla", &resolver, &Default::default()) {
+    // The program's natives, as every command compiles with (the seeds declare the lidar's).
+    let Ok(options) = tessla_telegraf::natives::load_options() else {
+        return;
+    };
+    match tessla_engine::load_with("main.tessla", &resolver, &options) {
         Ok(loaded) => {
             let _ = tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false);
             // Bad annotations are reported as a message, never a panic.

@@ -85,6 +85,9 @@ pub enum SpecOptionError {
          definitions that other specs include, use `check --library`"
     )]
     NoOutputs(String),
+    /// This program's natives could not be registered (a defect of the build, not of the spec).
+    #[error("{0}")]
+    Natives(#[from] tessla_engine::builtins::RegisterError),
 }
 
 impl From<SpecOptionError> for crate::cli::error::CliError {
@@ -93,7 +96,8 @@ impl From<SpecOptionError> for crate::cli::error::CliError {
     }
 }
 
-/// The engine's load options from the command line (`--base-time`, `--set NAME=VALUE`).
+/// The engine's load options from the command line (`--base-time`, `--set NAME=VALUE`), with
+/// this program's natives (`crate::natives`): every command that compiles a spec starts here.
 pub fn load_options(o: &SpecOptions) -> Result<tessla_engine::LoadOptions, SpecOptionError> {
     let overrides = o
         .set
@@ -113,6 +117,7 @@ pub fn load_options(o: &SpecOptions) -> Result<tessla_engine::LoadOptions, SpecO
             .map(|(n, t)| (n.to_string(), t.to_string()))
             .collect(),
         on_bundled_include: Some(crate::bundled::say_bundled_include),
+        natives: crate::natives::natives()?,
     })
 }
 

@@ -13,13 +13,18 @@
 //! A new stream operator is one entry here plus its nodes in the lowering's `stream_builtin`; a
 //! new value function is one entry here plus its native in `natives`.
 //!
+//! The table is open to an application: [`Natives`] holds natives it registers (name, signature,
+//! function) and hands the loader in [`crate::LoadOptions::natives`]; a spec reaches them through
+//! `extern("name")`, the checker holds the declaring `def` to the registered signature and the
+//! lowering calls them as it calls the table's natives. Registered names never shadow the table.
+//!
 //! Signatures are written in TeSSLa's type notation: `(Events[A], Events[B]) => Events[A]`, a
 //! plain type for a constant (`List[A]`). `A`/`K` and `B`/`V` are the only type variables.
 //! `lift`, `slift`, `merge` (with or without an arity suffix) and `log` take a varying number
 //! of arguments: their signature is a [`Sig::Variadic`] shape and the checker builds it per call.
 
 use crate::runtime::collections;
-use crate::runtime::natives::{self, core};
+use crate::runtime::natives::core;
 use crate::runtime::ops;
 use crate::value::{NativeFn, Value};
 use std::collections::HashMap;
@@ -518,21 +523,133 @@ pub static BUILTINS: &[Builtin] = &[
     operator("Operators.negate", ops::natives::neg),
     operator("Operators.fnegate", ops::natives::fneg),
     operator("Operators.bitflip", ops::natives::bitflip),
-    // Natives reached only through `extern("name")` (declared in the bundled specs).
+    // Natives reached only through `extern("name")` (declared in the bundled prelude and
+    // TeSSLa's libraries); an application adds its own with [`Natives::register`].
     external("CTF.getInt", core::ctf_get_int),
     external("CTF.getString", core::ctf_get_string),
     external("List_size", core::list_size),
     external("List_get", core::list_get),
     external("List_fold", core::list_fold),
-    external("lidar_dropouts", natives::lidar::dropouts),
-    external("fleet_closest_pair", natives::fleet::closest_pair),
-    external("lidar_spikes", natives::lidar::spikes),
-    external("lidar_sector_min", natives::lidar::sector_min),
-    external(
-        "lidar_sector_valid_fraction",
-        natives::lidar::sector_valid_fraction,
-    ),
 ];
+
+/// A native an application registers (see [`Natives`]): reached through `extern("name")`,
+/// typed by its declaring `def`, which must have the registered signature.
+#[derive(Debug, Clone, Copy)]
+pub struct Native {
+    pub name: &'static str,
+    /// In TeSSLa's type notation, a function type: `(List[Float], Float) => Int`; `A`/`K` and
+    /// `B`/`V` are type variables, as in [`BUILTINS`].
+    pub sig: &'static str,
+    pub f: NativeFn,
+}
+
+/// The natives an application adds to the builtins table, passed to the loader in
+/// [`crate::LoadOptions::natives`]: a spec reaches each through `extern("name")` from a `def`
+/// declared with the registered signature (checked when the spec is compiled; a different
+/// declaration is a type error). Names are kept apart from the language's builtins and from each
+/// other, so a registered native never changes what an existing spec means.
+///
+/// ```
+/// use tessla_engine::{LoadOptions, Value, builtins::Natives};
+/// fn twice(a: &[Value]) -> Value {
+///     match a {
+///         [Value::Int(n)] => Value::Int(n.wrapping_mul(2)),
+///         _ => Value::None,
+///     }
+/// }
+/// let mut natives = Natives::new();
+/// natives.register("twice", "(Int) => Int", twice).unwrap();
+/// let options = LoadOptions { natives, ..LoadOptions::default() };
+/// # let _ = options;
+/// ```
+#[derive(Debug, Clone, Default)]
+pub struct Natives {
+    list: Vec<Native>,
+}
+
+/// Why [`Natives::register`] refused a native.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RegisterError {
+    #[error("native `{0}`: the name is a builtin of the language")]
+    Builtin(&'static str),
+    #[error("native `{0}`: registered twice")]
+    Twice(&'static str),
+    #[error("native `{name}`: signature `{sig}` is not a function type in TeSSLa's notation")]
+    Signature {
+        name: &'static str,
+        sig: &'static str,
+    },
+}
+
+impl Natives {
+    /// No natives beyond the language's.
+    pub const fn new() -> Natives {
+        Natives { list: Vec::new() }
+    }
+
+    /// Add the native `name` with its signature and implementation. Refused: a name the
+    /// language's table has, a name registered before, a signature that is not a function type
+    /// (`(T1, ..., Tn) => R`, its parentheses balanced).
+    pub fn register(
+        &mut self,
+        name: &'static str,
+        sig: &'static str,
+        f: NativeFn,
+    ) -> Result<&mut Natives, RegisterError> {
+        if get(name).is_some() {
+            return Err(RegisterError::Builtin(name));
+        }
+        if self.get(name).is_some() {
+            return Err(RegisterError::Twice(name));
+        }
+        if !looks_like_function_type(sig) {
+            return Err(RegisterError::Signature { name, sig });
+        }
+        self.list.push(Native { name, sig, f });
+        Ok(self)
+    }
+
+    /// The native registered as `name`, if any.
+    pub fn get(&self, name: &str) -> Option<&Native> {
+        self.list.iter().find(|n| n.name == name)
+    }
+
+    /// The registered natives, in the order registered.
+    pub fn iter(&self) -> impl Iterator<Item = &Native> {
+        self.list.iter()
+    }
+}
+
+/// `(...) => R` with balanced brackets: the shape [`Natives::register`] accepts (the checker
+/// parses the types when a spec uses the native, and reports a signature it cannot read).
+fn looks_like_function_type(sig: &str) -> bool {
+    /// The depth after each character, `None` once a bracket closes that was not opened.
+    fn depths(s: &str) -> impl Iterator<Item = Option<usize>> + '_ {
+        s.chars().scan(Some(0usize), |d, c| {
+            *d = match c {
+                '(' | '[' => d.map(|d| d + 1),
+                ')' | ']' => d.and_then(|d| d.checked_sub(1)),
+                _ => *d,
+            };
+            Some(*d)
+        })
+    }
+    let s = sig.trim();
+    if !s.starts_with('(') {
+        return false;
+    }
+    // The parameters' closing parenthesis: the first character back at depth 0.
+    let Some(((close, _), _)) = s.char_indices().zip(depths(s)).find(|(_, d)| *d == Some(0)) else {
+        return false;
+    };
+    // `close` is the byte offset of a `)` or `]`, one byte long.
+    let Some(result) = s[close + 1..].trim_start().strip_prefix("=>") else {
+        return false;
+    };
+    !result.trim().is_empty()
+        && depths(result).all(|d| d.is_some())
+        && depths(result).last() == Some(Some(0))
+}
 
 #[cfg(test)]
 mod tests {

@@ -2,9 +2,11 @@
 //! [`Program`].
 //!
 //! Owns: the single entry point every command uses (`check`, `trace`, `run`, the bundled robot
-//! monitors), the options that affect compilation (base time, `--set` overrides) and the error
+//! monitors), the options that affect compilation (base time, `--set` overrides, the
+//! application's natives) and the error
 //! type carrying rendered-ready diagnostics.
 
+use crate::builtins::Natives;
 use crate::front::lower;
 use crate::runtime::exec::Program;
 use std::path::Path;
@@ -32,6 +34,9 @@ pub struct LoadOptions {
     pub bundled_includes: Vec<(String, String)>,
     /// Called once for each bundled include used: (the name as written, the including file).
     pub on_bundled_include: Option<fn(&str, &str)>,
+    /// The application's natives, added to the builtins table for this load: a spec reaches
+    /// each through `extern("name")` (see [`Natives`]).
+    pub natives: Natives,
 }
 
 /// A checked, compiled spec.
@@ -162,7 +167,7 @@ pub fn load_with(
         asts.push(file);
     }
     let resolved = crate::front::resolve::Resolved::with_library(&asts, library);
-    let typed = match crate::front::typeck::check(&resolved) {
+    let typed = match crate::front::typeck::check_with(&resolved, &options.natives) {
         Ok(typed) => typed,
         Err(diagnostics) => {
             return Err(LoadError {

@@ -35,8 +35,48 @@ struct Spec {
     conv: char,
 }
 
+/// What Java's `String.format` would throw for, in our words (each a Java
+/// `IllegalFormatException`); `body` is a conversion's text after its `%`.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum FormatError {
+    #[error("width `{0}` is too large")]
+    WidthTooLarge(String),
+    #[error("precision `{0}` is too large")]
+    PrecisionTooLarge(String),
+    #[error("a `.` must be followed by a precision")]
+    PrecisionMissing,
+    #[error("a `%` conversion lacks its conversion character")]
+    ConversionMissing,
+    #[error("`%{0}` lacks a conversion character")]
+    NoConversionCharacter(String),
+    #[error("unexpected `{rest}` after the conversion `{conv}`")]
+    AfterConversion { rest: char, conv: char },
+    #[error("a width or precision above {max} in `%{0}` is not supported", max = MAX_FIELD)]
+    FieldTooLarge(String),
+    #[error("the `-` and `0` flags need a width (`%{0}`)")]
+    FlagNeedsWidth(String),
+    #[error("conflicting flags in `%{0}`")]
+    ConflictingFlags(String),
+    #[error("`%<` refers to no earlier argument")]
+    NoEarlierArgument,
+    #[error("bad argument index in `%{0}`")]
+    BadArgumentIndex(String),
+    #[error("`%{body}` asks for argument {index}, but there is one argument")]
+    OneArgument { body: String, index: usize },
+    #[error("flags not allowed with `%{0}`")]
+    FlagsNotAllowed(char),
+    #[error("`#` and a precision are not allowed with `%d`")]
+    AltOrPrecisionWithD,
+    #[error("`,` and a precision are not allowed with `%{0}`")]
+    GroupOrPrecision(char),
+    #[error("`(` is not allowed with `%a`")]
+    ParenWithA,
+    #[error("`%{conv}` cannot format {what}")]
+    Mismatch { conv: char, what: &'static str },
+}
+
 /// `s` with every character after the `%` parsed; `Err` names what Java rejects.
-fn parse_spec(body: &str) -> Result<Spec, String> {
+fn parse_spec(body: &str) -> Result<Spec, FormatError> {
     let mut chars = body.chars().peekable();
     let mut flags = Flags::default();
     while let Some(&c) = chars.peek() {
@@ -69,32 +109,28 @@ fn parse_spec(body: &str) -> Result<Spec, String> {
     } else {
         Some(
             w.parse::<usize>()
-                .map_err(|_| format!("width `{w}` is too large"))?,
+                .map_err(|_| FormatError::WidthTooLarge(w.clone()))?,
         )
     };
     let prec = if chars.peek() == Some(&'.') {
         chars.next();
         let p = num(&mut chars);
         if p.is_empty() {
-            return Err("a `.` must be followed by a precision".into());
+            return Err(FormatError::PrecisionMissing);
         }
         Some(
             p.parse::<usize>()
-                .map_err(|_| format!("precision `{p}` is too large"))?,
+                .map_err(|_| FormatError::PrecisionTooLarge(p.clone()))?,
         )
     } else {
         None
     };
-    let conv = chars
-        .next()
-        .ok_or("a `%` conversion lacks its conversion character")?;
+    let conv = chars.next().ok_or(FormatError::ConversionMissing)?;
     if let Some(rest) = chars.next() {
-        return Err(format!("unexpected `{rest}` after the conversion `{conv}`"));
+        return Err(FormatError::AfterConversion { rest, conv });
     }
     if width.max(prec).is_some_and(|n| n > MAX_FIELD) {
-        return Err(format!(
-            "a width or precision above {MAX_FIELD} in `%{body}` is not supported"
-        ));
+        return Err(FormatError::FieldTooLarge(body.to_string()));
     }
     let spec = Spec {
         flags,
@@ -103,34 +139,17 @@ fn parse_spec(body: &str) -> Result<Spec, String> {
         conv,
     };
     if (flags.left || flags.zero) && width.is_none() {
-        return Err(format!("the `-` and `0` flags need a width (`%{body}`)"));
+        return Err(FormatError::FlagNeedsWidth(body.to_string()));
     }
     if flags.left && flags.zero || flags.plus && flags.space {
-        return Err(format!("conflicting flags in `%{body}`"));
+        return Err(FormatError::ConflictingFlags(body.to_string()));
     }
     Ok(spec)
 }
 
-/// What Java's `String.format` would throw for, in our words.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct FormatError(pub String);
-
-impl std::fmt::Display for FormatError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for FormatError {}
-
 /// `fmt` with its conversions applied to the single argument `v`, as Java's
 /// `String.format(Locale.ROOT, fmt, v)`. `Err`: what Java would throw for, in our words.
 pub fn java_format(fmt: &str, v: &Value) -> Result<String, FormatError> {
-    java_format_text(fmt, v).map_err(FormatError)
-}
-
-/// [`java_format`] with the error as text.
-fn java_format_text(fmt: &str, v: &Value) -> Result<String, String> {
     let mut out = String::new();
     let mut rest = fmt;
     let mut next_arg = 1usize;
@@ -143,21 +162,21 @@ fn java_format_text(fmt: &str, v: &Value) -> Result<String, String> {
             .char_indices()
             .find(|(_, c)| c.is_ascii_alphabetic() || *c == '%')
             .map(|(i, c)| i + c.len_utf8())
-            .ok_or_else(|| format!("`%{after}` lacks a conversion character"))?;
+            .ok_or_else(|| FormatError::NoConversionCharacter(after.to_string()))?;
         let mut body = &after[..end];
         rest = &after[end..];
         // An argument index: `1$` or `<`.
         let mut index = None;
         if let Some(b) = body.strip_prefix('<') {
             if !used_any {
-                return Err("`%<` refers to no earlier argument".into());
+                return Err(FormatError::NoEarlierArgument);
             }
             index = Some(1);
             body = b;
         } else if let Some(d) = body.find('$') {
             let n: usize = body[..d]
                 .parse()
-                .map_err(|_| format!("bad argument index in `%{body}`"))?;
+                .map_err(|_| FormatError::BadArgumentIndex(body.to_string()))?;
             index = Some(n);
             body = &body[d + 1..];
         }
@@ -172,9 +191,10 @@ fn java_format_text(fmt: &str, v: &Value) -> Result<String, String> {
                     n
                 });
                 if n != 1 {
-                    return Err(format!(
-                        "`%{body}` asks for argument {n}, but there is one argument"
-                    ));
+                    return Err(FormatError::OneArgument {
+                        body: body.to_string(),
+                        index: n,
+                    });
                 }
                 used_any = true;
                 out.push_str(&format_one(&spec, v)?);
@@ -206,7 +226,7 @@ fn justify(s: String, spec: &Spec) -> String {
     }
 }
 
-fn mismatch(spec: &Spec, v: &Value) -> String {
+fn mismatch(spec: &Spec, v: &Value) -> FormatError {
     let what = match v {
         Value::Int(_) => "an Int",
         Value::Float(_) => "a Float",
@@ -214,17 +234,20 @@ fn mismatch(spec: &Spec, v: &Value) -> String {
         Value::Str(_) => "a String",
         _ => "this value",
     };
-    format!("`%{}` cannot format {what}", spec.conv)
+    FormatError::Mismatch {
+        conv: spec.conv,
+        what,
+    }
 }
 
 /// One conversion of `v`.
-fn format_one(spec: &Spec, v: &Value) -> Result<String, String> {
+fn format_one(spec: &Spec, v: &Value) -> Result<String, FormatError> {
     let f = &spec.flags;
     let upper = spec.conv.is_ascii_uppercase();
     let s = match (spec.conv.to_ascii_lowercase(), v) {
         ('s', _) | ('b', _) => {
             if f.alt || f.plus || f.space || f.zero || f.group || f.paren {
-                return Err(format!("flags not allowed with `%{}`", spec.conv));
+                return Err(FormatError::FlagsNotAllowed(spec.conv));
             }
             let text = match (spec.conv.to_ascii_lowercase(), v) {
                 ('b', Value::Bool(b)) => b.to_string(),
@@ -239,7 +262,7 @@ fn format_one(spec: &Spec, v: &Value) -> Result<String, String> {
         }
         ('d', Value::Int(i)) => {
             if f.alt || spec.prec.is_some() {
-                return Err("`#` and a precision are not allowed with `%d`".into());
+                return Err(FormatError::AltOrPrecisionWithD);
             }
             let mut digits = i.unsigned_abs().to_string();
             if f.group {
@@ -249,10 +272,7 @@ fn format_one(spec: &Spec, v: &Value) -> Result<String, String> {
         }
         ('o' | 'x', Value::Int(i)) => {
             if f.group || spec.prec.is_some() {
-                return Err(format!(
-                    "`,` and a precision are not allowed with `%{}`",
-                    spec.conv
-                ));
+                return Err(FormatError::GroupOrPrecision(spec.conv));
             }
             let m = i.unsigned_abs();
             let (digits, prefix) = if spec.conv.eq_ignore_ascii_case(&'x') {
@@ -397,10 +417,10 @@ fn scientific(x: f64, prec: usize, spec: &Spec) -> String {
 }
 
 /// A `%e`, `%f`, `%g` or `%a` of a float.
-fn float(x: f64, spec: &Spec) -> Result<String, String> {
+fn float(x: f64, spec: &Spec) -> Result<String, FormatError> {
     let conv = spec.conv.to_ascii_lowercase();
     if conv == 'g' && spec.flags.alt || conv == 'a' && spec.flags.group {
-        return Err(format!("flags not allowed with `%{}`", spec.conv));
+        return Err(FormatError::FlagsNotAllowed(spec.conv));
     }
     if !x.is_finite() {
         let text = if x.is_nan() { "NaN" } else { "Infinity" };
@@ -438,7 +458,7 @@ fn float(x: f64, spec: &Spec) -> Result<String, String> {
         }
         _ => {
             if spec.flags.paren {
-                return Err("`(` is not allowed with `%a`".into());
+                return Err(FormatError::ParenWithA);
             }
             java_hex_float(a, spec.prec)
         }
@@ -617,6 +637,76 @@ mod tests {
             ("%.2000000000f", Value::Float(1.0)),
         ] {
             assert!(java_format(fmt, &v).is_err(), "{fmt}");
+        }
+    }
+
+    /// Each rejection is its own error, and says what Java rejects in the words
+    /// `String.format`'s run-time error carries.
+    #[test]
+    fn rejections_are_typed_and_worded() {
+        for (fmt, v, want, text) in [
+            (
+                "%d",
+                Value::Float(1.0),
+                FormatError::Mismatch {
+                    conv: 'd',
+                    what: "a Float",
+                },
+                "`%d` cannot format a Float",
+            ),
+            (
+                "%d %d",
+                Value::Int(1),
+                FormatError::OneArgument {
+                    body: "d".into(),
+                    index: 2,
+                },
+                "`%d` asks for argument 2, but there is one argument",
+            ),
+            (
+                "%-d",
+                Value::Int(1),
+                FormatError::FlagNeedsWidth("-d".into()),
+                "the `-` and `0` flags need a width (`%-d`)",
+            ),
+            (
+                "%<d",
+                Value::Int(1),
+                FormatError::NoEarlierArgument,
+                "`%<` refers to no earlier argument",
+            ),
+            (
+                "%.20000f",
+                Value::Float(1.0),
+                FormatError::FieldTooLarge(".20000f".into()),
+                "a width or precision above 10000 in `%.20000f` is not supported",
+            ),
+            (
+                "%2000000000000000000000d",
+                Value::Int(1),
+                FormatError::WidthTooLarge("2000000000000000000000".into()),
+                "width `2000000000000000000000` is too large",
+            ),
+            (
+                "%,a",
+                Value::Float(1.0),
+                FormatError::FlagsNotAllowed('a'),
+                "flags not allowed with `%a`",
+            ),
+            (
+                "abc %",
+                Value::Int(1),
+                FormatError::NoConversionCharacter(String::new()),
+                "`%` lacks a conversion character",
+            ),
+        ] {
+            let got = java_format(fmt, &v);
+            assert_eq!(got.as_ref().err(), Some(&want), "{fmt}");
+            assert_eq!(
+                got.err().map(|e| e.to_string()).as_deref(),
+                Some(text),
+                "{fmt}"
+            );
         }
     }
 }

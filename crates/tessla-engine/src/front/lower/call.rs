@@ -93,8 +93,8 @@ impl Compiler<'_> {
         };
         match &*ft {
             FuncTerm::Builtin(b, op) => self.stream_builtin(b.name, *op, args, span),
-            FuncTerm::Native { f, .. } => {
-                self.apply_value_fn(closure::native_callee(*f), args, span)
+            FuncTerm::Native { name, f } => {
+                self.apply_value_fn(closure::native_callee(name, *f), args, span)
             }
             FuncTerm::User { def, env: denv } => {
                 let params = def.params.clone().unwrap_or_default();
@@ -225,9 +225,10 @@ impl Compiler<'_> {
     ) -> R<Code> {
         match args.get(i) {
             Some(Term::Func(ft)) => match &**ft {
-                FuncTerm::Native { f, .. } => {
-                    Ok(Code::apply(closure::native_callee(*f), Code::slots(arity)))
-                }
+                FuncTerm::Native { name, f } => Ok(Code::apply(
+                    closure::native_callee(name, *f),
+                    Code::slots(arity),
+                )),
                 _ => match self.func_value(ft, span)? {
                     Term::Const(Value::Closure(c)) => {
                         let mut all = vec![Code::Const(Value::Closure(c))];

@@ -195,8 +195,8 @@ impl Compiler<'_> {
             Term::Code(c) => c,
             Term::Const(v) => Code::Const(v),
             Term::Func(ft) => match &*ft {
-                FuncTerm::Native { f, .. } if matches!(def.body, Body::Extern { .. }) => {
-                    Code::apply(native_callee(*f), Code::slots(frame))
+                FuncTerm::Native { name, f } if matches!(def.body, Body::Extern { .. }) => {
+                    Code::apply(native_callee(name, *f), Code::slots(frame))
                 }
                 // A function returning a function: the result is a function value.
                 _ => match self.func_value(&ft, span)? {
@@ -230,8 +230,9 @@ impl Compiler<'_> {
     }
 }
 
-/// A native as a callee, named as the builtins table names it (for listings and identities).
-pub(super) fn native_callee(f: NativeFn) -> Callee {
+/// A native as a callee, named as the builtins table names it (for listings and identities);
+/// a native the table lacks (one the application registered) by `name`.
+pub(super) fn native_callee(name: &'static str, f: NativeFn) -> Callee {
     static NAMES: std::sync::OnceLock<HashMap<usize, &'static str>> = std::sync::OnceLock::new();
     let names = NAMES.get_or_init(|| {
         let mut m = HashMap::new();
@@ -244,7 +245,7 @@ pub(super) fn native_callee(f: NativeFn) -> Callee {
             .or_insert("unknown extern");
         m
     });
-    let name = names.get(&(f as usize)).copied().unwrap_or("native");
+    let name = names.get(&(f as usize)).copied().unwrap_or(name);
     Callee::Native { name, f }
 }
 
@@ -252,5 +253,8 @@ pub(super) fn native_callee(f: NativeFn) -> Callee {
 /// native: `maximum` and `minimum` reduce with `max` and `min`). A name the table lacks is an
 /// error when evaluated (a test checks the names used are there).
 pub(super) fn named_native(name: &str) -> Callee {
-    native_callee(builtins::extern_native(name).unwrap_or(unknown_extern))
+    match builtins::extern_named(name) {
+        Some((name, f)) => native_callee(name, f),
+        None => native_callee("unknown extern", unknown_extern),
+    }
 }

@@ -150,7 +150,10 @@ impl Compiler<'_> {
                     d.name.name
                 ),
             ),
-            Body::Extern { name, .. } => match builtins::extern_named(name) {
+            Body::Extern { name, .. } => match builtins::extern_named(name).or_else(|| {
+                let n = self.typed.natives().get(name)?;
+                Some((n.name, n.f))
+            }) {
                 Some((name, f)) => Ok(Term::Func(Rc::new(FuncTerm::Native { name, f }))),
                 // As in TeSSLa, an unknown extern is an error when it is evaluated.
                 None if d.params.is_some() => {

@@ -102,10 +102,44 @@ impl<'a> Checker<'a> {
             }
         };
         let ret = declared.unwrap_or(body);
-        if d.params.is_some() {
+        let t = if d.params.is_some() {
             func(ptys, ret)
         } else {
             ret
+        };
+        if let Body::Extern { name, span, .. } = &d.body {
+            self.check_registered_native(d, name, *span, &t);
+        }
+        t
+    }
+
+    /// An `extern` of a native the application registered must be declared with the native's
+    /// signature (else the native would be handed values of other types).
+    fn check_registered_native(&mut self, d: &Def, name: &str, span: Span, declared: &Ty) {
+        let Some(native) = self.natives.and_then(|n| n.get(name)) else {
+            return;
+        };
+        let vars = [self.fresh(), self.fresh()];
+        match signatures::signature(native.sig, &vars) {
+            Some(registered) => {
+                self.expect(
+                    &registered,
+                    declared,
+                    span,
+                    &format!(
+                        "`{}` is declared with another type than the native `{name}`",
+                        d.name.name
+                    ),
+                );
+            }
+            None => self.report(Diagnostic::error(
+                Category::Type,
+                Some(span),
+                format!(
+                    "the native `{name}` was registered with a signature that does not parse: `{}`",
+                    native.sig
+                ),
+            )),
         }
     }
 

@@ -38,7 +38,7 @@
 //! type arguments), `defs` (definitions, recursion), `names` (lookup, written types),
 //! `signatures` (builtins from the table, prelude declarations), `annotations`, `liftable`.
 
-use crate::builtins::{self, Builtin, Sig, Variadic};
+use crate::builtins::{self, Builtin, Natives, Sig, Variadic};
 use crate::front::resolve::{Global, Resolved, at};
 use crate::ir::Type;
 use std::cell::RefCell;
@@ -137,6 +137,8 @@ impl ExprId {
 #[derive(Debug)]
 pub struct Typed<'a> {
     resolved: &'a Resolved<'a>,
+    /// The natives the application registered (`extern("name")` beyond the builtins table).
+    natives: &'a Natives,
     inputs: Vec<Type>,
     outputs: HashMap<ExprId, Type>,
     defs: HashMap<String, Type>,
@@ -146,6 +148,11 @@ impl<'a> Typed<'a> {
     /// The resolved spec that was checked.
     pub fn resolved(&self) -> &'a Resolved<'a> {
         self.resolved
+    }
+
+    /// The natives the spec was checked with.
+    pub fn natives(&self) -> &'a Natives {
+        self.natives
     }
 
     /// The element type of input `i` (by its index in [`Resolved::inputs`]).
@@ -167,16 +174,28 @@ impl<'a> Typed<'a> {
     }
 }
 
-/// Check a resolved spec: the typed program, or the errors found (the resolver's first).
+/// Check a resolved spec with the builtins only: see [`check_with`].
 pub fn check<'a>(resolved: &'a Resolved<'a>) -> Result<Typed<'a>, Vec<Diagnostic>> {
+    static NONE: Natives = Natives::new();
+    check_with(resolved, &NONE)
+}
+
+/// Check a resolved spec, `natives` added to the builtins: the typed program, or the errors
+/// found (the resolver's first).
+pub fn check_with<'a>(
+    resolved: &'a Resolved<'a>,
+    natives: &'a Natives,
+) -> Result<Typed<'a>, Vec<Diagnostic>> {
     let mut types = Typed {
         resolved,
+        natives,
         inputs: Vec::new(),
         outputs: HashMap::new(),
         defs: HashMap::new(),
     };
     let mut c = Checker {
         resolved: Some(resolved),
+        natives: Some(natives),
         ..Checker::default()
     };
     for d in &resolved.diagnostics {
@@ -266,6 +285,9 @@ struct Checker<'a> {
     diags: Vec<Diagnostic>,
     /// The resolved spec: statements, global definitions, imports, inputs, declared types.
     resolved: Option<&'a Resolved<'a>>,
+    /// The natives the application registered: an `extern` of one is checked against its
+    /// registered signature.
+    natives: Option<&'a Natives>,
     /// The global definitions, by [`DefId`](crate::front::resolve::DefId).
     globals: Vec<Rc<DefInfo<'a>>>,
     /// The types of the inputs, by their index in [`Resolved::inputs`].

@@ -118,7 +118,13 @@ impl SigParser<'_> {
         if self.eat("(") {
             let params = self.list(")")?;
             if !self.eat("=>") {
-                return None;
+                // A tuple (`(String, Float)`) as a spec writes it; `()` is Unit, `(T)` is T.
+                let mut params = params;
+                return Some(match params.len() {
+                    0 => unit(),
+                    1 => params.pop()?,
+                    _ => tuple(params),
+                });
             }
             return Some(func(params, self.ty()?));
         }

@@ -1,5 +1,5 @@
-//! Native (Rust) implementations of value functions: the core ones (`core`) and the robot's
-//! lidar functions (`lidar`) and the fleet's closest pair (`fleet`).
+//! Native (Rust) implementations of the language's value functions (`core`). An application
+//! adds natives of its own with `crate::builtins::Natives`.
 //!
 //! Owns: the implementations. Names, kinds and signatures are in `crate::builtins`; a native
 //! reached only through `extern("name")` is declared with its TeSSLa signature in a library
@@ -9,5 +9,3 @@
 //! them through [`crate::value::Callable`]; their type is [`crate::value::NativeFn`].
 
 pub mod core;
-pub mod fleet;
-pub mod lidar;

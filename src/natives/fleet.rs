@@ -3,9 +3,9 @@
 //! O(n²) per step (1k robots: half a million distances per fleet step); here it is the grid
 //! method, O(n) expected (`make bench-fleet` measures both at 1k, 10k and 100k robots).
 
-use crate::value::{RuntimeError, Value};
 use std::collections::HashMap;
 use std::sync::Arc;
+use tessla_engine::{RuntimeError, Value};
 
 fn bad(name: &str) -> Value {
     Value::Error(RuntimeError::Other(
@@ -159,7 +159,7 @@ mod tests {
 
     #[test]
     fn fewer_than_two_is_none() {
-        let m = crate::runtime::collections::map_of(vec![(
+        let m = tessla_engine::runtime::collections::map_of(vec![(
             Value::Str(Arc::from("a")),
             Value::Tuple(Arc::from(vec![Value::Float(1.0), Value::Float(2.0)])),
         )]);

@@ -6,8 +6,8 @@
 //! is a *dropout*. A valid beam is a *spike* when both cyclic neighbours are valid and it differs
 //! from each by more than gamma in the same direction. Sector functions use valid, non-spike beams.
 
-use crate::value::{RuntimeError, Value};
 use std::ops::Range;
+use tessla_engine::{RuntimeError, Value};
 
 /// One scan and its parameters, the beams borrowed from the list value: four natives read every
 /// scan (P1's two sector functions, P3's spikes and dropouts), so each reads only the beams it
