@@ -64,6 +64,8 @@ pub struct FleetNats {
     holding: bool,
     /// The newest robot clock this process sent.
     front: i64,
+    /// The partition lease's generation when this process last held it.
+    generation: Option<u64>,
     last_sent: Instant,
     sent: u64,
     /// When each partition was last heard (for drop-outs, decided by the holder).
@@ -127,6 +129,7 @@ impl FleetNats {
             written: 0,
             holding: false,
             front: i64::MIN,
+            generation: None,
             last_sent: Instant::now() - HEARTBEAT,
             sent: 0,
             heard: HashMap::new(),
@@ -158,7 +161,12 @@ impl FleetNats {
         generation: Option<u64>,
         out: &mut Vec<u8>,
     ) {
-        if let Some(g) = generation {
+        // Records are stepped only while holding the partition lease; a renewal that falls
+        // overdue between the step and now must not lose their changes: they go with the
+        // generation they were stepped in (a newer holder's entries make them stale).
+        let fresh = generation.is_some();
+        self.generation = generation.or(self.generation);
+        if let Some(g) = self.generation {
             for d in &drained {
                 for (_, c) in &d.clocks {
                     self.front = self.front.max(*c);
@@ -166,7 +174,7 @@ impl FleetNats {
             }
             let promise = self.front.max(now_ns().saturating_sub(self.silence));
             let msg = Msg::of(&self.partition, g, promise, end, drained);
-            if msg.is_data() || self.last_sent.elapsed() >= HEARTBEAT {
+            if msg.is_data() || (fresh && self.last_sent.elapsed() >= HEARTBEAT) {
                 let part = self.partition.clone();
                 self.put(&part, g, "", &msg);
                 self.last_sent = Instant::now();
@@ -311,10 +319,11 @@ impl FleetNats {
     pub fn release(&mut self) {
         let c = &self.table.counters;
         log_info!(
-            "fleet: {} changes sent again by a partition's new holder not counted twice, {} messages of a replaced generation dropped; the fleet level stepped {} times",
+            "fleet: {} changes sent again by a partition's new holder not counted twice, {} messages of a replaced generation dropped; the fleet level stepped {} times, {} changes late",
             c.repeats,
             c.stale,
-            self.level.counters.steps
+            self.level.counters.steps,
+            self.level.counters.late
         );
         if self.holding {
             let store = self.store.clone();

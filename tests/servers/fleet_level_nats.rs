@@ -6,7 +6,7 @@
 //! by the first holder and then by the new one equal, line for line, one process's over the same
 //! records. With SIGKILL (no save, no release) the new holder may write again the lines of the
 //! old one's last progress interval, never others, and the new p0 holder's replay of records
-//! the old one had already sent is not counted twice.
+//! the old one had already sent is not counted twice (no change is late at the fleet level).
 
 use super::fleet_nats_specs::nats_server;
 use crate::support::child;
@@ -176,8 +176,16 @@ fn takeover(signal: &str) {
     a.write(&records(base, Some(0), 0..half));
     a2.write(&records(base, Some(0), 0..half));
     b.write(&records(base, Some(1), 0..half));
-    // The first holder has written part of the fleet's lines: stop it in the middle.
-    a.wait_out("a fleet line", |l| l.starts_with("tessla_fleet "));
+    // The first holder has written the fleet's lines up to shortly before the pause: stop it
+    // there (after SIGKILL, p0's new holder then replays changes the fleet stepped already).
+    let near_pause = base + (half - 5) * 200_000_000;
+    a.wait_out("a fleet line near the pause", |l| {
+        l.starts_with("tessla_fleet ")
+            && l.rsplit(' ')
+                .next()
+                .and_then(|t| t.trim().parse::<i64>().ok())
+                .is_some_and(|t| t >= near_pause)
+    });
     let first_written = fleet_lines(&a.out.concat()).len();
     assert!(first_written > 0);
     a.signal(signal);
@@ -217,6 +225,7 @@ fn takeover(signal: &str) {
         after.len(),
         repeats(&holder_err)
     );
+
     if signal == "TERM" {
         let got: Vec<String> = before.iter().chain(&after).cloned().collect();
         assert_eq!(
@@ -240,9 +249,12 @@ fn takeover(signal: &str) {
     }
     // After SIGKILL (no save) the new p0 holder replays every record from its buffer: what the
     // old one had sent is not counted twice (else the lines above would differ).
+    // Counted again, they would be late changes (stepped after the fleet's last step; with
+    // the repeats let through this run had 236).
     if signal == "KILL" {
         assert!(repeats(&holder_err) > 0, "{holder_err}");
     }
+    assert_eq!(late(&holder_err), 0, "{holder_err}");
 }
 
 #[test]
@@ -253,4 +265,18 @@ fn a_two_partition_fleet_with_a_takeover_gives_one_process_fleet_lines() {
 #[test]
 fn a_killed_fleet_level_holder_repeats_lines_never_loses_or_changes_them() {
     takeover("KILL");
+}
+
+/// The count in the fleet level's closing line `..., M changes late`.
+fn late(err: &str) -> u64 {
+    err.lines()
+        .filter(|l| l.contains(" changes sent again "))
+        .find_map(|l| {
+            l.rsplit_once(", ")?
+                .1
+                .strip_suffix(" changes late")?
+                .parse()
+                .ok()
+        })
+        .unwrap_or_else(|| panic!("no closing line of the fleet level: {err}"))
 }
