@@ -79,7 +79,7 @@ pub fn run(args: RunArgs) -> CliResult {
             })?;
             Some(Feed::Nats(Box::new(n)))
         }
-        (Some((level, _)), _) => Some(Feed::Local(level)),
+        (Some((level, _)), _) => Some(Feed::Local(Box::new(level))),
         (None, _) => None,
     };
     let mut updates = Updates::new(config.spec.clone(), config.watch_spec, &partition);

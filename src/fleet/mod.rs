@@ -26,7 +26,7 @@ use crate::state::lease::Lease;
 /// Where the step loop sends what the robots' instances give the fleet.
 pub enum Feed {
     /// One process: the level here.
-    Local(Level),
+    Local(Box<Level>),
     /// A partition of a NATS fleet: sent to the fleet level, which every process follows and
     /// the holder of the `fleet` lease writes.
     Nats(Box<nats::FleetNats>),
