@@ -280,3 +280,35 @@ fn late(err: &str) -> u64 {
         })
         .unwrap_or_else(|| panic!("no closing line of the fleet level: {err}"))
 }
+
+/// A partition whose only process dies (no standby) drops out after twice its lease TTL: the
+/// fleet level's holder names it in a status line, and the fleet no longer waits for it.
+#[test]
+fn a_partition_without_a_holder_drops_out_and_is_named() {
+    let server = nats_server("");
+    let state = format!("nats://127.0.0.1:{}/fleet_drop", server.port);
+    let base = base();
+    let mut a = spawn(&state, "p0");
+    a.wait_err("fleet held", 0, |l| {
+        l.contains("partition fleet: held by this process")
+    });
+    let b = spawn(&state, "p1");
+    a.wait_out("p1 joined", |l| {
+        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
+    });
+    b.signal("KILL");
+    let _ = b.finish();
+    a.wait_out("p1 dropped", |l| {
+        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("state=\"dropped\"")
+    });
+    // p1 holds nothing back now: p0's records alone move the fleet on.
+    a.write(&records(base, Some(0), 0..20));
+    a.wait_out("a fleet line", |l| l.starts_with("tessla_fleet "));
+    let (_, err, code) = a.finish();
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("fleet: partition p1 (generation")
+            && err.contains("drops out of the fleet level"),
+        "{err}"
+    );
+}
