@@ -8,7 +8,7 @@ use super::config::{RunConfig, StateConfig};
 use super::ending::{finish, runtime};
 use super::error::{CliError, CliResult};
 use super::spec_options::require_outputs;
-use crate::fleet::Level;
+use crate::fleet::{Feed, Level};
 use crate::processor::Processor;
 use crate::spec_feed::Updates;
 use crate::spec_feed::nats::NatsFeed;
@@ -35,7 +35,7 @@ pub fn run(args: RunArgs) -> CliResult {
         );
     }
     require_outputs(&loaded.program, &config.spec_name())?;
-    let mut fleet = match &fleet_args.0 {
+    let fleet = match &fleet_args.0 {
         Some(path) => Some(fleet_level(path, &fleet_args, &loaded.program, &config)?),
         None => None,
     };
@@ -60,6 +60,24 @@ pub fn run(args: RunArgs) -> CliResult {
         Some(Target::Nats(url)) => url.lease.clone().unwrap_or_default(),
         _ => String::new(),
     };
+    // A partition of a NATS fleet sends to the fleet level, which one process of the fleet
+    // writes (docs/fleet.md, "A fleet of NATS partitions"); otherwise the level runs here.
+    let mut feed = match (fleet, config.state.as_ref().map(|s| &s.target)) {
+        (Some((level, _)), Some(Target::Nats(url))) if url.lease.is_some() => {
+            let silence = i64::try_from(fleet_args.1.as_nanos()).unwrap_or(i64::MAX);
+            let n = crate::fleet::nats::FleetNats::connect(
+                url,
+                partition.clone(),
+                level,
+                silence,
+                config.processor.tags.clone(),
+            )
+            .map_err(|e| CliError::from(e).within("fleet"))?;
+            Some(Feed::Nats(Box::new(n)))
+        }
+        (Some((level, _)), _) => Some(Feed::Local(Box::new(level))),
+        (None, _) => None,
+    };
     let mut updates = Updates::new(config.spec.clone(), config.watch_spec, &partition);
     if let Some(ch) = &config.channel {
         let (feed, first) = NatsFeed::connect(&ch.url, &ch.trust)
@@ -76,7 +94,7 @@ pub fn run(args: RunArgs) -> CliResult {
         updates: &mut updates,
         store,
         watch,
-        fleet: fleet.as_mut().map(|(l, _)| l),
+        fleet: feed.as_mut(),
     };
     let rt = runtime()?;
     let result = rt.block_on(transport::run(&config.transport, &mut proc, setup));

@@ -67,6 +67,9 @@ pub struct Level {
     /// The fleet has stepped every time up to here.
     done: i64,
     silence: i64,
+    /// The fleet across NATS partitions: the minimum of the live partitions' promises (no time
+    /// at or after it is stepped yet; `i64::MAX` in one process, [`super::watermark`]).
+    bound: i64,
     prepared: Prepared,
     scratch: encode::Scratch,
     actions: Actions,
@@ -107,6 +110,7 @@ impl Level {
             front: i64::MIN,
             done: i64::MIN,
             silence: silence.max(0),
+            bound: i64::MAX,
             scratch: encode::Scratch::default(),
             actions,
             tags,
@@ -150,6 +154,11 @@ impl Level {
             self.write(out);
             self.done = self.done.max(w - 1);
         }
+    }
+
+    /// Hold the watermark below `bound` (the partitions' promises; `i64::MAX`: no bound).
+    pub fn set_bound(&mut self, bound: i64) {
+        self.bound = bound;
     }
 
     /// The robots in the fleet now (live clocks).
@@ -202,9 +211,11 @@ impl Level {
     /// not are silent (more than the silence behind the newest).
     fn watermark(&self) -> i64 {
         let Some((min, _)) = self.order.first() else {
-            return self.front;
+            return self.front.min(self.bound);
         };
-        (*min).max(self.front.saturating_sub(self.silence))
+        (*min)
+            .max(self.front.saturating_sub(self.silence))
+            .min(self.bound)
     }
 
     /// Robots silent past the bound before `w` leave the maps at their clock + silence.

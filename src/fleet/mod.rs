@@ -9,12 +9,71 @@
 //! line protocol by the Telegraf annotations (default measurement `tessla_fleet`) and its
 //! coordinated actions, one `action` metric per addressed robot ([`actions`]). The robot side
 //! of it is `crate::processor::fleet_tap`; the step loop drains every processor's tap into the
-//! level after each read.
+//! level after each read ([`Feed`]: the level in this process, or, with NATS partitions, the
+//! partition's messages to the fleet level and the fleet level run on them: [`nats`], with its
+//! rules in [`watermark`]).
 
 pub mod actions;
 pub mod level;
+pub mod nats;
+pub mod watermark;
 
 pub use level::Level;
+
+use crate::processor::fleet_tap::Drained;
+use crate::state::lease::Lease;
+
+/// Where the step loop sends what the robots' instances give the fleet.
+pub enum Feed {
+    /// One process: the level here.
+    Local(Box<Level>),
+    /// A partition of a NATS fleet: sent to the fleet level, which every process follows and
+    /// the holder of the `fleet` lease writes.
+    Nats(Box<nats::FleetNats>),
+}
+
+impl Feed {
+    /// After a read or a wall-clock advance: `drained` from every processor; `partition`: the
+    /// partition lease, if any (only its holder sends); `end`: the input ended.
+    pub fn pump(
+        &mut self,
+        drained: Vec<Drained>,
+        end: bool,
+        partition: Option<&Lease>,
+        out: &mut Vec<u8>,
+    ) {
+        match self {
+            Feed::Local(level) => level.pump(drained, end, out),
+            Feed::Nats(n) => n.pump(drained, end, partition.and_then(Lease::generation), out),
+        }
+    }
+
+    /// Between reads (the lease poll): heartbeats and the fleet level's own progress.
+    pub fn tick(&mut self, partition: Option<&Lease>, out: &mut Vec<u8>) {
+        if let Feed::Nats(n) = self {
+            n.pump(
+                Vec::new(),
+                false,
+                partition.and_then(Lease::generation),
+                out,
+            );
+        }
+    }
+
+    /// At the end, before the last write.
+    pub fn finish(&mut self, out: &mut Vec<u8>) {
+        if let Feed::Nats(n) = self {
+            n.finish(out);
+        }
+    }
+
+    /// At the end, after the last write.
+    pub fn release(&mut self) {
+        if let Feed::Nats(n) = self {
+            n.release();
+        }
+    }
+}
 
 use std::path::Path;
 use tessla_engine::{LoadOptions, Program};

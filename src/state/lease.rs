@@ -71,6 +71,9 @@ struct LeaseState {
     lost: bool,
     /// Released on a clean stop: the task ends.
     released: bool,
+    /// The revision at which this process last took the lease: its generation (the fleet
+    /// level keys what a partition sends by it, docs/fleet.md).
+    generation: u64,
 }
 
 /// A partition lease: at most one process of the partition's group steps its monitors.
@@ -86,12 +89,13 @@ impl Lease {
     /// Start holding (or waiting for) the lease of partition `name` in the bucket `store`: one
     /// attempt now (a lone process starts active), then a task on the connection's thread
     /// renews or waits for it.
-    pub(super) fn start(conn: &Conn, store: &kv::Store, name: String, ttl: Duration) -> Lease {
+    pub(crate) fn start(conn: &Conn, store: &kv::Store, name: String, ttl: Duration) -> Lease {
         let key = format!("lease.{}", kv_key_part_of(&name));
         let shared = Arc::new(Mutex::new(LeaseState {
             mode: Mode::Standby,
             lost: false,
             released: false,
+            generation: 0,
         }));
         let lease = Lease {
             shared: Arc::clone(&shared),
@@ -112,6 +116,7 @@ impl Lease {
         let (taken, seen) = first.unwrap_or((None, None));
         let holding = taken.is_some();
         if let (Some(revision), Ok(mut s)) = (taken, shared.lock()) {
+            s.generation = revision;
             s.mode = Mode::Active {
                 revision,
                 renewed: sent,
@@ -145,6 +150,15 @@ impl Lease {
             Mode::Active { renewed, .. } => renewed.elapsed() < self.ttl / 2,
             Mode::Standby => false,
         }
+    }
+
+    /// The lease's generation while this process holds it (the bucket revision at which it took
+    /// it: a later holder's is higher); `None` while not holding.
+    pub fn generation(&self) -> Option<u64> {
+        if !self.holding() {
+            return None;
+        }
+        self.shared.lock().ok().map(|s| s.generation)
     }
 
     /// Whether the lease went to another process since the last call.
@@ -334,6 +348,7 @@ async fn lease_task(
                 if let Some(revision) = taken {
                     standby_since = None;
                     let Ok(mut s) = shared.lock() else { return };
+                    s.generation = revision;
                     s.mode = Mode::Active {
                         revision,
                         renewed: sent,

@@ -22,7 +22,7 @@
 pub mod shards;
 pub mod shared;
 
-use crate::fleet::Level;
+use crate::fleet::Feed;
 use crate::log::Level as LogLevel;
 use crate::processor::Processor;
 use crate::processor::clock::Wall;
@@ -100,8 +100,9 @@ pub struct Setup<'a> {
     pub store: Option<Store<'a>>,
     /// Where the loop marks what it is doing, for the step watchdog (`--step-timeout`).
     pub watch: Arc<Watch>,
-    /// `--fleet-spec`: the fleet level, fed from every thread's instances after each read.
-    pub fleet: Option<&'a mut Level>,
+    /// `--fleet-spec`: the fleet level (or, partitioned, the way to it), fed from every
+    /// thread's instances after each read.
+    pub fleet: Option<&'a mut Feed>,
 }
 
 /// How a run ended.
@@ -161,6 +162,9 @@ pub async fn run<S: Source, K: Sink>(
     let r = l.run(source, sink, updates, interval).await;
     // Every ending (EOF, signal, closed output, I/O error) has evaluated what it could: save.
     l.save(LogLevel::Info);
+    if let Some(f) = l.fleet.as_deref_mut() {
+        f.release();
+    }
     if let Some(s) = &l.shared {
         if !s.active {
             log_info!(
@@ -184,7 +188,7 @@ struct Loop<'p, 'b> {
     backend: Option<&'p mut (dyn Backend + 'b)>,
     out: Vec<u8>,
     watch: &'p Watch,
-    fleet: Option<&'p mut Level>,
+    fleet: Option<&'p mut Feed>,
 }
 
 impl Loop<'_, '_> {
@@ -245,6 +249,7 @@ impl Loop<'_, '_> {
                 }
                 _ = tick(&mut lease_ticks) => {
                     self.follow_lease();
+                    self.fleet_tick();
                     if self.write(sink).await.is_err() {
                         return Ok(Ending::OutputClosed);
                     }
@@ -307,6 +312,9 @@ impl Loop<'_, '_> {
         }
         self.records(&mut splitter, &[], true, true, &mut || {})?;
         self.fleet(true);
+        if let Some(f) = self.fleet.as_deref_mut() {
+            f.finish(&mut self.out);
+        }
         watch.set(Phase::Writing);
         if self.write(sink).await.is_err() {
             return Ok(Ending::OutputClosed);
@@ -328,7 +336,7 @@ impl Loop<'_, '_> {
     /// Feed the fleet level what every thread's instances produced and step it as far as its
     /// watermark allows (`end`: the input ended, everything pending).
     fn fleet(&mut self, end: bool) {
-        let Some(level) = self.fleet.as_deref_mut() else {
+        let Some(feed) = self.fleet.as_deref_mut() else {
             return;
         };
         let drained = self
@@ -337,7 +345,16 @@ impl Loop<'_, '_> {
             .into_iter()
             .map(|p| p.fleet_drain())
             .collect();
-        level.pump(drained, end, &mut self.out);
+        let lease = self.shared.as_ref().and_then(|s| s.lease.as_ref());
+        feed.pump(drained, end, lease, &mut self.out);
+    }
+
+    /// Between reads: a partitioned fleet's heartbeat and its fleet level's progress.
+    fn fleet_tick(&mut self) {
+        if let Some(feed) = self.fleet.as_deref_mut() {
+            let lease = self.shared.as_ref().and_then(|s| s.lease.as_ref());
+            feed.tick(lease, &mut self.out);
+        }
     }
 
     /// Stepping now: without a lease, or holding it.

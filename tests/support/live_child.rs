@@ -135,7 +135,8 @@ impl LiveChild {
         }
     }
 
-    fn drain_err(&mut self) {
+    /// Take every stderr line received so far into `err`, without waiting.
+    pub fn drain_err(&mut self) {
         while let Ok(l) = self.err_rx.try_recv() {
             self.err.push(l);
         }

@@ -1,0 +1,414 @@
+//! The fleet level over NATS partitions (`--fleet-spec` with `--state nats://...?lease=NAME`,
+//! docs/fleet.md, "A fleet of NATS partitions").
+//!
+//! Owns both ends, in every partition process: sending what the partition's holder steps (its
+//! robots' fleet changes, clocks and evictions, with its promise: a heartbeat when idle) as
+//! entries `fleet.m.<partition>.g<generation>.<pid>x<n>` of the state bucket, keyed by the
+//! partition lease's generation; and the fleet level itself, run by every process on the same
+//! entries in the bucket's order (a hot standby), written out only by the holder of the `fleet`
+//! lease, which records how far it wrote (`fleet.written`, the stream sequence) so that a
+//! standby taking over writes from there on. The holder also decides drop-outs (a partition
+//! silent past twice the lease TTL) and puts them in the stream, so every process applies them
+//! at the same point. The rules themselves are [`super::watermark`].
+
+use super::Level;
+use super::watermark::{self, Msg, Partitions};
+use crate::nats::conn::{Conn, Failure, connect};
+use crate::nats::kv_keys::kv_key_part_of;
+use crate::nats::url::Url;
+use crate::processor::fleet_tap::Drained;
+use crate::state::lease::Lease;
+use async_nats::jetstream::{self, kv};
+use std::collections::{HashMap, HashSet, VecDeque};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// The lease of the fleet level, beside the partitions' (`lease.vfleet`).
+pub const LEASE: &str = "fleet";
+/// How far the holder of the fleet lease has written (the stream sequence of the last message
+/// whose outputs it wrote).
+const WRITTEN_KEY: &str = "fleet.written";
+/// A holder of a partition lease that sent nothing for this long sends a heartbeat.
+const HEARTBEAT: Duration = Duration::from_millis(200);
+/// At most this many messages' outputs kept by a standby (the holder's progress trims them).
+const MAX_KEPT: usize = 100_000;
+
+enum Job {
+    Put(String, bytes::Bytes),
+    Flush(std::sync::mpsc::Sender<()>),
+}
+
+#[derive(Default)]
+struct Inbox {
+    msgs: VecDeque<(u64, bytes::Bytes)>,
+    /// The holder's `fleet.written`, as last seen.
+    written: u64,
+}
+
+/// The partition side and the fleet level of one process.
+pub struct FleetNats {
+    partition: String,
+    silence: i64,
+    conn: Conn,
+    store: kv::Store,
+    jobs: tokio::sync::mpsc::UnboundedSender<Job>,
+    inbox: Arc<Mutex<Inbox>>,
+    lease: Lease,
+    level: Level,
+    table: Partitions,
+    tags: Vec<(String, String)>,
+    /// Outputs per stream sequence, not written yet.
+    outputs: VecDeque<(u64, Vec<u8>)>,
+    /// The last stream sequence whose outputs were written (here or by the holder before).
+    written: u64,
+    holding: bool,
+    /// The newest robot clock this process sent.
+    front: i64,
+    /// The partition lease's generation when this process last held it.
+    generation: Option<u64>,
+    last_sent: Instant,
+    sent: u64,
+    /// When each partition was last heard (for drop-outs, decided by the holder).
+    heard: HashMap<String, Instant>,
+    drops_sent: HashSet<(String, u64)>,
+    drop_after: Duration,
+}
+
+fn now_ns() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX))
+}
+
+impl FleetNats {
+    /// Connect to `url`'s bucket (made by the state backend already), start following the
+    /// fleet's entries and the `fleet` lease. `partition`: this process's lease name.
+    pub fn connect(
+        url: &Url,
+        partition: String,
+        level: Level,
+        silence: i64,
+        tags: Vec<(String, String)>,
+    ) -> Result<FleetNats, Failure> {
+        if partition == LEASE {
+            return Err(Failure::Config(format!(
+                "--state ?lease={LEASE} is the fleet level's own lease; name the partition otherwise"
+            )));
+        }
+        let conn = Conn::start()
+            .map_err(|e| Failure::Io(format!("cannot start the fleet's NATS thread: {e}")))?;
+        let u = url.clone();
+        let store = conn
+            .call(async move {
+                let (client, _) = connect(&u).await?;
+                jetstream::new(client)
+                    .get_key_value(u.bucket.clone())
+                    .await
+                    .map_err(|e| {
+                        Failure::Io(format!("fleet: cannot open bucket {}: {e}", u.bucket))
+                    })
+            })
+            .ok_or_else(|| Failure::Io("the fleet's NATS thread stopped".into()))??;
+        let inbox = Arc::new(Mutex::new(Inbox::default()));
+        let (jobs, rx) = tokio::sync::mpsc::unbounded_channel();
+        conn.handle.spawn(publisher(store.clone(), rx));
+        conn.handle.spawn(follow(store.clone(), Arc::clone(&inbox)));
+        let lease = Lease::start(&conn, &store, LEASE.to_string(), url.ttl);
+        Ok(FleetNats {
+            partition,
+            silence,
+            conn,
+            store,
+            jobs,
+            inbox,
+            lease,
+            level,
+            table: Partitions::default(),
+            tags,
+            outputs: VecDeque::new(),
+            written: 0,
+            holding: false,
+            front: i64::MIN,
+            generation: None,
+            last_sent: Instant::now() - HEARTBEAT,
+            sent: 0,
+            heard: HashMap::new(),
+            drops_sent: HashSet::new(),
+            drop_after: url.ttl * 2,
+        })
+    }
+
+    fn put(&mut self, part: &str, generation: u64, kind: &str, msg: &Msg) {
+        let Ok(bytes) = serde_json::to_vec(msg) else {
+            return;
+        };
+        self.sent += 1;
+        let key = format!(
+            "fleet.m.{}.g{generation}.{kind}{}x{}",
+            kv_key_part_of(part),
+            std::process::id(),
+            self.sent
+        );
+        let _ = self.jobs.send(Job::Put(key, bytes.into()));
+    }
+
+    /// Send what this partition's processors collected (when holding the partition lease:
+    /// `generation`), then follow the fleet level; outputs to `out` while holding its lease.
+    pub fn pump(
+        &mut self,
+        drained: Vec<Drained>,
+        end: bool,
+        generation: Option<u64>,
+        out: &mut Vec<u8>,
+    ) {
+        // Records are stepped only while holding the partition lease; a renewal that falls
+        // overdue between the step and now must not lose their changes: they go with the
+        // generation they were stepped in (a newer holder's entries make them stale).
+        let fresh = generation.is_some();
+        self.generation = generation.or(self.generation);
+        if let Some(g) = self.generation {
+            for d in &drained {
+                for (_, c) in &d.clocks {
+                    self.front = self.front.max(*c);
+                }
+            }
+            let promise = self.front.max(now_ns().saturating_sub(self.silence));
+            let msg = Msg::of(&self.partition, g, promise, end, drained);
+            if msg.is_data() || (fresh && self.last_sent.elapsed() >= HEARTBEAT) {
+                let part = self.partition.clone();
+                self.put(&part, g, "", &msg);
+                self.last_sent = Instant::now();
+            }
+        }
+        self.follow(out);
+    }
+
+    /// Take in the fleet's messages, write the outputs while holding the fleet lease, and (as
+    /// its holder) drop the partitions silent past the bound.
+    pub fn follow(&mut self, out: &mut Vec<u8>) {
+        let (msgs, progress) = match self.inbox.lock() {
+            Ok(mut i) => (std::mem::take(&mut i.msgs), i.written),
+            Err(_) => return,
+        };
+        for (seq, bytes) in msgs {
+            let m: Msg = match serde_json::from_slice(&bytes) {
+                Ok(m) => m,
+                Err(e) => {
+                    crate::log::warn_limited("fleet message", || {
+                        format!(
+                            "fleet: a message at stream sequence {seq} is not one: {e}; ignored"
+                        )
+                    });
+                    continue;
+                }
+            };
+            if !m.drop {
+                self.heard.insert(m.p.clone(), Instant::now());
+            }
+            let (drained, status) = self.table.apply(m);
+            let mut o = Vec::new();
+            for s in &status {
+                watermark::status_line(s, &self.tags, now_ns(), &mut o);
+                log_info!(
+                    "fleet: partition {} (generation {}) {}",
+                    s.partition,
+                    s.generation,
+                    s.event
+                );
+            }
+            self.level.set_bound(self.table.bound());
+            let end = self.table.all_done();
+            self.level.pump(drained.into_iter().collect(), end, &mut o);
+            if !o.is_empty() {
+                self.outputs.push_back((seq, o));
+            }
+        }
+        let holding = self.lease.holding();
+        if holding && !self.holding {
+            let store = self.store.clone();
+            let before = self
+                .conn
+                .call(async move { store.get(WRITTEN_KEY).await })
+                .and_then(Result::ok)
+                .flatten()
+                .and_then(|b| std::str::from_utf8(&b).ok()?.trim().parse::<u64>().ok())
+                .unwrap_or(0);
+            self.written = self.written.max(before);
+            log_info!(
+                "fleet: holding the fleet level; the previous holder wrote up to stream sequence {before}, this process goes on from there"
+            );
+        } else if !holding && self.holding {
+            log_warn!("fleet: not holding the fleet level any more; standing by");
+        }
+        self.holding = holding;
+        self.written = self.written.max(if holding { 0 } else { progress });
+        let written = self.written;
+        if holding {
+            let mut last = None;
+            for (seq, o) in self.outputs.drain(..) {
+                if seq > written {
+                    out.extend_from_slice(&o);
+                    last = Some(seq);
+                }
+            }
+            if let Some(seq) = last {
+                self.written = seq;
+                let _ = self.jobs.send(Job::Put(
+                    WRITTEN_KEY.to_string(),
+                    seq.to_string().into_bytes().into(),
+                ));
+            }
+            self.drop_silent();
+        } else {
+            while self.outputs.front().is_some_and(|(seq, _)| *seq <= written)
+                || self.outputs.len() > MAX_KEPT
+            {
+                self.outputs.pop_front();
+            }
+        }
+    }
+
+    /// As the fleet level's holder: put a drop-out in the stream for each live partition not
+    /// heard for the bound.
+    fn drop_silent(&mut self) {
+        let silent: Vec<(String, u64)> = self
+            .table
+            .live()
+            .filter(|(p, _)| {
+                self.heard
+                    .get(*p)
+                    .is_none_or(|at| at.elapsed() > self.drop_after)
+            })
+            .map(|(p, g)| (p.to_string(), g))
+            .filter(|k| !self.drops_sent.contains(k))
+            .collect();
+        for (p, g) in silent {
+            log_warn!(
+                "fleet: partition {p} (generation {g}) sent nothing for {}; it drops out of the fleet level",
+                humantime::format_duration(self.drop_after)
+            );
+            let msg = Msg {
+                drop: true,
+                ..Msg::of(&p, g, 0, false, Vec::new())
+            };
+            self.put(&p, g, "drop", &msg);
+            self.drops_sent.insert((p, g));
+        }
+    }
+
+    /// At the end of this process: send what is queued; as the fleet level's holder, wait a
+    /// little for the other partitions to end (so a fleet whose inputs all end steps
+    /// everything pending) and write what the level gave.
+    pub fn finish(&mut self, out: &mut Vec<u8>) {
+        self.flush();
+        if !self.lease.holding() {
+            return;
+        }
+        let start = Instant::now();
+        let wait = self.drop_after.min(Duration::from_secs(2));
+        loop {
+            self.follow(out);
+            if self.table.all_done() || start.elapsed() > wait {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// After the last write: record how far this process wrote, and give the fleet lease up.
+    pub fn release(&mut self) {
+        let c = &self.table.counters;
+        log_info!(
+            "fleet: {} changes sent again by a partition's new holder not counted twice, {} messages of a replaced generation dropped; the fleet level stepped {} times, {} changes late",
+            c.repeats,
+            c.stale,
+            self.level.counters.steps,
+            self.level.counters.late
+        );
+        if self.holding {
+            let store = self.store.clone();
+            let seq = self.written;
+            let _ = self.conn.call(async move {
+                store
+                    .put(WRITTEN_KEY, seq.to_string().into_bytes().into())
+                    .await
+            });
+        }
+        self.flush();
+        self.lease.release();
+    }
+
+    /// Wait until every queued put was sent.
+    fn flush(&self) {
+        let (tx, rx) = std::sync::mpsc::channel();
+        if self.jobs.send(Job::Flush(tx)).is_ok() {
+            let _ = rx.recv_timeout(Duration::from_secs(5));
+        }
+    }
+}
+
+/// Put the queued entries in order, one at a time.
+async fn publisher(store: kv::Store, mut rx: tokio::sync::mpsc::UnboundedReceiver<Job>) {
+    while let Some(job) = rx.recv().await {
+        match job {
+            Job::Put(key, bytes) => {
+                if let Err(e) = store.put(&key, bytes).await {
+                    crate::log::warn_limited("fleet put", || {
+                        format!("fleet: cannot put {key}: {e}")
+                    });
+                }
+            }
+            Job::Flush(done) => {
+                let _ = done.send(());
+            }
+        }
+    }
+}
+
+/// Follow every fleet entry of the bucket from the first, in the stream's order, and the
+/// holder's progress.
+async fn follow(store: kv::Store, inbox: Arc<Mutex<Inbox>>) {
+    use futures_util::StreamExt;
+    let progress = {
+        let (store, inbox) = (store.clone(), Arc::clone(&inbox));
+        async move {
+            let Ok(mut w) = store.watch_with_history(WRITTEN_KEY).await else {
+                return;
+            };
+            while let Some(Ok(e)) = w.next().await {
+                if let Some(n) = std::str::from_utf8(&e.value)
+                    .ok()
+                    .and_then(|s| s.trim().parse::<u64>().ok())
+                    && let Ok(mut i) = inbox.lock()
+                {
+                    i.written = i.written.max(n);
+                }
+            }
+        }
+    };
+    tokio::spawn(progress);
+    // A watch made again (after an error) starts from the first entry: each is taken once.
+    let mut last = 0;
+    loop {
+        match store.watch_with_history("fleet.m.>").await {
+            Ok(mut w) => {
+                while let Some(e) = w.next().await {
+                    match e {
+                        Ok(e) if e.operation == kv::Operation::Put && e.revision > last => {
+                            last = e.revision;
+                            if let Ok(mut i) = inbox.lock() {
+                                i.msgs.push_back((e.revision, e.value));
+                            }
+                        }
+                        Ok(_) => {}
+                        Err(err) => {
+                            log_warn!("fleet: following the fleet's entries: {err}");
+                        }
+                    }
+                }
+            }
+            Err(e) => log_warn!("fleet: cannot follow the fleet's entries: {e}; retrying"),
+        }
+        tokio::time::sleep(Duration::from_secs(1)).await;
+    }
+}

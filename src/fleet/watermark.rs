@@ -1,0 +1,358 @@
+//! The fleet level across NATS partitions, without NATS (docs/fleet.md, "A fleet of NATS
+//! partitions"): what a partition sends ([`Msg`]), and the fleet level's table of partitions
+//! ([`Partitions`]) that turns the messages, in the order the stream holds them, into what the
+//! [`super::Level`] takes in and the bound on its watermark.
+//!
+//! Owns: each partition's generation (its lease's; messages of an older generation are
+//! dropped, so a fenced-out holder counts nothing), its promise (no change it sends later is
+//! at or before it), whether it is live, ended or dropped out, and each robot's highest clock
+//! reported by any generation: a change at or before it is a repeat (a new holder replaying
+//! what its predecessor already sent) and is not counted twice. The bound is the minimum
+//! promise over live partitions; an ended or dropped-out partition does not hold the fleet
+//! back. Status lines (`tessla_fleet_status`) name each partition's changes of state.
+
+use crate::processor::fleet_tap::{Change, Drained};
+use serde::{Deserialize, Serialize};
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
+use tessla_engine::runtime::snapshot::SValue;
+
+/// The measurement of the fleet level's status lines.
+pub const STATUS_MEASUREMENT: &str = "tessla_fleet_status";
+
+/// One message to the fleet level, JSON in the stream.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Msg {
+    /// The partition (its lease name).
+    pub p: String,
+    /// Its lease's generation.
+    pub g: u64,
+    /// `true`: the fleet level's holder says this partition (at generation `g`) dropped out.
+    #[serde(default)]
+    pub drop: bool,
+    /// No change this partition sends later is at or before this time (ns).
+    #[serde(default)]
+    pub promise: i64,
+    /// The partition's input ended (its holder stopped).
+    #[serde(default)]
+    pub end: bool,
+    /// Robot output events: (time, robot key, fleet input, value).
+    #[serde(default)]
+    pub changes: Vec<(i64, String, usize, SValue)>,
+    /// Robot clocks after their steps.
+    #[serde(default)]
+    pub clocks: Vec<(String, i64)>,
+    /// Robots evicted.
+    #[serde(default)]
+    pub left: Vec<String>,
+}
+
+impl Msg {
+    /// The message of partition `p` at generation `g` for what its processors collected.
+    pub fn of(p: &str, g: u64, promise: i64, end: bool, drained: Vec<Drained>) -> Msg {
+        let mut m = Msg {
+            p: p.to_string(),
+            g,
+            drop: false,
+            promise,
+            end,
+            changes: Vec::new(),
+            clocks: Vec::new(),
+            left: Vec::new(),
+        };
+        for d in drained {
+            m.changes.extend(d.changes.into_iter().filter_map(|c| {
+                Some((
+                    c.ts,
+                    c.key.to_string(),
+                    c.input,
+                    SValue::from_value(&c.value)?,
+                ))
+            }));
+            m.clocks
+                .extend(d.clocks.into_iter().map(|(k, t)| (k.to_string(), t)));
+            m.left.extend(d.left.into_iter().map(|k| k.to_string()));
+        }
+        m
+    }
+
+    /// Whether it carries anything but the promise.
+    pub fn is_data(&self) -> bool {
+        !self.changes.is_empty() || !self.clocks.is_empty() || !self.left.is_empty() || self.end
+    }
+}
+
+/// A partition's state at the fleet level.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum State {
+    Live,
+    Ended,
+    Dropped,
+}
+
+impl State {
+    fn word(self) -> &'static str {
+        match self {
+            State::Live => "live",
+            State::Ended => "ended",
+            State::Dropped => "dropped",
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+struct Part {
+    generation: u64,
+    promise: i64,
+    state: State,
+}
+
+/// A change of a partition's state, for the status output.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Status {
+    pub partition: String,
+    pub generation: u64,
+    pub state: State,
+    /// What happened: `joined`, `takeover`, `ended`, `dropped`, `rejoined`.
+    pub event: &'static str,
+}
+
+/// Counters of the partitioned fleet level.
+#[derive(Debug, Default, Clone, PartialEq, Eq)]
+pub struct Counters {
+    /// Messages of an older generation than the partition's newest, dropped.
+    pub stale: u64,
+    /// Changes a new generation sent again (at or before the robot's highest clock), dropped.
+    pub repeats: u64,
+}
+
+/// The fleet level's view of the partitions.
+#[derive(Debug, Default)]
+pub struct Partitions {
+    parts: BTreeMap<String, Part>,
+    /// Per robot: the highest clock any generation reported.
+    high: HashMap<Arc<str>, i64>,
+    pub counters: Counters,
+}
+
+impl Partitions {
+    /// Take in one message (in stream order): what the level takes in, if anything, and the
+    /// status changes it makes.
+    pub fn apply(&mut self, m: Msg) -> (Option<Drained>, Vec<Status>) {
+        let mut status = Vec::new();
+        let known = self.parts.get(&m.p).cloned();
+        if m.drop {
+            if let Some(p) = self.parts.get_mut(&m.p)
+                && p.generation == m.g
+                && p.state == State::Live
+            {
+                p.state = State::Dropped;
+                status.push(Status {
+                    partition: m.p,
+                    generation: m.g,
+                    state: State::Dropped,
+                    event: "dropped",
+                });
+            }
+            return (None, status);
+        }
+        let event = match &known {
+            Some(p) if m.g < p.generation => {
+                self.counters.stale += 1;
+                return (None, status);
+            }
+            None => Some("joined"),
+            Some(p) if m.g > p.generation => Some("takeover"),
+            Some(p) if p.state != State::Live => Some("rejoined"),
+            Some(_) => None,
+        };
+        let state = if m.end { State::Ended } else { State::Live };
+        let promise = known
+            .as_ref()
+            .filter(|p| p.generation == m.g)
+            .map_or(m.promise, |p| p.promise.max(m.promise));
+        self.parts.insert(
+            m.p.clone(),
+            Part {
+                generation: m.g,
+                promise,
+                state,
+            },
+        );
+        if let Some(event) = event {
+            status.push(Status {
+                partition: m.p.clone(),
+                generation: m.g,
+                state: State::Live,
+                event,
+            });
+        }
+        if m.end {
+            status.push(Status {
+                partition: m.p.clone(),
+                generation: m.g,
+                state: State::Ended,
+                event: "ended",
+            });
+        }
+        let mut d = Drained::default();
+        for (ts, key, input, value) in m.changes {
+            let key: Arc<str> = Arc::from(key);
+            if self.high.get(&key).is_some_and(|h| ts <= *h) {
+                self.counters.repeats += 1;
+                continue;
+            }
+            d.changes.push(Change {
+                ts,
+                key,
+                input,
+                value: value.to_value(),
+            });
+        }
+        for (key, t) in m.clocks {
+            let key: Arc<str> = Arc::from(key);
+            let h = self.high.entry(Arc::clone(&key)).or_insert(t);
+            *h = (*h).max(t);
+            d.clocks.push((key, t));
+        }
+        d.left = m.left.into_iter().map(Arc::from).collect();
+        (Some(d), status)
+    }
+
+    /// The bound on the fleet's watermark: the least promise of the live partitions.
+    pub fn bound(&self) -> i64 {
+        self.parts
+            .values()
+            .filter(|p| p.state == State::Live)
+            .map(|p| p.promise)
+            .min()
+            .unwrap_or(i64::MAX)
+    }
+
+    /// Every partition known has ended or dropped out (and there is one): the fleet steps
+    /// everything pending, as one process does at the end of its input.
+    pub fn all_done(&self) -> bool {
+        !self.parts.is_empty() && self.parts.values().all(|p| p.state != State::Live)
+    }
+
+    /// The live partitions and their generations.
+    pub fn live(&self) -> impl Iterator<Item = (&str, u64)> {
+        self.parts
+            .iter()
+            .filter(|(_, p)| p.state == State::Live)
+            .map(|(n, p)| (n.as_str(), p.generation))
+    }
+}
+
+/// A status line: `tessla_fleet_status,partition=P[,--tag...] state="live",event="joined",generation=Gi TS`.
+pub fn status_line(s: &Status, tags: &[(String, String)], ts: i64, out: &mut Vec<u8>) {
+    let mut line = String::from(STATUS_MEASUREMENT);
+    let mut all: Vec<(&str, &str)> = tags.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+    all.push(("partition", s.partition.as_str()));
+    all.sort();
+    for (k, v) in all {
+        line.push(',');
+        lineproto::write::write_tag_key(&mut line, k);
+        line.push('=');
+        lineproto::write::write_tag_value(&mut line, v);
+    }
+    line.push_str(&format!(
+        " state=\"{}\",event=\"{}\",generation={}i {ts}\n",
+        s.state.word(),
+        s.event,
+        s.generation
+    ));
+    out.extend_from_slice(line.as_bytes());
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tessla_engine::Value;
+
+    fn msg(p: &str, g: u64, promise: i64, changes: &[(i64, &str)], clocks: &[(&str, i64)]) -> Msg {
+        Msg {
+            p: p.into(),
+            g,
+            drop: false,
+            promise,
+            end: false,
+            changes: changes
+                .iter()
+                .map(|(t, k)| {
+                    (
+                        *t,
+                        k.to_string(),
+                        0,
+                        SValue::from_value(&Value::Int(*t)).unwrap(),
+                    )
+                })
+                .collect(),
+            clocks: clocks.iter().map(|(k, t)| (k.to_string(), *t)).collect(),
+            left: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn the_bound_is_the_least_live_promise() {
+        let mut ps = Partitions::default();
+        assert_eq!(ps.bound(), i64::MAX);
+        ps.apply(msg("p0", 1, 10, &[], &[]));
+        ps.apply(msg("p1", 1, 7, &[], &[]));
+        assert_eq!(ps.bound(), 7);
+        let mut end = msg("p1", 1, 9, &[], &[]);
+        end.end = true;
+        let (_, st) = ps.apply(end);
+        assert_eq!(st.last().map(|s| s.event), Some("ended"));
+        assert_eq!(ps.bound(), 10);
+        let drop = Msg {
+            drop: true,
+            ..msg("p0", 1, 0, &[], &[])
+        };
+        let (_, st) = ps.apply(drop);
+        assert_eq!(st.first().map(|s| s.event), Some("dropped"));
+        assert!(ps.all_done());
+        assert_eq!(ps.bound(), i64::MAX);
+    }
+
+    #[test]
+    fn a_new_generation_does_not_count_twice_and_an_old_one_counts_nothing() {
+        let mut ps = Partitions::default();
+        let (d, _) = ps.apply(msg("p0", 3, 0, &[(5, "r1"), (6, "r1")], &[("r1", 6)]));
+        assert_eq!(d.map(|d| d.changes.len()), Some(2));
+        // The new holder replays from its last save: 5 and 6 again, then 7.
+        let (d, st) = ps.apply(msg(
+            "p0",
+            8,
+            0,
+            &[(5, "r1"), (6, "r1"), (7, "r1")],
+            &[("r1", 7)],
+        ));
+        assert_eq!(st.first().map(|s| s.event), Some("takeover"));
+        let got: Vec<i64> = d
+            .map(|d| d.changes.iter().map(|c| c.ts).collect())
+            .unwrap_or_default();
+        assert_eq!(got, vec![7]);
+        assert_eq!(ps.counters.repeats, 2);
+        // The fenced-out holder's late message.
+        let (d, _) = ps.apply(msg("p0", 3, 0, &[(9, "r1")], &[("r1", 9)]));
+        assert!(d.is_none());
+        assert_eq!(ps.counters.stale, 1);
+    }
+
+    #[test]
+    fn a_status_line_is_line_protocol() {
+        let mut out = Vec::new();
+        let s = Status {
+            partition: "p 0".into(),
+            generation: 4,
+            state: State::Dropped,
+            event: "dropped",
+        };
+        status_line(&s, &[("site".into(), "a".into())], 12, &mut out);
+        assert_eq!(
+            String::from_utf8_lossy(&out),
+            "tessla_fleet_status,partition=p\\ 0,site=a state=\"dropped\",event=\"dropped\",generation=4i 12\n"
+        );
+    }
+}
