@@ -85,7 +85,7 @@ fn fleet_processor() -> Processor {
 }
 
 fn robot_processor() -> Processor {
-    let loaded = tessla_telegraf::bundled::load(&Default::default()).unwrap();
+    let loaded = tessla_telegraf::bundled::load(&tessla_telegraf::natives::load_options().unwrap()).unwrap();
     Processor::new(loaded.program, Options::default()).unwrap()
 }
 
