@@ -85,7 +85,8 @@ fn fleet_processor() -> Processor {
 }
 
 fn robot_processor() -> Processor {
-    let loaded = tessla_telegraf::bundled::load(&tessla_telegraf::natives::load_options().unwrap()).unwrap();
+    let loaded =
+        tessla_telegraf::bundled::load(&tessla_telegraf::natives::load_options().unwrap()).unwrap();
     Processor::new(loaded.program, Options::default()).unwrap()
 }
 
