@@ -102,6 +102,26 @@ fn without_registration_the_extern_is_unknown_as_before() {
         lines.iter().all(|l| l.contains("unknown extern")),
         "{lines:?}"
     );
+    // Said once at load, where the extern is declared, with the natives that are registered.
+    let warnings = |natives: Natives| match load(TWICE, natives) {
+        Ok(loaded) => tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false),
+        Err(e) => panic!("{e}"),
+    };
+    let none = warnings(Natives::new());
+    assert_eq!(none.matches("names no native").count(), 1, "{none}");
+    assert!(none.contains("spec.tessla:1:"), "{none}");
+    let mut other = Natives::new();
+    other
+        .register("app_pair_sum", "((Float, Float)) => Float", pair_sum)
+        .unwrap();
+    let listed = warnings(other);
+    assert!(listed.contains("`extern(\"app_twice\")`"), "{listed}");
+    assert!(
+        listed.contains("this program's natives: app_pair_sum"),
+        "{listed}"
+    );
+    // A registered native: no warning.
+    assert!(!warnings(natives()).contains("names no native"));
 }
 
 #[test]

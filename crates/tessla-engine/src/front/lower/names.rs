@@ -139,6 +139,36 @@ impl Compiler<'_> {
         false
     }
 
+    /// A warning for an `extern` no builtin and no registered native provides (once per place),
+    /// naming the natives this program registered.
+    fn warn_unknown_extern(&mut self, name: &str, span: Span) {
+        let message = format!(
+            "`extern(\"{name}\")` names no native of this program: every call of it is an error \
+             value (`call of an unknown extern`)"
+        );
+        if self
+            .diags
+            .iter()
+            .any(|d| d.span == Some(span) && d.message == message)
+        {
+            return;
+        }
+        let mut registered: Vec<&str> = self.typed.natives().iter().map(|n| n.name).collect();
+        registered.sort_unstable();
+        let help = if registered.is_empty() {
+            "check the name; a program embedding the engine registers its natives with \
+             `Natives::register` in `LoadOptions::natives`"
+                .to_string()
+        } else {
+            format!(
+                "check the name; this program's natives: {}",
+                registered.join(", ")
+            )
+        };
+        self.diags
+            .push(Diagnostic::warning(Category::Other, Some(span), message).with_help(help));
+    }
+
     pub(super) fn body(&mut self, d: &Def, env: &Env) -> R<Term> {
         match &d.body {
             // The one place of this rule (the checker leaves an unannotated extern's type open).
@@ -150,13 +180,15 @@ impl Compiler<'_> {
                     d.name.name
                 ),
             ),
-            Body::Extern { name, .. } => match builtins::extern_named(name).or_else(|| {
+            Body::Extern { name, span, .. } => match builtins::extern_named(name).or_else(|| {
                 let n = self.typed.natives().get(name)?;
                 Some((n.name, n.f))
             }) {
                 Some((name, f)) => Ok(Term::Func(Rc::new(FuncTerm::Native { name, f }))),
-                // As in TeSSLa, an unknown extern is an error when it is evaluated.
+                // As in TeSSLa, an unknown extern is an error when it is evaluated; said once
+                // at load, so a misspelt or unregistered native is not found by its errors.
                 None if d.params.is_some() => {
+                    self.warn_unknown_extern(name, *span);
                     let f: NativeFn = unknown_extern;
                     let name = "unknown extern";
                     Ok(Term::Func(Rc::new(FuncTerm::Native { name, f })))
