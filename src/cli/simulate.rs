@@ -246,7 +246,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
             ));
         }
         Some(Ok(b)) => Some(b),
-        Some(Err(e)) => return Err(bad(&e)),
+        Some(Err(e)) => return Err(bad(&e.to_string())),
     };
     let timeout = match positive("action-timeout", args.action_timeout) {
         Ok(t) => Duration::from_secs_f64(t),

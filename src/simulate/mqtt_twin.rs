@@ -43,7 +43,8 @@ impl MqttTwin {
     ) -> Result<MqttTwin, String> {
         let id = format!("tessla-telegraf-simulate-{}", std::process::id());
         let publisher =
-            Publisher::connect(broker, &format!("{id}-pub"), QoS::AtLeastOnce, timeout)?;
+            Publisher::connect(broker, &format!("{id}-pub"), QoS::AtLeastOnce, timeout)
+                .map_err(|e| e.to_string())?;
         let mut options = MqttOptions::new(format!("{id}-sub"), broker.host.clone(), broker.port);
         options.set_keep_alive(Duration::from_secs(30));
         options.set_max_packet_size(1 << 20, 1 << 20);
@@ -105,7 +106,7 @@ impl MqttTwin {
     pub fn finish(mut self) -> Result<usize, String> {
         let _ = self.subscriber.disconnect();
         match self.publisher.take() {
-            Some(p) => p.finish(self.timeout),
+            Some(p) => p.finish(self.timeout).map_err(|e| e.to_string()),
             None => Ok(0),
         }
     }
@@ -199,7 +200,9 @@ impl Twin for MqttTwin {
             .publisher
             .as_mut()
             .ok_or_else(|| "MQTT publisher already closed".to_string())?;
-        publisher.publish(&self.topic, payload.into_bytes())?;
+        publisher
+            .publish(&self.topic, payload.into_bytes())
+            .map_err(|e| e.to_string())?;
         let mut lines = line.as_bytes().to_vec();
         let mut received_ns = None;
         let metric = match self.actions.recv_timeout(self.timeout) {
