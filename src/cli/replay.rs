@@ -135,7 +135,10 @@ pub fn run(args: ReplayArgs) -> CliResult {
 fn replay(args: &ReplayArgs) -> CliResult {
     let speed = pacing::check_speed(args.speed).map_err(|e| CliError::spec(e.to_string()))?;
     let qos = parse_qos(args.qos).map_err(|e| CliError::spec(e.to_string()))?;
-    let broker: Broker = args.broker.parse().map_err(|e: BrokerError| CliError::spec(e.to_string()))?;
+    let broker: Broker = args
+        .broker
+        .parse()
+        .map_err(|e: BrokerError| CliError::spec(e.to_string()))?;
     let login = login(args, &broker)?;
     let recording = read_recording(&args.file, args.format, args.measurement.as_deref())?;
     for skipped in &recording.skipped {

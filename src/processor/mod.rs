@@ -40,8 +40,8 @@ mod wall;
 pub mod wiring;
 
 pub use counters::Counters;
-pub use switch::Refusal;
 pub use state_hooks::Continuity;
+pub use switch::Refusal;
 
 use self::instance_table::Key;
 use self::versions::{Version, Versions};

@@ -4,8 +4,8 @@
 
 use super::emit::Fired;
 use super::versions::{Rule, Selector, Unfit, Version};
-use crate::telegraf::binding::BindingError;
 use super::{Accepted, Processor, pool};
+use crate::telegraf::binding::BindingError;
 use std::sync::Arc;
 use tessla_engine::{Monitor, OutputEvent, Program};
 

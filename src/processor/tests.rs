@@ -374,7 +374,10 @@ fn a_version_that_does_not_fit_is_refused() {
         .check_version("o", &program(other), &Selector::all(), p.samples())
         .unwrap_err();
     assert!(
-        matches!(e, super::Refusal::Unfit(super::versions::Unfit::Unfed { .. })),
+        matches!(
+            e,
+            super::Refusal::Unfit(super::versions::Unfit::Unfed { .. })
+        ),
         "{e}"
     );
     assert!(e.to_string().contains("none of its inputs"), "{e}");

@@ -128,7 +128,9 @@ pub enum MqttError {
     )]
     Tls { broker: Broker, error: String },
     /// A certificate was refused outside the handshake proper.
-    #[error("TLS failed with MQTT broker {broker}: {error}; check --tls-ca, --tls-cert and --tls-key")]
+    #[error(
+        "TLS failed with MQTT broker {broker}: {error}; check --tls-ca, --tls-cert and --tls-key"
+    )]
     Certificate { broker: Broker, error: String },
     /// A plain connection reset: perhaps the broker speaks TLS.
     #[error(
@@ -142,9 +144,7 @@ pub enum MqttError {
     #[error("MQTT broker {broker}: {error}")]
     Client { broker: Broker, error: String },
     /// Not every message was acknowledged in time.
-    #[error(
-        "MQTT broker {broker} acknowledged {acked} of {published} messages within {seconds} s"
-    )]
+    #[error("MQTT broker {broker} acknowledged {acked} of {published} messages within {seconds} s")]
     Unacknowledged {
         broker: Broker,
         acked: usize,
