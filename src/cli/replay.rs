@@ -6,7 +6,7 @@
 
 use super::error::{CliError, CliResult};
 use crate::replay::message::{MessageOptions, to_json};
-use crate::replay::mqtt::{Broker, Login, Publisher, parse_qos};
+use crate::replay::mqtt::{Broker, BrokerError, Login, Publisher, parse_qos};
 use crate::replay::{Recording, pacing, read_csv, read_lp};
 use clap::{Args, ValueEnum};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -134,8 +134,11 @@ pub fn run(args: ReplayArgs) -> CliResult {
 
 fn replay(args: &ReplayArgs) -> CliResult {
     let speed = pacing::check_speed(args.speed).map_err(|e| CliError::spec(e.to_string()))?;
-    let qos = parse_qos(args.qos).map_err(CliError::spec)?;
-    let broker: Broker = args.broker.parse().map_err(CliError::spec)?;
+    let qos = parse_qos(args.qos).map_err(|e| CliError::spec(e.to_string()))?;
+    let broker: Broker = args
+        .broker
+        .parse()
+        .map_err(|e: BrokerError| CliError::spec(e.to_string()))?;
     let login = login(args, &broker)?;
     let recording = read_recording(&args.file, args.format, args.measurement.as_deref())?;
     for skipped in &recording.skipped {
@@ -166,7 +169,7 @@ fn replay(args: &ReplayArgs) -> CliResult {
         .unwrap_or_else(|| format!("tessla-replay-{}", std::process::id()));
     let mut publisher =
         Publisher::connect_with(&broker, &client_id, qos, Duration::from_secs(10), &login)
-            .map_err(CliError::io)?;
+            .map_err(|e| CliError::io(e.to_string()))?;
 
     let bar = progress_bar(recording.samples.len());
     let start = Instant::now();
@@ -181,12 +184,12 @@ fn replay(args: &ReplayArgs) -> CliResult {
         let payload = to_json(sample, &options).to_string().into_bytes();
         publisher
             .publish(&args.topic, payload)
-            .map_err(CliError::io)?;
+            .map_err(|e| CliError::io(e.to_string()))?;
         bar.inc(1);
     }
     let published = publisher
         .finish(Duration::from_secs(30))
-        .map_err(CliError::io)?;
+        .map_err(|e| CliError::io(e.to_string()))?;
     bar.finish_and_clear();
     eprintln!(
         "I! replay: published {published} messages from {} to {broker} topic {:?} in {:.1} s ({} skipped)",

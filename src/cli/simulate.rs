@@ -246,7 +246,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
             ));
         }
         Some(Ok(b)) => Some(b),
-        Some(Err(e)) => return Err(bad(&e)),
+        Some(Err(e)) => return Err(bad(&e.to_string())),
     };
     let timeout = match positive("action-timeout", args.action_timeout) {
         Ok(t) => Duration::from_secs_f64(t),
@@ -304,7 +304,11 @@ pub fn run(args: SimulateArgs) -> CliResult {
                 );
             }
             let finished = twin.finish();
-            outcome.and_then(|o| finished.map(|_| vec![(chosen_on, o)]))
+            match (outcome, finished) {
+                (Err(e), _) => Err(e.to_string()),
+                (Ok(_), Err(e)) => Err(e.to_string()),
+                (Ok(o), Ok(_)) => Ok(vec![(chosen_on, o)]),
+            }
         }
         (None, Some(program)) => in_process(&scenario, &program, chosen_on, &mut file),
         (None, None) => Err("no monitors loaded".to_string()),
@@ -348,10 +352,11 @@ fn in_process(
             twin = twin.live(scenario.start_ns);
         }
         let outcome = if on == chosen_on {
-            closed_loop::run(scenario, on, &mut twin, file)?
+            closed_loop::run(scenario, on, &mut twin, file)
         } else {
-            closed_loop::run(scenario, on, &mut twin, &mut std::io::sink())?
-        };
+            closed_loop::run(scenario, on, &mut twin, &mut std::io::sink())
+        }
+        .map_err(|e| e.to_string())?;
         log_debug!(
             "monitor {}: {}",
             if on { "on" } else { "off" },

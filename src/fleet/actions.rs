@@ -20,6 +20,17 @@ struct ActionOut {
     validity: i64,
 }
 
+/// A `@FleetAction` annotation without its arguments: the output and what it lacks.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ActionError {
+    /// No field name (a String) given.
+    #[error("fleet output `{0}`: @FleetAction needs a field name (a String)")]
+    NoField(String),
+    /// No validity (an Int above 0) given.
+    #[error("fleet output `{0}`: @FleetAction needs a validity in ns (an Int above 0)")]
+    NoValidity(String),
+}
+
 /// The action outputs of a fleet spec and each robot's sequence number.
 pub struct Actions {
     /// Per fleet output: its action, if it is one.
@@ -35,7 +46,7 @@ impl Actions {
         program: &Program,
         by: Vec<String>,
         tags: Vec<(String, String)>,
-    ) -> Result<Actions, String> {
+    ) -> Result<Actions, ActionError> {
         let mut outs = Vec::new();
         for o in &program.outputs {
             let Some(a) = o.annotations.iter().find(|a| a.name == "FleetAction") else {
@@ -52,19 +63,13 @@ impl Actions {
             let field = match arg("field", 0) {
                 Some(Value::Str(s)) => s.to_string(),
                 _ => {
-                    return Err(format!(
-                        "fleet output `{}`: @FleetAction needs a field name (a String)",
-                        o.name
-                    ));
+                    return Err(ActionError::NoField(o.name.clone()));
                 }
             };
             let validity = match arg("validity", 1) {
                 Some(Value::Int(i)) if i > 0 => i,
                 _ => {
-                    return Err(format!(
-                        "fleet output `{}`: @FleetAction needs a validity in ns (an Int above 0)",
-                        o.name
-                    ));
+                    return Err(ActionError::NoValidity(o.name.clone()));
                 }
             };
             outs.push(Some(ActionOut { field, validity }));

@@ -78,6 +78,17 @@ pub struct Level {
     pub counters: FleetCounters,
 }
 
+/// Why a fleet level cannot be built from a checked fleet spec.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LevelError {
+    /// A robot output the level reads has no input of that name.
+    #[error("fleet spec: no input `{0}`")]
+    NoInput(String),
+    /// A `@FleetAction` lacks its arguments.
+    #[error(transparent)]
+    Action(#[from] super::actions::ActionError),
+}
+
 impl Level {
     /// A level running `program` (checked by [`super::check`]) whose inputs read the robot
     /// outputs `names`; `silence` in ns; `tags`: the static `--tag`s; `by`: `--instance-by`.
@@ -87,7 +98,7 @@ impl Level {
         silence: i64,
         tags: Vec<(String, String)>,
         by: Vec<String>,
-    ) -> Result<Level, String> {
+    ) -> Result<Level, LevelError> {
         let inputs = names
             .iter()
             .map(|n| {
@@ -95,7 +106,7 @@ impl Level {
                     .inputs
                     .iter()
                     .position(|i| &i.name == n)
-                    .ok_or_else(|| format!("fleet spec: no input `{n}`"))
+                    .ok_or_else(|| LevelError::NoInput(n.clone()))
             })
             .collect::<Result<Vec<_>, _>>()?;
         let actions = Actions::new(&program, by, tags.clone())?;

@@ -41,9 +41,11 @@ pub mod wiring;
 
 pub use counters::Counters;
 pub use state_hooks::Continuity;
+pub use switch::Refusal;
 
 use self::instance_table::Key;
 use self::versions::{Version, Versions};
+use crate::telegraf::binding::BindingError;
 use crate::telegraf::encode;
 use crate::watchdog::Lane;
 use clock::{Deadlines, Wall};
@@ -154,7 +156,7 @@ pub struct Processor {
 
 impl Processor {
     /// A processor for `program`; fails when an input annotation is malformed.
-    pub fn new(program: Arc<Program>, opts: Options) -> Result<Processor, String> {
+    pub fn new(program: Arc<Program>, opts: Options) -> Result<Processor, BindingError> {
         let base = Version::new(String::new(), String::new(), program, &opts.measurement)?;
         Ok(Self::with_versions(
             Versions::new(base, opts.instance_by.clone()),
@@ -188,7 +190,7 @@ impl Processor {
 
     /// A processor with this one's versions and options and no instances (a `--threads`
     /// worker).
-    pub fn sibling(&self) -> Result<Processor, String> {
+    pub fn sibling(&self) -> Result<Processor, BindingError> {
         let mut p = Self::with_versions(self.versions.duplicate()?, self.opts.clone());
         if let Some(names) = self.fleet_outputs() {
             p.tap_fleet(names);

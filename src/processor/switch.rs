@@ -3,8 +3,9 @@
 //! at each step ([`versions`](super::versions) owns the table and the rules).
 
 use super::emit::Fired;
-use super::versions::{Rule, Selector, Version};
+use super::versions::{Rule, Selector, Unfit, Version};
 use super::{Accepted, Processor, pool};
+use crate::telegraf::binding::BindingError;
 use std::sync::Arc;
 use tessla_engine::{Monitor, OutputEvent, Program};
 
@@ -109,7 +110,7 @@ impl Processor {
         program: Arc<Program>,
         id: &str,
         mut carry: impl FnMut(&Monitor) -> Monitor,
-    ) -> Result<(), String> {
+    ) -> Result<(), BindingError> {
         let label = self.versions.base().label.clone();
         let base = Version::new(id.to_string(), label, program, &self.opts.measurement)?;
         self.end_of_read();
@@ -141,23 +142,23 @@ impl Processor {
         program: &Arc<Program>,
         selector: &Selector,
         samples: &[lineproto::Metric],
-    ) -> Result<(), String> {
+    ) -> Result<(), Refusal> {
         let unknown = selector.unknown_tags(&self.opts.instance_by);
         if !unknown.is_empty() {
-            return Err(format!(
-                "its selector `{selector}` names tag(s) {} that do not choose instances here (--instance-by {})",
-                unknown.join(", "),
-                if self.opts.instance_by.is_empty() {
+            return Err(Refusal::UnknownTags {
+                selector: selector.clone(),
+                tags: unknown.join(", "),
+                by: if self.opts.instance_by.is_empty() {
                     "is not set".to_string()
                 } else {
                     self.opts.instance_by.join(",")
-                }
-            ));
+                },
+            });
         }
         if self.versions.find(id).is_none() {
             let m = &self.opts.measurement;
             let v = Version::new(id.to_string(), String::new(), Arc::clone(program), m)
-                .map_err(|e| format!("its input annotations: {e}"))?;
+                .map_err(Refusal::Annotations)?;
             super::versions::check_against(&v, samples)?;
         }
         Ok(())
@@ -189,13 +190,13 @@ impl Processor {
         program: Arc<Program>,
         from: i64,
         selector: Selector,
-    ) -> Result<Accepted, String> {
+    ) -> Result<Accepted, Refusal> {
         let version = match self.versions.find(id) {
             Some(v) => v,
             None => {
                 let m = &self.opts.measurement;
                 let v = Version::new(id.to_string(), label.to_string(), program, m)
-                    .map_err(|e| format!("its input annotations: {e}"))?;
+                    .map_err(Refusal::Annotations)?;
                 self.versions.list.push(v);
                 self.capture = self.versions.list_to_capture();
                 self.versions.list.len() - 1
@@ -216,4 +217,26 @@ impl Processor {
         self.requeue_all();
         Ok(Accepted { reset_outputs })
     }
+}
+
+/// Why this processor refuses a new version ([`Processor::check_version`],
+/// [`Processor::accept_version`]).
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum Refusal {
+    /// Its selector names tags that are not `--instance-by` tags here (`by`: their list, or
+    /// "is not set").
+    #[error(
+        "its selector `{selector}` names tag(s) {tags} that do not choose instances here (--instance-by {by})"
+    )]
+    UnknownTags {
+        selector: Selector,
+        tags: String,
+        by: String,
+    },
+    /// Its input annotations are malformed.
+    #[error("its input annotations: {0}")]
+    Annotations(BindingError),
+    /// It does not fit the metrics seen.
+    #[error(transparent)]
+    Unfit(#[from] Unfit),
 }

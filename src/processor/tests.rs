@@ -358,18 +358,29 @@ fn a_version_that_does_not_fit_is_refused() {
             &[],
         )
         .unwrap_err();
-    assert!(e.contains("site"), "{e}");
+    assert!(matches!(e, super::Refusal::UnknownTags { .. }), "{e}");
+    assert_eq!(
+        e.to_string(),
+        "its selector `site=lab` names tag(s) site that do not choose instances here (--instance-by robot)"
+    );
     feed(&mut p, "m,robot=a x=1i 100\n");
     let strings = "in x: Events[Bool]\nout x\n";
     let e = p
         .check_version("b", &program(strings), &Selector::all(), p.samples())
         .unwrap_err();
-    assert!(e.contains("input `x`"), "{e}");
+    assert!(e.to_string().contains("input `x`"), "{e}");
     let other = "in y: Events[Int]\nout y\n";
     let e = p
         .check_version("o", &program(other), &Selector::all(), p.samples())
         .unwrap_err();
-    assert!(e.contains("none of its inputs"), "{e}");
+    assert!(
+        matches!(
+            e,
+            super::Refusal::Unfit(super::versions::Unfit::Unfed { .. })
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().contains("none of its inputs"), "{e}");
     p.check_version("new", &program(NEW), &Selector::all(), p.samples())
         .unwrap();
 }

@@ -7,7 +7,7 @@
 //! started with.
 
 use super::instance_table::Key;
-use crate::telegraf::binding::{self, FieldPattern, InputBinding, TimeBinding};
+use crate::telegraf::binding::{self, BindingError, FieldPattern, InputBinding, TimeBinding};
 use crate::telegraf::encode;
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -40,7 +40,7 @@ impl Version {
         label: String,
         program: Arc<Program>,
         measurement: &str,
-    ) -> Result<Version, String> {
+    ) -> Result<Version, BindingError> {
         Ok(Version {
             keys: snapshot::node_keys(&program),
             bindings: binding::bindings(&program)?,
@@ -67,10 +67,44 @@ impl Version {
     }
 }
 
+/// Why a version does not fit the metrics this process has seen ([`check_against`]).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Unfit {
+    /// An input whose field the metrics carry but never convert to its type.
+    #[error("input `{input}` cannot read the metrics this process receives: {reason}")]
+    Unreadable { input: String, reason: String },
+    /// No input of the version is fed (the measurements seen, comma-separated).
+    #[error(
+        "none of its inputs is fed by the metrics this process receives (measurements {measurements}); check their @TelegrafIn annotations"
+    )]
+    Unfed { measurements: String },
+}
+
+/// A metric that a version cannot read ([`fits`]): the input and why its field does not convert.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("input `{input}`: {reason}")]
+pub struct Misfit {
+    /// The input's name.
+    pub input: String,
+    /// Why the field does not convert.
+    pub reason: String,
+}
+
+/// A selector that does not parse: the clause and what it lacks.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SelectorError {
+    /// A clause without `=`.
+    #[error("`{0}` is not TAG=VALUE[,VALUE...] (for example robot=r1,r2)")]
+    NotPair(String),
+    /// A clause with an empty tag or no value.
+    #[error("`{0}` needs a tag and at least one value (for example robot=r1,r2)")]
+    Empty(String),
+}
+
 /// Check `v`'s bindings against metrics this process has seen (none seen: nothing to check).
 /// Refused: an input whose field the metrics carry but never converts to its type, or a
 /// version none of whose inputs any of them feeds.
-pub fn check_against(v: &Version, samples: &[lineproto::Metric]) -> Result<(), String> {
+pub fn check_against(v: &Version, samples: &[lineproto::Metric]) -> Result<(), Unfit> {
     if samples.is_empty() || v.bindings.is_empty() {
         return Ok(());
     }
@@ -87,18 +121,17 @@ pub fn check_against(v: &Version, samples: &[lineproto::Metric]) -> Result<(), S
         }
         fed |= converted;
         if let (false, Some(reason)) = (converted, failure) {
-            return Err(format!(
-                "input `{}` cannot read the metrics this process receives: {reason}",
-                b.name
-            ));
+            return Err(Unfit::Unreadable {
+                input: b.name.clone(),
+                reason,
+            });
         }
     }
     if !fed {
         let seen: Vec<&str> = samples.iter().map(|m| m.measurement.as_str()).collect();
-        return Err(format!(
-            "none of its inputs is fed by the metrics this process receives (measurements {}); check their @TelegrafIn annotations",
-            seen.join(", ")
-        ));
+        return Err(Unfit::Unfed {
+            measurements: seen.join(", "),
+        });
     }
     Ok(())
 }
@@ -106,10 +139,13 @@ pub fn check_against(v: &Version, samples: &[lineproto::Metric]) -> Result<(), S
 /// Whether version `v` can read `m`: `Err` names an input whose field `m` carries but does not
 /// convert to the input's type (a metric that feeds none of its inputs fits: nothing in it
 /// contradicts the version).
-pub fn fits(v: &Version, m: &lineproto::Metric) -> Result<(), String> {
+pub fn fits(v: &Version, m: &lineproto::Metric) -> Result<(), Misfit> {
     for b in v.bindings.iter().filter(|b| b.matches(m)) {
         if let Some(Err(e)) = b.extract(m) {
-            return Err(format!("input `{}`: {}", b.name, e.reason));
+            return Err(Misfit {
+                input: b.name.clone(),
+                reason: e.reason,
+            });
         }
     }
     Ok(())
@@ -178,7 +214,7 @@ impl Versions {
     }
 
     /// The same versions and rules, built again (a `--threads` worker's own).
-    pub fn duplicate(&self) -> Result<Versions, String> {
+    pub fn duplicate(&self) -> Result<Versions, BindingError> {
         let list = self
             .list
             .iter()
@@ -245,7 +281,7 @@ impl Versions {
             match fits(self.get(v), m) {
                 Err(why) if fits(self.get(current), m).is_ok() => {
                     unfit.push(rule);
-                    refused(rule, why);
+                    refused(rule, why.to_string());
                 }
                 _ => return v,
             }
@@ -387,12 +423,12 @@ impl Selector {
         self.clauses.is_empty()
     }
 
-    pub fn parse(s: &str) -> Result<Selector, String> {
+    pub fn parse(s: &str) -> Result<Selector, SelectorError> {
         let mut clauses = Vec::new();
         for clause in s.split(';').map(str::trim).filter(|c| !c.is_empty()) {
-            let (tag, values) = clause.split_once('=').ok_or_else(|| {
-                format!("`{clause}` is not TAG=VALUE[,VALUE...] (for example robot=r1,r2)")
-            })?;
+            let (tag, values) = clause
+                .split_once('=')
+                .ok_or_else(|| SelectorError::NotPair(clause.to_string()))?;
             let tag = tag.trim();
             let values: Vec<String> = values
                 .split(',')
@@ -400,9 +436,7 @@ impl Selector {
                 .filter(|v| !v.is_empty())
                 .collect();
             if tag.is_empty() || values.is_empty() {
-                return Err(format!(
-                    "`{clause}` needs a tag and at least one value (for example robot=r1,r2)"
-                ));
+                return Err(SelectorError::Empty(clause.to_string()));
             }
             clauses.push((tag.to_string(), values));
         }
@@ -443,8 +477,8 @@ impl fmt::Display for Selector {
 }
 
 impl TryFrom<String> for Selector {
-    type Error = String;
-    fn try_from(s: String) -> Result<Selector, String> {
+    type Error = SelectorError;
+    fn try_from(s: String) -> Result<Selector, SelectorError> {
         Selector::parse(&s)
     }
 }

@@ -58,34 +58,127 @@ impl fmt::Debug for Login {
     }
 }
 
-impl FromStr for Broker {
-    type Err = String;
+/// A broker address that does not parse: the address as shown (secrets masked) and why.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("bad broker address {shown:?}: {why} (expected mqtt://HOST:PORT or mqtts://HOST:PORT)")]
+pub struct BrokerError {
+    /// The address given, its secrets masked.
+    pub shown: String,
+    /// What is wrong with it.
+    pub why: BadBroker,
+}
 
-    fn from_str(text: &str) -> Result<Self, String> {
+/// What is wrong with a broker address.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BadBroker {
+    /// A scheme other than mqtt/tcp/mqtts/ssl.
+    #[error("scheme {0:?} is not supported, only mqtt:// (plain TCP) and mqtts:// (TLS)")]
+    Scheme(String),
+    /// `user:password@` in the address.
+    #[error("credentials do not go in the address: use --username and --password-env VAR")]
+    Credentials,
+    /// An IPv6 host without its `]`.
+    #[error("unclosed '['")]
+    Unclosed,
+    /// Nothing before the port.
+    #[error("no host")]
+    NoHost,
+    /// A port that is not 1..65535.
+    #[error("port {0:?} is not a number 1..65535")]
+    Port(String),
+}
+
+/// A `--qos` other than 0, 1 or 2.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("--qos must be 0, 1 or 2, not {0}")]
+pub struct QosError(pub u8);
+
+/// Why connecting, publishing or finishing failed; each names the broker. The texts of
+/// rumqttc's errors are kept as text (they name no secret).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MqttError {
+    /// `mqtts://` without `--tls-ca`.
+    #[error("{0} is TLS: --tls-ca PATH must name the CA that signed its certificate")]
+    NeedsCa(Broker),
+    /// No CONNACK before the deadline.
+    #[error("cannot reach MQTT broker {broker}: no answer within {seconds} s")]
+    NoAnswer { broker: Broker, seconds: f64 },
+    /// The broker refused the user name or password.
+    #[error(
+        "MQTT broker {broker} refused the login ({who}: {code}); check --username and the \
+         password in the variable --password-env names"
+    )]
+    LoginRefused {
+        broker: Broker,
+        who: String,
+        code: String,
+    },
+    /// The broker refused the connection for another reason.
+    #[error("MQTT broker {broker} refused the connection ({who}): {code}")]
+    Refused {
+        broker: Broker,
+        who: String,
+        code: String,
+    },
+    /// The TLS handshake failed.
+    #[error(
+        "TLS failed with MQTT broker {broker}: {error}; check --tls-ca (the CA that signed the \
+         broker's certificate), the host name against the certificate, and --tls-cert/--tls-key \
+         when the broker asks for a client certificate"
+    )]
+    Tls { broker: Broker, error: String },
+    /// A certificate was refused outside the handshake proper.
+    #[error(
+        "TLS failed with MQTT broker {broker}: {error}; check --tls-ca, --tls-cert and --tls-key"
+    )]
+    Certificate { broker: Broker, error: String },
+    /// A plain connection reset: perhaps the broker speaks TLS.
+    #[error(
+        "cannot reach MQTT broker {broker}: {error} (does the broker expect TLS? then write mqtts://)"
+    )]
+    Reset { broker: Broker, error: String },
+    /// No broker answered, or the client closed.
+    #[error("cannot reach MQTT broker {broker}: {error}")]
+    Unreachable { broker: Broker, error: String },
+    /// The client refused a message.
+    #[error("MQTT broker {broker}: {error}")]
+    Client { broker: Broker, error: String },
+    /// Not every message was acknowledged in time.
+    #[error("MQTT broker {broker} acknowledged {acked} of {published} messages within {seconds} s")]
+    Unacknowledged {
+        broker: Broker,
+        acked: usize,
+        published: usize,
+        seconds: f64,
+    },
+    /// The connection failed after connecting.
+    #[error("connection to MQTT broker {broker} lost: {error}")]
+    Lost { broker: Broker, error: String },
+}
+
+impl FromStr for Broker {
+    type Err = BrokerError;
+
+    fn from_str(text: &str) -> Result<Self, BrokerError> {
         let shown = crate::log::mask(text);
-        let bad = |why: &str| {
-            format!(
-                "bad broker address {shown:?}: {why} (expected mqtt://HOST:PORT or mqtts://HOST:PORT)"
-            )
+        let bad = |why: BadBroker| BrokerError {
+            shown: shown.to_string(),
+            why,
         };
         let (tls, rest) = match text.split_once("://") {
             Some(("mqtt" | "tcp", rest)) => (false, rest),
             Some(("mqtts" | "ssl", rest)) => (true, rest),
             Some((scheme, _)) => {
-                return Err(bad(&format!(
-                    "scheme {scheme:?} is not supported, only mqtt:// (plain TCP) and mqtts:// (TLS)"
-                )));
+                return Err(bad(BadBroker::Scheme(scheme.to_string())));
             }
             None => (false, text),
         };
         if rest.contains('@') {
-            return Err(bad(
-                "credentials do not go in the address: use --username and --password-env VAR",
-            ));
+            return Err(bad(BadBroker::Credentials));
         }
         let rest = rest.trim_end_matches('/');
         let (host, port) = if let Some(v6) = rest.strip_prefix('[') {
-            let (host, after) = v6.split_once(']').ok_or_else(|| bad("unclosed '['"))?;
+            let (host, after) = v6.split_once(']').ok_or_else(|| bad(BadBroker::Unclosed))?;
             (host, after.strip_prefix(':'))
         } else {
             match rest.rsplit_once(':') {
@@ -94,14 +187,14 @@ impl FromStr for Broker {
             }
         };
         if host.is_empty() {
-            return Err(bad("no host"));
+            return Err(bad(BadBroker::NoHost));
         }
         let port = match port {
             Some(p) => p
                 .parse::<u16>()
                 .ok()
                 .filter(|p| *p != 0)
-                .ok_or_else(|| bad(&format!("port {p:?} is not a number 1..65535")))?,
+                .ok_or_else(|| bad(BadBroker::Port(p.to_string())))?,
             None if tls => 8883,
             None => 1883,
         };
@@ -115,42 +208,43 @@ impl FromStr for Broker {
 
 /// Why connecting failed, in the user's terms: the broker refused the login, TLS failed, or no
 /// broker answered. The error texts of rumqttc name no secret.
-fn connect_failure(broker: &Broker, login: &Login, e: &rumqttc::ConnectionError) -> String {
+fn connect_failure(broker: &Broker, login: &Login, e: &rumqttc::ConnectionError) -> MqttError {
     use rumqttc::{ConnectReturnCode as C, ConnectionError as E};
     let who = match &login.username {
         Some(u) => format!("as user `{u}`"),
         None => "without a user name".into(),
     };
+    let broker = broker.clone();
+    let error = e.to_string();
     match e {
-        E::ConnectionRefused(C::BadUserNamePassword | C::NotAuthorized) => format!(
-            "MQTT broker {broker} refused the login ({who}: {e:?}); check --username and the \
-             password in the variable --password-env names"
-        ),
-        E::ConnectionRefused(code) => {
-            format!("MQTT broker {broker} refused the connection ({who}): {code:?}")
+        E::ConnectionRefused(C::BadUserNamePassword | C::NotAuthorized) => {
+            MqttError::LoginRefused {
+                broker,
+                who,
+                code: format!("{e:?}"),
+            }
         }
-        E::Tls(_) => format!(
-            "TLS failed with MQTT broker {broker}: {e}; check --tls-ca (the CA that signed the \
-             broker's certificate), the host name against the certificate, and --tls-cert/--tls-key \
-             when the broker asks for a client certificate"
-        ),
-        _ if broker.tls && format!("{e}").to_ascii_lowercase().contains("certificate") => format!(
-            "TLS failed with MQTT broker {broker}: {e}; check --tls-ca, --tls-cert and --tls-key"
-        ),
-        _ if !broker.tls && format!("{e}").contains("reset by peer") => format!(
-            "cannot reach MQTT broker {broker}: {e} (does the broker expect TLS? then write mqtts://)"
-        ),
-        _ => format!("cannot reach MQTT broker {broker}: {e}"),
+        E::ConnectionRefused(code) => MqttError::Refused {
+            broker,
+            who,
+            code: format!("{code:?}"),
+        },
+        E::Tls(_) => MqttError::Tls { broker, error },
+        _ if broker.tls && error.to_ascii_lowercase().contains("certificate") => {
+            MqttError::Certificate { broker, error }
+        }
+        _ if !broker.tls && error.contains("reset by peer") => MqttError::Reset { broker, error },
+        _ => MqttError::Unreachable { broker, error },
     }
 }
 
 /// Parse `0`, `1` or `2` into a QoS.
-pub fn parse_qos(level: u8) -> Result<QoS, String> {
+pub fn parse_qos(level: u8) -> Result<QoS, QosError> {
     match level {
         0 => Ok(QoS::AtMostOnce),
         1 => Ok(QoS::AtLeastOnce),
         2 => Ok(QoS::ExactlyOnce),
-        other => Err(format!("--qos must be 0, 1 or 2, not {other}")),
+        other => Err(QosError(other)),
     }
 }
 
@@ -159,7 +253,7 @@ pub struct Publisher {
     broker: Broker,
     client: Client,
     acked: Arc<AtomicUsize>,
-    error: Arc<Mutex<Option<String>>>,
+    error: Arc<Mutex<Option<MqttError>>>,
     driver: Option<JoinHandle<()>>,
     published: usize,
     qos: QoS,
@@ -172,7 +266,7 @@ impl Publisher {
         client_id: &str,
         qos: QoS,
         timeout: Duration,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, MqttError> {
         Self::connect_with(broker, client_id, qos, timeout, &Login::default())
     }
 
@@ -184,16 +278,14 @@ impl Publisher {
         qos: QoS,
         timeout: Duration,
         login: &Login,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, MqttError> {
         let mut options = MqttOptions::new(client_id, broker.host.clone(), broker.port);
         if let Some(user) = &login.username {
             options.set_credentials(user.clone(), login.password.clone().unwrap_or_default());
         }
         if broker.tls {
             let Some(ca) = login.ca.clone() else {
-                return Err(format!(
-                    "{broker} is TLS: --tls-ca PATH must name the CA that signed its certificate"
-                ));
+                return Err(MqttError::NeedsCa(broker.clone()));
             };
             options.set_transport(rumqttc::Transport::tls_with_config(
                 rumqttc::TlsConfiguration::Simple {
@@ -212,10 +304,10 @@ impl Publisher {
         loop {
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
-                return Err(format!(
-                    "cannot reach MQTT broker {broker}: no answer within {} s",
-                    timeout.as_secs_f64()
-                ));
+                return Err(MqttError::NoAnswer {
+                    broker: broker.clone(),
+                    seconds: timeout.as_secs_f64(),
+                });
             }
             match connection.recv_timeout(left) {
                 Ok(Ok(Event::Incoming(Packet::ConnAck(_)))) => break,
@@ -223,7 +315,10 @@ impl Publisher {
                 Ok(Err(e)) => return Err(connect_failure(broker, login, &e)),
                 Err(RecvTimeoutError::Timeout) => {}
                 Err(RecvTimeoutError::Disconnected) => {
-                    return Err(format!("cannot reach MQTT broker {broker}: client closed"));
+                    return Err(MqttError::Unreachable {
+                        broker: broker.clone(),
+                        error: "client closed".into(),
+                    });
                 }
             }
         }
@@ -247,15 +342,17 @@ impl Publisher {
     }
 
     /// Queue one message (blocks while the client's queue is full).
-    pub fn publish(&mut self, topic: &str, payload: Vec<u8>) -> Result<(), String> {
+    pub fn publish(&mut self, topic: &str, payload: Vec<u8>) -> Result<(), MqttError> {
         if let Some(e) = self.failure() {
             return Err(e);
         }
         self.client
             .publish(topic, self.qos, false, payload)
             .map_err(|e| {
-                self.failure()
-                    .unwrap_or_else(|| format!("MQTT broker {}: {e}", self.broker))
+                self.failure().unwrap_or_else(|| MqttError::Client {
+                    broker: self.broker.clone(),
+                    error: e.to_string(),
+                })
             })?;
         self.published += 1;
         Ok(())
@@ -267,7 +364,7 @@ impl Publisher {
     }
 
     /// Wait (at most `timeout`) until every message is acknowledged, then disconnect.
-    pub fn finish(mut self, timeout: Duration) -> Result<usize, String> {
+    pub fn finish(mut self, timeout: Duration) -> Result<usize, MqttError> {
         let deadline = Instant::now() + timeout;
         if self.qos != QoS::AtMostOnce {
             while self.acknowledged() < self.published {
@@ -275,13 +372,12 @@ impl Publisher {
                     return Err(e);
                 }
                 if Instant::now() >= deadline {
-                    return Err(format!(
-                        "MQTT broker {} acknowledged {} of {} messages within {} s",
-                        self.broker,
-                        self.acknowledged(),
-                        self.published,
-                        timeout.as_secs_f64()
-                    ));
+                    return Err(MqttError::Unacknowledged {
+                        broker: self.broker.clone(),
+                        acked: self.acknowledged(),
+                        published: self.published,
+                        seconds: timeout.as_secs_f64(),
+                    });
                 }
                 std::thread::sleep(Duration::from_millis(5));
             }
@@ -296,7 +392,7 @@ impl Publisher {
         }
     }
 
-    fn failure(&self) -> Option<String> {
+    fn failure(&self) -> Option<MqttError> {
         self.error.lock().ok().and_then(|e| e.clone())
     }
 }
@@ -306,7 +402,7 @@ fn drive(
     mut connection: Connection,
     broker: &Broker,
     acked: &AtomicUsize,
-    error: &Mutex<Option<String>>,
+    error: &Mutex<Option<MqttError>>,
 ) {
     let mut disconnect_sent: Option<Instant> = None;
     loop {
@@ -326,7 +422,10 @@ fn drive(
                 if disconnect_sent.is_none()
                     && let Ok(mut slot) = error.lock()
                 {
-                    *slot = Some(format!("connection to MQTT broker {broker} lost: {e}"));
+                    *slot = Some(MqttError::Lost {
+                        broker: broker.clone(),
+                        error: e.to_string(),
+                    });
                 }
                 return;
             }
@@ -370,15 +469,24 @@ mod tests {
             "http://h:1"
                 .parse::<Broker>()
                 .unwrap_err()
+                .to_string()
                 .contains("not supported")
         );
         let e = "mqtt://u:Secr3t@h:1".parse::<Broker>().unwrap_err();
+        assert_eq!(e.why, BadBroker::Credentials);
+        let e = e.to_string();
+        assert!(!e.contains("Secr3t"), "{e}");
         assert!(e.contains("--password-env"), "{e}");
-        assert!("mqtt://h:x".parse::<Broker>().unwrap_err().contains("port"));
+        assert_eq!(
+            "mqtt://h:x".parse::<Broker>().unwrap_err().to_string(),
+            "bad broker address \"mqtt://h:x\": port \"x\" is not a number 1..65535 \
+             (expected mqtt://HOST:PORT or mqtts://HOST:PORT)"
+        );
         assert!(
             "mqtt://:1"
                 .parse::<Broker>()
                 .unwrap_err()
+                .to_string()
                 .contains("no host")
         );
     }
@@ -398,7 +506,8 @@ mod tests {
         };
         let err = Publisher::connect(&broker, "t", QoS::AtLeastOnce, Duration::from_secs(5))
             .err()
-            .unwrap();
+            .unwrap()
+            .to_string();
         assert!(err.contains(&format!("mqtt://127.0.0.1:{port}")), "{err}");
     }
 }

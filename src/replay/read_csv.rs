@@ -33,8 +33,32 @@ fn classify(header: &str) -> Column {
     }
 }
 
+/// Why a recording cannot be read at all (a bad row is skipped, not an error).
+#[derive(Debug, thiserror::Error)]
+pub enum CsvError {
+    /// The header row does not parse.
+    #[error("cannot read the CSV header: {0}")]
+    Header(csv::Error),
+    /// The header row is empty.
+    #[error("the CSV header names no columns")]
+    NoColumns,
+}
+
+/// Why one row is skipped.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+enum RowError {
+    #[error("{cells} cells but the header has {columns} columns")]
+    TooManyCells { cells: usize, columns: usize },
+    #[error("time {0:?} is not an integer of nanoseconds")]
+    TimeNs(String),
+    #[error("time {0:?} is not a number of seconds")]
+    TimeSeconds(String),
+    #[error("lidar range {0} {1:?} is not a number")]
+    Lidar(usize, String),
+}
+
 /// Read every row of `text` (the header is the first row).
-pub fn read(text: &str) -> Result<Recording, String> {
+pub fn read(text: &str) -> Result<Recording, CsvError> {
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(true)
         .flexible(true)
@@ -42,12 +66,12 @@ pub fn read(text: &str) -> Result<Recording, String> {
         .from_reader(text.as_bytes());
     let columns: Vec<Column> = reader
         .headers()
-        .map_err(|e| format!("cannot read the CSV header: {e}"))?
+        .map_err(CsvError::Header)?
         .iter()
         .map(classify)
         .collect();
     if columns.is_empty() {
-        return Err("the CSV header names no columns".into());
+        return Err(CsvError::NoColumns);
     }
     let mut recording = Recording::default();
     for row in reader.records() {
@@ -69,7 +93,10 @@ pub fn read(text: &str) -> Result<Recording, String> {
                 time_ns,
                 fields,
             }),
-            Err(reason) => recording.skipped.push(SkippedRecord { line, reason }),
+            Err(why) => recording.skipped.push(SkippedRecord {
+                line,
+                reason: why.to_string(),
+            }),
         }
     }
     Ok(recording)
@@ -77,13 +104,12 @@ pub fn read(text: &str) -> Result<Recording, String> {
 
 type Row = (Option<i64>, Vec<(String, FieldValue)>);
 
-fn read_row(columns: &[Column], row: &csv::StringRecord) -> Result<Row, String> {
+fn read_row(columns: &[Column], row: &csv::StringRecord) -> Result<Row, RowError> {
     if row.len() > columns.len() {
-        return Err(format!(
-            "{} cells but the header has {} columns",
-            row.len(),
-            columns.len()
-        ));
+        return Err(RowError::TooManyCells {
+            cells: row.len(),
+            columns: columns.len(),
+        });
     }
     let mut time_ns = None;
     let mut fields = Vec::new();
@@ -95,7 +121,7 @@ fn read_row(columns: &[Column], row: &csv::StringRecord) -> Result<Row, String> 
             Column::TimeNs => {
                 let ns = cell
                     .parse::<i64>()
-                    .map_err(|_| format!("time {cell:?} is not an integer of nanoseconds"))?;
+                    .map_err(|_| RowError::TimeNs(cell.to_string()))?;
                 time_ns = Some(ns);
             }
             Column::TimeSeconds => {
@@ -103,7 +129,7 @@ fn read_row(columns: &[Column], row: &csv::StringRecord) -> Result<Row, String> 
                     .parse::<f64>()
                     .ok()
                     .filter(|s| s.is_finite() && s.abs() < 9.2e9)
-                    .ok_or_else(|| format!("time {cell:?} is not a number of seconds"))?;
+                    .ok_or_else(|| RowError::TimeSeconds(cell.to_string()))?;
                 time_ns = Some((s * 1e9).round() as i64);
             }
             Column::LidarList => {
@@ -113,7 +139,7 @@ fn read_row(columns: &[Column], row: &csv::StringRecord) -> Result<Row, String> 
                 for (i, range) in ranges.enumerate() {
                     let value = range
                         .parse::<f64>()
-                        .map_err(|_| format!("lidar range {i} {range:?} is not a number"))?;
+                        .map_err(|_| RowError::Lidar(i, range.to_string()))?;
                     fields.push((format!("lidar_{i}"), FieldValue::Float(value)));
                 }
             }

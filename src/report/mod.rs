@@ -68,17 +68,46 @@ pub fn timeline(text: &str, source: &str, width: usize, telemetry: &[String]) ->
     )
 }
 
+/// Why a report could not be written: a file or folder, or a chart.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// The output folder cannot be created.
+    #[error("cannot create {}: {error}", .path.display())]
+    Create {
+        path: PathBuf,
+        error: std::io::Error,
+    },
+    /// An earlier report's chart cannot be removed.
+    #[error("cannot remove {}: {error}", .path.display())]
+    Remove {
+        path: PathBuf,
+        error: std::io::Error,
+    },
+    /// A chart or the page cannot be written.
+    #[error("cannot write {}: {error}", .path.display())]
+    Write {
+        path: PathBuf,
+        error: std::io::Error,
+    },
+    /// A chart cannot be drawn.
+    #[error(transparent)]
+    Plot(#[from] plots::PlotError),
+}
+
 /// Read `text` (line protocol) and write `index.html` and the SVG plots into `dir`.
 pub fn write_report(
     text: &str,
     source_name: &str,
     dir: &Path,
     telemetry: &[String],
-) -> Result<Written, String> {
+) -> Result<Written, ReportError> {
     let run = parse(text, telemetry);
     let picked = series::Picked::from_run(&run);
     let summary = stats::Summary::compute(&run, &picked);
-    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    std::fs::create_dir_all(dir).map_err(|error| ReportError::Create {
+        path: dir.to_path_buf(),
+        error,
+    })?;
     let mut svgs = Vec::new();
     let outputs = outputs::Outputs::from_run(&run);
     let rendered = plots::render_all(&picked, &outputs)?;
@@ -90,7 +119,10 @@ pub fn write_report(
             let stale = dir.join(file);
             match std::fs::remove_file(&stale) {
                 Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
-                    return Err(format!("cannot remove {}: {e}", stale.display()));
+                    return Err(ReportError::Remove {
+                        path: stale,
+                        error: e,
+                    });
                 }
                 _ => {}
             }
@@ -98,14 +130,18 @@ pub fn write_report(
     }
     for plot in &rendered {
         let path = dir.join(plot.file_name);
-        std::fs::write(&path, &plot.svg)
-            .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        std::fs::write(&path, &plot.svg).map_err(|error| ReportError::Write {
+            path: path.clone(),
+            error,
+        })?;
         svgs.push(path);
     }
     let page = html::page(source_name, &summary, &titles, &run, &outputs);
     let html_path = dir.join("index.html");
-    std::fs::write(&html_path, page)
-        .map_err(|e| format!("cannot write {}: {e}", html_path.display()))?;
+    std::fs::write(&html_path, page).map_err(|error| ReportError::Write {
+        path: html_path.clone(),
+        error,
+    })?;
     Ok(Written {
         html: html_path,
         svgs,

@@ -72,7 +72,7 @@ const PALETTE: [RGBColor; 12] = [
 ];
 
 /// The charts this run has data for, in [`FILES`] order.
-pub fn render_all(picked: &Picked, outputs: &Outputs) -> Result<Vec<Plot>, String> {
+pub fn render_all(picked: &Picked, outputs: &Outputs) -> Result<Vec<Plot>, PlotError> {
     let has_speeds = !(picked.expected_speed.is_empty()
         && picked.actual_speed.is_empty()
         && picked.action_speed.is_empty());
@@ -107,6 +107,16 @@ pub fn render_all(picked: &Picked, outputs: &Outputs) -> Result<Vec<Plot>, Strin
     Ok(plots)
 }
 
+/// A chart plotters could not draw: its title and plotters' text.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("plot {title:?}: {error}")]
+pub struct PlotError {
+    /// The chart's title.
+    pub title: String,
+    /// What plotters said.
+    pub error: String,
+}
+
 type Root<'a> = DrawingArea<SVGBackend<'a>, Shift>;
 type DrawResult = Result<(), Box<dyn std::error::Error + 'static>>;
 
@@ -114,14 +124,17 @@ fn render(
     title: &str,
     size: (u32, u32),
     draw: impl FnOnce(&Root<'_>) -> DrawResult,
-) -> Result<String, String> {
+) -> Result<String, PlotError> {
+    let failed = |e: &dyn std::fmt::Display| PlotError {
+        title: title.to_string(),
+        error: e.to_string(),
+    };
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
-        root.fill(&WHITE)
-            .map_err(|e| format!("plot {title:?}: {e}"))?;
-        draw(&root).map_err(|e| format!("plot {title:?}: {e}"))?;
-        root.present().map_err(|e| format!("plot {title:?}: {e}"))?;
+        root.fill(&WHITE).map_err(|e| failed(&e))?;
+        draw(&root).map_err(|e| failed(&e))?;
+        root.present().map_err(|e| failed(&e))?;
     }
     Ok(svg)
 }

@@ -122,13 +122,55 @@ pub struct Reply {
     pub received_ns: Option<i64>,
 }
 
+/// Why the monitors gave no answer: the broker behind them failed (in-process monitors always
+/// answer).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TwinError {
+    /// Publishing the robot's message failed.
+    #[error(transparent)]
+    Mqtt(#[from] crate::replay::mqtt::MqttError),
+    /// The subscriber's client failed (the broker as shown, the client's text).
+    #[error("MQTT broker {broker}: {error}")]
+    Subscriber { broker: String, error: String },
+    /// The broker did not confirm the subscription in time.
+    #[error("MQTT broker {broker}: no subscription acknowledgement within {seconds} s")]
+    NoSubAck { broker: String, seconds: f64 },
+    /// A message after [`crate::simulate::mqtt_twin::MqttTwin::finish`].
+    #[error("MQTT publisher already closed")]
+    Closed,
+}
+
+/// Why a closed-loop run stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum RunError {
+    /// A period that is not a positive number of seconds.
+    #[error("period {0} s: must be positive")]
+    Period(f64),
+    /// A delay that is negative or not a number.
+    #[error("delay {0} s: must be zero or positive")]
+    Delay(f64),
+    /// A noise level the normal distribution refuses.
+    #[error("{0}")]
+    Noise(rand_distr::NormalError),
+    /// The output could not be written.
+    #[error("cannot write the output: {0}")]
+    Output(std::io::Error),
+    /// The monitors gave no answer.
+    #[error(transparent)]
+    Twin(#[from] TwinError),
+}
+
 /// The monitors, in-process or behind a broker.
 pub trait Twin {
     /// Hand over one message (`line` is its line-protocol form) and return the answer.
     /// `arrival_ns`: the robot's clock when the message reaches the twin (its own time, or later
     /// when a link drop held it back).
-    fn exchange(&mut self, line: &str, message: &Message, arrival_ns: i64)
-    -> Result<Reply, String>;
+    fn exchange(
+        &mut self,
+        line: &str,
+        message: &Message,
+        arrival_ns: i64,
+    ) -> Result<Reply, TwinError>;
 }
 
 /// A run's measures.
@@ -170,13 +212,13 @@ pub fn run(
     monitor_on: bool,
     twin: &mut dyn Twin,
     out: &mut dyn Write,
-) -> Result<Outcome, String> {
+) -> Result<Outcome, RunError> {
     let s = scenario;
     if !(s.period.is_finite() && s.period > 0.0) {
-        return Err(format!("period {} s: must be positive", s.period));
+        return Err(RunError::Period(s.period));
     }
     if !(s.delay.is_finite() && s.delay >= 0.0) {
-        return Err(format!("delay {} s: must be zero or positive", s.delay));
+        return Err(RunError::Delay(s.delay));
     }
     let substeps = (s.period / s.dt.max(1e-6)).ceil().max(1.0) as usize;
     let dt = s.period / substeps as f64;
@@ -189,8 +231,8 @@ pub fn run(
         r
     };
     let (mut slam_rng, mut lidar_rng, mut angular_rng) = (stream(1), stream(2), stream(3));
-    let slam = Normal::new(0.0, s.slam_noise.max(0.0)).map_err(|e| e.to_string())?;
-    let angular = Normal::new(0.0, s.angular_noise.max(0.0)).map_err(|e| e.to_string())?;
+    let slam = Normal::new(0.0, s.slam_noise.max(0.0)).map_err(RunError::Noise)?;
+    let angular = Normal::new(0.0, s.angular_noise.max(0.0)).map_err(RunError::Noise)?;
 
     let mut robot = Robot::new(s.robot.clone());
     let mut pose_prev = robot.x + slam.sample(&mut slam_rng);
@@ -249,8 +291,7 @@ pub fn run(
             {
                 let arrival_ns = s.start_ns.saturating_add((arrival * 1e9).round() as i64);
                 let reply = twin.exchange(&message.to_line(&s.host), &message, arrival_ns)?;
-                out.write_all(&reply.lines)
-                    .map_err(|e| format!("cannot write the output: {e}"))?;
+                out.write_all(&reply.lines).map_err(RunError::Output)?;
                 let Some(a) = reply.action else {
                     continue;
                 };
@@ -321,7 +362,7 @@ mod tests {
     }
 
     impl Twin for Fixed {
-        fn exchange(&mut self, line: &str, message: &Message, _: i64) -> Result<Reply, String> {
+        fn exchange(&mut self, line: &str, message: &Message, _: i64) -> Result<Reply, TwinError> {
             assert!(line.starts_with("mqtt_consumer,host=sim,topic=tessla "));
             self.seen.push(message.expected_speed);
             Ok(Reply {

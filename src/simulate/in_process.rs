@@ -8,7 +8,7 @@
 //! clock does, so a message a link drop held back comes late), and reading an `action` metric
 //! into an [`Action`] ([`action_of`], shared with the MQTT twin).
 
-use super::closed_loop::{Message, Reply, Twin};
+use super::closed_loop::{Message, Reply, Twin, TwinError};
 use super::gate::Action;
 use crate::processor::Processor;
 use crate::processor::clock::Wall;
@@ -51,7 +51,7 @@ impl Twin for InProcess {
         line: &str,
         _message: &Message,
         arrival_ns: i64,
-    ) -> Result<Reply, String> {
+    ) -> Result<Reply, TwinError> {
         self.line += 1;
         let record = Record {
             bytes: line.as_bytes().to_vec(),

@@ -8,13 +8,13 @@
 //! message builder; the subscription is a second rumqttc client here (the publisher's
 //! connection thread only counts acknowledgements).
 
-use super::closed_loop::{Message, Reply, Twin};
+use super::closed_loop::{Message, Reply, Twin, TwinError};
 use super::gate::Action;
 use super::in_process::action_of;
 use crate::log;
 use crate::replay::Sample;
 use crate::replay::message::{MessageOptions, to_json};
-use crate::replay::mqtt::{Broker, Publisher};
+use crate::replay::mqtt::{Broker, MqttError, Publisher};
 use lineproto::{FieldValue, LineWriter, Metric};
 use rumqttc::{Client, Event, MqttOptions, Packet, QoS, RecvTimeoutError};
 use serde_json::Value;
@@ -40,7 +40,7 @@ impl MqttTwin {
         action_topic: &str,
         timeout: Duration,
         time_key: Option<String>,
-    ) -> Result<MqttTwin, String> {
+    ) -> Result<MqttTwin, TwinError> {
         let id = format!("tessla-telegraf-simulate-{}", std::process::id());
         let publisher =
             Publisher::connect(broker, &format!("{id}-pub"), QoS::AtLeastOnce, timeout)?;
@@ -50,9 +50,12 @@ impl MqttTwin {
         let (client, mut connection) = Client::new(options, 64);
         client
             .subscribe(action_topic, QoS::AtLeastOnce)
-            .map_err(|e| format!("MQTT broker {broker}: {e}"))?;
+            .map_err(|e| TwinError::Subscriber {
+                broker: broker.to_string(),
+                error: e.to_string(),
+            })?;
         let (tx, rx) = channel();
-        let (ready_tx, ready_rx) = channel::<Result<(), String>>();
+        let (ready_tx, ready_rx) = channel::<Result<(), TwinError>>();
         let name = broker.to_string();
         std::thread::spawn(move || {
             let mut ready = false;
@@ -70,7 +73,10 @@ impl MqttTwin {
                     Ok(Ok(_)) | Err(RecvTimeoutError::Timeout) => {}
                     Ok(Err(e)) => {
                         if !ready {
-                            let _ = ready_tx.send(Err(format!("MQTT broker {name}: {e}")));
+                            let _ = ready_tx.send(Err(TwinError::Subscriber {
+                                broker: name.clone(),
+                                error: e.to_string(),
+                            }));
                         } else {
                             log_error!("MQTT broker {name}: {e}");
                         }
@@ -84,10 +90,10 @@ impl MqttTwin {
             Ok(Ok(())) => {}
             Ok(Err(e)) => return Err(e),
             Err(_) => {
-                return Err(format!(
-                    "MQTT broker {broker}: no subscription acknowledgement within {} s",
-                    timeout.as_secs_f64()
-                ));
+                return Err(TwinError::NoSubAck {
+                    broker: broker.to_string(),
+                    seconds: timeout.as_secs_f64(),
+                });
             }
         }
         Ok(MqttTwin {
@@ -102,7 +108,7 @@ impl MqttTwin {
     }
 
     /// Wait until the broker acknowledged every message, then disconnect.
-    pub fn finish(mut self) -> Result<usize, String> {
+    pub fn finish(mut self) -> Result<usize, MqttError> {
         let _ = self.subscriber.disconnect();
         match self.publisher.take() {
             Some(p) => p.finish(self.timeout),
@@ -187,7 +193,7 @@ fn metric_of(json: &Value) -> Option<Metric> {
 }
 
 impl Twin for MqttTwin {
-    fn exchange(&mut self, line: &str, message: &Message, _: i64) -> Result<Reply, String> {
+    fn exchange(&mut self, line: &str, message: &Message, _: i64) -> Result<Reply, TwinError> {
         // An action that arrived after its message timed out belongs to no message now.
         while self.actions.try_recv().is_ok() {}
         let options = MessageOptions {
@@ -195,10 +201,7 @@ impl Twin for MqttTwin {
             time_key: self.time_key.clone(),
         };
         let payload = to_json(&sample_of(message), &options).to_string();
-        let publisher = self
-            .publisher
-            .as_mut()
-            .ok_or_else(|| "MQTT publisher already closed".to_string())?;
+        let publisher = self.publisher.as_mut().ok_or(TwinError::Closed)?;
         publisher.publish(&self.topic, payload.into_bytes())?;
         let mut lines = line.as_bytes().to_vec();
         let mut received_ns = None;

@@ -400,7 +400,8 @@ impl Updates {
         let id = Self::version_id(&a.rollout, procs);
         let samples = if data { samples_of(procs) } else { Vec::new() };
         if let Some(p) = procs.first() {
-            p.check_version(&id, &program, &a.rollout.selector, &samples)?;
+            p.check_version(&id, &program, &a.rollout.selector, &samples)
+                .map_err(|e| e.to_string())?;
         }
         Ok(program)
     }
@@ -448,7 +449,7 @@ impl Updates {
                 }
                 // Annotations are the same for every processor: the first refuses before any
                 // accepted.
-                Err(e) => return cannot(e),
+                Err(e) => return cannot(e.to_string()),
             }
         }
         if late > 0 {

@@ -105,7 +105,8 @@ pub fn reload(
         return Reloaded::Refused("no processor".into());
     };
     let checked = Version::new(String::new(), String::new(), Arc::clone(&new), "tessla")
-        .and_then(|v| versions::check_against(&v, samples));
+        .map_err(|e| e.to_string())
+        .and_then(|v| versions::check_against(&v, samples).map_err(|e| e.to_string()));
     if let Err(e) = checked {
         log_error!(
             "reload: {}: {e}; the running spec stays in use",
@@ -130,7 +131,7 @@ pub fn reload(
                 "reload: {}: {e}; the running spec stays in use",
                 src.describe()
             );
-            return Reloaded::Refused(e);
+            return Reloaded::Refused(e.to_string());
         }
         instances += proc.instance_count();
     }

@@ -83,6 +83,18 @@ pub(super) struct Shards {
     done: mpsc::Receiver<Done>,
 }
 
+/// Why the `--threads` workers could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum ShardError {
+    /// The operating system refused a thread.
+    #[error("cannot start a worker thread: {0}")]
+    Spawn(std::io::Error),
+    /// A worker's processor could not be built (the same annotations as the first: not in
+    /// practice).
+    #[error(transparent)]
+    Sibling(#[from] crate::telegraf::binding::BindingError),
+}
+
 impl Shards {
     /// `threads` as `cli/config.rs` decided it (at least 1). `--max-instances` stays the total:
     /// each shard keeps its even part of it.
@@ -90,7 +102,7 @@ impl Shards {
         proc: &mut Processor,
         threads: usize,
         watch: &Watch,
-    ) -> Result<Shards, String> {
+    ) -> Result<Shards, ShardError> {
         let total = proc.max_instances().max(1);
         // Not a rule, a guard: no shard without a thread, no division by zero.
         let threads = threads.max(1);
@@ -118,7 +130,7 @@ impl Shards {
                         }
                     }
                 })
-                .map_err(|e| format!("cannot start a worker thread: {e}"))?;
+                .map_err(ShardError::Spawn)?;
             let mut sibling = proc.sibling()?;
             sibling.keep_instances(share(shard));
             sibling.watch_with(watch.lane());

@@ -34,6 +34,51 @@ pub struct InputBinding {
     pub length: Option<usize>,
 }
 
+/// An input annotation this program cannot be run with: the input and what is wrong.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error("input `{input}`: {why}")]
+pub struct BindingError {
+    /// The input's name.
+    pub input: String,
+    /// What is wrong with its annotations.
+    pub why: BadAnnotation,
+}
+
+/// What is wrong with an input's Telegraf annotations.
+#[derive(Debug, Clone, thiserror::Error)]
+pub enum BadAnnotation {
+    /// `@TelegrafTime` on an input that is not `Events[Int]` (its type given).
+    #[error(
+        "@TelegrafTime gives the record's timestamp in ns, so the input must be Events[Int], found Events[{0}]"
+    )]
+    TimeNotInt(Type),
+    /// `@TelegrafTime` and `@TelegrafIn` together.
+    #[error(
+        "@TelegrafTime and @TelegrafIn on one input; keep one (@TelegrafTime: the record's time, @TelegrafIn: a field)"
+    )]
+    TimeAndIn,
+    /// `@TelegrafIn`'s tags do not parse.
+    #[error("@TelegrafIn tags `{given}`: {error}")]
+    Tags { given: String, error: TagError },
+    /// A `_*` pattern on an input that is not `Events[List[Float]]` (its type given).
+    #[error("a `_*` field pattern needs type Events[List[Float]], found Events[{0}]")]
+    IndexedType(Type),
+    /// `@TelegrafListLength` without a `_*` pattern.
+    #[error("@TelegrafListLength needs a `_*` field pattern in its @TelegrafIn")]
+    LengthWithoutList,
+    /// `@TelegrafListLength` of something other than a whole number in range (what was found).
+    #[error(
+        "@TelegrafListLength needs a whole number from 1 to {max}, found {0}",
+        max = MAX_LIST_LENGTH
+    )]
+    Length(String),
+}
+
+/// A tag list item that is not `key=value`.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("`{0}` is not key=value")]
+pub struct TagError(pub String);
+
 /// Why a field value could not become an event.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ConvertError {
@@ -63,23 +108,21 @@ pub struct TimeBinding {
 
 /// The inputs of `program` marked `@TelegrafTime`, or a message naming one that is not an
 /// `Events[Int]`.
-pub fn time_bindings(program: &Program) -> Result<Vec<TimeBinding>, String> {
+pub fn time_bindings(program: &Program) -> Result<Vec<TimeBinding>, BindingError> {
     let mut out = Vec::new();
     for (i, info) in program.inputs.iter().enumerate() {
         if !is_time_input(info) {
             continue;
         }
+        let bad = |why| BindingError {
+            input: info.name.clone(),
+            why,
+        };
         if info.ty != Type::Int {
-            return Err(format!(
-                "input `{}`: @TelegrafTime gives the record's timestamp in ns, so the input must be Events[Int], found Events[{}]",
-                info.name, info.ty
-            ));
+            return Err(bad(BadAnnotation::TimeNotInt(info.ty.clone())));
         }
         if info.annotations.iter().any(|a| a.name == "TelegrafIn") {
-            return Err(format!(
-                "input `{}`: @TelegrafTime and @TelegrafIn on one input; keep one (@TelegrafTime: the record's time, @TelegrafIn: a field)",
-                info.name
-            ));
+            return Err(bad(BadAnnotation::TimeAndIn));
         }
         out.push(TimeBinding {
             input: i,
@@ -95,12 +138,16 @@ fn is_time_input(info: &tessla_engine::InputInfo) -> bool {
 
 /// The bindings of every input of `program` that reads a field (every input but those marked
 /// `@TelegrafTime`: [`time_bindings`]), or a message naming a bad annotation.
-pub fn bindings(program: &Program) -> Result<Vec<InputBinding>, String> {
+pub fn bindings(program: &Program) -> Result<Vec<InputBinding>, BindingError> {
     let mut out = Vec::new();
     for (i, info) in program.inputs.iter().enumerate() {
         if is_time_input(info) {
             continue;
         }
+        let bad = |why| BindingError {
+            input: info.name.clone(),
+            why,
+        };
         let ann = info.annotations.iter().find(|a| a.name == "TelegrafIn");
         let (measurement, tags, field) = match ann {
             None => (None, Vec::new(), FieldPattern::Exact(info.name.clone())),
@@ -108,8 +155,12 @@ pub fn bindings(program: &Program) -> Result<Vec<InputBinding>, String> {
                 let m = str_arg(&a.args, "measurement", 0).unwrap_or("");
                 let t = str_arg(&a.args, "tags", 1).unwrap_or("");
                 let f = str_arg(&a.args, "field", 2).unwrap_or(&info.name);
-                let tags = parse_tags(t)
-                    .map_err(|e| format!("input `{}`: @TelegrafIn tags `{t}`: {e}", info.name))?;
+                let tags = parse_tags(t).map_err(|error| {
+                    bad(BadAnnotation::Tags {
+                        given: t.to_string(),
+                        error,
+                    })
+                })?;
                 let field = match f.strip_suffix('*') {
                     Some(prefix) => FieldPattern::Indexed(prefix.to_string()),
                     None => FieldPattern::Exact(if f.is_empty() {
@@ -124,10 +175,7 @@ pub fn bindings(program: &Program) -> Result<Vec<InputBinding>, String> {
         };
         if matches!(field, FieldPattern::Indexed(_)) && info.ty != Type::List(Box::new(Type::Float))
         {
-            return Err(format!(
-                "input `{}`: a `_*` field pattern needs type Events[List[Float]], found Events[{}]",
-                info.name, info.ty
-            ));
+            return Err(bad(BadAnnotation::IndexedType(info.ty.clone())));
         }
         let length = match info
             .annotations
@@ -135,7 +183,7 @@ pub fn bindings(program: &Program) -> Result<Vec<InputBinding>, String> {
             .find(|a| a.name == "TelegrafListLength")
         {
             None => None,
-            Some(a) => Some(list_length(&info.name, &a.args, &field)?),
+            Some(a) => Some(list_length(&a.args, &field).map_err(bad)?),
         };
         out.push(InputBinding {
             input: i,
@@ -150,17 +198,11 @@ pub fn bindings(program: &Program) -> Result<Vec<InputBinding>, String> {
     Ok(out)
 }
 
-/// The length of `@TelegrafListLength(length)` on input `name`: a whole number 1..=1000000 on an
-/// input with a `_*` pattern.
-fn list_length(
-    name: &str,
-    args: &[(String, Value)],
-    field: &FieldPattern,
-) -> Result<usize, String> {
+/// The length of `@TelegrafListLength(length)`: a whole number 1..=1000000 on an input with a
+/// `_*` pattern.
+fn list_length(args: &[(String, Value)], field: &FieldPattern) -> Result<usize, BadAnnotation> {
     if !matches!(field, FieldPattern::Indexed(_)) {
-        return Err(format!(
-            "input `{name}`: @TelegrafListLength needs a `_*` field pattern in its @TelegrafIn"
-        ));
+        return Err(BadAnnotation::LengthWithoutList);
     }
     let n = args
         .iter()
@@ -169,9 +211,8 @@ fn list_length(
         .map(|(_, v)| v);
     match n {
         Some(Value::Int(n)) if (1..=MAX_LIST_LENGTH as i64).contains(n) => Ok(*n as usize),
-        other => Err(format!(
-            "input `{name}`: @TelegrafListLength needs a whole number from 1 to {MAX_LIST_LENGTH}, found {}",
-            other.map_or_else(|| "nothing".to_string(), ToString::to_string)
+        other => Err(BadAnnotation::Length(
+            other.map_or_else(|| "nothing".to_string(), ToString::to_string),
         )),
     }
 }
@@ -180,13 +221,13 @@ fn list_length(
 const MAX_LIST_LENGTH: usize = MAX_INDEX;
 
 /// `"k=v,k2=v2"` (may be empty).
-pub fn parse_tags(s: &str) -> Result<Vec<(String, String)>, String> {
+pub fn parse_tags(s: &str) -> Result<Vec<(String, String)>, TagError> {
     s.split(',')
         .filter(|p| !p.trim().is_empty())
         .map(|p| {
             p.split_once('=')
                 .map(|(k, v)| (k.trim().to_string(), v.trim().to_string()))
-                .ok_or_else(|| format!("`{p}` is not key=value"))
+                .ok_or_else(|| TagError(p.to_string()))
         })
         .collect()
 }
@@ -607,6 +648,10 @@ mod tests {
     fn tag_lists_parse() {
         assert_eq!(parse_tags("").unwrap(), vec![]);
         assert_eq!(parse_tags("a=1,b=2").unwrap().len(), 2);
-        assert!(parse_tags("a").is_err());
+        assert_eq!(parse_tags("x=1,a").unwrap_err(), TagError("a".into()));
+        assert_eq!(
+            parse_tags("a").unwrap_err().to_string(),
+            "`a` is not key=value"
+        );
     }
 }

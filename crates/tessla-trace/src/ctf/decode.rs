@@ -73,7 +73,89 @@ struct Bits<'a> {
     big_endian: bool,
 }
 
-type R<T> = Result<T, String>;
+/// Why a stream file cannot be decoded further (the packet's offset is added by the caller).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DecodeError {
+    /// A value runs past the end of the packet's content.
+    #[error("truncated: {bits} bits needed at byte {at}, the content ends at byte {end}")]
+    Truncated {
+        /// Bits the value needs.
+        bits: u64,
+        /// Where it starts (byte).
+        at: u64,
+        /// Where the content ends (byte).
+        end: u64,
+    },
+    /// A packet header whose magic number is not CTF's.
+    #[error("bad packet magic number {0:#x} (expected 0xc1fc1fc1)")]
+    Magic(i128),
+    /// A packet of a stream the metadata does not declare.
+    #[error("packet of stream {0}, which the metadata does not declare")]
+    UnknownStream(i128),
+    /// A packet context whose sizes do not fit the file.
+    #[error(
+        "packet context: content size {content} bits, packet size {size} bits do not fit the {rest} bits left in the file"
+    )]
+    PacketSize {
+        /// `content_size` (bits).
+        content: i128,
+        /// `packet_size` (bits).
+        size: i128,
+        /// Bits left in the file.
+        rest: u64,
+    },
+    /// An event id the stream does not declare (`(none)` when it has none).
+    #[error("event id {id} is not declared for stream {stream}")]
+    UnknownEvent {
+        /// The id read, or `(none)`.
+        id: String,
+        /// The stream's id.
+        stream: u64,
+    },
+    /// An event that reads no bit.
+    #[error("empty event `{0}`")]
+    EmptyEvent(String),
+    /// A value outside a packet.
+    #[error("no packet")]
+    NoPacket,
+    /// A string without its terminating zero.
+    #[error("string at byte {0} has no terminating zero before the end of the packet content")]
+    Unterminated(usize),
+    /// A sequence whose length field was not read before it.
+    #[error("sequence length `{0}` is not an integer field read before")]
+    NoLength(String),
+    /// An array longer than the packet.
+    #[error("array length {n} at byte {at} is more than the {left} bits left in the packet")]
+    ArrayLength {
+        /// The length read.
+        n: i128,
+        /// Where the array starts (byte).
+        at: u64,
+        /// Bits left in the packet.
+        left: u64,
+    },
+    /// A variant whose tag value has no label.
+    #[error("variant tag `{tag}` = {value} matches no label of its enum")]
+    Unlabelled {
+        /// The tag's path.
+        tag: String,
+        /// Its value.
+        value: i128,
+    },
+    /// A variant whose tag is not an enum read before.
+    #[error("variant tag `{0}` is not an enum field read before")]
+    NoTag(String),
+    /// A variant without the option its tag names.
+    #[error("variant has no option `{label}` (tag `{tag}`)")]
+    NoOption {
+        /// The label the tag gave.
+        label: String,
+        /// The tag's path.
+        tag: String,
+    },
+}
+
+type R<T> = Result<T, DecodeError>;
 
 impl Bits<'_> {
     fn align(&mut self, a: u32) -> R<()> {
@@ -86,12 +168,12 @@ impl Bits<'_> {
         Ok(())
     }
 
-    fn truncated(&self, bits: u64) -> String {
-        format!(
-            "truncated: {bits} bits needed at byte {}, the content ends at byte {}",
-            self.pos / 8,
-            self.end / 8
-        )
+    fn truncated(&self, bits: u64) -> DecodeError {
+        DecodeError::Truncated {
+            bits,
+            at: self.pos / 8,
+            end: self.end / 8,
+        }
     }
 
     fn bit(&self, p: u64, big: bool) -> u8 {
@@ -283,9 +365,7 @@ impl<'a> StreamDecoder<'a> {
             if let Some(m) = h.get("magic").and_then(Field::int)
                 && m != 0xC1FC_1FC1
             {
-                return Err(format!(
-                    "bad packet magic number {m:#x} (expected 0xc1fc1fc1)"
-                ));
+                return Err(DecodeError::Magic(m));
             }
             self.done.push(("trace.packet.header", h.clone()));
         }
@@ -300,9 +380,7 @@ impl<'a> StreamDecoder<'a> {
             Some(s) => Some(s),
             None if self.md.streams.is_empty() && sid == 0 => None,
             None => {
-                return Err(format!(
-                    "packet of stream {sid}, which the metadata does not declare"
-                ));
+                return Err(DecodeError::UnknownStream(sid));
             }
         };
         self.stream = stream;
@@ -322,9 +400,11 @@ impl<'a> StreamDecoder<'a> {
                     || size > i128::from(rest)
                     || size % 8 != 0
                 {
-                    return Err(format!(
-                        "packet context: content size {content} bits, packet size {size} bits do not fit the {rest} bits left in the file"
-                    ));
+                    return Err(DecodeError::PacketSize {
+                        content,
+                        size,
+                        rest,
+                    });
                 }
                 if let Some(b) = &mut self.bits {
                     b.end = u64::try_from(content).unwrap_or(0);
@@ -397,10 +477,10 @@ impl<'a> StreamDecoder<'a> {
             None => None,
         };
         let Some((decl, d)) = decl.and_then(|i| Some((i, self.md.events.get(i)?))) else {
-            return Err(format!(
-                "event id {} is not declared for stream {sid}",
-                id.map_or_else(|| "(none)".to_string(), |i| i.to_string())
-            ));
+            return Err(DecodeError::UnknownEvent {
+                id: id.map_or_else(|| "(none)".to_string(), |i| i.to_string()),
+                stream: sid,
+            });
         };
         let stream_context = match stream.and_then(|s| s.event_context.as_ref()) {
             Some(t) => {
@@ -423,7 +503,7 @@ impl<'a> StreamDecoder<'a> {
             None => None,
         };
         if self.bits.as_ref().map_or(0, |b| b.pos) == start {
-            return Err(format!("empty event `{}`", d.name));
+            return Err(DecodeError::EmptyEvent(d.name.clone()));
         }
         Ok(RawEvent {
             decl: Some(decl),
@@ -525,7 +605,7 @@ impl<'a> StreamDecoder<'a> {
 
     fn value(&mut self, t: &Type) -> R<Field> {
         let Some(b) = self.bits.as_mut() else {
-            return Err("no packet".into());
+            return Err(DecodeError::NoPacket);
         };
         match t {
             Type::Int(i) => Ok(Field::Int(b.int(i)?)),
@@ -555,9 +635,7 @@ impl<'a> StreamDecoder<'a> {
                 let end = (b.end / 8) as usize;
                 let bytes = b.data.get(start..end).unwrap_or_default();
                 let Some(n) = bytes.iter().position(|&c| c == 0) else {
-                    return Err(format!(
-                        "string at byte {start} has no terminating zero before the end of the packet content"
-                    ));
+                    return Err(DecodeError::Unterminated(start));
                 };
                 b.pos += (n as u64 + 1) * 8;
                 Ok(Field::Str(
@@ -568,19 +646,20 @@ impl<'a> StreamDecoder<'a> {
             Type::Array(elem, len) => {
                 let n = match len {
                     Len::Fixed(n) => i128::from(*n),
-                    Len::Field(p) => self.lookup(p).ok_or_else(|| {
-                        format!("sequence length `{p}` is not an integer field read before")
-                    })?,
+                    Len::Field(p) => self
+                        .lookup(p)
+                        .ok_or_else(|| DecodeError::NoLength(p.to_string()))?,
                 };
                 let (pos, left) = self
                     .bits
                     .as_ref()
                     .map_or((0, 0), |b| (b.pos, b.end.saturating_sub(b.pos)));
                 if n < 0 || n > i128::from(left) {
-                    return Err(format!(
-                        "array length {n} at byte {} is more than the {left} bits left in the packet",
-                        pos / 8
-                    ));
+                    return Err(DecodeError::ArrayLength {
+                        n,
+                        at: pos / 8,
+                        left,
+                    });
                 }
                 let mut items = Vec::new();
                 for _ in 0..n {
@@ -592,18 +671,20 @@ impl<'a> StreamDecoder<'a> {
                 let label = match self.lookup_field(tag) {
                     Some(Field::Enum(_, Some(l))) => l.clone(),
                     Some(Field::Enum(v, None)) => {
-                        return Err(format!(
-                            "variant tag `{tag}` = {v} matches no label of its enum"
-                        ));
+                        return Err(DecodeError::Unlabelled {
+                            tag: tag.to_string(),
+                            value: *v,
+                        });
                     }
                     _ => {
-                        return Err(format!(
-                            "variant tag `{tag}` is not an enum field read before"
-                        ));
+                        return Err(DecodeError::NoTag(tag.to_string()));
                     }
                 };
                 let Some((name, ot)) = options.iter().find(|(n, _)| *n == label) else {
-                    return Err(format!("variant has no option `{label}` (tag `{tag}`)"));
+                    return Err(DecodeError::NoOption {
+                        label,
+                        tag: tag.to_string(),
+                    });
                 };
                 let v = self.value(ot)?;
                 Ok(Field::Variant(name.clone(), Box::new(v)))
@@ -659,7 +740,7 @@ mod tests {
         while let Some(e) = d.next_event() {
             match e {
                 Ok(e) => events.push(e),
-                Err(e) => error = Some(e),
+                Err(e) => error = Some(e.to_string()),
             }
         }
         (events, error)

@@ -135,11 +135,11 @@ fn merge(
         .iter()
         .map(|s| StreamDecoder::new(md, &s.data))
         .collect();
-    let mut heads: Vec<Option<Result<RawEvent, String>>> =
+    let mut heads: Vec<Option<Result<RawEvent, decode::DecodeError>>> =
         decoders.iter_mut().map(|d| d.next_event()).collect();
     let mut last: Vec<u64> = vec![0; files.len()];
     loop {
-        let key = |i: usize, h: &Option<Result<RawEvent, String>>| match h {
+        let key = |i: usize, h: &Option<Result<RawEvent, decode::DecodeError>>| match h {
             Some(Ok(e)) => Some((e.ts, 1u8, i)),
             Some(Err(_)) => Some((last[i], 0u8, i)),
             None => None,

@@ -112,9 +112,43 @@ pub struct Metadata {
     pub events: Vec<EventDecl>,
 }
 
+/// Why a `metadata` file holds no metadata text ([`metadata_text`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum MetadataError {
+    /// Plain text that is not UTF-8 (the first bad byte).
+    #[error("metadata is not UTF-8 text (byte {0})")]
+    NotUtf8(usize),
+    /// Packets whose text is not UTF-8 (the first bad byte of the text).
+    #[error("metadata is not UTF-8 text (byte {0} of its text)")]
+    PacketsNotUtf8(usize),
+    /// A packet without the magic number (its byte offset).
+    #[error("metadata packet at byte {0}: bad magic number")]
+    Magic(usize),
+    /// A packet whose header is cut short.
+    #[error("metadata packet at byte {0}: truncated header")]
+    Truncated(usize),
+    /// A compressed packet.
+    #[error("metadata packet at byte {0}: compressed metadata is not supported")]
+    Compressed(usize),
+    /// A packet whose sizes do not fit the file.
+    #[error(
+        "metadata packet at byte {at}: sizes do not fit (content {content} bytes, packet {size} bytes, {left} left)"
+    )]
+    Sizes {
+        /// The packet's byte offset.
+        at: usize,
+        /// Its content size (bytes).
+        content: usize,
+        /// Its packet size (bytes).
+        size: usize,
+        /// Bytes left in the file.
+        left: usize,
+    },
+}
+
 /// The metadata text of a `metadata` file: plain TSDL, or metadata packets (each with a 37-byte
 /// header: magic 0x75D11D57, uuid, checksum, content and packet size in bits, ...).
-pub fn metadata_text(bytes: &[u8]) -> Result<String, String> {
+pub fn metadata_text(bytes: &[u8]) -> Result<String, MetadataError> {
     const MAGIC: u32 = 0x75D1_1D57;
     let magic_at = |b: &[u8]| -> Option<bool> {
         let m: [u8; 4] = b.get(..4)?.try_into().ok()?;
@@ -127,19 +161,15 @@ pub fn metadata_text(bytes: &[u8]) -> Result<String, String> {
         }
     };
     if magic_at(bytes).is_none() {
-        return String::from_utf8(bytes.to_vec()).map_err(|e| {
-            format!(
-                "metadata is not UTF-8 text (byte {})",
-                e.utf8_error().valid_up_to()
-            )
-        });
+        return String::from_utf8(bytes.to_vec())
+            .map_err(|e| MetadataError::NotUtf8(e.utf8_error().valid_up_to()));
     }
     let mut text = Vec::new();
     let mut pos = 0usize;
     while pos < bytes.len() {
         let p = &bytes[pos..];
         let Some(be) = magic_at(p) else {
-            return Err(format!("metadata packet at byte {pos}: bad magic number"));
+            return Err(MetadataError::Magic(pos));
         };
         let u32_at = |o: usize| -> Option<u32> {
             let b: [u8; 4] = p.get(o..o + 4)?.try_into().ok()?;
@@ -150,29 +180,24 @@ pub fn metadata_text(bytes: &[u8]) -> Result<String, String> {
             })
         };
         let (Some(content), Some(size)) = (u32_at(24), u32_at(28)) else {
-            return Err(format!("metadata packet at byte {pos}: truncated header"));
+            return Err(MetadataError::Truncated(pos));
         };
         let (content, size) = (content as usize / 8, size as usize / 8);
         if p.get(32).is_some_and(|&c| c != 0) {
-            return Err(format!(
-                "metadata packet at byte {pos}: compressed metadata is not supported"
-            ));
+            return Err(MetadataError::Compressed(pos));
         }
         if content < 37 || size < content || p.len() < content {
-            return Err(format!(
-                "metadata packet at byte {pos}: sizes do not fit (content {content} bytes, packet {size} bytes, {} left)",
-                p.len()
-            ));
+            return Err(MetadataError::Sizes {
+                at: pos,
+                content,
+                size,
+                left: p.len(),
+            });
         }
         text.extend_from_slice(&p[37..content]);
         pos += size.max(1);
     }
-    String::from_utf8(text).map_err(|e| {
-        format!(
-            "metadata is not UTF-8 text (byte {} of its text)",
-            e.utf8_error().valid_up_to()
-        )
-    })
+    String::from_utf8(text).map_err(|e| MetadataError::PacketsNotUtf8(e.utf8_error().valid_up_to()))
 }
 
 #[derive(Debug, Clone, PartialEq)]

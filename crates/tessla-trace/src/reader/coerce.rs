@@ -20,13 +20,34 @@ fn fits(v: &Value, t: &Type) -> bool {
     }
 }
 
+/// Why a read value is not of its input's type (TeSSLa's wording; values as [`show`] writes
+/// them, types in the engine's notation).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub(super) enum CoerceError {
+    /// A value of another type.
+    #[error("{value} is not of type {ty}.")]
+    Mismatch { value: String, ty: Type },
+    /// A record without a member its type has.
+    #[error("Expected {ty} but {member} is missing.")]
+    Missing { ty: Type, member: String },
+    /// A record with a member its type lacks.
+    #[error("Expected {ty} but found the extra member {member}.")]
+    Extra { ty: Type, member: String },
+    /// Something other than a record where a record is declared.
+    #[error("Expected {ty} but found {value}.")]
+    NotRecord { ty: Type, value: String },
+}
+
 /// `v` as a value of type `t`, or why it is not one (TeSSLa's wording; types in the engine's
 /// notation, `tessla_engine::Type`'s `Display`).
-pub(super) fn coerce(v: Value, t: &Type) -> Result<Value, String> {
+pub(super) fn coerce(v: Value, t: &Type) -> Result<Value, CoerceError> {
     if fits(&v, t) {
         return Ok(v);
     }
-    let mismatch = |v: &Value| format!("{} is not of type {t}.", show(v));
+    let mismatch = |v: &Value| CoerceError::Mismatch {
+        value: show(v),
+        ty: t.clone(),
+    };
     match (v, t) {
         (v, Type::Unknown) => Ok(v),
         (v @ Value::Unit, Type::Unit)
@@ -71,16 +92,25 @@ pub(super) fn coerce(v: Value, t: &Type) -> Result<Value, String> {
                     .iter()
                     .find(|(k, _)| **k == **n)
                     .map(|(_, x)| x.clone())
-                    .ok_or_else(|| format!("Expected {t} but {n} is missing."))?;
+                    .ok_or_else(|| CoerceError::Missing {
+                        ty: t.clone(),
+                        member: n.to_string(),
+                    })?;
                 out.push((n.as_str().into(), coerce(x, ft)?));
             }
             if let Some((extra, _)) = fs.iter().find(|(k, _)| !ts.iter().any(|(n, _)| **k == **n)) {
-                return Err(format!("Expected {t} but found the extra member {extra}."));
+                return Err(CoerceError::Extra {
+                    ty: t.clone(),
+                    member: extra.to_string(),
+                });
             }
             out.sort_by(|a, b| a.0.cmp(&b.0));
             Ok(Value::Record(out.into()))
         }
-        (v, Type::Record(_)) => Err(format!("Expected {t} but found {}.", show(&v))),
+        (v, Type::Record(_)) => Err(CoerceError::NotRecord {
+            ty: t.clone(),
+            value: show(&v),
+        }),
         (v, _) => Err(mismatch(&v)),
     }
 }

@@ -7,7 +7,7 @@ use super::*;
 /// [`read_value`] by the general parser: any constant expression, and the messages for text
 /// that is none.
 pub(super) fn read_expression(text: &str, line: usize) -> Result<Value, ReadError> {
-    check_escapes(text).map_err(|m| ReadError::malformed(line, m))?;
+    check_escapes(text).map_err(|m| ReadError::malformed(line, m.to_string()))?;
     let unsupported = |feature: &str| ReadError {
         kind: ReadErrorKind::Unsupported,
         line,
@@ -40,6 +40,62 @@ pub(super) fn read_expression(text: &str, line: usize) -> Result<Value, ReadErro
     eval(&expr).map_err(|m| ReadError::malformed(line, format!("in the value `{text}`: {m}")))
 }
 
+/// Why a trace value's text is no trace value (TeSSLa's wording where it has one).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub(super) enum EvalError {
+    /// An escape TeSSLa does not know (the character after the backslash).
+    #[error("Invalid escape sequence '\\{0}' in string")]
+    Escape(char),
+    /// A string without its closing quote.
+    #[error("unterminated string")]
+    Unterminated,
+    /// A number with a time unit (the unit).
+    #[error("time units (`{0}`) are not allowed in traces")]
+    TimeUnit(String),
+    /// `f"..."`.
+    #[error("format strings are not allowed in traces")]
+    FormatString,
+    /// A record member given twice.
+    #[error("member {0} is given twice")]
+    TwiceGiven(String),
+    /// A name that is not `true`, `false` or `None`.
+    #[error("`{0}` is not a value")]
+    NotAValue(String),
+    /// A call of something other than a name.
+    #[error("only `Some`, `List`, `Set` and `Map` may be called in traces")]
+    Callee,
+    /// A named argument.
+    #[error("named argument `{0}` in a trace value")]
+    NamedArgument(String),
+    /// A call that makes no trace value (the function and its argument count).
+    #[error("`{0}` with {1} arguments is not a trace value")]
+    Call(String, usize),
+    /// `&&` or `||` with an operand that is not a Bool (the operator, the operand shown).
+    #[error("`{0}` needs Bool operands, found {1}")]
+    Logic(&'static str, String),
+    /// An `if` whose condition is not a Bool (shown).
+    #[error("an `if` condition must be a Bool, found {0}")]
+    Condition(String),
+    /// Anything but constants, operators and `if`.
+    #[error("only constants, operators and `if` are allowed in trace values")]
+    NotConstant,
+    /// A right operand of `&&`/`||` that is not a Bool (shown).
+    #[error("expected a Bool, found {0}")]
+    NotBool(String),
+    /// An `Int` operation that overflows.
+    #[error("Int overflow")]
+    Overflow,
+    /// Division by zero.
+    #[error("Division by zero")]
+    DivisionByZero,
+    /// A unary operator on a value it does not apply to.
+    #[error("operator `{0}` does not apply to {1}")]
+    Unary(&'static str, String),
+    /// A binary operator on values it does not apply to.
+    #[error("operator `{0}` does not apply to {1} and {2}")]
+    Binary(&'static str, String, String),
+}
+
 /// `->` (outside string literals) replaced by `,`: in TeSSLa's trace grammar it only separates
 /// a map entry's key from its value, and `Map(...)` pairs its arguments again.
 fn arrows_as_commas(text: &str) -> String {
@@ -66,7 +122,7 @@ fn arrows_as_commas(text: &str) -> String {
 
 /// TeSSLa's valid escapes; the syntax crate also reports others, but keeps `\\d` and `\d` alike
 /// in the AST, so they are checked on the raw text.
-fn check_escapes(text: &str) -> Result<(), String> {
+fn check_escapes(text: &str) -> Result<(), EvalError> {
     let mut in_str = false;
     let mut chars = text.chars();
     while let Some(c) = chars.next() {
@@ -74,8 +130,8 @@ fn check_escapes(text: &str) -> Result<(), String> {
             '"' => in_str = !in_str,
             '\\' if in_str => match chars.next() {
                 Some('n' | 'r' | 't' | 'a' | '\\' | '"' | '$' | '%') => {}
-                Some(o) => return Err(format!("Invalid escape sequence '\\{o}' in string")),
-                None => return Err("unterminated string".into()),
+                Some(o) => return Err(EvalError::Escape(o)),
+                None => return Err(EvalError::Unterminated),
             },
             _ => {}
         }
@@ -84,17 +140,14 @@ fn check_escapes(text: &str) -> Result<(), String> {
 }
 
 /// Evaluate a constant trace expression, or say why it is not a trace value.
-fn eval(e: &Expr) -> Result<Value, String> {
+fn eval(e: &Expr) -> Result<Value, EvalError> {
     match &e.kind {
         ExprKind::Int { value, unit: None } => Ok(Value::from_big((*value).into())),
-        ExprKind::Int { unit: Some(u), .. } => Err(format!(
-            "time units (`{}`) are not allowed in traces",
-            u.name
-        )),
+        ExprKind::Int { unit: Some(u), .. } => Err(EvalError::TimeUnit(u.name.to_string())),
         ExprKind::Float(f) => Ok(Value::Float(*f)),
         ExprKind::Str { parts, format } => {
             if *format {
-                return Err("format strings are not allowed in traces".into());
+                return Err(EvalError::FormatString);
             }
             let mut s = String::new();
             for p in parts {
@@ -117,7 +170,7 @@ fn eval(e: &Expr) -> Result<Value, String> {
             let mut out: Vec<(Arc<str>, Value)> = Vec::new();
             for (name, v) in fields {
                 if out.iter().any(|(n, _)| **n == *name.name) {
-                    return Err(format!("member {} is given twice", name.name));
+                    return Err(EvalError::TwiceGiven(name.name.to_string()));
                 }
                 out.push((name.name.as_str().into(), eval(v)?));
             }
@@ -128,7 +181,7 @@ fn eval(e: &Expr) -> Result<Value, String> {
             "true" => Ok(Value::Bool(true)),
             "false" => Ok(Value::Bool(false)),
             "None" => Ok(Value::None),
-            other => Err(format!("`{other}` is not a value")),
+            other => Err(EvalError::NotAValue(other.to_string())),
         },
         ExprKind::Call {
             function,
@@ -136,10 +189,10 @@ fn eval(e: &Expr) -> Result<Value, String> {
             args: Some(args),
         } if type_args.is_empty() => {
             let ExprKind::Var(f) = &function.kind else {
-                return Err("only `Some`, `List`, `Set` and `Map` may be called in traces".into());
+                return Err(EvalError::Callee);
             };
             if let Some(a) = args.iter().find_map(|a| a.name.as_ref()) {
-                return Err(format!("named argument `{}` in a trace value", a.name));
+                return Err(EvalError::NamedArgument(a.name.to_string()));
             }
             let vals = args
                 .iter()
@@ -160,7 +213,7 @@ fn eval(e: &Expr) -> Result<Value, String> {
                     // A repeated key keeps the last value, as Scala's `toMap` does.
                     Ok(tessla_engine::runtime::collections::map_of(map))
                 }
-                (other, n) => Err(format!("`{other}` with {n} arguments is not a trace value")),
+                (other, n) => Err(EvalError::Call(other.to_string(), n)),
             }
         }
         ExprKind::Unary { op, operand } => unary(*op, eval(operand)?),
@@ -168,12 +221,12 @@ fn eval(e: &Expr) -> Result<Value, String> {
             BinOp::And => match eval(lhs)? {
                 Value::Bool(false) => Ok(Value::Bool(false)),
                 Value::Bool(true) => bool_of(eval(rhs)?),
-                v => Err(format!("`&&` needs Bool operands, found {}", show(&v))),
+                v => Err(EvalError::Logic("&&", show(&v))),
             },
             BinOp::Or => match eval(lhs)? {
                 Value::Bool(true) => Ok(Value::Bool(true)),
                 Value::Bool(false) => bool_of(eval(rhs)?),
-                v => Err(format!("`||` needs Bool operands, found {}", show(&v))),
+                v => Err(EvalError::Logic("||", show(&v))),
             },
             _ => binary(*op, eval(lhs)?, eval(rhs)?),
         },
@@ -185,28 +238,25 @@ fn eval(e: &Expr) -> Result<Value, String> {
         } => match eval(cond)? {
             Value::Bool(true) => eval(then_branch),
             Value::Bool(false) => eval(else_branch),
-            v => Err(format!(
-                "an `if` condition must be a Bool, found {}",
-                show(&v)
-            )),
+            v => Err(EvalError::Condition(show(&v))),
         },
-        _ => Err("only constants, operators and `if` are allowed in trace values".into()),
+        _ => Err(EvalError::NotConstant),
     }
 }
 
-fn bool_of(v: Value) -> Result<Value, String> {
+fn bool_of(v: Value) -> Result<Value, EvalError> {
     match v {
         Value::Bool(_) => Ok(v),
-        v => Err(format!("expected a Bool, found {}", show(&v))),
+        v => Err(EvalError::NotBool(show(&v))),
     }
 }
 
 /// An operator's semantics are the engine's ([`tessla_engine::runtime::ops`]); only the messages
 /// are the trace reader's.
-fn op_error(e: OpError, undefined: impl FnOnce() -> String) -> String {
+fn op_error(e: OpError, undefined: impl FnOnce() -> EvalError) -> EvalError {
     match e {
-        OpError::Overflow => "Int overflow".into(),
-        OpError::DivisionByZero => "Division by zero".into(),
+        OpError::Overflow => EvalError::Overflow,
+        OpError::DivisionByZero => EvalError::DivisionByZero,
         OpError::Undefined => undefined(),
     }
 }
@@ -221,33 +271,18 @@ fn unary_symbol(op: UnaryOp) -> &'static str {
     }
 }
 
-fn unary(op: UnaryOp, v: Value) -> Result<Value, String> {
+fn unary(op: UnaryOp, v: Value) -> Result<Value, EvalError> {
     match (op, v) {
         // A negative float literal: `-1.5` (TeSSLa's trace lexer reads it as one literal).
         (UnaryOp::Neg, Value::Float(f)) => Ok(Value::Float(-f)),
-        (op, v) => ops::unary(op.into(), &v).map_err(|e| {
-            op_error(e, || {
-                format!(
-                    "operator `{}` does not apply to {}",
-                    unary_symbol(op),
-                    show(&v)
-                )
-            })
-        }),
+        (op, v) => ops::unary(op.into(), &v)
+            .map_err(|e| op_error(e, || EvalError::Unary(unary_symbol(op), show(&v)))),
     }
 }
 
-fn binary(op: BinOp, a: Value, b: Value) -> Result<Value, String> {
-    ops::binary(op.into(), &a, &b).map_err(|e| {
-        op_error(e, || {
-            format!(
-                "operator `{}` does not apply to {} and {}",
-                op.symbol(),
-                show(&a),
-                show(&b)
-            )
-        })
-    })
+fn binary(op: BinOp, a: Value, b: Value) -> Result<Value, EvalError> {
+    ops::binary(op.into(), &a, &b)
+        .map_err(|e| op_error(e, || EvalError::Binary(op.symbol(), show(&a), show(&b))))
 }
 
 /// A value as TeSSLa shows it in input errors (strings quoted).
