@@ -14,27 +14,7 @@ use dashboards::{
 
 /// What the binary prints for the fleet example: the robots' own lines and the fleet level's.
 fn fleet_example_output() -> String {
-    use crate::support::child::{root, run_text};
-    let robot = root().join("specs/fleet/robot.tessla");
-    let fleet = root().join("specs/fleet/fleet.tessla");
-    let input = std::fs::read_to_string(root().join("tests/fixtures/fleet/three_robots.lp"))
-        .expect("the fleet fixture");
-    let (out, err, code) = run_text(
-        &[
-            "--spec",
-            robot.to_str().unwrap(),
-            "--instance-by",
-            "topic",
-            "--fleet-spec",
-            fleet.to_str().unwrap(),
-            "--max-ahead",
-            "off",
-            "--allowed-lateness",
-            "off",
-        ],
-        &input,
-    );
-    assert_eq!(code, 0, "{err}");
+    let out = crate::support::fleet_example::output(&[]);
     assert!(out.lines().any(|l| l.starts_with("tessla_fleet ")), "{out}");
     out
 }

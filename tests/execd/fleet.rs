@@ -6,12 +6,6 @@
 
 use crate::support::child::{root, run_text, write};
 
-const FIXTURE: &str = "tests/fixtures/fleet/three_robots.lp";
-
-fn fixture() -> String {
-    std::fs::read_to_string(root().join(FIXTURE)).unwrap()
-}
-
 fn fleet_lines(out: &str) -> Vec<&str> {
     out.lines()
         .filter(|l| l.starts_with("tessla_fleet") || l.starts_with("action,"))
@@ -19,27 +13,7 @@ fn fleet_lines(out: &str) -> Vec<&str> {
 }
 
 fn run_example(threads: &str) -> String {
-    let robot = root().join("specs/fleet/robot.tessla");
-    let fleet = root().join("specs/fleet/fleet.tessla");
-    let (out, err, code) = run_text(
-        &[
-            "--spec",
-            robot.to_str().unwrap(),
-            "--instance-by",
-            "topic",
-            "--fleet-spec",
-            fleet.to_str().unwrap(),
-            "--max-ahead",
-            "off",
-            "--allowed-lateness",
-            "off",
-            "--threads",
-            threads,
-        ],
-        &fixture(),
-    );
-    assert_eq!(code, 0, "{err}");
-    out
+    crate::support::fleet_example::output(&["--threads", threads])
 }
 
 /// The example's fleet outputs are exactly the expected file's lines (P2 count, closest pair,

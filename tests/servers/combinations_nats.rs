@@ -7,6 +7,13 @@
 //! Every publish starts at the next record's time, so a rollout known from the start judges
 //! each record as one arriving in the middle does (the documented way to get one switch point
 //! everywhere, `--from`). Every line, robot by robot, must equal the oracle's.
+//!
+//! The fleet level runs too (`--fleet-spec`, docs/fleet.md): a fleet spec over `c`, which every
+//! version keeps, and `y`, which version 2 renames (the rule: robots on a version without `y`
+//! stop feeding it, and the fleet's `y` map keeps their last value). Both partitions take part
+//! in one fleet level (`?lease=`), and a restart that hits the holder of the `fleet` lease hands
+//! it over; the fleet lines of every process together are each written once and end on the
+//! oracle's last line (line for line they differ where a change is late for the fleet level).
 
 use super::fleet_nats_specs::{BASE_SPEC, Setup, channel_run, nats_server, published, ts};
 use crate::support::child;
@@ -25,11 +32,42 @@ const VERSIONS: &[&str] = &[
     "in x: Events[Int]\nout x + true\n",
 ];
 
+/// The fleet spec: the sum of the robots' counts and of their `y`s.
+const FLEET_SPEC: &str = "in c: Events[Map[String, Int]]\nin y: Events[Map[String, Int]]\n\
+liftable def sumOf(m: Map[String, Int]): Int = Map.fold(m, 0, (acc: Int, k: String, v: Int) => acc + v)\n\
+out sumOf(c) as counts\nout sumOf(y) as ys\n";
+
 /// One partition's process, and the sync robot whose answer says it has stepped all before.
 struct Part {
     child: Option<LiveChild>,
     lease: &'static str,
     sync: &'static str,
+}
+
+/// Each partition's sync robot steps `ts(k)`; wait until each has answered (it has stepped all
+/// before).
+fn sync(parts: &mut [Part], k: i64, records: &mut Vec<String>) {
+    for p in parts {
+        let line = format!("m,robot={} x=1i {}\n", p.sync, ts(k));
+        let c = p.child.as_mut().unwrap();
+        c.write(&line);
+        let want = format!(" {}", ts(k));
+        let sync = format!("robot={},", p.sync);
+        c.wait_out("the sync record's answer", |l| {
+            l.contains(&sync) && l.trim_end().ends_with(&want)
+        });
+        records.push(line);
+    }
+}
+
+/// The fleet level's lines (not its status, stamped with the wall clock), sorted.
+fn fleet_lines<'a>(lines: impl Iterator<Item = &'a str>) -> Vec<String> {
+    let mut v: Vec<String> = lines
+        .filter(|l| l.starts_with("tessla_fleet "))
+        .map(String::from)
+        .collect();
+    v.sort();
+    v
 }
 
 fn by_robot(lines: impl Iterator<Item = String>) -> BTreeMap<String, Vec<String>> {
@@ -52,6 +90,8 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
     let url = format!("nats://127.0.0.1:{}", server.port);
     let s = Setup::new();
     let base = child::write(s.dir.path(), "base.tessla", BASE_SPEC);
+    let fleet = child::write(s.dir.path(), "fleet.tessla", FLEET_SPEC);
+    let fleet = fleet.to_str().unwrap();
     let specs: Vec<_> = VERSIONS
         .iter()
         .enumerate()
@@ -61,6 +101,7 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
     published(&s.publish(&url, &specs[0], &["--select", "robot=none"]), 1);
     let mut revision = 1;
     let (mut total, mut restarts) = (0, 0);
+    let (mut fleet_total, mut fleet_holders) = (0, 0);
     for seed in 0..3u64 {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let state = format!("{url}/state_{seed}");
@@ -69,7 +110,12 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
                 .into_iter()
                 .map(String::from)
                 .collect();
-            a.extend(["--state".into(), format!("{state}?lease={lease}")]);
+            a.extend([
+                "--state".into(),
+                format!("{state}?lease={lease}"),
+                "--fleet-spec".into(),
+                fleet.into(),
+            ]);
             a
         };
         let spawn = |lease: &str| {
@@ -92,6 +138,11 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
         let mut records: Vec<String> = Vec::new();
         let mut k = 10 * seed as i64 * 100;
         let mut last: BTreeMap<usize, i64> = BTreeMap::new();
+        let mut logs = String::new();
+        // Both partitions known to the fleet level before the first robot: their sync robots
+        // hold its watermark until each partition's changes are in.
+        k += 1;
+        sync(&mut parts, k, &mut records);
         for _ in 0..24 {
             match rng.random_range(0..10) {
                 0..6 => {
@@ -112,17 +163,7 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
                         records.push(line);
                     }
                     k += 1;
-                    for p in &mut parts {
-                        let line = format!("m,robot={} x=1i {}\n", p.sync, ts(k));
-                        let c = p.child.as_mut().unwrap();
-                        c.write(&line);
-                        let want = format!(" {}", ts(k));
-                        let sync = format!("robot={},", p.sync);
-                        c.wait_out("the sync record's answer", |l| {
-                            l.contains(&sync) && l.trim_end().ends_with(&want)
-                        });
-                        records.push(line);
-                    }
+                    sync(&mut parts, k, &mut records);
                 }
                 6..8 => {
                     let v = rng.random_range(0..VERSIONS.len());
@@ -161,22 +202,61 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
                     let (out, err, code) = p.child.take().unwrap().finish();
                     assert_eq!(code, 0, "{err}");
                     fleet_out.extend(out.lines().map(String::from));
+                    logs.push_str(&err);
                     p.child = Some(spawn(p.lease));
                     restarts += 1;
                 }
             }
         }
+        // Both inputs end together, so the fleet level's holder sees every partition end and
+        // steps everything pending, as the oracle does at its end.
+        for p in &mut parts {
+            p.child.as_mut().unwrap().close_stdin();
+        }
         for p in &mut parts {
             let (out, err, code) = p.child.take().unwrap().finish();
             assert_eq!(code, 0, "{err}");
             fleet_out.extend(out.lines().map(String::from));
+            logs.push_str(&err);
         }
+        let holders = logs.matches("fleet: holding the fleet level").count();
+        assert!(
+            holders >= 1,
+            "seed {seed}: no process held the fleet level\n{logs}"
+        );
+        fleet_holders += holders;
         // The oracle: one process, its own state bucket, every record in order.
         let oracle_state = format!("{url}/oracle_{seed}");
         let mut a = channel_run(&url, &s, &base);
-        a.extend(["--state", oracle_state.as_str()]);
+        a.extend(["--state", oracle_state.as_str(), "--fleet-spec", fleet]);
         let (out, err, code) = child::run_text(&a, &records.concat());
         assert_eq!(code, 0, "{err}");
+        let (got, want) = (
+            fleet_lines(fleet_out.iter().map(String::as_str)),
+            fleet_lines(out.lines()),
+        );
+        assert!(
+            !want.is_empty(),
+            "seed {seed}: the oracle wrote no fleet line\n{out}"
+        );
+        // Each line written once, whichever process held the fleet level.
+        let mut once = got.clone();
+        once.dedup();
+        assert_eq!(once, got, "seed {seed}: a fleet line written twice");
+        // The fleet level ends on the same maps: the last step's line is the oracle's. (Line
+        // for line they differ where a change is late for the fleet level: see docs/fleet.md,
+        // "What comes next".)
+        let last = |v: &[String]| {
+            v.iter()
+                .max_by_key(|l| l.rsplit(' ').next().and_then(|t| t.parse::<i64>().ok()))
+                .cloned()
+        };
+        assert_eq!(
+            last(&got),
+            last(&want),
+            "seed {seed}: the partitions' last fleet line against one process's\n{got:#?}\n{want:#?}"
+        );
+        fleet_total += got.len();
         let (got, want) = (
             by_robot(fleet_out.into_iter()),
             by_robot(out.lines().map(String::from)),
@@ -188,9 +268,11 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
         total += want.values().map(Vec::len).sum::<usize>();
     }
     eprintln!(
-        "combinations on real processes: {total} lines equal to one process's; {} rollouts, {restarts} restarts",
+        "combinations on real processes: {total} lines equal to one process's; {} rollouts, {restarts} restarts; {fleet_total} fleet lines written once, ending as one process's, the fleet level held {fleet_holders} times in 3 seeds",
         revision - 1
     );
+    // At least one restart hit the fleet level's holder and another process took over.
+    assert!(fleet_holders > 3, "the fleet level never changed hands");
     assert!(
         total > 100 && restarts > 0 && revision > 3,
         "{total} lines compared"

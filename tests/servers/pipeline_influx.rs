@@ -149,27 +149,7 @@ fn recorded_run_output_is_stored_and_every_panel_answers() {
 /// holds, and each has data.
 #[test]
 fn fleet_example_output_is_stored_and_every_fleet_panel_answers() {
-    use crate::support::child::{root, run_text};
-    let robot = root().join("specs/fleet/robot.tessla");
-    let fleet = root().join("specs/fleet/fleet.tessla");
-    let input = std::fs::read_to_string(root().join("tests/fixtures/fleet/three_robots.lp"))
-        .expect("the fleet fixture");
-    let (output, err, code) = run_text(
-        &[
-            "--spec",
-            robot.to_str().unwrap(),
-            "--instance-by",
-            "topic",
-            "--fleet-spec",
-            fleet.to_str().unwrap(),
-            "--max-ahead",
-            "off",
-            "--allowed-lateness",
-            "off",
-        ],
-        &input,
-    );
-    assert_eq!(code, 0, "{err}");
+    let output = crate::support::fleet_example::output(&[]);
     let Some(answered) = check_output_in_influxdb(&output) else {
         return;
     };
