@@ -324,26 +324,7 @@ fn shared_floor_robots_fire_the_fleet_examples_slow_down() {
     let input = std::fs::read_to_string(&records).unwrap();
     // 5 Hz for 30 s, three robots.
     assert_eq!(input.lines().count(), 150 * 3);
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let robot = root.join("specs/fleet/robot.tessla");
-    let fleet = root.join("specs/fleet/fleet.tessla");
-    let (stdout, err, code) = crate::support::child::run_text(
-        &[
-            "--spec",
-            robot.to_str().unwrap(),
-            "--instance-by",
-            "topic",
-            "--fleet-spec",
-            fleet.to_str().unwrap(),
-            "--max-ahead",
-            "off",
-            "--allowed-lateness",
-            "off",
-            "--no-passthrough",
-        ],
-        &input,
-    );
-    assert_eq!(code, 0, "{err}");
+    let stdout = crate::support::fleet_example::output_over(&input, &["--no-passthrough"]);
     let fleet_lines: Vec<&str> = stdout
         .lines()
         .filter(|l| l.starts_with("tessla_fleet "))

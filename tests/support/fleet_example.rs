@@ -11,9 +11,15 @@ const FIXTURE: &str = "tests/fixtures/fleet/three_robots.lp";
 /// The example's whole output (robot lines, passed records, fleet lines) with `extra` options
 /// after the documented ones (`--threads 2`); asserts it exits 0.
 pub fn output(extra: &[&str]) -> String {
+    let input = std::fs::read_to_string(root().join(FIXTURE)).expect("the fleet fixture");
+    output_over(&input, extra)
+}
+
+/// The example's command (the robot and fleet specs, as documented, then `extra`) over `input`
+/// instead of the fixture (e.g. `simulate --shared-floor`'s records); asserts it exits 0.
+pub fn output_over(input: &str, extra: &[&str]) -> String {
     let robot = root().join("specs/fleet/robot.tessla");
     let fleet = root().join("specs/fleet/fleet.tessla");
-    let input = std::fs::read_to_string(root().join(FIXTURE)).expect("the fleet fixture");
     let mut args = vec![
         "--spec",
         robot.to_str().unwrap(),
@@ -27,7 +33,7 @@ pub fn output(extra: &[&str]) -> String {
         "off",
     ];
     args.extend_from_slice(extra);
-    let (out, err, code) = run_text(&args, &input);
+    let (out, err, code) = run_text(&args, input);
     assert_eq!(code, 0, "the fleet example: {err}");
     out
 }
