@@ -303,7 +303,7 @@ fn writable_leaf(v: &Value) -> Option<&Value> {
 
 /// Append a scalar from [`writable_leaf`] in line-protocol form (what [`field_value`] and
 /// [`lineproto::write_value`] write, without the intermediate [`FieldValue`]).
-#[inline]
+#[inline(always)]
 fn write_leaf(line: &mut String, floats: &mut Floats, v: &Value) {
     match v {
         Value::Unit | Value::Bool(true) => line.push_str("true"),
@@ -338,7 +338,7 @@ impl Default for Floats {
 
 impl Floats {
     /// Append finite `f` as [`lineproto::write_float`] writes it.
-    #[inline]
+    #[inline(always)]
     fn write(&mut self, line: &mut String, f: f64) {
         let bits = f.to_bits();
         let slot = (bits.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 60) as usize;
