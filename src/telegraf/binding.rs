@@ -242,42 +242,48 @@ impl InputBinding {
     }
 
     /// The event this input gets from the metric: `None` when the metric has no such field.
+    /// (The usual exact field inline; a list out of line.)
+    #[inline]
     pub fn extract(&self, m: &Metric) -> Option<Result<Value, ConvertError>> {
         match &self.field {
             FieldPattern::Exact(f) => m.field(f).map(|v| self.convert(v)),
-            FieldPattern::Indexed(prefix) => {
-                let mut list = spare_list();
-                let fill = |l: &mut Vec<Value>| {
-                    if m.list.holds(prefix) {
-                        copy_captured(m.list.values(), l)
-                    } else {
-                        gather(prefix, &m.fields, l)
-                    }
-                };
-                let out = match Arc::get_mut(&mut list).map(|l| (fill(l), l)) {
-                    Some((None, _)) => None,
-                    Some((Some(Ok(())), l)) => {
-                        self.to_length(l);
-                        Some(Ok(Value::List(list.clone())))
-                    }
-                    Some((Some(Err(max)), _)) => Some(Err(ConvertError {
-                        input: self.name.clone(),
-                        reason: format!("index {max} in `{prefix}*` is beyond {MAX_INDEX}"),
-                    })),
-                    // Not reachable: `spare_list` gives a list nothing else holds.
-                    None => Some(Err(ConvertError {
-                        input: self.name.clone(),
-                        reason: "internal: the list to fill is shared".to_string(),
-                    })),
-                };
-                // An absurdly long scan (up to MAX_INDEX beams) is not kept: the spare would hold
-                // its memory for the rest of the run.
-                if list.capacity() <= SPARE_MAX {
-                    SPARE_LIST.set(Some(list));
-                }
-                out
-            }
+            FieldPattern::Indexed(prefix) => self.extract_list(prefix, m),
         }
+    }
+
+    /// [`InputBinding::extract`] of an indexed pattern: the list of the fields `prefix<i>`.
+    #[inline(never)]
+    fn extract_list(&self, prefix: &str, m: &Metric) -> Option<Result<Value, ConvertError>> {
+        let mut list = spare_list();
+        let fill = |l: &mut Vec<Value>| {
+            if m.list.holds(prefix) {
+                copy_captured(m.list.values(), l)
+            } else {
+                gather(prefix, &m.fields, l)
+            }
+        };
+        let out = match Arc::get_mut(&mut list).map(|l| (fill(l), l)) {
+            Some((None, _)) => None,
+            Some((Some(Ok(())), l)) => {
+                self.to_length(l);
+                Some(Ok(Value::List(list.clone())))
+            }
+            Some((Some(Err(max)), _)) => Some(Err(ConvertError {
+                input: self.name.clone(),
+                reason: format!("index {max} in `{prefix}*` is beyond {MAX_INDEX}"),
+            })),
+            // Not reachable: `spare_list` gives a list nothing else holds.
+            None => Some(Err(ConvertError {
+                input: self.name.clone(),
+                reason: "internal: the list to fill is shared".to_string(),
+            })),
+        };
+        // An absurdly long scan (up to MAX_INDEX beams) is not kept: the spare would hold
+        // its memory for the rest of the run.
+        if list.capacity() <= SPARE_MAX {
+            SPARE_LIST.set(Some(list));
+        }
+        out
     }
 
     /// `list` at the known length: filled up with NaN when a few elements are missing
@@ -314,17 +320,15 @@ impl InputBinding {
     }
 
     /// Convert where no information is lost.
+    /// (Inline, with the message of a value that does not convert written out of line.)
+    #[inline]
     pub fn convert(&self, v: &FieldValue) -> Result<Value, ConvertError> {
-        let bad = |reason: String| ConvertError {
-            input: self.name.clone(),
-            reason,
-        };
         let r = match (&self.ty, v) {
             (Type::Unit, _) => Some(Value::Unit),
             (Type::Float, FieldValue::Float(f)) => Some(Value::Float(*f)),
             (Type::Float, FieldValue::Int(i)) => Some(Value::Float(*i as f64)),
             (Type::Float, FieldValue::UInt(u)) => Some(Value::Float(*u as f64)),
-            (Type::Float, FieldValue::Str(s)) => s.trim().parse::<f64>().ok().map(Value::Float),
+            (Type::Float, FieldValue::Str(s)) => float_of_str(s).map(Value::Float),
             (Type::Int, FieldValue::Int(i)) => Some(Value::Int(*i)),
             (Type::Int, FieldValue::UInt(u)) => i64::try_from(*u).ok().map(Value::Int),
             (Type::Int, FieldValue::Float(f)) => whole(*f).map(Value::Int),
@@ -344,14 +348,31 @@ impl InputBinding {
             (Type::String, FieldValue::Str(s)) => Some(Value::Str(s.as_str().into())),
             _ => None,
         };
-        r.ok_or_else(|| {
-            bad(format!(
+        match r {
+            Some(v) => Ok(v),
+            None => Err(self.not_converted(v)),
+        }
+    }
+
+    /// Why `v` did not convert to this input's type.
+    #[cold]
+    #[inline(never)]
+    fn not_converted(&self, v: &FieldValue) -> ConvertError {
+        ConvertError {
+            input: self.name.clone(),
+            reason: format!(
                 "{} does not convert to {} without loss",
                 show_field(v),
                 self.ty
-            ))
-        })
+            ),
+        }
     }
+}
+
+/// A float read from a string field (`"0.0226"`; spaces around it allowed).
+#[inline(never)]
+fn float_of_str(s: &str) -> Option<f64> {
+    s.trim().parse::<f64>().ok()
 }
 
 /// The value of an indexed field as a list element.
