@@ -46,7 +46,9 @@ impl Processor {
         if let Ok(true) = parsed {
             self.record_metric(&rec, &metric, out);
         }
-        self.scratch = metric;
+        // What `take` left there is a default metric, which owns no memory: put back without
+        // the call that would drop it.
+        std::mem::forget(std::mem::replace(&mut self.scratch, metric));
         match parsed {
             Ok(true) => {}
             Ok(false) => self.counters.records -= 1,
