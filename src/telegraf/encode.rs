@@ -318,11 +318,25 @@ fn write_leaf(line: &mut String, floats: &mut Floats, v: &Value) {
 
 /// Floats written lately and their text, one slot per value by a hash of its bits: a value that
 /// repeats (a constant output like `0.015`, a value written to two metrics of a step) is copied,
-/// not formatted again (formatting a Float was the largest item of writing a line). A slot
-/// costs a copy of the text when it changes.
+/// not formatted again (formatting a Float was the largest item of writing a line).
+///
+/// A value seen once is only noted (its bits), and its text kept the second time it comes: a
+/// value that never repeats (a difference of two readings) costs no copy of its text. A slot
+/// that served a copy since the last value went past it keeps its value once more (`keep`), so
+/// such passing values do not evict a constant that comes every step.
 #[derive(Debug)]
 pub struct Floats {
-    slots: [(u64, String); 16],
+    slots: [Slot; 16],
+}
+
+#[derive(Debug)]
+struct Slot {
+    bits: u64,
+    /// Whether `text` is the text of `bits` (else only the bits are noted).
+    ready: bool,
+    /// Whether a copy was served since a value last went past.
+    keep: bool,
+    text: String,
 }
 
 /// The bits of a NaN: no slot of an unused [`Floats`] matches a finite value.
@@ -331,7 +345,12 @@ const NO_FLOAT: u64 = 0x7ff8_0000_0000_0001;
 impl Default for Floats {
     fn default() -> Floats {
         Floats {
-            slots: std::array::from_fn(|_| (NO_FLOAT, String::new())),
+            slots: std::array::from_fn(|_| Slot {
+                bits: NO_FLOAT,
+                ready: false,
+                keep: false,
+                text: String::new(),
+            }),
         }
     }
 }
@@ -342,20 +361,32 @@ impl Floats {
     fn write(&mut self, line: &mut String, f: f64) {
         let bits = f.to_bits();
         let slot = (bits.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 60) as usize;
-        let Some((b, text)) = self.slots.get_mut(slot) else {
+        let Some(s) = self.slots.get_mut(slot) else {
             lineproto::write_float(line, f);
             return;
         };
-        if *b == bits {
-            line.push_str(text);
+        if s.bits == bits {
+            if s.ready {
+                s.keep = true;
+                line.push_str(&s.text);
+                return;
+            }
+            // The second time: format and keep the text.
+            let start = line.len();
+            lineproto::write_float(line, f);
+            if let Some(t) = line.get(start..) {
+                s.text.clear();
+                s.text.push_str(t);
+                s.ready = true;
+            }
             return;
         }
-        let start = line.len();
         lineproto::write_float(line, f);
-        if let Some(t) = line.get(start..) {
-            text.clear();
-            text.push_str(t);
-            *b = bits;
+        if s.keep {
+            s.keep = false;
+        } else {
+            s.bits = bits;
+            s.ready = false;
         }
     }
 }
@@ -876,6 +907,32 @@ mod tests {
         // NaN, the error value and infinity.
         assert_eq!(n_dropped, 3);
         assert!(prepared.one_metric.is_some());
+    }
+
+    /// The float cache writes what `write_float` writes, whether a value is new, noted once,
+    /// kept, or passing a kept slot; values that share a slot included.
+    #[test]
+    fn float_cache_writes_what_write_float_writes() {
+        let mut floats = Floats::default();
+        let mut x = 0.0226f64;
+        for i in 0..20_000u32 {
+            let constant = [0.015, 0.22, -0.22][(i % 7 % 3) as usize];
+            x = (x * 1.000_37 + 1e-5) % 0.3;
+            for f in [
+                constant,
+                x - 0.015,
+                x * x,
+                constant,
+                f64::from(i % 5),
+                -0.0,
+                1e21,
+            ] {
+                let (mut ours, mut full) = (String::from("k="), String::from("k="));
+                floats.write(&mut ours, f);
+                lineproto::write_float(&mut full, f);
+                assert_eq!(ours, full, "{f:?} at {i}");
+            }
+        }
     }
 
     /// One scratch serving two sets of encodings with as many outputs in turn (instances on
