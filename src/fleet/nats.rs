@@ -8,8 +8,10 @@
 //! entries in the bucket's order (a hot standby), written out only by the holder of the `fleet`
 //! lease, which records how far it wrote (`fleet.written`, the stream sequence) so that a
 //! standby taking over writes from there on. The holder also decides drop-outs (a partition
-//! silent past twice the lease TTL) and puts them in the stream, so every process applies them
-//! at the same point. The rules themselves are [`super::watermark`].
+//! silent past twice the lease TTL) and the end of the fleet's input (a close: stopping, every
+//! partition ended and no partition lease held, so no restart is under way) and puts them in
+//! the stream, so every process applies them at the same point. The rules themselves are
+//! [`super::watermark`].
 
 use super::Level;
 use super::watermark::{self, Msg, Partitions};
@@ -66,6 +68,8 @@ pub struct FleetNats {
     front: i64,
     /// The partition lease's generation when this process last held it.
     generation: Option<u64>,
+    /// Whether this process held its partition lease at the last pump.
+    holds_partition: bool,
     last_sent: Instant,
     sent: u64,
     /// When each partition was last heard (for drop-outs, decided by the holder).
@@ -130,6 +134,7 @@ impl FleetNats {
             holding: false,
             front: i64::MIN,
             generation: None,
+            holds_partition: false,
             last_sent: Instant::now() - HEARTBEAT,
             sent: 0,
             heard: HashMap::new(),
@@ -165,6 +170,7 @@ impl FleetNats {
         // overdue between the step and now must not lose their changes: they go with the
         // generation they were stepped in (a newer holder's entries make them stale).
         let fresh = generation.is_some();
+        self.holds_partition = fresh;
         self.generation = generation.or(self.generation);
         if let Some(g) = self.generation {
             for d in &drained {
@@ -205,6 +211,17 @@ impl FleetNats {
             if !m.drop {
                 self.heard.insert(m.p.clone(), Instant::now());
             }
+            log_debug!(
+                "fleet: entry {seq} from {} (generation {}): {} changes, clocks {:?}, left {:?}{}{}{}",
+                m.p,
+                m.g,
+                m.changes.len(),
+                m.clocks,
+                m.left,
+                if m.end { ", end" } else { "" },
+                if m.drop { ", drop-out" } else { "" },
+                if m.close { ", close" } else { "" },
+            );
             let (drained, status) = self.table.apply(m);
             let mut o = Vec::new();
             for s in &status {
@@ -217,7 +234,7 @@ impl FleetNats {
                 );
             }
             self.level.set_bound(self.table.bound());
-            let end = self.table.all_done();
+            let end = self.table.closed();
             self.level.pump(drained.into_iter().collect(), end, &mut o);
             if !o.is_empty() {
                 self.outputs.push_back((seq, o));
@@ -297,8 +314,12 @@ impl FleetNats {
     }
 
     /// At the end of this process: send what is queued; as the fleet level's holder, wait a
-    /// little for the other partitions to end (so a fleet whose inputs all end steps
-    /// everything pending) and write what the level gave.
+    /// little for the other partitions to end and release their leases. When every partition
+    /// has ended and no other process holds a partition lease (no replacement is coming: a
+    /// restarted partition's new process takes its lease at start), put a close in the stream,
+    /// so that every process steps everything pending at the same point, as one process does
+    /// at the end of its input; then write what the level gave. A partition still held (a
+    /// restart in progress) leaves the pending changes to the next holder.
     pub fn finish(&mut self, out: &mut Vec<u8>) {
         self.flush();
         if !self.lease.holding() {
@@ -306,13 +327,50 @@ impl FleetNats {
         }
         let start = Instant::now();
         let wait = self.drop_after.min(Duration::from_secs(2));
+        let mut closing = false;
         loop {
             self.follow(out);
-            if self.table.all_done() || start.elapsed() > wait {
+            if self.table.closed() || start.elapsed() > wait {
                 break;
+            }
+            if !closing && self.table.all_done() && !self.partitions_held() {
+                let part = self.partition.clone();
+                let msg = Msg {
+                    close: true,
+                    ..Msg::of(&part, 0, 0, false, Vec::new())
+                };
+                self.put(&part, 0, "close", &msg);
+                self.flush();
+                closing = true;
+                log_info!("fleet: every partition ended and none is held; the fleet's input ends");
             }
             std::thread::sleep(Duration::from_millis(20));
         }
+    }
+
+    /// Whether a process (other than this one, for the partition it holds) holds the lease of
+    /// a partition the fleet level knows: its lease key is present (deleted at a clean stop).
+    fn partitions_held(&self) -> bool {
+        let keys: Vec<String> = self
+            .table
+            .names()
+            .filter(|p| !(self.holds_partition && *p == self.partition))
+            .map(|p| format!("lease.{}", kv_key_part_of(p)))
+            .collect();
+        let store = self.store.clone();
+        self.conn
+            .call(async move {
+                for key in keys {
+                    match store.entry(key).await {
+                        Ok(Some(e)) if e.operation == kv::Operation::Put => return true,
+                        Ok(_) => {}
+                        // Not known: as held (the pending changes wait for the next holder).
+                        Err(_) => return true,
+                    }
+                }
+                false
+            })
+            .unwrap_or(true)
     }
 
     /// After the last write: record how far this process wrote, and give the fleet lease up.
