@@ -10,8 +10,10 @@
 //! standby taking over writes from there on. The holder also decides drop-outs (a partition
 //! silent past twice the lease TTL) and the end of the fleet's input (a close: stopping, every
 //! partition ended and no partition lease held, so no restart is under way) and puts them in
-//! the stream, so every process applies them at the same point. The rules themselves are
-//! [`super::watermark`].
+//! the stream, so every process applies them at the same point. It also writes the fleet
+//! checkpoint (`fleet.checkpoint`: the table and the level after an entry, every 5 s) and
+//! deletes the entries the checkpoint before covered, so the entries stay bounded; a process
+//! that starts goes on from the checkpoint. The rules themselves are [`super::watermark`].
 
 use super::Level;
 use super::watermark::{self, Msg, Partitions};
@@ -34,10 +36,27 @@ const WRITTEN_KEY: &str = "fleet.written";
 const HEARTBEAT: Duration = Duration::from_millis(200);
 /// At most this many messages' outputs kept by a standby (the holder's progress trims them).
 const MAX_KEPT: usize = 100_000;
+/// The fleet checkpoint: the fleet level's state after the entry at its stream sequence.
+const CHECKPOINT_KEY: &str = "fleet.checkpoint";
+/// The holder of the fleet lease writes a checkpoint this often (while entries come), and
+/// then deletes the entries the checkpoint before it covered.
+const CHECKPOINT_EVERY: Duration = Duration::from_secs(5);
 
 enum Job {
     Put(String, bytes::Bytes),
+    /// Delete the fleet entries up to this stream sequence.
+    Trim(u64),
     Flush(std::sync::mpsc::Sender<()>),
+}
+
+/// The fleet checkpoint (`fleet.checkpoint`, JSON): the fleet level after the entry at `seq`.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct Checkpoint {
+    seq: u64,
+    /// `fleet.written` when it was taken.
+    written: u64,
+    table: watermark::PartsState,
+    level: super::level::LevelState,
 }
 
 #[derive(Default)]
@@ -76,6 +95,10 @@ pub struct FleetNats {
     heard: HashMap<String, Instant>,
     drops_sent: HashSet<(String, u64)>,
     drop_after: Duration,
+    /// The stream sequence of the last entry taken in (or of the checkpoint started from).
+    applied: u64,
+    /// The sequence of the last checkpoint written or started from, and when.
+    checkpointed: (u64, Instant),
 }
 
 fn now_ns() -> i64 {
@@ -113,10 +136,42 @@ impl FleetNats {
                     })
             })
             .ok_or_else(|| Failure::Io("the fleet's NATS thread stopped".into()))??;
+        let mut level = level;
+        let mut table = Partitions::default();
+        let mut written = 0;
+        let mut applied = 0;
+        let mut heard = HashMap::new();
+        let st = store.clone();
+        let saved = conn
+            .call(async move { st.get(CHECKPOINT_KEY).await })
+            .and_then(Result::ok)
+            .flatten();
+        if let Some(bytes) = saved {
+            match serde_json::from_slice::<Checkpoint>(&bytes) {
+                Ok(c) => {
+                    log_info!(
+                        "fleet: starting from the fleet checkpoint at stream sequence {} (the entries it covers may be deleted)",
+                        c.seq
+                    );
+                    table = Partitions::from_state(c.table);
+                    level.restore(c.level);
+                    level.set_bound(table.bound());
+                    written = c.written;
+                    applied = c.seq;
+                    for (p, _) in table.live() {
+                        heard.insert(p.to_string(), Instant::now());
+                    }
+                }
+                Err(e) => log_warn!(
+                    "fleet: the fleet checkpoint is not one ({e}); following the entries from the first"
+                ),
+            }
+        }
         let inbox = Arc::new(Mutex::new(Inbox::default()));
         let (jobs, rx) = tokio::sync::mpsc::unbounded_channel();
         conn.handle.spawn(publisher(store.clone(), rx));
-        conn.handle.spawn(follow(store.clone(), Arc::clone(&inbox)));
+        conn.handle
+            .spawn(follow(store.clone(), Arc::clone(&inbox), applied));
         let lease = Lease::start(&conn, &store, LEASE.to_string(), url.ttl);
         Ok(FleetNats {
             partition,
@@ -127,19 +182,21 @@ impl FleetNats {
             inbox,
             lease,
             level,
-            table: Partitions::default(),
+            table,
             tags,
             outputs: VecDeque::new(),
-            written: 0,
+            written,
             holding: false,
             front: i64::MIN,
             generation: None,
             holds_partition: false,
             last_sent: Instant::now() - HEARTBEAT,
             sent: 0,
-            heard: HashMap::new(),
+            heard,
             drops_sent: HashSet::new(),
             drop_after: url.ttl * 2,
+            applied,
+            checkpointed: (applied, Instant::now()),
         })
     }
 
@@ -236,6 +293,7 @@ impl FleetNats {
             self.level.set_bound(self.table.bound());
             let end = self.table.closed();
             self.level.pump(drained.into_iter().collect(), end, &mut o);
+            self.applied = seq;
             if !o.is_empty() {
                 self.outputs.push_back((seq, o));
             }
@@ -276,6 +334,7 @@ impl FleetNats {
                 ));
             }
             self.drop_silent();
+            self.checkpoint();
         } else {
             while self.outputs.front().is_some_and(|(seq, _)| *seq <= written)
                 || self.outputs.len() > MAX_KEPT
@@ -283,6 +342,44 @@ impl FleetNats {
                 self.outputs.pop_front();
             }
         }
+    }
+
+    /// As the fleet level's holder, every [`CHECKPOINT_EVERY`]: put the fleet level's state
+    /// after the last entry taken in (every output up to it is written) as the fleet
+    /// checkpoint, then delete the entries the checkpoint before this one covered (one
+    /// checkpoint behind, so a process that has just read that one still finds the entries
+    /// after it).
+    fn checkpoint(&mut self) {
+        let (last, at) = self.checkpointed;
+        if self.applied <= last || at.elapsed() < CHECKPOINT_EVERY || !self.outputs.is_empty() {
+            return;
+        }
+        let Some(level) = self.level.state() else {
+            crate::log::warn_limited("fleet checkpoint", || {
+                "fleet: the fleet level holds a value a checkpoint cannot keep; its entries are kept".into()
+            });
+            return;
+        };
+        let c = Checkpoint {
+            seq: self.applied,
+            written: self.written,
+            table: self.table.state(),
+            level,
+        };
+        let Ok(bytes) = serde_json::to_vec(&c) else {
+            return;
+        };
+        let _ = self
+            .jobs
+            .send(Job::Put(CHECKPOINT_KEY.to_string(), bytes.into()));
+        if last > 0 {
+            let _ = self.jobs.send(Job::Trim(last));
+        }
+        log_debug!(
+            "fleet: checkpoint at stream sequence {}; entries up to {last} deleted",
+            self.applied
+        );
+        self.checkpointed = (self.applied, Instant::now());
     }
 
     /// As the fleet level's holder: put a drop-out in the stream for each live partition not
@@ -416,6 +513,20 @@ async fn publisher(store: kv::Store, mut rx: tokio::sync::mpsc::UnboundedReceive
                     });
                 }
             }
+            Job::Trim(seq) => {
+                let filter = format!("{}fleet.m.>", store.prefix);
+                if let Err(e) = store
+                    .stream
+                    .purge()
+                    .filter(filter)
+                    .sequence(seq.saturating_add(1))
+                    .await
+                {
+                    crate::log::warn_limited("fleet trim", || {
+                        format!("fleet: cannot delete the entries up to {seq}: {e}")
+                    });
+                }
+            }
             Job::Flush(done) => {
                 let _ = done.send(());
             }
@@ -423,9 +534,9 @@ async fn publisher(store: kv::Store, mut rx: tokio::sync::mpsc::UnboundedReceive
     }
 }
 
-/// Follow every fleet entry of the bucket from the first, in the stream's order, and the
-/// holder's progress.
-async fn follow(store: kv::Store, inbox: Arc<Mutex<Inbox>>) {
+/// Follow every fleet entry of the bucket after stream sequence `after` (a checkpoint's; 0:
+/// from the first), in the stream's order, and the holder's progress.
+async fn follow(store: kv::Store, inbox: Arc<Mutex<Inbox>>, after: u64) {
     use futures_util::StreamExt;
     let progress = {
         let (store, inbox) = (store.clone(), Arc::clone(&inbox));
@@ -446,7 +557,7 @@ async fn follow(store: kv::Store, inbox: Arc<Mutex<Inbox>>) {
     };
     tokio::spawn(progress);
     // A watch made again (after an error) starts from the first entry: each is taken once.
-    let mut last = 0;
+    let mut last = after;
     loop {
         match store.watch_with_history("fleet.m.>").await {
             Ok(mut w) => {

@@ -89,7 +89,7 @@ impl Msg {
 }
 
 /// A partition's state at the fleet level.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum State {
     Live,
     Ended,
@@ -124,12 +124,22 @@ pub struct Status {
 }
 
 /// Counters of the partitioned fleet level.
-#[derive(Debug, Default, Clone, PartialEq, Eq)]
+#[derive(Debug, Default, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Counters {
     /// Messages of an older generation than the partition's newest, dropped.
     pub stale: u64,
     /// Changes a new generation sent again (at or before the robot's highest clock), dropped.
     pub repeats: u64,
+}
+
+/// The table's state in a fleet checkpoint.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PartsState {
+    /// (partition, generation, promise, state).
+    parts: Vec<(String, u64, i64, State)>,
+    high: Vec<(String, i64)>,
+    closed: bool,
+    counters: Counters,
 }
 
 /// The fleet level's view of the partitions.
@@ -260,6 +270,46 @@ impl Partitions {
         self.parts.keys().map(String::as_str)
     }
 
+    /// The table's state, for a fleet checkpoint.
+    pub fn state(&self) -> PartsState {
+        let mut high: Vec<(String, i64)> =
+            self.high.iter().map(|(k, t)| (k.to_string(), *t)).collect();
+        high.sort();
+        PartsState {
+            parts: self
+                .parts
+                .iter()
+                .map(|(n, p)| (n.clone(), p.generation, p.promise, p.state))
+                .collect(),
+            high,
+            closed: self.closed,
+            counters: self.counters.clone(),
+        }
+    }
+
+    /// The table of a fleet checkpoint.
+    pub fn from_state(s: PartsState) -> Partitions {
+        Partitions {
+            parts: s
+                .parts
+                .into_iter()
+                .map(|(n, generation, promise, state)| {
+                    (
+                        n,
+                        Part {
+                            generation,
+                            promise,
+                            state,
+                        },
+                    )
+                })
+                .collect(),
+            high: s.high.into_iter().map(|(k, t)| (Arc::from(k), t)).collect(),
+            closed: s.closed,
+            counters: s.counters,
+        }
+    }
+
     /// The live partitions and their generations.
     pub fn live(&self) -> impl Iterator<Item = (&str, u64)> {
         self.parts
@@ -339,6 +389,20 @@ mod tests {
         assert_eq!(st.first().map(|s| s.event), Some("dropped"));
         assert!(ps.all_done());
         assert_eq!(ps.bound(), i64::MAX);
+    }
+
+    #[test]
+    fn the_table_goes_on_from_its_state() {
+        let mut ps = Partitions::default();
+        ps.apply(msg("p0", 3, 10, &[(5, "r1")], &[("r1", 6)]));
+        ps.apply(msg("p1", 4, 7, &[], &[]));
+        let json = serde_json::to_string(&ps.state()).unwrap();
+        let mut back = Partitions::from_state(serde_json::from_str(&json).unwrap());
+        assert_eq!(back.bound(), 7);
+        // The robot's highest clock came along: its replayed change is a repeat.
+        let (d, _) = back.apply(msg("p0", 5, 10, &[(6, "r1"), (7, "r1")], &[("r1", 7)]));
+        assert_eq!(d.map(|d| d.changes.len()), Some(1));
+        assert_eq!(back.counters.repeats, 1);
     }
 
     #[test]
