@@ -44,8 +44,9 @@ const CHECKPOINT_EVERY: Duration = Duration::from_secs(5);
 
 enum Job {
     Put(String, bytes::Bytes),
-    /// Delete the fleet entries up to this stream sequence.
-    Trim(u64),
+    /// Put a fleet checkpoint covering the entries up to this stream sequence; once it is
+    /// stored, delete the entries the checkpoint stored before it covered.
+    Checkpoint(u64, bytes::Bytes),
     Flush(std::sync::mpsc::Sender<()>),
 }
 
@@ -369,16 +370,8 @@ impl FleetNats {
         let Ok(bytes) = serde_json::to_vec(&c) else {
             return;
         };
-        let _ = self
-            .jobs
-            .send(Job::Put(CHECKPOINT_KEY.to_string(), bytes.into()));
-        if last > 0 {
-            let _ = self.jobs.send(Job::Trim(last));
-        }
-        log_debug!(
-            "fleet: checkpoint at stream sequence {}; entries up to {last} deleted",
-            self.applied
-        );
+        let _ = self.jobs.send(Job::Checkpoint(self.applied, bytes.into()));
+        log_debug!("fleet: checkpoint at stream sequence {}", self.applied);
         self.checkpointed = (self.applied, Instant::now());
     }
 
@@ -504,6 +497,9 @@ impl FleetNats {
 
 /// Put the queued entries in order, one at a time.
 async fn publisher(store: kv::Store, mut rx: tokio::sync::mpsc::UnboundedReceiver<Job>) {
+    // The sequence the last checkpoint this process stored covers: the next one stored
+    // deletes the entries up to it (never entries no stored checkpoint covers).
+    let mut stored = 0;
     while let Some(job) = rx.recv().await {
         match job {
             Job::Put(key, bytes) => {
@@ -513,17 +509,27 @@ async fn publisher(store: kv::Store, mut rx: tokio::sync::mpsc::UnboundedReceive
                     });
                 }
             }
-            Job::Trim(seq) => {
+            Job::Checkpoint(seq, bytes) => {
+                if let Err(e) = store.put(CHECKPOINT_KEY, bytes).await {
+                    crate::log::warn_limited("fleet checkpoint put", || {
+                        format!("fleet: cannot put the fleet checkpoint: {e}; the entries are kept")
+                    });
+                    continue;
+                }
+                let upto = std::mem::replace(&mut stored, seq);
+                if upto == 0 {
+                    continue;
+                }
                 let filter = format!("{}fleet.m.>", store.prefix);
                 if let Err(e) = store
                     .stream
                     .purge()
                     .filter(filter)
-                    .sequence(seq.saturating_add(1))
+                    .sequence(upto.saturating_add(1))
                     .await
                 {
                     crate::log::warn_limited("fleet trim", || {
-                        format!("fleet: cannot delete the entries up to {seq}: {e}")
+                        format!("fleet: cannot delete the entries up to {upto}: {e}")
                     });
                 }
             }
