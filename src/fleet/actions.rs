@@ -41,6 +41,18 @@ pub struct Actions {
 }
 
 impl Actions {
+    /// The count of actions sent to each robot (a fleet checkpoint).
+    pub fn counts(&self) -> Vec<(String, i64)> {
+        let mut v: Vec<(String, i64)> = self.seq.iter().map(|(k, n)| (k.to_string(), *n)).collect();
+        v.sort();
+        v
+    }
+
+    /// Go on from `counts` (a fleet checkpoint).
+    pub fn set_counts(&mut self, counts: Vec<(String, i64)>) {
+        self.seq = counts.into_iter().map(|(k, n)| (Arc::from(k), n)).collect();
+    }
+
     /// The `@FleetAction` outputs of `program`; an annotation without its arguments is an error.
     pub fn new(
         program: &Program,

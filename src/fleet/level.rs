@@ -15,6 +15,7 @@ use crate::telegraf::encode::{self, Prepared, StepEvent};
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::sync::Arc;
 use tessla_engine::runtime::collections;
+use tessla_engine::runtime::snapshot::SValue;
 use tessla_engine::{Monitor, OutputEvent, Program, Value};
 
 /// One pending change of a fleet map.
@@ -41,7 +42,7 @@ impl StepEvent for Ev {
 }
 
 /// Counters of the fleet level (the summary's `fleet` part).
-#[derive(Debug, Default, Clone, PartialEq, Eq)]
+#[derive(Debug, Default, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct FleetCounters {
     pub steps: u64,
     pub changes: u64,
@@ -380,5 +381,98 @@ impl Level {
                 }
             }
         }
+    }
+}
+
+/// A pending change in a checkpoint: (time, robot key, `None`: leaves, or (fleet input,
+/// value)).
+type PendState = (i64, String, Option<(usize, SValue)>);
+
+/// The fleet level's state between two inputs (a fleet checkpoint across NATS partitions,
+/// `super::nats`): its monitor, maps, pending changes, robot clocks and action counts.
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
+pub struct LevelState {
+    monitor: Option<tessla_engine::runtime::snapshot::Snapshot>,
+    maps: Vec<SValue>,
+    pending: Vec<PendState>,
+    clocks: Vec<(String, i64)>,
+    front: i64,
+    done: i64,
+    actions: Vec<(String, i64)>,
+    counters: FleetCounters,
+}
+
+impl Level {
+    /// The state to checkpoint; `None` when a value cannot be saved (a function value).
+    pub fn state(&self) -> Option<LevelState> {
+        if !self.events.is_empty() {
+            return None;
+        }
+        let monitor = self
+            .monitor
+            .as_ref()
+            .map(tessla_engine::runtime::snapshot::snapshot);
+        if monitor.as_ref().is_some_and(|m| m.unsaved > 0) {
+            return None;
+        }
+        let maps = self
+            .maps
+            .iter()
+            .map(SValue::from_value)
+            .collect::<Option<Vec<_>>>()?;
+        let mut pending = Vec::new();
+        for (t, ps) in &self.pending {
+            for p in ps {
+                let set = match &p.set {
+                    None => None,
+                    Some((i, v)) => Some((*i, SValue::from_value(v)?)),
+                };
+                pending.push((*t, p.key.to_string(), set));
+            }
+        }
+        let mut clocks: Vec<(String, i64)> = self
+            .clocks
+            .iter()
+            .map(|(k, c)| (k.to_string(), *c))
+            .collect();
+        clocks.sort();
+        Some(LevelState {
+            monitor,
+            maps,
+            pending,
+            clocks,
+            front: self.front,
+            done: self.done,
+            actions: self.actions.counts(),
+            counters: self.counters.clone(),
+        })
+    }
+
+    /// Continue from `state` (a level made by [`Level::new`] for the same fleet spec).
+    pub fn restore(&mut self, state: LevelState) {
+        self.monitor = state.monitor.map(|snap| {
+            tessla_engine::runtime::snapshot::restore(Arc::clone(&self.program), &snap)
+        });
+        if state.maps.len() == self.maps.len() {
+            self.maps = state.maps.iter().map(SValue::to_value).collect();
+        }
+        self.pending.clear();
+        for (t, key, set) in state.pending {
+            self.pending.entry(t).or_default().push(Pend {
+                key: Arc::from(key),
+                set: set.map(|(i, v)| (i, v.to_value())),
+            });
+        }
+        self.clocks.clear();
+        self.order.clear();
+        for (key, c) in state.clocks {
+            let key: Arc<str> = Arc::from(key);
+            self.clocks.insert(Arc::clone(&key), c);
+            self.order.insert((c, key));
+        }
+        self.front = state.front;
+        self.done = state.done;
+        self.actions.set_counts(state.actions);
+        self.counters = state.counters;
     }
 }

@@ -8,8 +8,12 @@
 //! entries in the bucket's order (a hot standby), written out only by the holder of the `fleet`
 //! lease, which records how far it wrote (`fleet.written`, the stream sequence) so that a
 //! standby taking over writes from there on. The holder also decides drop-outs (a partition
-//! silent past twice the lease TTL) and puts them in the stream, so every process applies them
-//! at the same point. The rules themselves are [`super::watermark`].
+//! silent past twice the lease TTL) and the end of the fleet's input (a close: stopping, every
+//! partition ended and no partition lease held, so no restart is under way) and puts them in
+//! the stream, so every process applies them at the same point. It also writes the fleet
+//! checkpoint (`fleet.checkpoint`: the table and the level after an entry, every 5 s) and
+//! deletes the entries the checkpoint before covered, so the entries stay bounded; a process
+//! that starts goes on from the checkpoint. The rules themselves are [`super::watermark`].
 
 use super::Level;
 use super::watermark::{self, Msg, Partitions};
@@ -32,10 +36,28 @@ const WRITTEN_KEY: &str = "fleet.written";
 const HEARTBEAT: Duration = Duration::from_millis(200);
 /// At most this many messages' outputs kept by a standby (the holder's progress trims them).
 const MAX_KEPT: usize = 100_000;
+/// The fleet checkpoint: the fleet level's state after the entry at its stream sequence.
+const CHECKPOINT_KEY: &str = "fleet.checkpoint";
+/// The holder of the fleet lease writes a checkpoint this often (while entries come), and
+/// then deletes the entries the checkpoint before it covered.
+const CHECKPOINT_EVERY: Duration = Duration::from_secs(5);
 
 enum Job {
     Put(String, bytes::Bytes),
+    /// Put a fleet checkpoint covering the entries up to this stream sequence; once it is
+    /// stored, delete the entries the checkpoint stored before it covered.
+    Checkpoint(u64, bytes::Bytes),
     Flush(std::sync::mpsc::Sender<()>),
+}
+
+/// The fleet checkpoint (`fleet.checkpoint`, JSON): the fleet level after the entry at `seq`.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct Checkpoint {
+    seq: u64,
+    /// `fleet.written` when it was taken.
+    written: u64,
+    table: watermark::PartsState,
+    level: super::level::LevelState,
 }
 
 #[derive(Default)]
@@ -66,12 +88,18 @@ pub struct FleetNats {
     front: i64,
     /// The partition lease's generation when this process last held it.
     generation: Option<u64>,
+    /// Whether this process held its partition lease at the last pump.
+    holds_partition: bool,
     last_sent: Instant,
     sent: u64,
     /// When each partition was last heard (for drop-outs, decided by the holder).
     heard: HashMap<String, Instant>,
     drops_sent: HashSet<(String, u64)>,
     drop_after: Duration,
+    /// The stream sequence of the last entry taken in (or of the checkpoint started from).
+    applied: u64,
+    /// The sequence of the last checkpoint written or started from, and when.
+    checkpointed: (u64, Instant),
 }
 
 fn now_ns() -> i64 {
@@ -109,10 +137,42 @@ impl FleetNats {
                     })
             })
             .ok_or_else(|| Failure::Io("the fleet's NATS thread stopped".into()))??;
+        let mut level = level;
+        let mut table = Partitions::default();
+        let mut written = 0;
+        let mut applied = 0;
+        let mut heard = HashMap::new();
+        let st = store.clone();
+        let saved = conn
+            .call(async move { st.get(CHECKPOINT_KEY).await })
+            .and_then(Result::ok)
+            .flatten();
+        if let Some(bytes) = saved {
+            match serde_json::from_slice::<Checkpoint>(&bytes) {
+                Ok(c) => {
+                    log_info!(
+                        "fleet: starting from the fleet checkpoint at stream sequence {} (the entries it covers may be deleted)",
+                        c.seq
+                    );
+                    table = Partitions::from_state(c.table);
+                    level.restore(c.level);
+                    level.set_bound(table.bound());
+                    written = c.written;
+                    applied = c.seq;
+                    for (p, _) in table.live() {
+                        heard.insert(p.to_string(), Instant::now());
+                    }
+                }
+                Err(e) => log_warn!(
+                    "fleet: the fleet checkpoint is not one ({e}); following the entries from the first"
+                ),
+            }
+        }
         let inbox = Arc::new(Mutex::new(Inbox::default()));
         let (jobs, rx) = tokio::sync::mpsc::unbounded_channel();
         conn.handle.spawn(publisher(store.clone(), rx));
-        conn.handle.spawn(follow(store.clone(), Arc::clone(&inbox)));
+        conn.handle
+            .spawn(follow(store.clone(), Arc::clone(&inbox), applied));
         let lease = Lease::start(&conn, &store, LEASE.to_string(), url.ttl);
         Ok(FleetNats {
             partition,
@@ -123,18 +183,21 @@ impl FleetNats {
             inbox,
             lease,
             level,
-            table: Partitions::default(),
+            table,
             tags,
             outputs: VecDeque::new(),
-            written: 0,
+            written,
             holding: false,
             front: i64::MIN,
             generation: None,
+            holds_partition: false,
             last_sent: Instant::now() - HEARTBEAT,
             sent: 0,
-            heard: HashMap::new(),
+            heard,
             drops_sent: HashSet::new(),
             drop_after: url.ttl * 2,
+            applied,
+            checkpointed: (applied, Instant::now()),
         })
     }
 
@@ -165,6 +228,7 @@ impl FleetNats {
         // overdue between the step and now must not lose their changes: they go with the
         // generation they were stepped in (a newer holder's entries make them stale).
         let fresh = generation.is_some();
+        self.holds_partition = fresh;
         self.generation = generation.or(self.generation);
         if let Some(g) = self.generation {
             for d in &drained {
@@ -205,6 +269,17 @@ impl FleetNats {
             if !m.drop {
                 self.heard.insert(m.p.clone(), Instant::now());
             }
+            log_debug!(
+                "fleet: entry {seq} from {} (generation {}): {} changes, clocks {:?}, left {:?}{}{}{}",
+                m.p,
+                m.g,
+                m.changes.len(),
+                m.clocks,
+                m.left,
+                if m.end { ", end" } else { "" },
+                if m.drop { ", drop-out" } else { "" },
+                if m.close { ", close" } else { "" },
+            );
             let (drained, status) = self.table.apply(m);
             let mut o = Vec::new();
             for s in &status {
@@ -217,8 +292,9 @@ impl FleetNats {
                 );
             }
             self.level.set_bound(self.table.bound());
-            let end = self.table.all_done();
+            let end = self.table.closed();
             self.level.pump(drained.into_iter().collect(), end, &mut o);
+            self.applied = seq;
             if !o.is_empty() {
                 self.outputs.push_back((seq, o));
             }
@@ -259,6 +335,7 @@ impl FleetNats {
                 ));
             }
             self.drop_silent();
+            self.checkpoint();
         } else {
             while self.outputs.front().is_some_and(|(seq, _)| *seq <= written)
                 || self.outputs.len() > MAX_KEPT
@@ -266,6 +343,36 @@ impl FleetNats {
                 self.outputs.pop_front();
             }
         }
+    }
+
+    /// As the fleet level's holder, every [`CHECKPOINT_EVERY`]: put the fleet level's state
+    /// after the last entry taken in (every output up to it is written) as the fleet
+    /// checkpoint, then delete the entries the checkpoint before this one covered (one
+    /// checkpoint behind, so a process that has just read that one still finds the entries
+    /// after it).
+    fn checkpoint(&mut self) {
+        let (last, at) = self.checkpointed;
+        if self.applied <= last || at.elapsed() < CHECKPOINT_EVERY || !self.outputs.is_empty() {
+            return;
+        }
+        let Some(level) = self.level.state() else {
+            crate::log::warn_limited("fleet checkpoint", || {
+                "fleet: the fleet level holds a value a checkpoint cannot keep; its entries are kept".into()
+            });
+            return;
+        };
+        let c = Checkpoint {
+            seq: self.applied,
+            written: self.written,
+            table: self.table.state(),
+            level,
+        };
+        let Ok(bytes) = serde_json::to_vec(&c) else {
+            return;
+        };
+        let _ = self.jobs.send(Job::Checkpoint(self.applied, bytes.into()));
+        log_debug!("fleet: checkpoint at stream sequence {}", self.applied);
+        self.checkpointed = (self.applied, Instant::now());
     }
 
     /// As the fleet level's holder: put a drop-out in the stream for each live partition not
@@ -297,8 +404,12 @@ impl FleetNats {
     }
 
     /// At the end of this process: send what is queued; as the fleet level's holder, wait a
-    /// little for the other partitions to end (so a fleet whose inputs all end steps
-    /// everything pending) and write what the level gave.
+    /// little for the other partitions to end and release their leases. When every partition
+    /// has ended and no other process holds a partition lease (no replacement is coming: a
+    /// restarted partition's new process takes its lease at start), put a close in the stream,
+    /// so that every process steps everything pending at the same point, as one process does
+    /// at the end of its input; then write what the level gave. A partition still held (a
+    /// restart in progress) leaves the pending changes to the next holder.
     pub fn finish(&mut self, out: &mut Vec<u8>) {
         self.flush();
         if !self.lease.holding() {
@@ -306,13 +417,50 @@ impl FleetNats {
         }
         let start = Instant::now();
         let wait = self.drop_after.min(Duration::from_secs(2));
+        let mut closing = false;
         loop {
             self.follow(out);
-            if self.table.all_done() || start.elapsed() > wait {
+            if self.table.closed() || start.elapsed() > wait {
                 break;
+            }
+            if !closing && self.table.all_done() && !self.partitions_held() {
+                let part = self.partition.clone();
+                let msg = Msg {
+                    close: true,
+                    ..Msg::of(&part, 0, 0, false, Vec::new())
+                };
+                self.put(&part, 0, "close", &msg);
+                self.flush();
+                closing = true;
+                log_info!("fleet: every partition ended and none is held; the fleet's input ends");
             }
             std::thread::sleep(Duration::from_millis(20));
         }
+    }
+
+    /// Whether a process (other than this one, for the partition it holds) holds the lease of
+    /// a partition the fleet level knows: its lease key is present (deleted at a clean stop).
+    fn partitions_held(&self) -> bool {
+        let keys: Vec<String> = self
+            .table
+            .names()
+            .filter(|p| !(self.holds_partition && *p == self.partition))
+            .map(|p| format!("lease.{}", kv_key_part_of(p)))
+            .collect();
+        let store = self.store.clone();
+        self.conn
+            .call(async move {
+                for key in keys {
+                    match store.entry(key).await {
+                        Ok(Some(e)) if e.operation == kv::Operation::Put => return true,
+                        Ok(_) => {}
+                        // Not known: as held (the pending changes wait for the next holder).
+                        Err(_) => return true,
+                    }
+                }
+                false
+            })
+            .unwrap_or(true)
     }
 
     /// After the last write: record how far this process wrote, and give the fleet lease up.
@@ -349,12 +497,39 @@ impl FleetNats {
 
 /// Put the queued entries in order, one at a time.
 async fn publisher(store: kv::Store, mut rx: tokio::sync::mpsc::UnboundedReceiver<Job>) {
+    // The sequence the last checkpoint this process stored covers: the next one stored
+    // deletes the entries up to it (never entries no stored checkpoint covers).
+    let mut stored = 0;
     while let Some(job) = rx.recv().await {
         match job {
             Job::Put(key, bytes) => {
                 if let Err(e) = store.put(&key, bytes).await {
                     crate::log::warn_limited("fleet put", || {
                         format!("fleet: cannot put {key}: {e}")
+                    });
+                }
+            }
+            Job::Checkpoint(seq, bytes) => {
+                if let Err(e) = store.put(CHECKPOINT_KEY, bytes).await {
+                    crate::log::warn_limited("fleet checkpoint put", || {
+                        format!("fleet: cannot put the fleet checkpoint: {e}; the entries are kept")
+                    });
+                    continue;
+                }
+                let upto = std::mem::replace(&mut stored, seq);
+                if upto == 0 {
+                    continue;
+                }
+                let filter = format!("{}fleet.m.>", store.prefix);
+                if let Err(e) = store
+                    .stream
+                    .purge()
+                    .filter(filter)
+                    .sequence(upto.saturating_add(1))
+                    .await
+                {
+                    crate::log::warn_limited("fleet trim", || {
+                        format!("fleet: cannot delete the entries up to {upto}: {e}")
                     });
                 }
             }
@@ -365,9 +540,9 @@ async fn publisher(store: kv::Store, mut rx: tokio::sync::mpsc::UnboundedReceive
     }
 }
 
-/// Follow every fleet entry of the bucket from the first, in the stream's order, and the
-/// holder's progress.
-async fn follow(store: kv::Store, inbox: Arc<Mutex<Inbox>>) {
+/// Follow every fleet entry of the bucket after stream sequence `after` (a checkpoint's; 0:
+/// from the first), in the stream's order, and the holder's progress.
+async fn follow(store: kv::Store, inbox: Arc<Mutex<Inbox>>, after: u64) {
     use futures_util::StreamExt;
     let progress = {
         let (store, inbox) = (store.clone(), Arc::clone(&inbox));
@@ -388,7 +563,7 @@ async fn follow(store: kv::Store, inbox: Arc<Mutex<Inbox>>) {
     };
     tokio::spawn(progress);
     // A watch made again (after an error) starts from the first entry: each is taken once.
-    let mut last = 0;
+    let mut last = after;
     loop {
         match store.watch_with_history("fleet.m.>").await {
             Ok(mut w) => {

@@ -9,7 +9,8 @@
 //! reported by any generation: a change at or before it is a repeat (a new holder replaying
 //! what its predecessor already sent) and is not counted twice. The bound is the minimum
 //! promise over live partitions; an ended or dropped-out partition does not hold the fleet
-//! back. Status lines (`tessla_fleet_status`) name each partition's changes of state.
+//! back. Every partition ended is the end of the fleet's input only once a close comes (a
+//! restarted partition's replacement goes on). Status lines (`tessla_fleet_status`) name each partition's changes of state.
 
 use crate::processor::fleet_tap::{Change, Drained};
 use serde::{Deserialize, Serialize};
@@ -36,6 +37,10 @@ pub struct Msg {
     /// The partition's input ended (its holder stopped).
     #[serde(default)]
     pub end: bool,
+    /// `true`: the fleet level's holder, stopping, found every partition ended and no
+    /// partition lease held (no replacement coming): the fleet's input ended, step everything.
+    #[serde(default)]
+    pub close: bool,
     /// Robot output events: (time, robot key, fleet input, value).
     #[serde(default)]
     pub changes: Vec<(i64, String, usize, SValue)>,
@@ -56,6 +61,7 @@ impl Msg {
             drop: false,
             promise,
             end,
+            close: false,
             changes: Vec::new(),
             clocks: Vec::new(),
             left: Vec::new(),
@@ -83,7 +89,7 @@ impl Msg {
 }
 
 /// A partition's state at the fleet level.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum State {
     Live,
     Ended,
@@ -118,12 +124,22 @@ pub struct Status {
 }
 
 /// Counters of the partitioned fleet level.
-#[derive(Debug, Default, Clone, PartialEq, Eq)]
+#[derive(Debug, Default, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Counters {
     /// Messages of an older generation than the partition's newest, dropped.
     pub stale: u64,
     /// Changes a new generation sent again (at or before the robot's highest clock), dropped.
     pub repeats: u64,
+}
+
+/// The table's state in a fleet checkpoint.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PartsState {
+    /// (partition, generation, promise, state).
+    parts: Vec<(String, u64, i64, State)>,
+    high: Vec<(String, i64)>,
+    closed: bool,
+    counters: Counters,
 }
 
 /// The fleet level's view of the partitions.
@@ -132,6 +148,8 @@ pub struct Partitions {
     parts: BTreeMap<String, Part>,
     /// Per robot: the highest clock any generation reported.
     high: HashMap<Arc<str>, i64>,
+    /// A close came while every partition had ended (until one is live again).
+    closed: bool,
     pub counters: Counters,
 }
 
@@ -140,6 +158,10 @@ impl Partitions {
     /// status changes it makes.
     pub fn apply(&mut self, m: Msg) -> (Option<Drained>, Vec<Status>) {
         let mut status = Vec::new();
+        if m.close {
+            self.closed = self.all_done();
+            return (None, status);
+        }
         let known = self.parts.get(&m.p).cloned();
         if m.drop {
             if let Some(p) = self.parts.get_mut(&m.p)
@@ -229,10 +251,63 @@ impl Partitions {
             .unwrap_or(i64::MAX)
     }
 
-    /// Every partition known has ended or dropped out (and there is one): the fleet steps
-    /// everything pending, as one process does at the end of its input.
+    /// Every partition known has ended or dropped out (and there is one). Not yet the end of
+    /// the fleet's input: a partition's process that stops may be restarted (its replacement
+    /// takes the lease over and goes on), so the fleet waits for [`Self::closed`].
     pub fn all_done(&self) -> bool {
         !self.parts.is_empty() && self.parts.values().all(|p| p.state != State::Live)
+    }
+
+    /// The fleet's input ended: a close came while every partition had ended, and none is
+    /// live again since. The fleet steps everything pending, as one process does at the end
+    /// of its input.
+    pub fn closed(&self) -> bool {
+        self.closed && self.all_done()
+    }
+
+    /// Every partition known, by name.
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.parts.keys().map(String::as_str)
+    }
+
+    /// The table's state, for a fleet checkpoint.
+    pub fn state(&self) -> PartsState {
+        let mut high: Vec<(String, i64)> =
+            self.high.iter().map(|(k, t)| (k.to_string(), *t)).collect();
+        high.sort();
+        PartsState {
+            parts: self
+                .parts
+                .iter()
+                .map(|(n, p)| (n.clone(), p.generation, p.promise, p.state))
+                .collect(),
+            high,
+            closed: self.closed,
+            counters: self.counters.clone(),
+        }
+    }
+
+    /// The table of a fleet checkpoint.
+    pub fn from_state(s: PartsState) -> Partitions {
+        Partitions {
+            parts: s
+                .parts
+                .into_iter()
+                .map(|(n, generation, promise, state)| {
+                    (
+                        n,
+                        Part {
+                            generation,
+                            promise,
+                            state,
+                        },
+                    )
+                })
+                .collect(),
+            high: s.high.into_iter().map(|(k, t)| (Arc::from(k), t)).collect(),
+            closed: s.closed,
+            counters: s.counters,
+        }
     }
 
     /// The live partitions and their generations.
@@ -277,6 +352,7 @@ mod tests {
             drop: false,
             promise,
             end: false,
+            close: false,
             changes: changes
                 .iter()
                 .map(|(t, k)| {
@@ -313,6 +389,46 @@ mod tests {
         assert_eq!(st.first().map(|s| s.event), Some("dropped"));
         assert!(ps.all_done());
         assert_eq!(ps.bound(), i64::MAX);
+    }
+
+    #[test]
+    fn the_table_goes_on_from_its_state() {
+        let mut ps = Partitions::default();
+        ps.apply(msg("p0", 3, 10, &[(5, "r1")], &[("r1", 6)]));
+        ps.apply(msg("p1", 4, 7, &[], &[]));
+        let json = serde_json::to_string(&ps.state()).unwrap();
+        let mut back = Partitions::from_state(serde_json::from_str(&json).unwrap());
+        assert_eq!(back.bound(), 7);
+        // The robot's highest clock came along: its replayed change is a repeat.
+        let (d, _) = back.apply(msg("p0", 5, 10, &[(6, "r1"), (7, "r1")], &[("r1", 7)]));
+        assert_eq!(d.map(|d| d.changes.len()), Some(1));
+        assert_eq!(back.counters.repeats, 1);
+    }
+
+    #[test]
+    fn every_partition_ended_is_not_the_end_until_a_close() {
+        let mut ps = Partitions::default();
+        ps.apply(msg("p0", 1, 10, &[], &[]));
+        let end = |p: &str, g| Msg {
+            end: true,
+            ..msg(p, g, 10, &[], &[])
+        };
+        let close = Msg {
+            close: true,
+            ..msg("p0", 0, 0, &[], &[])
+        };
+        ps.apply(end("p0", 1));
+        assert!(ps.all_done() && !ps.closed(), "a restart may follow");
+        // A close while a partition is live does nothing.
+        ps.apply(msg("p0", 2, 10, &[], &[]));
+        ps.apply(close.clone());
+        assert!(!ps.closed());
+        ps.apply(end("p0", 2));
+        ps.apply(close);
+        assert!(ps.closed());
+        // A partition back (a new generation) opens the fleet again.
+        ps.apply(msg("p0", 3, 10, &[], &[]));
+        assert!(!ps.closed());
     }
 
     #[test]

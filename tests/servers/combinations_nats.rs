@@ -12,8 +12,12 @@
 //! version keeps, and `y`, which version 2 renames (the rule: robots on a version without `y`
 //! stop feeding it, and the fleet's `y` map keeps their last value). Both partitions take part
 //! in one fleet level (`?lease=`), and a restart that hits the holder of the `fleet` lease hands
-//! it over; the fleet lines of every process together are each written once and end on the
-//! oracle's last line (line for line they differ where a change is late for the fleet level).
+//! it over; the fleet lines of every process together are each written once and equal, line
+//! for line, the oracle's. The schedule's late records may be more than `--fleet-silence`
+//! behind the newest robot, where the fleet's event-time rule depends on the order records
+//! arrive in (docs/fleet.md, "Late and provisional values"), so both sides take them in the same
+//! order: each record's fleet entry is in the stream (its process logged it) before the next
+//! record is written, and the oracle reads one record at a time.
 
 use super::fleet_nats_specs::{BASE_SPEC, Setup, channel_run, nats_server, published, ts};
 use crate::support::child;
@@ -45,19 +49,88 @@ struct Part {
 }
 
 /// Each partition's sync robot steps `ts(k)`; wait until each has answered (it has stepped all
-/// before).
+/// before) and its fleet entry is in the stream.
 fn sync(parts: &mut [Part], k: i64, records: &mut Vec<String>) {
     for p in parts {
         let line = format!("m,robot={} x=1i {}\n", p.sync, ts(k));
         let c = p.child.as_mut().unwrap();
+        let from = c.err.len();
         c.write(&line);
         let want = format!(" {}", ts(k));
         let sync = format!("robot={},", p.sync);
         c.wait_out("the sync record's answer", |l| {
             l.contains(&sync) && l.trim_end().ends_with(&want)
         });
+        wait_entry(c, p.lease, p.sync, from);
         records.push(line);
     }
+}
+
+/// Wait until partition `lease`'s process has followed the fleet entry with `robot`'s clock
+/// (its `D!` line, after `from` stderr lines): the entry has its place in the stream before
+/// the next record is written anywhere.
+fn wait_entry(c: &mut LiveChild, lease: &str, robot: &str, from: usize) {
+    let part = format!(" from {lease} (generation");
+    let clock = format!("(\"{robot}\", ");
+    c.wait_err("the record's fleet entry", from, |l| {
+        l.contains("D! fleet: entry ") && l.contains(&part) && l.contains(&clock)
+    });
+}
+
+/// The oracle: one process, its own state bucket, fed one record at a time (each answered
+/// before the next: one read each, as the partitions' entries are taken one at a time).
+fn oracle(args: &[&str], records: &[String]) -> (String, String) {
+    let mut o = LiveChild::spawn(args);
+    for (i, r) in records.iter().enumerate() {
+        o.write(r);
+        let start = std::time::Instant::now();
+        loop {
+            o.drain_out();
+            if o.out.iter().filter(|l| l.starts_with("tessla,")).count() > i {
+                break;
+            }
+            assert!(
+                start.elapsed() < std::time::Duration::from_secs(60),
+                "the oracle did not answer record {i}: {r}"
+            );
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+    }
+    let (out, err, code) = o.finish();
+    assert_eq!(code, 0, "{err}");
+    (out, err)
+}
+
+/// The time of a line protocol line.
+fn time_of(l: &str) -> i64 {
+    l.rsplit(' ')
+        .next()
+        .and_then(|t| t.trim().parse().ok())
+        .unwrap_or(i64::MIN)
+}
+
+/// Where `got` and `want` (fleet lines) first differ in time order, with the records around
+/// that time.
+fn first_difference(got: &[String], want: &[String], records: &[String]) -> String {
+    let order = |v: &[String]| {
+        let mut v = v.to_vec();
+        v.sort_by_key(|l| time_of(l));
+        v
+    };
+    let (g, w) = (order(got), order(want));
+    let n = g.iter().zip(&w).take_while(|(a, b)| a == b).count();
+    let at = g.get(n).or(w.get(n)).map_or(i64::MAX, |l| time_of(l));
+    let around: Vec<&str> = records
+        .iter()
+        .map(String::as_str)
+        .filter(|r| (time_of(r) - at).abs() <= 300_000_000)
+        .collect();
+    format!(
+        "first difference at line {n} (time {at}):\n  partitions: {:?}\n  one process: {:?}\nrecords within 0.3 s, in input order:\n{}",
+        g.get(n),
+        w.get(n),
+        around.concat()
+    )
 }
 
 /// The fleet level's lines (not its status, stamped with the wall clock), sorted.
@@ -115,6 +188,10 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
                 format!("{state}?lease={lease}"),
                 "--fleet-spec".into(),
                 fleet.into(),
+                // The fleet entries each process follows (`D! fleet: entry ...`): the test
+                // writes a record once the one before has its place in the stream.
+                "--log-level".into(),
+                "debug".into(),
             ]);
             a
         };
@@ -159,7 +236,10 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
                         *l = (*l).max(t);
                         let line = format!("m,robot=r{robot} x={}i {t}\n", rng.random_range(0..50));
                         let p = &mut parts[robot % 2];
-                        p.child.as_mut().unwrap().write(&line);
+                        let c = p.child.as_mut().unwrap();
+                        let from = c.err.len();
+                        c.write(&line);
+                        wait_entry(c, p.lease, &format!("r{robot}"), from);
                         records.push(line);
                     }
                     k += 1;
@@ -203,7 +283,12 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
                     assert_eq!(code, 0, "{err}");
                     fleet_out.extend(out.lines().map(String::from));
                     logs.push_str(&err);
-                    p.child = Some(spawn(p.lease));
+                    // The replacement takes the lease at start (a restart, not the end of the
+                    // partition's input: the fleet level goes on with it).
+                    let mut c = spawn(p.lease);
+                    let held = format!("partition {}: held by this process", p.lease);
+                    c.wait_err("the replacement's lease", 0, |l| l.contains(&held));
+                    p.child = Some(c);
                     restarts += 1;
                 }
             }
@@ -229,8 +314,7 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
         let oracle_state = format!("{url}/oracle_{seed}");
         let mut a = channel_run(&url, &s, &base);
         a.extend(["--state", oracle_state.as_str(), "--fleet-spec", fleet]);
-        let (out, err, code) = child::run_text(&a, &records.concat());
-        assert_eq!(code, 0, "{err}");
+        let (out, _) = oracle(&a, &records);
         let (got, want) = (
             fleet_lines(fleet_out.iter().map(String::as_str)),
             fleet_lines(out.lines()),
@@ -243,18 +327,15 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
         let mut once = got.clone();
         once.dedup();
         assert_eq!(once, got, "seed {seed}: a fleet line written twice");
-        // The fleet level ends on the same maps: the last step's line is the oracle's. (Line
-        // for line they differ where a change is late for the fleet level: see docs/fleet.md,
-        // "What comes next".)
-        let last = |v: &[String]| {
-            v.iter()
-                .max_by_key(|l| l.rsplit(' ').next().and_then(|t| t.parse::<i64>().ok()))
-                .cloned()
-        };
-        assert_eq!(
-            last(&got),
-            last(&want),
-            "seed {seed}: the partitions' last fleet line against one process's\n{got:#?}\n{want:#?}"
+        // Line for line the oracle's.
+        assert!(
+            got == want,
+            "seed {seed}: the partitions' fleet lines against one process's: {}\n{}",
+            first_difference(&got, &want, &records),
+            logs.lines()
+                .filter(|l| !l.starts_with("D! "))
+                .collect::<Vec<_>>()
+                .join("\n")
         );
         fleet_total += got.len();
         let (got, want) = (
@@ -268,7 +349,7 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
         total += want.values().map(Vec::len).sum::<usize>();
     }
     eprintln!(
-        "combinations on real processes: {total} lines equal to one process's; {} rollouts, {restarts} restarts; {fleet_total} fleet lines written once, ending as one process's, the fleet level held {fleet_holders} times in 3 seeds",
+        "combinations on real processes: {total} lines equal to one process's; {} rollouts, {restarts} restarts; {fleet_total} fleet lines written once, equal to one process's, the fleet level held {fleet_holders} times in 3 seeds",
         revision - 1
     );
     // At least one restart hit the fleet level's holder and another process took over.

@@ -312,3 +312,141 @@ fn a_partition_without_a_holder_drops_out_and_is_named() {
         "{err}"
     );
 }
+
+/// The keys `fleet.m.*` (the fleet's entries) in `bucket`, and whether `fleet.checkpoint` is
+/// there.
+fn fleet_keys(port: u16, bucket: &str) -> (Vec<String>, bool) {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    rt.block_on(async {
+        use futures_util::StreamExt;
+        let client = async_nats::connect(format!("127.0.0.1:{port}"))
+            .await
+            .unwrap();
+        let kv = async_nats::jetstream::new(client)
+            .get_key_value(bucket)
+            .await
+            .unwrap();
+        let keys: Vec<String> = kv
+            .keys()
+            .await
+            .unwrap()
+            .filter_map(|k| async { k.ok() })
+            .collect()
+            .await;
+        let checkpoint = keys.iter().any(|k| k == "fleet.checkpoint");
+        let mut entries: Vec<String> = keys
+            .into_iter()
+            .filter(|k| k.starts_with("fleet.m."))
+            .collect();
+        entries.sort();
+        (entries, checkpoint)
+    })
+}
+
+/// Bounded entries: the holder of the fleet level checkpoints it (`fleet.checkpoint`) every
+/// 5 s and deletes the entries the checkpoint before covered, so over a long run (heartbeats
+/// five a second per partition) the entries stay few; processes started after the trimming
+/// (both partitions' next processes) start from the checkpoint, and the fleet lines, the first
+/// holder's then the new one's, equal one process's over the same records.
+#[test]
+fn fleet_entries_stay_bounded_and_a_later_process_starts_from_the_checkpoint() {
+    let server = nats_server("");
+    let bucket = "fleet_checkpoint";
+    let state = format!("nats://127.0.0.1:{}/{bucket}", server.port);
+    let base = base();
+    let (half, all) = (STEPS / 2, 0..STEPS);
+    let (one, err, code) = run_all(
+        &example_args()
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+        &records(base, None, all.clone()),
+    );
+    assert_eq!(code, 0, "{err}");
+    let want = fleet_lines(&one);
+
+    let mut a = spawn(&state, "p0");
+    a.wait_err("fleet held", 0, |l| {
+        l.contains("partition fleet: held by this process")
+    });
+    let mut b = spawn(&state, "p1");
+    a.wait_out("p1 joined", |l| {
+        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
+    });
+    a.write(&records(base, Some(0), 0..half));
+    b.write(&records(base, Some(1), 0..half));
+    let near_pause = base + (half - 5) * 200_000_000;
+    a.wait_out("a fleet line near the pause", |l| {
+        l.starts_with("tessla_fleet ")
+            && l.rsplit(' ')
+                .next()
+                .and_then(|t| t.trim().parse::<i64>().ok())
+                .is_some_and(|t| t >= near_pause)
+    });
+    // The first half's entries are deleted once two checkpoints have passed.
+    let (first, _) = fleet_keys(server.port, bucket);
+    assert!(!first.is_empty());
+    let start = std::time::Instant::now();
+    let mut most = 0;
+    let mut trimmed = false;
+    // A long idle run: heartbeats only (two partitions, five a second: about 250 entries in
+    // 25 s without trimming).
+    while start.elapsed() < std::time::Duration::from_secs(25) {
+        std::thread::sleep(std::time::Duration::from_millis(500));
+        let (keys, checkpoint) = fleet_keys(server.port, bucket);
+        if !trimmed && checkpoint && !keys.iter().any(|k| first.contains(k)) {
+            trimmed = true;
+        }
+        if trimmed {
+            most = most.max(keys.len());
+        }
+    }
+    assert!(trimmed, "the first half's entries were never deleted");
+    // Two checkpoint intervals of heartbeats (10 s, 100 entries) and the pause's data.
+    assert!(most <= 160, "{most} fleet entries kept");
+    eprintln!(
+        "fleet checkpoint: {} entries before trimming, at most {most} kept after it",
+        first.len()
+    );
+
+    // p1's next process and a standby for p0, both started after the trimming.
+    let (b_out, b_err, code) = b.finish();
+    assert_eq!(code, 0, "{b_err}");
+    assert!(fleet_lines(&b_out).is_empty(), "{b_out}");
+    let mut b2 = spawn(&state, "p1");
+    let mut c = spawn(&state, "p0");
+    for p in [&mut b2, &mut c] {
+        p.wait_err("the checkpoint", 0, |l| {
+            l.contains("fleet: starting from the fleet checkpoint at stream sequence")
+        });
+    }
+    b2.wait_err("p1 held", 0, |l| {
+        l.contains("partition p1: held by this process")
+    });
+    c.wait_err("p0 standby", 0, |l| {
+        l.contains("partition p0: held by another")
+    });
+    a.signal("TERM");
+    let (a_out, a_err, _) = a.finish();
+    let new = wait_any_err(&mut [&mut c, &mut b2], "lease.vfleet taken by");
+    c.wait_err("p0 taken over", 0, |l| l.contains("holding partition p0"));
+    c.write(&records(base, Some(0), half..STEPS));
+    b2.write(&records(base, Some(1), half..STEPS));
+    let (holder, other) = if new == 0 { (c, b2) } else { (b2, c) };
+    let (other_out, other_err, code) = other.finish();
+    assert_eq!(code, 0, "{other_err}");
+    assert!(fleet_lines(&other_out).is_empty(), "{other_out}");
+    let (holder_out, holder_err, code) = holder.finish();
+    assert_eq!(code, 0, "{holder_err}");
+    let got: Vec<String> = fleet_lines(&a_out)
+        .into_iter()
+        .chain(fleet_lines(&holder_out))
+        .collect();
+    assert_eq!(
+        got, want,
+        "first holder:\n{a_out}\n{a_err}\nnew holder:\n{holder_out}\n{holder_err}"
+    );
+}
