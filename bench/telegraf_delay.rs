@@ -26,13 +26,9 @@
 //! P3 then judge an empty scan), to see what the lidar costs Telegraf. Prints one line: `robots=.. sent=.. answered=.. lost=..
 //! p50_ms=.. p90_ms=.. p99_ms=.. max_ms=..` (the first `--warmup` seconds not counted).
 
-// The tests' helpers, of which this tool uses a part: the servers from the dev-only crate
-// test-support; the real Telegraf's helpers by path (they run the binary, named as `BIN` below,
-// which the root crate's tests take from `CARGO_BIN_EXE_*`).
-#[path = "../tests/support/real_telegraf.rs"]
-#[allow(dead_code)]
-mod real_telegraf;
-use test_support::servers;
+// The tests' helpers, of which this tool uses a part, from the dev-only crate test-support:
+// the servers and the real Telegraf (given the binary it runs, `BIN` below).
+use test_support::{real_telegraf, servers};
 
 use rumqttc::{Client, Event, MqttOptions, Packet, QoS};
 use std::collections::VecDeque;
@@ -207,8 +203,8 @@ fn run(args: &Args) -> Result<(), String> {
         Some(path) => std::fs::read_to_string(path).map_err(|e| format!("{path}: {e}"))?,
         None => real_telegraf::shipped(conf_path),
     };
-    let rewrite =
-        real_telegraf::Rewrite::robot(broker.port, Some(&influx.url(""))).state_in(state.path());
+    let rewrite = real_telegraf::Rewrite::robot(BIN, broker.port, Some(&influx.url("")))
+        .state_in(state.path());
     let mut conf = rewrite.apply(&text);
     if args.clone {
         conf = real_telegraf::clone_wiring(&conf)?;

@@ -103,13 +103,14 @@ const LINEPROTO_LAYERS: Layers = &[
 ];
 
 /// test-support (dev-only): the NATS stand-in on the cluster on the servers; the TeSSLa suite's
-/// cases beside them; the workspace's folders under all.
+/// cases and the real Telegraf beside them; the workspace's folders and the benchmarks' records
+/// under all.
 const TEST_SUPPORT_LAYERS: Layers = &[
     &["lib"],
-    &["nats_standin", "tessla_suite"],
+    &["nats_standin", "tessla_suite", "real_telegraf"],
     &["nats_cluster"],
     &["servers"],
-    &["paths"],
+    &["paths", "workload"],
 ];
 
 struct Crate {

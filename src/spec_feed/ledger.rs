@@ -8,6 +8,7 @@
 //! matching) that is still undecided when a later one is decided is passed over: nothing could
 //! put it in force here.
 
+use super::error::RolloutError;
 use super::{Arrival, Decision};
 use std::collections::BTreeMap;
 
@@ -23,7 +24,7 @@ pub enum Step {
 #[derive(Default)]
 struct Entry {
     arrival: Option<Arrival>,
-    decision: Option<Result<Decision, String>>,
+    decision: Option<Result<Decision, RolloutError>>,
 }
 
 /// The rollouts and decisions not acted on yet, and how far the process has acted.
@@ -38,7 +39,7 @@ pub struct Ledger {
 
 impl Ledger {
     /// A decision arrived. The first one for a revision counts (the channel creates it once).
-    pub fn decided(&mut self, revision: u64, decision: Result<Decision, String>) {
+    pub fn decided(&mut self, revision: u64, decision: Result<Decision, RolloutError>) {
         // Acted on, or passed over: a decision cannot change it now.
         if revision <= self.done {
             return;
@@ -145,6 +146,11 @@ mod tests {
     use crate::processor::versions::Selector;
     use crate::spec_feed::Rollout;
     use crate::spec_feed::bundle::Bundle;
+    use crate::spec_feed::sign::RecordError;
+
+    fn unsigned() -> RolloutError {
+        RecordError::Unsigned { what: "rollout" }.into()
+    }
 
     fn arrival(revision: u64, ok: bool) -> Arrival {
         Arrival {
@@ -163,12 +169,12 @@ mod tests {
                     links: Vec::new(),
                 })
             } else {
-                Err("it is unsigned".into())
+                Err(unsigned())
             },
         }
     }
 
-    fn decision(revision: u64, commit: bool) -> Result<Decision, String> {
+    fn decision(revision: u64, commit: bool) -> Result<Decision, RolloutError> {
         Ok(Decision {
             revision,
             id: format!("v{revision}"),
@@ -254,7 +260,7 @@ mod tests {
         l.proposed(arrival(2, true));
         l.decided(2, decision(3, true));
         l.proposed(arrival(3, true));
-        l.decided(3, Err("it is unsigned".into()));
+        l.decided(3, Err(unsigned()));
         let steps = names(&mut l);
         assert_eq!(steps.len(), 2, "{steps:?}");
         assert!(

@@ -13,6 +13,7 @@
 
 pub mod bundle;
 pub mod decide;
+pub mod error;
 pub mod ledger;
 pub mod nats;
 pub mod reload;
@@ -23,6 +24,7 @@ pub mod watch;
 use crate::processor::Processor;
 use crate::processor::versions::Selector;
 use bundle::Bundle;
+use error::RolloutError;
 use ledger::{Ledger, Step};
 use reload::{Reloaded, SpecSource};
 use serde::{Deserialize, Serialize};
@@ -162,7 +164,7 @@ pub struct Decision {
 #[derive(Debug, Clone)]
 pub struct Arrival {
     pub rollout: Rollout,
-    pub bundle: Result<Bundle, String>,
+    pub bundle: Result<Bundle, RolloutError>,
 }
 
 /// What a channel delivers: a rollout (a proposal), or the fleet's decision on one (`Err`: a
@@ -172,7 +174,7 @@ pub enum Event {
     Proposal(Arrival),
     Decision {
         revision: u64,
-        decision: Result<Decision, String>,
+        decision: Result<Decision, RolloutError>,
     },
 }
 
@@ -365,7 +367,7 @@ impl Updates {
         let checked = self.check(a, procs, true);
         let (accepted, reason) = match &checked {
             Ok(_) => (true, String::new()),
-            Err(e) => (false, e.clone()),
+            Err(e) => (false, e.to_string()),
         };
         if accepted {
             log_info!(
@@ -395,13 +397,12 @@ impl Updates {
         a: &Arrival,
         procs: &[&mut Processor],
         data: bool,
-    ) -> Result<Arc<tessla_engine::Program>, String> {
+    ) -> Result<Arc<tessla_engine::Program>, RolloutError> {
         let program = self.program_of(a, procs)?;
         let id = Self::version_id(&a.rollout, procs);
         let samples = if data { samples_of(procs) } else { Vec::new() };
         if let Some(p) = procs.first() {
-            p.check_version(&id, &program, &a.rollout.selector, &samples)
-                .map_err(|e| e.to_string())?;
+            p.check_version(&id, &program, &a.rollout.selector, &samples)?;
         }
         Ok(program)
     }
@@ -424,7 +425,7 @@ impl Updates {
         };
         let program = match self.check(a, procs, false) {
             Ok(p) => p,
-            Err(e) => return cannot(e),
+            Err(e) => return cannot(e.to_string()),
         };
         let id = Self::version_id(r, procs);
         let mut reset = Vec::new();
@@ -490,7 +491,7 @@ impl Updates {
         &mut self,
         a: &Arrival,
         procs: &[&mut Processor],
-    ) -> Result<Arc<tessla_engine::Program>, String> {
+    ) -> Result<Arc<tessla_engine::Program>, RolloutError> {
         let r = &a.rollout;
         // A rollout the channel refused (unsigned, signed by a key not trusted, its bundle not
         // matching its digest) is refused whatever version it names: the base, or one held.
@@ -499,23 +500,22 @@ impl Updates {
             return procs
                 .first()
                 .map(|p| Arc::clone(&p.versions().base().program))
-                .ok_or_else(|| "no processor".to_string());
+                .ok_or(RolloutError::NoProcessor);
         }
         if let Some(p) = self.compiled.get(&r.id) {
             return Ok(Arc::clone(p));
         }
         if bundle.id() != r.id {
-            return Err(format!(
-                "its bundle is version {}, not {} as the rollout says",
-                bundle.id(),
-                r.id
-            ));
+            return Err(RolloutError::OtherVersion {
+                bundle: bundle.id(),
+                said: r.id.clone(),
+            });
         }
         let loaded = bundle
             .load(&self.source.options)
-            .map_err(|e| format!("it does not check here: {}", first_lines(&e.render())))?;
+            .map_err(|e| RolloutError::DoesNotCheck(first_lines(&e.render())))?;
         if loaded.program.outputs.is_empty() {
-            return Err("it has no outputs, so it would check nothing and write nothing".into());
+            return Err(RolloutError::NoOutputs);
         }
         self.compiled
             .insert(r.id.clone(), Arc::clone(&loaded.program));

@@ -141,6 +141,36 @@ pub enum KeyError {
         key: String,
         why: nkeys::error::Error,
     },
+    /// A key given with `--spec-trust` that is no public key.
+    #[error("--spec-trust: {0}")]
+    Given(Box<KeyError>),
+    #[error("--spec-trust-file {path}: {why}")]
+    TrustFile { path: String, why: std::io::Error },
+    /// A line of the `--spec-trust-file` that is no public key.
+    #[error("{path}:{line}: {why}")]
+    TrustLine {
+        path: String,
+        line: usize,
+        why: Box<KeyError>,
+    },
+    /// Neither `--spec-trust` nor `--spec-trust-file` gave a key.
+    #[error(
+        "a spec channel needs the operator's public key: --spec-trust KEY (or --spec-trust-file \
+         FILE); `tessla-telegraf spec keygen` makes a key pair"
+    )]
+    NoTrustedKey,
+}
+
+/// Why a record cannot be signed (`what`: the kind's [`Signable::FIELD`]).
+#[derive(Debug, thiserror::Error)]
+pub enum SealError {
+    #[error("{what}: {why}")]
+    Json {
+        what: &'static str,
+        why: serde_json::Error,
+    },
+    #[error("cannot sign with this seed: {0}")]
+    Sign(nkeys::error::Error),
 }
 
 /// The signing key from its seed (`S…`, as `spec keygen` or `nk -gen` writes it).
@@ -188,30 +218,30 @@ pub fn check_public_key(key: &str) -> Result<String, KeyError> {
 /// The keys a process trusts: `--spec-trust KEY[,KEY]` and the lines of `--spec-trust-file`
 /// (one key a line; blank lines and `#` comments ignored), each checked. None at all is an
 /// error: a process with a spec channel must know whom to trust.
-pub fn trusted_keys(given: &[String], file: Option<&Path>) -> Result<Vec<String>, String> {
+pub fn trusted_keys(given: &[String], file: Option<&Path>) -> Result<Vec<String>, KeyError> {
     let mut keys = Vec::new();
     for k in given.iter().map(|k| k.trim()).filter(|k| !k.is_empty()) {
-        keys.push(check_public_key(k).map_err(|e| format!("--spec-trust: {e}"))?);
+        keys.push(check_public_key(k).map_err(|e| KeyError::Given(Box::new(e)))?);
     }
     if let Some(path) = file {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("--spec-trust-file {}: {e}", path.display()))?;
+        let text = std::fs::read_to_string(path).map_err(|why| KeyError::TrustFile {
+            path: path.display().to_string(),
+            why,
+        })?;
         for (n, line) in text.lines().enumerate() {
             let line = line.split('#').next().unwrap_or("").trim();
             if line.is_empty() {
                 continue;
             }
-            keys.push(
-                check_public_key(line).map_err(|e| format!("{}:{}: {e}", path.display(), n + 1))?,
-            );
+            keys.push(check_public_key(line).map_err(|e| KeyError::TrustLine {
+                path: path.display().to_string(),
+                line: n + 1,
+                why: Box::new(e),
+            })?);
         }
     }
     if keys.is_empty() {
-        return Err(
-            "a spec channel needs the operator's public key: --spec-trust KEY (or --spec-trust-file \
-             FILE); `tessla-telegraf spec keygen` makes a key pair"
-                .into(),
-        );
+        return Err(KeyError::NoTrustedKey);
     }
     keys.sort();
     keys.dedup();
@@ -219,24 +249,73 @@ pub fn trusted_keys(given: &[String], file: Option<&Path>) -> Result<Vec<String>
 }
 
 /// The record of `body` (a rollout or a decision), signed with `key`.
-pub fn seal<T: Signable>(body: &T, key: &KeyPair) -> Result<Vec<u8>, String> {
-    let value = serde_json::to_value(body).map_err(|e| format!("{}: {e}", T::FIELD))?;
+pub fn seal<T: Signable>(body: &T, key: &KeyPair) -> Result<Vec<u8>, SealError> {
+    let json = |why| SealError::Json {
+        what: T::FIELD,
+        why,
+    };
+    let value = serde_json::to_value(body).map_err(json)?;
     let signature = key
         .sign(&message(T::DOMAIN, &value))
-        .map_err(|e| format!("cannot sign with this seed: {e}"))?;
+        .map_err(SealError::Sign)?;
     let mut record = Map::new();
     record.insert("format".into(), Value::String(T::FORMAT.into()));
     record.insert(T::FIELD.into(), value);
     record.insert("signer".into(), Value::String(key.public_key()));
     record.insert("signature".into(), Value::String(hex(&signature)));
-    serde_json::to_vec(&Value::Object(record)).map_err(|e| format!("{}: {e}", T::FIELD))
+    serde_json::to_vec(&Value::Object(record)).map_err(json)
+}
+
+/// Why a signed record (a rollout, a decision) cannot be used: it cannot be read, or its
+/// signature is missing, by a key not trusted, or does not verify. `what` is the kind's
+/// [`Signable::FIELD`].
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RecordError {
+    #[error("it is not a {what} record (not JSON: {why})")]
+    NotJson { what: &'static str, why: String },
+    #[error("it is not a {what} record (not a JSON object)")]
+    NotAnObject { what: &'static str },
+    #[error(
+        "its format is `{found}`, not `{expected}` (written by another version of tessla-telegraf?)"
+    )]
+    OtherFormat {
+        found: String,
+        expected: &'static str,
+    },
+    #[error("it is not a {what} record (no `format`: {expected})")]
+    NoFormat {
+        what: &'static str,
+        expected: &'static str,
+    },
+    #[error("it is not a {what} record (no `{what}`)")]
+    NoBody { what: &'static str },
+    #[error("its {what} cannot be read: {why}")]
+    BadBody { what: &'static str, why: String },
+    #[error("it cannot be read, so its signature cannot be checked")]
+    Unreadable,
+    #[error(
+        "it is unsigned: only {what}s signed with the operator's key count (publish with \
+         `tessla-telegraf spec publish`, which signs)"
+    )]
+    Unsigned { what: &'static str },
+    #[error(
+        "it is signed by key {signer}, which this process does not trust (--spec-trust): \
+         only the operator's key may publish"
+    )]
+    Untrusted { signer: String },
+    /// `why`: not a public key, the signature not hex, or the wrong signature.
+    #[error(
+        "its signature does not verify with key {signer} ({why}): the record was changed \
+         after it was signed"
+    )]
+    DoesNotVerify { signer: String, why: &'static str },
 }
 
 /// A record read back, before its signature is checked.
 #[derive(Debug, Clone)]
 pub struct Record<T: Signable = Rollout> {
     /// The rollout (or decision) it holds (`Err`: why there is none).
-    pub body: Result<T, String>,
+    pub body: Result<T, RecordError>,
     /// The public key it names as its signer, if any.
     pub signer: Option<String>,
     value: Option<Value>,
@@ -247,7 +326,7 @@ impl<T: Signable> Record<T> {
     /// Read a record (no signature checked: see [`Record::verify`]).
     pub fn parse(bytes: &[u8]) -> Record<T> {
         let what = T::FIELD;
-        let none = |why: String| Record {
+        let none = |why: RecordError| Record {
             body: Err(why),
             signer: None,
             value: None,
@@ -255,33 +334,40 @@ impl<T: Signable> Record<T> {
         };
         let record: Value = match serde_json::from_slice(bytes) {
             Ok(v) => v,
-            Err(e) => return none(format!("it is not a {what} record (not JSON: {e})")),
+            Err(e) => {
+                return none(RecordError::NotJson {
+                    what,
+                    why: e.to_string(),
+                });
+            }
         };
         let Some(obj) = record.as_object() else {
-            return none(format!("it is not a {what} record (not a JSON object)"));
+            return none(RecordError::NotAnObject { what });
         };
         match obj.get("format").and_then(Value::as_str) {
             Some(f) if f == T::FORMAT => {}
             Some(other) => {
-                return none(format!(
-                    "its format is `{other}`, not `{}` (written by another version of tessla-telegraf?)",
-                    T::FORMAT
-                ));
+                return none(RecordError::OtherFormat {
+                    found: other.to_string(),
+                    expected: T::FORMAT,
+                });
             }
             None => {
-                return none(format!(
-                    "it is not a {what} record (no `format`: {})",
-                    T::FORMAT
-                ));
+                return none(RecordError::NoFormat {
+                    what,
+                    expected: T::FORMAT,
+                });
             }
         }
         let Some(value) = obj.get(what).cloned() else {
-            return none(format!("it is not a {what} record (no `{what}`)"));
+            return none(RecordError::NoBody { what });
         };
         let text = |k: &str| obj.get(k).and_then(Value::as_str).map(str::to_string);
         Record {
-            body: serde_json::from_value::<T>(value.clone())
-                .map_err(|e| format!("its {what} cannot be read: {e}")),
+            body: serde_json::from_value::<T>(value.clone()).map_err(|e| RecordError::BadBody {
+                what,
+                why: e.to_string(),
+            }),
             signer: text("signer"),
             signature: text("signature"),
             value: Some(value),
@@ -290,28 +376,21 @@ impl<T: Signable> Record<T> {
 
     /// Whether the record is signed by one of `trusted` and unchanged since: `Ok`, or which of
     /// unsigned, signed by a key not trusted, or a signature that does not verify.
-    pub fn verify(&self, trusted: &[String]) -> Result<(), String> {
+    pub fn verify(&self, trusted: &[String]) -> Result<(), RecordError> {
         let Some(value) = &self.value else {
-            return Err("it cannot be read, so its signature cannot be checked".into());
+            return Err(RecordError::Unreadable);
         };
         let (Some(signer), Some(signature)) = (&self.signer, &self.signature) else {
-            return Err(format!(
-                "it is unsigned: only {}s signed with the operator's key count (publish with \
-                 `tessla-telegraf spec publish`, which signs)",
-                T::FIELD
-            ));
+            return Err(RecordError::Unsigned { what: T::FIELD });
         };
         if !trusted.iter().any(|t| t == signer) {
-            return Err(format!(
-                "it is signed by key {signer}, which this process does not trust (--spec-trust): \
-                 only the operator's key may publish"
-            ));
+            return Err(RecordError::Untrusted {
+                signer: signer.clone(),
+            });
         }
-        let bad = |why: &str| {
-            format!(
-                "its signature does not verify with key {signer} ({why}): the record was changed \
-                 after it was signed"
-            )
+        let bad = |why: &'static str| RecordError::DoesNotVerify {
+            signer: signer.clone(),
+            why,
         };
         let key = KeyPair::from_public_key(signer).map_err(|_| bad("not a public key"))?;
         let signature = unhex(signature).ok_or_else(|| bad("the signature is not hex"))?;
@@ -384,7 +463,7 @@ mod tests {
         assert_eq!(rec.verify(&[key.public_key()]), Ok(()));
         // Another key trusted: refused as untrusted, naming the signer.
         let other = KeyPair::new_operator();
-        let e = rec.verify(&[other.public_key()]).unwrap_err();
+        let e = rec.verify(&[other.public_key()]).unwrap_err().to_string();
         assert!(
             e.contains("does not trust") && e.contains(&key.public_key()),
             "{e}"
@@ -413,7 +492,8 @@ mod tests {
             v["rollout"][field] = new;
             let e = Record::<Rollout>::parse(&serde_json::to_vec(&v).unwrap())
                 .verify(&trusted)
-                .unwrap_err();
+                .unwrap_err()
+                .to_string();
             assert!(e.contains("does not verify"), "{field}: {e}");
         }
         // A field added to the rollout is covered too.
@@ -429,20 +509,23 @@ mod tests {
         v.as_object_mut().unwrap().remove("signature");
         let e = Record::<Rollout>::parse(&serde_json::to_vec(&v).unwrap())
             .verify(&trusted)
-            .unwrap_err();
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("unsigned"), "{e}");
         // Signed by another key that names itself: untrusted.
         let foreign = KeyPair::new_operator();
         let e = Record::<Rollout>::parse(&seal(&rollout(), &foreign).unwrap())
             .verify(&trusted)
-            .unwrap_err();
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("does not trust"), "{e}");
         // The trusted key named, but the signature made by another: does not verify.
         let mut v: Value = serde_json::from_slice(&seal(&rollout(), &foreign).unwrap()).unwrap();
         v["signer"] = Value::String(key.public_key());
         let e = Record::<Rollout>::parse(&serde_json::to_vec(&v).unwrap())
             .verify(&trusted)
-            .unwrap_err();
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("does not verify"), "{e}");
         // Not a record at all.
         let rec = Record::<Rollout>::parse(b"{\"revision\":1}");
@@ -469,7 +552,7 @@ mod tests {
         assert_eq!(keys.len(), 2);
         assert!(trusted_keys(&[], None).is_err());
         std::fs::write(&f, "garbage\n").unwrap();
-        let e = trusted_keys(&[], Some(&f)).unwrap_err();
+        let e = trusted_keys(&[], Some(&f)).unwrap_err().to_string();
         assert!(e.contains(":1:"), "{e}");
     }
 }

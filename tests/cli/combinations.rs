@@ -53,7 +53,9 @@ use tessla_telegraf::processor::versions::Selector;
 use tessla_telegraf::processor::{LateMode, Options, Processor};
 use tessla_telegraf::spec_feed::bundle::{Bundle, BundleFile, Link};
 use tessla_telegraf::spec_feed::decide::{self, Tally};
+use tessla_telegraf::spec_feed::error::RolloutError;
 use tessla_telegraf::spec_feed::reload::SpecSource;
+use tessla_telegraf::spec_feed::sign::RecordError;
 use tessla_telegraf::spec_feed::{
     Arrival, Channel, Decision, Event, Outcome, Phase, Rollout, Updates, Vote,
 };
@@ -491,7 +493,7 @@ struct Run {
     repeats: usize,
     problems: Vec<String>,
     /// Per revision: the decision.
-    decisions: Vec<(u64, Result<Decision, String>)>,
+    decisions: Vec<(u64, Result<Decision, RolloutError>)>,
     outcomes: Vec<Vec<Outcome>>,
     /// Every version id the schedule published: its place in [`POOL`] (`None`: the
     /// incompatible one, whose only output is `c`).
@@ -535,9 +537,17 @@ fn options(s: &Schedule) -> Options {
     o
 }
 
+/// Why a rollout or decision signed with a key not trusted is refused.
+fn foreign() -> RolloutError {
+    RecordError::Untrusted {
+        signer: "OFOREIGN".into(),
+    }
+    .into()
+}
+
 /// Run `s` on the fleet it names (`oracle`: one process, one thread, no failure, taking the
 /// decisions in `given`).
-fn run(s: &Schedule, dir: &Path, oracle: Option<&[(u64, Result<Decision, String>)]>) -> Run {
+fn run(s: &Schedule, dir: &Path, oracle: Option<&[(u64, Result<Decision, RolloutError>)]>) -> Run {
     let spec_path = dir.join("base.tessla");
     std::fs::write(&spec_path, spec_text(&POOL[0])).unwrap();
     let world = World {
@@ -664,9 +674,7 @@ fn run(s: &Schedule, dir: &Path, oracle: Option<&[(u64, Result<Decision, String>
                 let arrival = Arrival {
                     rollout: rollout.clone(),
                     bundle: match trust {
-                        Trust::Untrusted => Err(
-                            "it is signed by key OFOREIGN, which this process does not trust (--spec-trust)".into(),
-                        ),
+                        Trust::Untrusted => Err(foreign()),
                         _ => Ok(b),
                     },
                 };
@@ -676,7 +684,7 @@ fn run(s: &Schedule, dir: &Path, oracle: Option<&[(u64, Result<Decision, String>
                         .iter()
                         .find(|(r, _)| *r == revision)
                         .map(|(_, d)| d.clone())
-                        .unwrap_or_else(|| Err("no decision".into())),
+                        .unwrap_or_else(|| Err(RecordError::NoBody { what: "decision" }.into())),
                     None => {
                         // Every live process votes; the rule decides.
                         let mut votes = Vec::new();
@@ -695,9 +703,7 @@ fn run(s: &Schedule, dir: &Path, oracle: Option<&[(u64, Result<Decision, String>
                         }
                         let d = decide::decide(&rollout, &Tally { votes }, 0);
                         match trust {
-                            Trust::ForgedDecision => Err(
-                                "it is signed by key OFOREIGN, which this process does not trust (--spec-trust)".into(),
-                            ),
+                            Trust::ForgedDecision => Err(foreign()),
                             _ => Ok(d),
                         }
                     }
@@ -813,7 +819,7 @@ fn run(s: &Schedule, dir: &Path, oracle: Option<&[(u64, Result<Decision, String>
 /// decided before it started, never found a committed version unrunnable.
 fn outcomes_check(
     p: &Process,
-    decisions: &[(u64, Result<Decision, String>)],
+    decisions: &[(u64, Result<Decision, RolloutError>)],
     problems: &mut Vec<String>,
 ) {
     for o in p.stand.reports.lock().unwrap().iter() {

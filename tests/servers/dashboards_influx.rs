@@ -258,7 +258,7 @@ fn robot_dashboard_on(
         return;
     };
     let state = tempfile::tempdir().unwrap();
-    let conf = Rewrite::robot(broker.port, Some(&influx.url("")))
+    let conf = Rewrite::robot(crate::support::BIN, broker.port, Some(&influx.url("")))
         .state_in(state.path())
         .apply(&real_telegraf::shipped(conf_path));
     // The dashboard's time range: from the start to a minute past the end (Telegraf's time).

@@ -644,8 +644,7 @@ fn tampered_unsigned_and_foreign_rollouts_are_refused_saying_why() {
                 a.rollout.label.clone(),
                 a.bundle
                     .as_ref()
-                    .map(|_| String::new())
-                    .unwrap_or_else(Clone::clone),
+                    .map_or_else(ToString::to_string, |_| String::new()),
             )
         })
         .collect();
@@ -679,7 +678,7 @@ fn tampered_unsigned_and_foreign_rollouts_are_refused_saying_why() {
         both[2]
             .bundle
             .as_ref()
-            .is_err_and(|e| e.contains("does not hash")),
+            .is_err_and(|e| e.to_string().contains("does not hash")),
         "{:?}",
         both[2].bundle
     );
@@ -703,7 +702,7 @@ fn tampered_unsigned_and_foreign_rollouts_are_refused_saying_why() {
         got[0]
             .bundle
             .as_ref()
-            .is_err_and(|e| e.contains("its rollout cannot be read")),
+            .is_err_and(|e| e.to_string().contains("its rollout cannot be read")),
         "{:?}",
         got[0].bundle
     );

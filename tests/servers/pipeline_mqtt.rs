@@ -69,7 +69,7 @@ fn replayed_run_comes_back_as_the_same_actions() {
         // - the recording's host and topic;
         // - no InfluxDB (the table left out: this checks the MQTT round trip).
         let conf = without_table(
-            &Rewrite::robot(broker.port, None)
+            &Rewrite::robot(crate::support::BIN, broker.port, None)
                 .state_in(state.path())
                 .robots_time()
                 .replace("[agent]\n", format!("[agent]\n  hostname = {host:?}\n"))

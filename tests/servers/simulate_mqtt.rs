@@ -113,7 +113,7 @@ fn simulated_robot_drives_the_pipeline_through_mosquitto() {
         // - the simulated robot's host, `sim` (the agent's `hostname`);
         // - no InfluxDB (the table left out: this checks the MQTT round trip).
         let conf = without_table(
-            &Rewrite::robot(broker.port, None)
+            &Rewrite::robot(crate::support::BIN, broker.port, None)
                 .state_in(state.path())
                 .robots_time()
                 .replace("[agent]\n", "[agent]\n  hostname = \"sim\"\n")

@@ -124,7 +124,7 @@ fn run(version: &str, bin: &Path) -> Option<(usize, usize, String, String)> {
     let mut broker = PersistentBroker::start()?;
     let influx = servers::Influxd::start()?;
     let state = tempfile::tempdir().unwrap();
-    let conf = Rewrite::robot(broker.port, Some(&influx.url("")))
+    let conf = Rewrite::robot(crate::support::BIN, broker.port, Some(&influx.url("")))
         .state_in(state.path())
         .apply(&real_telegraf::shipped("telegraf/telegraf.conf"));
     let telegraf = Telegraf::start(version, bin, &conf, &[]);

@@ -129,7 +129,8 @@ fn robot_conf_matches_offline(
         };
         let state = tempfile::tempdir().unwrap();
         let text = real_telegraf::shipped(conf_path);
-        let rewrite = Rewrite::robot(broker.port, Some(&influx.url(""))).state_in(state.path());
+        let rewrite = Rewrite::robot(crate::support::BIN, broker.port, Some(&influx.url("")))
+            .state_in(state.path());
         let conf = rewrite.apply(&text);
         let inboxes: Vec<_> = topics
             .iter()
@@ -396,7 +397,7 @@ fn first_spec_example_conf_under_real_telegraf_answers_each_robot_and_fills_infl
             return;
         };
         let state = tempfile::tempdir().unwrap();
-        let conf = Rewrite::robot(broker.port, Some(&influx.url("")))
+        let conf = Rewrite::robot(crate::support::BIN, broker.port, Some(&influx.url("")))
             .replace(
                 "/usr/share/tessla-telegraf/first-spec/",
                 format!("{}/", root.join("examples/first-spec").display()),
@@ -534,7 +535,7 @@ fn main_conf_with_the_robots_time_rounds_as_telegraf_and_drops_a_redelivery() {
         };
         let state = tempfile::tempdir().unwrap();
         let text = real_telegraf::shipped("telegraf/telegraf.conf");
-        let rewrite = Rewrite::robot(broker.port, Some(&influx.url("")))
+        let rewrite = Rewrite::robot(crate::support::BIN, broker.port, Some(&influx.url("")))
             // The variant the conf's comment describes.
             .robots_time()
             .state_in(state.path());
@@ -714,7 +715,7 @@ fn our_longest_stderr_line_passes_telegrafs_reader() {
     let long = "v".repeat(100_000);
     for (version, bin) in real_telegraf::versions() {
         let Some(broker) = broker() else { return };
-        let conf = Rewrite::robot(broker.port, None)
+        let conf = Rewrite::robot(crate::support::BIN, broker.port, None)
             .replace("/var/lib/tessla-telegraf", "/tmp")
             .replace("\"run\"", format!("\"run\", \"--tag\", \"{long}\""))
             .replace("[[outputs.influxdb]]", "[[outputs.discard]]")

@@ -87,7 +87,8 @@ fn setup(edit: impl Fn(String) -> String) -> Option<Setup> {
     let influx = servers::Influxd::start()?;
     let state = tempfile::tempdir().unwrap();
     let text = real_telegraf::shipped("telegraf/telegraf.conf");
-    let rewrite = Rewrite::robot(broker.port, Some(&influx.url(""))).state_in(state.path());
+    let rewrite = Rewrite::robot(crate::support::BIN, broker.port, Some(&influx.url("")))
+        .state_in(state.path());
     let conf = edit(rewrite.apply(&text));
     Some(Setup {
         broker,
@@ -415,7 +416,7 @@ fn while_telegraf_is_away_the_broker_keeps_the_oldest_max_queued_messages() {
             return;
         };
         let state = tempfile::tempdir().unwrap();
-        let conf = Rewrite::robot(broker.port, Some(&influx.url("")))
+        let conf = Rewrite::robot(crate::support::BIN, broker.port, Some(&influx.url("")))
             .state_in(state.path())
             .apply(&real_telegraf::shipped("telegraf/telegraf.conf"));
         let s = Setup {
@@ -604,7 +605,8 @@ fn broker_run(
     let port = servers::free_port();
     let broker = mosquitto_on(port);
     let state = tempfile::tempdir().unwrap();
-    let mut rewrite = Rewrite::robot(port, Some(&influx.url(""))).state_in(state.path());
+    let mut rewrite =
+        Rewrite::robot(crate::support::BIN, port, Some(&influx.url(""))).state_in(state.path());
     if robots_time {
         rewrite = rewrite.robots_time();
     }

@@ -202,7 +202,7 @@ fn with_influxdb_down_the_echo_answers_every_message_and_the_clone_wiring_stops(
             let state = tempfile::tempdir().unwrap();
             // InfluxDB on a port where nothing listens: every write is refused.
             let down = format!("http://127.0.0.1:{}", servers::free_port());
-            let mut conf = Rewrite::robot(broker.port, Some(&down))
+            let mut conf = Rewrite::robot(crate::support::BIN, broker.port, Some(&down))
                 .state_in(state.path())
                 .apply(&text);
             if clone {

@@ -4,9 +4,8 @@
 //!
 //! The helpers other crates and tools share too (servers, the NATS cluster and stand-in,
 //! TeSSLa's suite) live in the dev-only crate `test-support` (crates/test-support) and are
-//! re-exported here under their old names. `bench/telegraf_delay.rs` still includes
-//! `real_telegraf.rs` by path (it runs the binary that only this crate's tests know by
-//! `CARGO_BIN_EXE_*`): a file here names its siblings as `super::...`.
+//! re-exported here under their old names; [`real_telegraf`] adds the binary under test to
+//! test-support's.
 
 pub mod child;
 // Without the `tools` feature the tests of `replay`, `simulate` and most of the real Telegraf's

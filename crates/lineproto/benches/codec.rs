@@ -3,9 +3,7 @@
 //! makes them (fields sorted, and in the random order Telegraf writes them: `*_unordered`), and
 //! float formatting (`Display` vs. [`lineproto::write_float`]).
 
-#[path = "support/workload.rs"]
-mod workload;
-use workload::{P2_LINE, lidar_line, unordered};
+use test_support::workload::{P2_LINE, lidar_line, unordered};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use lineproto::{

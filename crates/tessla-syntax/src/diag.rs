@@ -31,19 +31,26 @@ pub enum Category {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// How serious a diagnostic is.
 pub enum Level {
+    /// The spec is refused.
     Error,
+    /// The spec loads; something in it is probably not what was meant.
     Warning,
 }
 
 /// One message about a spec.
 #[derive(Debug, Clone)]
 pub struct Diagnostic {
+    /// Error or warning.
     pub level: Level,
+    /// Which phase found it (what `check` groups it under).
     pub category: Category,
+    /// The one-line message.
     pub message: String,
     /// The primary place, with an optional label shown under the caret.
     pub span: Option<Span>,
+    /// The text under the caret at `span` (empty: none).
     pub label: String,
     /// Secondary places (e.g. "first defined here").
     pub notes_at: Vec<(Span, String)>,
@@ -52,6 +59,7 @@ pub struct Diagnostic {
 }
 
 impl Diagnostic {
+    /// An error of `category` at `span` (none: about the whole spec).
     pub fn error(category: Category, span: Option<Span>, message: impl Into<String>) -> Self {
         Diagnostic {
             level: Level::Error,
@@ -64,6 +72,7 @@ impl Diagnostic {
         }
     }
 
+    /// A warning of `category` at `span`.
     pub fn warning(category: Category, span: Option<Span>, message: impl Into<String>) -> Self {
         Diagnostic {
             level: Level::Warning,
@@ -71,21 +80,25 @@ impl Diagnostic {
         }
     }
 
+    /// The same diagnostic with `label` under its caret.
     pub fn with_label(mut self, label: impl Into<String>) -> Self {
         self.label = label.into();
         self
     }
 
+    /// The same diagnostic with a hint on how to fix it.
     pub fn with_help(mut self, help: impl Into<String>) -> Self {
         self.help = Some(help.into());
         self
     }
 
+    /// The same diagnostic with a secondary place ("first defined here").
     pub fn with_note_at(mut self, span: Span, note: impl Into<String>) -> Self {
         self.notes_at.push((span, note.into()));
         self
     }
 
+    /// Whether it refuses the spec.
     pub fn is_error(&self) -> bool {
         self.level == Level::Error
     }

@@ -96,6 +96,7 @@ fn normalize(path: &Path) -> PathBuf {
 /// Resolves names from a fixed in-memory table (name -> text); used for the bundled specs.
 #[derive(Debug, Default, Clone)]
 pub struct MemResolver {
+    /// The files by the name an `include` gives, with their text.
     pub files: HashMap<String, String>,
 }
 

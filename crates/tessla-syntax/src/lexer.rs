@@ -13,34 +13,51 @@ use crate::diag::{Category, Diagnostic};
 use crate::source::{FileId, Span};
 
 #[derive(Debug, Clone, PartialEq)]
+/// A token of TeSSLa's source text.
 pub enum Tok {
+    /// A name: `x`, `Events`, `__root__`.
     Ident(String),
+    /// An integer literal (decimal or `0x` hexadecimal), its value.
     Int(i128),
+    /// A float literal: `1.5`, `2e-3`.
     Float(f64),
+    /// A string literal, `"..."` or `f"..."`, split at its interpolations.
     Str {
+        /// Its text and `${...}` parts, in order.
         parts: Vec<LexStrPart>,
+        /// `f"..."`: a format string.
         format: bool,
     },
     /// An operator or punctuation, e.g. `+.`, `(`, `=>`.
     Punct(Punct),
+    /// A line break (it ends a statement where one can end).
     Newline,
+    /// The end of the text.
     Eof,
 }
 
 #[derive(Debug, Clone, PartialEq)]
+/// A part of a string literal as the lexer splits it.
 pub enum LexStrPart {
+    /// Literal text, escapes resolved.
     Text(String),
     /// The tokens of `${ ... }` (without the braces) or of `$id`, then an optional format.
     Interp {
+        /// The interpolation's tokens, for the parser.
         tokens: Vec<Token>,
+        /// Where the interpolation is written.
         span: Span,
+        /// The `%` format specifier after it, in a format string.
         format: Option<String>,
     },
 }
 
 #[derive(Debug, Clone, PartialEq)]
+/// A token with its place in the source.
 pub struct Token {
+    /// What was read.
     pub tok: Tok,
+    /// Where it was read.
     pub span: Span,
 }
 
@@ -298,10 +315,12 @@ impl std::fmt::Display for Punct {
     }
 }
 
+/// Turns one file's text into [`Token`]s, collecting what it cannot read as diagnostics.
 pub struct Lexer<'a> {
     text: &'a str,
     pos: usize,
     file: FileId,
+    /// What could not be read (a bad character, an unterminated string), in order.
     pub diagnostics: Vec<Diagnostic>,
     /// `${` interpolations open around the current position (see [`MAX_INTERPOLATION`]).
     nesting: usize,
@@ -323,6 +342,7 @@ fn is_ident_char(c: char) -> bool {
 }
 
 impl<'a> Lexer<'a> {
+    /// A lexer at the start of `text`, the content of `file`.
     pub fn new(text: &'a str, file: FileId) -> Lexer<'a> {
         Lexer {
             text,

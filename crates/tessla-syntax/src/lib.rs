@@ -4,6 +4,7 @@
 //! (`ast`), and parsing. It knows nothing about types or evaluation (see `tessla-engine`).
 //!
 #![doc = include_str!("../README.md")]
+#![deny(missing_docs)]
 
 pub mod ast;
 pub mod diag;

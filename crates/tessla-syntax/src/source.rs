@@ -13,12 +13,16 @@ pub struct FileId(pub u32);
 /// A byte range `start..end` in one file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub struct Span {
+    /// The file it is in.
     pub file: FileId,
+    /// The first byte's offset.
     pub start: u32,
+    /// The offset one past the last byte.
     pub end: u32,
 }
 
 impl Span {
+    /// The bytes `start..end` of `file`.
     pub fn new(file: FileId, start: usize, end: usize) -> Span {
         Span {
             file,
@@ -44,6 +48,7 @@ pub struct SourceFile {
     pub name: String,
     /// The path on disk, if the file came from disk (includes resolve relative to it).
     pub path: Option<PathBuf>,
+    /// Its whole text.
     pub text: String,
     /// Byte offsets of line starts, for line/column lookup.
     line_starts: Vec<usize>,
@@ -73,10 +78,12 @@ pub struct SourceMap {
 }
 
 impl SourceMap {
+    /// An empty map.
     pub fn new() -> SourceMap {
         SourceMap::default()
     }
 
+    /// Add a file's text, named `name` in diagnostics and read from `path` (if from disk); its id.
     pub fn add(&mut self, name: impl Into<String>, path: Option<&Path>, text: String) -> FileId {
         let mut line_starts = vec![0];
         line_starts.extend(text.match_indices('\n').map(|(i, _)| i + 1));
@@ -89,10 +96,12 @@ impl SourceMap {
         FileId((self.files.len() - 1) as u32)
     }
 
+    /// The file `id` names (an id this map gave out).
     pub fn get(&self, id: FileId) -> &SourceFile {
         &self.files[id.0 as usize]
     }
 
+    /// Every file with its id, in the order they were added.
     pub fn files(&self) -> impl Iterator<Item = (FileId, &SourceFile)> {
         self.files
             .iter()

@@ -9,6 +9,7 @@
 //! value reaching an output stops the run at that step.
 //!
 #![doc = include_str!("../README.md")]
+#![deny(missing_docs)]
 
 pub mod ctf;
 mod fast;
@@ -40,7 +41,9 @@ pub enum ErrorKind {
 /// The error that stopped a run.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RunError {
+    /// What kind of error it is (how `tessla-telegraf trace` exits).
     pub kind: ErrorKind,
+    /// The message, as printed (a trace error names its line).
     pub message: String,
 }
 
@@ -65,6 +68,7 @@ pub enum Format {
 /// How to run a trace: the options of TeSSLa's `interpreter` command.
 #[derive(Debug, Clone, Default)]
 pub struct Options {
+    /// The trace's format (`--format`).
     pub format: Format,
     /// An event on a stream the spec does not declare is an error (`-r`); by default it is
     /// ignored, but time still advances to its timestamp.
@@ -80,7 +84,9 @@ pub struct Options {
 /// The result of running a trace held in memory: the printed output and the error, if any.
 #[derive(Debug, Default)]
 pub struct TraceRun {
+    /// What the run printed: TeSSLa's output lines, up to the error.
     pub output: String,
+    /// The error that stopped the run, if one did.
     pub error: Option<RunError>,
 }
 

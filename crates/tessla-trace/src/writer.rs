@@ -25,6 +25,7 @@ pub struct Lines<'a> {
 }
 
 impl<'a> Lines<'a> {
+    /// A writer of the lines of `outputs` (the program's outputs, by index).
     pub fn new(outputs: &'a [OutputInfo]) -> Lines<'a> {
         let fixed = outputs
             .iter()

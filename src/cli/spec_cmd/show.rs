@@ -39,7 +39,7 @@ pub(super) fn rollout_json(l: &Listed, decided: &[Decided], statuses: &[Status])
         None => Value::Null,
         Some(d) => match &d.decision {
             Ok(x) => serde_json::to_value(x).unwrap_or(Value::Null),
-            Err(why) => json!({ "problem": why }),
+            Err(why) => json!({ "problem": why.to_string() }),
         },
     };
     match &l.rollout {
@@ -63,7 +63,7 @@ pub(super) fn rollout_json(l: &Listed, decided: &[Decided], statuses: &[Status])
             }
             v
         }
-        Err(why) => json!({ "revision": l.revision, "problem": why }),
+        Err(why) => json!({ "revision": l.revision, "problem": why.to_string() }),
     }
 }
 
@@ -118,7 +118,7 @@ pub(super) fn status(a: ListArgs) -> CliResult {
                     v["state"] = json!(liveness(r, s, now).word());
                     v
                 }
-                Err(why) => json!({ "key": r.key, "problem": why }),
+                Err(why) => json!({ "key": r.key, "problem": why.to_string() }),
             })
             .collect();
         let v = json!({
@@ -164,7 +164,7 @@ pub(super) fn status(a: ListArgs) -> CliResult {
                     String::new(),
                     String::new(),
                     "?".into(),
-                    why.clone(),
+                    why.to_string(),
                 ]);
                 continue;
             }

@@ -8,6 +8,7 @@ use crate::nats::conn::{Failure, connect, violation};
 use crate::nats::url::Url;
 use crate::processor::versions::Selector;
 use crate::spec_feed::bundle::Bundle;
+use crate::spec_feed::error::RolloutError;
 use crate::spec_feed::sign::Record;
 use crate::spec_feed::{Arrival, BASE, Decision, Event, Rollout};
 use async_nats::jetstream::{self, kv};
@@ -159,20 +160,20 @@ pub(super) async fn arrival(
                     selector: Selector::all(),
                     published: 0,
                 },
-                bundle: Err(why.clone()),
+                bundle: Err(why.clone().into()),
             };
         }
     };
     let stored_as = rollout.revision;
     rollout.revision = revision;
     let bundle = if stored_as != revision {
-        Err(format!(
-            "it says it is revision {stored_as} but is stored as {}: a rollout copied from elsewhere",
-            rollout_key(revision)
-        ))
+        Err(RolloutError::RolloutMoved {
+            said: stored_as,
+            key: rollout_key(revision),
+        })
     } else {
         match record.verify(trust) {
-            Err(why) => Err(why),
+            Err(why) => Err(why.into()),
             Ok(()) => fetch_bundle(store, &rollout).await,
         }
     };
@@ -181,13 +182,10 @@ pub(super) async fn arrival(
 
 /// The bundle of a verified rollout, checked against its digest (the `base` marker has none: an
 /// empty bundle).
-pub(super) async fn fetch_bundle(store: &kv::Store, r: &Rollout) -> Result<Bundle, String> {
+pub(super) async fn fetch_bundle(store: &kv::Store, r: &Rollout) -> Result<Bundle, RolloutError> {
     if r.id == BASE {
         if !r.digest.is_empty() {
-            return Err(
-                "it names the base version (the spec each process started with) with a digest"
-                    .into(),
-            );
+            return Err(RolloutError::BaseWithDigest);
         }
         return Ok(Bundle {
             files: Vec::new(),
@@ -195,25 +193,34 @@ pub(super) async fn fetch_bundle(store: &kv::Store, r: &Rollout) -> Result<Bundl
         });
     }
     if r.digest.len() != 64 || !r.digest.starts_with(&r.id) || r.id.len() != 12 {
-        return Err(format!(
-            "its version id {} is not the first 12 digits of its digest {}",
-            r.id, r.digest
-        ));
+        return Err(RolloutError::IdNotOfDigest {
+            id: r.id.clone(),
+            digest: r.digest.clone(),
+        });
     }
     let key = bundle_key(&r.id);
     let bytes = match store.get(key.as_str()).await {
         Ok(Some(b)) => b,
-        Ok(None) => return Err(format!("its bundle {key} is not in the spec channel")),
-        Err(e) => return Err(format!("its bundle {key} cannot be read: {e}")),
+        Ok(None) => return Err(RolloutError::NoBundle(key)),
+        Err(e) => {
+            return Err(RolloutError::BundleUnreadable {
+                key,
+                why: e.to_string(),
+            });
+        }
     };
-    let bundle: Bundle = serde_json::from_slice(&bytes)
-        .map_err(|e| format!("its bundle {key} is not a spec bundle: {e}"))?;
+    let bundle: Bundle = match serde_json::from_slice(&bytes) {
+        Ok(b) => b,
+        Err(e) => {
+            return Err(RolloutError::NotABundle {
+                key,
+                why: e.to_string(),
+            });
+        }
+    };
     let digest = bundle.digest();
     if digest != r.digest {
-        return Err(format!(
-            "its bundle {key} does not hash to the digest the rollout was signed with (it hashes \
-             to {digest}): the bundle was changed after publishing"
-        ));
+        return Err(RolloutError::BundleChanged { key, digest });
     }
     Ok(bundle)
 }
@@ -224,16 +231,15 @@ pub(super) fn decision_of(
     revision: u64,
     value: &[u8],
     trust: &[String],
-) -> Result<Decision, String> {
+) -> Result<Decision, RolloutError> {
     let record = Record::<Decision>::parse(value);
     let d = record.body.clone()?;
     record.verify(trust)?;
     if d.revision != revision {
-        return Err(format!(
-            "it says it decides revision {} but is stored as {}",
-            d.revision,
-            decision_key(revision)
-        ));
+        return Err(RolloutError::DecisionMoved {
+            said: d.revision,
+            key: decision_key(revision),
+        });
     }
     Ok(d)
 }

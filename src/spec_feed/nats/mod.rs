@@ -29,7 +29,7 @@ pub mod operator;
 
 pub use follower::NatsFeed;
 pub use layout::{Status, status_key};
-pub use operator::{Decided, Listed, Operator, Reported};
+pub use operator::{Decided, Listed, Operator, Reported, StatusError};
 
 use crate::log::mask;
 use crate::nats::url::{DEFAULT_TTL, Url, UrlError};

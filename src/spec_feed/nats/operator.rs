@@ -8,7 +8,8 @@ use crate::log::mask;
 use crate::nats::conn::{Conn, Failure, violation};
 use crate::nats::url::Url;
 use crate::spec_feed::bundle::Bundle;
-use crate::spec_feed::sign::{self, Record};
+use crate::spec_feed::error::RolloutError;
+use crate::spec_feed::sign::{self, Record, RecordError};
 use crate::spec_feed::status::now_ns;
 use crate::spec_feed::{Decision, Rollout};
 use async_nats::jetstream::kv;
@@ -20,7 +21,7 @@ use std::time::Duration;
 #[derive(Debug, Clone)]
 pub struct Listed {
     pub revision: u64,
-    pub rollout: Result<Rollout, String>,
+    pub rollout: Result<Rollout, RecordError>,
     pub signer: Option<String>,
     /// When the server stored it (ns since the Unix epoch, the server's clock).
     pub written: i64,
@@ -31,7 +32,7 @@ pub struct Listed {
 #[derive(Debug, Clone)]
 pub struct Decided {
     pub revision: u64,
-    pub decision: Result<Decision, String>,
+    pub decision: Result<Decision, RecordError>,
     pub signer: Option<String>,
 }
 
@@ -40,12 +41,17 @@ fn server_ns(e: &kv::Entry) -> i64 {
     i64::try_from(e.created.unix_timestamp_nanos()).unwrap_or(i64::MAX)
 }
 
+/// Why a status key cannot be read.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("not a status: {0}")]
+pub struct StatusError(String);
+
 /// A status key as `spec status` reads it: its name and the status (`Err`: why it cannot be
 /// read).
 #[derive(Debug, Clone)]
 pub struct Reported {
     pub key: String,
-    pub status: Result<Status, String>,
+    pub status: Result<Status, StatusError>,
     /// When the server stored it (ns since the Unix epoch, the server's clock): how fresh it is.
     pub written: i64,
 }
@@ -169,7 +175,7 @@ impl Operator {
                 match store.entry(k.as_str()).await {
                     Ok(Some(e)) if e.operation == kv::Operation::Put => {
                         let s = serde_json::from_slice::<Status>(&e.value)
-                            .map_err(|e| format!("not a status: {e}"));
+                            .map_err(|e| StatusError(e.to_string()));
                         out.push(Reported {
                             key: k,
                             status: s,
@@ -219,14 +225,14 @@ impl Operator {
         &self,
         decision: &Decision,
         key: &nkeys::KeyPair,
-    ) -> Result<Option<Result<Decision, String>>, Failure> {
+    ) -> Result<Option<Result<Decision, RolloutError>>, Failure> {
         let Some(store) = self.store.clone() else {
             return Err(Failure::Io(format!(
                 "spec channel {}: no bucket",
                 self.url.shown()
             )));
         };
-        let bytes = sign::seal(decision, key).map_err(Failure::Config)?;
+        let bytes = sign::seal(decision, key).map_err(Failure::config)?;
         let k = decision_key(decision.revision);
         let kk = k.clone();
         let s = store.clone();
@@ -237,8 +243,12 @@ impl Operator {
                 let kk = k.clone();
                 let got = self.run(async move { store.get(kk.as_str()).await })?;
                 match got {
-                    Ok(Some(v)) => Ok(Some(Record::<Decision>::parse(&v).body)),
-                    Ok(None) => Ok(Some(Err(format!("{k} vanished while it was read")))),
+                    Ok(Some(v)) => Ok(Some(
+                        Record::<Decision>::parse(&v)
+                            .body
+                            .map_err(RolloutError::from),
+                    )),
+                    Ok(None) => Ok(Some(Err(RolloutError::Vanished(k)))),
                     Err(e) => Err(self.failure("reading the decision", e)),
                 }
             }
@@ -248,15 +258,12 @@ impl Operator {
 
     /// Check that the bundle of `r` is in the channel and hashes to its digest (a rollback
     /// publishes an earlier version again).
-    pub fn check_bundle(&self, r: &Rollout) -> Result<(), String> {
+    pub fn check_bundle(&self, r: &Rollout) -> Result<(), RolloutError> {
         let Some(store) = self.store.clone() else {
-            return Err("the spec channel has no bucket".into());
+            return Err(RolloutError::NoBucket);
         };
         let r = r.clone();
-        match self.run(async move { fetch_bundle(&store, &r).await.map(|_| ()) }) {
-            Ok(x) => x,
-            Err(f) => Err(f.message().to_string()),
-        }
+        self.run(async move { fetch_bundle(&store, &r).await.map(|_| ()) })?
     }
 
     /// Put `bundle` (none for the base marker), then `rollout` signed with `key` as the next
@@ -297,7 +304,7 @@ impl Operator {
         for _ in 0..100 {
             revision += 1;
             rollout.revision = revision;
-            let bytes = sign::seal(&rollout, key).map_err(Failure::Config)?;
+            let bytes = sign::seal(&rollout, key).map_err(Failure::config)?;
             let s = store.clone();
             let k = rollout_key(revision);
             let kk = k.clone();

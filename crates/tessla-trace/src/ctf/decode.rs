@@ -15,12 +15,17 @@ pub const LOST_EVENT: &str = "Lost event";
 /// A decoded value.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Field {
+    /// An integer of any size and sign the metadata allows.
     Int(i128),
+    /// A floating-point number (32 or 64 bits).
     Float(f64),
+    /// A null-terminated string.
     Str(String),
     /// The value and its label (none when no label's range holds it).
     Enum(i128, Option<String>),
+    /// A struct's members by name, in declaration order.
     Struct(Vec<(String, Field)>),
+    /// An array's or sequence's elements.
     Array(Vec<Field>),
     /// The chosen option's name and value.
     Variant(String, Box<Field>),
@@ -56,10 +61,15 @@ pub struct RawEvent {
     pub decl: Option<usize>,
     /// The clock value (cycles), extended over the header's wrapping timestamp field.
     pub ts: u64,
+    /// The stream's event header (id and timestamp), if the stream declares one.
     pub header: Option<Field>,
+    /// The stream's per-event context, if declared.
     pub stream_context: Option<Field>,
+    /// The event's own context, if its declaration has one.
     pub context: Option<Field>,
+    /// The event's payload fields, if declared.
     pub fields: Option<Field>,
+    /// The context of the packet the event is in.
     pub packet_context: Option<Field>,
 }
 
@@ -264,6 +274,7 @@ pub struct StreamDecoder<'a> {
 }
 
 impl<'a> StreamDecoder<'a> {
+    /// A decoder of `data` (one stream file's bytes) by the types of `md`.
     pub fn new(md: &'a Metadata, data: &'a [u8]) -> StreamDecoder<'a> {
         StreamDecoder {
             md,

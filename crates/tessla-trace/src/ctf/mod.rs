@@ -106,8 +106,12 @@ fn open(dir: &Path) -> Result<(tsdl::Metadata, Vec<StreamFile>), RunError> {
 
 /// One event of the merged trace.
 pub struct CtfEvent {
+    /// The event's name as the metadata declares it (or [`decode::LOST_EVENT`]).
     pub name: String,
+    /// Its timestamp: the clock value the event header holds (cycles, without the clock's
+    /// offset and frequency), as TeSSLa's reader gives it.
     pub ts: u64,
+    /// Its payload as a TeSSLa value: a record of its fields.
     pub value: Value,
 }
 

@@ -14,90 +14,131 @@ use std::sync::Arc;
 /// A metadata error: 1-based line and column, and what was wrong.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct TsdlError {
+    /// 1-based line of the metadata text.
     pub line: usize,
+    /// 1-based column.
     pub col: usize,
+    /// What was wrong there.
     pub message: String,
 }
 
 type R<T> = Result<T, TsdlError>;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+/// The byte order of an integer or float (`byte_order = native | le | be`).
 pub enum Order {
     /// The trace's byte order.
     Native,
+    /// Little endian (`le`).
     Le,
+    /// Big endian (`be`).
     Be,
 }
 
 #[derive(Debug, Clone, PartialEq)]
+/// An `integer { ... }` type.
 pub struct IntType {
     /// In bits, 1 to 64.
     pub size: u32,
     /// In bits.
     pub align: u32,
+    /// `signed = true`: two's complement.
     pub signed: bool,
+    /// Its byte order.
     pub order: Order,
     /// The clock this integer holds a value of (`map = clock.NAME.value`).
     pub clock: Option<String>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
+/// The length of an array (`[N]`) or a sequence (`[field]`).
 pub enum Len {
+    /// A fixed number of elements.
     Fixed(u64),
     /// A sequence: the path of the integer field holding the length.
     Field(String),
 }
 
 #[derive(Debug, Clone, PartialEq)]
+/// A field's type in the metadata.
 pub enum Type {
+    /// An integer.
     Int(IntType),
     /// Exponent and mantissa digits (8/24 or 11/53), alignment, byte order.
     Float {
+        /// Exponent digits (`exp_dig`).
         exp: u32,
+        /// Mantissa digits (`mant_dig`).
         mant: u32,
+        /// Alignment in bits.
         align: u32,
+        /// Byte order.
         order: Order,
     },
+    /// A null-terminated UTF-8 string (`string`).
     Str,
     /// Labels with their value ranges (inclusive).
     Enum(IntType, Arc<Vec<(String, i128, i128)>>),
+    /// A `struct { ... }` of named fields.
     Struct(Arc<StructType>),
+    /// A `variant <tag> { ... }`: one of its options, chosen by the enum at `tag`.
     Variant {
+        /// The path of the enum field whose label names the option.
         tag: String,
+        /// The options by name, in declaration order.
         options: Arc<Vec<(String, Type)>>,
     },
+    /// An array or sequence of elements of one type.
     Array(Box<Type>, Len),
 }
 
 #[derive(Debug, Clone, PartialEq, Default)]
+/// A `struct { ... }` type.
 pub struct StructType {
+    /// Its fields by name, in declaration order.
     pub fields: Vec<(String, Type)>,
     /// `align(N)`, in bits as all CTF alignments (1 when absent).
     pub align: u32,
 }
 
 #[derive(Debug, Clone, PartialEq, Default)]
+/// A `clock { ... }` block: what turns a timestamp field's cycles into time.
 pub struct Clock {
+    /// Its name (`clock.NAME.value` in an integer's `map`).
     pub name: String,
+    /// Cycles per second (`freq`, 1 GHz when absent).
     pub freq: u64,
+    /// Seconds since the Unix epoch at cycle 0 (`offset_s`).
     pub offset_s: i128,
+    /// Cycles added to that (`offset`).
     pub offset: i128,
 }
 
 #[derive(Debug, Clone, PartialEq, Default)]
+/// A `stream { ... }` block: the types every packet and event of the stream share.
 pub struct Stream {
+    /// The stream's id (`id`, 0 when absent).
     pub id: u64,
+    /// The packet context (`packet.context`): sizes, timestamps, discarded events.
     pub packet_context: Option<Type>,
+    /// The event header (`event.header`): the event's id and timestamp.
     pub event_header: Option<Type>,
+    /// The context every event of the stream has (`event.context`).
     pub event_context: Option<Type>,
 }
 
 #[derive(Debug, Clone, PartialEq)]
+/// An `event { ... }` block: one kind of event.
 pub struct EventDecl {
+    /// Its name (`name`).
     pub name: String,
+    /// Its id in its stream (`id`), as the event header gives it.
     pub id: u64,
+    /// The stream it belongs to (`stream_id`).
     pub stream_id: u64,
+    /// Its own context (`context`).
     pub context: Option<Type>,
+    /// Its payload (`fields`).
     pub fields: Option<Type>,
 }
 
@@ -106,9 +147,13 @@ pub struct EventDecl {
 pub struct Metadata {
     /// The trace's byte order (`Order::Le` when not given).
     pub big_endian: bool,
+    /// The header every packet starts with (`trace.packet.header`).
     pub packet_header: Option<Type>,
+    /// The clocks, in declaration order.
     pub clocks: Vec<Clock>,
+    /// The streams, in declaration order.
     pub streams: Vec<Stream>,
+    /// The event declarations, in declaration order.
     pub events: Vec<EventDecl>,
 }
 

@@ -50,9 +50,11 @@ use tessla_syntax::source::FileId;
 pub struct Event {
     /// 1-based line number in the trace.
     pub line: usize,
+    /// Its timestamp, in the trace's time unit.
     pub ts: i64,
     /// Index into `Program::inputs`.
     pub input: usize,
+    /// Its value, of the input's declared type.
     pub value: Value,
 }
 
@@ -66,10 +68,13 @@ pub enum ReadErrorKind {
 }
 
 #[derive(Debug, Clone, PartialEq, Eq)]
+/// A trace line that cannot be read: what kind of problem, where, and what.
 pub struct ReadError {
+    /// Malformed or unsupported.
     pub kind: ReadErrorKind,
     /// 1-based line number in the trace.
     pub line: usize,
+    /// What is wrong with the line.
     pub message: String,
 }
 
@@ -96,8 +101,17 @@ impl ReadError {
 /// (its value was read, but not checked against a type).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Read {
+    /// An event on a declared input.
     Event(Event),
-    Undeclared { line: usize, ts: i64, name: String },
+    /// An event on a stream the spec does not declare.
+    Undeclared {
+        /// 1-based line number in the trace.
+        line: usize,
+        /// Its timestamp: time still advances to it.
+        ts: i64,
+        /// The stream's name.
+        name: String,
+    },
 }
 
 /// Read one line of a trace: `None` for blank and comment lines. An event on an undeclared

@@ -4,9 +4,7 @@
 //! (fields sorted, and in Telegraf's random order: `bind_lidar360_unordered`).
 //! Run with `make bench` (or `cargo bench --bench binding`).
 
-#[path = "../crates/lineproto/benches/support/workload.rs"]
-mod workload;
-use workload::{P2_LINE, lidar_line, unordered};
+use test_support::workload::{P2_LINE, lidar_line, unordered};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;

@@ -1,8 +1,7 @@
-//! The benchmark records shared by the criterion benches of this crate and of the plugin
-//! (`benches/binding.rs`, `benches/record_path.rs` include this file): a P2-shaped robot line
-//! (two speeds, one a string) and a full robot message with a 360-beam scan, and a line's fields
-//! in the random order Telegraf writes them (Go map order).
-#![allow(dead_code)]
+//! The benchmark records shared by the criterion benches of crates/lineproto and of the plugin
+//! (its codec, binding and record-path benches): a P2-shaped robot line (two speeds, one a
+//! string) and a full robot message with a 360-beam scan, and a line's fields in the random
+//! order Telegraf writes them (Go map order).
 
 /// The P2 record.
 pub const P2_LINE: &str = "mqtt_consumer,host=turtlebot3,topic=tessla actualSpeed=\"0.0188\",expectedSpeed=0.015 1719231000123456789\n";

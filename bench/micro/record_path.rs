@@ -7,9 +7,7 @@
 //! `p2_spec_p2_record` is what the watchdog costs a record.
 //! Run with `make bench` (or `cargo bench --bench record_path`).
 
-#[path = "../crates/lineproto/benches/support/workload.rs"]
-mod workload;
-use workload::{P2_LINE, lidar_line, unordered};
+use test_support::workload::{P2_LINE, lidar_line, unordered};
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use lineproto::Record;
