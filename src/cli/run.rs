@@ -115,7 +115,11 @@ fn fleet_level(
     config: &RunConfig,
 ) -> Result<(Level, Arc<[String]>), CliError> {
     let options = super::spec_options::load_options(spec_options)?;
-    let (loaded, names) = crate::fleet::check(path, robot, &options).map_err(CliError::spec)?;
+    let crate::fleet::Checked {
+        loaded,
+        names,
+        bundle,
+    } = crate::fleet::check(path, robot, &options).map_err(CliError::spec)?;
     if !loaded.warnings.is_empty() {
         log_warn!(
             "{}",
@@ -127,7 +131,11 @@ fn fleet_level(
         loaded.program,
         &names,
         silence,
-        config.processor.tags.clone(),
+        crate::fleet::version_tags(
+            &config.processor.tags,
+            config.processor.version_tag.as_deref(),
+            &bundle.id(),
+        ),
         config.processor.instance_by.clone(),
     )
     .map_err(|e| CliError::spec(format!("{}: {e}", path.display())))?;
