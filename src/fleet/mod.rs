@@ -148,7 +148,9 @@ pub fn check_bundle(
     robot: &Program,
     options: &LoadOptions,
 ) -> Result<Checked, String> {
-    let loaded = bundle.load(&load_options(options)).map_err(|e| e.render())?;
+    let loaded = bundle
+        .load(&load_options(options))
+        .map_err(|e| e.render())?;
     check_loaded(bundle, loaded, robot)
 }
 
