@@ -660,6 +660,7 @@ fn run(s: &Schedule, dir: &Path, oracle: Option<&[(u64, Result<Decision, String>
                     from: T0 + e + from_ms * MS,
                     selector,
                     published: 0,
+                    fleet: false,
                 };
                 let arrival = Arrival {
                     rollout: rollout.clone(),
