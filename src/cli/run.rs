@@ -150,6 +150,8 @@ fn fleet_level(
         config.processor.instance_by.clone(),
     )
     .map_err(|e| CliError::spec(format!("{}: {e}", path.display())))?;
+    let mut level = level;
+    level.set_version_tag(config.processor.version_tag.clone());
     Ok((level, Arc::from(names)))
 }
 

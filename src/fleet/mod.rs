@@ -61,6 +61,17 @@ impl Feed {
         }
     }
 
+    /// A committed fleet rollout (the spec channel's, [`crate::spec_feed::Updates::take_fleet`]):
+    /// one process's level switches at its first step at or after max(its start, its next
+    /// step); across partitions the fleet lease's holder puts the switch in the fleet's stream,
+    /// and every process applies it there (the same step everywhere).
+    pub fn switch(&mut self, c: crate::spec_feed::FleetCommit) {
+        match self {
+            Feed::Local(level) => level.switch_to(&c),
+            Feed::Nats(n) => n.committed(c),
+        }
+    }
+
     /// At the end, before the last write.
     pub fn finish(&mut self, out: &mut Vec<u8>) {
         if let Feed::Nats(n) = self {
