@@ -60,10 +60,11 @@ fn sync(parts: &mut [Part], k: i64, records: &mut Vec<String>) {
     }
 }
 
-/// The fleet level's lines (not its status, stamped with the wall clock), sorted.
+/// The fleet level's lines (not its status, stamped with the wall clock), sorted; tagged with
+/// the fleet spec's version (`--version-tag`) or not.
 fn fleet_lines<'a>(lines: impl Iterator<Item = &'a str>) -> Vec<String> {
     let mut v: Vec<String> = lines
-        .filter(|l| l.starts_with("tessla_fleet "))
+        .filter(|l| l.starts_with("tessla_fleet ") || l.starts_with("tessla_fleet,"))
         .map(String::from)
         .collect();
     v.sort();
