@@ -6,7 +6,9 @@
 //! publish (the rollout known from its start); the lines after the switch carry the new fleet
 //! spec's version. A fleet spec with a type error, and one reading an input that is no robot
 //! output, are refused at publish with the messages of `--fleet-spec` and change nothing (the
-//! good publish is still revision 1).
+//! good publish is still revision 1). A decision read after the fleet level passed the start
+//! switches at the same step in every process (the one after the switch entry), also across a
+//! takeover.
 
 use super::fleet_level_nats::{base, example_args, fleet_lines, records};
 use super::fleet_nats_specs::{Setup, nats_server, published};
@@ -205,4 +207,129 @@ fn a_fleet_spec_rollout_switches_at_its_start_in_every_partition_as_in_one_proce
     let line = switched(&one_out).unwrap_or_else(|| panic!("{one_out}"));
     assert!(line.contains(&format!("version=\"{v_new}\"")) && line.contains("late=false"));
     assert_eq!(switched(&a_out), Some(line));
+}
+
+/// The step a process's fleet level switched at, from its log.
+fn switch_step(err: &str) -> i64 {
+    err.lines()
+        .find_map(|l| {
+            l.split_once("(fleet rollout 1) from its step at ")?
+                .1
+                .trim()
+                .parse()
+                .ok()
+        })
+        .unwrap_or_else(|| panic!("no switch in {err}"))
+}
+
+/// A decision the fleet level reads after it has stepped past the version's start: every
+/// process (the holder, p0's standby, p1) switches at the same step, the first after the switch
+/// entry, and says it was late; the standby that takes the fleet level over goes on with the
+/// new version.
+#[test]
+fn a_late_fleet_rollout_switches_at_the_same_step_in_every_process_and_after_a_takeover() {
+    let server = nats_server("");
+    let url = format!("nats://127.0.0.1:{}", server.port);
+    let state = format!("{url}/fleet_rollout_late");
+    let s = Setup::new();
+    let robot = child::root().join("specs/fleet/robot.tessla");
+    let v2 = child::write(s.dir.path(), "fleet_v2.tessla", FLEET_V2);
+    let base = base();
+
+    let mut a = spawn(&url, &s, &state, "p0");
+    a.wait_err("fleet held", 0, |l| {
+        l.contains("partition fleet: held by this process")
+    });
+    let mut a2 = spawn(&url, &s, &state, "p0");
+    let mut b = spawn(&url, &s, &state, "p1");
+    a2.wait_err("p0 standby", 0, |l| {
+        l.contains("partition p0: held by another")
+    });
+    a.wait_out("p1 joined", |l| {
+        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
+    });
+    for (c, p) in [(&mut a, 0), (&mut a2, 0), (&mut b, 1)] {
+        c.write(&records(base, Some(p), 0..40));
+    }
+    let step_30 = base + 30 * 200_000_000;
+    a.wait_out("a fleet line at step 30", |l| {
+        l.starts_with("tessla_fleet,")
+            && l.rsplit(' ')
+                .next()
+                .and_then(|t| t.trim().parse::<i64>().ok())
+                .is_some_and(|t| t >= step_30)
+    });
+    // Its start (step 10) is behind the fleet level already.
+    let from = base + 10 * 200_000_000;
+    let out = s.publish(
+        &url,
+        &robot,
+        &["--fleet", v2.to_str().unwrap(), "--from", &from.to_string()],
+    );
+    let v_new = published(&out, 1);
+    for c in [&mut a, &mut a2, &mut b] {
+        c.wait_err("the switch entry", 0, |l| {
+            l.contains("switch entry for fleet rollout 1")
+        });
+    }
+    for (c, p) in [(&mut a, 0), (&mut a2, 0), (&mut b, 1)] {
+        c.write(&records(base, Some(p), 40..60));
+    }
+    for c in [&mut a, &mut a2, &mut b] {
+        c.wait_err("the switch", 0, |l| {
+            l.contains("(fleet rollout 1) from its step at")
+        });
+    }
+    let steps: Vec<i64> = [&mut a, &mut a2, &mut b]
+        .into_iter()
+        .map(|c| {
+            c.drain_err();
+            switch_step(&c.err.concat())
+        })
+        .collect();
+    assert!(steps[0] > from, "late: after its start ({steps:?})");
+    assert_eq!(steps, [steps[0]; 3], "the same step in every process");
+    let at = steps[0];
+    a.wait_out("the switched line", |l| l.contains("event=\"switched\""));
+
+    // The holder stops; p0's standby takes both leases over and goes on.
+    a.signal("TERM");
+    let (a_out, a_err, _) = a.finish();
+    let switched = a_out
+        .lines()
+        .find(|l| l.contains("event=\"switched\""))
+        .unwrap_or_else(|| panic!("{a_out}\n{a_err}"));
+    assert!(
+        switched.contains("late=true") && switched.ends_with(&format!(" {at}")),
+        "{switched}"
+    );
+    a2.wait_err("p0 taken over", 0, |l| l.contains("holding partition p0"));
+    a2.write(&records(base, Some(0), 60..STEPS));
+    b.write(&records(base, Some(1), 60..STEPS));
+    let (b_out, b_err, code) = b.finish();
+    assert_eq!(code, 0, "{b_err}");
+    let (a2_out, a2_err, code) = a2.finish();
+    assert_eq!(code, 0, "{a2_err}");
+    let (holder_out, holder_err) = if a2_err.contains("fleet: holding the fleet level") {
+        (a2_out, a2_err)
+    } else {
+        (b_out, b_err)
+    };
+    // Every fleet metric written from the switch on, by either holder, is the new version's.
+    let all: Vec<String> = fleet_lines(&a_out)
+        .into_iter()
+        .chain(fleet_lines(&holder_out))
+        .filter(|l| l.starts_with("tessla_fleet,"))
+        .collect();
+    let after: Vec<&String> = all
+        .iter()
+        .filter(|l| l.rsplit(' ').next().unwrap().parse::<i64>().unwrap() >= at)
+        .collect();
+    assert!(after.len() > 10, "{holder_out}\n{holder_err}");
+    for l in &after {
+        assert_eq!(version(l), Some(v_new.as_str()), "{l}");
+    }
+    for l in all.iter().filter(|l| !after.contains(l)) {
+        assert_ne!(version(l), Some(v_new.as_str()), "{l}");
+    }
 }
