@@ -39,6 +39,14 @@ pub fn run(args: RunArgs) -> CliResult {
         Some(path) => Some(fleet_level(path, &fleet_args, &loaded.program, &config)?),
         None => None,
     };
+    let fleet_check = match &fleet {
+        Some((_, names)) => Some(fleet_check(
+            Arc::clone(&loaded.program),
+            super::spec_options::load_options(&fleet_args.2)?,
+            Arc::clone(names),
+        )),
+        None => None,
+    };
     let mut proc = Processor::new(loaded.program, config.processor.clone())
         .map_err(|e| CliError::spec(format!("spec: {e}")))?;
     if let Some((_, names)) = &fleet {
@@ -79,6 +87,9 @@ pub fn run(args: RunArgs) -> CliResult {
         (None, _) => None,
     };
     let mut updates = Updates::new(config.spec.clone(), config.watch_spec, &partition);
+    if let Some(check) = fleet_check {
+        updates.with_fleet(check);
+    }
     if let Some(ch) = &config.channel {
         let (feed, first) = NatsFeed::connect(&ch.url, &ch.trust)
             .map_err(|e| CliError::from(e).within("spec channel"))?;
@@ -115,7 +126,11 @@ fn fleet_level(
     config: &RunConfig,
 ) -> Result<(Level, Arc<[String]>), CliError> {
     let options = super::spec_options::load_options(spec_options)?;
-    let (loaded, names) = crate::fleet::check(path, robot, &options).map_err(CliError::spec)?;
+    let crate::fleet::Checked {
+        loaded,
+        names,
+        bundle,
+    } = crate::fleet::check(path, robot, &options).map_err(CliError::spec)?;
     if !loaded.warnings.is_empty() {
         log_warn!(
             "{}",
@@ -127,11 +142,40 @@ fn fleet_level(
         loaded.program,
         &names,
         silence,
-        config.processor.tags.clone(),
+        crate::fleet::version_tags(
+            &config.processor.tags,
+            config.processor.version_tag.as_deref(),
+            &bundle.id(),
+        ),
         config.processor.instance_by.clone(),
     )
     .map_err(|e| CliError::spec(format!("{}: {e}", path.display())))?;
+    let mut level = level;
+    level.set_version_tag(config.processor.version_tag.clone());
     Ok((level, Arc::from(names)))
+}
+
+/// How this process checks a fleet rollout (`spec publish --fleet`): as `--fleet-spec` is
+/// checked at start-up, against the robot spec it started with; and its inputs must be among
+/// the robot outputs the fleet level collects (`names`: the start-up fleet spec's inputs).
+fn fleet_check(
+    robot: Arc<tessla_engine::Program>,
+    options: tessla_engine::LoadOptions,
+    names: Arc<[String]>,
+) -> crate::spec_feed::FleetCheck {
+    Box::new(move |bundle| {
+        let checked = crate::fleet::check_bundle(bundle.clone(), &robot, &options)?;
+        if let Some(n) = checked.names.iter().find(|n| !names.contains(n)) {
+            return Err(format!(
+                "fleet spec input `{n}` reads a robot output the running fleet level does not collect (it collects {}: the inputs of the fleet spec it started with); restart with a --fleet-spec that reads it",
+                names.join(", ")
+            ));
+        }
+        Ok(crate::spec_feed::FleetVersion {
+            program: checked.loaded.program,
+            names: checked.names,
+        })
+    })
 }
 
 /// The state store `--state` names, connected (a NATS bucket: a mistake in its URL's

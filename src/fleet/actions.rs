@@ -94,6 +94,12 @@ impl Actions {
         })
     }
 
+    /// Go on with `before`'s per-robot sequence numbers (a new fleet spec version's actions
+    /// continue the numbering robots see).
+    pub fn carry_seq(&mut self, before: &Actions) {
+        self.seq = before.seq.clone();
+    }
+
     pub fn is_action(&self, output: usize) -> bool {
         matches!(self.outs.get(output), Some(Some(_)))
     }

@@ -6,7 +6,8 @@
 //! silence); a robot whose clock stays more than the silence behind W leaves every map at its
 //! clock + silence; an evicted robot leaves at the fleet's next step; a change at or before the
 //! fleet's last step (late) is stepped 1 ns after it. At the end of the input everything pending
-//! is stepped.
+//! is stepped. Also owns switching the fleet program to a committed fleet rollout's version
+//! ([`Level::switch_to`]) at its first step at or after the version's start.
 
 use super::actions::Actions;
 use crate::log;
@@ -51,14 +52,40 @@ pub struct FleetCounters {
     /// Robots that left the maps: silent past the bound, or evicted.
     pub left: u64,
     pub outputs: u64,
+    /// Switches to a committed fleet rollout's version.
+    pub switches: u64,
+}
+
+/// The measurement of the fleet level's status lines (as the partitions' in [`super::watermark`]).
+const STATUS: &str = "tessla_fleet_status";
+
+/// A fleet spec version waiting for its step.
+struct Switch {
+    /// The first step at or after this runs the version.
+    at: i64,
+    revision: u64,
+    id: String,
+    from: i64,
+    program: Arc<Program>,
+    /// Whether the level had stepped past `from` when the switch was decided here.
+    late: bool,
 }
 
 pub struct Level {
     program: Arc<Program>,
     /// Started at the fleet's first step.
     monitor: Option<Monitor>,
-    /// Per fleet input (by index into the names the taps use): its input number in the program.
-    inputs: Vec<usize>,
+    /// Per fleet input (by index into the names the taps use): its input number in the program
+    /// (`None`: the program running now does not read it).
+    inputs: Vec<Option<usize>>,
+    /// The robot outputs the taps collect (the fleet spec at start-up's inputs).
+    names: Vec<String>,
+    /// `--instance-by` (for the actions of a new version).
+    by: Vec<String>,
+    /// `--version-tag`: the tag set to the running fleet spec's version.
+    version_tag: Option<String>,
+    /// Fleet spec versions to switch to, by start.
+    switches: Vec<Switch>,
     maps: Vec<Value>,
     pending: BTreeMap<i64, Vec<Pend>>,
     clocks: HashMap<Arc<str>, i64>,
@@ -107,15 +134,20 @@ impl Level {
                     .inputs
                     .iter()
                     .position(|i| &i.name == n)
+                    .map(Some)
                     .ok_or_else(|| LevelError::NoInput(n.clone()))
             })
             .collect::<Result<Vec<_>, _>>()?;
-        let actions = Actions::new(&program, by, tags.clone())?;
+        let actions = Actions::new(&program, by.clone(), tags.clone())?;
         Ok(Level {
             prepared: Prepared::new(encode::encodings(&program), super::MEASUREMENT),
             monitor: None,
             maps: inputs.iter().map(|_| collections::empty_map()).collect(),
             inputs,
+            names: names.to_vec(),
+            by,
+            version_tag: None,
+            switches: Vec::new(),
             pending: BTreeMap::new(),
             clocks: HashMap::new(),
             order: BTreeSet::new(),
@@ -130,6 +162,115 @@ impl Level {
             counters: FleetCounters::default(),
             program,
         })
+    }
+
+    /// `--version-tag TAG`: a switch to a new fleet spec version sets TAG to its id.
+    pub fn set_version_tag(&mut self, tag: Option<String>) {
+        self.version_tag = tag;
+    }
+
+    /// A fleet rollout is pending or has switched the program (a checkpoint, which holds the
+    /// start-up fleet spec's monitor, is not written then).
+    pub fn has_switch(&self) -> bool {
+        !self.switches.is_empty() || self.counters.switches > 0
+    }
+
+    /// The robot outputs the taps collect for this level (a new version may read only these).
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// A committed fleet rollout: run its version from the first fleet step at or after
+    /// max(its start, the step after the last one stepped): the one rule for a decision seen
+    /// after the level has passed its start (it switches at its next step, and the switch's
+    /// status line says `late=true`). Its inputs must be among [`Self::names`] (the check
+    /// refuses others).
+    pub fn switch_to(&mut self, c: &crate::spec_feed::FleetCommit) {
+        let Some(version) = &c.version else {
+            return;
+        };
+        let late = c.from <= self.done;
+        let at = c.from.max(self.done.saturating_add(1));
+        if late {
+            log_warn!(
+                "fleet: fleet rollout {} (version {}) starts at {}, but the fleet level had stepped up to {}: it switches at its next step",
+                c.revision,
+                c.id,
+                c.from,
+                self.done
+            );
+        }
+        let pos = self.switches.partition_point(|s| s.at <= at);
+        self.switches.insert(
+            pos,
+            Switch {
+                at,
+                revision: c.revision,
+                id: c.id.clone(),
+                from: c.from,
+                program: Arc::clone(&version.program),
+                late,
+            },
+        );
+    }
+
+    /// Switch to the versions due at step `t` (the last one wins); `true` when one did. The
+    /// maps stay (robot data); the monitor starts afresh at `t`.
+    fn switch_due(&mut self, t: i64, out: &mut Vec<u8>) -> bool {
+        let n = self.switches.partition_point(|s| s.at <= t);
+        if n == 0 {
+            return false;
+        }
+        let due: Vec<Switch> = self.switches.drain(..n).collect();
+        let mut switched = false;
+        for sw in due {
+            let inputs: Vec<Option<usize>> = self
+                .names
+                .iter()
+                .map(|n| sw.program.inputs.iter().position(|i| &i.name == n))
+                .collect();
+            let tags = super::version_tags(&self.tags, self.version_tag.as_deref(), &sw.id);
+            let mut actions = match Actions::new(&sw.program, self.by.clone(), tags.clone()) {
+                Ok(a) => a,
+                Err(e) => {
+                    log::warn_limited("fleet switch", || {
+                        format!(
+                            "fleet: version {} cannot run here: {e}; the fleet level stays on the version it runs",
+                            sw.id
+                        )
+                    });
+                    continue;
+                }
+            };
+            self.prepared = Prepared::new(encode::encodings(&sw.program), super::MEASUREMENT);
+            actions.carry_seq(&self.actions);
+            self.actions = actions;
+            self.inputs = inputs;
+            self.tags = tags;
+            self.program = sw.program;
+            self.monitor = None;
+            self.counters.switches += 1;
+            log_info!(
+                "fleet: the fleet level runs version {} (fleet rollout {}) from its step at {t}",
+                sw.id,
+                sw.revision
+            );
+            // Where the switch took effect, in event time: the same line in every process.
+            let mut line = String::from(STATUS);
+            for (k, v) in &self.tags {
+                line.push(',');
+                lineproto::write::write_tag_key(&mut line, k);
+                line.push('=');
+                lineproto::write::write_tag_value(&mut line, v);
+            }
+            line.push_str(&format!(
+                " event=\"switched\",version=\"{}\",revision={}i,from={}i,late={} {t}\n",
+                sw.id, sw.revision, sw.from, sw.late
+            ));
+            out.extend_from_slice(line.as_bytes());
+            switched = true;
+        }
+        switched
     }
 
     /// Take in what the processors collected, then step every time the watermark has passed
@@ -148,11 +289,13 @@ impl Level {
             let (t, pends) = entry.remove_entry();
             self.step(t, pends, out);
         }
+        // The fleet's own delays fire up to the watermark (the running version's only up to
+        // the next switch).
+        let w = self.switches.first().map_or(w, |s| w.min(s.at));
         if !end
             && w > self.done.saturating_add(1)
             && let Some(monitor) = &mut self.monitor
         {
-            // The fleet's own delays fire up to the watermark.
             let events = &mut self.events;
             monitor.advance_to(w, &mut |e: OutputEvent<'_>| {
                 events.push((
@@ -299,6 +442,12 @@ impl Level {
                 }
             }
         }
+        if self.switch_due(t, out) {
+            // The new version's first input: every map it reads.
+            for (c, i) in changed.iter_mut().zip(&self.inputs) {
+                *c = *c || i.is_some();
+            }
+        }
         if !changed.iter().any(|&c| c) {
             self.done = self.done.max(t);
             return;
@@ -321,7 +470,7 @@ impl Level {
             if !c {
                 continue;
             }
-            let (Some(&input), Some(m)) = (self.inputs.get(i), self.maps.get(i)) else {
+            let (Some(&Some(input)), Some(m)) = (self.inputs.get(i), self.maps.get(i)) else {
                 continue;
             };
             if let Err(e) = monitor.push(t, input, m.clone(), &mut sink) {
@@ -405,7 +554,10 @@ pub struct LevelState {
 impl Level {
     /// The state to checkpoint; `None` when a value cannot be saved (a function value).
     pub fn state(&self) -> Option<LevelState> {
-        if !self.events.is_empty() {
+        // A checkpoint holds the start-up fleet spec's monitor: once a fleet rollout is
+        // pending or has switched the program, the level is not checkpointed (its entries
+        // stay, a later process replays them and meets the switch entry where the holder did).
+        if !self.events.is_empty() || self.has_switch() {
             return None;
         }
         let monitor = self
@@ -474,5 +626,96 @@ impl Level {
         self.done = state.done;
         self.actions.set_counts(state.actions);
         self.counters = state.counters;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::processor::fleet_tap::Change;
+    use crate::spec_feed::{FleetCommit, FleetVersion};
+
+    fn program(text: &str) -> Arc<Program> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("fleet.tessla");
+        std::fs::write(&path, text).unwrap();
+        tessla_engine::load_file(&path, &Default::default())
+            .unwrap()
+            .program
+    }
+
+    /// Robot `key`'s output `c` = `v` at `ts`, its clock there.
+    fn change(key: &str, ts: i64, v: i64) -> Drained {
+        let key: Arc<str> = Arc::from(key);
+        Drained {
+            changes: vec![Change {
+                ts,
+                key: Arc::clone(&key),
+                input: 0,
+                value: Value::Int(v),
+            }],
+            clocks: vec![(key, ts)],
+            left: Vec::new(),
+        }
+    }
+
+    fn commit(revision: u64, from: i64, p: &Arc<Program>) -> FleetCommit {
+        FleetCommit {
+            revision,
+            id: format!("new{revision}"),
+            from,
+            version: Some(FleetVersion {
+                program: Arc::clone(p),
+                names: vec!["c".into()],
+            }),
+        }
+    }
+
+    /// A switch known before its start runs at the first step at or after it; one decided
+    /// after the level passed its start runs at the next step, `late=true`; the maps stay.
+    #[test]
+    fn a_fleet_version_switches_at_its_first_step_at_or_after_its_start() {
+        let v1 = program("in c: Events[Map[String, Int]]\nout Map.size(c) as n\n");
+        let v2 = program("in c: Events[Map[String, Int]]\nout Map.size(c) + 100 as n\n");
+        let mut level = Level::new(
+            v1,
+            &["c".to_string()],
+            1_000_000_000,
+            vec![("v".into(), "old".into())],
+            vec!["robot".into()],
+        )
+        .unwrap();
+        level.set_version_tag(Some("v".into()));
+        let mut out = Vec::new();
+        level.pump(vec![change("r1", 10, 1)], false, &mut out);
+        let mut second = change("r2", 20, 1);
+        second.clocks.push((Arc::from("r1"), 20));
+        level.pump(vec![second], false, &mut out);
+        assert_eq!(
+            String::from_utf8_lossy(&out),
+            "tessla_fleet,v=old n=1i 10\n"
+        );
+        // Stepped 10, and the level's delays up to 19 (r2's clock passed them): switches
+        // decided now with an earlier start are late, and run at the next step (20), in
+        // revision order (the last wins); one starting at 25 runs at the first step after it.
+        level.switch_to(&commit(1, 15, &v2));
+        level.switch_to(&commit(2, 5, &v2));
+        level.switch_to(&commit(3, 25, &v2));
+        level.pump(vec![change("r1", 30, 2)], true, &mut out);
+        let text = String::from_utf8(out).unwrap();
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(
+            lines,
+            [
+                "tessla_fleet,v=old n=1i 10",
+                "tessla_fleet_status,v=new1 event=\"switched\",version=\"new1\",revision=1i,from=15i,late=true 20",
+                "tessla_fleet_status,v=new2 event=\"switched\",version=\"new2\",revision=2i,from=5i,late=true 20",
+                "tessla_fleet,v=new2 n=102i 20",
+                "tessla_fleet_status,v=new3 event=\"switched\",version=\"new3\",revision=3i,from=25i,late=false 30",
+                // The maps stayed: r1 and r2 both in.
+                "tessla_fleet,v=new3 n=102i 30",
+            ],
+            "{text}"
+        );
     }
 }

@@ -21,6 +21,7 @@ pub mod watermark;
 pub use level::Level;
 
 use crate::processor::fleet_tap::Drained;
+use crate::spec_feed::bundle::Bundle;
 use crate::state::lease::Lease;
 
 /// Where the step loop sends what the robots' instances give the fleet.
@@ -57,6 +58,17 @@ impl Feed {
                 partition.and_then(Lease::generation),
                 out,
             );
+        }
+    }
+
+    /// A committed fleet rollout (the spec channel's, [`crate::spec_feed::Updates::take_fleet`]):
+    /// one process's level switches at its first step at or after max(its start, its next
+    /// step); across partitions the fleet lease's holder puts the switch in the fleet's stream,
+    /// and every process applies it there (the same step everywhere).
+    pub fn switch(&mut self, c: crate::spec_feed::FleetCommit) {
+        match self {
+            Feed::Local(level) => level.switch_to(&c),
+            Feed::Nats(n) => n.committed(c),
         }
     }
 
@@ -108,17 +120,61 @@ pub fn load_options(robot: &LoadOptions) -> LoadOptions {
     o
 }
 
-/// Load the fleet spec at `path` and check its inputs against the robot spec's outputs: the
-/// fleet program and, per fleet input (in the fleet program's order), the robot output it reads.
+/// The tags of the fleet's lines: the static `--tag`s and, with `--version-tag TAG`, TAG set
+/// to the fleet spec's version `id` (as each robot line carries its own spec's), sorted.
+pub fn version_tags(
+    tags: &[(String, String)],
+    version_tag: Option<&str>,
+    id: &str,
+) -> Vec<(String, String)> {
+    let mut tags = tags.to_vec();
+    if let Some(t) = version_tag {
+        tags.retain(|(k, _)| k != t);
+        tags.push((t.to_string(), id.to_string()));
+        tags.sort();
+    }
+    tags
+}
+
+/// A checked fleet spec: the program, per fleet input (in the program's order) the robot output
+/// it reads, and the bundle it was read as (its [`Bundle::id`] is the fleet spec's version, as
+/// a robot spec's is).
+pub struct Checked {
+    pub loaded: tessla_engine::Loaded,
+    pub names: Vec<String>,
+    pub bundle: Bundle,
+}
+
+/// Load the fleet spec at `path` and check its inputs against the robot spec's outputs.
 /// Errors are rendered diagnostics (file, line, column).
-pub fn check(
-    path: &Path,
+pub fn check(path: &Path, robot: &Program, options: &LoadOptions) -> Result<Checked, String> {
+    let (bundle, loaded) = Bundle::read(path, &load_options(options)).map_err(|e| e.render())?;
+    check_loaded(bundle, loaded, robot)
+}
+
+/// Check a fleet spec version as it travels (a published bundle, loaded with this process's
+/// options), as [`check`] checks a file.
+pub fn check_bundle(
+    bundle: Bundle,
     robot: &Program,
     options: &LoadOptions,
-) -> Result<(tessla_engine::Loaded, Vec<String>), String> {
-    let loaded = tessla_engine::load_file(path, &load_options(options)).map_err(|e| e.render())?;
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("{}: cannot read the fleet spec: {e}", path.display()))?;
+) -> Result<Checked, String> {
+    let loaded = bundle
+        .load(&load_options(options))
+        .map_err(|e| e.render())?;
+    check_loaded(bundle, loaded, robot)
+}
+
+fn check_loaded(
+    bundle: Bundle,
+    loaded: tessla_engine::Loaded,
+    robot: &Program,
+) -> Result<Checked, String> {
+    let (name, text) = match bundle.files.first() {
+        Some(f) => (f.name.clone(), f.text.clone()),
+        None => return Err("the fleet spec is empty".into()),
+    };
+    let path = Path::new(&name);
     let mut sources = SourceMap::new();
     let file = sources.add(path.display().to_string(), Some(path), text.clone());
     let (ast, _) = tessla_syntax::parser::parse(&text, file);
@@ -187,7 +243,11 @@ pub fn check(
     if !diags.is_empty() {
         return Err(tessla_syntax::diag::render(&diags, &sources, false));
     }
-    Ok((loaded, names))
+    Ok(Checked {
+        loaded,
+        names,
+        bundle,
+    })
 }
 
 /// A syntax type in TeSSLa's notation, as the engine prints types (`Map[String, (Float, Float)]`).

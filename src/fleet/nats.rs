@@ -13,7 +13,10 @@
 //! the stream, so every process applies them at the same point. It also writes the fleet
 //! checkpoint (`fleet.checkpoint`: the table and the level after an entry, every 5 s) and
 //! deletes the entries the checkpoint before covered, so the entries stay bounded; a process
-//! that starts goes on from the checkpoint. The rules themselves are [`super::watermark`].
+//! that starts goes on from the checkpoint. The rules themselves are [`super::watermark`]. A
+//! committed fleet rollout is a switch entry `fleet.m.switch.r<revision>` the fleet lease's
+//! holder puts in the same stream; every process switches its level where it reads that entry
+//! (docs/fleet.md, "Rollouts of the fleet spec").
 
 use super::Level;
 use super::watermark::{self, Msg, Partitions};
@@ -100,6 +103,20 @@ pub struct FleetNats {
     applied: u64,
     /// The sequence of the last checkpoint written or started from, and when.
     checkpointed: (u64, Instant),
+    /// Fleet rollouts committed here whose switch entry was not read yet.
+    commits: Vec<crate::spec_feed::FleetCommit>,
+    /// Fleet rollouts whose switch entry was read (applied once, at its first entry).
+    switched: HashSet<u64>,
+    /// Fleet rollouts whose switch entry this process put.
+    switch_put: HashSet<u64>,
+    /// Entries from a switch entry on whose rollout this process has not seen committed yet.
+    held: VecDeque<(u64, bytes::Bytes)>,
+}
+
+/// A switch entry: the fleet level runs fleet rollout `fleet_switch`'s version from here on.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct SwitchEntry {
+    fleet_switch: u64,
 }
 
 fn now_ns() -> i64 {
@@ -198,7 +215,58 @@ impl FleetNats {
             drop_after: url.ttl * 2,
             applied,
             checkpointed: (applied, Instant::now()),
+            commits: Vec::new(),
+            switched: HashSet::new(),
+            switch_put: HashSet::new(),
+            held: VecDeque::new(),
         })
+    }
+
+    /// A fleet rollout committed (the spec channel): applied where its switch entry is read;
+    /// as the fleet lease's holder, put that entry.
+    pub fn committed(&mut self, c: crate::spec_feed::FleetCommit) {
+        if !self.switched.contains(&c.revision) {
+            self.commits.push(c);
+        }
+    }
+
+    /// A switch entry at `seq`: `true` when applied (or already applied), `false` when its
+    /// rollout is not known committed here yet (the entries from here on wait for it).
+    fn switch_entry(&mut self, seq: u64, e: &SwitchEntry) -> bool {
+        let r = e.fleet_switch;
+        if self.switched.contains(&r) {
+            return true;
+        }
+        let Some(i) = self.commits.iter().position(|c| c.revision == r) else {
+            return false;
+        };
+        let c = self.commits.remove(i);
+        log_info!(
+            "fleet: switch entry for fleet rollout {r} (version {}) at stream sequence {seq}",
+            c.id
+        );
+        self.level.switch_to(&c);
+        self.switched.insert(r);
+        true
+    }
+
+    /// As the fleet lease's holder: put a switch entry for each committed fleet rollout not
+    /// yet in the stream.
+    fn put_switches(&mut self) {
+        let due: Vec<u64> = self
+            .commits
+            .iter()
+            .map(|c| c.revision)
+            .filter(|r| !self.switch_put.contains(r))
+            .collect();
+        for r in due {
+            if let Ok(bytes) = serde_json::to_vec(&SwitchEntry { fleet_switch: r }) {
+                let _ = self
+                    .jobs
+                    .send(Job::Put(format!("fleet.m.switch.r{r}"), bytes.into()));
+                self.switch_put.insert(r);
+            }
+        }
     }
 
     fn put(&mut self, part: &str, generation: u64, kind: &str, msg: &Msg) {
@@ -254,7 +322,18 @@ impl FleetNats {
             Ok(mut i) => (std::mem::take(&mut i.msgs), i.written),
             Err(_) => return,
         };
-        for (seq, bytes) in msgs {
+        let mut msgs: VecDeque<_> = std::mem::take(&mut self.held)
+            .into_iter()
+            .chain(msgs)
+            .collect();
+        while let Some((seq, bytes)) = msgs.pop_front() {
+            if let Ok(e) = serde_json::from_slice::<SwitchEntry>(&bytes) {
+                if !self.switch_entry(seq, &e) {
+                    self.held.push_front((seq, bytes));
+                    self.held.extend(msgs.drain(..));
+                }
+                continue;
+            }
             let m: Msg = match serde_json::from_slice(&bytes) {
                 Ok(m) => m,
                 Err(e) => {
@@ -336,6 +415,7 @@ impl FleetNats {
             }
             self.drop_silent();
             self.checkpoint();
+            self.put_switches();
         } else {
             while self.outputs.front().is_some_and(|(seq, _)| *seq <= written)
                 || self.outputs.len() > MAX_KEPT
@@ -353,6 +433,12 @@ impl FleetNats {
     fn checkpoint(&mut self) {
         let (last, at) = self.checkpointed;
         if self.applied <= last || at.elapsed() < CHECKPOINT_EVERY || !self.outputs.is_empty() {
+            return;
+        }
+        // After a fleet rollout (pending or switched), or while entries wait behind a switch
+        // entry, no checkpoint: the entries stay and a later process replays them, meeting the
+        // switch entry where the holder did (docs/fleet.md, "Rollouts of the fleet spec").
+        if self.level.has_switch() || !self.held.is_empty() {
             return;
         }
         let Some(level) = self.level.state() else {

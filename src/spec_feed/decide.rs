@@ -154,6 +154,7 @@ mod tests {
             from: 0,
             selector: Selector::all(),
             published: 0,
+            fleet: false,
         }
     }
 

@@ -162,6 +162,7 @@ mod tests {
                 from: 100 * revision as i64,
                 selector: Selector::all(),
                 published: 0,
+                fleet: false,
             },
             bundle: if ok {
                 Ok(Bundle {

@@ -55,7 +55,37 @@ pub struct Rollout {
     /// When it was published (ns since the Unix epoch, the publisher's wall clock).
     #[serde(default)]
     pub published: i64,
+    /// A version of the fleet spec (`spec publish --fleet`, docs/fleet.md, "Rollouts of the
+    /// fleet spec"): checked against the robot spec and put in force in the fleet level, not in
+    /// the robots' instances. Not written when false, so the records (and signatures) of robot
+    /// rollouts are as before.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub fleet: bool,
 }
+
+/// A fleet spec version as a process checked it ([`FleetCheck`]): its program and, per fleet
+/// input in the program's order, the robot output it reads.
+#[derive(Debug, Clone)]
+pub struct FleetVersion {
+    pub program: Arc<tessla_engine::Program>,
+    pub names: Vec<String>,
+}
+
+/// A committed fleet rollout, for the fleet level to put in force from `from` (the step loop
+/// hands it over: [`Updates::take_fleet`]).
+#[derive(Debug, Clone)]
+pub struct FleetCommit {
+    pub revision: u64,
+    pub id: String,
+    pub from: i64,
+    /// `None`: this process cannot run it (its check failed here); the fleet level stays on
+    /// the version it runs, and a partitioned one goes on past the switch entry.
+    pub version: Option<FleetVersion>,
+}
+
+/// How this process checks a fleet spec version (the fleet level's own check against the
+/// robot spec, given by the command that runs it; the fleet level sits above this module).
+pub type FleetCheck = Box<dyn Fn(&Bundle) -> Result<FleetVersion, String>>;
 
 /// What a process's outcome for a version is: its check of a proposal (its vote), or what the
 /// fleet's decision did here.
@@ -219,6 +249,11 @@ pub struct Updates {
     first: Vec<Event>,
     /// The rollouts and decisions, in revision order.
     ledger: Ledger,
+    /// The fleet level's check of a fleet spec version (`None`: this process runs no fleet
+    /// level, and votes for any fleet version: `spec publish --fleet` checked it already).
+    fleet_check: Option<FleetCheck>,
+    /// Fleet rollouts committed and not yet handed to the fleet level.
+    fleet_commits: Vec<FleetCommit>,
 }
 
 impl Updates {
@@ -239,7 +274,19 @@ impl Updates {
             compiled: HashMap::new(),
             first: Vec::new(),
             ledger: Ledger::default(),
+            fleet_check: None,
+            fleet_commits: Vec::new(),
         }
+    }
+
+    /// This process runs a fleet level: fleet rollouts are checked with `check`.
+    pub fn with_fleet(&mut self, check: FleetCheck) {
+        self.fleet_check = Some(check);
+    }
+
+    /// The fleet rollouts committed since the last call, in revision order.
+    pub fn take_fleet(&mut self) -> Vec<FleetCommit> {
+        std::mem::take(&mut self.fleet_commits)
     }
 
     /// Follow `channel` too; `first`: what it already held, taken in by the first
@@ -291,7 +338,11 @@ impl Updates {
                 Event::Decision { revision, decision } => self.ledger.decided(revision, decision),
                 Event::Proposal(a) => {
                     if let Some(a) = self.ledger.proposed(a) {
-                        let vote = self.vote(&a, procs);
+                        let vote = if a.rollout.fleet {
+                            self.vote_fleet(&a)
+                        } else {
+                            self.vote(&a, procs)
+                        };
                         self.outcome(vote, a.rollout.from, out);
                     }
                 }
@@ -299,6 +350,7 @@ impl Updates {
         }
         while let Some(step) = self.ledger.next_step() {
             let outcome = match step {
+                Step::Commit(a) if a.rollout.fleet => self.commit_fleet(&a),
                 Step::Commit(a) => self.commit(&a, procs),
                 Step::Abort(a, why) => {
                     log_info!(
@@ -485,6 +537,91 @@ impl Updates {
         }
     }
 
+    /// Check a fleet rollout here: its bundle and the fleet level's check (the messages of
+    /// `--fleet-spec` at start-up). `Ok(None)`: this process runs no fleet level.
+    fn check_fleet(&self, a: &Arrival) -> Result<Option<FleetVersion>, String> {
+        let bundle = a.bundle.as_ref().map_err(Clone::clone)?;
+        if a.rollout.id == BASE {
+            return Err("a fleet rollout names its version (publish the earlier fleet spec again with `spec publish --fleet`)".into());
+        }
+        if bundle.id() != a.rollout.id {
+            return Err(format!(
+                "its bundle is version {}, not {} as the rollout says",
+                bundle.id(),
+                a.rollout.id
+            ));
+        }
+        match &self.fleet_check {
+            Some(check) => check(bundle).map(Some),
+            None => Ok(None),
+        }
+    }
+
+    /// This process's vote on a fleet rollout.
+    fn vote_fleet(&mut self, a: &Arrival) -> Outcome {
+        let r = &a.rollout;
+        match self.check_fleet(a) {
+            Ok(_) => {
+                log_info!(
+                    "spec: fleet rollout {} (fleet spec version {}{}) checks here: voted to commit it",
+                    r.revision,
+                    r.id,
+                    label_note(&r.label)
+                );
+                Outcome::of(r, Phase::Check, true, String::new())
+            }
+            Err(reason) => {
+                log_error!(
+                    "spec: fleet rollout {} (fleet spec version {}{}) refused here: {reason}; voted to abort it",
+                    r.revision,
+                    r.id,
+                    label_note(&r.label)
+                );
+                Outcome::of(r, Phase::Check, false, first_lines(&reason))
+            }
+        }
+    }
+
+    /// The fleet committed a fleet rollout: hand it to the fleet level, which switches at its
+    /// first step at or after its start (docs/fleet.md, "Rollouts of the fleet spec").
+    fn commit_fleet(&mut self, a: &Arrival) -> Outcome {
+        let r = &a.rollout;
+        match self.check_fleet(a) {
+            Ok(Some(version)) => {
+                log_info!(
+                    "spec: fleet rollout {} (fleet spec version {}{}) committed by the fleet; the fleet level runs it from its first step at or after {}",
+                    r.revision,
+                    r.id,
+                    label_note(&r.label),
+                    status::show_time(r.from)
+                );
+                self.fleet_commits.push(FleetCommit {
+                    revision: r.revision,
+                    id: r.id.clone(),
+                    from: r.from,
+                    version: Some(version),
+                });
+                Outcome::of(r, Phase::Committed, true, String::new())
+            }
+            Ok(None) => Outcome::of(r, Phase::Committed, true, String::new()),
+            Err(reason) => {
+                log_error!(
+                    "spec: fleet rollout {} (fleet spec version {}{}) was committed by the fleet, but this process cannot run it: {reason}; its fleet level stays on the fleet spec it runs",
+                    r.revision,
+                    r.id,
+                    label_note(&r.label)
+                );
+                self.fleet_commits.push(FleetCommit {
+                    revision: r.revision,
+                    id: r.id.clone(),
+                    from: r.from,
+                    version: None,
+                });
+                Outcome::of(r, Phase::Committed, false, first_lines(&reason))
+            }
+        }
+    }
+
     /// The program of a rollout's version: the base's for [`BASE`], one compiled before, or its
     /// bundle compiled with this process's options.
     fn program_of(
@@ -608,6 +745,7 @@ mod tests {
                 from,
                 selector: Selector::all(),
                 published: 0,
+                fleet: false,
             },
             bundle: Ok(b),
         })

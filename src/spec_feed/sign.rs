@@ -427,6 +427,7 @@ mod tests {
             from: 1_700_000_000_000_000_000,
             selector: Selector::parse("robot=r1,r2").unwrap(),
             published: 1_700_000_000_000_000_001,
+            fleet: false,
         }
     }
 

@@ -145,6 +145,12 @@ pub async fn run<S: Source, K: Sink>(
     // `--threads` workers made below copy them.
     let mut out = Vec::with_capacity(64 * 1024);
     updates.tick(&mut [&mut *proc], &mut out);
+    let mut fleet = fleet;
+    if let Some(f) = fleet.as_deref_mut() {
+        for c in updates.take_fleet() {
+            f.switch(c);
+        }
+    }
     if let Some(s) = store.as_mut() {
         s.backend.load(proc);
     }
@@ -330,6 +336,13 @@ impl Loop<'_, '_> {
             updates.hangup(&mut procs, &mut self.out);
         } else {
             updates.tick(&mut procs, &mut self.out);
+        }
+        // Committed fleet rollouts go to the fleet level.
+        let commits = updates.take_fleet();
+        if let Some(f) = self.fleet.as_deref_mut() {
+            for c in commits {
+                f.switch(c);
+            }
         }
     }
 

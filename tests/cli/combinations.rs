@@ -670,6 +670,7 @@ fn run(s: &Schedule, dir: &Path, oracle: Option<&[(u64, Result<Decision, Rollout
                     from: T0 + e + from_ms * MS,
                     selector,
                     published: 0,
+                    fleet: false,
                 };
                 let arrival = Arrival {
                     rollout: rollout.clone(),

@@ -2,7 +2,8 @@
 //! example's fleet outputs over a three-robot fixture, line for line, the same on one thread and
 //! on two; a robot silent past `--fleet-silence` leaves the maps at its last time plus the
 //! bound; a fleet spec that does not check, an input that is no robot output and an input of the
-//! wrong type are refused at start-up (exit 2) with file, line and column.
+//! wrong type are refused at start-up (exit 2) with file, line and column; with `--version-tag`
+//! fleet lines carry the fleet spec's own version.
 
 use crate::support::child::{root, run_text, write};
 
@@ -110,6 +111,108 @@ fn a_silent_robot_leaves_the_fleet_after_the_bound() {
         })
         .collect();
     assert!(after.iter().all(|l| l.contains("robots=2i")), "{after:#?}");
+}
+
+/// The tag value of `tag` in a line-protocol line, if it has one.
+fn tag_of<'a>(line: &'a str, tag: &str) -> Option<&'a str> {
+    let head = line.split(' ').next()?;
+    head.split(',')
+        .skip(1)
+        .find_map(|kv| kv.strip_prefix(tag)?.strip_prefix('='))
+}
+
+/// With `--version-tag`, fleet lines carry the fleet spec's version: the id its file would have
+/// as a robot spec (the same file run with `--spec` tags its lines with it), not the robot
+/// spec's; a changed fleet spec is another version.
+#[test]
+fn fleet_lines_carry_the_fleet_specs_version() {
+    let dir = tempfile::tempdir().unwrap();
+    let robot = write(
+        dir.path(),
+        "robot.tessla",
+        "@TelegrafIn(\"m\", \"\", \"v\")\nin v: Events[Int]\nout v as value\n",
+    );
+    let text = "in value: Events[Map[String, Int]]\nout default(Map.size(value), 0) as robots\n";
+    let fleet = write(dir.path(), "fleet.tessla", text);
+    let changed = write(dir.path(), "changed.tessla", &format!("{text}-- changed\n"));
+    let input = "m,robot=a v=1i 100\nm,robot=b v=2i 200\nm,robot=a v=3i 3000000000\n";
+    let run = |fleet: &std::path::Path| {
+        let (out, err, code) = run_text(
+            &[
+                "--spec",
+                robot.to_str().unwrap(),
+                "--instance-by",
+                "robot",
+                "--fleet-spec",
+                fleet.to_str().unwrap(),
+                "--version-tag",
+                "spec_version",
+                "--max-ahead",
+                "off",
+                "--allowed-lateness",
+                "off",
+                "--no-passthrough",
+            ],
+            input,
+        );
+        assert_eq!(code, 0, "{err}");
+        out
+    };
+    let versions = |out: &str, prefix: &str| {
+        let mut v: Vec<String> = out
+            .lines()
+            .filter(|l| l.starts_with(prefix))
+            .map(|l| tag_of(l, "spec_version").unwrap_or("").to_string())
+            .collect();
+        v.dedup();
+        v
+    };
+    let out = run(&fleet);
+    let fleet_v = versions(&out, "tessla_fleet");
+    let robot_v = versions(&out, "tessla,");
+    assert_eq!(fleet_v.len(), 1, "{out}");
+    assert_eq!(robot_v.len(), 1, "{out}");
+    assert_eq!(fleet_v[0].len(), 12, "{out}");
+    assert_ne!(fleet_v, robot_v, "{out}");
+    assert!(
+        out.contains(&format!(
+            "tessla_fleet,spec_version={} robots=2i 200",
+            fleet_v[0]
+        )),
+        "{out}"
+    );
+    // The fleet spec run as a robot spec: its lines carry the same version.
+    let (alone, err, code) = run_text(
+        &[
+            "--spec",
+            fleet.to_str().unwrap(),
+            "--version-tag",
+            "spec_version",
+            "--no-passthrough",
+        ],
+        "m v=1i 100\n",
+    );
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(versions(&alone, "tessla,"), fleet_v, "{alone}");
+    // Another text is another version; without --version-tag no version tag.
+    let other = run(&changed);
+    let other_v = versions(&other, "tessla_fleet");
+    assert_eq!(other_v.len(), 1, "{other}");
+    assert_ne!(other_v, fleet_v, "{other}");
+    let (plain, err, code) = run_text(
+        &[
+            "--spec",
+            robot.to_str().unwrap(),
+            "--instance-by",
+            "robot",
+            "--fleet-spec",
+            fleet.to_str().unwrap(),
+            "--no-passthrough",
+        ],
+        input,
+    );
+    assert_eq!(code, 0, "{err}");
+    assert!(plain.contains("tessla_fleet robots=2i 200\n"), "{plain}");
 }
 
 fn refused(fleet_text: &str) -> String {

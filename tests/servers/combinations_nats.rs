@@ -133,10 +133,11 @@ fn first_difference(got: &[String], want: &[String], records: &[String]) -> Stri
     )
 }
 
-/// The fleet level's lines (not its status, stamped with the wall clock), sorted.
+/// The fleet level's lines (not its status, stamped with the wall clock), sorted; tagged with
+/// the fleet spec's version (`--version-tag`) or not.
 fn fleet_lines<'a>(lines: impl Iterator<Item = &'a str>) -> Vec<String> {
     let mut v: Vec<String> = lines
-        .filter(|l| l.starts_with("tessla_fleet "))
+        .filter(|l| l.starts_with("tessla_fleet ") || l.starts_with("tessla_fleet,"))
         .map(String::from)
         .collect();
     v.sort();

@@ -17,7 +17,7 @@ const STEPS: i64 = 120;
 
 /// Event time of step `k`: ten minutes from now (every partition's promise is then its own
 /// front, not the wall clock less the silence), 5 Hz.
-fn base() -> i64 {
+pub(super) fn base() -> i64 {
     let now = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .unwrap()
@@ -45,7 +45,7 @@ fn record(base: i64, i: usize, k: i64) -> String {
 
 /// The records of steps `ks` of the robots of partition `p` (robots 0 and 2 in p0, 1 and 3
 /// in p1), or of every robot (`None`).
-fn records(base: i64, p: Option<usize>, ks: std::ops::Range<i64>) -> String {
+pub(super) fn records(base: i64, p: Option<usize>, ks: std::ops::Range<i64>) -> String {
     let mut s = String::new();
     for k in ks {
         for i in 0..ROBOTS {
@@ -57,7 +57,7 @@ fn records(base: i64, p: Option<usize>, ks: std::ops::Range<i64>) -> String {
     s
 }
 
-fn example_args() -> Vec<String> {
+pub(super) fn example_args() -> Vec<String> {
     let root = child::root();
     [
         "run",
@@ -88,7 +88,7 @@ fn spawn(state: &str, lease: &str) -> LiveChild {
 }
 
 /// The fleet's outputs in `out`, in order: its metrics and its actions, not its status lines.
-fn fleet_lines(out: &str) -> Vec<String> {
+pub(super) fn fleet_lines(out: &str) -> Vec<String> {
     out.lines()
         .filter(|l| {
             l.starts_with("tessla_fleet ")

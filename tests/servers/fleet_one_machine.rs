@@ -10,7 +10,10 @@
 //! - `spec status` lists all four processes, live, two per partition, each with its own pid
 //!   (its status key is unique per process);
 //! - SIGTERM to the script stops every Telegraf, their monitors and the server (exit 0); no
-//!   Telegraf logged an error.
+//!   Telegraf logged an error;
+//! - `start.sh --fleet`: the fleet example end to end (docs/fleet.md's walkthrough), its
+//!   fleet lines, the coordinated slow-downs on the robots' MQTT topics, both partitions
+//!   joined, and the fleet level handed over when its holder's Telegraf gets SIGTERM.
 
 use crate::support::BIN;
 use crate::support::mqtt_client;
@@ -150,25 +153,20 @@ fn processes(channel: &str) -> Vec<Value> {
     v["processes"].as_array().cloned().unwrap_or_default()
 }
 
-#[test]
-fn one_machine_fleet_answers_both_partitions_and_spec_status_lists_four_processes() {
-    let _one = nats_cluster::one_fleet_at_a_time();
-    let Some(nats) = nats_cluster::require_nats_server() else {
-        return;
-    };
-    let Some((version, telegraf)) = real_telegraf::versions().pop() else {
-        return;
-    };
+/// `start.sh ARGS` with its ports, folder and binaries from the environment, once it said
+/// "fleet ready".
+fn launch(nats: &Path, version: &str, telegraf: &Path, args: &[&str]) -> (Fleet, u16, u16) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let dir = tempfile::tempdir().unwrap();
     let (nats_port, mqtt_port) = (free_port(), free_port());
     let child = Command::new("bash")
         .arg(root.join("examples/fleet-one-machine/start.sh"))
+        .args(args)
         .env("FLEET_DIR", dir.path())
         .env("FLEET_NATS_PORT", nats_port.to_string())
         .env("FLEET_MQTT_PORT", mqtt_port.to_string())
-        .env("TELEGRAF", &telegraf)
-        .env("NATS_SERVER", &nats)
+        .env("TELEGRAF", telegraf)
+        .env("NATS_SERVER", nats)
         .env("TESSLA_TELEGRAF", BIN)
         .current_dir(root)
         .stdin(Stdio::null())
@@ -198,6 +196,19 @@ fn one_machine_fleet_answers_both_partitions_and_spec_status_lists_four_processe
         );
         std::thread::sleep(Duration::from_millis(200));
     }
+    (fleet, nats_port, mqtt_port)
+}
+
+#[test]
+fn one_machine_fleet_answers_both_partitions_and_spec_status_lists_four_processes() {
+    let _one = nats_cluster::one_fleet_at_a_time();
+    let Some(nats) = nats_cluster::require_nats_server() else {
+        return;
+    };
+    let Some((version, telegraf)) = real_telegraf::versions().pop() else {
+        return;
+    };
+    let (mut fleet, nats_port, mqtt_port) = launch(&nats, version, &telegraf, &[]);
     let channel = format!("nats://127.0.0.1:{nats_port}/tessla_specs");
 
     // The robots: each subscribed to its actions, then publishing the recorded run's head.
@@ -315,4 +326,280 @@ fn one_machine_fleet_answers_both_partitions_and_spec_status_lists_four_processe
             real_telegraf::assert_no_error(version, &log);
         }
     }
+}
+
+/// The Telegrafs `start.sh` runs (its children whose command line names a `telegraf-p*.conf`),
+/// each with the log it writes (`telegraf-p<N>-<member>.log`, from its environment).
+fn telegrafs(fleet: &Fleet) -> Vec<(u32, String)> {
+    let Some(child) = fleet.child.as_ref() else {
+        return Vec::new();
+    };
+    let mut out = Vec::new();
+    for pid in real_telegraf::children_of(child.id()) {
+        let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+        if !String::from_utf8_lossy(&cmdline).contains("telegraf-p") {
+            continue;
+        }
+        let environ = std::fs::read(format!("/proc/{pid}/environ")).unwrap_or_default();
+        let var = |name: &str| {
+            environ
+                .split(|b| *b == 0)
+                .find_map(|kv| kv.strip_prefix(format!("{name}=").as_bytes()))
+                .map(|v| String::from_utf8_lossy(v).into_owned())
+                .unwrap_or_default()
+        };
+        out.push((
+            pid,
+            format!(
+                "telegraf-p{}-{}.log",
+                var("FLEET_PARTITION"),
+                var("TESSLA_MEMBER")
+            ),
+        ));
+    }
+    out
+}
+
+/// Every line of the fleet's output files (`fleet-p<N>-<member>.lp`), each file in order.
+fn fleet_output(fleet: &Fleet) -> Vec<String> {
+    let mut names: Vec<_> = std::fs::read_dir(fleet.dir.path())
+        .map(|d| d.flatten().map(|e| e.path()).collect())
+        .unwrap_or_default();
+    names.sort();
+    names
+        .iter()
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("fleet-p") && n.ends_with(".lp"))
+        })
+        .flat_map(|p| {
+            std::fs::read_to_string(p)
+                .unwrap_or_default()
+                .lines()
+                .map(str::to_string)
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+/// A field's value in a line-protocol line (`name=value` in its field set), as text.
+fn field<'a>(line: &'a str, name: &str) -> Option<&'a str> {
+    let fields = line.split(' ').nth(1)?;
+    fields
+        .split(',')
+        .find_map(|kv| kv.strip_prefix(name)?.strip_prefix('='))
+}
+
+/// The fleet example end to end through the real Telegraf, by the walkthrough's commands
+/// (docs/fleet.md, "Walkthrough: the example on two partitions through Telegraf"):
+/// `start.sh --fleet`, `simulate --shared-floor 4`, one `replay` per robot to the MQTT gateway
+/// at recorded pace. The fleet level over both partitions writes its lines (P2 violations,
+/// closest distance, zone A occupancy, with sane values), both partitions join, the
+/// coordinated slow-downs reach the zone-A robots (tb3-1 in p0, tb3-2 in p1) on their own MQTT
+/// topics; SIGTERM to the Telegraf holding the fleet lease hands the fleet level to another
+/// process, whose lines go on, each fleet step written once.
+#[test]
+fn fleet_example_runs_end_to_end_through_telegraf_and_survives_its_holders_sigterm() {
+    let _one = nats_cluster::one_fleet_at_a_time();
+    let Some(nats) = nats_cluster::require_nats_server() else {
+        return;
+    };
+    let Some((version, telegraf)) = real_telegraf::versions().pop() else {
+        return;
+    };
+    let (mut fleet, _, mqtt_port) = launch(&nats, version, &telegraf, &["--fleet"]);
+    let dir = fleet.dir.path().to_path_buf();
+    let zone_a = ["tb3-1", "tb3-2"];
+    let inboxes: Vec<_> = zone_a
+        .iter()
+        .map(|r| {
+            mqtt_client::subscribe(
+                mqtt_port,
+                &format!("robots/{r}/action"),
+                &format!("{r}-actions"),
+            )
+        })
+        .collect();
+
+    // tessla-telegraf simulate --shared-floor 4 --output floor.lp
+    let floor = dir.join("floor.lp");
+    let out = Command::new(BIN)
+        .args(["simulate", "--shared-floor", "4", "--output"])
+        .arg(&floor)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&floor).unwrap();
+    let mut replays = Vec::new();
+    for r in 1..=4 {
+        // grep "topic=tessla/tb3-$r " floor.lp > tb3-$r.lp
+        let own: String = text
+            .lines()
+            .filter(|l| l.contains(&format!("topic=tessla/tb3-{r} ")))
+            .map(|l| format!("{l}\n"))
+            .collect();
+        assert!(!own.is_empty(), "no records of tb3-{r}");
+        let file = dir.join(format!("tb3-{r}.lp"));
+        std::fs::write(&file, own).unwrap();
+        // tessla-telegraf replay tb3-$r.lp --broker ... --topic robots/tb3-$r/telemetry
+        //   --time-key time --speed 1 &
+        replays.push(
+            Command::new(BIN)
+                .arg("replay")
+                .arg(&file)
+                .args(["--broker", &format!("mqtt://127.0.0.1:{mqtt_port}")])
+                .args(["--topic", &format!("robots/tb3-{r}/telemetry")])
+                .args(["--time-key", "time", "--speed", "1"])
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .unwrap(),
+        );
+    }
+    let steps = |lines: &[String]| {
+        lines
+            .iter()
+            .filter(|l| l.starts_with("tessla_fleet,"))
+            .count()
+    };
+
+    // The fleet level runs: its holder is one of the four, and it writes lines.
+    let deadline = Instant::now() + Duration::from_secs(90);
+    let (holder, holder_log) = loop {
+        let held: Vec<(u32, String)> = telegrafs(&fleet)
+            .into_iter()
+            .filter(|(_, log)| {
+                std::fs::read_to_string(dir.join(log))
+                    .unwrap_or_default()
+                    .contains("fleet: holding the fleet level")
+            })
+            .collect();
+        if held.len() == 1 && steps(&fleet_output(&fleet)) >= 40 {
+            break held[0].clone();
+        }
+        assert!(
+            Instant::now() < deadline,
+            "Telegraf {version}: no fleet holder writing lines ({held:?}, {} steps):\n{}",
+            steps(&fleet_output(&fleet)),
+            fleet.logs()
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    };
+
+    // SIGTERM to the holder's Telegraf: another process takes the fleet level over.
+    let before = steps(&fleet_output(&fleet));
+    let _ = Command::new("kill")
+        .args(["-TERM", &holder.to_string()])
+        .status();
+    let deadline = Instant::now() + Duration::from_secs(90);
+    let successor = loop {
+        let next = telegrafs(&fleet).into_iter().find(|(pid, log)| {
+            *pid != holder
+                && std::fs::read_to_string(dir.join(log))
+                    .unwrap_or_default()
+                    .contains("fleet: holding the fleet level")
+        });
+        if let Some(n) = next
+            && steps(&fleet_output(&fleet)) >= before + 40
+        {
+            break n;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "Telegraf {version}: nobody took the fleet level over from {holder_log} \
+             ({} steps, {before} before the SIGTERM):\n{}",
+            steps(&fleet_output(&fleet)),
+            fleet.logs()
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    assert!(
+        !real_telegraf::alive(holder),
+        "{holder_log} outlived SIGTERM"
+    );
+    for mut r in replays {
+        let status = r.wait().unwrap();
+        assert!(status.success(), "a replay failed: {status:?}");
+    }
+
+    // The slow-downs reached both zone-A robots, from the fleet.
+    for (r, inbox) in zone_a.iter().zip(&inboxes) {
+        let got = mqtt_client::collect(inbox, 3, Duration::from_secs(30));
+        assert!(
+            !got.is_empty(),
+            "Telegraf {version}: {r} got no fleet slow-down:\n{}",
+            fleet.logs()
+        );
+        for (_, payload) in &got {
+            let row = real_telegraf::action_row(payload);
+            assert_eq!(
+                row.tags.get("robot").map(String::as_str),
+                Some(*r),
+                "{row:?}"
+            );
+            assert_eq!(
+                row.tags.get("source").map(String::as_str),
+                Some("fleet"),
+                "{row:?}"
+            );
+            assert!(row.fields.contains_key("speed_limit"), "{row:?}");
+            assert!(row.fields.contains_key("valid_until"), "{row:?}");
+        }
+    }
+
+    // The fleet's lines: both partitions joined; P2 count, closest distance and zone A
+    // occupancy within what four robots on one floor can give; every step written once.
+    let lines = fleet_output(&fleet);
+    for p in ["p0", "p1"] {
+        assert!(
+            lines.iter().any(|l| l.starts_with(&format!(
+                "tessla_fleet_status,partition={p} state=\"live\",event=\"joined\""
+            ))),
+            "partition {p} never joined: {lines:#?}"
+        );
+    }
+    let fleet_lines: Vec<&String> = lines
+        .iter()
+        .filter(|l| l.starts_with("tessla_fleet,"))
+        .collect();
+    let values = |name: &str| -> Vec<f64> {
+        fleet_lines
+            .iter()
+            .filter_map(|l| field(l, name))
+            .map(|v| v.trim_end_matches('i').parse::<f64>().unwrap())
+            .collect()
+    };
+    let p2 = values("fleet_p2_violations");
+    let closest = values("closest_distance");
+    let zone = values("zone_a_occupancy");
+    assert!(!p2.is_empty() && !closest.is_empty() && !zone.is_empty());
+    assert!(p2.iter().all(|v| (0.0..=4.0).contains(v)), "{p2:?}");
+    assert!(zone.iter().all(|v| (0.0..=4.0).contains(v)), "{zone:?}");
+    assert!(zone.contains(&2.0), "{zone:?}");
+    assert!(closest.iter().all(|v| *v > 0.0 && *v < 10.0), "{closest:?}");
+    assert!(closest.iter().any(|v| *v < 0.5), "{closest:?}");
+    let mut stamps: Vec<&str> = fleet_lines
+        .iter()
+        .filter_map(|l| l.rsplit(' ').next())
+        .collect();
+    let n = stamps.len();
+    stamps.sort_unstable();
+    stamps.dedup();
+    assert_eq!(stamps.len(), n, "a fleet step written twice");
+    eprintln!(
+        "Telegraf {version}: fleet example through Telegraf: {n} fleet steps ({before} before SIGTERM to {holder_log}, then {}), slow-downs to {zone_a:?}",
+        successor.1
+    );
+    let status = fleet.stop();
+    assert_eq!(
+        status.and_then(|s| s.code()),
+        Some(0),
+        "start.sh after SIGTERM:\n{}",
+        fleet.logs()
+    );
 }

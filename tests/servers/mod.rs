@@ -13,6 +13,7 @@ mod fleet_nats_specs;
 mod fleet_nats_state;
 #[cfg(feature = "tools")]
 mod fleet_one_machine;
+mod fleet_spec_rollout;
 mod pipeline_influx;
 #[cfg(feature = "tools")]
 mod pipeline_mqtt;

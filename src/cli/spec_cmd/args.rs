@@ -70,8 +70,14 @@ pub struct SignArgs {
 
 #[derive(Debug, Args, Clone)]
 pub struct PublishArgs {
-    /// The `.tessla` file; its includes are published with it.
+    /// The `.tessla` file; its includes are published with it. With `--fleet`: the robot spec
+    /// the fleet spec is checked against (not published).
     pub spec: PathBuf,
+    /// Publish a version of the fleet spec (`run --fleet-spec`) instead: FILE is checked
+    /// against the robot spec as `--fleet-spec` is at start-up, and the fleet level of every
+    /// process switches to it at its first step at or after `--from` (docs/fleet.md).
+    #[arg(long, value_name = "FILE", conflicts_with = "select")]
+    pub fleet: Option<PathBuf>,
     /// A label shown beside the version's id (`tight delta`).
     #[arg(long)]
     pub label: Option<String>,

@@ -152,6 +152,7 @@ mod tests {
             from: 0,
             selector: Selector::parse(sel).unwrap(),
             published: 0,
+            fleet: false,
         }
     }
 

@@ -20,6 +20,9 @@ pub(super) fn publish(a: PublishArgs) -> CliResult {
     let mut spec_options = a.spec_options.clone();
     spec_options.set_from_env();
     let options = load_options(&spec_options)?;
+    if let Some(fleet) = &a.fleet {
+        return publish_fleet(&a, fleet, &options);
+    }
     let (bundle, loaded) = Bundle::read(&a.spec, &options).map_err(|e| {
         CliError::spec(format!(
             "{}\nspec publish: {} was not published: it does not check",
@@ -55,9 +58,69 @@ pub(super) fn publish(a: PublishArgs) -> CliResult {
         from: a.from.unwrap_or(now),
         selector: a.select.clone().unwrap_or_default(),
         published: now,
+        fleet: false,
     };
     let (r, proposed) = op.publish(Some(&bundle), rollout, &key).map_err(failure)?;
     print(&format!("{}\n", published_line(&r, "")))?;
+    settle(&op, &r, proposed, &key, a.vote.vote_timeout)
+}
+
+/// `spec publish ROBOT_SPEC --fleet FILE`: check the fleet spec against the robot spec (the
+/// messages of `run --fleet-spec`), then publish it as a fleet rollout and settle it.
+fn publish_fleet(
+    a: &PublishArgs,
+    fleet: &std::path::Path,
+    options: &tessla_engine::LoadOptions,
+) -> CliResult {
+    let not_published = |why: &str| {
+        format!(
+            "spec publish: fleet spec {} was not published: {why}",
+            fleet.display()
+        )
+    };
+    let (_, robot) = Bundle::read(&a.spec, options).map_err(|e| {
+        CliError::spec(format!(
+            "{}\n{}",
+            e.render().trim_end(),
+            not_published(&format!(
+                "the robot spec {} it is checked against does not check",
+                a.spec.display()
+            ))
+        ))
+    })?;
+    let checked = crate::fleet::check(fleet, &robot.program, options).map_err(|e| {
+        CliError::spec(format!(
+            "{}\n{}",
+            e.trim_end(),
+            not_published(&format!("it does not check against {}", a.spec.display()))
+        ))
+    })?;
+    let bundle = checked.bundle;
+    let key = read_signing_key(a.sign.sign_key_file.as_deref())
+        .map_err(|e| CliError::spec(format!("spec publish: {e}")))?;
+    let op = Operator::connect(&a.channel.channel, true).map_err(failure)?;
+    if op.created() {
+        let wait = Operator::settling();
+        eprintln!(
+            "spec: created the channel; waiting {} s for running processes to find it",
+            wait.as_secs_f64()
+        );
+        std::thread::sleep(wait);
+    }
+    refuse_while_undecided(&op)?;
+    let now = now_ns();
+    let rollout = Rollout {
+        revision: 0,
+        id: bundle.id(),
+        digest: bundle.digest(),
+        label: a.label.clone().unwrap_or_default(),
+        from: a.from.unwrap_or(now),
+        selector: Default::default(),
+        published: now,
+        fleet: true,
+    };
+    let (r, proposed) = op.publish(Some(&bundle), rollout, &key).map_err(failure)?;
+    print(&format!("{} (fleet spec)\n", published_line(&r, "")))?;
     settle(&op, &r, proposed, &key, a.vote.vote_timeout)
 }
 
@@ -288,6 +351,8 @@ pub(super) fn rollback(a: RollbackArgs) -> CliResult {
         .into_iter()
         .filter(|l| committed.contains(&l.revision))
         .filter_map(|l| l.rollout.ok())
+        // A fleet spec is rolled back by publishing the earlier one with `--fleet`.
+        .filter(|r| !r.fleet)
         .collect();
     let Some((undone, selector, previous)) = rollback_plan(&rollouts, a.select.as_ref()) else {
         return Err(CliError::spec(match &a.select {
@@ -324,6 +389,7 @@ pub(super) fn rollback(a: RollbackArgs) -> CliResult {
         from: a.from.unwrap_or(now),
         selector,
         published: now,
+        fleet: false,
     };
     let (r, proposed) = op.publish(None, rollout, &key).map_err(failure)?;
     let what = match previous {

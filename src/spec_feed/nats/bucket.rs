@@ -159,6 +159,7 @@ pub(super) async fn arrival(
                     from: 0,
                     selector: Selector::all(),
                     published: 0,
+                    fleet: false,
                 },
                 bundle: Err(why.clone().into()),
             };
