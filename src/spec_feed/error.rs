@@ -55,6 +55,14 @@ pub enum RolloutError {
     DoesNotCheck(String),
     #[error("it has no outputs, so it would check nothing and write nothing")]
     NoOutputs,
+    /// A fleet rollout must name a published fleet spec version.
+    #[error(
+        "a fleet rollout names its version (publish the earlier fleet spec again with `spec publish --fleet`)"
+    )]
+    FleetBase,
+    /// The fleet level's check of a fleet spec version (the messages of `--fleet-spec`).
+    #[error("{0}")]
+    FleetCheck(String),
     /// The processor's checks: selector, annotations, bindings.
     #[error(transparent)]
     Processor(#[from] crate::processor::Refusal),

@@ -539,20 +539,19 @@ impl Updates {
 
     /// Check a fleet rollout here: its bundle and the fleet level's check (the messages of
     /// `--fleet-spec` at start-up). `Ok(None)`: this process runs no fleet level.
-    fn check_fleet(&self, a: &Arrival) -> Result<Option<FleetVersion>, String> {
+    fn check_fleet(&self, a: &Arrival) -> Result<Option<FleetVersion>, RolloutError> {
         let bundle = a.bundle.as_ref().map_err(Clone::clone)?;
         if a.rollout.id == BASE {
-            return Err("a fleet rollout names its version (publish the earlier fleet spec again with `spec publish --fleet`)".into());
+            return Err(RolloutError::FleetBase);
         }
         if bundle.id() != a.rollout.id {
-            return Err(format!(
-                "its bundle is version {}, not {} as the rollout says",
-                bundle.id(),
-                a.rollout.id
-            ));
+            return Err(RolloutError::OtherVersion {
+                bundle: bundle.id().to_string(),
+                said: a.rollout.id.clone(),
+            });
         }
         match &self.fleet_check {
-            Some(check) => check(bundle).map(Some),
+            Some(check) => check(bundle).map(Some).map_err(RolloutError::FleetCheck),
             None => Ok(None),
         }
     }
@@ -577,7 +576,7 @@ impl Updates {
                     r.id,
                     label_note(&r.label)
                 );
-                Outcome::of(r, Phase::Check, false, first_lines(&reason))
+                Outcome::of(r, Phase::Check, false, first_lines(&reason.to_string()))
             }
         }
     }
@@ -617,7 +616,7 @@ impl Updates {
                     from: r.from,
                     version: None,
                 });
-                Outcome::of(r, Phase::Committed, false, first_lines(&reason))
+                Outcome::of(r, Phase::Committed, false, first_lines(&reason.to_string()))
             }
         }
     }
