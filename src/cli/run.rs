@@ -102,6 +102,13 @@ pub fn run(args: RunArgs) -> CliResult {
     finish(rt, result, &proc)
 }
 
+/// A fleet spec that does not check is a spec error (exit 2).
+impl From<crate::fleet::CheckError> for CliError {
+    fn from(e: crate::fleet::CheckError) -> Self {
+        CliError::spec(e.to_string())
+    }
+}
+
 /// The fleet level of `--fleet-spec` (checked against the robot spec `robot`) and the robot
 /// outputs it reads; a fleet spec that does not check is a spec error (exit 2).
 fn fleet_level(
@@ -115,7 +122,7 @@ fn fleet_level(
     config: &RunConfig,
 ) -> Result<(Level, Arc<[String]>), CliError> {
     let options = super::spec_options::load_options(spec_options)?;
-    let (loaded, names) = crate::fleet::check(path, robot, &options).map_err(CliError::spec)?;
+    let (loaded, names) = crate::fleet::check(path, robot, &options)?;
     if !loaded.warnings.is_empty() {
         log_warn!(
             "{}",

@@ -108,17 +108,33 @@ pub fn load_options(robot: &LoadOptions) -> LoadOptions {
     o
 }
 
+/// Why [`check`] refused a fleet spec.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckError {
+    /// The spec does not compile, or its inputs do not match the robot spec's outputs
+    /// (diagnostics with file, line, column).
+    #[error("{0}")]
+    Diagnostics(#[from] tessla_engine::LoadError),
+    /// The spec file could not be read again for the check.
+    #[error("{}: cannot read the fleet spec: {source}", path.display())]
+    Read {
+        path: std::path::PathBuf,
+        source: std::io::Error,
+    },
+}
+
 /// Load the fleet spec at `path` and check its inputs against the robot spec's outputs: the
 /// fleet program and, per fleet input (in the fleet program's order), the robot output it reads.
-/// Errors are rendered diagnostics (file, line, column).
 pub fn check(
     path: &Path,
     robot: &Program,
     options: &LoadOptions,
-) -> Result<(tessla_engine::Loaded, Vec<String>), String> {
-    let loaded = tessla_engine::load_file(path, &load_options(options)).map_err(|e| e.render())?;
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| format!("{}: cannot read the fleet spec: {e}", path.display()))?;
+) -> Result<(tessla_engine::Loaded, Vec<String>), CheckError> {
+    let loaded = tessla_engine::load_file(path, &load_options(options))?;
+    let text = std::fs::read_to_string(path).map_err(|source| CheckError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
     let mut sources = SourceMap::new();
     let file = sources.add(path.display().to_string(), Some(path), text.clone());
     let (ast, _) = tessla_syntax::parser::parse(&text, file);
@@ -185,7 +201,10 @@ pub fn check(
         ));
     }
     if !diags.is_empty() {
-        return Err(tessla_syntax::diag::render(&diags, &sources, false));
+        return Err(CheckError::Diagnostics(tessla_engine::LoadError {
+            sources,
+            diagnostics: diags,
+        }));
     }
     Ok((loaded, names))
 }
