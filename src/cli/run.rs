@@ -113,6 +113,13 @@ pub fn run(args: RunArgs) -> CliResult {
     finish(rt, result, &proc)
 }
 
+/// A fleet spec that does not check is a spec error (exit 2).
+impl From<crate::fleet::CheckError> for CliError {
+    fn from(e: crate::fleet::CheckError) -> Self {
+        CliError::spec(e.to_string())
+    }
+}
+
 /// The fleet level of `--fleet-spec` (checked against the robot spec `robot`) and the robot
 /// outputs it reads; a fleet spec that does not check is a spec error (exit 2).
 fn fleet_level(
@@ -130,7 +137,7 @@ fn fleet_level(
         loaded,
         names,
         bundle,
-    } = crate::fleet::check(path, robot, &options).map_err(CliError::spec)?;
+    } = crate::fleet::check(path, robot, &options)?;
     if !loaded.warnings.is_empty() {
         log_warn!(
             "{}",
@@ -166,10 +173,10 @@ fn fleet_check(
     Box::new(move |bundle| {
         let checked = crate::fleet::check_bundle(bundle.clone(), &robot, &options)?;
         if let Some(n) = checked.names.iter().find(|n| !names.contains(n)) {
-            return Err(format!(
-                "fleet spec input `{n}` reads a robot output the running fleet level does not collect (it collects {}: the inputs of the fleet spec it started with); restart with a --fleet-spec that reads it",
-                names.join(", ")
-            ));
+            return Err(crate::fleet::CheckError::NotCollected {
+                input: n.clone(),
+                collects: names.join(", "),
+            });
         }
         Ok(crate::spec_feed::FleetVersion {
             program: checked.loaded.program,

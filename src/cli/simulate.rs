@@ -7,7 +7,7 @@
 //! example's input, `crate::simulate::shared_floor`) and runs no monitor.
 
 use super::error::{CliError, CliResult};
-use super::spec_options::{SpecOptions, load_options};
+use super::spec_options::{SpecOptionError, SpecOptions, load_options};
 use crate::log;
 use crate::processor::{Options, Processor};
 use crate::replay::mqtt::Broker;
@@ -208,14 +208,53 @@ fn shared_floor(args: &SimulateArgs, robots: usize) -> CliResult {
     written.map_err(|e| CliError::io(format!("simulate: {e}")))
 }
 
+/// Why the monitors' program could not be loaded (exit 2).
+#[derive(Debug, thiserror::Error)]
+enum LoadError {
+    /// `--set` or `--base-time` is wrong.
+    #[error("{0}")]
+    Options(#[from] SpecOptionError),
+    /// The spec does not compile (its diagnostics rendered).
+    #[error("{0}")]
+    Spec(#[from] tessla_engine::LoadError),
+}
+
+impl From<LoadError> for CliError {
+    fn from(e: LoadError) -> Self {
+        CliError::spec(e.to_string())
+    }
+}
+
+/// Why a simulated run stopped (exit 3, the message led by `simulate: `).
+#[derive(Debug, thiserror::Error)]
+enum RunFailure {
+    /// A processor could not be made for the program.
+    #[error("spec: {0}")]
+    Processor(#[from] crate::telegraf::binding::BindingError),
+    /// The closed loop stopped.
+    #[error("{0}")]
+    Run(#[from] closed_loop::RunError),
+    /// The MQTT twin could not finish publishing.
+    #[error("{0}")]
+    Mqtt(#[from] crate::replay::mqtt::MqttError),
+    /// Neither a broker nor in-process monitors.
+    #[error("no monitors loaded")]
+    NoMonitors,
+}
+
+impl From<RunFailure> for CliError {
+    fn from(e: RunFailure) -> Self {
+        CliError::io(format!("simulate: {e}"))
+    }
+}
+
 /// The monitors' program from `--spec` (or the bundled one) and `--set`/`--base-time`.
-fn load(args: &SimulateArgs) -> Result<Arc<tessla_engine::Program>, String> {
-    let options = load_options(&args.spec_options).map_err(|e| e.to_string())?;
+fn load(args: &SimulateArgs) -> Result<Arc<tessla_engine::Program>, LoadError> {
+    let options = load_options(&args.spec_options)?;
     let loaded = match &args.spec {
         Some(path) => tessla_engine::load_file(path, &options),
         None => crate::bundled::load(&options),
-    }
-    .map_err(|e| e.render())?;
+    }?;
     if !loaded.warnings.is_empty() {
         log_warn!(
             "{}",
@@ -262,7 +301,7 @@ pub fn run(args: SimulateArgs) -> CliResult {
             }
             None
         }
-        None => Some(load(&args).map_err(CliError::spec)?),
+        None => Some(load(&args)?),
     };
     let mut file: Box<dyn Write> = match &args.output {
         Some(path) => match std::fs::File::create(path) {
@@ -305,15 +344,15 @@ pub fn run(args: SimulateArgs) -> CliResult {
             }
             let finished = twin.finish();
             match (outcome, finished) {
-                (Err(e), _) => Err(e.to_string()),
-                (Ok(_), Err(e)) => Err(e.to_string()),
+                (Err(e), _) => Err(RunFailure::from(e)),
+                (Ok(_), Err(e)) => Err(RunFailure::from(e)),
                 (Ok(o), Ok(_)) => Ok(vec![(chosen_on, o)]),
             }
         }
         (None, Some(program)) => in_process(&scenario, &program, chosen_on, &mut file),
-        (None, None) => Err("no monitors loaded".to_string()),
+        (None, None) => Err(RunFailure::NoMonitors),
     };
-    let outcomes = result.map_err(|e| CliError::io(format!("simulate: {e}")))?;
+    let outcomes = result?;
     file.flush()
         .map_err(|e| CliError::io(format!("simulate: cannot write the output: {e}")))?;
     for (on, o) in outcomes {
@@ -341,11 +380,10 @@ fn in_process(
     program: &Arc<tessla_engine::Program>,
     chosen_on: bool,
     file: &mut dyn Write,
-) -> Result<Vec<(bool, Outcome)>, String> {
+) -> Result<Vec<(bool, Outcome)>, RunFailure> {
     let mut outcomes = Vec::new();
     for on in [false, true] {
-        let processor = Processor::new(Arc::clone(program), Options::default())
-            .map_err(|e| format!("spec: {e}"))?;
+        let processor = Processor::new(Arc::clone(program), Options::default())?;
         let mut twin = InProcess::new(processor);
         if !scenario.link_drops.is_empty() {
             // A held message is late only if the silence moved the monitor's clock meanwhile.
@@ -355,8 +393,7 @@ fn in_process(
             closed_loop::run(scenario, on, &mut twin, file)
         } else {
             closed_loop::run(scenario, on, &mut twin, &mut std::io::sink())
-        }
-        .map_err(|e| e.to_string())?;
+        }?;
         log_debug!(
             "monitor {}: {}",
             if on { "on" } else { "off" },

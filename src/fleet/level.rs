@@ -15,8 +15,8 @@ use crate::processor::fleet_tap::Drained;
 use crate::telegraf::encode::{self, Prepared, StepEvent};
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::sync::Arc;
-use tessla_engine::runtime::collections;
-use tessla_engine::runtime::snapshot::SValue;
+use tessla_engine::collections;
+use tessla_engine::snapshot::SValue;
 use tessla_engine::{Monitor, OutputEvent, Program, Value};
 
 /// One pending change of a fleet map.
@@ -541,7 +541,7 @@ type PendState = (i64, String, Option<(usize, SValue)>);
 /// `super::nats`): its monitor, maps, pending changes, robot clocks and action counts.
 #[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct LevelState {
-    monitor: Option<tessla_engine::runtime::snapshot::Snapshot>,
+    monitor: Option<tessla_engine::snapshot::Snapshot>,
     maps: Vec<SValue>,
     pending: Vec<PendState>,
     clocks: Vec<(String, i64)>,
@@ -560,10 +560,7 @@ impl Level {
         if !self.events.is_empty() || self.has_switch() {
             return None;
         }
-        let monitor = self
-            .monitor
-            .as_ref()
-            .map(tessla_engine::runtime::snapshot::snapshot);
+        let monitor = self.monitor.as_ref().map(tessla_engine::snapshot::snapshot);
         if monitor.as_ref().is_some_and(|m| m.unsaved > 0) {
             return None;
         }
@@ -602,9 +599,9 @@ impl Level {
 
     /// Continue from `state` (a level made by [`Level::new`] for the same fleet spec).
     pub fn restore(&mut self, state: LevelState) {
-        self.monitor = state.monitor.map(|snap| {
-            tessla_engine::runtime::snapshot::restore(Arc::clone(&self.program), &snap)
-        });
+        self.monitor = state
+            .monitor
+            .map(|snap| tessla_engine::snapshot::restore(Arc::clone(&self.program), &snap));
         if state.maps.len() == self.maps.len() {
             self.maps = state.maps.iter().map(SValue::to_value).collect();
         }

@@ -145,10 +145,27 @@ pub struct Checked {
     pub bundle: Bundle,
 }
 
+/// Why [`check`] or [`check_bundle`] refused a fleet spec.
+#[derive(Debug, thiserror::Error)]
+pub enum CheckError {
+    /// The spec does not compile, or its inputs do not match the robot spec's outputs
+    /// (diagnostics with file, line, column).
+    #[error("{0}")]
+    Diagnostics(#[from] tessla_engine::LoadError),
+    /// A bundle without a file.
+    #[error("the fleet spec is empty")]
+    Empty,
+    /// A fleet spec version (a rollout) reads a robot output the running fleet level does not
+    /// collect.
+    #[error(
+        "fleet spec input `{input}` reads a robot output the running fleet level does not collect (it collects {collects}: the inputs of the fleet spec it started with); restart with a --fleet-spec that reads it"
+    )]
+    NotCollected { input: String, collects: String },
+}
+
 /// Load the fleet spec at `path` and check its inputs against the robot spec's outputs.
-/// Errors are rendered diagnostics (file, line, column).
-pub fn check(path: &Path, robot: &Program, options: &LoadOptions) -> Result<Checked, String> {
-    let (bundle, loaded) = Bundle::read(path, &load_options(options)).map_err(|e| e.render())?;
+pub fn check(path: &Path, robot: &Program, options: &LoadOptions) -> Result<Checked, CheckError> {
+    let (bundle, loaded) = Bundle::read(path, &load_options(options))?;
     check_loaded(bundle, loaded, robot)
 }
 
@@ -158,10 +175,8 @@ pub fn check_bundle(
     bundle: Bundle,
     robot: &Program,
     options: &LoadOptions,
-) -> Result<Checked, String> {
-    let loaded = bundle
-        .load(&load_options(options))
-        .map_err(|e| e.render())?;
+) -> Result<Checked, CheckError> {
+    let loaded = bundle.load(&load_options(options))?;
     check_loaded(bundle, loaded, robot)
 }
 
@@ -169,10 +184,10 @@ fn check_loaded(
     bundle: Bundle,
     loaded: tessla_engine::Loaded,
     robot: &Program,
-) -> Result<Checked, String> {
+) -> Result<Checked, CheckError> {
     let (name, text) = match bundle.files.first() {
         Some(f) => (f.name.clone(), f.text.clone()),
-        None => return Err("the fleet spec is empty".into()),
+        None => return Err(CheckError::Empty),
     };
     let path = Path::new(&name);
     let mut sources = SourceMap::new();
@@ -241,7 +256,10 @@ fn check_loaded(
         ));
     }
     if !diags.is_empty() {
-        return Err(tessla_syntax::diag::render(&diags, &sources, false));
+        return Err(CheckError::Diagnostics(tessla_engine::LoadError {
+            sources,
+            diagnostics: diags,
+        }));
     }
     Ok(Checked {
         loaded,

@@ -16,7 +16,7 @@ use crate::processor::fleet_tap::{Change, Drained};
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
-use tessla_engine::runtime::snapshot::SValue;
+use tessla_engine::snapshot::SValue;
 
 /// The measurement of the fleet level's status lines.
 pub const STATUS_MEASUREMENT: &str = "tessla_fleet_status";

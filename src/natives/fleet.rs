@@ -159,7 +159,7 @@ mod tests {
 
     #[test]
     fn fewer_than_two_is_none() {
-        let m = tessla_engine::runtime::collections::map_of(vec![(
+        let m = tessla_engine::collections::map_of(vec![(
             Value::Str(Arc::from("a")),
             Value::Tuple(Arc::from(vec![Value::Float(1.0), Value::Float(2.0)])),
         )]);

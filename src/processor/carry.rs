@@ -1,6 +1,6 @@
 //! What a monitor keeps when it continues in another program: a SIGHUP reload, a rollout's
 //! switch, and saved state restored into an edited spec all carry state by stream key
-//! (`tessla_engine::runtime::snapshot`), and this module is the one place that says which
+//! (`tessla_engine::snapshot`), and this module is the one place that says which
 //! streams start afresh and how that is worded in the log.
 //!
 //! Owns: the keys a program's state is known by ([`stream_keys`]: one per evaluated stream),
@@ -10,7 +10,7 @@
 //! state`).
 
 use tessla_engine::Program;
-use tessla_engine::runtime::snapshot;
+use tessla_engine::snapshot;
 
 /// The keys of every evaluated stream of `program` (its evaluation order), sorted, without
 /// repeats: what saved state records of the program it was saved by. `node_keys` is

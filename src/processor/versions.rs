@@ -12,7 +12,7 @@ use crate::telegraf::encode;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::sync::Arc;
-use tessla_engine::runtime::snapshot;
+use tessla_engine::snapshot;
 use tessla_engine::{Monitor, Program};
 
 /// One spec version a processor can run: its program and what reading metrics into it and

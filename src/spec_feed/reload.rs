@@ -4,7 +4,7 @@
 //! never change while running, so their reload keeps everything) and the reload itself: a spec
 //! that fails to check is reported with its full diagnostic and the running one stays; a good
 //! one replaces it for every instance, each stream whose key (see
-//! `tessla_engine::runtime::snapshot`) is unchanged keeping its state, and the streams that start
+//! `tessla_engine::snapshot`) is unchanged keeping its state, and the streams that start
 //! afresh are logged.
 
 use super::bundle::Bundle;
@@ -13,7 +13,7 @@ use crate::processor::carry::{self, Reset};
 use crate::processor::versions::{self, Version};
 use std::path::PathBuf;
 use std::sync::Arc;
-use tessla_engine::runtime::snapshot;
+use tessla_engine::snapshot;
 use tessla_engine::{LoadError, LoadOptions, Loaded};
 
 /// The spec `run` loads at start and on every SIGHUP.

@@ -9,12 +9,12 @@ use crate::processor::instance_table::Key;
 use crate::processor::{Continuity, carry};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
-use tessla_engine::runtime::snapshot::{self, Snapshot};
+use tessla_engine::snapshot::{self, Snapshot};
 use tessla_engine::{Monitor, Program};
 
 pub const MAGIC: &str = "tessla-telegraf-state";
 /// Format version; bumped on any incompatible change of the layout below or of node keys
-/// (2: structural node keys, see `tessla_engine::runtime::snapshot`; 3: the fingerprint covers
+/// (2: structural node keys, see `tessla_engine::snapshot`; 3: the fingerprint covers
 /// the options only, and the state records the keys of the program each instance ran, so an
 /// edited spec keeps every stream whose key is unchanged).
 pub const VERSION: u32 = 3;

@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 use std::fs::{self, File, OpenOptions};
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
-use tessla_engine::runtime::snapshot::{self, Snapshot};
+use tessla_engine::snapshot::{self, Snapshot};
 
 #[derive(Serialize, Deserialize)]
 struct SavedInstance {

@@ -19,7 +19,7 @@ use crate::processor::Processor;
 use crate::processor::instance_table::Key;
 use std::io;
 use std::path::PathBuf;
-use tessla_engine::runtime::snapshot;
+use tessla_engine::snapshot;
 
 /// Where `--state` keeps the state.
 #[derive(Debug, Clone, PartialEq)]

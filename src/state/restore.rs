@@ -14,7 +14,7 @@ use crate::processor::instance_table::Key;
 use crate::processor::{Continuity, Processor};
 use std::collections::HashSet;
 use std::sync::Arc;
-use tessla_engine::runtime::snapshot::{self, Snapshot};
+use tessla_engine::snapshot::{self, Snapshot};
 use tessla_engine::{Monitor, Program};
 
 /// A running program instances are restored into.

@@ -70,27 +70,36 @@ pub struct Dropped {
     pub reason: String,
 }
 
-fn field_value(v: &Value) -> Result<Option<FieldValue>, String> {
+/// Why a value has no line-protocol form (its message is a [`Dropped`] reason).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Unwritable {
+    /// An integer outside 64 bits (the value is a `Value::BigInt`).
+    #[error("{0} does not fit a line-protocol integer (64 bits)")]
+    BigInt(Value),
+    /// A NaN or infinite float.
+    #[error("{0} is not valid line protocol")]
+    Float(f64),
+    /// A TeSSLa runtime error carried as the value.
+    #[error("runtime error: {0}")]
+    Runtime(tessla_engine::RuntimeError),
+    /// A list, set, map or function (records and tuples are written member by member).
+    #[error("a compound value has no line-protocol form: {0}")]
+    Compound(Value),
+}
+
+fn field_value(v: &Value) -> Result<Option<FieldValue>, Unwritable> {
     Ok(Some(match v {
         Value::Unit => FieldValue::Bool(true),
         Value::Bool(b) => FieldValue::Bool(*b),
         Value::Int(i) => FieldValue::Int(*i),
-        Value::BigInt(i) => {
-            return Err(format!(
-                "{i} does not fit a line-protocol integer (64 bits)"
-            ));
-        }
+        big @ Value::BigInt(_) => return Err(Unwritable::BigInt(big.clone())),
         Value::Float(f) if f.is_finite() => FieldValue::Float(*f),
-        Value::Float(f) => return Err(format!("{f} is not valid line protocol")),
+        Value::Float(f) => return Err(Unwritable::Float(*f)),
         Value::Str(s) => FieldValue::Str(s.to_string()),
         Value::Some(x) => return field_value(x),
         Value::None => return Ok(None),
-        Value::Error(e) => return Err(format!("runtime error: {e}")),
-        other => {
-            return Err(format!(
-                "a compound value has no line-protocol form: {other}"
-            ));
-        }
+        Value::Error(e) => return Err(Unwritable::Runtime(e.clone())),
+        other => return Err(Unwritable::Compound(other.clone())),
     }))
 }
 
@@ -576,7 +585,7 @@ fn drop_value(
             } else {
                 format!("{output}.{path}")
             },
-            reason,
+            reason: reason.to_string(),
         });
     }
 }

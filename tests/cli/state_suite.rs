@@ -9,7 +9,7 @@ use crate::support::tessla_suite;
 use std::path::Path;
 use std::sync::{Arc, mpsc};
 use std::time::Duration;
-use tessla_engine::runtime::snapshot::{self, Snapshot};
+use tessla_engine::snapshot::{self, Snapshot};
 use tessla_engine::{Monitor, OutputEvent, Program, Value};
 use tessla_telegraf::trace::reader;
 

@@ -20,14 +20,41 @@
 #![doc = include_str!("../README.md")]
 
 pub mod builtins;
-pub mod front;
-pub mod ir;
+pub(crate) mod front;
+pub(crate) mod ir;
 pub mod load;
-pub mod runtime;
+// Crate-private: its public parts are re-exported below (the README, "Public API"); its
+// documentation may link to the private IR.
+#[allow(rustdoc::private_intra_doc_links)]
+pub(crate) mod runtime;
 pub mod value;
 
+pub use builtins::{Natives, RegisterError};
+pub use front::lower::time::{BaseTimeError, parse_base_time};
+pub use ir::schedule::Cycle;
 pub use ir::{Annotation, InputInfo, OutputInfo, Type};
 pub use load::{LoadError, LoadOptions, Loaded, file_resolver, load_file, load_with};
 pub use runtime::exec::Program;
+pub use runtime::format::{FormatError, java_format};
 pub use runtime::monitor::{InputError, Monitor, OutputEvent};
+pub use runtime::natives::core::{CTF_MARKER, ctf_get_int};
+pub use runtime::snapshot;
 pub use value::{Callable, RuntimeError, Value};
+
+/// TeSSLa's Set and Map values built and read outside a spec (an application's natives, a trace
+/// reader): the functions the builtins `Map_add`, `Map_contains`, ... run, their arguments as a
+/// slice, and the constructors from Rust collections.
+pub mod collections {
+    pub use crate::runtime::collections::{
+        empty_map, empty_set, map_add, map_contains, map_get, map_get_or_else, map_of, map_remove,
+        set_add, set_contains, set_of,
+    };
+}
+
+/// TeSSLa's arithmetic, comparison and bit operators on values, as the monitors evaluate them
+/// (for an application that evaluates expressions of its own with the same semantics, such as a
+/// trace reader).
+pub mod ops {
+    pub use crate::ir::{BinOp, UnaryOp};
+    pub use crate::runtime::ops::{OpError, binary, unary};
+}

@@ -2,7 +2,7 @@
 //! uninterrupted monitor; restored into a changed spec, unchanged streams keep their state.
 
 use std::sync::Arc;
-use tessla_engine::runtime::snapshot::{self, Snapshot};
+use tessla_engine::snapshot::{self, Snapshot};
 use tessla_engine::{Monitor, OutputEvent, Program, Value};
 use tessla_syntax::include::MemResolver;
 

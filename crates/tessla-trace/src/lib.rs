@@ -633,19 +633,19 @@ pub(crate) mod tests {
         is_error::<tessla_engine::LoadError>();
         is_error::<tessla_engine::InputError>();
         is_error::<tessla_engine::RuntimeError>();
-        is_error::<tessla_engine::runtime::ops::OpError>();
-        is_error::<tessla_engine::runtime::snapshot::SError>();
-        is_error::<tessla_engine::ir::schedule::Cycle>();
-        is_error::<tessla_engine::runtime::format::FormatError>();
-        is_error::<tessla_engine::front::lower::time::BaseTimeError>();
+        is_error::<tessla_engine::ops::OpError>();
+        is_error::<tessla_engine::snapshot::SError>();
+        is_error::<tessla_engine::Cycle>();
+        is_error::<tessla_engine::FormatError>();
+        is_error::<tessla_engine::BaseTimeError>();
         is_error::<tessla_syntax::include::ResolveError>();
 
         let r = MemResolver::default();
         let e = tessla_syntax::include::Resolver::resolve(&r, None, "x").unwrap_err();
         assert_eq!(e.to_string(), "no bundled spec named `x`");
-        let e = tessla_engine::front::lower::time::parse_base_time("0 s").unwrap_err();
+        let e = tessla_engine::parse_base_time("0 s").unwrap_err();
         assert_eq!(e.to_string(), "base time `0 s` must be positive");
-        let e = tessla_engine::runtime::format::java_format("%", &Value::Int(1)).unwrap_err();
+        let e = tessla_engine::java_format("%", &Value::Int(1)).unwrap_err();
         assert_eq!(e.to_string(), "`%` lacks a conversion character");
     }
 }

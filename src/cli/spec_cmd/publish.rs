@@ -91,7 +91,7 @@ fn publish_fleet(
     let checked = crate::fleet::check(fleet, &robot.program, options).map_err(|e| {
         CliError::spec(format!(
             "{}\n{}",
-            e.trim_end(),
+            e.to_string().trim_end(),
             not_published(&format!("it does not check against {}", a.spec.display()))
         ))
     })?;

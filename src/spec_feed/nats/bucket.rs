@@ -96,8 +96,29 @@ pub(super) fn denied(url: &Url, text: &str) -> String {
     )
 }
 
+/// Why the bucket's keys or entries could not be read.
+#[derive(Debug, thiserror::Error)]
+pub(super) enum BucketError {
+    /// The stream's subject list (the bucket's keys).
+    #[error("cannot list the spec channel's keys: {0}")]
+    Keys(#[from] jetstream::stream::InfoError),
+    /// One entry, as a process reads the channel.
+    #[error("cannot read {key} from the spec channel: {source}")]
+    Entry { key: String, source: kv::EntryError },
+    /// One entry, as the operator's commands list the channel (their messages name the channel
+    /// already).
+    #[error("cannot read {key}: {source}")]
+    Listed { key: String, source: kv::EntryError },
+    /// [`read_patiently`] gave up.
+    #[error(
+        "its rollouts could not be read within {} s, three times; is the server overloaded?",
+        READ_PATIENCE.as_secs()
+    )]
+    TooSlow,
+}
+
 /// The revisions of every rollout in the bucket, in order.
-pub(super) async fn revisions(store: &kv::Store) -> Result<Vec<u64>, String> {
+pub(super) async fn revisions(store: &kv::Store) -> Result<Vec<u64>, BucketError> {
     numbered_keys(store, revision_of).await
 }
 
@@ -105,7 +126,7 @@ pub(super) async fn revisions(store: &kv::Store) -> Result<Vec<u64>, String> {
 pub(super) async fn numbered_keys(
     store: &kv::Store,
     of: fn(&str) -> Option<u64>,
-) -> Result<Vec<u64>, String> {
+) -> Result<Vec<u64>, BucketError> {
     let mut out: Vec<u64> = key_names(store)
         .await?
         .iter()
@@ -121,16 +142,14 @@ pub(super) async fn numbered_keys(
 /// `Store::keys` creates an ordered push consumer per call and waits until it reports everything
 /// delivered; the status keys every process rewrites every 2 s kept that from ending within the
 /// 30 s bound on a loaded machine (a rollback in the real-process tests failed so).
-pub(super) async fn key_names(store: &kv::Store) -> Result<Vec<String>, String> {
-    let bad = |e: &dyn std::fmt::Display| format!("cannot list the spec channel's keys: {e}");
+pub(super) async fn key_names(store: &kv::Store) -> Result<Vec<String>, BucketError> {
     let mut subjects = store
         .stream
         .info_with_subjects(format!("{}>", store.prefix))
-        .await
-        .map_err(|e| bad(&e))?;
+        .await?;
     let mut out = Vec::new();
     while let Some(s) = subjects.next().await {
-        let (subject, _) = s.map_err(|e| bad(&e))?;
+        let (subject, _) = s?;
         if let Some(k) = subject.strip_prefix(store.prefix.as_str()) {
             out.push(k.to_string());
         }
@@ -247,7 +266,10 @@ pub(super) fn decision_of(
 
 /// Every rollout and decision so far, checked, in revision order (each decision before its
 /// rollout).
-pub(super) async fn read_all(store: &kv::Store, trust: &[String]) -> Result<Vec<Event>, String> {
+pub(super) async fn read_all(
+    store: &kv::Store,
+    trust: &[String],
+) -> Result<Vec<Event>, BucketError> {
     let mut out = Vec::new();
     for r in numbered_keys(store, decided_revision_of).await? {
         let key = decision_key(r);
@@ -257,7 +279,7 @@ pub(super) async fn read_all(store: &kv::Store, trust: &[String]) -> Result<Vec<
                 decision: decision_of(r, &e.value, trust),
             }),
             Ok(_) => {}
-            Err(e) => return Err(format!("cannot read {key} from the spec channel: {e}")),
+            Err(source) => return Err(BucketError::Entry { key, source }),
         }
     }
     for r in revisions(store).await? {
@@ -267,7 +289,7 @@ pub(super) async fn read_all(store: &kv::Store, trust: &[String]) -> Result<Vec<
                 out.push(Event::Proposal(arrival(store, r, &e.value, trust).await));
             }
             Ok(_) => {}
-            Err(e) => return Err(format!("cannot read {key} from the spec channel: {e}")),
+            Err(source) => return Err(BucketError::Entry { key, source }),
         }
     }
     Ok(out)
@@ -282,7 +304,7 @@ pub(super) const READ_PATIENCE: Duration = Duration::from_secs(10);
 pub(super) async fn read_patiently(
     store: &kv::Store,
     trust: &[String],
-) -> Result<Vec<Event>, String> {
+) -> Result<Vec<Event>, BucketError> {
     for attempt in 1..=3 {
         match tokio::time::timeout(READ_PATIENCE, read_all(store, trust)).await {
             Ok(got) => return got,
@@ -292,8 +314,5 @@ pub(super) async fn read_patiently(
             ),
         }
     }
-    Err(format!(
-        "its rollouts could not be read within {} s, three times; is the server overloaded?",
-        READ_PATIENCE.as_secs()
-    ))
+    Err(BucketError::TooSlow)
 }

@@ -150,7 +150,7 @@ impl Operator {
                         });
                     }
                     Ok(_) => {}
-                    Err(e) => return Err(format!("cannot read {key}: {e}")),
+                    Err(source) => return Err(BucketError::Listed { key, source }),
                 }
             }
             Ok(out)
@@ -183,7 +183,7 @@ impl Operator {
                         });
                     }
                     Ok(_) => {}
-                    Err(e) => return Err(format!("cannot read {k}: {e}")),
+                    Err(source) => return Err(BucketError::Listed { key: k, source }),
                 }
             }
             Ok(out)
@@ -210,7 +210,7 @@ impl Operator {
                         });
                     }
                     Ok(_) => {}
-                    Err(e) => return Err(format!("cannot read {key}: {e}")),
+                    Err(source) => return Err(BucketError::Listed { key, source }),
                 }
             }
             Ok(out)

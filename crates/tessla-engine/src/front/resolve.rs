@@ -84,7 +84,8 @@ impl<'a> Resolved<'a> {
         })
     }
 
-    /// Flatten and resolve the statements of `files`.
+    /// Flatten and resolve the statements of `files` (the unit tests' way in).
+    #[cfg(test)]
     pub fn new(files: &'a [ast::File]) -> Self {
         Self::with_library(files, None)
     }
@@ -370,6 +371,7 @@ impl<'a> Resolved<'a> {
 
     /// Does `head` name a module as seen from module `prefix` (own and enclosing modules, the
     /// top level, imported modules)?
+    #[cfg(test)]
     pub fn is_module(&self, head: &str, prefix: &str) -> bool {
         let mut p = prefix.to_string();
         loop {

@@ -21,7 +21,6 @@ pub(crate) mod print;
 pub mod schedule;
 pub use code::{Callee, Code, FnId, Function, LiftFn, Prim};
 pub use op::{BinOp, UnaryOp};
-pub use print::IrListing;
 
 /// A value type, as reported by `check` and used by bindings to convert inputs.
 #[derive(Debug, Clone, PartialEq)]

@@ -3,7 +3,7 @@
 //!
 //! Owns: [`Program`] (what monitors run: the IR with its compiled code, made once and shared;
 //! its listing for `check --ir`, [`Listing`], which ends with how its step runs), [`Exec`] (compiled code: a context and a frame in, a value out), [`Ctx`] (the compiled
-//! function table and node functions of one program), [`compile`], [`compile_program`], the
+//! function table and node functions of one program), [`compile`], [`compile_program_with`], the
 //! semantics of [`Prim`]itives and [`LiftFn`]s, function values ([`FnClosure`],
 //! [`native_value`]), the [`Fast`] forms of node functions that are one operator or native on
 //! the node's arguments (run by the monitor on its arguments by reference). The semantics of
@@ -280,11 +280,6 @@ impl std::ops::Deref for Program {
     fn deref(&self) -> &ir::Program {
         &self.ir
     }
-}
-
-/// Compile a program's function table and node functions, and its flat plan if it has one.
-pub fn compile_program(p: &ir::Program) -> Arc<Ctx> {
-    compile_program_with(p, true)
 }
 
 fn compile_program_with(p: &ir::Program, flat: bool) -> Arc<Ctx> {

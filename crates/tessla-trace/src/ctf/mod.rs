@@ -20,7 +20,7 @@
 //! metadata, [`decode`] the binary streams; both return errors naming the file and the place,
 //! and never panic on bad input.
 //!
-//! A `CTF` value is a record (see [`tessla_engine::runtime::natives::core::ctf_get_int`] for the key
+//! A `CTF` value is a record (see [`tessla_engine::ctf_get_int`] for the key
 //! rules) with the marker field `$ctf` (the event name) and one field per TeSSLa key prefix:
 //! `context` (stream event context and event context), `eventcontext`, `eventheader`,
 //! `packetcontext` and `fields`. Nested structs are records, integers `Int`, strings `String`;
@@ -38,7 +38,7 @@ use std::sync::Arc;
 use tessla_engine::{Monitor, Program, Value};
 
 /// The marker field of a `CTF` value (no TeSSLa record can have it: not an identifier).
-pub const CTF_MARKER: &str = tessla_engine::runtime::natives::core::CTF_MARKER;
+pub const CTF_MARKER: &str = tessla_engine::CTF_MARKER;
 
 fn io(message: String) -> RunError {
     RunError {

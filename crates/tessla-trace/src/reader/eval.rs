@@ -203,7 +203,7 @@ fn eval(e: &Expr) -> Result<Value, EvalError> {
                     vals.into_iter().next().unwrap_or(Value::Unit),
                 ))),
                 ("List", _) => Ok(Value::List(Arc::new(vals))),
-                ("Set", _) => Ok(tessla_engine::runtime::collections::set_of(vals)),
+                ("Set", _) => Ok(tessla_engine::collections::set_of(vals)),
                 ("Map", n) if n % 2 == 0 => {
                     let mut map: Vec<(Value, Value)> = Vec::with_capacity(n / 2);
                     let mut it = vals.into_iter();
@@ -211,7 +211,7 @@ fn eval(e: &Expr) -> Result<Value, EvalError> {
                         map.push((k, v));
                     }
                     // A repeated key keeps the last value, as Scala's `toMap` does.
-                    Ok(tessla_engine::runtime::collections::map_of(map))
+                    Ok(tessla_engine::collections::map_of(map))
                 }
                 (other, n) => Err(EvalError::Call(other.to_string(), n)),
             }
@@ -251,7 +251,7 @@ fn bool_of(v: Value) -> Result<Value, EvalError> {
     }
 }
 
-/// An operator's semantics are the engine's ([`tessla_engine::runtime::ops`]); only the messages
+/// An operator's semantics are the engine's ([`tessla_engine::ops`]); only the messages
 /// are the trace reader's.
 fn op_error(e: OpError, undefined: impl FnOnce() -> EvalError) -> EvalError {
     match e {

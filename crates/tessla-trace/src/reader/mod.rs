@@ -14,7 +14,7 @@
 //! kind are read before this module sees them, by the input's type (`crate::fast`, with
 //! `Lit`'s typed reading); what that path leaves comes here as before. Integers are unbounded, as
 //! TeSSLa's `Int`. Operators mean what they mean in a spec: their semantics are
-//! `tessla_engine::runtime::ops` (so a negative shift shifts the other way, as TeSSLa's
+//! `tessla_engine::ops` (so a negative shift shifts the other way, as TeSSLa's
 //! unbounded integers do).
 //!
 //! The evaluator is the trace reader's own, not the engine's constant folding: the engine folds
@@ -40,7 +40,7 @@ use eval::read_expression;
 pub(crate) use literal::Lit;
 use literal::literal;
 use std::sync::Arc;
-use tessla_engine::runtime::ops::{self, OpError};
+use tessla_engine::ops::{self, OpError};
 use tessla_engine::{Program, Type, Value};
 use tessla_syntax::ast::{BinOp, Expr, ExprKind, StrPart, UnaryOp};
 use tessla_syntax::source::FileId;
@@ -374,7 +374,7 @@ mod tests {
         let spec = "in s: Events[Set[Int]]\nin m: Events[Map[Int, String]]\nout s\nout m";
         assert_eq!(
             read(spec, "1: s = Set(1, 2, 1)").unwrap(),
-            tessla_engine::runtime::collections::set_of(vec![Value::Int(1), Value::Int(2)])
+            tessla_engine::collections::set_of(vec![Value::Int(1), Value::Int(2)])
         );
         assert_eq!(
             read(spec, r#"1: m = Map(1 -> "a->b", 2 -> "c", 1 -> "d")"#).unwrap(),

@@ -174,7 +174,8 @@ impl<'a> Typed<'a> {
     }
 }
 
-/// Check a resolved spec with the builtins only: see [`check_with`].
+/// Check a resolved spec with the builtins only: see [`check_with`] (the unit tests' way in).
+#[cfg(test)]
 pub fn check<'a>(resolved: &'a Resolved<'a>) -> Result<Typed<'a>, Vec<Diagnostic>> {
     static NONE: Natives = Natives::new();
     check_with(resolved, &NONE)
