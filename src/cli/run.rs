@@ -171,12 +171,17 @@ fn fleet_check(
     names: Arc<[String]>,
 ) -> crate::spec_feed::FleetCheck {
     Box::new(move |bundle| {
-        let checked = crate::fleet::check_bundle(bundle.clone(), &robot, &options)?;
+        // The fleet level's check, as the spec channel's reason for refusing the version.
+        let refused = |e: crate::fleet::CheckError| {
+            crate::spec_feed::error::RolloutError::FleetCheck(e.to_string())
+        };
+        let checked =
+            crate::fleet::check_bundle(bundle.clone(), &robot, &options).map_err(refused)?;
         if let Some(n) = checked.names.iter().find(|n| !names.contains(n)) {
-            return Err(crate::fleet::CheckError::NotCollected {
+            return Err(refused(crate::fleet::CheckError::NotCollected {
                 input: n.clone(),
                 collects: names.join(", "),
-            });
+            }));
         }
         Ok(crate::spec_feed::FleetVersion {
             program: checked.loaded.program,

@@ -85,7 +85,7 @@ pub struct FleetCommit {
 
 /// How this process checks a fleet spec version (the fleet level's own check against the
 /// robot spec, given by the command that runs it; the fleet level sits above this module).
-pub type FleetCheck = Box<dyn Fn(&Bundle) -> Result<FleetVersion, crate::fleet::CheckError>>;
+pub type FleetCheck = Box<dyn Fn(&Bundle) -> Result<FleetVersion, RolloutError>>;
 
 /// What a process's outcome for a version is: its check of a proposal (its vote), or what the
 /// fleet's decision did here.
@@ -551,9 +551,7 @@ impl Updates {
             });
         }
         match &self.fleet_check {
-            Some(check) => check(bundle)
-                .map(Some)
-                .map_err(|e| RolloutError::FleetCheck(e.to_string())),
+            Some(check) => check(bundle).map(Some),
             None => Ok(None),
         }
     }
