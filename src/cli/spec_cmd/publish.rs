@@ -35,34 +35,7 @@ pub(super) fn publish(a: PublishArgs) -> CliResult {
         let text = tessla_syntax::diag::render(&loaded.warnings, &loaded.sources, false);
         let _ = std::io::stderr().lock().write_all(text.as_bytes());
     }
-    let key = read_signing_key(a.sign.sign_key_file.as_deref())
-        .map_err(|e| CliError::spec(format!("spec publish: {e}")))?;
-    let op = Operator::connect(&a.channel.channel, true).map_err(failure)?;
-    if op.created() {
-        // Processes started before the channel existed are looking for it: let them find it
-        // and report, so their votes are waited for.
-        let wait = Operator::settling();
-        eprintln!(
-            "spec: created the channel; waiting {} s for running processes to find it",
-            wait.as_secs_f64()
-        );
-        std::thread::sleep(wait);
-    }
-    refuse_while_undecided(&op)?;
-    let now = now_ns();
-    let rollout = Rollout {
-        revision: 0,
-        id: bundle.id(),
-        digest: bundle.digest(),
-        label: a.label.clone().unwrap_or_default(),
-        from: a.from.unwrap_or(now),
-        selector: a.select.clone().unwrap_or_default(),
-        published: now,
-        fleet: false,
-    };
-    let (r, proposed) = op.publish(Some(&bundle), rollout, &key).map_err(failure)?;
-    print(&format!("{}\n", published_line(&r, "")))?;
-    settle(&op, &r, proposed, &key, a.vote.vote_timeout)
+    sign_publish_settle(&a, &bundle, a.select.clone().unwrap_or_default(), false, "")
 }
 
 /// `spec publish ROBOT_SPEC --fleet FILE`: check the fleet spec against the robot spec (the
@@ -96,10 +69,25 @@ fn publish_fleet(
         ))
     })?;
     let bundle = checked.bundle;
+    sign_publish_settle(a, &bundle, Default::default(), true, " (fleet spec)")
+}
+
+/// Sign `bundle`'s rollout (a fleet spec's with `fleet`), publish it on the channel once no
+/// earlier rollout is undecided, print its line (with `note`) and settle it: the tail `spec
+/// publish` shares for robot and fleet specs.
+fn sign_publish_settle(
+    a: &PublishArgs,
+    bundle: &Bundle,
+    selector: crate::processor::versions::Selector,
+    fleet: bool,
+    note: &str,
+) -> CliResult {
     let key = read_signing_key(a.sign.sign_key_file.as_deref())
         .map_err(|e| CliError::spec(format!("spec publish: {e}")))?;
     let op = Operator::connect(&a.channel.channel, true).map_err(failure)?;
     if op.created() {
+        // Processes started before the channel existed are looking for it: let them find it
+        // and report, so their votes are waited for.
         let wait = Operator::settling();
         eprintln!(
             "spec: created the channel; waiting {} s for running processes to find it",
@@ -115,12 +103,12 @@ fn publish_fleet(
         digest: bundle.digest(),
         label: a.label.clone().unwrap_or_default(),
         from: a.from.unwrap_or(now),
-        selector: Default::default(),
+        selector,
         published: now,
-        fleet: true,
+        fleet,
     };
-    let (r, proposed) = op.publish(Some(&bundle), rollout, &key).map_err(failure)?;
-    print(&format!("{} (fleet spec)\n", published_line(&r, "")))?;
+    let (r, proposed) = op.publish(Some(bundle), rollout, &key).map_err(failure)?;
+    print(&format!("{}{note}\n", published_line(&r, "")))?;
     settle(&op, &r, proposed, &key, a.vote.vote_timeout)
 }
 
