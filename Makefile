@@ -220,6 +220,15 @@ outputs-compare: build
 # built (`cargo package` resolves the crates' dependencies on one another through a local
 # registry), and every crate's documentation without a warning (a broken or private link fails).
 LIB_CRATES = -p tessla-syntax -p tessla-engine -p tessla-trace -p lineproto
+# Cargo takes a registry's packages as immutable: it reuses an unpacked copy under
+# $$CARGO_HOME/registry/src/-<hash>/ (the hash names the local registry's path, not the package's
+# contents) and a build of it in the target folder, keyed by name and version. After a change to a
+# crate's API, a copy left by an earlier run would fail the check for no fault of the tree. So the
+# unpacked copies of our own crates go first (crates.io's sources, under index.crates.io-*, stay)
+# and the packages are built in a target folder of their own, emptied each run.
+CARGO_HOME_DIR = $${CARGO_HOME:-$$HOME/.cargo}
+PACKAGE_TARGET = $(or $(CARGO_TARGET_DIR),target)/crates-package
 crates-package:
-	$(CARGO) package $(LIB_CRATES) --allow-dirty
+	rm -rf $(PACKAGE_TARGET) $(foreach c,tessla-syntax tessla-engine tessla-trace lineproto,$(CARGO_HOME_DIR)/registry/src/-*/$(c)-[0-9]*)
+	CARGO_TARGET_DIR=$(PACKAGE_TARGET) $(CARGO) package $(LIB_CRATES) --allow-dirty
 	RUSTDOCFLAGS="-D warnings" $(CARGO) doc --no-deps --workspace
