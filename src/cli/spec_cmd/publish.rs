@@ -82,9 +82,7 @@ fn sign_publish_settle(
     fleet: bool,
     note: &str,
 ) -> CliResult {
-    let key = read_signing_key(a.sign.sign_key_file.as_deref())
-        .map_err(|e| CliError::spec(format!("spec publish: {e}")))?;
-    let op = Operator::connect(&a.channel.channel, true).map_err(failure)?;
+    let (key, op) = signed_operator("spec publish", &a.sign, &a.channel, true)?;
     if op.created() {
         // Processes started before the channel existed are looking for it: let them find it
         // and report, so their votes are waited for.
@@ -110,6 +108,21 @@ fn sign_publish_settle(
     let (r, proposed) = op.publish(Some(bundle), rollout, &key).map_err(failure)?;
     print(&format!("{}{note}\n", published_line(&r, "")))?;
     settle(&op, &r, proposed, &key, a.vote.vote_timeout)
+}
+
+/// The operator's signing key (`--sign-key-file` or TESSLA_SIGN_KEY) and the channel it signs
+/// for (`create`: make its bucket when missing): what every command that writes a rollout or a
+/// decision starts with; `cmd` names the command in a refusal.
+fn signed_operator(
+    cmd: &str,
+    sign: &SignArgs,
+    channel: &ChannelArgs,
+    create: bool,
+) -> Result<(nkeys::KeyPair, Operator), CliError> {
+    let key = read_signing_key(sign.sign_key_file.as_deref())
+        .map_err(|e| CliError::spec(format!("{cmd}: {e}")))?;
+    let op = Operator::connect(&channel.channel, create).map_err(failure)?;
+    Ok((key, op))
 }
 
 /// The rollouts that are readable, signed and undecided (each holds every later one in every
@@ -260,9 +273,7 @@ pub(super) fn already_decided(d: &Decided) -> CliError {
 }
 
 pub(super) fn decide_cmd(a: DecideArgs) -> CliResult {
-    let key = read_signing_key(a.sign.sign_key_file.as_deref())
-        .map_err(|e| CliError::spec(format!("spec decide: {e}")))?;
-    let op = Operator::connect(&a.channel.channel, false).map_err(failure)?;
+    let (key, op) = signed_operator("spec decide", &a.sign, &a.channel, false)?;
     if let Some(d) = decision_on(&op, a.revision)? {
         return Err(already_decided(&d));
     }
@@ -280,9 +291,7 @@ pub(super) fn decide_cmd(a: DecideArgs) -> CliResult {
 }
 
 pub(super) fn abort_cmd(a: AbortArgs) -> CliResult {
-    let key = read_signing_key(a.sign.sign_key_file.as_deref())
-        .map_err(|e| CliError::spec(format!("spec abort: {e}")))?;
-    let op = Operator::connect(&a.channel.channel, false).map_err(failure)?;
+    let (key, op) = signed_operator("spec abort", &a.sign, &a.channel, false)?;
     if let Some(d) = decision_on(&op, a.revision)? {
         return Err(already_decided(&d));
     }
@@ -321,9 +330,7 @@ pub(super) fn abort_cmd(a: AbortArgs) -> CliResult {
 }
 
 pub(super) fn rollback(a: RollbackArgs) -> CliResult {
-    let key = read_signing_key(a.sign.sign_key_file.as_deref())
-        .map_err(|e| CliError::spec(format!("spec rollback: {e}")))?;
-    let op = Operator::connect(&a.channel.channel, false).map_err(failure)?;
+    let (key, op) = signed_operator("spec rollback", &a.sign, &a.channel, false)?;
     refuse_while_undecided(&op)?;
     // Only committed rollouts were ever in force: aborted ones are skipped.
     let committed: Vec<u64> = op
