@@ -420,6 +420,14 @@ pub struct Row {
 
 /// Every point of `measurement` in database `db`, oldest first, with tags and typed fields.
 pub fn influx_rows(influx: &crate::servers::Influxd, db: &str, measurement: &str) -> Vec<Row> {
+    // The points first, their tag and field keys after: a field written between the two
+    // queries is then known (points keep coming while a test polls), never a type missing.
+    // `GROUP BY *` puts the tags in each series (none when the measurement has none).
+    let (status, v) = influx.query(
+        Some(db),
+        &format!("SELECT * FROM \"{measurement}\" GROUP BY * ORDER BY time"),
+    );
+    assert_eq!(status, 200, "{v}");
     let (_, keys) = influx.query(Some(db), &format!("SHOW TAG KEYS FROM \"{measurement}\""));
     let tag_keys: Vec<String> = keys["results"][0]["series"][0]["values"]
         .as_array()
@@ -438,16 +446,6 @@ pub fn influx_rows(influx: &crate::servers::Influxd, db: &str, measurement: &str
                 .collect()
         })
         .unwrap_or_default();
-    let group = if tag_keys.is_empty() {
-        String::new()
-    } else {
-        " GROUP BY *".to_string()
-    };
-    let (status, v) = influx.query(
-        Some(db),
-        &format!("SELECT * FROM \"{measurement}\"{group} ORDER BY time"),
-    );
-    assert_eq!(status, 200, "{v}");
     let mut rows = Vec::new();
     for series in v["results"][0]["series"].as_array().into_iter().flatten() {
         let tags: BTreeMap<String, String> = series["tags"]
