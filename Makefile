@@ -211,10 +211,11 @@ reproduce: build
 # A refactor's guard: everything the engine prints (`run` on the fixture and bench workloads,
 # `trace` on the conformance suite and fixtures, `check`/`check --ir` of every shipped spec),
 # compared byte for byte with an older binary: make outputs-compare BASE=path/to/old/binary
+OUT_TARGET = $(or $(CARGO_TARGET_DIR),$(CURDIR)/target)
 outputs-compare: build
-	bash tools/outputs.sh $(BASE) $(CURDIR)/target/outputs-base
-	bash tools/outputs.sh target/release/tessla-telegraf $(CURDIR)/target/outputs-new
-	diff -r target/outputs-base target/outputs-new && echo "outputs-compare: identical"
+	bash tools/outputs.sh $(BASE) $(OUT_TARGET)/outputs-base
+	bash tools/outputs.sh $(OUT_TARGET)/release/tessla-telegraf $(OUT_TARGET)/outputs-new
+	diff -r $(OUT_TARGET)/outputs-base $(OUT_TARGET)/outputs-new && echo "outputs-compare: identical"
 
 # The four library crates as crates.io would receive them: each packaged and its packaged copy
 # built (`cargo package` resolves the crates' dependencies on one another through a local
