@@ -613,11 +613,28 @@ mod tests {
     /// A short decimal string reads as `str::parse` reads it; anything else is left to it.
     #[test]
     fn short_decimal_strings_equal_str_parse() {
-        for s in ["0.0226", "-0.5", "5", "-0", "123456789012345", "0.00000000000001"] {
+        for s in [
+            "0.0226",
+            "-0.5",
+            "5",
+            "-0",
+            "123456789012345",
+            "0.00000000000001",
+        ] {
             assert_eq!(short_decimal(s), s.parse::<f64>().ok(), "{s}");
         }
         for s in [
-            "", " 0.5", "0.5 ", "+1", "1.", ".5", "01", "1e3", "0.5,", "1234567890123456", "nan",
+            "",
+            " 0.5",
+            "0.5 ",
+            "+1",
+            "1.",
+            ".5",
+            "01",
+            "1e3",
+            "0.5,",
+            "1234567890123456",
+            "nan",
         ] {
             assert_eq!(short_decimal(s), None, "{s}");
         }
