@@ -2,7 +2,8 @@
 # Instructions (valgrind --tool=cachegrind, no cache simulation) of two tessla-telegraf binaries
 # on the engine's workloads, one run each, as a Markdown table: P2 (20,000 records, bench spec),
 # P2 with its action (specs/p2_tolerance.tessla), lidar (2,000 records), the fleet (1,000 robots x 5,
-# one thread), the robot monitors on the recorded fixture, VAMOS primes (its 80k trace, `trace`) and
+# one thread), the robot monitors on the recorded fixture, parse-only (the P2 yardstick: the
+# parse_only example beside each binary, when both were built), VAMOS primes (its 80k trace, `trace`) and
 # Auction (the first CRV trace, `trace`) when ../shared/corpora is there. Counts of one binary move
 # by at most about 0.1M between runs (hash seeds).
 #
@@ -44,6 +45,16 @@ row "P2 with its action (--spec specs/p2_tolerance.tessla)" "$p2" run --max-ahea
 row "lidar, 2,000 records (run --max-ahead off)" "$lidar" run --max-ahead off
 row "fleet, 1,000 robots x 5 (--instance-by robot --threads 1)" "$fleet" run --max-ahead off --instance-by robot --threads 1
 row "robot monitors, recorded fixture (run --max-ahead off)" "$root/tests/fixtures/robot/recorded_run.lp" run --max-ahead off
+# The P2 yardstick: the parse-only example beside each binary (built by `cargo build --release
+# --example parse_only` in each tree), when both are there.
+base_po=$(dirname "$base")/examples/parse_only
+new_po=$(dirname "$new")/examples/parse_only
+if [ -x "$base_po" ] && [ -x "$new_po" ]; then
+    (
+        base=$base_po new=$new_po
+        row "parse-only (lineproto example), the same 20,000 P2 records" "$p2"
+    )
+fi
 if [ -f "$primes/primes.tessla" ]; then
     row "VAMOS primes, its 80k trace (trace)" "$primes/gen_tessla_input/primes.in" trace "$primes/primes.tessla"
 fi

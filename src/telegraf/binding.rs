@@ -369,10 +369,12 @@ impl InputBinding {
     }
 }
 
-/// A float read from a string field (`"0.0226"`; spaces around it allowed).
+/// A float read from a string field (`"0.0226"`; spaces around it allowed). The usual short
+/// decimal is read in one pass ([`lineproto::short_decimal`], the same value); anything else
+/// is trimmed and parsed.
 #[inline(never)]
 fn float_of_str(s: &str) -> Option<f64> {
-    s.trim().parse::<f64>().ok()
+    lineproto::short_decimal(s).or_else(|| s.trim().parse::<f64>().ok())
 }
 
 /// The value of an indexed field as a list element.

@@ -158,14 +158,56 @@ fn parse_into(text: &str, m: &mut Metric) -> Option<()> {
 /// radix handling: every record has a 19-digit timestamp).
 #[inline]
 fn timestamp(digits: &str, neg: bool) -> Option<i64> {
-    let mut v: u64 = 0;
-    for d in digits.bytes() {
-        v = v.checked_mul(10)?.checked_add(u64::from(d - b'0'))?;
-    }
+    let b = digits.as_bytes();
+    let v = if b.len() <= 19 {
+        // At most 19 digits are below 10^19 < 2^64: no overflow to check. Read eight at a time
+        // (a nanosecond timestamp is 19 digits: three alone, then two blocks of eight).
+        let (head, blocks) = b.split_at(b.len() % 8);
+        let mut v: u64 = 0;
+        for &d in head {
+            v = v * 10 + u64::from(d - b'0');
+        }
+        for block in blocks.chunks_exact(8) {
+            let eight = block.first_chunk::<8>().map_or(0, |c| eight_digits(*c));
+            v = v * 100_000_000 + eight;
+        }
+        v
+    } else {
+        let mut v: u64 = 0;
+        for &d in b {
+            v = v.checked_mul(10)?.checked_add(u64::from(d - b'0'))?;
+        }
+        v
+    };
     if neg {
         0i64.checked_sub_unsigned(v)
     } else {
         i64::try_from(v).ok()
+    }
+}
+
+/// The value of eight ASCII digits, the first the most significant: all eight at once in one
+/// 64-bit word (pairs, then fours, then the eight: three multiplies instead of eight).
+#[inline(always)]
+fn eight_digits(block: [u8; 8]) -> u64 {
+    let v = u64::from_le_bytes(block).wrapping_sub(0x3030_3030_3030_3030);
+    // Each even byte: ten times its digit plus the next (at most 99, no carry).
+    let v = v.wrapping_mul(10).wrapping_add(v >> 8);
+    let pairs_02 = v & 0x0000_00ff_0000_00ff;
+    let pairs_13 = (v >> 16) & 0x0000_00ff_0000_00ff;
+    (pairs_02
+        .wrapping_mul(100 + (1_000_000 << 32))
+        .wrapping_add(pairs_13.wrapping_mul(1 + (10_000 << 32))))
+        >> 32
+}
+
+/// A whole string that is a short decimal float (`-?int(.frac)?`, at most 15 digits, no leading
+/// zero, nothing around it): its value, exactly what `str::parse::<f64>` gives; `None` for any
+/// other string (the caller then parses it the general way).
+pub fn short_decimal(s: &str) -> Option<f64> {
+    match short_float(s.as_bytes(), 0) {
+        Some((f, end)) if end == s.len() => Some(f),
+        _ => None,
     }
 }
 
@@ -538,6 +580,63 @@ mod tests {
                 t.parse::<i64>().ok(),
                 "{t}"
             );
+        }
+    }
+
+    /// Timestamps of every length read as `str::parse` reads them (the eight-digit blocks).
+    #[test]
+    fn random_timestamps_read_as_str_parse_reads_them() {
+        let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(0x5eed_7153);
+        let mut next = move || rand::RngCore::next_u64(&mut rng);
+        for _ in 0..200_000 {
+            let len = 1 + (next() % 22) as usize;
+            let mut t: String = (0..len)
+                .map(|_| char::from(b'0' + (next() % 10) as u8))
+                .collect();
+            if len > 1 && t.starts_with('0') {
+                t.replace_range(..1, "1");
+            }
+            if next() % 4 == 0 {
+                t.insert(0, '-');
+            }
+            let digits = t.strip_prefix('-').unwrap_or(&t);
+            assert_eq!(
+                timestamp(digits, digits.len() != t.len()),
+                t.parse::<i64>().ok(),
+                "{t}"
+            );
+        }
+        assert_eq!(eight_digits(*b"01234567"), 1_234_567);
+        assert_eq!(eight_digits(*b"99999999"), 99_999_999);
+    }
+
+    /// A short decimal string reads as `str::parse` reads it; anything else is left to it.
+    #[test]
+    fn short_decimal_strings_equal_str_parse() {
+        for s in [
+            "0.0226",
+            "-0.5",
+            "5",
+            "-0",
+            "123456789012345",
+            "0.00000000000001",
+        ] {
+            assert_eq!(short_decimal(s), s.parse::<f64>().ok(), "{s}");
+        }
+        for s in [
+            "",
+            " 0.5",
+            "0.5 ",
+            "+1",
+            "1.",
+            ".5",
+            "01",
+            "1e3",
+            "0.5,",
+            "1234567890123456",
+            "nan",
+        ] {
+            assert_eq!(short_decimal(s), None, "{s}");
         }
     }
 

@@ -16,6 +16,7 @@ pub mod split;
 mod telegraf_rules;
 pub mod write;
 
+pub use fast::short_decimal;
 pub use list::{ListCapture, Prefix, list_index};
 pub use metric::{FieldValue, Metric};
 pub use parse::{ParseError, parse_record, parse_record_into};

@@ -182,10 +182,40 @@ fn step(state: u8, b: u8) -> u8 {
 /// string now, no newline in `seg`, or the newline is inside a string); step byte by byte.
 /// This keeps a 360-beam lidar record (one string field anywhere in it: Telegraf writes fields
 /// in random order) from being stepped over byte by byte.
+///
+/// One pass finds the first newline and follows the quotes before it as
+/// [`in_string_possible`] does (a P2 record has a string field: four searches became one); a
+/// backslash before the newline hands over to [`quick_end_searches`], which decides the same
+/// way in separate searches.
 fn quick_end(state: u8, seg: &[u8]) -> Option<usize> {
     if state == st::STR || state == st::STR_ESC {
         return None;
     }
+    let (mut outside, mut inside) = (true, false);
+    let mut last_quote = None;
+    for at in memchr::memchr3_iter(b'\n', b'"', b'\\', seg) {
+        match seg.get(at) {
+            Some(b'"') => {
+                let may_open = at == 0 || seg.get(at - 1) == Some(&b'=');
+                (outside, inside) = (outside || inside, outside && may_open);
+                last_quote = Some(at);
+            }
+            Some(b'\n') => {
+                let Some(q) = last_quote.filter(|_| inside) else {
+                    return Some(at);
+                };
+                let after = seg.get(..=q)?.iter().fold(state, |s, &b| step(s, b));
+                return (after != st::STR).then_some(at);
+            }
+            _ => return quick_end_searches(state, seg),
+        }
+    }
+    None
+}
+
+/// [`quick_end`] by separate searches: the first newline, the last quote before it, then
+/// [`in_string_possible`] (what a record with a backslash takes).
+fn quick_end_searches(state: u8, seg: &[u8]) -> Option<usize> {
     let nl = memchr::memchr(b'\n', seg)?;
     let head = seg.get(..nl)?;
     let q = match memchr::memrchr(b'"', head) {
