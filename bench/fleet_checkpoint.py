@@ -7,11 +7,11 @@ For each N: a nats-server with JetStream on a free loopback port; one partition'
 release binary (`run --state nats://...?lease=p0` with the fleet example, specs/fleet/) fed N
 robots' records (every robot at one timestamp per round, 5 Hz, 3 rounds), stdin kept open; its
 checkpoint lines (`--log-level debug`: `fleet: checkpoint at stream sequence S: J bytes of JSON,
-B bytes stored in P parts (compressed in C ms, put in T ms)`) are read until two in a row give
+B bytes stored in P parts (taken and encoded in E ms, compressed in C ms, put in T ms)`) are read until two in a row give
 the same JSON size within 1% (every record taken in). Then a second process (partition p1, same
 bucket) starts and logs how long reading it took (`starting from the fleet checkpoint ... B bytes
 in P parts, read in R ms`). Printed per N: JSON and stored bytes (and per robot), parts, the
-deflate ratio, compress/put/read times, and the first process's resident memory then (VmRSS);
+deflate ratio, encode (on the step loop's thread)/compress/put/read times, and the first process's resident memory then (VmRSS);
 memory per robot is the slope between the smallest and the largest N.
 
 Usage: python3 bench/fleet_checkpoint.py [--bin target/release/tessla-telegraf] [--sizes 1000,10000,100000]
@@ -20,7 +20,7 @@ import argparse, os, re, shutil, signal, socket, subprocess, tempfile, threading
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CP = re.compile(r"fleet: checkpoint at stream sequence (\d+): (\d+) bytes of JSON, (\d+) bytes stored in (\d+) parts "
-                r"\(compressed in (\d+) ms, put in (\d+) ms\)")
+                r"\(taken and encoded in (\d+) ms, compressed in (\d+) ms, put in (\d+) ms\)")
 START = re.compile(r"starting from the fleet checkpoint at stream sequence (\d+) .*?(\d+) bytes in (\d+) parts, read in (\d+) ms")
 
 
@@ -128,7 +128,7 @@ def measure(binary, n, rounds):
         a.stop()
         return {
             "json": int(cp.group(2)), "stored": int(cp.group(3)), "parts": int(cp.group(4)),
-            "compress_ms": int(cp.group(5)), "put_ms": int(cp.group(6)),
+            "encode_ms": int(cp.group(5)), "compress_ms": int(cp.group(6)), "put_ms": int(cp.group(7)),
             "read_ms": int(st.group(4)), "read_bytes": int(st.group(2)), "rss_kib": rss,
         }
     finally:
@@ -151,7 +151,7 @@ def main():
         got[n] = r
         print(f"  {n} robots: {r['json']} B JSON ({r['json'] / n:.0f} B/robot), {r['stored']} B stored in {r['parts']} parts "
               f"({r['stored'] / n:.0f} B/robot, deflate {r['json'] / max(r['stored'], 1):.1f}x); "
-              f"compress {r['compress_ms']} ms, put {r['put_ms']} ms, read {r['read_ms']} ms; VmRSS {r['rss_kib']} KiB")
+              f"encode {r['encode_ms']} ms (step loop), compress {r['compress_ms']} ms, put {r['put_ms']} ms, read {r['read_ms']} ms; VmRSS {r['rss_kib']} KiB")
     if len(sizes) >= 2:
         lo, hi = min(sizes), max(sizes)
         per = (got[hi]["rss_kib"] - got[lo]["rss_kib"]) * 1024 / (hi - lo)

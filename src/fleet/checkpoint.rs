@@ -24,6 +24,9 @@ const MAX_PART: usize = 512 * 1024;
 /// A head replaced while its parts were read (their deletion follows): read again at most
 /// this many times.
 const READS: usize = 5;
+/// At most this much is reserved ahead from a head's sizes (a hint: a bad head allocates no
+/// more).
+const CAPACITY: usize = 64 << 20;
 
 /// The fleet checkpoint: the fleet level after the entry at `seq`.
 #[derive(serde::Serialize, serde::Deserialize)]
@@ -78,7 +81,7 @@ fn deflate(json: &[u8]) -> std::io::Result<Vec<u8>> {
 }
 
 fn inflate(bytes: &[u8], json: u64) -> std::io::Result<Vec<u8>> {
-    let mut out = Vec::with_capacity(usize::try_from(json).unwrap_or(0).min(1 << 30));
+    let mut out = Vec::with_capacity(usize::try_from(json).unwrap_or(0).min(CAPACITY));
     flate2::read::DeflateDecoder::new(bytes).read_to_end(&mut out)?;
     Ok(out)
 }
@@ -213,7 +216,7 @@ pub async fn load(store: &kv::Store) -> Result<Option<Loaded>, String> {
 }
 
 async fn read_parts(store: &kv::Store, h: &Head) -> Result<Vec<u8>, String> {
-    let mut body = Vec::with_capacity(usize::try_from(h.bytes).unwrap_or(0).min(1 << 30));
+    let mut body = Vec::with_capacity(usize::try_from(h.bytes).unwrap_or(0).min(CAPACITY));
     for n in 0..h.parts {
         let key = format!("{PARTS}.{}.{n}", h.seq);
         let part = store

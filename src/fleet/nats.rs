@@ -47,8 +47,9 @@ const CHECKPOINT_EVERY: Duration = Duration::from_secs(5);
 enum Job {
     Put(String, bytes::Bytes),
     /// Put a fleet checkpoint covering the entries up to this stream sequence; once it is
-    /// stored, delete the entries the checkpoint stored before it covered.
-    Checkpoint(u64, bytes::Bytes),
+    /// stored, delete the entries the checkpoint stored before it covered. The JSON, and how
+    /// long taking and encoding it took (on the step loop's thread).
+    Checkpoint(u64, bytes::Bytes, Duration),
     Flush(std::sync::mpsc::Sender<()>),
 }
 
@@ -441,6 +442,7 @@ impl FleetNats {
         if self.level.has_switch() || !self.held.is_empty() {
             return;
         }
+        let started = Instant::now();
         let Some(level) = self.level.state() else {
             crate::log::warn_limited("fleet checkpoint", || {
                 "fleet: the fleet level holds a value a checkpoint cannot keep; its entries are kept".into()
@@ -456,7 +458,11 @@ impl FleetNats {
         let Ok(bytes) = serde_json::to_vec(&c) else {
             return;
         };
-        let _ = self.jobs.send(Job::Checkpoint(self.applied, bytes.into()));
+        let _ = self.jobs.send(Job::Checkpoint(
+            self.applied,
+            bytes.into(),
+            started.elapsed(),
+        ));
         self.checkpointed = (self.applied, Instant::now());
     }
 
@@ -598,7 +604,7 @@ async fn publisher(
                     });
                 }
             }
-            Job::Checkpoint(seq, bytes) => {
+            Job::Checkpoint(seq, bytes, encode) => {
                 let s = match checkpoint::store(&store, seq, bytes, part).await {
                     Ok(s) => s,
                     Err(e) => {
@@ -612,10 +618,11 @@ async fn publisher(
                 };
                 // The first at info, then every 5 s at debug.
                 let line = format!(
-                    "fleet: checkpoint at stream sequence {seq}: {} bytes of JSON, {} bytes stored in {} parts (compressed in {} ms, put in {} ms)",
+                    "fleet: checkpoint at stream sequence {seq}: {} bytes of JSON, {} bytes stored in {} parts (taken and encoded in {} ms, compressed in {} ms, put in {} ms)",
                     s.json,
                     s.bytes,
                     s.parts,
+                    encode.as_millis(),
                     s.compress.as_millis(),
                     s.put.as_millis()
                 );
