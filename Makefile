@@ -108,9 +108,11 @@ bench-process:
 	python3 bench/run.py --reps $(BENCH_REPS)
 
 # The fleet level (docs/fleet.md, the Benchmarks chapter, "Fleet level"): cost per record at 1k and 10k
-# robots, memory per robot, the closest pair at 1k, 10k and 100k robots.
+# robots, memory per robot, the closest pair at 1k, 10k and 100k robots; then the fleet checkpoint on a
+# nats-server (bench/fleet_checkpoint.py): its bytes per robot, write and read times, memory per robot.
 bench-fleet: build
 	nice -n 5 python3 bench/fleet.py --reps 3 --bin $(or $(CARGO_TARGET_DIR),target)/release/tessla-telegraf
+	nice -n 5 python3 bench/fleet_checkpoint.py --bin $(or $(CARGO_TARGET_DIR),target)/release/tessla-telegraf
 
 # Fleet on NATS (the Benchmarks chapter, "Fleet on NATS"): throughput with 1, 2 and 4 partitions and the
 # standby's takeover time, on a 3-node nats-server cluster started on free loopback ports.

@@ -11,9 +11,10 @@
 //! of it is `crate::processor::fleet_tap`; the step loop drains every processor's tap into the
 //! level after each read ([`Feed`]: the level in this process, or, with NATS partitions, the
 //! partition's messages to the fleet level and the fleet level run on them: [`nats`], with its
-//! rules in [`watermark`]).
+//! rules in [`watermark`] and its checkpoint's store in [`checkpoint`]).
 
 pub mod actions;
+pub mod checkpoint;
 pub mod level;
 pub mod nats;
 pub mod watermark;

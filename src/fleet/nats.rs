@@ -11,14 +11,15 @@
 //! silent past twice the lease TTL) and the end of the fleet's input (a close: stopping, every
 //! partition ended and no partition lease held, so no restart is under way) and puts them in
 //! the stream, so every process applies them at the same point. It also writes the fleet
-//! checkpoint (`fleet.checkpoint`: the table and the level after an entry, every 5 s) and
-//! deletes the entries the checkpoint before covered, so the entries stay bounded; a process
-//! that starts goes on from the checkpoint. The rules themselves are [`super::watermark`]. A
+//! checkpoint (the table and the level after an entry, every 5 s; its store is
+//! [`super::checkpoint`]) and deletes the entries the checkpoint before covered, so the entries
+//! stay bounded; a process that starts goes on from the checkpoint. The rules themselves are [`super::watermark`]. A
 //! committed fleet rollout is a switch entry `fleet.m.switch.r<revision>` the fleet lease's
 //! holder puts in the same stream; every process switches its level where it reads that entry
 //! (docs/fleet.md, "Rollouts of the fleet spec").
 
 use super::Level;
+use super::checkpoint::{self, Checkpoint};
 use super::watermark::{self, Msg, Partitions};
 use crate::nats::conn::{Conn, Failure, connect};
 use crate::nats::kv_keys::kv_key_part_of;
@@ -39,8 +40,6 @@ const WRITTEN_KEY: &str = "fleet.written";
 const HEARTBEAT: Duration = Duration::from_millis(200);
 /// At most this many messages' outputs kept by a standby (the holder's progress trims them).
 const MAX_KEPT: usize = 100_000;
-/// The fleet checkpoint: the fleet level's state after the entry at its stream sequence.
-const CHECKPOINT_KEY: &str = "fleet.checkpoint";
 /// The holder of the fleet lease writes a checkpoint this often (while entries come), and
 /// then deletes the entries the checkpoint before it covered.
 const CHECKPOINT_EVERY: Duration = Duration::from_secs(5);
@@ -48,19 +47,10 @@ const CHECKPOINT_EVERY: Duration = Duration::from_secs(5);
 enum Job {
     Put(String, bytes::Bytes),
     /// Put a fleet checkpoint covering the entries up to this stream sequence; once it is
-    /// stored, delete the entries the checkpoint stored before it covered.
-    Checkpoint(u64, bytes::Bytes),
+    /// stored, delete the entries the checkpoint stored before it covered. The JSON, and how
+    /// long taking and encoding it took (on the step loop's thread).
+    Checkpoint(u64, bytes::Bytes, Duration),
     Flush(std::sync::mpsc::Sender<()>),
-}
-
-/// The fleet checkpoint (`fleet.checkpoint`, JSON): the fleet level after the entry at `seq`.
-#[derive(serde::Serialize, serde::Deserialize)]
-struct Checkpoint {
-    seq: u64,
-    /// `fleet.written` when it was taken.
-    written: u64,
-    table: watermark::PartsState,
-    level: super::level::LevelState,
 }
 
 #[derive(Default)]
@@ -143,12 +133,14 @@ impl FleetNats {
         let conn = Conn::start()
             .map_err(|e| Failure::Io(format!("cannot start the fleet's NATS thread: {e}")))?;
         let u = url.clone();
-        let store = conn
+        let (store, max_payload) = conn
             .call(async move {
                 let (client, _) = connect(&u).await?;
+                let max_payload = client.server_info().max_payload;
                 jetstream::new(client)
                     .get_key_value(u.bucket.clone())
                     .await
+                    .map(|s| (s, max_payload))
                     .map_err(|e| {
                         Failure::Io(format!("fleet: cannot open bucket {}: {e}", u.bucket))
                     })
@@ -161,15 +153,20 @@ impl FleetNats {
         let mut heard = HashMap::new();
         let st = store.clone();
         let saved = conn
-            .call(async move { st.get(CHECKPOINT_KEY).await })
-            .and_then(Result::ok)
-            .flatten();
-        if let Some(bytes) = saved {
-            match serde_json::from_slice::<Checkpoint>(&bytes) {
-                Ok(c) => {
+            .call(async move { checkpoint::load(&st).await })
+            .unwrap_or(Ok(None));
+        if let Some(saved) = saved.transpose() {
+            match saved {
+                Ok(checkpoint::Loaded {
+                    checkpoint: c,
+                    bytes,
+                    parts,
+                    took,
+                }) => {
                     log_info!(
-                        "fleet: starting from the fleet checkpoint at stream sequence {} (the entries it covers may be deleted)",
-                        c.seq
+                        "fleet: starting from the fleet checkpoint at stream sequence {} (the entries it covers may be deleted; {bytes} bytes in {parts} parts, read in {} ms)",
+                        c.seq,
+                        took.as_millis()
                     );
                     table = Partitions::from_state(c.table);
                     level.restore(c.level);
@@ -187,7 +184,11 @@ impl FleetNats {
         }
         let inbox = Arc::new(Mutex::new(Inbox::default()));
         let (jobs, rx) = tokio::sync::mpsc::unbounded_channel();
-        conn.handle.spawn(publisher(store.clone(), rx));
+        conn.handle.spawn(publisher(
+            store.clone(),
+            rx,
+            checkpoint::part_size(max_payload),
+        ));
         conn.handle
             .spawn(follow(store.clone(), Arc::clone(&inbox), applied));
         let lease = Lease::start(&conn, &store, LEASE.to_string(), url.ttl);
@@ -441,6 +442,7 @@ impl FleetNats {
         if self.level.has_switch() || !self.held.is_empty() {
             return;
         }
+        let started = Instant::now();
         let Some(level) = self.level.state() else {
             crate::log::warn_limited("fleet checkpoint", || {
                 "fleet: the fleet level holds a value a checkpoint cannot keep; its entries are kept".into()
@@ -456,8 +458,11 @@ impl FleetNats {
         let Ok(bytes) = serde_json::to_vec(&c) else {
             return;
         };
-        let _ = self.jobs.send(Job::Checkpoint(self.applied, bytes.into()));
-        log_debug!("fleet: checkpoint at stream sequence {}", self.applied);
+        let _ = self.jobs.send(Job::Checkpoint(
+            self.applied,
+            bytes.into(),
+            started.elapsed(),
+        ));
         self.checkpointed = (self.applied, Instant::now());
     }
 
@@ -582,7 +587,11 @@ impl FleetNats {
 }
 
 /// Put the queued entries in order, one at a time.
-async fn publisher(store: kv::Store, mut rx: tokio::sync::mpsc::UnboundedReceiver<Job>) {
+async fn publisher(
+    store: kv::Store,
+    mut rx: tokio::sync::mpsc::UnboundedReceiver<Job>,
+    part: usize,
+) {
     // The sequence the last checkpoint this process stored covers: the next one stored
     // deletes the entries up to it (never entries no stored checkpoint covers).
     let mut stored = 0;
@@ -595,29 +604,35 @@ async fn publisher(store: kv::Store, mut rx: tokio::sync::mpsc::UnboundedReceive
                     });
                 }
             }
-            Job::Checkpoint(seq, bytes) => {
-                if let Err(e) = store.put(CHECKPOINT_KEY, bytes).await {
-                    crate::log::warn_limited("fleet checkpoint put", || {
-                        format!("fleet: cannot put the fleet checkpoint: {e}; the entries are kept")
-                    });
-                    continue;
+            Job::Checkpoint(seq, bytes, encode) => {
+                let s = match checkpoint::store(&store, seq, bytes, part).await {
+                    Ok(s) => s,
+                    Err(e) => {
+                        crate::log::warn_limited("fleet checkpoint put", || {
+                            format!(
+                                "fleet: cannot store the fleet checkpoint: {e}; the entries are kept"
+                            )
+                        });
+                        continue;
+                    }
+                };
+                // The first at info, then every 5 s at debug.
+                let line = format!(
+                    "fleet: checkpoint at stream sequence {seq}: {} bytes of JSON, {} bytes stored in {} parts (taken and encoded in {} ms, compressed in {} ms, put in {} ms)",
+                    s.json,
+                    s.bytes,
+                    s.parts,
+                    encode.as_millis(),
+                    s.compress.as_millis(),
+                    s.put.as_millis()
+                );
+                if stored == 0 {
+                    log_info!("{line}");
+                } else {
+                    log_debug!("{line}");
                 }
                 let upto = std::mem::replace(&mut stored, seq);
-                if upto == 0 {
-                    continue;
-                }
-                let filter = format!("{}fleet.m.>", store.prefix);
-                if let Err(e) = store
-                    .stream
-                    .purge()
-                    .filter(filter)
-                    .sequence(upto.saturating_add(1))
-                    .await
-                {
-                    crate::log::warn_limited("fleet trim", || {
-                        format!("fleet: cannot delete the entries up to {upto}: {e}")
-                    });
-                }
+                checkpoint::trim(&store, upto, s.first).await;
             }
             Job::Flush(done) => {
                 let _ = done.send(());

@@ -78,7 +78,7 @@ pub(super) fn example_args() -> Vec<String> {
     .collect()
 }
 
-fn spawn(state: &str, lease: &str) -> LiveChild {
+pub(super) fn spawn(state: &str, lease: &str) -> LiveChild {
     let mut a = example_args();
     a.extend([
         "--state".to_string(),
@@ -114,7 +114,7 @@ fn repeats(err: &str) -> u64 {
 }
 
 /// Wait until one of `children` logs `what` on stderr; its index.
-fn wait_any_err(children: &mut [&mut LiveChild], what: &str) -> usize {
+pub(super) fn wait_any_err(children: &mut [&mut LiveChild], what: &str) -> usize {
     let start = std::time::Instant::now();
     loop {
         for (n, c) in children.iter_mut().enumerate() {

@@ -6,6 +6,7 @@
 mod combinations_nats;
 #[cfg(feature = "tools")]
 mod dashboards_influx;
+mod fleet_checkpoint_nats;
 mod fleet_level_nats;
 mod fleet_nats;
 mod fleet_nats_security;
