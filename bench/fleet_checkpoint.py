@@ -16,7 +16,7 @@ memory per robot is the slope between the smallest and the largest N.
 
 Usage: python3 bench/fleet_checkpoint.py [--bin target/release/tessla-telegraf] [--sizes 1000,10000,100000]
 """
-import argparse, os, re, shutil, signal, socket, subprocess, tempfile, threading, time
+import argparse, os, re, shutil, signal, socket, statistics, subprocess, tempfile, threading, time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CP = re.compile(r"fleet: checkpoint at stream sequence (\d+): (\d+) bytes of JSON, (\d+) bytes stored in (\d+) parts "
@@ -142,16 +142,18 @@ def main():
     ap.add_argument("--bin", default=os.path.join(ROOT, "target/release/tessla-telegraf"))
     ap.add_argument("--sizes", default="1000,10000,100000")
     ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--reps", type=int, default=3, help="runs per size; every figure is their median")
     a = ap.parse_args()
     sizes = [int(s) for s in a.sizes.split(",")]
-    print(f"3. fleet checkpoint on NATS (the fleet example, {a.rounds} rounds at 5 Hz, one partition, nats-server max_payload 1 MiB)")
+    print(f"3. fleet checkpoint on NATS (the fleet example, {a.rounds} rounds at 5 Hz, one partition, nats-server max_payload 1 MiB; medians of {a.reps} runs)")
     got = {}
     for n in sizes:
-        r = measure(a.bin, n, a.rounds)
+        runs = [measure(a.bin, n, a.rounds) for _ in range(max(a.reps, 1))]
+        r = {k: statistics.median(run[k] for run in runs) for k in runs[0]}
         got[n] = r
-        print(f"  {n} robots: {r['json']} B JSON ({r['json'] / n:.0f} B/robot), {r['stored']} B stored in {r['parts']} parts "
+        print(f"  {n} robots: {r['json']:.0f} B JSON ({r['json'] / n:.0f} B/robot), {r['stored']:.0f} B stored in {r['parts']:.0f} parts "
               f"({r['stored'] / n:.0f} B/robot, deflate {r['json'] / max(r['stored'], 1):.1f}x); "
-              f"encode {r['encode_ms']} ms (step loop), compress {r['compress_ms']} ms, put {r['put_ms']} ms, read {r['read_ms']} ms; VmRSS {r['rss_kib']} KiB")
+              f"encode {r['encode_ms']:.0f} ms (step loop), compress {r['compress_ms']:.0f} ms, put {r['put_ms']:.0f} ms, read {r['read_ms']:.0f} ms; VmRSS {r['rss_kib']:.0f} KiB")
     if len(sizes) >= 2:
         lo, hi = min(sizes), max(sizes)
         per = (got[hi]["rss_kib"] - got[lo]["rss_kib"]) * 1024 / (hi - lo)
