@@ -180,6 +180,49 @@ impl Level {
         &self.names
     }
 
+    /// The fleet inputs the running version reads whose robot output committed robot rollout
+    /// `c`'s version lacks: the robots it picks stop feeding them (each map keeps their last
+    /// value until they leave; docs/fleet.md).
+    pub fn unfed(&self, c: &crate::spec_feed::RobotCommit) -> Vec<String> {
+        self.program
+            .inputs
+            .iter()
+            .map(|i| &i.name)
+            .filter(|n| self.names.contains(*n) && !c.outputs.contains(*n))
+            .cloned()
+            .collect()
+    }
+
+    /// The `tessla_fleet_status` line saying fleet input `input` is left without its robot
+    /// output by robot rollout `c`, stamped `ts` (the wall clock), tagged as the fleet's lines.
+    pub fn unfed_line(
+        &self,
+        c: &crate::spec_feed::RobotCommit,
+        input: &str,
+        ts: i64,
+        out: &mut Vec<u8>,
+    ) {
+        let mut line = String::from(STATUS);
+        for (k, v) in &self.tags {
+            line.push(',');
+            lineproto::write::write_tag_key(&mut line, k);
+            line.push('=');
+            lineproto::write::write_tag_value(&mut line, v);
+        }
+        let quoted = |s: &str| s.replace('\\', "\\\\").replace('"', "\\\"");
+        line.push_str(&format!(
+            " event=\"input_unfed\",input=\"{}\",version=\"{}\",revision={}i",
+            quoted(input),
+            quoted(&c.id),
+            c.revision
+        ));
+        if !c.select.is_empty() {
+            line.push_str(&format!(",select=\"{}\"", quoted(&c.select)));
+        }
+        line.push_str(&format!(" {ts}\n"));
+        out.extend_from_slice(line.as_bytes());
+    }
+
     /// A committed fleet rollout: run its version from the first fleet step at or after
     /// max(its start, the step after the last one stepped): the one rule for a decision seen
     /// after the level has passed its start (it switches at its next step, and the switch's
@@ -666,6 +709,39 @@ mod tests {
                 names: vec!["c".into()],
             }),
         }
+    }
+
+    /// A robot version without an output the running fleet spec reads leaves that input unfed:
+    /// named (with the robot version and the robots it picks) in one status line each.
+    #[test]
+    fn a_robot_version_without_a_fleet_input_s_output_leaves_it_unfed() {
+        let v1 = program(
+            "in c: Events[Map[String, Int]]\nin y: Events[Map[String, Int]]\nout Map.size(c) + Map.size(y) as n\n",
+        );
+        let level = Level::new(
+            v1,
+            &["c".to_string(), "y".to_string()],
+            1_000_000_000,
+            vec![("v".into(), "f1".into())],
+            vec!["robot".into()],
+        )
+        .unwrap();
+        let robot = |outputs: &[&str], select: &str| crate::spec_feed::RobotCommit {
+            revision: 4,
+            id: "abc".into(),
+            select: select.into(),
+            outputs: outputs.iter().map(|o| o.to_string()).collect(),
+        };
+        assert!(level.unfed(&robot(&["c", "y", "z"], "")).is_empty());
+        let c = robot(&["c", "z"], "robot=r1,r2");
+        assert_eq!(level.unfed(&c), ["y"]);
+        let mut out = Vec::new();
+        level.unfed_line(&c, "y", 7, &mut out);
+        assert_eq!(
+            String::from_utf8(out).unwrap(),
+            "tessla_fleet_status,v=f1 event=\"input_unfed\",input=\"y\",version=\"abc\",revision=4i,select=\"robot=r1,r2\" 7\n"
+        );
+        assert_eq!(level.unfed(&robot(&[], "")), ["c", "y"]);
     }
 
     /// A switch known before its start runs at the first step at or after it; one decided

@@ -73,6 +73,35 @@ impl Feed {
         }
     }
 
+    /// A committed robot rollout ([`crate::spec_feed::Updates::take_robot_commits`]): for each
+    /// fleet input the running fleet spec reads whose robot output its version lacks, a `W!`
+    /// and one `tessla_fleet_status` line, `event="input_unfed"` (written where the fleet's
+    /// lines are: here, or by the holder of the `fleet` lease).
+    pub fn robot_rollout(&mut self, c: &crate::spec_feed::RobotCommit, out: &mut Vec<u8>) {
+        let (level, write) = match self {
+            Feed::Local(level) => (&**level, true),
+            Feed::Nats(n) => n.level_and_holding(),
+        };
+        for input in level.unfed(c) {
+            log_warn!(
+                "fleet: robot spec rollout {} (version {}) has no output `{input}`: the robots it picks ({}) no longer feed the fleet input `{input}`, whose map keeps their last values until they leave",
+                c.revision,
+                c.id,
+                if c.select.is_empty() {
+                    "every robot"
+                } else {
+                    c.select.as_str()
+                }
+            );
+            if write {
+                let now = std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX));
+                level.unfed_line(c, &input, now, out);
+            }
+        }
+    }
+
     /// At the end, before the last write.
     pub fn finish(&mut self, out: &mut Vec<u8>) {
         if let Feed::Nats(n) = self {

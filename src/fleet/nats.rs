@@ -43,6 +43,12 @@ const MAX_KEPT: usize = 100_000;
 /// The holder of the fleet lease writes a checkpoint this often (while entries come), and
 /// then deletes the entries the checkpoint before it covered.
 const CHECKPOINT_EVERY: Duration = Duration::from_secs(5);
+/// A process holding the fleet's entries behind a switch entry whose decision it has not read
+/// says so after this long (the decision normally comes within a channel poll).
+const WAITING_SAID_AFTER: Duration = Duration::from_secs(10);
+/// A standby (a process of a partition whose lease another holds) renews its key
+/// `fleet.standby.<partition>.<pid>` this often; one older than three times this is not live.
+const STANDBY_EVERY: Duration = Duration::from_secs(1);
 
 enum Job {
     Put(String, bytes::Bytes),
@@ -101,6 +107,11 @@ pub struct FleetNats {
     switch_put: HashSet<u64>,
     /// Entries from a switch entry on whose rollout this process has not seen committed yet.
     held: VecDeque<(u64, bytes::Bytes)>,
+    /// Since when entries are held (the switch entry's stream sequence), and whether it was
+    /// said (a `W!` and a `waiting` status line).
+    waiting: Option<(u64, Instant, bool)>,
+    /// As a standby: when this process last renewed its standby key (`None`: not a standby).
+    standby_at: Option<Instant>,
 }
 
 /// A switch entry: the fleet level runs fleet rollout `fleet_switch`'s version from here on.
@@ -220,6 +231,8 @@ impl FleetNats {
             switched: HashSet::new(),
             switch_put: HashSet::new(),
             held: VecDeque::new(),
+            waiting: None,
+            standby_at: None,
         })
     }
 
@@ -229,6 +242,12 @@ impl FleetNats {
         if !self.switched.contains(&c.revision) {
             self.commits.push(c);
         }
+    }
+
+    /// The fleet level this process follows, and whether it writes its lines (it holds the
+    /// `fleet` lease).
+    pub fn level_and_holding(&self) -> (&Level, bool) {
+        (&self.level, self.holding)
     }
 
     /// A switch entry at `seq`: `true` when applied (or already applied), `false` when its
@@ -298,6 +317,7 @@ impl FleetNats {
         // generation they were stepped in (a newer holder's entries make them stale).
         let fresh = generation.is_some();
         self.holds_partition = fresh;
+        self.stand_by(fresh);
         self.generation = generation.or(self.generation);
         if let Some(g) = self.generation {
             for d in &drained {
@@ -379,6 +399,7 @@ impl FleetNats {
                 self.outputs.push_back((seq, o));
             }
         }
+        self.say_waiting(out);
         let holding = self.lease.holding();
         if holding && !self.holding {
             let store = self.store.clone();
@@ -424,6 +445,53 @@ impl FleetNats {
                 self.outputs.pop_front();
             }
         }
+    }
+
+    /// Entries held behind a switch entry whose decision this process has not read (it never
+    /// switches on an entry alone): after [`WAITING_SAID_AFTER`], a `W!` and one
+    /// `tessla_fleet_status` line `event="waiting"`, written by this process whether or not it
+    /// holds the fleet lease (it is about this process: it follows no channel, or a channel
+    /// that has not brought the decision); when the decision comes, an `I!`.
+    fn say_waiting(&mut self, out: &mut Vec<u8>) {
+        let Some((seq, bytes)) = self.held.front() else {
+            if let Some((seq, since, true)) = self.waiting.take() {
+                log_info!(
+                    "fleet: the decision for the switch entry at stream sequence {seq} came after {}; the held entries go on",
+                    humantime::format_duration(Duration::from_secs(since.elapsed().as_secs()))
+                );
+            }
+            return;
+        };
+        let seq = *seq;
+        let revision = serde_json::from_slice::<SwitchEntry>(bytes).map_or(0, |e| e.fleet_switch);
+        let (at, since, said) = self
+            .waiting
+            .get_or_insert_with(|| (seq, Instant::now(), false));
+        if *at != seq {
+            (*at, *since, *said) = (seq, Instant::now(), false);
+        }
+        if *said || since.elapsed() < WAITING_SAID_AFTER {
+            return;
+        }
+        *said = true;
+        let held = self.held.len() - 1;
+        log_warn!(
+            "fleet: the switch entry for fleet rollout {revision} (stream sequence {seq}) came {} ago, but this process has not read the rollout's decision: the fleet level holds the {held} entries after it until it has (is `--spec-channel` given, and the same as the other processes'?)",
+            humantime::format_duration(WAITING_SAID_AFTER)
+        );
+        let mut line = String::from("tessla_fleet_status,partition=");
+        lineproto::write::write_tag_value(&mut line, &self.partition);
+        for (k, v) in &self.tags {
+            line.push(',');
+            lineproto::write::write_tag_key(&mut line, k);
+            line.push('=');
+            lineproto::write::write_tag_value(&mut line, v);
+        }
+        line.push_str(&format!(
+            " event=\"waiting\",revision={revision}i,sequence={seq}i,held={held}i {}\n",
+            now_ns()
+        ));
+        out.extend_from_slice(line.as_bytes());
     }
 
     /// As the fleet level's holder, every [`CHECKPOINT_EVERY`]: put the fleet level's state
@@ -502,6 +570,12 @@ impl FleetNats {
     /// at the end of its input; then write what the level gave. A partition still held (a
     /// restart in progress) leaves the pending changes to the next holder.
     pub fn finish(&mut self, out: &mut Vec<u8>) {
+        // A standby stopping is no replacement for anyone any more.
+        if self.standby_at.take().is_some() {
+            let store = self.store.clone();
+            let key = self.standby_key();
+            let _ = self.conn.call(async move { store.delete(key).await });
+        }
         self.flush();
         if !self.lease.holding() {
             return;
@@ -509,12 +583,17 @@ impl FleetNats {
         let start = Instant::now();
         let wait = self.drop_after.min(Duration::from_secs(2));
         let mut closing = false;
+        let mut standby_said = false;
         loop {
             self.follow(out);
             if self.table.closed() || start.elapsed() > wait {
                 break;
             }
-            if !closing && self.table.all_done() && !self.partitions_held() {
+            if !closing
+                && self.table.all_done()
+                && !self.partitions_held()
+                && !self.standby_live(&mut standby_said)
+            {
                 let part = self.partition.clone();
                 let msg = Msg {
                     close: true,
@@ -527,6 +606,90 @@ impl FleetNats {
             }
             std::thread::sleep(Duration::from_millis(20));
         }
+    }
+
+    /// This process's standby key.
+    fn standby_key(&self) -> String {
+        format!(
+            "fleet.standby.{}.pid{}",
+            kv_key_part_of(&self.partition),
+            std::process::id()
+        )
+    }
+
+    /// Not holding its partition's lease (`holding` false), this process is a standby: it
+    /// renews its standby key every [`STANDBY_EVERY`] so that a fleet holder stopping hands the
+    /// fleet level over instead of closing its input; taking the partition over, it marks the
+    /// key stale.
+    fn stand_by(&mut self, holding: bool) {
+        let due = match (holding, self.standby_at) {
+            (false, None) => true,
+            (false, Some(at)) => at.elapsed() >= STANDBY_EVERY,
+            (true, Some(_)) => {
+                self.standby_at = None;
+                let _ = self
+                    .jobs
+                    .send(Job::Put(self.standby_key(), b"0".to_vec().into()));
+                return;
+            }
+            (true, None) => false,
+        };
+        if due {
+            self.standby_at = Some(Instant::now());
+            let _ = self.jobs.send(Job::Put(
+                self.standby_key(),
+                now_ns().to_string().into_bytes().into(),
+            ));
+        }
+    }
+
+    /// Whether another process is a live standby (its standby key renewed within three
+    /// [`STANDBY_EVERY`]): it will take a partition over, so the fleet's input has not ended.
+    /// Logged once (`said`). Not known (the keys cannot be listed): not live, as before.
+    fn standby_live(&self, said: &mut bool) -> bool {
+        use futures_util::StreamExt;
+        let store = self.store.clone();
+        let own = self.standby_key();
+        let stale = i64::try_from((STANDBY_EVERY * 3).as_nanos()).unwrap_or(i64::MAX);
+        let now = now_ns();
+        let live = self
+            .conn
+            .call(async move {
+                let Ok(keys) = store.keys().await else {
+                    return None;
+                };
+                let keys: Vec<String> = keys
+                    .filter_map(|k| async move { k.ok() })
+                    .filter(|k| {
+                        let k = k.clone();
+                        async move { k.starts_with("fleet.standby.") }
+                    })
+                    .collect()
+                    .await;
+                for key in keys.into_iter().filter(|k| *k != own) {
+                    let Ok(Some(v)) = store.get(&key).await else {
+                        continue;
+                    };
+                    let at = std::str::from_utf8(&v)
+                        .ok()
+                        .and_then(|t| t.trim().parse::<i64>().ok())
+                        .unwrap_or(0);
+                    if now.saturating_sub(at) < stale {
+                        return Some(key);
+                    }
+                }
+                None
+            })
+            .flatten();
+        if let Some(key) = &live
+            && !*said
+        {
+            *said = true;
+            log_info!(
+                "fleet: a standby is live ({key}): the fleet level is handed over, its input not closed"
+            );
+        }
+        live.is_some()
     }
 
     /// Whether a process (other than this one, for the partition it holds) holds the lease of

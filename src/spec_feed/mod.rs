@@ -83,6 +83,19 @@ pub struct FleetCommit {
     pub version: Option<FleetVersion>,
 }
 
+/// A committed robot rollout, as the fleet level sees it: the outputs its version has (a fleet
+/// input reading an output it lacks is no longer fed by the robots it picks: docs/fleet.md).
+/// Only rollouts committed while this process runs ([`Updates::take_robot_commits`]), not
+/// those in the channel's history at start.
+#[derive(Debug, Clone)]
+pub struct RobotCommit {
+    pub revision: u64,
+    pub id: String,
+    /// The robots it picks (`Selector`'s text; empty: every one).
+    pub select: String,
+    pub outputs: Vec<String>,
+}
+
 /// How this process checks a fleet spec version (the fleet level's own check against the
 /// robot spec, given by the command that runs it; the fleet level sits above this module).
 pub type FleetCheck = Box<dyn Fn(&Bundle) -> Result<FleetVersion, RolloutError>>;
@@ -254,6 +267,10 @@ pub struct Updates {
     fleet_check: Option<FleetCheck>,
     /// Fleet rollouts committed and not yet handed to the fleet level.
     fleet_commits: Vec<FleetCommit>,
+    /// Robot rollouts committed since the first tick, not yet handed to the fleet level.
+    robot_commits: Vec<RobotCommit>,
+    /// The first tick (the channel's history at connect) is done.
+    ticked: bool,
 }
 
 impl Updates {
@@ -276,6 +293,8 @@ impl Updates {
             ledger: Ledger::default(),
             fleet_check: None,
             fleet_commits: Vec::new(),
+            robot_commits: Vec::new(),
+            ticked: false,
         }
     }
 
@@ -287,6 +306,12 @@ impl Updates {
     /// The fleet rollouts committed since the last call, in revision order.
     pub fn take_fleet(&mut self) -> Vec<FleetCommit> {
         std::mem::take(&mut self.fleet_commits)
+    }
+
+    /// The robot rollouts committed since the last call (none from the channel's history at
+    /// start), in revision order.
+    pub fn take_robot_commits(&mut self) -> Vec<RobotCommit> {
+        std::mem::take(&mut self.robot_commits)
     }
 
     /// Follow `channel` too; `first`: what it already held, taken in by the first
@@ -326,6 +351,8 @@ impl Updates {
             Some(c) => events.extend(c.poll()),
             None => return,
         }
+        let history = !self.ticked;
+        self.ticked = true;
         if events.is_empty() {
             return;
         }
@@ -364,6 +391,11 @@ impl Updates {
             };
             let from = self.ledger.from_of(outcome.revision);
             self.outcome(outcome, from, out);
+        }
+        // What the channel held at start was in force before this process: no news for the
+        // fleet level.
+        if history {
+            self.robot_commits.clear();
         }
         if let Some(c) = self.channel.as_mut() {
             c.report(&self.host, &self.partition, &self.outcomes);
@@ -518,6 +550,16 @@ impl Updates {
         } else {
             format!("outputs starting afresh: {}", reset.join(", "))
         };
+        self.robot_commits.push(RobotCommit {
+            revision: r.revision,
+            id: id.clone(),
+            select: if r.selector.is_all() {
+                String::new()
+            } else {
+                r.selector.to_string()
+            },
+            outputs: program.outputs.iter().map(|o| o.name.clone()).collect(),
+        });
         log_info!(
             "spec: rollout {} (version {}{}) committed by the fleet; in force from {} for {}; {reset_note}",
             r.revision,

@@ -150,6 +150,9 @@ pub async fn run<S: Source, K: Sink>(
         for c in updates.take_fleet() {
             f.switch(c);
         }
+        for c in updates.take_robot_commits() {
+            f.robot_rollout(&c, &mut out);
+        }
     }
     if let Some(s) = store.as_mut() {
         s.backend.load(proc);
@@ -339,9 +342,14 @@ impl Loop<'_, '_> {
         }
         // Committed fleet rollouts go to the fleet level.
         let commits = updates.take_fleet();
+        let robots = updates.take_robot_commits();
         if let Some(f) = self.fleet.as_deref_mut() {
             for c in commits {
                 f.switch(c);
+            }
+            // A robot rollout that leaves a fleet input without its robot output says so.
+            for c in &robots {
+                f.robot_rollout(c, &mut self.out);
             }
         }
     }

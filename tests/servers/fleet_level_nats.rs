@@ -450,3 +450,73 @@ fn fleet_entries_stay_bounded_and_a_later_process_starts_from_the_checkpoint() {
         "first holder:\n{a_out}\n{a_err}\nnew holder:\n{holder_out}\n{holder_err}"
     );
 }
+
+/// The holder of the fleet level stops (stdin closed: a clean stop) after every other
+/// partition has ended, while a standby of its own partition is live: it hands the fleet level
+/// over without closing the fleet's input (a close would step everything pending, and the
+/// standby's records after the takeover would come late). The standby takes both leases over
+/// and goes on; the fleet lines of both holders equal one process's over the same records.
+#[test]
+fn a_stopping_fleet_holder_with_a_live_standby_hands_over_without_a_close() {
+    let server = nats_server("");
+    let state = format!("nats://127.0.0.1:{}/fleet_standby", server.port);
+    let base = base();
+    let (p1_end, takeover, end) = (25, 22, 40);
+    // One process: p1's robots up to step 25, p0's up to 40, in time order.
+    let mut input = String::new();
+    for k in 0..end {
+        for i in (0..ROBOTS).filter(|i| i % 2 == 0 || k < p1_end) {
+            input.push_str(&record(base, i, k));
+        }
+    }
+    let (one, err, code) = run_all(
+        &example_args()
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+        &input,
+    );
+    assert_eq!(code, 0, "{err}");
+    let want = fleet_lines(&one);
+
+    let mut a = spawn(&state, "p0");
+    a.wait_err("fleet held", 0, |l| {
+        l.contains("partition fleet: held by this process")
+    });
+    let mut a2 = spawn(&state, "p0");
+    a2.wait_err("p0 standby", 0, |l| {
+        l.contains("partition p0: held by another")
+    });
+    let mut b = spawn(&state, "p1");
+    a.wait_out("p1 joined", |l| {
+        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
+    });
+    a.write(&records(base, Some(0), 0..takeover));
+    a2.write(&records(base, Some(0), 0..takeover));
+    b.write(&records(base, Some(1), 0..p1_end));
+    let (b_out, b_err, code) = b.finish();
+    assert_eq!(code, 0, "{b_err}");
+    assert!(fleet_lines(&b_out).is_empty(), "{b_out}");
+    a.wait_out("p1 ended", |l| {
+        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("event=\"ended\"")
+    });
+    // Every other partition has ended; p0's standby is live: no close.
+    let (a_out, a_err, code) = a.finish();
+    assert_eq!(code, 0, "{a_err}");
+    assert!(
+        a_err.contains("a standby is live") && !a_err.contains("the fleet's input ends"),
+        "{a_err}"
+    );
+    a2.wait_err("p0 taken over", 0, |l| l.contains("holding partition p0"));
+    a2.write(&records(base, Some(0), takeover..end));
+    let (a2_out, a2_err, code) = a2.finish();
+    assert_eq!(code, 0, "{a2_err}");
+    // The new holder closes the fleet's input at its own end (no standby left).
+    assert!(a2_err.contains("the fleet's input ends"), "{a2_err}");
+    let mut got = fleet_lines(&a_out);
+    got.extend(fleet_lines(&a2_out));
+    assert_eq!(
+        got, want,
+        "first holder:\n{a_out}\n{a_err}\nnew holder:\n{a2_err}"
+    );
+}

@@ -333,3 +333,71 @@ fn a_late_fleet_rollout_switches_at_the_same_step_in_every_process_and_after_a_t
         assert_ne!(version(l), Some(v_new.as_str()), "{l}");
     }
 }
+
+/// A process that reads a switch entry but never the rollout's decision (here: it follows no
+/// spec channel) holds the fleet entries after it: after a bounded wait it says so, a `W!` and
+/// one `tessla_fleet_status` line `event="waiting"` naming the rollout, while the holder of the
+/// fleet level, which read the decision, switches and goes on.
+#[test]
+fn a_process_holding_entries_behind_a_switch_entry_says_it_waits() {
+    let server = nats_server("");
+    let url = format!("nats://127.0.0.1:{}", server.port);
+    let state = format!("{url}/fleet_rollout_waiting");
+    let s = Setup::new();
+    let robot = child::root().join("specs/fleet/robot.tessla");
+    let v2 = child::write(s.dir.path(), "fleet_v2.tessla", FLEET_V2);
+    let base = base();
+
+    let mut a = spawn(&url, &s, &state, "p0");
+    a.wait_err("fleet held", 0, |l| {
+        l.contains("partition fleet: held by this process")
+    });
+    // p1's process follows no spec channel.
+    let mut lone = example_args();
+    lone.extend([
+        "--state".to_string(),
+        format!("{state}?lease=p1&ttl=1s"),
+        "--version-tag".to_string(),
+        "spec_version".to_string(),
+    ]);
+    let mut b = LiveChild::spawn(&lone.iter().map(String::as_str).collect::<Vec<_>>());
+    a.wait_out("p1 joined", |l| {
+        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
+    });
+    a.write(&records(base, Some(0), 0..30));
+    b.write(&records(base, Some(1), 0..30));
+    a.wait_out("a fleet line", |l| l.starts_with("tessla_fleet,"));
+    let from = base + 40 * 200_000_000;
+    let out = s.publish(
+        &url,
+        &robot,
+        &["--fleet", v2.to_str().unwrap(), "--from", &from.to_string()],
+    );
+    published(&out, 1);
+    a.wait_err("the switch entry", 0, |l| {
+        l.contains("switch entry for fleet rollout 1 (")
+    });
+    a.write(&records(base, Some(0), 30..60));
+    b.write(&records(base, Some(1), 30..60));
+    // The holder switches at step 40; p1's process holds every entry after the switch entry
+    // and, after the bounded wait, says so.
+    a.wait_out("the switched line", |l| l.contains("event=\"switched\""));
+    let warn = b.wait_err("the waiting warning", 0, |l| {
+        l.contains("has not read the rollout's decision")
+    });
+    assert!(
+        warn.starts_with("W! ") && warn.contains("fleet rollout 1 "),
+        "{warn}"
+    );
+    b.wait_out("the waiting line", |l| {
+        l.starts_with("tessla_fleet_status,partition=p1")
+            && l.contains("event=\"waiting\",revision=1i,")
+    });
+    let (b_out, b_err, code) = b.finish();
+    assert_eq!(code, 0, "{b_err}");
+    let (a_out, a_err, code) = a.finish();
+    assert_eq!(code, 0, "{a_err}");
+    // Said once; the holder never waited.
+    assert_eq!(b_out.matches("event=\"waiting\"").count(), 1, "{b_out}");
+    assert!(!a_out.contains("event=\"waiting\""), "{a_out}");
+}
