@@ -18,6 +18,10 @@ const ROUNDS: i64 = 8;
 /// `ks`, one timestamp per round (5 Hz): lanes 0.5 m apart, 100 to a row, each driving 1 cm a
 /// round; the first four of the first two rows are in zone A (x 0..2, y 0..1), so the slow-down
 /// fires; one robot in 17 violates P2 at a time.
+/// 5,000 robots' monitors and a checkpoint of 1.6 MB: a wait for a line may take longer than
+/// the default on two cores running the other tests.
+const PATIENT: std::time::Duration = std::time::Duration::from_secs(240);
+
 fn records(base: i64, p: Option<usize>, ks: std::ops::Range<i64>) -> String {
     let mut s = String::new();
     for k in ks {
@@ -99,11 +103,11 @@ fn a_fleet_checkpoint_over_the_max_payload_is_stored_in_parts_trims_and_restarts
         want.len()
     );
 
-    let mut a = spawn(&state, "p0");
+    let mut a = spawn(&state, "p0").patient(PATIENT);
     a.wait_err("fleet held", 0, |l| {
         l.contains("partition fleet: held by this process")
     });
-    let mut b = spawn(&state, "p1");
+    let mut b = spawn(&state, "p1").patient(PATIENT);
     a.wait_out("p1 joined", |l| {
         l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
     });
@@ -164,8 +168,8 @@ fn a_fleet_checkpoint_over_the_max_payload_is_stored_in_parts_trims_and_restarts
     let (b_out, b_err, code) = b.finish();
     assert_eq!(code, 0, "{b_err}");
     assert!(fleet_lines(&b_out).is_empty());
-    let mut b2 = spawn(&state, "p1");
-    let mut c = spawn(&state, "p0");
+    let mut b2 = spawn(&state, "p1").patient(PATIENT);
+    let mut c = spawn(&state, "p0").patient(PATIENT);
     for p in [&mut b2, &mut c] {
         let l = p.wait_err("the checkpoint", 0, |l| {
             l.contains("fleet: starting from the fleet checkpoint at stream sequence")

@@ -17,6 +17,8 @@ pub struct LiveChild {
     /// Every stdout / stderr line received so far (with its newline).
     pub out: Vec<String>,
     pub err: Vec<String>,
+    /// How long a wait for a line may take before the test fails (`patient`).
+    patience: Duration,
 }
 
 fn pump(r: impl std::io::Read + Send + 'static) -> Receiver<String> {
@@ -57,7 +59,15 @@ impl LiveChild {
             err_rx,
             out: Vec::new(),
             err: Vec::new(),
+            patience: PATIENCE,
         }
+    }
+
+    /// Waits for a line may take up to `d` (default 60 s): for a child with much work before
+    /// the line it is waited for, on a machine running other tests beside it.
+    pub fn patient(mut self, d: Duration) -> LiveChild {
+        self.patience = d;
+        self
     }
 
     pub fn write(&mut self, text: &str) {
@@ -90,7 +100,7 @@ impl LiveChild {
                 }
                 Err(RecvTimeoutError::Timeout) => {}
             }
-            if start.elapsed() > PATIENCE {
+            if start.elapsed() > self.patience {
                 self.drain_err();
                 panic!(
                     "no stdout line {what}; got:\n{}\nstderr:\n{}",
@@ -122,7 +132,7 @@ impl LiveChild {
                 }
                 Err(RecvTimeoutError::Timeout) => {}
             }
-            if start.elapsed() > PATIENCE {
+            if start.elapsed() > self.patience {
                 panic!("no stderr line {what}; got:\n{}", self.err.concat());
             }
         }
