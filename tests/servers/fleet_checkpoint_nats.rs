@@ -9,6 +9,7 @@
 
 use super::fleet_level_nats::{base, example_args, fleet_lines, spawn, wait_any_err};
 use super::fleet_nats_specs::nats_server;
+use crate::support::kv;
 use crate::support::live_child::{LiveChild, run_all};
 
 const ROBOTS: usize = 5000;
@@ -40,28 +41,9 @@ fn records(base: i64, p: Option<usize>, ks: std::ops::Range<i64>) -> String {
 
 /// Every key of `bucket` beginning `fleet.`, and the checkpoint's head.
 fn fleet_keys(port: u16, bucket: &str) -> (Vec<String>, Option<serde_json::Value>) {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
-        use futures_util::StreamExt;
-        let client = async_nats::connect(format!("127.0.0.1:{port}"))
-            .await
-            .unwrap();
-        let kv = async_nats::jetstream::new(client)
-            .get_key_value(bucket)
-            .await
-            .unwrap();
-        let mut keys: Vec<String> = kv
-            .keys()
-            .await
-            .unwrap()
-            .filter_map(|k| async { k.ok() })
-            .filter(|k| std::future::ready(k.starts_with("fleet.")))
-            .collect()
-            .await;
-        keys.sort();
+    kv::with_bucket(&format!("127.0.0.1:{port}"), bucket, async |kv| {
+        let mut keys = kv::keys(&kv).await;
+        keys.retain(|k| k.starts_with("fleet."));
         let head = kv
             .get("fleet.checkpoint")
             .await

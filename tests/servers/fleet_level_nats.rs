@@ -10,6 +10,7 @@
 
 use super::fleet_nats_specs::nats_server;
 use crate::support::child;
+use crate::support::kv;
 use crate::support::live_child::{LiveChild, run_all};
 
 const ROBOTS: usize = 4;
@@ -316,32 +317,13 @@ fn a_partition_without_a_holder_drops_out_and_is_named() {
 /// The keys `fleet.m.*` (the fleet's entries) in `bucket`, and whether `fleet.checkpoint` is
 /// there.
 fn fleet_keys(port: u16, bucket: &str) -> (Vec<String>, bool) {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
-        use futures_util::StreamExt;
-        let client = async_nats::connect(format!("127.0.0.1:{port}"))
-            .await
-            .unwrap();
-        let kv = async_nats::jetstream::new(client)
-            .get_key_value(bucket)
-            .await
-            .unwrap();
-        let keys: Vec<String> = kv
-            .keys()
-            .await
-            .unwrap()
-            .filter_map(|k| async { k.ok() })
-            .collect()
-            .await;
+    kv::with_bucket(&format!("127.0.0.1:{port}"), bucket, async |kv| {
+        let keys = kv::keys(&kv).await;
         let checkpoint = keys.iter().any(|k| k == "fleet.checkpoint");
-        let mut entries: Vec<String> = keys
+        let entries = keys
             .into_iter()
             .filter(|k| k.starts_with("fleet.m."))
             .collect();
-        entries.sort();
         (entries, checkpoint)
     })
 }

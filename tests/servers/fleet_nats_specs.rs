@@ -11,6 +11,7 @@
 //! unsigned spec off the robots.
 
 use crate::support::child;
+use crate::support::kv;
 use crate::support::nats_cluster::{self, Cluster};
 use crate::support::servers;
 
@@ -563,20 +564,7 @@ fn raw<T>(
     bucket: &str,
     f: impl AsyncFnOnce(async_nats::jetstream::kv::Store) -> T,
 ) -> T {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
-        let client = async_nats::connect(format!("127.0.0.1:{port}"))
-            .await
-            .unwrap();
-        let kv = async_nats::jetstream::new(client)
-            .get_key_value(bucket)
-            .await
-            .unwrap();
-        f(kv).await
-    })
+    kv::with_bucket(&format!("127.0.0.1:{port}"), bucket, f)
 }
 
 #[test]

@@ -6,6 +6,7 @@
 //! is a clear error (exit 3).
 
 use crate::support::child;
+use crate::support::kv;
 
 use crate::support::nats_cluster;
 
@@ -41,27 +42,9 @@ fn run(args: &[&str], input: &str) -> (String, String, i32) {
 
 /// The bucket `name`: (key, value) of every live entry.
 fn entries(cluster: &Cluster, name: &str) -> Vec<(String, Vec<u8>)> {
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    rt.block_on(async {
-        use futures_util::StreamExt;
-        let client = async_nats::connect(cluster.url(0)).await.unwrap();
-        let kv = async_nats::jetstream::new(client)
-            .get_key_value(name)
-            .await
-            .unwrap();
-        let mut keys: Vec<String> = kv
-            .keys()
-            .await
-            .unwrap()
-            .filter_map(|k| async { k.ok() })
-            .collect()
-            .await;
-        keys.sort();
+    kv::with_bucket(&cluster.url(0), name, async |kv| {
         let mut out = Vec::new();
-        for k in keys {
+        for k in kv::keys(&kv).await {
             if let Some(v) = kv.get(&k).await.unwrap() {
                 out.push((k, v.to_vec()));
             }

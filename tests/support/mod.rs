@@ -14,6 +14,7 @@ pub mod child;
 #[cfg_attr(not(feature = "tools"), allow(dead_code))]
 pub mod dashboards;
 pub mod fleet_example;
+pub mod kv;
 pub mod live_child;
 #[cfg_attr(not(feature = "tools"), allow(dead_code))]
 pub mod mqtt_client;
