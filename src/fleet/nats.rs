@@ -49,6 +49,8 @@ const WAITING_SAID_AFTER: Duration = Duration::from_secs(10);
 /// A standby (a process of a partition whose lease another holds) renews its key
 /// `fleet.standby.<partition>.<pid>` this often; one older than three times this is not live.
 const STANDBY_EVERY: Duration = Duration::from_secs(1);
+/// How long a process stopping waits to take a fleet lease it found released.
+const TAKE_FREE_WAIT: Duration = Duration::from_secs(2);
 
 enum Job {
     Put(String, bytes::Bytes),
@@ -577,7 +579,7 @@ impl FleetNats {
             let _ = self.conn.call(async move { store.delete(key).await });
         }
         self.flush();
-        if !self.lease.holding() {
+        if !self.lease.holding() && !self.take_free_fleet_lease() {
             return;
         }
         let start = Instant::now();
@@ -606,6 +608,28 @@ impl FleetNats {
             }
             std::thread::sleep(Duration::from_millis(20));
         }
+    }
+
+    /// Stopping while nobody holds the fleet lease (its holder stopped first and released it),
+    /// this process takes it, so that the fleet's input is closed and its pending lines written
+    /// when every partition has ended (else nobody would write them): its lease task takes a
+    /// released lease at its next poll. With several stopping at once, one takes it; the others
+    /// return after [`TAKE_FREE_WAIT`].
+    fn take_free_fleet_lease(&self) -> bool {
+        if !self.lease.free() {
+            return false;
+        }
+        let start = Instant::now();
+        while start.elapsed() < TAKE_FREE_WAIT {
+            if self.lease.holding() {
+                log_info!(
+                    "fleet: stopping, took the fleet level its holder released, to end its input"
+                );
+                return true;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        false
     }
 
     /// This process's standby key.

@@ -169,6 +169,23 @@ impl Lease {
             .unwrap_or(false)
     }
 
+    /// Whether nobody holds the lease now: its key absent or deleted (released on a clean
+    /// stop). A lease whose holder died is not free until it lapses; unknown (the server does
+    /// not answer in time) is not free either.
+    pub fn free(&self) -> bool {
+        let store = self.store.clone();
+        let key = format!("lease.{}", kv_key_part_of(&self.name));
+        let (tx, rx) = std::sync::mpsc::channel();
+        self.handle.spawn(async move {
+            let _ = tx.send(store.entry(key).await);
+        });
+        match rx.recv_timeout(REQUEST_TIMEOUT * 2) {
+            Ok(Ok(None)) => true,
+            Ok(Ok(Some(e))) => e.operation != kv::Operation::Put,
+            _ => false,
+        }
+    }
+
     /// Give the lease up (after the last save), so a standby takes over at once.
     pub fn release(&self) {
         let revision = match self.shared.lock() {

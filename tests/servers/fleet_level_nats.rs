@@ -502,3 +502,61 @@ fn a_stopping_fleet_holder_with_a_live_standby_hands_over_without_a_close() {
         "first holder:\n{a_out}\n{a_err}\nnew holder:\n{a2_err}"
     );
 }
+
+/// The holder of the fleet level stops first (a restart) while p1's process still reads; p1's
+/// input then ends at once, before its lease task has taken the released fleet lease. The
+/// process stopping takes the free lease itself, closes the fleet's input and writes the
+/// pending lines: both processes' fleet lines equal one process's (before, nobody closed and
+/// the last steps' lines were lost).
+#[test]
+fn a_process_stopping_after_the_fleet_holder_takes_the_free_level_and_closes() {
+    let server = nats_server("");
+    let state = format!("nats://127.0.0.1:{}/fleet_last", server.port);
+    let base = base();
+    let end = 20;
+    let mut input = String::new();
+    for k in 0..end {
+        for i in 0..ROBOTS {
+            input.push_str(&record(base, i, k));
+        }
+    }
+    let (one, err, code) = run_all(
+        &example_args()
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+        &input,
+    );
+    assert_eq!(code, 0, "{err}");
+    let want = fleet_lines(&one);
+    assert!(!want.is_empty());
+
+    let mut a = spawn(&state, "p0");
+    a.wait_err("fleet held", 0, |l| {
+        l.contains("partition fleet: held by this process")
+    });
+    let mut b = spawn(&state, "p1");
+    a.wait_out("p1 joined", |l| {
+        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
+    });
+    a.write(&records(base, Some(0), 0..end));
+    b.write(&records(base, Some(1), 0..end));
+    // Both partitions are past the step before last (the holder wrote its line).
+    let near_end = base + (end - 2) * 200_000_000;
+    a.wait_out("a fleet line near the end", |l| {
+        l.starts_with("tessla_fleet ")
+            && l.rsplit(' ')
+                .next()
+                .and_then(|t| t.trim().parse::<i64>().ok())
+                .is_some_and(|t| t >= near_end)
+    });
+    let (a_out, a_err, code) = a.finish();
+    assert_eq!(code, 0, "{a_err}");
+    assert!(!a_err.contains("the fleet's input ends"), "{a_err}");
+    let (b_out, b_err, code) = b.finish();
+    assert_eq!(code, 0, "{b_err}");
+    assert!(b_err.contains("the fleet's input ends"), "{b_err}");
+    let mut got = fleet_lines(&a_out);
+    got.extend(fleet_lines(&b_out));
+    assert_eq!(got, want, "first holder:\n{a_err}\nlast process:\n{b_err}");
+}
