@@ -56,9 +56,6 @@ pub struct FleetCounters {
     pub switches: u64,
 }
 
-/// The measurement of the fleet level's status lines (as the partitions' in [`super::watermark`]).
-const STATUS: &str = "tessla_fleet_status";
-
 /// A fleet spec version waiting for its step.
 struct Switch {
     /// The first step at or after this runs the version.
@@ -202,13 +199,7 @@ impl Level {
         ts: i64,
         out: &mut Vec<u8>,
     ) {
-        let mut line = String::from(STATUS);
-        for (k, v) in &self.tags {
-            line.push(',');
-            lineproto::write::write_tag_key(&mut line, k);
-            line.push('=');
-            lineproto::write::write_tag_value(&mut line, v);
-        }
+        let mut line = super::watermark::status_head(&self.tags, None);
         let quoted = |s: &str| s.replace('\\', "\\\\").replace('"', "\\\"");
         line.push_str(&format!(
             " event=\"input_unfed\",input=\"{}\",version=\"{}\",revision={}i",
@@ -299,13 +290,7 @@ impl Level {
                 sw.revision
             );
             // Where the switch took effect, in event time: the same line in every process.
-            let mut line = String::from(STATUS);
-            for (k, v) in &self.tags {
-                line.push(',');
-                lineproto::write::write_tag_key(&mut line, k);
-                line.push('=');
-                lineproto::write::write_tag_value(&mut line, v);
-            }
+            let mut line = super::watermark::status_head(&self.tags, None);
             line.push_str(&format!(
                 " event=\"switched\",version=\"{}\",revision={}i,from={}i,late={} {t}\n",
                 sw.id, sw.revision, sw.from, sw.late

@@ -481,14 +481,7 @@ impl FleetNats {
             "fleet: the switch entry for fleet rollout {revision} (stream sequence {seq}) came {} ago, but this process has not read the rollout's decision: the fleet level holds the {held} entries after it until it has (is `--spec-channel` given, and the same as the other processes'?)",
             humantime::format_duration(WAITING_SAID_AFTER)
         );
-        let mut line = String::from("tessla_fleet_status,partition=");
-        lineproto::write::write_tag_value(&mut line, &self.partition);
-        for (k, v) in &self.tags {
-            line.push(',');
-            lineproto::write::write_tag_key(&mut line, k);
-            line.push('=');
-            lineproto::write::write_tag_value(&mut line, v);
-        }
+        let mut line = watermark::status_head(&self.tags, Some(&self.partition));
         line.push_str(&format!(
             " event=\"waiting\",revision={revision}i,sequence={seq}i,held={held}i {}\n",
             now_ns()

@@ -319,11 +319,12 @@ impl Partitions {
     }
 }
 
-/// A status line: `tessla_fleet_status,partition=P[,--tag...] state="live",event="joined",generation=Gi TS`.
-pub fn status_line(s: &Status, tags: &[(String, String)], ts: i64, out: &mut Vec<u8>) {
+/// The start of every fleet status line: `tessla_fleet_status` and its tags, sorted (the
+/// fleet's `--tag`s and version tag, with `partition` when the line is about one).
+pub fn status_head(tags: &[(String, String)], partition: Option<&str>) -> String {
     let mut line = String::from(STATUS_MEASUREMENT);
     let mut all: Vec<(&str, &str)> = tags.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
-    all.push(("partition", s.partition.as_str()));
+    all.extend(partition.map(|p| ("partition", p)));
     all.sort();
     for (k, v) in all {
         line.push(',');
@@ -331,6 +332,12 @@ pub fn status_line(s: &Status, tags: &[(String, String)], ts: i64, out: &mut Vec
         line.push('=');
         lineproto::write::write_tag_value(&mut line, v);
     }
+    line
+}
+
+/// A status line: `tessla_fleet_status,partition=P[,--tag...] state="live",event="joined",generation=Gi TS`.
+pub fn status_line(s: &Status, tags: &[(String, String)], ts: i64, out: &mut Vec<u8>) {
+    let mut line = status_head(tags, Some(&s.partition));
     line.push_str(&format!(
         " state=\"{}\",event=\"{}\",generation={}i {ts}\n",
         s.state.word(),

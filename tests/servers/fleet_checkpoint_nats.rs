@@ -7,10 +7,10 @@
 //! processes) give, after the first holder's lines, the fleet lines of one process over the same
 //! records, line for line.
 
-use super::fleet_level_nats::{base, example_args, fleet_lines, spawn, wait_any_err};
+use super::fleet_level_nats::{base, fleet_lines, one_process, spawn, wait_any_err};
 use super::fleet_nats_specs::nats_server;
 use crate::support::kv;
-use crate::support::live_child::{LiveChild, run_all};
+use crate::support::live_child::LiveChild;
 
 const ROBOTS: usize = 5000;
 const ROUNDS: i64 = 8;
@@ -70,15 +70,7 @@ fn a_fleet_checkpoint_over_the_max_payload_is_stored_in_parts_trims_and_restarts
     let state = format!("nats://127.0.0.1:{}/{bucket}", server.port);
     let base = base();
     let half = ROUNDS / 2;
-    let (one, err, code) = run_all(
-        &example_args()
-            .iter()
-            .map(String::as_str)
-            .collect::<Vec<_>>(),
-        &records(base, None, 0..ROUNDS),
-    );
-    assert_eq!(code, 0, "{err}");
-    let want = fleet_lines(&one);
+    let (_, want) = one_process(&records(base, None, 0..ROUNDS));
     assert!(
         want.iter().any(|l| l.starts_with("action,")),
         "zone A holds robots together: {}",

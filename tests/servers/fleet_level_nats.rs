@@ -79,6 +79,21 @@ pub(super) fn example_args() -> Vec<String> {
     .collect()
 }
 
+/// The example run by one process over `input` (the oracle the partitions are held to): its
+/// whole stdout and its fleet lines.
+pub(super) fn one_process(input: &str) -> (String, Vec<String>) {
+    let (one, err, code) = run_all(
+        &example_args()
+            .iter()
+            .map(String::as_str)
+            .collect::<Vec<_>>(),
+        input,
+    );
+    assert_eq!(code, 0, "{err}");
+    let want = fleet_lines(&one);
+    (one, want)
+}
+
 pub(super) fn spawn(state: &str, lease: &str) -> LiveChild {
     let mut a = example_args();
     a.extend([
@@ -139,15 +154,7 @@ fn takeover(signal: &str) {
     let (half, all) = (STEPS / 2, 0..STEPS);
 
     // One process over every record: the fleet lines to match.
-    let (one, err, code) = run_all(
-        &example_args()
-            .iter()
-            .map(String::as_str)
-            .collect::<Vec<_>>(),
-        &records(base, None, all.clone()),
-    );
-    assert_eq!(code, 0, "{err}");
-    let want = fleet_lines(&one);
+    let (one, want) = one_process(&records(base, None, all.clone()));
     assert!(
         want.iter().any(|l| l.starts_with("action,")),
         "the records bring two robots into zone A together: {one}"
@@ -340,15 +347,7 @@ fn fleet_entries_stay_bounded_and_a_later_process_starts_from_the_checkpoint() {
     let state = format!("nats://127.0.0.1:{}/{bucket}", server.port);
     let base = base();
     let (half, all) = (STEPS / 2, 0..STEPS);
-    let (one, err, code) = run_all(
-        &example_args()
-            .iter()
-            .map(String::as_str)
-            .collect::<Vec<_>>(),
-        &records(base, None, all.clone()),
-    );
-    assert_eq!(code, 0, "{err}");
-    let want = fleet_lines(&one);
+    let (_, want) = one_process(&records(base, None, all.clone()));
 
     let mut a = spawn(&state, "p0");
     a.wait_err("fleet held", 0, |l| {
@@ -451,15 +450,7 @@ fn a_stopping_fleet_holder_with_a_live_standby_hands_over_without_a_close() {
             input.push_str(&record(base, i, k));
         }
     }
-    let (one, err, code) = run_all(
-        &example_args()
-            .iter()
-            .map(String::as_str)
-            .collect::<Vec<_>>(),
-        &input,
-    );
-    assert_eq!(code, 0, "{err}");
-    let want = fleet_lines(&one);
+    let (_, want) = one_process(&input);
 
     let mut a = spawn(&state, "p0");
     a.wait_err("fleet held", 0, |l| {
@@ -520,15 +511,7 @@ fn a_process_stopping_after_the_fleet_holder_takes_the_free_level_and_closes() {
             input.push_str(&record(base, i, k));
         }
     }
-    let (one, err, code) = run_all(
-        &example_args()
-            .iter()
-            .map(String::as_str)
-            .collect::<Vec<_>>(),
-        &input,
-    );
-    assert_eq!(code, 0, "{err}");
-    let want = fleet_lines(&one);
+    let (_, want) = one_process(&input);
     assert!(!want.is_empty());
 
     let mut a = spawn(&state, "p0");
