@@ -7,20 +7,24 @@ For each N: a nats-server with JetStream on a free loopback port; one partition'
 release binary (`run --state nats://...?lease=p0` with the fleet example, specs/fleet/) fed N
 robots' records (every robot at one timestamp per round, 5 Hz, 3 rounds), stdin kept open; its
 checkpoint lines (`--log-level debug`: `fleet: checkpoint at stream sequence S: J bytes of JSON,
-B bytes stored in P parts (taken and encoded in E ms, compressed in C ms, put in T ms)`) are read until two in a row give
+B bytes stored in P parts (held the step loop H ms, encoded in E ms, compressed in C ms, put in T ms)`) are read until two in a row give
 the same JSON size within 1% (every record taken in). Then a second process (partition p1, same
 bucket) starts and logs how long reading it took (`starting from the fleet checkpoint ... B bytes
 in P parts, read in R ms`). Printed per N: JSON and stored bytes (and per robot), parts, the
-deflate ratio, encode (on the step loop's thread)/compress/put/read times, and the first process's resident memory then (VmRSS);
+deflate ratio, the time taking it held the step loop, encode (off the step loop)/compress/put/read times, and the first process's resident memory then (VmRSS);
 memory per robot is the slope between the smallest and the largest N.
 
-Usage: python3 bench/fleet_checkpoint.py [--bin target/release/tessla-telegraf] [--sizes 1000,10000,100000]
+Usage: python3 bench/fleet_checkpoint.py [--bin target/release/tessla-telegraf] [--baseline OTHER_BINARY]
+       [--sizes 1000,10000,100000]
 """
 import argparse, os, re, shutil, signal, socket, statistics, subprocess, tempfile, threading, time
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# Since the checkpoint left the step loop: "held the step loop H ms, encoded in E ms"; before
+# (a baseline binary, --baseline): "taken and encoded in E ms", all of it on the step loop.
 CP = re.compile(r"fleet: checkpoint at stream sequence (\d+): (\d+) bytes of JSON, (\d+) bytes stored in (\d+) parts "
-                r"\(taken and encoded in (\d+) ms, compressed in (\d+) ms, put in (\d+) ms\)")
+                r"\((?:held the step loop (\d+) ms, encoded in (\d+) ms|taken and encoded in (\d+) ms), "
+                r"compressed in (\d+) ms, put in (\d+) ms\)")
 START = re.compile(r"starting from the fleet checkpoint at stream sequence (\d+) .*?(\d+) bytes in (\d+) parts, read in (\d+) ms")
 
 
@@ -126,9 +130,13 @@ def measure(binary, n, rounds):
         st = b.wait(START, "start from the checkpoint", 300)[-1]
         b.stop()
         a.stop()
+        if cp.group(7) is not None:  # an earlier binary: taken and encoded on the step loop
+            held = encode = int(cp.group(7))
+        else:
+            held, encode = int(cp.group(5)), int(cp.group(6))
         return {
             "json": int(cp.group(2)), "stored": int(cp.group(3)), "parts": int(cp.group(4)),
-            "encode_ms": int(cp.group(5)), "compress_ms": int(cp.group(6)), "put_ms": int(cp.group(7)),
+            "held_ms": held, "encode_ms": encode, "compress_ms": int(cp.group(8)), "put_ms": int(cp.group(9)),
             "read_ms": int(st.group(4)), "read_bytes": int(st.group(2)), "rss_kib": rss,
         }
     finally:
@@ -137,9 +145,18 @@ def measure(binary, n, rounds):
         shutil.rmtree(tmp, ignore_errors=True)
 
 
+def line(n, r):
+    return (f"{r['json']:.0f} B JSON ({r['json'] / n:.0f} B/robot), {r['stored']:.0f} B stored in {r['parts']:.0f} parts "
+            f"({r['stored'] / n:.0f} B/robot, deflate {r['json'] / max(r['stored'], 1):.1f}x); "
+            f"held the step loop {r['held_ms']:.0f} ms, encode {r['encode_ms']:.0f} ms, compress {r['compress_ms']:.0f} ms, "
+            f"put {r['put_ms']:.0f} ms, read {r['read_ms']:.0f} ms; VmRSS {r['rss_kib']:.0f} KiB")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--bin", default=os.path.join(ROOT, "target/release/tessla-telegraf"))
+    ap.add_argument("--baseline", help="a second binary (an earlier build) measured in the same run, its runs "
+                    "interleaved with --bin's; the step-loop hold is compared")
     ap.add_argument("--sizes", default="1000,10000,100000")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--reps", type=int, default=3, help="runs per size; every figure is their median")
@@ -148,12 +165,18 @@ def main():
     print(f"3. fleet checkpoint on NATS (the fleet example, {a.rounds} rounds at 5 Hz, one partition, nats-server max_payload 1 MiB; medians of {a.reps} runs)")
     got = {}
     for n in sizes:
-        runs = [measure(a.bin, n, a.rounds) for _ in range(max(a.reps, 1))]
+        runs, base = [], []
+        for _ in range(max(a.reps, 1)):
+            runs.append(measure(a.bin, n, a.rounds))
+            if a.baseline:
+                base.append(measure(a.baseline, n, a.rounds))
         r = {k: statistics.median(run[k] for run in runs) for k in runs[0]}
         got[n] = r
-        print(f"  {n} robots: {r['json']:.0f} B JSON ({r['json'] / n:.0f} B/robot), {r['stored']:.0f} B stored in {r['parts']:.0f} parts "
-              f"({r['stored'] / n:.0f} B/robot, deflate {r['json'] / max(r['stored'], 1):.1f}x); "
-              f"encode {r['encode_ms']:.0f} ms (step loop), compress {r['compress_ms']:.0f} ms, put {r['put_ms']:.0f} ms, read {r['read_ms']:.0f} ms; VmRSS {r['rss_kib']:.0f} KiB")
+        print(f"  {n} robots: {line(n, r)}")
+        if base:
+            b = {k: statistics.median(run[k] for run in base) for k in base[0]}
+            print(f"  {n} robots, baseline: {line(n, b)}")
+            print(f"  {n} robots: the step loop held {r['held_ms']:.0f} ms against the baseline's {b['held_ms']:.0f} ms")
     if len(sizes) >= 2:
         lo, hi = min(sizes), max(sizes)
         per = (got[hi]["rss_kib"] - got[lo]["rss_kib"]) * 1024 / (hi - lo)

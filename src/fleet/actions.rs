@@ -41,11 +41,9 @@ pub struct Actions {
 }
 
 impl Actions {
-    /// The count of actions sent to each robot (a fleet checkpoint).
-    pub fn counts(&self) -> Vec<(String, i64)> {
-        let mut v: Vec<(String, i64)> = self.seq.iter().map(|(k, n)| (k.to_string(), *n)).collect();
-        v.sort();
-        v
+    /// The count of actions sent to each robot, as held (copied for a fleet checkpoint).
+    pub fn seq(&self) -> &HashMap<Arc<str>, i64> {
+        &self.seq
     }
 
     /// Go on from `counts` (a fleet checkpoint).

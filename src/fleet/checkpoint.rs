@@ -6,10 +6,12 @@
 //! one), how it is read (the head, its parts, the digest checked; a head replaced while it is
 //! read is read again; the one-key JSON of earlier versions is read too), and the trimming once
 //! a head is stored (the entries the checkpoint before covered, the parts of older heads).
-//! When and what to checkpoint is decided by [`super::nats`].
+//! A checkpoint is taken on the step loop as a cheap copy ([`Taken`]: the maps and monitor
+//! values are shared) and converted, encoded, deflated and hashed off it ([`Taken::encode`] in
+//! a blocking task, then [`store`]). When and what to checkpoint is decided by [`super::nats`].
 
-use super::level::LevelState;
-use super::watermark::PartsState;
+use super::level::{LevelCopy, LevelState};
+use super::watermark::{Partitions, PartsState};
 use async_nats::jetstream::kv;
 use sha2::{Digest, Sha256};
 use std::io::{Read, Write};
@@ -36,6 +38,34 @@ pub struct Checkpoint {
     pub written: u64,
     pub table: PartsState,
     pub level: LevelState,
+}
+
+/// A checkpoint as taken on the step loop: the level and the partitions' table copied (values
+/// shared, not converted), turned into a [`Checkpoint`]'s JSON off the step loop.
+pub struct Taken {
+    pub seq: u64,
+    pub written: u64,
+    pub table: Partitions,
+    pub level: LevelCopy,
+}
+
+impl Taken {
+    /// The JSON of the [`Checkpoint`]: `Ok(None)` when the level holds a value a checkpoint
+    /// cannot keep (a function value).
+    pub fn encode(&self) -> Result<Option<Vec<u8>>, String> {
+        let Some(level) = self.level.state() else {
+            return Ok(None);
+        };
+        let c = Checkpoint {
+            seq: self.seq,
+            written: self.written,
+            table: self.table.state(),
+            level,
+        };
+        serde_json::to_vec(&c)
+            .map(Some)
+            .map_err(|e| format!("cannot encode it: {e}"))
+    }
 }
 
 /// The head (`fleet.checkpoint`): the parts holding the deflated JSON of a [`Checkpoint`].

@@ -579,15 +579,25 @@ pub struct LevelState {
     counters: FleetCounters,
 }
 
-impl Level {
+/// A copy of the fleet level's state taken on the step loop ([`Level::copy`]): the maps and
+/// the monitor's values are shared (`Arc`), so it costs a clone of the robot clocks and action
+/// counts; turning it into a [`LevelState`] (the snapshot, the conversion of every value) runs
+/// off the step loop.
+#[derive(Clone)]
+pub struct LevelCopy {
+    monitor: Option<Monitor>,
+    maps: Vec<Value>,
+    pending: BTreeMap<i64, Vec<Pend>>,
+    clocks: HashMap<Arc<str>, i64>,
+    front: i64,
+    done: i64,
+    actions: HashMap<Arc<str>, i64>,
+    counters: FleetCounters,
+}
+
+impl LevelCopy {
     /// The state to checkpoint; `None` when a value cannot be saved (a function value).
     pub fn state(&self) -> Option<LevelState> {
-        // A checkpoint holds the start-up fleet spec's monitor: once a fleet rollout is
-        // pending or has switched the program, the level is not checkpointed (its entries
-        // stay, a later process replays them and meets the switch entry where the holder did).
-        if !self.events.is_empty() || self.has_switch() {
-            return None;
-        }
         let monitor = self.monitor.as_ref().map(tessla_engine::snapshot::snapshot);
         if monitor.as_ref().is_some_and(|m| m.unsaved > 0) {
             return None;
@@ -613,6 +623,12 @@ impl Level {
             .map(|(k, c)| (k.to_string(), *c))
             .collect();
         clocks.sort();
+        let mut actions: Vec<(String, i64)> = self
+            .actions
+            .iter()
+            .map(|(k, n)| (k.to_string(), *n))
+            .collect();
+        actions.sort();
         Some(LevelState {
             monitor,
             maps,
@@ -620,7 +636,36 @@ impl Level {
             clocks,
             front: self.front,
             done: self.done,
-            actions: self.actions.counts(),
+            actions,
+            counters: self.counters.clone(),
+        })
+    }
+}
+
+impl Level {
+    /// The state to checkpoint; `None` when a value cannot be saved (a function value).
+    pub fn state(&self) -> Option<LevelState> {
+        self.copy()?.state()
+    }
+
+    /// What [`LevelCopy::state`] turns into the state to checkpoint, taken cheaply (values are
+    /// shared, not converted); `None` when the level is not checkpointed now (a fleet rollout
+    /// pending or switched, or outputs of a step not written yet).
+    pub fn copy(&self) -> Option<LevelCopy> {
+        // A checkpoint holds the start-up fleet spec's monitor: once a fleet rollout is
+        // pending or has switched the program, the level is not checkpointed (its entries
+        // stay, a later process replays them and meets the switch entry where the holder did).
+        if !self.events.is_empty() || self.has_switch() {
+            return None;
+        }
+        Some(LevelCopy {
+            monitor: self.monitor.clone(),
+            maps: self.maps.clone(),
+            pending: self.pending.clone(),
+            clocks: self.clocks.clone(),
+            front: self.front,
+            done: self.done,
+            actions: self.actions.seq().clone(),
             counters: self.counters.clone(),
         })
     }

@@ -19,7 +19,7 @@
 //! (docs/fleet.md, "Rollouts of the fleet spec").
 
 use super::Level;
-use super::checkpoint::{self, Checkpoint};
+use super::checkpoint::{self, Taken};
 use super::watermark::{self, Msg, Partitions};
 use crate::nats::conn::{Conn, Failure, connect};
 use crate::nats::kv_keys::kv_key_part_of;
@@ -54,10 +54,10 @@ const TAKE_FREE_WAIT: Duration = Duration::from_secs(2);
 
 enum Job {
     Put(String, bytes::Bytes),
-    /// Put a fleet checkpoint covering the entries up to this stream sequence; once it is
-    /// stored, delete the entries the checkpoint stored before it covered. The JSON, and how
-    /// long taking and encoding it took (on the step loop's thread).
-    Checkpoint(u64, bytes::Bytes, Duration),
+    /// Put a fleet checkpoint (encoded here, off the step loop); once it is stored, delete the
+    /// entries the checkpoint stored before it covered. The copy taken, and how long taking it
+    /// held the step loop.
+    Checkpoint(Box<Taken>, Duration),
     Flush(std::sync::mpsc::Sender<()>),
 }
 
@@ -505,27 +505,21 @@ impl FleetNats {
         if self.level.has_switch() || !self.held.is_empty() {
             return;
         }
+        // On the step loop only a copy (the maps and monitor values are shared): converting,
+        // encoding, deflating and hashing it run in the store task's blocking thread.
         let started = Instant::now();
-        let Some(level) = self.level.state() else {
-            crate::log::warn_limited("fleet checkpoint", || {
-                "fleet: the fleet level holds a value a checkpoint cannot keep; its entries are kept".into()
-            });
+        let Some(level) = self.level.copy() else {
             return;
         };
-        let c = Checkpoint {
+        let taken = Taken {
             seq: self.applied,
             written: self.written,
-            table: self.table.state(),
+            table: self.table.clone(),
             level,
         };
-        let Ok(bytes) = serde_json::to_vec(&c) else {
-            return;
-        };
-        let _ = self.jobs.send(Job::Checkpoint(
-            self.applied,
-            bytes.into(),
-            started.elapsed(),
-        ));
+        let _ = self
+            .jobs
+            .send(Job::Checkpoint(Box::new(taken), started.elapsed()));
         self.checkpointed = (self.applied, Instant::now());
     }
 
@@ -784,8 +778,32 @@ async fn publisher(
                     });
                 }
             }
-            Job::Checkpoint(seq, bytes, encode) => {
-                let s = match checkpoint::store(&store, seq, bytes, part).await {
+            Job::Checkpoint(taken, held) => {
+                let seq = taken.seq;
+                let started = Instant::now();
+                let json = match tokio::task::spawn_blocking(move || taken.encode()).await {
+                    Ok(Ok(Some(json))) => json,
+                    Ok(Ok(None)) => {
+                        crate::log::warn_limited("fleet checkpoint", || {
+                            "fleet: the fleet level holds a value a checkpoint cannot keep; its entries are kept".into()
+                        });
+                        continue;
+                    }
+                    Ok(Err(e)) => {
+                        crate::log::warn_limited("fleet checkpoint put", || {
+                            format!("fleet: cannot store the fleet checkpoint: {e}; the entries are kept")
+                        });
+                        continue;
+                    }
+                    Err(e) => {
+                        crate::log::warn_limited("fleet checkpoint put", || {
+                            format!("fleet: cannot store the fleet checkpoint: cannot encode it: {e}; the entries are kept")
+                        });
+                        continue;
+                    }
+                };
+                let encode = started.elapsed();
+                let s = match checkpoint::store(&store, seq, json.into(), part).await {
                     Ok(s) => s,
                     Err(e) => {
                         crate::log::warn_limited("fleet checkpoint put", || {
@@ -798,10 +816,11 @@ async fn publisher(
                 };
                 // The first at info, then every 5 s at debug.
                 let line = format!(
-                    "fleet: checkpoint at stream sequence {seq}: {} bytes of JSON, {} bytes stored in {} parts (taken and encoded in {} ms, compressed in {} ms, put in {} ms)",
+                    "fleet: checkpoint at stream sequence {seq}: {} bytes of JSON, {} bytes stored in {} parts (held the step loop {} ms, encoded in {} ms, compressed in {} ms, put in {} ms)",
                     s.json,
                     s.bytes,
                     s.parts,
+                    held.as_millis(),
                     encode.as_millis(),
                     s.compress.as_millis(),
                     s.put.as_millis()

@@ -143,7 +143,7 @@ pub struct PartsState {
 }
 
 /// The fleet level's view of the partitions.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 pub struct Partitions {
     parts: BTreeMap<String, Part>,
     /// Per robot: the highest clock any generation reported.
