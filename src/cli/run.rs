@@ -200,10 +200,7 @@ fn open_store(s: &StateConfig) -> Result<(Box<dyn Backend>, Option<SharedStore>)
             crate::state::file::check_writable(path)
                 .map_err(|m| CliError::io(format!("state: {m}")))?;
             Ok((
-                Box::new(FileBackend {
-                    path: path.clone(),
-                    ctx: s.context.clone(),
-                }),
+                Box::new(FileBackend::new(path.clone(), s.context.clone())),
                 None,
             ))
         }

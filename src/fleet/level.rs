@@ -595,6 +595,13 @@ pub struct LevelCopy {
     counters: FleetCounters,
 }
 
+impl LevelState {
+    /// The robots in the fleet then (live clocks).
+    pub fn robots(&self) -> usize {
+        self.clocks.len()
+    }
+}
+
 impl LevelCopy {
     /// The state to checkpoint; `None` when a value cannot be saved (a function value).
     pub fn state(&self) -> Option<LevelState> {

@@ -11,7 +11,9 @@
 //! of it is `crate::processor::fleet_tap`; the step loop drains every processor's tap into the
 //! level after each read ([`Feed`]: the level in this process, or, with NATS partitions, the
 //! partition's messages to the fleet level and the fleet level run on them: [`nats`], with its
-//! rules in [`watermark`] and its checkpoint's store in [`checkpoint`]).
+//! rules in [`watermark`] and its checkpoint's store in [`checkpoint`]). In one process the
+//! level is also saved in and restored from `--state FILE` ([`Feed::saved`],
+//! [`Feed::restore_saved`]: JSON the state file holds as it is).
 
 pub mod actions;
 pub mod checkpoint;
@@ -24,6 +26,14 @@ pub use level::Level;
 use crate::processor::fleet_tap::Drained;
 use crate::spec_feed::bundle::Bundle;
 use crate::state::lease::Lease;
+
+/// The fleet level as `--state FILE` holds it: the fleet inputs it was saved for (the robot
+/// outputs the maps hold, in order) and its state.
+#[derive(serde::Serialize, serde::Deserialize)]
+struct Saved {
+    inputs: Vec<String>,
+    level: level::LevelState,
+}
 
 /// Where the step loop sends what the robots' instances give the fleet.
 pub enum Feed {
@@ -106,6 +116,51 @@ impl Feed {
     pub fn finish(&mut self, out: &mut Vec<u8>) {
         if let Feed::Nats(n) = self {
             n.finish(out);
+        }
+    }
+
+    /// The fleet level of this process as JSON, for `--state FILE` (one process; a fleet of
+    /// NATS partitions keeps its level in its stream and checkpoint): `None` when there is
+    /// none to save, or it cannot be saved now (a fleet rollout switched it, a function value:
+    /// a `W!`; a restart then rebuilds the maps from the robots' next events).
+    pub fn saved(&self) -> Option<Vec<u8>> {
+        let Feed::Local(level) = self else {
+            return None;
+        };
+        let Some(state) = level.state() else {
+            crate::log::warn_limited("fleet state", || {
+                "state: the fleet level cannot be saved (a fleet rollout switched it, or it holds a function value); a restart rebuilds its maps from the robots' next events".into()
+            });
+            return None;
+        };
+        let saved = Saved {
+            inputs: level.names().to_vec(),
+            level: state,
+        };
+        serde_json::to_vec(&saved).ok()
+    }
+
+    /// Go on from the fleet level `json` held by `--state FILE` ([`Feed::saved`]), read before
+    /// the first record. A level saved for other fleet inputs, or JSON that is not one, is not
+    /// used (a `W!`): the maps are rebuilt from the robots' next events.
+    pub fn restore_saved(&mut self, json: &str, place: &str) {
+        let Feed::Local(level) = self else {
+            return;
+        };
+        match serde_json::from_str::<Saved>(json) {
+            Ok(saved) if saved.inputs == level.names() => {
+                let robots = saved.level.robots();
+                level.restore(saved.level);
+                log_info!("state: restored the fleet level ({robots} robots) from {place}");
+            }
+            Ok(saved) => log_warn!(
+                "state: the fleet level in {place} was saved for the fleet inputs {:?}, not {:?}; not used, its maps are rebuilt from the robots' next events",
+                saved.inputs,
+                level.names()
+            ),
+            Err(e) => log_warn!(
+                "state: the fleet level in {place} is not one ({e}); not used, its maps are rebuilt from the robots' next events"
+            ),
         }
     }
 

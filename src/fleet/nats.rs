@@ -791,13 +791,17 @@ async fn publisher(
                     }
                     Ok(Err(e)) => {
                         crate::log::warn_limited("fleet checkpoint put", || {
-                            format!("fleet: cannot store the fleet checkpoint: {e}; the entries are kept")
+                            format!(
+                                "fleet: cannot store the fleet checkpoint: {e}; the entries are kept"
+                            )
                         });
                         continue;
                     }
                     Err(e) => {
                         crate::log::warn_limited("fleet checkpoint put", || {
-                            format!("fleet: cannot store the fleet checkpoint: cannot encode it: {e}; the entries are kept")
+                            format!(
+                                "fleet: cannot store the fleet checkpoint: cannot encode it: {e}; the entries are kept"
+                            )
                         });
                         continue;
                     }

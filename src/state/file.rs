@@ -6,7 +6,9 @@
 //! version or a file written for other `--set` / `--base-time` / `--instance-by` options is
 //! renamed aside (`FILE.rejected-<unix seconds>`) with a warning, and the run starts fresh.
 //! A file saved by another program (an edited spec) is restored stream by stream
-//! ([`super::restore`]). Never fatal.
+//! ([`super::restore`]). Never fatal. With `--fleet-spec` (one process) the file also holds
+//! the fleet level (`"fleet"`, JSON the step loop hands over and gets back as it is); a file
+//! without it (earlier versions) still loads.
 //!
 //! JSON rather than a binary format: it is readable when something goes wrong, floats are stored
 //! as their bits (exact, NaN included), and the size is measured in `docs/book/src/state-and-reload.md`.
@@ -57,6 +59,10 @@ struct StateFile {
     /// The programs the instances ran (one, unless a rollout had some run another version).
     programs: Vec<SavedProgram>,
     instances: Vec<SavedInstance>,
+    /// The fleet level of a one-process `--fleet-spec` run, as the step loop gave it; absent
+    /// in files without one (and in earlier versions).
+    #[serde(default)]
+    fleet: Option<Box<serde_json::value::RawValue>>,
 }
 
 /// One instance as the file holds it, borrowed for writing (the same JSON as [`SavedInstance`]).
@@ -128,6 +134,16 @@ fn encode_instances(instances: &[Instance<'_>], keys: &[&[u64]]) -> io::Result<(
 /// (each a contiguous run of them, so the file lists them in the same order, least recently used
 /// first), then written in one pass: the bytes are those of `StateFile` serialised whole.
 pub fn save(path: &Path, proc: &Processor, ctx: &Context) -> io::Result<usize> {
+    save_with_fleet(path, proc, ctx, None)
+}
+
+/// [`save`], with the fleet level's JSON (`fleet`, written as it is after the instances).
+pub fn save_with_fleet(
+    path: &Path,
+    proc: &Processor,
+    ctx: &Context,
+    fleet: Option<&[u8]>,
+) -> io::Result<usize> {
     let mut programs = Programs::default();
     let monitors: Vec<Instance<'_>> = proc
         .saved_instances()
@@ -181,7 +197,12 @@ pub fn save(path: &Path, proc: &Processor, ctx: &Context) -> io::Result<usize> {
             first = false;
             w.write_all(bytes)?;
         }
-        w.write_all(b"]}\n")
+        w.write_all(b"]")?;
+        if let Some(fleet) = fleet {
+            w.write_all(b",\"fleet\":")?;
+            w.write_all(fleet)?;
+        }
+        w.write_all(b"}\n")
     })?;
     Ok(monitors.len())
 }
@@ -236,7 +257,16 @@ pub enum Outcome {
 
 /// Read `path` and restore its instances into `proc` (which has none yet). Logs what happened.
 pub fn load(path: &Path, proc: &mut Processor, ctx: &Context) -> Outcome {
-    let (outcome, notes) = load_quiet(path, proc, ctx);
+    load_with_fleet(path, proc, ctx).0
+}
+
+/// [`load`], and the fleet level's JSON the file holds, if any.
+pub fn load_with_fleet(
+    path: &Path,
+    proc: &mut Processor,
+    ctx: &Context,
+) -> (Outcome, Option<String>) {
+    let (outcome, notes, fleet) = load_quiet(path, proc, ctx);
     let shown = path.display();
     match &outcome {
         Outcome::Missing => log_info!("state: {shown} does not exist yet; starting fresh"),
@@ -253,16 +283,22 @@ pub fn load(path: &Path, proc: &mut Processor, ctx: &Context) -> Outcome {
     for note in notes {
         log_info!("{}", note);
     }
-    outcome
+    (outcome, fleet)
 }
 
 /// [`load`] without its messages; the second value holds what a restore from another program
-/// reset (to log after the outcome).
-fn load_quiet(path: &Path, proc: &mut Processor, ctx: &Context) -> (Outcome, Vec<String>) {
+/// reset (to log after the outcome), the third the fleet level's JSON.
+fn load_quiet(
+    path: &Path,
+    proc: &mut Processor,
+    ctx: &Context,
+) -> (Outcome, Vec<String>, Option<String>) {
     let text = match fs::read(path) {
         Ok(t) => t,
-        Err(e) if e.kind() == io::ErrorKind::NotFound => return (Outcome::Missing, Vec::new()),
-        Err(e) => return (Outcome::Unreadable(e.to_string()), Vec::new()),
+        Err(e) if e.kind() == io::ErrorKind::NotFound => {
+            return (Outcome::Missing, Vec::new(), None);
+        }
+        Err(e) => return (Outcome::Unreadable(e.to_string()), Vec::new(), None),
     };
     match check(&text, ctx) {
         Ok(file) => {
@@ -284,12 +320,13 @@ fn load_quiet(path: &Path, proc: &mut Processor, ctx: &Context) -> (Outcome, Vec
                 notes.extend(note);
                 proc.restore_instance_at(s.key, m, c);
             }
-            (Outcome::Restored(n), notes)
+            let fleet = file.fleet.map(|f| f.get().to_string());
+            (Outcome::Restored(n), notes, fleet)
         }
         Err(why) => {
             let moved =
                 aside_name(path).and_then(|aside| fs::rename(path, &aside).ok().map(|()| aside));
-            (Outcome::Rejected(why.to_string(), moved), Vec::new())
+            (Outcome::Rejected(why.to_string(), moved), Vec::new(), None)
         }
     }
 }
@@ -403,10 +440,24 @@ pub enum WritableError {
     },
 }
 
-/// `--state FILE`: [`load`] at start, [`save`] at the save points.
+/// `--state FILE`: [`load`] at start, [`save`] at the save points, the fleet level with them.
 pub struct FileBackend {
     pub path: PathBuf,
     pub ctx: Context,
+    /// The fleet level to save next, and the one the file held at load.
+    fleet_out: Option<Vec<u8>>,
+    fleet_in: Option<String>,
+}
+
+impl FileBackend {
+    pub fn new(path: PathBuf, ctx: Context) -> FileBackend {
+        FileBackend {
+            path,
+            ctx,
+            fleet_out: None,
+            fleet_in: None,
+        }
+    }
 }
 
 impl Backend for FileBackend {
@@ -415,11 +466,19 @@ impl Backend for FileBackend {
     }
 
     fn load(&mut self, proc: &mut Processor) {
-        load(&self.path, proc, &self.ctx);
+        self.fleet_in = load_with_fleet(&self.path, proc, &self.ctx).1;
     }
 
     fn save(&mut self, proc: &Processor) -> io::Result<usize> {
-        save(&self.path, proc, &self.ctx)
+        save_with_fleet(&self.path, proc, &self.ctx, self.fleet_out.as_deref())
+    }
+
+    fn keep_fleet(&mut self, json: &dyn Fn() -> Option<Vec<u8>>) {
+        self.fleet_out = json();
+    }
+
+    fn take_fleet(&mut self) -> Option<String> {
+        self.fleet_in.take()
     }
 }
 

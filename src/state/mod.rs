@@ -99,4 +99,14 @@ pub trait Backend {
     /// The process dropped all its instances (its partition went to another process): look
     /// each one up again when it next arrives.
     fn forget(&mut self) {}
+    /// Before [`Backend::save`]: `json` gives the fleet level of this process (`--fleet-spec`
+    /// without NATS partitions) as JSON, to save beside the instances (`None`: none to save).
+    /// A backend that keeps no fleet level does not call it (a partitioned fleet keeps its
+    /// own, in the stream).
+    fn keep_fleet(&mut self, _json: &dyn Fn() -> Option<Vec<u8>>) {}
+    /// After [`Backend::load`]: the fleet level's JSON the state held, once (`None`: none, or
+    /// state written before the fleet level was saved).
+    fn take_fleet(&mut self) -> Option<String> {
+        None
+    }
 }

@@ -156,6 +156,10 @@ pub async fn run<S: Source, K: Sink>(
     }
     if let Some(s) = store.as_mut() {
         s.backend.load(proc);
+        // `--state FILE` with the fleet level in this process: it goes on from the saved one.
+        if let (Some(json), Some(f)) = (s.backend.take_fleet(), fleet.as_deref_mut()) {
+            f.restore_saved(&json, &s.backend.describe());
+        }
     }
     let interval = store.as_ref().and_then(|s| s.interval);
     let mut shards = Shards::new(proc, threads, &watch).map_err(std::io::Error::other)?;
@@ -449,6 +453,9 @@ impl Loop<'_, '_> {
             return;
         };
         let start = Instant::now();
+        if let Some(f) = self.fleet.as_deref() {
+            backend.keep_fleet(&|| f.saved());
+        }
         match backend.save(self.proc) {
             Ok(n) => log_at!(
                 level,

@@ -669,3 +669,113 @@ fn a_state_folder_that_does_not_exist_stops_the_run_at_start() {
     );
     assert!(!folder.exists(), "nothing is made behind the user's back");
 }
+
+/// The fleet lines (`tessla_fleet`, the fleet's actions) of an output, in order.
+fn fleet_lines(out: &str) -> Vec<String> {
+    out.lines()
+        .filter(|l| l.starts_with("tessla_fleet") || l.starts_with("action,source=fleet"))
+        .map(str::to_string)
+        .collect()
+}
+
+/// The fleet lines of runs of `args` over `lines` cut at `cuts`, each ended at EOF, with
+/// `--state state`, and each run's stderr; `edit(i, state)` is called before run `i`.
+fn fleet_runs(
+    args: &[&str],
+    state: &Path,
+    lines: &[String],
+    cuts: &[usize],
+    edit: &dyn Fn(usize, &Path),
+) -> (Vec<String>, Vec<String>) {
+    let mut with_state: Vec<&str> = args.to_vec();
+    with_state.extend(["--state", s(state)]);
+    let (mut got, mut errs) = (Vec::new(), Vec::new());
+    let mut start = 0;
+    for (i, &cut) in cuts.iter().chain([&lines.len()]).enumerate() {
+        edit(i, state);
+        let (out, err, code) = run_all(&with_state, &lines[start..cut].concat());
+        assert_eq!(code, 0, "{err}");
+        assert!(err.contains("I! state: saved"), "{err}");
+        got.extend(fleet_lines(&out));
+        errs.push(err);
+        start = cut;
+    }
+    (got, errs)
+}
+
+/// With `--fleet-spec` in one process the state file holds the fleet level too (docs/fleet.md,
+/// "Fleet state in `--state`"): the fleet example's records cut into runs with `--state` give
+/// the fleet lines of one uninterrupted run, line for line (its maps, pending changes, robot
+/// clocks, its monitor and its actions' `seq` go on). A state file without the fleet level
+/// (earlier versions) still loads: the instances are restored and the fleet's maps rebuilt
+/// from the robots' next events, which changes the fleet lines after the restart.
+#[test]
+fn the_fleet_level_in_one_process_survives_restarts_line_for_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = crate::support::child::root();
+    let robot = root.join("specs/fleet/robot.tessla");
+    let fleet = root.join("specs/fleet/fleet.tessla");
+    let args = [
+        "--spec",
+        s(&robot),
+        "--instance-by",
+        "topic",
+        "--fleet-spec",
+        s(&fleet),
+        "--max-ahead",
+        "off",
+        "--allowed-lateness",
+        "off",
+        "--no-passthrough",
+    ];
+    let lines: Vec<String> =
+        std::fs::read_to_string(root.join("tests/fixtures/fleet/three_robots.lp"))
+            .unwrap()
+            .lines()
+            .map(|l| format!("{l}\n"))
+            .collect();
+    let (whole, err, code) = run_all(&args, &lines.concat());
+    assert_eq!(code, 0, "{err}");
+    let want = fleet_lines(&whole);
+    assert!(want.len() > 40, "the fleet has outputs: {whole}");
+    // Cuts between rounds and inside one (robot 1 of a round in one run, 2 and 3 in the next).
+    for (k, cuts) in [&[21][..], &[7, 31, 40]].into_iter().enumerate() {
+        let state = dir.path().join(format!("state-{k}.json"));
+        let (got, errs) = fleet_runs(&args, &state, &lines, cuts, &|_, _| {});
+        for err in errs.iter().skip(1) {
+            assert!(
+                err.contains("I! state: restored the fleet level (3 robots) from"),
+                "{err}"
+            );
+        }
+        assert_eq!(
+            got, want,
+            "cut at {cuts:?}: the fleet lines differ from one run"
+        );
+    }
+    // An earlier version's file: the same without `"fleet"`.
+    let state = dir.path().join("state-old.json");
+    let drop_fleet = |i: usize, path: &Path| {
+        if i == 0 {
+            return;
+        }
+        let mut v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap();
+        assert!(
+            v.as_object_mut().unwrap().remove("fleet").is_some(),
+            "the state file holds the fleet level"
+        );
+        std::fs::write(path, serde_json::to_vec(&v).unwrap()).unwrap();
+    };
+    let (got, errs) = fleet_runs(&args, &state, &lines, &[21], &drop_fleet);
+    assert!(
+        errs[1].contains("I! state: restored 3 monitor instances"),
+        "{}",
+        errs[1]
+    );
+    assert!(!errs[1].contains("fleet level"), "{}", errs[1]);
+    assert_ne!(
+        got, want,
+        "without the fleet level a restart rebuilds the maps"
+    );
+}
