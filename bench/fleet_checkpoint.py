@@ -17,7 +17,9 @@ memory per robot is the slope between the smallest and the largest N.
 Usage: python3 bench/fleet_checkpoint.py [--bin target/release/tessla-telegraf] [--baseline OTHER_BINARY]
        [--sizes 1000,10000,100000]
 """
-import argparse, os, re, shutil, signal, socket, statistics, subprocess, tempfile, threading, time
+import argparse, os, re, shutil, statistics, subprocess, tempfile, threading, time
+
+import servers
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # Since the checkpoint left the step loop: "held the step loop H ms, encoded in E ms"; before
@@ -26,14 +28,6 @@ CP = re.compile(r"fleet: checkpoint at stream sequence (\d+): (\d+) bytes of JSO
                 r"\((?:held the step loop (\d+) ms, encoded in (\d+) ms|taken and encoded in (\d+) ms), "
                 r"compressed in (\d+) ms, put in (\d+) ms\)")
 START = re.compile(r"starting from the fleet checkpoint at stream sequence (\d+) .*?(\d+) bytes in (\d+) parts, read in (\d+) ms")
-
-
-def free_port():
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    p = s.getsockname()[1]
-    s.close()
-    return p
 
 
 def records(n, rounds):
@@ -111,11 +105,8 @@ def stable(ms):
 
 def measure(binary, n, rounds):
     tmp = tempfile.mkdtemp()
-    port = free_port()
-    server = subprocess.Popen(["nats-server", "-js", "-a", "127.0.0.1", "-p", str(port), "-sd", tmp],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    server, port = servers.start_nats(tmp)
     try:
-        time.sleep(1.0)
         state = f"nats://127.0.0.1:{port}/fleet_cp"
         base = [binary, "run", "--spec", os.path.join(ROOT, "specs/fleet/robot.tessla"), "--instance-by", "topic",
                 "--fleet-spec", os.path.join(ROOT, "specs/fleet/fleet.tessla"), "--max-ahead", "off",
@@ -140,8 +131,7 @@ def measure(binary, n, rounds):
             "read_ms": int(st.group(4)), "read_bytes": int(st.group(2)), "rss_kib": rss,
         }
     finally:
-        server.send_signal(signal.SIGTERM)
-        server.wait()
+        servers.stop(server)
         shutil.rmtree(tmp, ignore_errors=True)
 
 

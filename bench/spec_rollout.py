@@ -14,18 +14,12 @@ and that each robot's version tags change only at publishes (never back and fort
 
 Usage: python3 bench/spec_rollout.py [--bin target/release/tessla-telegraf] [--reps 10]
 """
-import argparse, os, shutil, socket, statistics, subprocess, sys, tempfile, threading, time
+import argparse, os, shutil, statistics, subprocess, sys, tempfile, threading, time
+
+import servers
 
 SPEC_A = "in x: Events[Int]\ndef c = count(x)\ndef y = x + 1\nout c\nout y\n"
 SPEC_B = "in x: Events[Int]\ndef c = count(x)\ndef y = x * 10\nout c\nout y\n"
-
-
-def free_port():
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    p = s.getsockname()[1]
-    s.close()
-    return p
 
 
 def main():
@@ -34,22 +28,11 @@ def main():
     ap.add_argument("--reps", type=int, default=10)
     a = ap.parse_args()
     binary = os.path.abspath(a.bin)
-    server = shutil.which("nats-server")
-    if not server:
-        sys.exit("nats-server is needed (apt-get install nats-server)")
     tmp = tempfile.mkdtemp()
-    port = free_port()
+    nats, port = servers.start_nats(tmp + "/js")
     url = f"nats://127.0.0.1:{port}"
-    nats = subprocess.Popen([server, "-a", "127.0.0.1", "-p", str(port), "-js", "-sd", tmp + "/js"],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     procs = []
     try:
-        for _ in range(100):
-            try:
-                socket.create_connection(("127.0.0.1", port), 0.1).close()
-                break
-            except OSError:
-                time.sleep(0.05)
         seed = tmp + "/operator.seed"
         out = subprocess.run([binary, "spec", "keygen", "--seed-file", seed], capture_output=True, text=True, check=True)
         public = next(l.split(": ", 1)[1] for l in out.stdout.splitlines() if l.startswith("public key: "))
@@ -144,7 +127,7 @@ def main():
         for proc in procs:
             if proc.poll() is None:
                 proc.kill()
-        nats.kill()
+        servers.stop(nats)
         shutil.rmtree(tmp, ignore_errors=True)
 
 

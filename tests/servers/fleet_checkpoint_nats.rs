@@ -7,8 +7,11 @@
 //! processes) give, after the first holder's lines, the fleet lines of one process over the same
 //! records, line for line.
 
-use super::fleet_level_nats::{base, fleet_lines, one_process, spawn, wait_any_err};
+use super::fleet_level_nats::{base, fleet_lines, one_process, spawn};
 use super::fleet_nats_specs::nats_server;
+use crate::support::fleet_partitions::{
+    TwoPartitions, hand_over, two_partitions, wait_fleet_line_from,
+};
 use crate::support::kv;
 use crate::support::live_child::LiveChild;
 
@@ -77,24 +80,15 @@ fn a_fleet_checkpoint_over_the_max_payload_is_stored_in_parts_trims_and_restarts
         want.len()
     );
 
-    let mut a = spawn(&state, "p0").patient(PATIENT);
-    a.wait_err("fleet held", 0, |l| {
-        l.contains("partition fleet: held by this process")
-    });
-    let mut b = spawn(&state, "p1").patient(PATIENT);
-    a.wait_out("p1 joined", |l| {
-        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
-    });
+    let TwoPartitions {
+        p0: mut a,
+        p1: mut b,
+        ..
+    } = two_partitions(&|lease| spawn(&state, lease).patient(PATIENT), false);
     write(&mut a, &records(base, Some(0), 0..half));
     write(&mut b, &records(base, Some(1), 0..half));
     let near_pause = base + (half - 2) * 200_000_000;
-    a.wait_out("a fleet line near the pause", |l| {
-        l.starts_with("tessla_fleet ")
-            && l.rsplit(' ')
-                .next()
-                .and_then(|t| t.trim().parse::<i64>().ok())
-                .is_some_and(|t| t >= near_pause)
-    });
+    wait_fleet_line_from(&mut a, "a fleet line near the pause", near_pause);
     let (first, _) = fleet_keys(server.port, bucket);
     let first: Vec<String> = first
         .into_iter()
@@ -156,13 +150,10 @@ fn a_fleet_checkpoint_over_the_max_payload_is_stored_in_parts_trims_and_restarts
     c.wait_err("p0 standby", 0, |l| {
         l.contains("partition p0: held by another")
     });
-    a.signal("TERM");
-    let (a_out, a_err, _) = a.finish();
-    let new = wait_any_err(&mut [&mut c, &mut b2], "lease.vfleet taken by");
-    c.wait_err("p0 taken over", 0, |l| l.contains("holding partition p0"));
+    let (a_out, a_err, c_holds) = hand_over(a, "TERM", &mut c, &mut b2);
     write(&mut c, &records(base, Some(0), half..ROUNDS));
     write(&mut b2, &records(base, Some(1), half..ROUNDS));
-    let (holder, other) = if new == 0 { (c, b2) } else { (b2, c) };
+    let (holder, other) = if c_holds { (c, b2) } else { (b2, c) };
     let (other_out, other_err, code) = other.finish();
     assert_eq!(code, 0, "{other_err}");
     assert!(fleet_lines(&other_out).is_empty());

@@ -10,6 +10,9 @@
 
 use super::fleet_nats_specs::nats_server;
 use crate::support::child;
+use crate::support::fleet_partitions::{
+    TwoPartitions, hand_over, two_partitions, wait_fleet_line_from,
+};
 use crate::support::kv;
 use crate::support::live_child::{LiveChild, run_all};
 
@@ -129,24 +132,6 @@ fn repeats(err: &str) -> u64 {
         .unwrap_or_else(|| panic!("no closing line of the fleet level: {err}"))
 }
 
-/// Wait until one of `children` logs `what` on stderr; its index.
-pub(super) fn wait_any_err(children: &mut [&mut LiveChild], what: &str) -> usize {
-    let start = std::time::Instant::now();
-    loop {
-        for (n, c) in children.iter_mut().enumerate() {
-            c.drain_err();
-            if c.err.iter().any(|l| l.contains(what)) {
-                return n;
-            }
-        }
-        assert!(
-            start.elapsed() < std::time::Duration::from_secs(60),
-            "nobody logged {what}"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(50));
-    }
-}
-
 fn takeover(signal: &str) {
     let server = nats_server("");
     let state = format!("nats://127.0.0.1:{}/fleet_level", server.port);
@@ -160,26 +145,14 @@ fn takeover(signal: &str) {
         "the records bring two robots into zone A together: {one}"
     );
 
-    // p0's primary first: it holds p0 and the fleet level; then p0's standby and p1.
-    let mut a = spawn(&state, "p0");
-    a.wait_err("p0 held", 0, |l| {
-        l.contains("partition p0: held by this process")
-    });
-    a.wait_err("fleet held", 0, |l| {
-        l.contains("partition fleet: held by this process")
-    });
-    let mut a2 = spawn(&state, "p0");
-    let mut b = spawn(&state, "p1");
-    a2.wait_err("p0 standby", 0, |l| {
-        l.contains("partition p0: held by another")
-    });
-    b.wait_err("p1 held", 0, |l| {
-        l.contains("partition p1: held by this process")
-    });
-    // The fleet level knows both partitions (their heartbeats) before any record.
-    a.wait_out("p1 joined", |l| {
-        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
-    });
+    // p0's primary first: it holds p0 and the fleet level; then p0's standby and p1, until
+    // the fleet level knows both partitions (their heartbeats) before any record.
+    let TwoPartitions {
+        p0: mut a,
+        standby,
+        p1: mut b,
+    } = two_partitions(&|lease| spawn(&state, lease), true);
+    let mut a2 = standby.expect("p0's standby");
 
     a.write(&records(base, Some(0), 0..half));
     a2.write(&records(base, Some(0), 0..half));
@@ -187,25 +160,16 @@ fn takeover(signal: &str) {
     // The first holder has written the fleet's lines up to shortly before the pause: stop it
     // there (after SIGKILL, p0's new holder then replays changes the fleet stepped already).
     let near_pause = base + (half - 5) * 200_000_000;
-    a.wait_out("a fleet line near the pause", |l| {
-        l.starts_with("tessla_fleet ")
-            && l.rsplit(' ')
-                .next()
-                .and_then(|t| t.trim().parse::<i64>().ok())
-                .is_some_and(|t| t >= near_pause)
-    });
+    wait_fleet_line_from(&mut a, "a fleet line near the pause", near_pause);
     let first_written = fleet_lines(&a.out.concat()).len();
     assert!(first_written > 0);
-    a.signal(signal);
-    let (a_out, a_err, _) = a.finish();
-    let new = wait_any_err(&mut [&mut a2, &mut b], "lease.vfleet taken by");
-    a2.wait_err("p0 taken over", 0, |l| l.contains("holding partition p0"));
+    let (a_out, a_err, a2_holds) = hand_over(a, signal, &mut a2, &mut b);
 
     a2.write(&records(base, Some(0), half..STEPS));
     b.write(&records(base, Some(1), half..STEPS));
     // The partition without the fleet level ends first, then the holder, which steps what is
     // pending once every partition has ended.
-    let (holder, other) = if new == 0 { (a2, b) } else { (b, a2) };
+    let (holder, other) = if a2_holds { (a2, b) } else { (b, a2) };
     let (other_out, other_err, code) = other.finish();
     assert_eq!(code, 0, "{other_err}");
     let (holder_out, holder_err, code) = holder.finish();
@@ -296,14 +260,9 @@ fn a_partition_without_a_holder_drops_out_and_is_named() {
     let server = nats_server("");
     let state = format!("nats://127.0.0.1:{}/fleet_drop", server.port);
     let base = base();
-    let mut a = spawn(&state, "p0");
-    a.wait_err("fleet held", 0, |l| {
-        l.contains("partition fleet: held by this process")
-    });
-    let b = spawn(&state, "p1");
-    a.wait_out("p1 joined", |l| {
-        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
-    });
+    let TwoPartitions {
+        p0: mut a, p1: b, ..
+    } = two_partitions(&|lease| spawn(&state, lease), false);
     b.signal("KILL");
     let _ = b.finish();
     a.wait_out("p1 dropped", |l| {
@@ -349,24 +308,15 @@ fn fleet_entries_stay_bounded_and_a_later_process_starts_from_the_checkpoint() {
     let (half, all) = (STEPS / 2, 0..STEPS);
     let (_, want) = one_process(&records(base, None, all.clone()));
 
-    let mut a = spawn(&state, "p0");
-    a.wait_err("fleet held", 0, |l| {
-        l.contains("partition fleet: held by this process")
-    });
-    let mut b = spawn(&state, "p1");
-    a.wait_out("p1 joined", |l| {
-        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
-    });
+    let TwoPartitions {
+        p0: mut a,
+        p1: mut b,
+        ..
+    } = two_partitions(&|lease| spawn(&state, lease), false);
     a.write(&records(base, Some(0), 0..half));
     b.write(&records(base, Some(1), 0..half));
     let near_pause = base + (half - 5) * 200_000_000;
-    a.wait_out("a fleet line near the pause", |l| {
-        l.starts_with("tessla_fleet ")
-            && l.rsplit(' ')
-                .next()
-                .and_then(|t| t.trim().parse::<i64>().ok())
-                .is_some_and(|t| t >= near_pause)
-    });
+    wait_fleet_line_from(&mut a, "a fleet line near the pause", near_pause);
     // The first half's entries are deleted once two checkpoints have passed.
     let (first, _) = fleet_keys(server.port, bucket);
     assert!(!first.is_empty());
@@ -410,13 +360,10 @@ fn fleet_entries_stay_bounded_and_a_later_process_starts_from_the_checkpoint() {
     c.wait_err("p0 standby", 0, |l| {
         l.contains("partition p0: held by another")
     });
-    a.signal("TERM");
-    let (a_out, a_err, _) = a.finish();
-    let new = wait_any_err(&mut [&mut c, &mut b2], "lease.vfleet taken by");
-    c.wait_err("p0 taken over", 0, |l| l.contains("holding partition p0"));
+    let (a_out, a_err, c_holds) = hand_over(a, "TERM", &mut c, &mut b2);
     c.write(&records(base, Some(0), half..STEPS));
     b2.write(&records(base, Some(1), half..STEPS));
-    let (holder, other) = if new == 0 { (c, b2) } else { (b2, c) };
+    let (holder, other) = if c_holds { (c, b2) } else { (b2, c) };
     let (other_out, other_err, code) = other.finish();
     assert_eq!(code, 0, "{other_err}");
     assert!(fleet_lines(&other_out).is_empty(), "{other_out}");
@@ -452,18 +399,12 @@ fn a_stopping_fleet_holder_with_a_live_standby_hands_over_without_a_close() {
     }
     let (_, want) = one_process(&input);
 
-    let mut a = spawn(&state, "p0");
-    a.wait_err("fleet held", 0, |l| {
-        l.contains("partition fleet: held by this process")
-    });
-    let mut a2 = spawn(&state, "p0");
-    a2.wait_err("p0 standby", 0, |l| {
-        l.contains("partition p0: held by another")
-    });
-    let mut b = spawn(&state, "p1");
-    a.wait_out("p1 joined", |l| {
-        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
-    });
+    let TwoPartitions {
+        p0: mut a,
+        standby,
+        p1: mut b,
+    } = two_partitions(&|lease| spawn(&state, lease), true);
+    let mut a2 = standby.expect("p0's standby");
     a.write(&records(base, Some(0), 0..takeover));
     a2.write(&records(base, Some(0), 0..takeover));
     b.write(&records(base, Some(1), 0..p1_end));
@@ -514,25 +455,16 @@ fn a_process_stopping_after_the_fleet_holder_takes_the_free_level_and_closes() {
     let (_, want) = one_process(&input);
     assert!(!want.is_empty());
 
-    let mut a = spawn(&state, "p0");
-    a.wait_err("fleet held", 0, |l| {
-        l.contains("partition fleet: held by this process")
-    });
-    let mut b = spawn(&state, "p1");
-    a.wait_out("p1 joined", |l| {
-        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
-    });
+    let TwoPartitions {
+        p0: mut a,
+        p1: mut b,
+        ..
+    } = two_partitions(&|lease| spawn(&state, lease), false);
     a.write(&records(base, Some(0), 0..end));
     b.write(&records(base, Some(1), 0..end));
     // Both partitions are past the step before last (the holder wrote its line).
     let near_end = base + (end - 2) * 200_000_000;
-    a.wait_out("a fleet line near the end", |l| {
-        l.starts_with("tessla_fleet ")
-            && l.rsplit(' ')
-                .next()
-                .and_then(|t| t.trim().parse::<i64>().ok())
-                .is_some_and(|t| t >= near_end)
-    });
+    wait_fleet_line_from(&mut a, "a fleet line near the end", near_end);
     let (a_out, a_err, code) = a.finish();
     assert_eq!(code, 0, "{a_err}");
     assert!(!a_err.contains("the fleet's input ends"), "{a_err}");

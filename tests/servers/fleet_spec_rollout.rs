@@ -13,7 +13,12 @@
 use super::fleet_level_nats::{base, example_args, fleet_lines, records};
 use super::fleet_nats_specs::{Setup, nats_server, published};
 use crate::support::child;
+use crate::support::fleet_partitions::{
+    TwoPartitions, hand_over, two_partitions, wait_fleet_line_from,
+};
 use crate::support::live_child::{LiveChild, run_all};
+use crate::support::servers::Server;
+use std::path::PathBuf;
 
 const STEPS: i64 = 120;
 
@@ -78,6 +83,61 @@ fn spawn(url: &str, s: &Setup, state: &str, lease: &str) -> LiveChild {
     LiveChild::spawn(&a.iter().map(String::as_str).collect::<Vec<_>>())
 }
 
+/// What every test here starts with: a nats-server, the channel's URL and the state bucket
+/// `bucket` on it, the operator's keys, the robot spec, the fleet spec's version 2 and the
+/// records' base time.
+struct Rollout {
+    _server: Server,
+    url: String,
+    state: String,
+    s: Setup,
+    robot: PathBuf,
+    v2: PathBuf,
+    base: i64,
+}
+
+impl Rollout {
+    fn new(bucket: &str) -> Rollout {
+        let server = nats_server("");
+        let url = format!("nats://127.0.0.1:{}", server.port);
+        let state = format!("{url}/{bucket}");
+        let s = Setup::new();
+        let robot = child::root().join("specs/fleet/robot.tessla");
+        let v2 = child::write(s.dir.path(), "fleet_v2.tessla", FLEET_V2);
+        Rollout {
+            _server: server,
+            url,
+            state,
+            s,
+            robot,
+            v2,
+            base: base(),
+        }
+    }
+
+    /// A process of partition `lease` following the channel.
+    fn spawn(&self, lease: &str) -> LiveChild {
+        spawn(&self.url, &self.s, &self.state, lease)
+    }
+
+    /// Publish version 2 of the fleet spec from `from`: what `spec publish` said, and the
+    /// version's id (revision 1).
+    fn publish_v2(&self, from: i64) -> (std::process::Output, String) {
+        let out = self.s.publish(
+            &self.url,
+            &self.robot,
+            &[
+                "--fleet",
+                self.v2.to_str().unwrap(),
+                "--from",
+                &from.to_string(),
+            ],
+        );
+        let id = published(&out, 1);
+        (out, id)
+    }
+}
+
 /// The `spec_version` tag of a line.
 fn version(line: &str) -> Option<&str> {
     line.split(' ')
@@ -88,33 +148,25 @@ fn version(line: &str) -> Option<&str> {
 
 #[test]
 fn a_fleet_spec_rollout_switches_at_its_start_in_every_partition_as_in_one_process() {
-    let server = nats_server("");
-    let url = format!("nats://127.0.0.1:{}", server.port);
-    let state = format!("{url}/fleet_rollout");
-    let s = Setup::new();
-    let robot = child::root().join("specs/fleet/robot.tessla");
-    let v2 = child::write(s.dir.path(), "fleet_v2.tessla", FLEET_V2);
+    let r = Rollout::new("fleet_rollout");
+    let (url, s, robot, base) = (&r.url, &r.s, &r.robot, r.base);
     let bad_type = child::write(s.dir.path(), "fleet_type.tessla", FLEET_TYPE_ERROR);
     let bad_input = child::write(s.dir.path(), "fleet_input.tessla", FLEET_NO_OUTPUT);
     let wrong_input = child::write(s.dir.path(), "fleet_wrong.tessla", FLEET_WRONG_INPUT);
-    let base = base();
     // Ahead of every record written before the publish: step 70's time.
     let from = base + 70 * 200_000_000 - 500;
 
-    let mut a = spawn(&url, &s, &state, "p0");
-    a.wait_err("fleet held", 0, |l| {
-        l.contains("partition fleet: held by this process")
-    });
-    let mut b = spawn(&url, &s, &state, "p1");
-    a.wait_out("p1 joined", |l| {
-        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
-    });
+    let TwoPartitions {
+        p0: mut a,
+        p1: mut b,
+        ..
+    } = two_partitions(&|lease| r.spawn(lease), false);
     a.write(&records(base, Some(0), 0..50));
     b.write(&records(base, Some(1), 0..50));
     a.wait_out("a fleet line", |l| l.starts_with("tessla_fleet,"));
 
     // Refused at publish, with the start-up messages; nothing is written to the channel.
-    let refused = s.publish(&url, &robot, &["--fleet", bad_type.to_str().unwrap()]);
+    let refused = s.publish(url, robot, &["--fleet", bad_type.to_str().unwrap()]);
     let err = child::text(&refused.stderr);
     assert!(!refused.status.success(), "{err}");
     assert!(
@@ -123,7 +175,7 @@ fn a_fleet_spec_rollout_switches_at_its_start_in_every_partition_as_in_one_proce
             && err.contains("was not published: it does not check"),
         "{err}"
     );
-    let refused = s.publish(&url, &robot, &["--fleet", wrong_input.to_str().unwrap()]);
+    let refused = s.publish(url, robot, &["--fleet", wrong_input.to_str().unwrap()]);
     let err = child::text(&refused.stderr);
     assert!(!refused.status.success(), "{err}");
     assert!(
@@ -131,7 +183,7 @@ fn a_fleet_spec_rollout_switches_at_its_start_in_every_partition_as_in_one_proce
             && err.contains("was not published"),
         "{err}"
     );
-    let refused = s.publish(&url, &robot, &["--fleet", bad_input.to_str().unwrap()]);
+    let refused = s.publish(url, robot, &["--fleet", bad_input.to_str().unwrap()]);
     let err = child::text(&refused.stderr);
     assert!(!refused.status.success(), "{err}");
     assert!(
@@ -141,12 +193,7 @@ fn a_fleet_spec_rollout_switches_at_its_start_in_every_partition_as_in_one_proce
     );
 
     // The good one: both partitions vote for it; revision 1 (the refusals wrote nothing).
-    let out = s.publish(
-        &url,
-        &robot,
-        &["--fleet", v2.to_str().unwrap(), "--from", &from.to_string()],
-    );
-    let v_new = published(&out, 1);
+    let (out, v_new) = r.publish_v2(from);
     assert!(
         child::text(&out.stdout).contains("all 2 processes accepted it"),
         "{}",
@@ -167,7 +214,7 @@ fn a_fleet_spec_rollout_switches_at_its_start_in_every_partition_as_in_one_proce
     assert!(fleet_lines(&b_out).is_empty(), "{b_out}");
 
     // One process started after the publish, fed every record.
-    let one = args(&url, &s, &[]);
+    let one = args(url, s, &[]);
     let (one_out, one_err, code) = run_all(
         &one.iter().map(String::as_str).collect::<Vec<_>>(),
         &records(base, None, 0..STEPS),
@@ -228,45 +275,22 @@ fn switch_step(err: &str) -> i64 {
 /// new version.
 #[test]
 fn a_late_fleet_rollout_switches_at_the_same_step_in_every_process_and_after_a_takeover() {
-    let server = nats_server("");
-    let url = format!("nats://127.0.0.1:{}", server.port);
-    let state = format!("{url}/fleet_rollout_late");
-    let s = Setup::new();
-    let robot = child::root().join("specs/fleet/robot.tessla");
-    let v2 = child::write(s.dir.path(), "fleet_v2.tessla", FLEET_V2);
-    let base = base();
-
-    let mut a = spawn(&url, &s, &state, "p0");
-    a.wait_err("fleet held", 0, |l| {
-        l.contains("partition fleet: held by this process")
-    });
-    let mut a2 = spawn(&url, &s, &state, "p0");
-    let mut b = spawn(&url, &s, &state, "p1");
-    a2.wait_err("p0 standby", 0, |l| {
-        l.contains("partition p0: held by another")
-    });
-    a.wait_out("p1 joined", |l| {
-        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
-    });
+    let r = Rollout::new("fleet_rollout_late");
+    let base = r.base;
+    let TwoPartitions {
+        p0: mut a,
+        standby,
+        p1: mut b,
+    } = two_partitions(&|lease| r.spawn(lease), true);
+    let mut a2 = standby.expect("p0's standby");
     for (c, p) in [(&mut a, 0), (&mut a2, 0), (&mut b, 1)] {
         c.write(&records(base, Some(p), 0..40));
     }
     let step_30 = base + 30 * 200_000_000;
-    a.wait_out("a fleet line at step 30", |l| {
-        l.starts_with("tessla_fleet,")
-            && l.rsplit(' ')
-                .next()
-                .and_then(|t| t.trim().parse::<i64>().ok())
-                .is_some_and(|t| t >= step_30)
-    });
+    wait_fleet_line_from(&mut a, "a fleet line at step 30", step_30);
     // Its start (step 10) is behind the fleet level already.
     let from = base + 10 * 200_000_000;
-    let out = s.publish(
-        &url,
-        &robot,
-        &["--fleet", v2.to_str().unwrap(), "--from", &from.to_string()],
-    );
-    let v_new = published(&out, 1);
+    let (_, v_new) = r.publish_v2(from);
     for c in [&mut a, &mut a2, &mut b] {
         c.wait_err("the switch entry", 0, |l| {
             l.contains("switch entry for fleet rollout 1")
@@ -293,8 +317,7 @@ fn a_late_fleet_rollout_switches_at_the_same_step_in_every_process_and_after_a_t
     a.wait_out("the switched line", |l| l.contains("event=\"switched\""));
 
     // The holder stops; p0's standby takes both leases over and goes on.
-    a.signal("TERM");
-    let (a_out, a_err, _) = a.finish();
+    let (a_out, a_err, _) = hand_over(a, "TERM", &mut a2, &mut b);
     let switched = a_out
         .lines()
         .find(|l| l.contains("event=\"switched\""))
@@ -303,7 +326,6 @@ fn a_late_fleet_rollout_switches_at_the_same_step_in_every_process_and_after_a_t
         switched.contains("late=true") && switched.ends_with(&format!(" {at}")),
         "{switched}"
     );
-    a2.wait_err("p0 taken over", 0, |l| l.contains("holding partition p0"));
     a2.write(&records(base, Some(0), 60..STEPS));
     b.write(&records(base, Some(1), 60..STEPS));
     let (b_out, b_err, code) = b.finish();
@@ -340,40 +362,32 @@ fn a_late_fleet_rollout_switches_at_the_same_step_in_every_process_and_after_a_t
 /// fleet level, which read the decision, switches and goes on.
 #[test]
 fn a_process_holding_entries_behind_a_switch_entry_says_it_waits() {
-    let server = nats_server("");
-    let url = format!("nats://127.0.0.1:{}", server.port);
-    let state = format!("{url}/fleet_rollout_waiting");
-    let s = Setup::new();
-    let robot = child::root().join("specs/fleet/robot.tessla");
-    let v2 = child::write(s.dir.path(), "fleet_v2.tessla", FLEET_V2);
-    let base = base();
-
-    let mut a = spawn(&url, &s, &state, "p0");
-    a.wait_err("fleet held", 0, |l| {
-        l.contains("partition fleet: held by this process")
-    });
+    let r = Rollout::new("fleet_rollout_waiting");
+    let base = r.base;
     // p1's process follows no spec channel.
     let mut lone = example_args();
     lone.extend([
         "--state".to_string(),
-        format!("{state}?lease=p1&ttl=1s"),
+        format!("{}?lease=p1&ttl=1s", r.state),
         "--version-tag".to_string(),
         "spec_version".to_string(),
     ]);
-    let mut b = LiveChild::spawn(&lone.iter().map(String::as_str).collect::<Vec<_>>());
-    a.wait_out("p1 joined", |l| {
-        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
-    });
+    let TwoPartitions {
+        p0: mut a,
+        p1: mut b,
+        ..
+    } = two_partitions(
+        &|lease| match lease {
+            "p1" => LiveChild::spawn(&lone.iter().map(String::as_str).collect::<Vec<_>>()),
+            _ => r.spawn(lease),
+        },
+        false,
+    );
     a.write(&records(base, Some(0), 0..30));
     b.write(&records(base, Some(1), 0..30));
     a.wait_out("a fleet line", |l| l.starts_with("tessla_fleet,"));
     let from = base + 40 * 200_000_000;
-    let out = s.publish(
-        &url,
-        &robot,
-        &["--fleet", v2.to_str().unwrap(), "--from", &from.to_string()],
-    );
-    published(&out, 1);
+    r.publish_v2(from);
     a.wait_err("the switch entry", 0, |l| {
         l.contains("switch entry for fleet rollout 1 (")
     });

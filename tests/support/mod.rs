@@ -1,5 +1,5 @@
 //! What the integration tests share (tests/integration.rs): the binary run as a child
-//! ([`child`], [`live_child`]), the recorded run ([`recorded`]), the fleet example's run ([`fleet_example`]), real servers ([`servers`],
+//! ([`child`], [`live_child`]), the recorded run ([`recorded`]), the fleet example's run ([`fleet_example`]), two partitions of a NATS fleet ([`fleet_partitions`]), real servers ([`servers`],
 //! [`nats_cluster`], [`real_telegraf`]) and the clients and stand-ins that talk to them.
 //!
 //! The helpers other crates and tools share too (servers, the NATS cluster and stand-in,
@@ -14,6 +14,7 @@ pub mod child;
 #[cfg_attr(not(feature = "tools"), allow(dead_code))]
 pub mod dashboards;
 pub mod fleet_example;
+pub mod fleet_partitions;
 pub mod kv;
 pub mod live_child;
 #[cfg_attr(not(feature = "tools"), allow(dead_code))]
