@@ -581,8 +581,9 @@ mod tests {
         );
 
         let mut q = processor(NEW);
-        let (outcome, notes) = load_quiet(&path, &mut q, &ctx);
+        let (outcome, notes, fleet) = load_quiet(&path, &mut q, &ctx);
         assert_eq!(outcome, Outcome::Restored(2));
+        assert_eq!(fleet, None, "no fleet level was saved");
         assert_eq!(notes.len(), 1, "{notes:?}");
         assert!(
             notes[0].contains("holds state saved by another program"),
@@ -624,6 +625,43 @@ mod tests {
         ] {
             assert_ne!(fingerprint(&other), fp, "{other:?}");
         }
+    }
+
+    /// The fleet level's JSON the step loop hands over is written as `"fleet"` after the
+    /// instances and given back as it is at load; a file without it loads as before.
+    #[test]
+    fn the_fleet_level_is_saved_beside_the_instances_and_given_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("state.json");
+        let ctx = Context {
+            instance_by: vec!["robot".into()],
+            ..Context::default()
+        };
+        let mut p = processor(OLD);
+        feed(&mut p, "m,robot=a x=1i 10\n");
+        let fleet = br#"{"inputs":["c"],"level":{"front":10}}"#;
+        assert_eq!(save_with_fleet(&path, &p, &ctx, Some(fleet)).unwrap(), 1);
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(
+            text.trim_end()
+                .ends_with(r#"],"fleet":{"inputs":["c"],"level":{"front":10}}}"#)
+        );
+        let mut q = processor(OLD);
+        let (outcome, got) = load_with_fleet(&path, &mut q, &ctx);
+        assert_eq!(outcome, Outcome::Restored(1));
+        assert_eq!(got.as_deref().map(str::as_bytes), Some(&fleet[..]));
+        // Without it (earlier versions): the same instances, no fleet level.
+        save(&path, &p, &ctx).unwrap();
+        assert!(
+            !std::fs::read_to_string(&path)
+                .unwrap()
+                .contains("\"fleet\"")
+        );
+        let mut q = processor(OLD);
+        assert_eq!(
+            load_with_fleet(&path, &mut q, &ctx),
+            (Outcome::Restored(1), None)
+        );
     }
 
     /// A message the broker redelivers after a restart (the same record again) is still a
