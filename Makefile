@@ -109,10 +109,12 @@ bench-process:
 
 # The fleet level (docs/fleet.md, the Benchmarks chapter, "Fleet level"): cost per record at 1k and 10k
 # robots, memory per robot, the closest pair at 1k, 10k and 100k robots; then the fleet checkpoint on a
-# nats-server (bench/fleet_checkpoint.py): its bytes per robot, write and read times, memory per robot.
+# nats-server (bench/fleet_checkpoint.py): its bytes per robot, how long it holds the step loop, write and
+# read times, memory per robot. FLEET_BASELINE=BINARY (an earlier build) is measured in the same run.
+FLEET_BASELINE ?=
 bench-fleet: build
 	nice -n 5 python3 bench/fleet.py --reps 3 --bin $(or $(CARGO_TARGET_DIR),target)/release/tessla-telegraf
-	nice -n 5 python3 bench/fleet_checkpoint.py --bin $(or $(CARGO_TARGET_DIR),target)/release/tessla-telegraf
+	nice -n 5 python3 bench/fleet_checkpoint.py --bin $(or $(CARGO_TARGET_DIR),target)/release/tessla-telegraf $(if $(FLEET_BASELINE),--baseline $(FLEET_BASELINE))
 
 # Fleet on NATS (the Benchmarks chapter, "Fleet on NATS"): throughput with 1, 2 and 4 partitions and the
 # standby's takeover time, on a 3-node nats-server cluster started on free loopback ports.
