@@ -828,4 +828,35 @@ mod tests {
             "{text}"
         );
     }
+
+    /// The copy a checkpoint takes on the step loop is the level at that moment: the level
+    /// stepping on afterwards (new robots, new map values) changes nothing in the state made
+    /// from it off the step loop, which equals the state the level had when it was taken.
+    #[test]
+    fn a_copy_taken_for_a_checkpoint_keeps_the_level_as_it_was() {
+        let p = program("in c: Events[Map[String, Int]]\nout Map.size(c) as n\n");
+        let mut level = Level::new(
+            p,
+            &["c".to_string()],
+            1_000_000_000,
+            Vec::new(),
+            vec!["robot".into()],
+        )
+        .unwrap();
+        let mut out = Vec::new();
+        level.pump(vec![change("r1", 10, 1)], false, &mut out);
+        let mut second = change("r2", 20, 1);
+        second.clocks.push((Arc::from("r1"), 20));
+        level.pump(vec![second], false, &mut out);
+        let then = serde_json::to_string(&level.state().unwrap()).unwrap();
+        let copy = level.copy().unwrap();
+        let mut third = change("r3", 30, 7);
+        third
+            .clocks
+            .extend([(Arc::from("r1"), 30), (Arc::from("r2"), 30)]);
+        level.pump(vec![third, change("r1", 40, 5)], false, &mut out);
+        let now = serde_json::to_string(&level.state().unwrap()).unwrap();
+        assert_ne!(now, then, "the level stepped on");
+        assert_eq!(serde_json::to_string(&copy.state().unwrap()).unwrap(), then);
+    }
 }
