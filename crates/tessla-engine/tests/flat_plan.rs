@@ -225,6 +225,50 @@ fn the_plan_sends_what_the_general_step_sends() {
     }
 }
 
+/// A plan of more than 256 slots (read from a slice) and smaller ones (read from a fixed
+/// array) take turns on one thread's slots, step by step, and each sends what the general
+/// step sends.
+#[test]
+fn plans_large_and_small_share_the_threads_slots() {
+    let mut big = String::from("in x: Events[Float]\nin n: Events[Int]\ndef d0 = x +. 1.0\n");
+    for i in 1..300 {
+        big.push_str(&format!("def d{i} = d{} *. 0.5 +. x\n", i - 1));
+    }
+    big.push_str("def c = count(n)\nout d299\nout d150\nout c\n");
+    let specs = [big.as_str(), EVERY_FORM, RECURSION];
+    let programs: Vec<(Arc<Program>, Arc<Program>)> = specs.iter().map(|s| both(s)).collect();
+    assert!(programs[0].0.nodes.len() > 300);
+    assert!(programs.iter().all(|p| p.0.step_plan().is_some()));
+    for seed in 1..=5u64 {
+        let run = |pick: fn(&(Arc<Program>, Arc<Program>)) -> &Arc<Program>| {
+            let mut rng = Rng(rand::SeedableRng::seed_from_u64(seed));
+            let mut ms: Vec<Monitor> = programs
+                .iter()
+                .map(|p| Monitor::new(Arc::clone(pick(p))))
+                .collect();
+            let mut out = Vec::new();
+            for ts in 1..=200 {
+                for (k, m) in ms.iter_mut().enumerate() {
+                    let mut sink = |e: OutputEvent<'_>| {
+                        out.push(format!("{k} {} {} {:?}", e.ts, e.output, e.value))
+                    };
+                    for (i, input) in m.program().inputs.clone().iter().enumerate() {
+                        if rng.below(3) != 0 {
+                            let v = rng.value(&input.ty);
+                            m.push(ts, i, v, &mut sink).unwrap();
+                        }
+                    }
+                    m.flush(&mut sink);
+                }
+            }
+            out
+        };
+        let want = run(|p| &p.1);
+        assert!(want.len() > 1000, "too few events: {}", want.len());
+        assert_eq!(run(|p| &p.0), want, "seed {seed}");
+    }
+}
+
 #[test]
 fn overflow_hands_the_step_to_the_general_step() {
     // `sn` passes i64::MAX at once: a big integer, which the general step computes and keeps;

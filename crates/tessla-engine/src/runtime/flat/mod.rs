@@ -760,10 +760,48 @@ fn scalar(kind: Kind, bits: u64) -> Value {
     }
 }
 
+/// Plans of at most this many slots read them from a fixed array (see [`Cur`]).
+const SMALL: usize = 256;
+
+/// This step's slots as a plan reads and writes them: a slice (each index tested against its
+/// length), or for a plan of at most [`SMALL`] slots a fixed array read by the index masked to
+/// its length, which needs no test (every index of such a plan is below its slot count; the
+/// slots past it are never read). The tests were a fifth of P2's step.
+trait Cur {
+    fn at(&self, n: u32) -> Slot;
+    fn set(&mut self, n: u32, v: Slot);
+}
+
+impl Cur for [Slot] {
+    #[inline(always)]
+    fn at(&self, n: u32) -> Slot {
+        self.get(n as usize).copied().unwrap_or_default()
+    }
+
+    #[inline(always)]
+    fn set(&mut self, n: u32, v: Slot) {
+        if let Some(c) = self.get_mut(n as usize) {
+            *c = v;
+        }
+    }
+}
+
+impl Cur for [Slot; SMALL] {
+    #[inline(always)]
+    fn at(&self, n: u32) -> Slot {
+        self[n as usize & (SMALL - 1)]
+    }
+
+    #[inline(always)]
+    fn set(&mut self, n: u32, v: Slot) {
+        self[n as usize & (SMALL - 1)] = v;
+    }
+}
+
 /// Node `n`'s event this step.
 #[inline(always)]
-fn cur_of(cur: &[Slot], n: u32) -> Slot {
-    cur.get(n as usize).copied().unwrap_or_default()
+fn cur_of<S: Cur + ?Sized>(cur: &S, n: u32) -> Slot {
+    cur.at(n)
 }
 
 /// The value kept in `slot` (`Some(None)` for none or [`NO_SLOT`]); `None`: not a scalar of
@@ -782,7 +820,7 @@ fn kept_of(last: &[Option<Value>], slot: u32, kind: Kind) -> Option<Option<u64>>
 
 /// An operand's value: this step's event, else the latest one, or the constant.
 #[inline(always)]
-fn value_of(cur: &[Slot], last: &[Option<Value>], a: &Src) -> Option<Option<u64>> {
+fn value_of<S: Cur + ?Sized>(cur: &S, last: &[Option<Value>], a: &Src) -> Option<Option<u64>> {
     let c = cur_of(cur, a.n);
     if c.has {
         Some(Some(c.bits))
@@ -794,14 +832,14 @@ fn value_of(cur: &[Slot], last: &[Option<Value>], a: &Src) -> Option<Option<u64>
 }
 
 #[inline(always)]
-fn has_event(cur: &[Slot], a: &Src) -> bool {
+fn has_event<S: Cur + ?Sized>(cur: &S, a: &Src) -> bool {
     cur_of(cur, a.n).has
 }
 
 /// Whether a signal lift of `args` fires: one has an event and every one has a value (`None`: a
 /// kept value the plan cannot read).
 #[inline(always)]
-fn fires(cur: &[Slot], last: &[Option<Value>], args: &[Src]) -> Option<bool> {
+fn fires<S: Cur + ?Sized>(cur: &S, last: &[Option<Value>], args: &[Src]) -> Option<bool> {
     if !args.iter().any(|a| has_event(cur, a)) {
         return Some(false);
     }
@@ -856,18 +894,46 @@ impl Plan {
             temps,
             arms,
         } = sc;
-        if cur.len() != self.slots {
+        if self.slots <= SMALL {
+            if cur.len() != SMALL {
+                cur.clear();
+                cur.resize(SMALL, NONE);
+            }
+            if let Ok(small) = <&mut [Slot; SMALL]>::try_from(cur.as_mut_slice()) {
+                return self.run(st, small, temps, arms, call, sink);
+            }
+        }
+        if cur.len() < self.slots {
             cur.clear();
             cur.resize(self.slots, NONE);
         }
+        self.run(st, cur.as_mut_slice(), temps, arms, call, sink)
+    }
+
+    /// [`Plan::step`] on the thread's slots as `cur`.
+    #[inline(always)]
+    fn run<S, F, C>(
+        &self,
+        st: StepState<'_>,
+        cur: &mut S,
+        temps: &mut Vec<Option<Value>>,
+        arms: &mut Vec<Option<Option<i64>>>,
+        call: &mut C,
+        sink: &mut F,
+    ) -> bool
+    where
+        S: Cur + ?Sized,
+        F: FnMut(usize, &Value),
+        C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
+    {
         if !self.temp_nodes.is_empty() && temps.len() != self.slots {
             temps.clear();
             temps.resize_with(self.slots, || None);
         }
         let done = if self.full {
-            self.eval::<C, true>(&st, cur, temps, call)
+            self.eval::<S, C, true>(&st, cur, temps, call)
         } else {
-            self.eval::<C, false>(&st, cur, temps, call)
+            self.eval::<S, C, false>(&st, cur, temps, call)
         };
         if done.is_none() {
             self.clear_temps(temps);
@@ -935,10 +1001,10 @@ impl Plan {
     /// changed; a target is cleared when the delay fires or is reset, and set `amount` after now
     /// when either happens with an amount): `None` when an amount is not positive (an error
     /// value the general step sends).
-    fn arm(
+    fn arm<S: Cur + ?Sized>(
         &self,
         ts: i64,
-        cur: &[Slot],
+        cur: &S,
         vals: Vals<'_>,
         arms: &mut [Option<Option<i64>>],
     ) -> Option<()> {
@@ -1003,9 +1069,9 @@ impl Plan {
     /// Keep the events of the kept nodes of [`Kind::Val`]: one kept from another kept slot is
     /// copied before any of them is written (the slot it refers to may be written here; the
     /// scalars' slots are never referred to), one from an input or a constant is cloned.
-    fn keep_values(
+    fn keep_values<S: Cur + ?Sized>(
         &self,
-        cur: &[Slot],
+        cur: &S,
         inputs: &[Option<Value>],
         last: &mut [Option<Value>],
         temps: &[Option<Value>],
@@ -1047,10 +1113,10 @@ impl Plan {
     /// An `Instr::Call`'s event (out of line: the typed instructions' loop stays small).
     #[allow(clippy::too_many_arguments)]
     #[inline(never)]
-    fn call<C>(
+    fn call<S: Cur + ?Sized, C>(
         &self,
         st: &StepState<'_>,
-        cur: &mut [Slot],
+        cur: &mut S,
         temps: &mut [Option<Value>],
         call: &mut C,
         dst: u32,
@@ -1140,10 +1206,10 @@ impl Plan {
     ///
     /// `FULL`: the plan has calls, values made [`Kind::Val`] or delays ([`Plan::full`]);
     /// without, their instructions are never met and their code is left out of the loop.
-    fn eval<C, const FULL: bool>(
+    fn eval<S: Cur + ?Sized, C, const FULL: bool>(
         &self,
         st: &StepState<'_>,
-        cur: &mut [Slot],
+        cur: &mut S,
         temps: &mut [Option<Value>],
         call: &mut C,
     ) -> Option<()>
@@ -1413,9 +1479,7 @@ impl Plan {
                     (dst, v)
                 }
             };
-            if let Some(c) = cur.get_mut(*dst as usize) {
-                *c = v;
-            }
+            cur.set(*dst, v);
         }
         Some(())
     }
