@@ -18,6 +18,12 @@
 //! event, a kept value, a constant), an output is sent by reference, and only a kept one is
 //! cloned into the monitor's state (for a tuple, one reference count).
 //!
+//! A plan without calls, values or delays also has a straight block (`Block`, made by `build`'s
+//! clock analysis): for the steps where every input has an event (after the first), the nodes
+//! that then fire for certain (operators and signal lifts of such nodes and constants, `fold`s
+//! and `reduce`s of them) run without presence tests or kept-value fallbacks; the rest run as
+//! in the loop. On P2 every node but the `filter` is straight.
+//!
 //! Every other node has a form too: `delay` (its target read in the step, armed after it), and
 //! a call (`Instr::Call`) of the node's compiled function for what has no typed form (natives,
 //! user functions, lifts of functions, folds over Maps): its value is kept for the step in
@@ -586,6 +592,109 @@ enum Instr {
     },
 }
 
+/// An operand of a [`Straight`] instruction: a node's event, certain to be there, or a
+/// constant.
+#[derive(Clone, Copy, Debug)]
+enum Opnd {
+    Node(u32),
+    Const(u64),
+}
+
+/// One node of the plan's straight block ([`Plan::block`]): its instruction as it runs when
+/// the block's clock ticks (every input of the plan has an event, and it is not the first
+/// step), where every operand it reads is certain to have its event or is a constant, so
+/// nothing is tested for presence and nothing falls back to a kept value.
+#[derive(Clone, Debug)]
+enum Straight {
+    /// An input of a scalar kind (its event is there: the block's condition).
+    Input {
+        dst: u32,
+        input: u32,
+        kind: Kind,
+    },
+    Op2 {
+        dst: u32,
+        op: Op2,
+        a: Opnd,
+        b: Opnd,
+    },
+    Op1 {
+        dst: u32,
+        op: Op1,
+        a: u32,
+    },
+    Ite {
+        dst: u32,
+        cond: Opnd,
+        then: Opnd,
+        other: Opnd,
+    },
+    /// A `fold` of a stream with its event (`acc`: its own kept value; none kept: the block
+    /// gives the step to the plan's loop).
+    Fold {
+        dst: u32,
+        stream: u32,
+        acc: Src,
+        op: Op2,
+        a: FArg,
+        b: FArg,
+    },
+    Reduce {
+        dst: u32,
+        stream: u32,
+        acc: Src,
+        op: Op2,
+        a: FArg,
+        b: FArg,
+    },
+    /// An event that is its operand's (an alias, a `default` of a stream with its event, a
+    /// signal lift picking an argument).
+    Copy {
+        dst: u32,
+        src: Opnd,
+    },
+    /// `time` of a node with its event.
+    Time {
+        dst: u32,
+    },
+    /// Any other node: the plan's instruction, as the plan's loop runs it.
+    Other(u32),
+}
+
+/// The plan's straight block: the same nodes as [`Plan::instrs`], for the steps where every
+/// input has an event (see [`Straight`]). A clock analysis of the plan: a node that is a
+/// function of such inputs and constants fires with them, so it needs neither a presence test
+/// nor its kept value; what it cannot tell (a `filter`, a `merge`, `last`) runs as before.
+#[derive(Debug)]
+struct Block {
+    /// The inputs that must all have an event (the plan's `Input` instructions').
+    inputs: Vec<u32>,
+    code: Vec<Straight>,
+    /// How many of the nodes run straight (not [`Straight::Other`]).
+    straight: usize,
+}
+
+impl Block {
+    /// Whether this step is one of the block's: not the first, and every input has an event.
+    #[inline(always)]
+    fn ticks(&self, st: &StepState<'_>) -> bool {
+        !st.first
+            && self
+                .inputs
+                .iter()
+                .all(|&i| matches!(st.inputs.get(i as usize), Some(Some(_))))
+    }
+}
+
+/// An operand's bits in the straight block.
+#[inline(always)]
+fn opnd<S: Cur + ?Sized>(cur: &S, a: Opnd) -> u64 {
+    match a {
+        Opnd::Node(n) => cur_of(cur, n).bits,
+        Opnd::Const(k) => k,
+    }
+}
+
 /// A program's step as flat instructions (see the module's documentation).
 #[derive(Debug)]
 pub struct Plan {
@@ -609,6 +718,9 @@ pub struct Plan {
     full: bool,
     /// Whether it has an `Instr::Call`.
     calls: bool,
+    /// The straight block, for a plan without calls, values or delays whose nodes mostly fire
+    /// with its inputs (none: every step runs the loop).
+    block: Option<Block>,
 }
 
 /// A thread's working memory for plans, shared by every monitor on it.
@@ -932,6 +1044,13 @@ impl Plan {
         }
         let done = if self.full {
             self.eval::<S, C, true>(&st, cur, temps, call)
+        } else if let Some(b) = self.block.as_ref().filter(|b| b.ticks(&st)) {
+            match self.straight(b, &st, cur, temps, call) {
+                Some(true) => Some(()),
+                // A kept value the block cannot read as it assumed: the loop runs the step.
+                Some(false) => self.eval::<S, C, false>(&st, cur, temps, call),
+                None => None,
+            }
         } else {
             self.eval::<S, C, false>(&st, cur, temps, call)
         };
@@ -1054,6 +1173,11 @@ impl Plan {
                 _ => None,
             })
             .collect()
+    }
+
+    /// How many nodes its straight block runs without presence tests (0: it has none).
+    pub fn straight_nodes(&self) -> usize {
+        self.block.as_ref().map_or(0, |b| b.straight)
     }
 
     /// Drop the values calls computed this step.
@@ -1216,6 +1340,100 @@ impl Plan {
     where
         C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
     {
+        for instr in &self.instrs {
+            self.one::<S, C, FULL>(instr, st, cur, temps, call)?;
+        }
+        Some(())
+    }
+
+    /// Evaluate one step by the straight block `b` (its clock ticks: [`Block::ticks`]) into
+    /// `cur`: `Some(true)` done; `Some(false)` the loop must run it (a `fold` without a kept
+    /// value, as on no step after the first unless restored so); `None` no scalar answer (the
+    /// loop's answer too). The plan has no calls, values or delays.
+    #[inline(always)]
+    fn straight<S: Cur + ?Sized, C>(
+        &self,
+        b: &Block,
+        st: &StepState<'_>,
+        cur: &mut S,
+        temps: &mut [Option<Value>],
+        call: &mut C,
+    ) -> Option<bool>
+    where
+        C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
+    {
+        let last = &*st.last;
+        for s in &b.code {
+            let (dst, v) = match *s {
+                Straight::Input { dst, input, kind } => match st.inputs.get(input as usize) {
+                    Some(Some(v)) => (dst, kind.bits(v)?),
+                    _ => return Some(false),
+                },
+                Straight::Op2 { dst, op, a, b } => (dst, op.run(opnd(cur, a), opnd(cur, b))?),
+                Straight::Op1 { dst, op, a } => (dst, op.run(cur_of(cur, a).bits)),
+                Straight::Ite {
+                    dst,
+                    cond,
+                    then,
+                    other,
+                } => (
+                    dst,
+                    if opnd(cur, cond) != 0 {
+                        opnd(cur, then)
+                    } else {
+                        opnd(cur, other)
+                    },
+                ),
+                Straight::Fold {
+                    dst,
+                    stream,
+                    acc,
+                    op,
+                    a,
+                    b,
+                } => match kept_of(last, acc.slot, acc.kind)? {
+                    Some(s) => (dst, op.fold(a, b, s, cur_of(cur, stream).bits)?),
+                    None => return Some(false),
+                },
+                Straight::Reduce {
+                    dst,
+                    stream,
+                    acc,
+                    op,
+                    a,
+                    b,
+                } => {
+                    let x = cur_of(cur, stream).bits;
+                    match kept_of(last, acc.slot, acc.kind)? {
+                        Some(s) => (dst, op.fold(a, b, s, x)?),
+                        None => (dst, x),
+                    }
+                }
+                Straight::Copy { dst, src } => (dst, opnd(cur, src)),
+                Straight::Time { dst } => (dst, st.ts as u64),
+                Straight::Other(i) => {
+                    self.one::<S, C, false>(self.instrs.get(i as usize)?, st, cur, temps, call)?;
+                    continue;
+                }
+            };
+            cur.set(dst, some(v));
+        }
+        Some(true)
+    }
+
+    /// Run one instruction of the plan's loop: node `dst`'s event into `cur`.
+    #[inline(always)]
+    fn one<S: Cur + ?Sized, C, const FULL: bool>(
+        &self,
+        instr: &Instr,
+        st: &StepState<'_>,
+        cur: &mut S,
+        temps: &mut [Option<Value>],
+        call: &mut C,
+    ) -> Option<()>
+    where
+        C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
+    {
         let last = &*st.last;
         // What references point into; `temps` as it is when read (calls write it).
         macro_rules! vals {
@@ -1228,7 +1446,7 @@ impl Plan {
                 }
             };
         }
-        for instr in &self.instrs {
+        {
             let (dst, v) = match instr {
                 Instr::Nil { dst } => (dst, NONE),
                 Instr::Input { dst, input, kind } => (
