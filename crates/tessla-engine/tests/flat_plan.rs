@@ -225,6 +225,97 @@ fn the_plan_sends_what_the_general_step_sends() {
     }
 }
 
+/// A plan of more than 256 slots (read from a slice) and smaller ones (read from a fixed
+/// array) take turns on one thread's slots, step by step, and each sends what the general
+/// step sends.
+#[test]
+fn plans_large_and_small_share_the_threads_slots() {
+    let mut big = String::from("in x: Events[Float]\nin n: Events[Int]\ndef d0 = x +. 1.0\n");
+    for i in 1..300 {
+        big.push_str(&format!("def d{i} = d{} *. 0.5 +. x\n", i - 1));
+    }
+    big.push_str("def c = count(n)\nout d299\nout d150\nout c\n");
+    let specs = [big.as_str(), EVERY_FORM, RECURSION];
+    let programs: Vec<(Arc<Program>, Arc<Program>)> = specs.iter().map(|s| both(s)).collect();
+    assert!(programs[0].0.nodes.len() > 300);
+    assert!(programs.iter().all(|p| p.0.step_plan().is_some()));
+    for seed in 1..=5u64 {
+        let run = |pick: fn(&(Arc<Program>, Arc<Program>)) -> &Arc<Program>| {
+            let mut rng = Rng(rand::SeedableRng::seed_from_u64(seed));
+            let mut ms: Vec<Monitor> = programs
+                .iter()
+                .map(|p| Monitor::new(Arc::clone(pick(p))))
+                .collect();
+            let mut out = Vec::new();
+            for ts in 1..=200 {
+                for (k, m) in ms.iter_mut().enumerate() {
+                    let mut sink = |e: OutputEvent<'_>| {
+                        out.push(format!("{k} {} {} {:?}", e.ts, e.output, e.value))
+                    };
+                    for (i, input) in m.program().inputs.clone().iter().enumerate() {
+                        if rng.below(3) != 0 {
+                            let v = rng.value(&input.ty);
+                            m.push(ts, i, v, &mut sink).unwrap();
+                        }
+                    }
+                    m.flush(&mut sink);
+                }
+            }
+            out
+        };
+        let want = run(|p| &p.1);
+        assert!(want.len() > 1000, "too few events: {}", want.len());
+        assert_eq!(run(|p| &p.0), want, "seed {seed}");
+    }
+}
+
+/// P2 (specs/lib/p2_tolerance.tessla): every node but the `filter` fires with its two inputs.
+const P2: &str = "in e: Events[Float]\nin a: Events[Float]\n\
+    def diff = e -. a\ndef violated = diff >. 0.02 || diff <. -.0.02\n\
+    def corrected = e +. 0.5 *. diff\n\
+    def action = if !violated then e else if corrected >. 0.22 then 0.22 \
+    else if corrected <. -.0.22 then -.0.22 else corrected\n\
+    def augmented = action != e\ndef sq = diff *. diff\n\
+    def sum = fold(sq, 0.0, (acc: Float, x: Float) => acc +. x)\ndef n = count(sq)\n\
+    def mse = filter(sum /. intToFloat(n), n > 0)\ndef t = time(diff)\n\
+    def r = reduce(a, (x: Float, y: Float) => x +. y)\n\
+    out diff\nout violated\nout action\nout augmented\nout mse\nout t\nout r\n";
+
+/// The plan's straight block (the steps where every input has an event, run without presence
+/// tests) sends what the general step sends, on traces where the inputs mostly come together
+/// and sometimes apart (the block and the plan's loop take turns), with NaN and infinities.
+#[test]
+fn the_straight_block_sends_what_the_general_step_sends() {
+    let (flat, general) = both(P2);
+    let plan = flat.step_plan().expect("P2 has a plan");
+    // Every node but the `filter` (its event depends on a value).
+    assert_eq!(plan.straight_nodes(), flat.nodes.len() - 1);
+    for seed in 1..=20u64 {
+        let run = |program: &Arc<Program>| {
+            let mut rng = Rng(rand::SeedableRng::seed_from_u64(seed));
+            let mut m = Monitor::new(Arc::clone(program));
+            let mut out = Vec::new();
+            let mut sink =
+                |e: OutputEvent<'_>| out.push(format!("{} {} {:?}", e.ts, e.output, e.value));
+            for ts in 1..=400 {
+                // Both inputs in 7 of 8 steps; else one of them.
+                let which = rng.below(16);
+                for i in 0..2 {
+                    if which >= 2 || which == i {
+                        let v = rng.value(&Type::Float);
+                        m.push(ts, i as usize, v, &mut sink).unwrap();
+                    }
+                }
+                m.flush(&mut sink);
+            }
+            out
+        };
+        let want = run(&general);
+        assert!(want.len() > 2000, "too few events: {}", want.len());
+        assert_eq!(run(&flat), want, "seed {seed}");
+    }
+}
+
 #[test]
 fn overflow_hands_the_step_to_the_general_step() {
     // `sn` passes i64::MAX at once: a big integer, which the general step computes and keeps;

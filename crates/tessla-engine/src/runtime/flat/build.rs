@@ -4,8 +4,8 @@
 //! nodes without one are handed back (`check --ir` names them).
 
 use super::{
-    CONST, CallMode, FArg, Instr, KArg, Kernel, Kind, LiftOp, NoPlan, Op1, Op2, Plan, Ref, Src,
-    need,
+    Block, CONST, CallMode, FArg, Instr, KArg, Kernel, Kind, LiftOp, NoPlan, Op1, Op2, Opnd, Plan,
+    Ref, Src, Straight, need,
 };
 use crate::ir::{self, LiftFn, NO_SLOT, Node, NodeId, SArg};
 use crate::value::Value;
@@ -730,7 +730,10 @@ impl Plan {
                 _ => None,
             })
             .collect();
+        let full = !temp_nodes.is_empty() || !delays.is_empty() || b.forced.iter().any(|f| *f);
+        let block = if full { None } else { block(&all, n + 1) };
         Ok(Plan {
+            block,
             instrs: all,
             slots: n + 1,
             kept_vals: vals.into_iter().map(|(n, s, _)| (n, s)).collect(),
@@ -738,9 +741,164 @@ impl Plan {
             outputs,
             consts: b.consts.take(),
             calls,
-            full: !temp_nodes.is_empty() || !delays.is_empty() || b.forced.iter().any(|f| *f),
+            full,
             temp_nodes,
             delays,
         })
     }
+}
+
+/// The straight block of a plan's instructions (`instrs`, over `slots` slots; a plan without
+/// calls, values or delays), if any node runs straight in it: a clock analysis for the steps
+/// where every input has an event, after the first. An input then has its event; a node fires
+/// for certain when its operands are nodes that do and constants, at least one a node (a signal
+/// lift or an operator of them: every operand has a value and one has an event; a `fold`, a
+/// `reduce`, `time`, an alias or a `default` of one). What depends on values or on kept values
+/// (`filter`, `merge`, `last`, an event lift, a lift reading a node that may be silent) stays
+/// the loop's instruction.
+fn block(instrs: &[Instr], slots: usize) -> Option<Block> {
+    let mut sure = vec![false; slots];
+    let is = |sure: &[bool], n: u32| sure.get(n as usize).copied().unwrap_or(false);
+    let opnd = |sure: &[bool], a: &Src| -> Option<Opnd> {
+        if a.slot == CONST {
+            Some(Opnd::Const(a.k))
+        } else if is(sure, a.n) {
+            Some(Opnd::Node(a.n))
+        } else {
+            None
+        }
+    };
+    // Operands all certain or constant, one a node: they fire.
+    let fire = |ops: &[Option<Opnd>]| -> bool {
+        ops.iter().all(Option::is_some) && ops.iter().any(|o| matches!(o, Some(Opnd::Node(_))))
+    };
+    let mut inputs = Vec::new();
+    let mut code = Vec::with_capacity(instrs.len());
+    let mut straight = 0;
+    for (i, instr) in instrs.iter().enumerate() {
+        let s = match instr {
+            Instr::Input { dst, input, kind } if *kind != Kind::Val => {
+                inputs.push(*input);
+                Some(Straight::Input {
+                    dst: *dst,
+                    input: *input,
+                    kind: *kind,
+                })
+            }
+            Instr::Op2 { dst, op, a, b } => {
+                let (x, y) = (opnd(&sure, a), opnd(&sure, b));
+                match (x, y) {
+                    (Some(a), Some(b)) if fire(&[x, y]) => Some(Straight::Op2 {
+                        dst: *dst,
+                        op: *op,
+                        a,
+                        b,
+                    }),
+                    _ => None,
+                }
+            }
+            Instr::Op1 { dst, op, a } if is(&sure, a.n) && a.slot != CONST => Some(Straight::Op1 {
+                dst: *dst,
+                op: *op,
+                a: a.n,
+            }),
+            Instr::Ite {
+                dst,
+                cond,
+                then,
+                other,
+            } => {
+                let ops = [opnd(&sure, cond), opnd(&sure, then), opnd(&sure, other)];
+                match ops {
+                    [Some(cond), Some(then), Some(other)] if fire(&ops) => Some(Straight::Ite {
+                        dst: *dst,
+                        cond,
+                        then,
+                        other,
+                    }),
+                    _ => None,
+                }
+            }
+            Instr::Fold {
+                dst,
+                stream,
+                acc,
+                op,
+                a,
+                b,
+                ..
+            } if is(&sure, *stream) => Some(Straight::Fold {
+                dst: *dst,
+                stream: *stream,
+                acc: *acc,
+                op: *op,
+                a: *a,
+                b: *b,
+            }),
+            Instr::Reduce {
+                dst,
+                stream,
+                acc,
+                op,
+                a,
+                b,
+            } if is(&sure, *stream) => Some(Straight::Reduce {
+                dst: *dst,
+                stream: *stream,
+                acc: *acc,
+                op: *op,
+                a: *a,
+                b: *b,
+            }),
+            Instr::Alias { dst, src }
+            | Instr::Default {
+                dst, stream: src, ..
+            } if is(&sure, *src) => Some(Straight::Copy {
+                dst: *dst,
+                src: Opnd::Node(*src),
+            }),
+            Instr::Time { dst, src } if is(&sure, *src) => Some(Straight::Time { dst: *dst }),
+            Instr::SConst { dst, args, bits } => {
+                let ops: Vec<_> = args.iter().map(|a| opnd(&sure, a)).collect();
+                fire(&ops).then_some(Straight::Copy {
+                    dst: *dst,
+                    src: Opnd::Const(*bits),
+                })
+            }
+            Instr::SPick { dst, args, pick } => {
+                let ops: Vec<_> = args.iter().map(|a| opnd(&sure, a)).collect();
+                match ops.get(*pick) {
+                    Some(&Some(src)) if fire(&ops) => Some(Straight::Copy { dst: *dst, src }),
+                    _ => None,
+                }
+            }
+            _ => None,
+        };
+        match s {
+            Some(s) => {
+                let dst = match &s {
+                    Straight::Input { dst, .. }
+                    | Straight::Op2 { dst, .. }
+                    | Straight::Op1 { dst, .. }
+                    | Straight::Ite { dst, .. }
+                    | Straight::Fold { dst, .. }
+                    | Straight::Reduce { dst, .. }
+                    | Straight::Copy { dst, .. }
+                    | Straight::Time { dst } => *dst,
+                    Straight::Other(_) => u32::MAX,
+                };
+                if let Some(f) = sure.get_mut(dst as usize) {
+                    *f = true;
+                }
+                straight += 1;
+                code.push(s);
+            }
+            None => code.push(Straight::Other(u32::try_from(i).ok()?)),
+        }
+    }
+    (!inputs.is_empty() && straight > inputs.len()).then_some(Block {
+        inputs,
+        code,
+        straight,
+    })
 }

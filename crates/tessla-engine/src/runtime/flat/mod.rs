@@ -18,6 +18,12 @@
 //! event, a kept value, a constant), an output is sent by reference, and only a kept one is
 //! cloned into the monitor's state (for a tuple, one reference count).
 //!
+//! A plan without calls, values or delays also has a straight block (`Block`, made by `build`'s
+//! clock analysis): for the steps where every input has an event (after the first), the nodes
+//! that then fire for certain (operators and signal lifts of such nodes and constants, `fold`s
+//! and `reduce`s of them) run without presence tests or kept-value fallbacks; the rest run as
+//! in the loop. On P2 every node but the `filter` is straight.
+//!
 //! Every other node has a form too: `delay` (its target read in the step, armed after it), and
 //! a call (`Instr::Call`) of the node's compiled function for what has no typed form (natives,
 //! user functions, lifts of functions, folds over Maps): its value is kept for the step in
@@ -586,6 +592,109 @@ enum Instr {
     },
 }
 
+/// An operand of a [`Straight`] instruction: a node's event, certain to be there, or a
+/// constant.
+#[derive(Clone, Copy, Debug)]
+enum Opnd {
+    Node(u32),
+    Const(u64),
+}
+
+/// One node of the plan's straight block ([`Plan::block`]): its instruction as it runs when
+/// the block's clock ticks (every input of the plan has an event, and it is not the first
+/// step), where every operand it reads is certain to have its event or is a constant, so
+/// nothing is tested for presence and nothing falls back to a kept value.
+#[derive(Clone, Debug)]
+enum Straight {
+    /// An input of a scalar kind (its event is there: the block's condition).
+    Input {
+        dst: u32,
+        input: u32,
+        kind: Kind,
+    },
+    Op2 {
+        dst: u32,
+        op: Op2,
+        a: Opnd,
+        b: Opnd,
+    },
+    Op1 {
+        dst: u32,
+        op: Op1,
+        a: u32,
+    },
+    Ite {
+        dst: u32,
+        cond: Opnd,
+        then: Opnd,
+        other: Opnd,
+    },
+    /// A `fold` of a stream with its event (`acc`: its own kept value; none kept: the block
+    /// gives the step to the plan's loop).
+    Fold {
+        dst: u32,
+        stream: u32,
+        acc: Src,
+        op: Op2,
+        a: FArg,
+        b: FArg,
+    },
+    Reduce {
+        dst: u32,
+        stream: u32,
+        acc: Src,
+        op: Op2,
+        a: FArg,
+        b: FArg,
+    },
+    /// An event that is its operand's (an alias, a `default` of a stream with its event, a
+    /// signal lift picking an argument).
+    Copy {
+        dst: u32,
+        src: Opnd,
+    },
+    /// `time` of a node with its event.
+    Time {
+        dst: u32,
+    },
+    /// Any other node: the plan's instruction, as the plan's loop runs it.
+    Other(u32),
+}
+
+/// The plan's straight block: the same nodes as [`Plan::instrs`], for the steps where every
+/// input has an event (see [`Straight`]). A clock analysis of the plan: a node that is a
+/// function of such inputs and constants fires with them, so it needs neither a presence test
+/// nor its kept value; what it cannot tell (a `filter`, a `merge`, `last`) runs as before.
+#[derive(Debug)]
+struct Block {
+    /// The inputs that must all have an event (the plan's `Input` instructions').
+    inputs: Vec<u32>,
+    code: Vec<Straight>,
+    /// How many of the nodes run straight (not [`Straight::Other`]).
+    straight: usize,
+}
+
+impl Block {
+    /// Whether this step is one of the block's: not the first, and every input has an event.
+    #[inline(always)]
+    fn ticks(&self, st: &StepState<'_>) -> bool {
+        !st.first
+            && self
+                .inputs
+                .iter()
+                .all(|&i| matches!(st.inputs.get(i as usize), Some(Some(_))))
+    }
+}
+
+/// An operand's bits in the straight block.
+#[inline(always)]
+fn opnd<S: Cur + ?Sized>(cur: &S, a: Opnd) -> u64 {
+    match a {
+        Opnd::Node(n) => cur_of(cur, n).bits,
+        Opnd::Const(k) => k,
+    }
+}
+
 /// A program's step as flat instructions (see the module's documentation).
 #[derive(Debug)]
 pub struct Plan {
@@ -609,6 +718,9 @@ pub struct Plan {
     full: bool,
     /// Whether it has an `Instr::Call`.
     calls: bool,
+    /// The straight block, for a plan without calls, values or delays whose nodes mostly fire
+    /// with its inputs (none: every step runs the loop).
+    block: Option<Block>,
 }
 
 /// A thread's working memory for plans, shared by every monitor on it.
@@ -760,10 +872,48 @@ fn scalar(kind: Kind, bits: u64) -> Value {
     }
 }
 
+/// Plans of at most this many slots read them from a fixed array (see [`Cur`]).
+const SMALL: usize = 256;
+
+/// This step's slots as a plan reads and writes them: a slice (each index tested against its
+/// length), or for a plan of at most [`SMALL`] slots a fixed array read by the index masked to
+/// its length, which needs no test (every index of such a plan is below its slot count; the
+/// slots past it are never read). The tests were a fifth of P2's step.
+trait Cur {
+    fn at(&self, n: u32) -> Slot;
+    fn set(&mut self, n: u32, v: Slot);
+}
+
+impl Cur for [Slot] {
+    #[inline(always)]
+    fn at(&self, n: u32) -> Slot {
+        self.get(n as usize).copied().unwrap_or_default()
+    }
+
+    #[inline(always)]
+    fn set(&mut self, n: u32, v: Slot) {
+        if let Some(c) = self.get_mut(n as usize) {
+            *c = v;
+        }
+    }
+}
+
+impl Cur for [Slot; SMALL] {
+    #[inline(always)]
+    fn at(&self, n: u32) -> Slot {
+        self[n as usize & (SMALL - 1)]
+    }
+
+    #[inline(always)]
+    fn set(&mut self, n: u32, v: Slot) {
+        self[n as usize & (SMALL - 1)] = v;
+    }
+}
+
 /// Node `n`'s event this step.
 #[inline(always)]
-fn cur_of(cur: &[Slot], n: u32) -> Slot {
-    cur.get(n as usize).copied().unwrap_or_default()
+fn cur_of<S: Cur + ?Sized>(cur: &S, n: u32) -> Slot {
+    cur.at(n)
 }
 
 /// The value kept in `slot` (`Some(None)` for none or [`NO_SLOT`]); `None`: not a scalar of
@@ -782,7 +932,7 @@ fn kept_of(last: &[Option<Value>], slot: u32, kind: Kind) -> Option<Option<u64>>
 
 /// An operand's value: this step's event, else the latest one, or the constant.
 #[inline(always)]
-fn value_of(cur: &[Slot], last: &[Option<Value>], a: &Src) -> Option<Option<u64>> {
+fn value_of<S: Cur + ?Sized>(cur: &S, last: &[Option<Value>], a: &Src) -> Option<Option<u64>> {
     let c = cur_of(cur, a.n);
     if c.has {
         Some(Some(c.bits))
@@ -794,14 +944,14 @@ fn value_of(cur: &[Slot], last: &[Option<Value>], a: &Src) -> Option<Option<u64>
 }
 
 #[inline(always)]
-fn has_event(cur: &[Slot], a: &Src) -> bool {
+fn has_event<S: Cur + ?Sized>(cur: &S, a: &Src) -> bool {
     cur_of(cur, a.n).has
 }
 
 /// Whether a signal lift of `args` fires: one has an event and every one has a value (`None`: a
 /// kept value the plan cannot read).
 #[inline(always)]
-fn fires(cur: &[Slot], last: &[Option<Value>], args: &[Src]) -> Option<bool> {
+fn fires<S: Cur + ?Sized>(cur: &S, last: &[Option<Value>], args: &[Src]) -> Option<bool> {
     if !args.iter().any(|a| has_event(cur, a)) {
         return Some(false);
     }
@@ -856,18 +1006,53 @@ impl Plan {
             temps,
             arms,
         } = sc;
-        if cur.len() != self.slots {
+        if self.slots <= SMALL {
+            if cur.len() != SMALL {
+                cur.clear();
+                cur.resize(SMALL, NONE);
+            }
+            if let Ok(small) = <&mut [Slot; SMALL]>::try_from(cur.as_mut_slice()) {
+                return self.run(st, small, temps, arms, call, sink);
+            }
+        }
+        if cur.len() < self.slots {
             cur.clear();
             cur.resize(self.slots, NONE);
         }
+        self.run(st, cur.as_mut_slice(), temps, arms, call, sink)
+    }
+
+    /// [`Plan::step`] on the thread's slots as `cur`.
+    #[inline(always)]
+    fn run<S, F, C>(
+        &self,
+        st: StepState<'_>,
+        cur: &mut S,
+        temps: &mut Vec<Option<Value>>,
+        arms: &mut Vec<Option<Option<i64>>>,
+        call: &mut C,
+        sink: &mut F,
+    ) -> bool
+    where
+        S: Cur + ?Sized,
+        F: FnMut(usize, &Value),
+        C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
+    {
         if !self.temp_nodes.is_empty() && temps.len() != self.slots {
             temps.clear();
             temps.resize_with(self.slots, || None);
         }
         let done = if self.full {
-            self.eval::<C, true>(&st, cur, temps, call)
+            self.eval::<S, C, true>(&st, cur, temps, call)
+        } else if let Some(b) = self.block.as_ref().filter(|b| b.ticks(&st)) {
+            match self.straight(b, &st, cur, temps, call) {
+                Some(true) => Some(()),
+                // A kept value the block cannot read as it assumed: the loop runs the step.
+                Some(false) => self.eval::<S, C, false>(&st, cur, temps, call),
+                None => None,
+            }
         } else {
-            self.eval::<C, false>(&st, cur, temps, call)
+            self.eval::<S, C, false>(&st, cur, temps, call)
         };
         if done.is_none() {
             self.clear_temps(temps);
@@ -935,10 +1120,10 @@ impl Plan {
     /// changed; a target is cleared when the delay fires or is reset, and set `amount` after now
     /// when either happens with an amount): `None` when an amount is not positive (an error
     /// value the general step sends).
-    fn arm(
+    fn arm<S: Cur + ?Sized>(
         &self,
         ts: i64,
-        cur: &[Slot],
+        cur: &S,
         vals: Vals<'_>,
         arms: &mut [Option<Option<i64>>],
     ) -> Option<()> {
@@ -990,6 +1175,11 @@ impl Plan {
             .collect()
     }
 
+    /// How many nodes its straight block runs without presence tests (0: it has none).
+    pub fn straight_nodes(&self) -> usize {
+        self.block.as_ref().map_or(0, |b| b.straight)
+    }
+
     /// Drop the values calls computed this step.
     #[inline(always)]
     fn clear_temps(&self, temps: &mut [Option<Value>]) {
@@ -1003,9 +1193,9 @@ impl Plan {
     /// Keep the events of the kept nodes of [`Kind::Val`]: one kept from another kept slot is
     /// copied before any of them is written (the slot it refers to may be written here; the
     /// scalars' slots are never referred to), one from an input or a constant is cloned.
-    fn keep_values(
+    fn keep_values<S: Cur + ?Sized>(
         &self,
-        cur: &[Slot],
+        cur: &S,
         inputs: &[Option<Value>],
         last: &mut [Option<Value>],
         temps: &[Option<Value>],
@@ -1047,10 +1237,10 @@ impl Plan {
     /// An `Instr::Call`'s event (out of line: the typed instructions' loop stays small).
     #[allow(clippy::too_many_arguments)]
     #[inline(never)]
-    fn call<C>(
+    fn call<S: Cur + ?Sized, C>(
         &self,
         st: &StepState<'_>,
-        cur: &mut [Slot],
+        cur: &mut S,
         temps: &mut [Option<Value>],
         call: &mut C,
         dst: u32,
@@ -1140,10 +1330,104 @@ impl Plan {
     ///
     /// `FULL`: the plan has calls, values made [`Kind::Val`] or delays ([`Plan::full`]);
     /// without, their instructions are never met and their code is left out of the loop.
-    fn eval<C, const FULL: bool>(
+    fn eval<S: Cur + ?Sized, C, const FULL: bool>(
         &self,
         st: &StepState<'_>,
-        cur: &mut [Slot],
+        cur: &mut S,
+        temps: &mut [Option<Value>],
+        call: &mut C,
+    ) -> Option<()>
+    where
+        C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
+    {
+        for instr in &self.instrs {
+            self.one::<S, C, FULL>(instr, st, cur, temps, call)?;
+        }
+        Some(())
+    }
+
+    /// Evaluate one step by the straight block `b` (its clock ticks: [`Block::ticks`]) into
+    /// `cur`: `Some(true)` done; `Some(false)` the loop must run it (a `fold` without a kept
+    /// value, as on no step after the first unless restored so); `None` no scalar answer (the
+    /// loop's answer too). The plan has no calls, values or delays.
+    #[inline(always)]
+    fn straight<S: Cur + ?Sized, C>(
+        &self,
+        b: &Block,
+        st: &StepState<'_>,
+        cur: &mut S,
+        temps: &mut [Option<Value>],
+        call: &mut C,
+    ) -> Option<bool>
+    where
+        C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
+    {
+        let last = &*st.last;
+        for s in &b.code {
+            let (dst, v) = match *s {
+                Straight::Input { dst, input, kind } => match st.inputs.get(input as usize) {
+                    Some(Some(v)) => (dst, kind.bits(v)?),
+                    _ => return Some(false),
+                },
+                Straight::Op2 { dst, op, a, b } => (dst, op.run(opnd(cur, a), opnd(cur, b))?),
+                Straight::Op1 { dst, op, a } => (dst, op.run(cur_of(cur, a).bits)),
+                Straight::Ite {
+                    dst,
+                    cond,
+                    then,
+                    other,
+                } => (
+                    dst,
+                    if opnd(cur, cond) != 0 {
+                        opnd(cur, then)
+                    } else {
+                        opnd(cur, other)
+                    },
+                ),
+                Straight::Fold {
+                    dst,
+                    stream,
+                    acc,
+                    op,
+                    a,
+                    b,
+                } => match kept_of(last, acc.slot, acc.kind)? {
+                    Some(s) => (dst, op.fold(a, b, s, cur_of(cur, stream).bits)?),
+                    None => return Some(false),
+                },
+                Straight::Reduce {
+                    dst,
+                    stream,
+                    acc,
+                    op,
+                    a,
+                    b,
+                } => {
+                    let x = cur_of(cur, stream).bits;
+                    match kept_of(last, acc.slot, acc.kind)? {
+                        Some(s) => (dst, op.fold(a, b, s, x)?),
+                        None => (dst, x),
+                    }
+                }
+                Straight::Copy { dst, src } => (dst, opnd(cur, src)),
+                Straight::Time { dst } => (dst, st.ts as u64),
+                Straight::Other(i) => {
+                    self.one::<S, C, false>(self.instrs.get(i as usize)?, st, cur, temps, call)?;
+                    continue;
+                }
+            };
+            cur.set(dst, some(v));
+        }
+        Some(true)
+    }
+
+    /// Run one instruction of the plan's loop: node `dst`'s event into `cur`.
+    #[inline(always)]
+    fn one<S: Cur + ?Sized, C, const FULL: bool>(
+        &self,
+        instr: &Instr,
+        st: &StepState<'_>,
+        cur: &mut S,
         temps: &mut [Option<Value>],
         call: &mut C,
     ) -> Option<()>
@@ -1162,7 +1446,7 @@ impl Plan {
                 }
             };
         }
-        for instr in &self.instrs {
+        {
             let (dst, v) = match instr {
                 Instr::Nil { dst } => (dst, NONE),
                 Instr::Input { dst, input, kind } => (
@@ -1413,9 +1697,7 @@ impl Plan {
                     (dst, v)
                 }
             };
-            if let Some(c) = cur.get_mut(*dst as usize) {
-                *c = v;
-            }
+            cur.set(*dst, v);
         }
         Some(())
     }
