@@ -446,15 +446,6 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
                 clocks: BTreeMap::new(),
             },
         ];
-        // Each process holds its partition before the records flow (docs/fleet.md, "What comes
-        // next": a record buffered by a process that takes its lease over later).
-        for p in &mut parts {
-            let held = format!("holding partition {};", p.lease);
-            p.child
-                .as_mut()
-                .unwrap()
-                .wait_err("the partition's lease", 0, |l| l.contains(&held));
-        }
         let mut fleet_out: Vec<String> = Vec::new();
         let mut records: Vec<String> = Vec::new();
         let mut k = 10 * seed as i64 * 100;
