@@ -249,3 +249,70 @@ fn a_process_taking_a_killed_holders_partition_sends_its_buffered_records_change
 fn a_process_taking_a_live_holders_partition_sends_its_buffered_records_changes() {
     buffered_records_reach_the_fleet(false);
 }
+
+/// The holder of p0 and of the fleet level is SIGKILLed once both partitions are near the
+/// end, and p1's input ends at once: nobody else is left to close the fleet's input. p1's
+/// process, stopping as the last live partition, waits for the fleet lease to lapse, takes
+/// it, lets p0 drop out and closes: the killed holder's fleet lines followed by p1's (the
+/// lines of the killed holder's last progress interval written again, identical) equal one
+/// process's, line for line, the close's last steps included.
+#[test]
+fn a_killed_fleet_holder_is_replaced_by_the_last_partition_stopping_which_closes() {
+    let server = nats_server("");
+    let state = format!("nats://127.0.0.1:{}/fleet_killed_last", server.port);
+    let base = base();
+    let end = 20;
+    let want = one_process(&records(base, None, 0..end));
+    assert!(!want.is_empty());
+
+    let mut a = spawn(&state, "p0");
+    a.wait_err("fleet held", 0, |l| {
+        l.contains("partition fleet: held by this process")
+    });
+    let mut b = spawn(&state, "p1");
+    a.wait_out("p1 joined", |l| {
+        l.starts_with("tessla_fleet_status,partition=p1") && l.contains("joined")
+    });
+    a.write(&records(base, Some(0), 0..end));
+    b.write(&records(base, Some(1), 0..end));
+    // Both partitions are past the step before last (the holder wrote its line).
+    let near_end = base + (end - 2) * 200_000_000;
+    a.wait_out("a fleet line near the end", |l| {
+        l.starts_with("tessla_fleet ")
+            && l.rsplit(' ')
+                .next()
+                .and_then(|t| t.trim().parse::<i64>().ok())
+                .is_some_and(|t| t >= near_end)
+    });
+    a.signal("KILL");
+    let started = std::time::Instant::now();
+    let (b_out, b_err, code) = b.finish();
+    let stop = started.elapsed();
+    assert_eq!(code, 0, "{b_err}");
+    let (a_out, _, _) = a.finish();
+    assert!(
+        b_err.contains("took the fleet level whose holder fell silent")
+            && b_err.contains("the fleet's input ends"),
+        "{b_err}"
+    );
+    // The stop is bounded: the drop time (twice the TTL) and its margin, and the wait for
+    // the last live partition, with room for a busy machine.
+    assert!(stop < std::time::Duration::from_secs(20), "{stop:?}");
+    let before = fleet_lines(&a_out);
+    let after = fleet_lines(&b_out);
+    // After SIGKILL the new holder writes again the lines the old one wrote after its last
+    // recorded progress (docs/fleet.md): identical, so the overlap is dropped once.
+    let overlap = (0..=before.len().min(after.len()))
+        .rev()
+        .find(|n| before[before.len() - n..] == after[..*n])
+        .unwrap_or(0);
+    let mut got = before.clone();
+    got.extend(after[overlap..].iter().cloned());
+    eprintln!(
+        "killed fleet holder, last partition closing: one process {} fleet lines; the killed holder {}, the last partition {} ({overlap} written again); stop took {stop:?}",
+        want.len(),
+        before.len(),
+        after.len()
+    );
+    assert_eq!(got, want, "the last partition:\n{b_err}");
+}
