@@ -656,9 +656,12 @@ impl FleetNats {
         let start = Instant::now();
         // Entries taken in within the first heartbeat may have been put before this stop.
         let fresh = start + HEARTBEAT / 2;
-        loop {
+        let limit = self.lease.ttl() + LAPSE_MARGIN;
+        let mut said = false;
+        while start.elapsed() < LAST_LIVE_AFTER + limit {
             self.follow(out);
-            // Its own partition counts when another process holds it.
+            // Another partition's holder is live (its own partition counts when another
+            // process holds it): it stops later and does this.
             let own = self.holds_partition.then_some(self.partition.as_str());
             let heard = self
                 .table
@@ -669,32 +672,31 @@ impl FleetNats {
                 return false;
             }
             if start.elapsed() >= LAST_LIVE_AFTER {
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let limit = self.lease.ttl() + LAPSE_MARGIN;
-        log_info!(
-            "fleet: stopping as the last live partition while another process holds the fleet level; waiting up to {} for its lease to lapse",
-            humantime::format_duration(limit)
-        );
-        while start.elapsed() < limit + LAST_LIVE_AFTER {
-            if self.lease.holding() {
-                log_info!(
-                    "fleet: stopping, took the fleet level whose holder fell silent, to end its input"
-                );
-                return true;
+                if self.lease.holding() {
+                    log_info!(
+                        "fleet: stopping, took the fleet level whose holder fell silent, to end its input"
+                    );
+                    return true;
+                }
+                if !said {
+                    said = true;
+                    log_info!(
+                        "fleet: stopping as the last live partition while another process holds the fleet level; waiting up to {} for its lease to lapse",
+                        humantime::format_duration(limit)
+                    );
+                }
             }
             if let Some((r, mine)) = self.lease.current()
                 && r != first
                 && !mine
             {
-                log_info!(
-                    "fleet: the fleet level's holder renewed its lease; it ends the fleet's input itself"
-                );
+                if said {
+                    log_info!(
+                        "fleet: the fleet level's holder renewed its lease; it ends the fleet's input itself"
+                    );
+                }
                 return false;
             }
-            self.follow(out);
             std::thread::sleep(Duration::from_millis(20));
         }
         log_warn!(
