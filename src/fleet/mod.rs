@@ -60,18 +60,6 @@ impl Feed {
         }
     }
 
-    /// Between reads (the lease poll): heartbeats and the fleet level's own progress.
-    pub fn tick(&mut self, partition: Option<&Lease>, out: &mut Vec<u8>) {
-        if let Feed::Nats(n) = self {
-            n.pump(
-                Vec::new(),
-                false,
-                partition.and_then(Lease::generation),
-                out,
-            );
-        }
-    }
-
     /// A committed fleet rollout (the spec channel's, [`crate::spec_feed::Updates::take_fleet`]):
     /// one process's level switches at its first step at or after max(its start, its next
     /// step); across partitions the fleet lease's holder puts the switch in the fleet's stream,

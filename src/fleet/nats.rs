@@ -10,7 +10,9 @@
 //! standby taking over writes from there on. The holder also decides drop-outs (a partition
 //! silent past twice the lease TTL) and the end of the fleet's input (a close: stopping, every
 //! partition ended and no partition lease held, so no restart is under way) and puts them in
-//! the stream, so every process applies them at the same point. It also writes the fleet
+//! the stream, so every process applies them at the same point; a process stopping without
+//! the fleet lease takes it to close when it was released, or when it is the last live
+//! partition and the lease lapses (its holder killed). It also writes the fleet
 //! checkpoint (the table and the level after an entry, every 5 s; its store is
 //! [`super::checkpoint`]) and deletes the entries the checkpoint before covered, so the entries
 //! stay bounded; a process that starts goes on from the checkpoint. The rules themselves are [`super::watermark`]. A
@@ -51,6 +53,12 @@ const WAITING_SAID_AFTER: Duration = Duration::from_secs(10);
 const STANDBY_EVERY: Duration = Duration::from_secs(1);
 /// How long a process stopping waits to take a fleet lease it found released.
 const TAKE_FREE_WAIT: Duration = Duration::from_secs(2);
+/// A process stopping without the fleet lease, which hears no other live partition for this
+/// long (three heartbeats), counts itself the last live partition.
+const LAST_LIVE_AFTER: Duration = Duration::from_millis(600);
+/// The margin past the lease TTL (for the fleet lease to lapse) and past the drop time (for a
+/// killed partition to drop out) a last live partition stopping waits.
+const LAPSE_MARGIN: Duration = Duration::from_secs(1);
 
 enum Job {
     Put(String, bytes::Bytes),
@@ -557,7 +565,10 @@ impl FleetNats {
     /// restarted partition's new process takes its lease at start), put a close in the stream,
     /// so that every process steps everything pending at the same point, as one process does
     /// at the end of its input; then write what the level gave. A partition still held (a
-    /// restart in progress) leaves the pending changes to the next holder.
+    /// restart in progress) leaves the pending changes to the next holder. Not holding the
+    /// fleet lease, it takes a released one ([`Self::take_free_fleet_lease`]) or, as the last
+    /// live partition, one whose holder fell silent ([`Self::take_lapsed_fleet_lease`]: then it
+    /// waits up to the drop time and a margin for the killed holder's partition to drop out).
     pub fn finish(&mut self, out: &mut Vec<u8>) {
         // A standby stopping is no replacement for anyone any more.
         if self.standby_at.take().is_some() {
@@ -566,11 +577,16 @@ impl FleetNats {
             let _ = self.conn.call(async move { store.delete(key).await });
         }
         self.flush();
-        if !self.lease.holding() && !self.take_free_fleet_lease() {
-            return;
-        }
         let start = Instant::now();
-        let wait = self.drop_after.min(Duration::from_secs(2));
+        let mut wait = self.drop_after.min(Duration::from_secs(2));
+        if !self.lease.holding() && !self.take_free_fleet_lease() {
+            if !self.take_lapsed_fleet_lease(out) {
+                return;
+            }
+            // The holder was killed: its partition, silent, drops out after the drop time
+            // (counted from its last entry, before this stop), and then the close is put.
+            wait = self.drop_after + LAPSE_MARGIN;
+        }
         let mut closing = false;
         let mut standby_said = false;
         loop {
@@ -616,6 +632,71 @@ impl FleetNats {
             }
             std::thread::sleep(Duration::from_millis(20));
         }
+        false
+    }
+
+    /// Stopping while the fleet lease is held by a process that may be dead (SIGKILL: its
+    /// lease stays until it lapses), this process takes it when it is the **last live
+    /// partition**: no entry from another live partition for [`LAST_LIVE_AFTER`] (a live
+    /// holder sends a heartbeat every 200 ms). It then waits, at most the lease TTL and
+    /// [`LAPSE_MARGIN`], for its lease task to take the lapsed lease; a renewal seen meanwhile
+    /// means the holder lives (it closes the fleet's input itself when it stops), and it
+    /// returns at once. Without it, nobody closed the fleet's input and the last steps' lines
+    /// were lost (docs/fleet.md, "Partitions that stop").
+    fn take_lapsed_fleet_lease(&mut self, out: &mut Vec<u8>) -> bool {
+        let Some((first, _)) = self.lease.current() else {
+            return false;
+        };
+        let start = Instant::now();
+        // Entries taken in within the first heartbeat may have been put before this stop.
+        let fresh = start + HEARTBEAT / 2;
+        let limit = self.lease.ttl() + LAPSE_MARGIN;
+        let mut said = false;
+        while start.elapsed() < LAST_LIVE_AFTER + limit {
+            self.follow(out);
+            // Another partition's holder is live (its own partition counts when another
+            // process holds it): it stops later and does this.
+            let own = self.holds_partition.then_some(self.partition.as_str());
+            let heard = self
+                .table
+                .live()
+                .filter(|(p, _)| Some(*p) != own)
+                .any(|(p, _)| self.heard.get(p).is_some_and(|at| *at > fresh));
+            if heard {
+                return false;
+            }
+            if start.elapsed() >= LAST_LIVE_AFTER {
+                if self.lease.holding() {
+                    log_info!(
+                        "fleet: stopping, took the fleet level whose holder fell silent, to end its input"
+                    );
+                    return true;
+                }
+                if !said {
+                    said = true;
+                    log_info!(
+                        "fleet: stopping as the last live partition while another process holds the fleet level; waiting up to {} for its lease to lapse",
+                        humantime::format_duration(limit)
+                    );
+                }
+            }
+            if let Some((r, mine)) = self.lease.current()
+                && r != first
+                && !mine
+            {
+                if said {
+                    log_info!(
+                        "fleet: the fleet level's holder renewed its lease; it ends the fleet's input itself"
+                    );
+                }
+                return false;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        log_warn!(
+            "fleet: the fleet level's lease did not lapse within {}; the fleet's last steps wait for its next holder",
+            humantime::format_duration(limit)
+        );
         false
     }
 
@@ -710,6 +791,9 @@ impl FleetNats {
             .table
             .names()
             .filter(|p| !(self.holds_partition && *p == self.partition))
+            // A dropped partition's holder died (its key stays until taken over); a process
+            // taking it over sends at once, and the partition is live again.
+            .filter(|p| !self.table.dropped(p))
             .map(|p| format!("lease.{}", kv_key_part_of(p)))
             .collect();
         let store = self.store.clone();

@@ -310,6 +310,12 @@ impl Partitions {
         }
     }
 
+    /// Whether partition `p` dropped out (silent past the bound; its next holder's first
+    /// entry brings it back).
+    pub fn dropped(&self, p: &str) -> bool {
+        self.parts.get(p).is_some_and(|p| p.state == State::Dropped)
+    }
+
     /// The live partitions and their generations.
     pub fn live(&self) -> impl Iterator<Item = (&str, u64)> {
         self.parts

@@ -83,6 +83,8 @@ pub struct Lease {
     ttl: Duration,
     store: kv::Store,
     handle: tokio::runtime::Handle,
+    /// This process's name in the lease key (`host:pid`).
+    holder: String,
 }
 
 impl Lease {
@@ -97,14 +99,15 @@ impl Lease {
             released: false,
             generation: 0,
         }));
+        let holder = format!("{}:{}", hostname(), std::process::id());
         let lease = Lease {
             shared: Arc::clone(&shared),
             name: name.clone(),
             ttl,
             store: store.clone(),
             handle: conn.handle.clone(),
+            holder: holder.clone(),
         };
-        let holder = format!("{}:{}", hostname(), std::process::id());
         // The first attempt before any record is read: a lone process starts active.
         let (first_store, k, h) = (store.clone(), key.clone(), holder.clone());
         let sent = Instant::now();
@@ -183,6 +186,29 @@ impl Lease {
             Ok(Ok(None)) => true,
             Ok(Ok(Some(e))) => e.operation != kv::Operation::Put,
             _ => false,
+        }
+    }
+
+    /// The lease's TTL.
+    pub fn ttl(&self) -> Duration {
+        self.ttl
+    }
+
+    /// The lease key as the server has it now: its revision (every renewal changes it) and
+    /// whether this process wrote it; `None` when absent, deleted (released) or not known (the
+    /// server does not answer in time).
+    pub fn current(&self) -> Option<(u64, bool)> {
+        let store = self.store.clone();
+        let key = format!("lease.{}", kv_key_part_of(&self.name));
+        let (tx, rx) = std::sync::mpsc::channel();
+        self.handle.spawn(async move {
+            let _ = tx.send(store.entry(key).await);
+        });
+        match rx.recv_timeout(REQUEST_TIMEOUT * 2) {
+            Ok(Ok(Some(e))) if e.operation == kv::Operation::Put => {
+                Some((e.revision, e.value.as_ref() == self.holder.as_bytes()))
+            }
+            _ => None,
         }
     }
 

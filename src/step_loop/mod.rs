@@ -374,11 +374,15 @@ impl Loop<'_, '_> {
         feed.pump(drained, end, lease, &mut self.out);
     }
 
-    /// Between reads: a partitioned fleet's heartbeat and its fleet level's progress.
+    /// Between reads (the lease poll): a partitioned fleet's heartbeat and its fleet level's
+    /// progress, with what the instances gave since the last read: a takeover's replay
+    /// ([`Self::follow_lease`], just before) steps the buffered records here, and their changes
+    /// go to the fleet now. (Before, the tick sent a heartbeat alone and the replayed records'
+    /// changes waited in the taps for the next read, which a partition whose input waits for
+    /// the fleet's answer never gets: docs/fleet.md, "A fleet of NATS partitions".)
     fn fleet_tick(&mut self) {
-        if let Some(feed) = self.fleet.as_deref_mut() {
-            let lease = self.shared.as_ref().and_then(|s| s.lease.as_ref());
-            feed.tick(lease, &mut self.out);
+        if matches!(self.fleet.as_deref(), Some(Feed::Nats(_))) {
+            self.fleet(false);
         }
     }
 

@@ -323,13 +323,16 @@ fn unfed_lines<'a>(lines: impl Iterator<Item = &'a str>) -> Vec<String> {
 /// A restart of partition `i`'s process: it saves, releases its lease (and the `fleet` lease
 /// when it holds it); the next one takes the partition lease at start and restores each robot
 /// at its first record (a restart, not the end of the partition's input: the fleet level goes
-/// on with it).
+/// on with it). `wait_holder`: wait until a process holds the fleet level again (a later step
+/// picks the holder); not needed before the seed's end, where a process stopping takes a
+/// released `fleet` lease itself (docs/fleet.md, "Partitions that stop").
 fn restart(
     parts: &mut [Part],
     i: usize,
     spawn: &dyn Fn(&str) -> LiveChild,
     fleet_out: &mut Vec<String>,
     logs: &mut String,
+    wait_holder: bool,
 ) {
     let p = &mut parts[i];
     let (out, err, code) = p.child.take().unwrap().finish();
@@ -340,8 +343,11 @@ fn restart(
     let held = format!("holding partition {};", p.lease);
     c.wait_err("the replacement's lease", 0, |l| l.contains(&held));
     p.child = Some(c);
-    // A process holds the fleet level again before anything else happens (a restart of its
-    // holder hands the `fleet` lease over: docs/fleet.md, "What comes next").
+    if !wait_holder {
+        return;
+    }
+    // A process holds the fleet level again before the next step, which may pick its holder
+    // (a restart of its holder hands the `fleet` lease over).
     let start = std::time::Instant::now();
     while fleet_holder(parts).is_none() {
         assert!(
@@ -354,6 +360,8 @@ fn restart(
 
 /// The seeds run.
 const SEEDS: [u64; 4] = [0, 1, 2, 3];
+/// The schedule's steps per seed.
+const STEPS: usize = 24;
 
 /// What the schedule did, over every seed.
 #[derive(Default, Debug)]
@@ -371,6 +379,11 @@ struct Counts {
     takeover_after_refused: usize,
     restart_after_accepted: usize,
     restart_after_refused: usize,
+    /// Seeds whose end stopped the fleet level's holder first, and of those, the ones where
+    /// the other process, stopping, took the released `fleet` lease itself (else its lease
+    /// task had taken it before its input ended).
+    holder_stopped_first: usize,
+    free_lease_taken: usize,
 }
 
 #[test]
@@ -446,15 +459,6 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
                 clocks: BTreeMap::new(),
             },
         ];
-        // Each process holds its partition before the records flow (docs/fleet.md, "What comes
-        // next": a record buffered by a process that takes its lease over later).
-        for p in &mut parts {
-            let held = format!("holding partition {};", p.lease);
-            p.child
-                .as_mut()
-                .unwrap()
-                .wait_err("the partition's lease", 0, |l| l.contains(&held));
-        }
         let mut fleet_out: Vec<String> = Vec::new();
         let mut records: Vec<String> = Vec::new();
         let mut k = 10 * seed as i64 * 100;
@@ -466,7 +470,7 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
         // hold its watermark until each partition's changes are in.
         k += 1;
         sync(&mut parts, k, &mut records);
-        for _ in 0..24 {
+        for step in 0..STEPS {
             match rng.random_range(0..12) {
                 0..6 => {
                     // A batch of records, then each partition's sync robot.
@@ -582,7 +586,7 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
                         _ => None,
                     };
                     if let Some(i) = hit {
-                        restart(&mut parts, i, &spawn, &mut fleet_out, &mut logs);
+                        restart(&mut parts, i, &spawn, &mut fleet_out, &mut logs, true);
                         n.restarts += 1;
                         match (after, refused) {
                             (After::Takeover, false) => n.takeover_after_accepted += 1,
@@ -605,19 +609,48 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
                 }
                 _ => {
                     let i = rng.random_range(0..2usize);
-                    restart(&mut parts, i, &spawn, &mut fleet_out, &mut logs);
+                    let last = step + 1 == STEPS;
+                    restart(&mut parts, i, &spawn, &mut fleet_out, &mut logs, !last);
                     n.restarts += 1;
                 }
             }
         }
-        // Both inputs end together, so the fleet level's holder sees every partition end and
-        // steps everything pending, as the oracle does at its end.
-        for p in &mut parts {
+        // The seed's end, seeded: both inputs end together, so the fleet level's holder sees
+        // every partition end and steps everything pending, as the oracle does at its end; or
+        // the holder stops first (the other partition is live: it hands over, no close) and
+        // the other's input ends at once: that process, stopping, takes the released `fleet`
+        // lease (unless its lease task took it first) and closes (docs/fleet.md, "Partitions
+        // that stop").
+        let first = if rng.random_bool(0.5) {
+            fleet_holder(&mut parts)
+        } else {
+            None
+        };
+        if let Some(h) = first {
+            let (out, err, code) = parts[h].child.take().unwrap().finish();
+            assert_eq!(code, 0, "{err}");
+            assert!(
+                !err.contains("the fleet's input ends"),
+                "seed {seed}: the holder closed while another partition was live\n{err}"
+            );
+            fleet_out.extend(out.lines().map(String::from));
+            logs.push_str(&err);
+            n.holder_stopped_first += 1;
+        }
+        for p in parts.iter_mut().filter(|p| p.child.is_some()) {
             p.child.as_mut().unwrap().close_stdin();
         }
-        for p in &mut parts {
+        for p in parts.iter_mut().filter(|p| p.child.is_some()) {
             let (out, err, code) = p.child.take().unwrap().finish();
             assert_eq!(code, 0, "{err}");
+            if first.is_some() {
+                assert!(
+                    err.contains("the fleet's input ends"),
+                    "seed {seed}: the last process did not close the fleet's input\n{err}"
+                );
+                n.free_lease_taken +=
+                    usize::from(err.contains("took the fleet level its holder released"));
+            }
             fleet_out.extend(out.lines().map(String::from));
             logs.push_str(&err);
         }
@@ -729,7 +762,8 @@ fn seeded_schedules_on_real_processes_give_the_one_process_lines() {
             && n.takeover_after_accepted > 0
             && n.takeover_after_refused > 0
             && n.restart_after_accepted > 0
-            && n.restart_after_refused > 0,
+            && n.restart_after_refused > 0
+            && n.holder_stopped_first > 0,
         "{n:?}"
     );
 }

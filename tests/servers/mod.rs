@@ -15,6 +15,7 @@ mod fleet_nats_state;
 #[cfg(feature = "tools")]
 mod fleet_one_machine;
 mod fleet_spec_rollout;
+mod fleet_takeover_nats;
 mod pipeline_influx;
 #[cfg(feature = "tools")]
 mod pipeline_mqtt;
