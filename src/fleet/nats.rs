@@ -566,8 +566,8 @@ impl FleetNats {
     /// so that every process steps everything pending at the same point, as one process does
     /// at the end of its input; then write what the level gave. A partition still held (a
     /// restart in progress) leaves the pending changes to the next holder. Not holding the
-    /// fleet lease, it takes a released one ([`Self::take_free_fleet_lease`]) or, as the last
-    /// live partition, one whose holder fell silent ([`Self::take_lapsed_fleet_lease`]: then it
+    /// fleet lease, it takes a released one (`take_free_fleet_lease`) or, as the last
+    /// live partition, one whose holder fell silent (`take_lapsed_fleet_lease`: then it
     /// waits up to the drop time and a margin for the killed holder's partition to drop out).
     pub fn finish(&mut self, out: &mut Vec<u8>) {
         // A standby stopping is no replacement for anyone any more.
