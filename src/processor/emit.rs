@@ -52,12 +52,13 @@ pub(super) struct Emitter {
 
 impl Emitter {
     /// Write the collected events as metrics, one group per timestamp, by `encodings` (those
-    /// of the version whose monitor produced the events); `from`: the instance's fleet key and
+    /// of the version whose monitor produced the events) after the instance's tags escaped
+    /// once (`escaped_tags`: [`encode::escape_tags`]); `from`: the instance's fleet key and
     /// the program that produced them, for the fleet tap.
     pub(super) fn emit(
         &mut self,
         encodings: &Prepared,
-        tags: &[(String, String)],
+        escaped_tags: &str,
         from: (&Arc<str>, &Arc<Program>),
         counters: &mut Counters,
         out: &mut Vec<u8>,
@@ -76,7 +77,14 @@ impl Emitter {
             let (step, tail) = rest.split_at(n);
             rest = tail;
             counters.outputs += step.len() as u64;
-            let dropped = encode::encode_prepared(&mut self.encode, encodings, ts, step, tags, out);
+            let dropped = encode::encode_prepared_escaped(
+                &mut self.encode,
+                encodings,
+                ts,
+                step,
+                escaped_tags,
+                out,
+            );
             for d in dropped {
                 counters.dropped_values += 1;
                 log::warn_limited("output value", || {

@@ -11,6 +11,7 @@ use super::instance_table::{Key, Table, key_of};
 use super::versions::Versions;
 use super::{Counters, Options};
 use crate::log;
+use crate::telegraf::encode;
 use crate::watchdog::Lane;
 use lineproto::Metric;
 use std::sync::Arc;
@@ -34,6 +35,9 @@ pub(super) struct Instance {
     /// version it can run ([`Versions::target_fitting`]). Saved with it.
     pub(super) unfit: Vec<usize>,
     pub(super) tags: Vec<(String, String)>,
+    /// Its `tags` as its verdict lines carry them after the measurement (escaped once, and
+    /// again when a tag is set: [`Instance::set_tag`]).
+    pub(super) escaped_tags: String,
     /// Its key as the fleet level names it: the `--instance-by` values joined by `,`.
     pub(super) fleet_key: Arc<str>,
     pub(super) recent: super::dedup::Recent,
@@ -200,6 +204,8 @@ impl Pool {
         self.next_id += 1;
         let horizon = monitor.clock();
         let fleet_key = fleet_key(&key);
+        let mut escaped_tags = String::new();
+        encode::escape_tags(&mut escaped_tags, &tags);
         let i = self.table.insert(
             key,
             Instance {
@@ -210,6 +216,7 @@ impl Pool {
                 unfit: Vec::new(),
                 horizon,
                 tags,
+                escaped_tags,
                 fleet_key,
                 recent: Default::default(),
                 id: self.next_id,
@@ -325,6 +332,14 @@ pub(super) fn warn_unfit(by: &[String], key: &Key, versions: &Versions, rule: us
             describe(by, key)
         )
     });
+}
+
+impl Instance {
+    /// Set its tag `name` to `value` ([`set_tag`]), its escaped tags with it.
+    pub(super) fn set_tag(&mut self, name: &str, value: &str) {
+        set_tag(&mut self.tags, name, value);
+        encode::escape_tags(&mut self.escaped_tags, &self.tags);
+    }
 }
 
 /// Set tag `name` to `value` in `tags` (sorted by name, as [`Pool::insert`] makes them).

@@ -160,7 +160,7 @@ impl Processor {
         let version = self.versions.get(inst.version);
         self.emitter.emit(
             &version.encodings,
-            &inst.tags,
+            &inst.escaped_tags,
             (&inst.fleet_key, &version.program),
             &mut self.counters,
             out,
@@ -257,7 +257,7 @@ impl Processor {
         inst.monitor.flush(&mut sink);
         self.emitter.emit(
             &version.encodings,
-            &inst.tags,
+            &inst.escaped_tags,
             (&inst.fleet_key, &version.program),
             &mut self.counters,
             out,

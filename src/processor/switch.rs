@@ -79,7 +79,7 @@ impl Processor {
                 let old = self.versions.get(inst.version);
                 self.emitter.emit(
                     &old.encodings,
-                    &inst.tags,
+                    &inst.escaped_tags,
                     (&inst.fleet_key, &old.program),
                     &mut self.counters,
                     out,
@@ -88,7 +88,7 @@ impl Processor {
                 inst.monitor = new.carry(old, &inst.monitor);
                 inst.version = target;
                 if let Some(tag) = &self.opts.version_tag {
-                    pool::set_tag(&mut inst.tags, tag, &new.id);
+                    inst.set_tag(tag, &new.id);
                 }
                 self.counters.switched += 1;
             }
@@ -118,7 +118,7 @@ impl Processor {
             if inst.version == 0 {
                 inst.monitor = carry(&inst.monitor);
                 if let Some(tag) = &self.opts.version_tag {
-                    pool::set_tag(&mut inst.tags, tag, &base.id);
+                    inst.set_tag(tag, &base.id);
                 }
             }
         }

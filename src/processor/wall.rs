@@ -96,7 +96,7 @@ impl Processor {
                 let version = self.versions.get(inst.version);
                 self.emitter.emit(
                     &version.encodings,
-                    &inst.tags,
+                    &inst.escaped_tags,
                     (&inst.fleet_key, &version.program),
                     &mut self.counters,
                     out,

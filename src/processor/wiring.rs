@@ -60,6 +60,35 @@ pub struct WiringCheck {
     started: Option<Instant>,
     inputs: Vec<InputSeen>,
     measurements: BTreeMap<String, MeasurementSeen>,
+    /// Scratch for [`tag_set_key`]: the order of the record's tags, and the key.
+    tag_order: Vec<usize>,
+    tag_key: String,
+}
+
+/// Write into `key` the record's tag set as [`WiringCheck`] keeps it: its `k=v` pieces in
+/// sorted order (as strings, so `a-b=..` before `a=..`), joined by `,`. `order` is a buffer.
+fn tag_set_key(m: &Metric, order: &mut Vec<usize>, key: &mut String) {
+    fn piece<'a>((k, v): &'a (String, String)) -> impl Iterator<Item = u8> + 'a {
+        k.bytes().chain(std::iter::once(b'=')).chain(v.bytes())
+    }
+    order.clear();
+    order.extend(0..m.tags.len());
+    let by_piece = |a: &usize, b: &usize| match (m.tags.get(*a), m.tags.get(*b)) {
+        (Some(a), Some(b)) => piece(a).cmp(piece(b)),
+        _ => a.cmp(b),
+    };
+    if !order.is_sorted_by(|a, b| by_piece(a, b).is_le()) {
+        order.sort_by(by_piece);
+    }
+    key.clear();
+    for (n, (k, v)) in order.iter().filter_map(|&i| m.tags.get(i)).enumerate() {
+        if n > 0 {
+            key.push(',');
+        }
+        key.push_str(k);
+        key.push('=');
+        key.push_str(v);
+    }
 }
 
 impl WiringCheck {
@@ -151,12 +180,12 @@ impl WiringCheck {
             Some(seen) => seen,
             None => self.measurements.entry(m.measurement.clone()).or_default(),
         };
-        let mut tags: Vec<String> = m.tags.iter().map(|(k, v)| format!("{k}={v}")).collect();
-        tags.sort();
-        let tags = tags.join(",");
-        if !seen.tag_sets.contains(&tags) {
+        // The tag set as `k=v` pieces sorted and joined by `,`, built in the check's buffers
+        // (no allocation per record once warm); a new one is copied into the set.
+        tag_set_key(m, &mut self.tag_order, &mut self.tag_key);
+        if !seen.tag_sets.contains(self.tag_key.as_str()) {
             if seen.tag_sets.len() < MAX_TAG_SETS {
-                seen.tag_sets.insert(tags);
+                seen.tag_sets.insert(self.tag_key.clone());
             } else {
                 seen.more_tag_sets = true;
             }
@@ -499,6 +528,53 @@ mod tests {
         let msg = w.unmatched(&b, &w.inputs[0], "in 1 records");
         assert!(msg.contains("seen: n,topic=t fields y"), "{msg}");
         assert!(msg.contains("no metric named `m`"), "{msg}");
+    }
+
+    /// The tag-set key built in buffers is the one built by formatting, sorting and joining
+    /// (string order of `k=v`, which differs from key order: `a-b=..` before `a=..`).
+    #[test]
+    fn tag_set_keys_as_formatted_and_joined() {
+        let records: [&[u8]; 6] = [
+            b"m f=1 1",
+            b"m,t=1 f=1 1",
+            b"m,b=2,a=1 f=1 1",
+            b"m,a=x,a-b=y f=1 1",
+            b"m,host=h,topic=t,a\\,b=c\\ d f=1 1",
+            b"m,z=1,y=2,x=3,a=9,a0=1 f=1 1",
+        ];
+        let (mut order, mut key) = (Vec::new(), String::new());
+        for r in records {
+            let m = lineproto::parse_record(r).unwrap().unwrap();
+            let mut want: Vec<String> = m.tags.iter().map(|(k, v)| format!("{k}={v}")).collect();
+            want.sort();
+            tag_set_key(&m, &mut order, &mut key);
+            assert_eq!(key, want.join(","), "{r:?}");
+        }
+        // Seen by the check: two records of one tag set in two orders are one set.
+        let b = InputBinding {
+            input: 0,
+            name: "x".into(),
+            ty: Type::Float,
+            measurement: Some("none".into()),
+            tags: Vec::new(),
+            field: FieldPattern::Exact("x".into()),
+            length: None,
+        };
+        let mut w = WiringCheck::new(std::slice::from_ref(&b));
+        for r in [
+            &b"m,b=2,a=1 f=1 1"[..],
+            b"m,a=1,b=2 f=1 2",
+            b"m,a-b=1 f=1 3",
+        ] {
+            let m = lineproto::parse_record(r).unwrap().unwrap();
+            w.observe(&m, std::slice::from_ref(&b));
+        }
+        let sets: Vec<&str> = w.measurements["m"]
+            .tag_sets
+            .iter()
+            .map(String::as_str)
+            .collect();
+        assert_eq!(sets, ["a-b=1", "a=1,b=2"]);
     }
 
     #[test]

@@ -169,6 +169,8 @@ pub struct Scratch {
     /// A member's field key before escaping (see [`Writer`]).
     name: String,
     line: String,
+    /// [`encode_prepared`]'s tags escaped.
+    tags: String,
     floats: Floats,
     /// [`encode_step_with`]'s last encodings prepared: used again while the same encodings
     /// come (compared each step), prepared afresh when others do.
@@ -275,7 +277,39 @@ pub fn encode_prepared<E: StepEvent>(
     tags: &[(String, String)],
     out: &mut Vec<u8>,
 ) -> Vec<Dropped> {
-    encode(scratch, prepared, ts, events, tags, out)
+    let mut escaped = std::mem::take(&mut scratch.tags);
+    escape_tags(&mut escaped, tags);
+    let dropped = encode(scratch, prepared, ts, events, &escaped, out);
+    scratch.tags = escaped;
+    dropped
+}
+
+/// [`encode_prepared`] with the tags escaped once by [`escape_tags`] (a processor keeps each
+/// instance's, written again only when its tags change).
+#[inline]
+pub fn encode_prepared_escaped<E: StepEvent>(
+    scratch: &mut Scratch,
+    prepared: &Prepared,
+    ts: i64,
+    events: &[E],
+    escaped_tags: &str,
+    out: &mut Vec<u8>,
+) -> Vec<Dropped> {
+    encode(scratch, prepared, ts, events, escaped_tags, out)
+}
+
+/// Write into `escaped` what follows the measurement of a verdict line with `tags`: `,k=v`
+/// for each writable tag, escaped.
+pub fn escape_tags(escaped: &mut String, tags: &[(String, String)]) {
+    escaped.clear();
+    for (k, v) in tags {
+        if lineproto::name_is_writable(k) && lineproto::name_is_writable(v) {
+            escaped.push(',');
+            lineproto::write_tag_key(escaped, k);
+            escaped.push('=');
+            lineproto::write_tag_value(escaped, v);
+        }
+    }
 }
 
 /// Per encoding, the first encoding index of the metric its fields go to.
@@ -599,7 +633,7 @@ fn encode<E: StepEvent>(
     prepared: &Prepared,
     ts: i64,
     events: &[E],
-    tags: &[(String, String)],
+    tags: &str,
     out: &mut Vec<u8>,
 ) -> Vec<Dropped> {
     let Scratch {
@@ -608,6 +642,7 @@ fn encode<E: StepEvent>(
         name,
         line,
         floats,
+        tags: _,
         last: _,
     } = scratch;
     let Prepared {
@@ -684,19 +719,12 @@ fn encode<E: StepEvent>(
     dropped
 }
 
-/// Start a verdict line in `line`: the measurement and the writable tags.
+/// Start a verdict line in `line`: the measurement and the tags escaped ([`escape_tags`]).
 #[inline]
-fn start_line(line: &mut String, measurement: &str, tags: &[(String, String)]) {
+fn start_line(line: &mut String, measurement: &str, tags: &str) {
     line.clear();
     line.push_str(measurement);
-    for (k, v) in tags {
-        if lineproto::name_is_writable(k) && lineproto::name_is_writable(v) {
-            line.push(',');
-            lineproto::write_tag_key(line, k);
-            line.push('=');
-            lineproto::write_tag_value(line, v);
-        }
-    }
+    line.push_str(tags);
 }
 
 /// End a verdict line that has at least one field: the timestamp, the newline, then append it
