@@ -6,93 +6,12 @@
 //! and a fleet level whose holder was SIGKILLed while every other input ends at once is still
 //! closed by the last process stopping, so the last steps' lines are written.
 
+use super::fleet_level_nats::{base, example_args, fleet_lines, one_process, records};
 use super::fleet_nats_specs::nats_server;
-use crate::support::child;
-use crate::support::live_child::{LiveChild, run_all};
+use crate::support::live_child::LiveChild;
 
-const ROBOTS: usize = 4;
 /// The lease TTL of every process here (a takeover of a killed holder's lease takes this long).
 const TTL: &str = "2s";
-
-/// Event time of step 0: ten minutes from now (every partition's promise is then its own
-/// front, not the wall clock less the silence), 5 Hz.
-fn base() -> i64 {
-    let now = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .as_nanos() as i64;
-    now + 600_000_000_000
-}
-
-/// Robot `i`'s record at step `k`: lanes 0.4 m apart driving back and forth through zone A
-/// with different phases (two are in it together at times); robot 3 violates P2 now and then.
-fn record(base: i64, i: usize, k: i64) -> String {
-    let phase = (k + 13 * i as i64) % 60;
-    let x = -1.0 + 0.1 * (if phase < 30 { phase } else { 60 - phase }) as f64;
-    let y = 0.2 + 0.4 * i as f64;
-    let actual = if i == 3 && (k / 10) % 3 == 1 {
-        0.5
-    } else {
-        0.1
-    };
-    format!(
-        "mqtt_consumer,host=h,topic=tessla/r{i} expectedSpeed=0.1,actualSpeed={actual},x={x:.2},y={y:.2} {}\n",
-        base + k * 200_000_000 + i as i64 * 1000
-    )
-}
-
-/// The records of steps `ks` of partition `p`'s robots (0 and 2 in p0, 1 and 3 in p1), or of
-/// every robot (`None`).
-fn records(base: i64, p: Option<usize>, ks: std::ops::Range<i64>) -> String {
-    let mut s = String::new();
-    for k in ks {
-        for i in (0..ROBOTS).filter(|i| p.is_none_or(|p| i % 2 == p)) {
-            s.push_str(&record(base, i, k));
-        }
-    }
-    s
-}
-
-fn example_args() -> Vec<String> {
-    let root = child::root();
-    [
-        "run",
-        "--spec",
-        root.join("specs/fleet/robot.tessla").to_str().unwrap(),
-        "--instance-by",
-        "topic",
-        "--fleet-spec",
-        root.join("specs/fleet/fleet.tessla").to_str().unwrap(),
-        "--max-ahead",
-        "off",
-        "--allowed-lateness",
-        "off",
-        "--no-passthrough",
-    ]
-    .into_iter()
-    .map(String::from)
-    .collect()
-}
-
-/// The fleet's outputs in `out`, in order: its metrics and its actions, not its status lines.
-fn fleet_lines(out: &str) -> Vec<String> {
-    out.lines()
-        .filter(|l| {
-            l.starts_with("tessla_fleet ")
-                || l.starts_with("tessla_fleet,")
-                || (l.starts_with("action,") && l.contains("source=fleet"))
-        })
-        .map(String::from)
-        .collect()
-}
-
-/// One process over `input`: its fleet lines (the oracle).
-fn one_process(input: &str) -> Vec<String> {
-    let a = example_args();
-    let (out, err, code) = run_all(&a.iter().map(String::as_str).collect::<Vec<_>>(), input);
-    assert_eq!(code, 0, "{err}");
-    fleet_lines(&out)
-}
 
 /// A partition process of the fleet example on `state`, logging the fleet entries it follows
 /// (`D! fleet: entry N from p0 (generation G): C changes, clocks [...]`).
@@ -157,7 +76,7 @@ fn buffered_records_reach_the_fleet(kill: bool) {
     );
     let base = base();
     let (buffered, end) = (5, 30);
-    let want = one_process(&records(base, None, 0..end));
+    let (_, want) = one_process(&records(base, None, 0..end));
     assert!(!want.is_empty());
 
     // p1 first: it holds p1 and the fleet level; then p0's first holder.
@@ -262,7 +181,7 @@ fn a_killed_fleet_holder_is_replaced_by_the_last_partition_stopping_which_closes
     let state = format!("nats://127.0.0.1:{}/fleet_killed_last", server.port);
     let base = base();
     let end = 20;
-    let want = one_process(&records(base, None, 0..end));
+    let (_, want) = one_process(&records(base, None, 0..end));
     assert!(!want.is_empty());
 
     let mut a = spawn(&state, "p0");
