@@ -172,10 +172,9 @@ impl Lease {
             .unwrap_or(false)
     }
 
-    /// Whether nobody holds the lease now: its key absent or deleted (released on a clean
-    /// stop). A lease whose holder died is not free until it lapses; unknown (the server does
-    /// not answer in time) is not free either.
-    pub fn free(&self) -> bool {
+    /// The lease key's entry as the server has it now (`Some(None)`: absent); `None` when the
+    /// server does not answer in time.
+    fn key_now(&self) -> Option<Option<kv::Entry>> {
         let store = self.store.clone();
         let key = format!("lease.{}", kv_key_part_of(&self.name));
         let (tx, rx) = std::sync::mpsc::channel();
@@ -183,9 +182,19 @@ impl Lease {
             let _ = tx.send(store.entry(key).await);
         });
         match rx.recv_timeout(REQUEST_TIMEOUT * 2) {
-            Ok(Ok(None)) => true,
-            Ok(Ok(Some(e))) => e.operation != kv::Operation::Put,
-            _ => false,
+            Ok(Ok(e)) => Some(e),
+            _ => None,
+        }
+    }
+
+    /// Whether nobody holds the lease now: its key absent or deleted (released on a clean
+    /// stop). A lease whose holder died is not free until it lapses; unknown (the server does
+    /// not answer in time) is not free either.
+    pub fn free(&self) -> bool {
+        match self.key_now() {
+            Some(None) => true,
+            Some(Some(e)) => e.operation != kv::Operation::Put,
+            None => false,
         }
     }
 
@@ -198,14 +207,8 @@ impl Lease {
     /// whether this process wrote it; `None` when absent, deleted (released) or not known (the
     /// server does not answer in time).
     pub fn current(&self) -> Option<(u64, bool)> {
-        let store = self.store.clone();
-        let key = format!("lease.{}", kv_key_part_of(&self.name));
-        let (tx, rx) = std::sync::mpsc::channel();
-        self.handle.spawn(async move {
-            let _ = tx.send(store.entry(key).await);
-        });
-        match rx.recv_timeout(REQUEST_TIMEOUT * 2) {
-            Ok(Ok(Some(e))) if e.operation == kv::Operation::Put => {
+        match self.key_now() {
+            Some(Some(e)) if e.operation == kv::Operation::Put => {
                 Some((e.revision, e.value.as_ref() == self.holder.as_bytes()))
             }
             _ => None,
