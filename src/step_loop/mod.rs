@@ -326,6 +326,11 @@ impl Loop<'_, '_> {
         self.records(&mut splitter, &[], true, true, &mut || {})?;
         self.fleet(true);
         if let Some(f) = self.fleet.as_deref_mut() {
+            // The fleet's end waits for the entries' store, the other partitions and the fleet
+            // lease, each wait bounded by time (docs/fleet.md, "Partitions that stop"): no step
+            // to watch. (Watched, a loaded machine made those waits pass the step timeout and
+            // the watchdog ended a process whose records were all stepped, losing its last lines.)
+            watch.set(Phase::Idle);
             f.finish(&mut self.out);
         }
         watch.set(Phase::Writing);
