@@ -168,7 +168,6 @@ pub struct Scratch {
     path: String,
     /// A member's field key before escaping (see [`Writer`]).
     name: String,
-    line: String,
     /// [`encode_prepared`]'s tags escaped.
     tags: String,
     floats: Floats,
@@ -177,7 +176,9 @@ pub struct Scratch {
     last: Option<Prepared>,
 }
 
-/// An encoding's measurement escaped and its field key escaped with `=` (`None`: not writable).
+/// An encoding's measurement escaped and its field key escaped between `,` and `=` (`,key=`:
+/// every field is written after a comma, and a line's first comma made a space when it ends;
+/// `None`: not writable).
 type Names = (Option<String>, Option<String>);
 
 /// Measurement, field key and whether it is a connector metric, for one encoding.
@@ -197,7 +198,7 @@ fn prepare(enc: &Encoding, default_measurement: &str) -> Names {
         s
     });
     let k = lineproto::name_is_writable(field).then(|| {
-        let mut s = String::new();
+        let mut s = String::from(",");
         lineproto::write_field_key(&mut s, field);
         s.push('=');
         s
@@ -347,11 +348,11 @@ fn writable_leaf(v: &Value) -> Option<&Value> {
 /// Append a scalar from [`writable_leaf`] in line-protocol form (what [`field_value`] and
 /// [`lineproto::write_value`] write, without the intermediate [`FieldValue`]).
 #[inline(always)]
-fn write_leaf(line: &mut String, floats: &mut Floats, v: &Value) {
+fn write_leaf(line: &mut Vec<u8>, floats: &mut Floats, v: &Value) {
     match v {
-        Value::Unit | Value::Bool(true) => line.push_str("true"),
+        Value::Unit | Value::Bool(true) => line.extend_from_slice(b"true"),
         // Apart from `true`: a literal of known length is copied inline, not through memcpy.
-        Value::Bool(false) => line.push_str("false"),
+        Value::Bool(false) => line.extend_from_slice(b"false"),
         Value::Int(i) => lineproto::write::write_int(line, *i),
         Value::Float(f) => floats.write(line, *f),
         Value::Str(s) => lineproto::write::write_string(line, s),
@@ -379,7 +380,7 @@ struct Slot {
     ready: bool,
     /// Whether a copy was served since a value last went past.
     keep: bool,
-    text: String,
+    text: Vec<u8>,
 }
 
 /// The bits of a NaN: no slot of an unused [`Floats`] matches a finite value.
@@ -392,7 +393,7 @@ impl Default for Floats {
                 bits: NO_FLOAT,
                 ready: false,
                 keep: false,
-                text: String::new(),
+                text: Vec::new(),
             }),
         }
     }
@@ -401,7 +402,7 @@ impl Default for Floats {
 impl Floats {
     /// Append finite `f` as [`lineproto::write_float`] writes it.
     #[inline(always)]
-    fn write(&mut self, line: &mut String, f: f64) {
+    fn write(&mut self, line: &mut Vec<u8>, f: f64) {
         let bits = f.to_bits();
         let slot = (bits.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> 60) as usize;
         let Some(s) = self.slots.get_mut(slot) else {
@@ -411,7 +412,7 @@ impl Floats {
         if s.bits == bits {
             if s.ready {
                 s.keep = true;
-                line.push_str(&s.text);
+                line.extend_from_slice(&s.text);
                 return;
             }
             // The second time: format and keep the text.
@@ -419,7 +420,7 @@ impl Floats {
             lineproto::write_float(line, f);
             if let Some(t) = line.get(start..) {
                 s.text.clear();
-                s.text.push_str(t);
+                s.text.extend_from_slice(t);
                 s.ready = true;
             }
             return;
@@ -483,13 +484,13 @@ fn each_member<'v>(v: &'v Value, path: &mut String, f: &mut dyn FnMut(&str, &'v 
 struct Writer<'a> {
     encodings: &'a [Encoding],
     default_measurement: &'a str,
-    line: &'a mut String,
+    /// The output: a line is written straight into it, taken back when it gets no field.
+    line: &'a mut Vec<u8>,
     floats: &'a mut Floats,
     /// A member's field key before escaping: the output's field and the member's path.
     name: &'a mut String,
     dropped: &'a mut Vec<Dropped>,
-    /// Whether the line has a field yet (what goes before the next one: ',' or ' '). A bool,
-    /// so that the separator is known to be one byte.
+    /// Whether the line has a field yet.
     written: bool,
     /// Leaves without a line-protocol form are reported while the line is written (the
     /// one-metric case; otherwise while the metrics are found).
@@ -545,8 +546,7 @@ impl Writer<'_> {
         match (leaf, key) {
             (Some(v), Some((_, Some(key)))) => {
                 if path.is_empty() {
-                    self.line.push(if self.written { ',' } else { ' ' });
-                    self.line.push_str(key);
+                    self.line.extend_from_slice(key.as_bytes());
                 } else {
                     let field = match self.encodings.get(idx) {
                         Some(Encoding::Field { field, .. } | Encoding::Default(field)) => {
@@ -554,8 +554,7 @@ impl Writer<'_> {
                         }
                         _ => None,
                     };
-                    let sep = if self.written { ',' } else { ' ' };
-                    if !member_key(self.line, self.name, sep, field, path) {
+                    if !member_key(self.line, self.name, field, path) {
                         return;
                     }
                 }
@@ -574,17 +573,11 @@ impl Writer<'_> {
     }
 }
 
-/// Append `sep`, a member's field key and `=`: the output's field and the member's path (the
+/// Append `,`, a member's field key and `=`: the output's field and the member's path (the
 /// path alone for a connector, which has no `field`). False, with nothing appended, when the
 /// name is not writable. `name` is a buffer.
 #[inline(never)]
-fn member_key(
-    line: &mut String,
-    name: &mut String,
-    sep: char,
-    field: Option<&String>,
-    path: &str,
-) -> bool {
+fn member_key(line: &mut Vec<u8>, name: &mut String, field: Option<&String>, path: &str) -> bool {
     name.clear();
     if let Some(field) = field {
         name.push_str(field);
@@ -594,9 +587,9 @@ fn member_key(
     if !lineproto::name_is_writable(name) {
         return false;
     }
-    line.push(sep);
+    line.push(b',');
     lineproto::write_field_key(line, name);
-    line.push('=');
+    line.push(b'=');
     true
 }
 
@@ -640,7 +633,6 @@ fn encode<E: StepEvent>(
         groups,
         path,
         name,
-        line,
         floats,
         tags: _,
         last: _,
@@ -656,7 +648,7 @@ fn encode<E: StepEvent>(
     let mut w = Writer {
         encodings,
         default_measurement,
-        line,
+        line: out,
         floats,
         name,
         dropped: &mut dropped,
@@ -692,7 +684,10 @@ fn encode<E: StepEvent>(
         let Some((Some(measurement), _)) = prepared.get(g) else {
             continue;
         };
-        start_line(w.line, measurement, tags);
+        let start = w.line.len();
+        w.line.extend_from_slice(measurement.as_bytes());
+        w.line.extend_from_slice(tags.as_bytes());
+        let fields_at = w.line.len();
         w.written = false;
         w.report = report;
         for e in events {
@@ -713,28 +708,24 @@ fn encode<E: StepEvent>(
             }
         }
         if w.written {
-            end_line(w.line, ts, out);
+            end_line(w.line, fields_at, ts);
+        } else {
+            w.line.truncate(start);
         }
     }
     dropped
 }
 
-/// Start a verdict line in `line`: the measurement and the tags escaped ([`escape_tags`]).
+/// End a verdict line that has at least one field (its first field's comma at `fields_at`):
+/// that comma made the space before the fields, then the timestamp and the newline.
 #[inline]
-fn start_line(line: &mut String, measurement: &str, tags: &str) {
-    line.clear();
-    line.push_str(measurement);
-    line.push_str(tags);
-}
-
-/// End a verdict line that has at least one field: the timestamp, the newline, then append it
-/// to `out`.
-#[inline]
-fn end_line(line: &mut String, ts: i64, out: &mut Vec<u8>) {
-    line.push(' ');
+fn end_line(line: &mut Vec<u8>, fields_at: usize, ts: i64) {
+    if let Some(sep) = line.get_mut(fields_at) {
+        *sep = b' ';
+    }
+    line.push(b' ');
     lineproto::write_timestamp(line, ts);
-    line.push('\n');
-    out.extend_from_slice(line.as_bytes());
+    line.push(b'\n');
 }
 
 #[cfg(test)]
@@ -964,10 +955,10 @@ mod tests {
                 -0.0,
                 1e21,
             ] {
-                let (mut ours, mut full) = (String::from("k="), String::from("k="));
+                let (mut ours, mut full) = (b"k=".to_vec(), String::from("k="));
                 floats.write(&mut ours, f);
                 lineproto::write_float(&mut full, f);
-                assert_eq!(ours, full, "{f:?} at {i}");
+                assert_eq!(ours, full.as_bytes(), "{f:?} at {i}");
             }
         }
     }

@@ -16,7 +16,6 @@
 //! the escape (Telegraf's own serializer writes a broken line there).
 
 use crate::metric::FieldValue;
-use std::fmt::Write as _;
 
 /// A Float that is NaN or infinite cannot be written as line protocol.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -29,6 +28,48 @@ impl std::fmt::Display for NotFinite {
 }
 
 impl std::error::Error for NotFinite {}
+
+/// Where the writers append: a `String`, or a byte buffer such as a processor's output (a
+/// verdict line written straight into it, without a line buffer and its copy). Only UTF-8
+/// text is appended.
+pub trait Text {
+    /// Append `s`.
+    fn push_str(&mut self, s: &str);
+    /// Append one ASCII byte (`b < 0x80`).
+    fn push_ascii(&mut self, b: u8);
+    /// Remove the last byte, which is ASCII.
+    fn pop_ascii(&mut self);
+}
+
+impl Text for String {
+    #[inline(always)]
+    fn push_str(&mut self, s: &str) {
+        String::push_str(self, s);
+    }
+    #[inline(always)]
+    fn push_ascii(&mut self, b: u8) {
+        self.push(char::from(b));
+    }
+    #[inline(always)]
+    fn pop_ascii(&mut self) {
+        self.pop();
+    }
+}
+
+impl Text for Vec<u8> {
+    #[inline(always)]
+    fn push_str(&mut self, s: &str) {
+        self.extend_from_slice(s.as_bytes());
+    }
+    #[inline(always)]
+    fn push_ascii(&mut self, b: u8) {
+        self.push(b);
+    }
+    #[inline(always)]
+    fn pop_ascii(&mut self) {
+        self.pop();
+    }
+}
 
 /// The escape written for `c` in a name, if it needs one.
 fn name_escape(c: char, escape_eq: bool) -> Option<&'static str> {
@@ -44,7 +85,7 @@ fn name_escape(c: char, escape_eq: bool) -> Option<&'static str> {
     })
 }
 
-fn escape_name(out: &mut String, s: &str, escape_eq: bool) {
+fn escape_name<T: Text + ?Sized>(out: &mut T, s: &str, escape_eq: bool) {
     // Fast path: most names need no escape at all.
     if !s.bytes().any(|b| {
         b < b' ' || b == 0x7f || b == b'\\' || b == b',' || b == b' ' || (escape_eq && b == b'=')
@@ -61,14 +102,14 @@ fn escape_name(out: &mut String, s: &str, escape_eq: bool) {
         let esc = name_escape(c, escape_eq);
         let other_control = esc.is_none() && c.is_control() && c.is_ascii();
         let pad = run % 2 == 1 && (esc.is_some() || other_control || c == '"');
-        out.extend(std::iter::repeat_n('\\', run + usize::from(pad)));
+        for _ in 0..run + usize::from(pad) {
+            out.push_ascii(b'\\');
+        }
         run = 0;
         match esc {
             Some(e) => out.push_str(e),
-            None if other_control => {
-                let _ = write!(out, "\\x{:02x}", u32::from(c));
-            }
-            None => out.push(c),
+            None if other_control => out.push_str(&format!("\\x{:02x}", u32::from(c))),
+            None => out.push_str(c.encode_utf8(&mut [0; 4])),
         }
     }
     // Trailing backslashes cannot be written (Telegraf's serializer drops them too).
@@ -82,22 +123,22 @@ pub fn measurement_is_writable(name: &str) -> bool {
 }
 
 /// Append an escaped measurement name (see [`measurement_is_writable`] for names that cannot be).
-pub fn write_measurement(out: &mut String, name: &str) {
+pub fn write_measurement<T: Text + ?Sized>(out: &mut T, name: &str) {
     escape_name(out, name, false);
 }
 
 /// Append an escaped tag key.
-pub fn write_tag_key(out: &mut String, key: &str) {
+pub fn write_tag_key<T: Text + ?Sized>(out: &mut T, key: &str) {
     escape_name(out, key, true);
 }
 
 /// Append an escaped tag value.
-pub fn write_tag_value(out: &mut String, value: &str) {
+pub fn write_tag_value<T: Text + ?Sized>(out: &mut T, value: &str) {
     escape_name(out, value, true);
 }
 
 /// Append an escaped field key.
-pub fn write_field_key(out: &mut String, key: &str) {
+pub fn write_field_key<T: Text + ?Sized>(out: &mut T, key: &str) {
     escape_name(out, key, true);
 }
 
@@ -107,7 +148,7 @@ pub fn write_field_value(out: &mut String, value: &FieldValue) -> Result<(), Not
 }
 
 /// Append a timestamp (decimal nanoseconds).
-pub fn write_timestamp(out: &mut String, ts: i64) {
+pub fn write_timestamp<T: Text + ?Sized>(out: &mut T, ts: i64) {
     out.push_str(itoa::Buffer::new().format(ts));
 }
 
@@ -242,21 +283,26 @@ pub fn write_value(out: &mut String, value: &FieldValue) -> Result<(), NotFinite
 }
 
 /// Append an Int field value (`-5i`).
-pub fn write_int(out: &mut String, i: i64) {
+pub fn write_int<T: Text + ?Sized>(out: &mut T, i: i64) {
     out.push_str(itoa::Buffer::new().format(i));
-    out.push('i');
+    out.push_ascii(b'i');
 }
 
 /// Append a String field value, quoted, `"` and `\` escaped.
-pub fn write_string(out: &mut String, s: &str) {
-    out.push('"');
-    for c in s.chars() {
-        if c == '"' || c == '\\' {
-            out.push('\\');
-        }
-        out.push(c);
+pub fn write_string<T: Text + ?Sized>(out: &mut T, s: &str) {
+    out.push_ascii(b'"');
+    // Runs without `"` or `\\` are copied whole.
+    let mut rest = s;
+    while let Some(i) = rest.find(['"', '\\']) {
+        let (run, tail) = rest.split_at(i);
+        out.push_str(run);
+        out.push_ascii(b'\\');
+        let (c, tail) = tail.split_at(1);
+        out.push_str(c);
+        rest = tail;
     }
-    out.push('"');
+    out.push_str(rest);
+    out.push_ascii(b'"');
 }
 
 /// Append a finite float exactly as Rust's `Display` writes it: the shortest digits that read
@@ -271,7 +317,7 @@ pub fn write_string(out: &mut String, s: &str) {
 /// exactly 1658206780088562.25 is `...562.2` for zmij, `...562.3` for `Display`); `is_tie` finds those
 /// values exactly and they are written by `Display` itself. A test compares both on millions of
 /// values.
-pub fn write_float(out: &mut String, f: f64) {
+pub fn write_float<T: Text + ?Sized>(out: &mut T, f: f64) {
     let mut buf = zmij::Buffer::new();
     let s = buf.format_finite(f);
     // Usual case: zmij wrote plain decimal form `-?\d+\.\d+` (at most 17 significant digits).
@@ -298,7 +344,7 @@ pub fn write_float(out: &mut String, f: f64) {
             if !is_tie(f, body.bytes(), -(frac_len as i32) - 1) {
                 out.push_str(s);
             } else {
-                let _ = write!(out, "{f}");
+                out.push_str(&f.to_string());
             }
             return;
         }
@@ -334,10 +380,10 @@ pub fn write_float(out: &mut String, f: f64) {
         .count();
     let sig = digits.get(lead..n - trail).unwrap_or_default();
     if neg {
-        out.push('-');
+        out.push_ascii(b'-');
     }
     if sig.is_empty() {
-        out.push('0');
+        out.push_ascii(b'0');
         return;
     }
     let point = int.len() as i32 + exp - lead as i32;
@@ -345,24 +391,28 @@ pub fn write_float(out: &mut String, f: f64) {
     // Ties need more digits than a double's 15.65 decimal digits leave room for below 16.
     if n != digits_all || (len >= 16 && is_tie(f, sig.iter().copied(), point - len - 1)) {
         if neg {
-            out.pop();
+            out.pop_ascii();
         }
-        let _ = write!(out, "{f}");
+        out.push_str(&f.to_string());
         return;
     }
     // `sig` holds ASCII digits only.
     let sig = std::str::from_utf8(sig).unwrap_or_default();
     if point <= 0 {
         out.push_str("0.");
-        out.extend(std::iter::repeat_n('0', (-point) as usize));
+        for _ in 0..-point {
+            out.push_ascii(b'0');
+        }
         out.push_str(sig);
     } else if point >= len {
         out.push_str(sig);
-        out.extend(std::iter::repeat_n('0', (point - len) as usize));
+        for _ in 0..point - len {
+            out.push_ascii(b'0');
+        }
     } else {
         let (a, b) = sig.split_at(point as usize);
         out.push_str(a);
-        out.push('.');
+        out.push_ascii(b'.');
         out.push_str(b);
     }
 }
