@@ -24,6 +24,18 @@ pub struct Recent {
     /// The newest timestamp ever remembered: a record newer than it repeats none of `seen`
     /// (the usual case, records in time order), so the window is not searched.
     newest: Option<i64>,
+    /// The instance's last measurement and tags, with their part of the digest.
+    head: Head,
+}
+
+/// A record's measurement and tags (its `head`: its bytes up to the space before the fields,
+/// kept when they have no escapes) with their part of the digest: the records of one instance
+/// usually repeat them (about 150 instructions of a P2 record's digest). Not saved.
+#[derive(Debug, Default, Clone)]
+struct Head {
+    bytes: Vec<u8>,
+    sum: u64,
+    known: bool,
 }
 
 /// How many of an instance's newest records are saved with it (`--state`): a message the broker
@@ -46,12 +58,14 @@ impl Recent {
             // The ring is overwritten from the start once it is full.
             next: 0,
             seen,
+            head: Head::default(),
         }
     }
 
-    /// Whether `m` (timestamp `ts`) repeats a recent record; if not, it is remembered.
-    pub fn is_duplicate(&mut self, ts: i64, m: &Metric, keys: &mut ListKeys) -> bool {
-        let d = digest(m, keys);
+    /// Whether `m` (timestamp `ts`, parsed from `raw`) repeats a recent record; if not, it is
+    /// remembered.
+    pub fn is_duplicate(&mut self, ts: i64, m: &Metric, raw: &[u8], keys: &mut ListKeys) -> bool {
+        let d = digest(m, raw, &mut self.head, keys);
         let newer = self.newest.is_none_or(|n| ts > n);
         if !newer && self.seen.iter().any(|&(t, x)| t == ts && x == d) {
             return true;
@@ -92,14 +106,11 @@ impl Recent {
 /// A record whose list elements the parser read apart ([`lineproto::ListCapture`]) has the same
 /// digest as read into fields: each element's key digest (`lidar_12` as Float key) comes from
 /// [`ListKeys`].
-fn digest(m: &Metric, keys: &mut ListKeys) -> u64 {
-    let mut sum = bytes_digest(K[0], m.measurement.as_bytes());
-    for (k, v) in &m.tags {
-        sum = sum.wrapping_add(pair(
-            bytes_digest(K[1], k.as_bytes()),
-            bytes_digest(K[5], v.as_bytes()),
-        ));
-    }
+///
+/// The measurement's and tags' part is taken from `head` when `m`'s record (`raw`) starts with
+/// the same measurement and tags ([`Head`]).
+fn digest(m: &Metric, raw: &[u8], head: &mut Head, keys: &mut ListKeys) -> u64 {
+    let mut sum = head_digest(m, raw, head);
     for (k, v) in &m.fields {
         let (seed, bits) = match v {
             FieldValue::Float(f) => (K[2], f.to_bits()),
@@ -121,6 +132,49 @@ fn digest(m: &Metric, keys: &mut ListKeys) -> u64 {
         fields += m.list.count();
     }
     sum ^ (fields as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15)
+}
+
+/// The measurement's and tags' part of [`digest`]: the sum of their digests.
+fn head_sum(m: &Metric) -> u64 {
+    let mut sum = bytes_digest(K[0], m.measurement.as_bytes());
+    for (k, v) in &m.tags {
+        sum = sum.wrapping_add(pair(
+            bytes_digest(K[1], k.as_bytes()),
+            bytes_digest(K[5], v.as_bytes()),
+        ));
+    }
+    sum
+}
+
+/// [`head_sum`], `known`'s when `raw` starts with the same head as its record did; else made,
+/// and kept in `known`.
+///
+/// Why the head's bytes decide: `len`, the length `m`'s measurement and tags have written
+/// without escapes, is where a record without escapes in its head has the space after it. When
+/// `raw` has no backslash before `len` and a space at `len`, its head ends at or before `len`
+/// (a space inside a head is escaped), so `raw[..len]` alone decided `m`'s measurement and tags:
+/// a record starting with the same `len` bytes and a space has the same ones.
+#[inline]
+fn head_digest(m: &Metric, raw: &[u8], known: &mut Head) -> u64 {
+    let len = m.measurement.len()
+        + m.tags
+            .iter()
+            .map(|(k, v)| k.len() + v.len() + 2)
+            .sum::<usize>();
+    let head = raw.get(..len).filter(|_| raw.get(len) == Some(&b' '));
+    // The known head has no backslash: equal bytes have none either (searched only when a head
+    // is kept).
+    if known.known && head == Some(known.bytes.as_slice()) {
+        return known.sum;
+    }
+    let sum = head_sum(m);
+    if let Some(h) = head.filter(|h| memchr::memchr(b'\\', h).is_none()) {
+        known.bytes.clear();
+        known.bytes.extend_from_slice(h);
+        known.sum = sum;
+        known.known = true;
+    }
+    sum
 }
 
 /// The digests of the Float keys `<prefix><index>` of a captured list, by index, made once (a
@@ -229,6 +283,52 @@ mod tests {
         m
     }
 
+    /// The digest of `m` made afresh.
+    fn fresh(m: &Metric) -> u64 {
+        digest(m, b"", &mut Head::default(), &mut ListKeys::default())
+    }
+
+    /// [`Recent::is_duplicate`] on `line` parsed.
+    fn dup(r: &mut Recent, ts: i64, line: &str, k: &mut ListKeys) -> bool {
+        r.is_duplicate(ts, &metric(line), line.as_bytes(), k)
+    }
+
+    /// The head's part of the digest taken from the record before is the one made afresh,
+    /// whatever heads come in turn: the same, another tag value, escapes (a space, a comma, an
+    /// equals sign inside a name), a head that only starts like the one before, no tags.
+    #[test]
+    fn a_head_known_from_the_record_before_gives_the_digest_made_afresh() {
+        let lines = [
+            "mqtt_consumer,host=turtlebot3,topic=tessla a=0.015,b=\"0.0226\" 1",
+            "mqtt_consumer,host=turtlebot3,topic=tessla a=0.015,b=\"0.0196\" 2",
+            "mqtt_consumer,host=turtlebot3,topic=tessla2 a=0.015 2",
+            "mqtt_consumer,host=turtlebot3,topic=tessla a=0.015 2",
+            "mqtt_consumer,host=turtlebot3,topic=tess\\ la a=0.015 2",
+            "mqtt_consumer,host=turtlebot3,topic=tess\\,la a=0.015 2",
+            "mqtt_consumer,host=turtlebot3,topic=tess\\=la a=0.015 2",
+            "mqtt_consumer,host=turtlebot3,topic=tess la=0.015 2",
+            "mqtt_consumer,host=turtlebot3,topic=tess a=1 2",
+            "mqtt\\ consumer,host=turtlebot3,topic=tessla a=0.015 2",
+            "mqtt_consumer,topic=tessla,host=turtlebot3 a=0.015 2",
+            "mqtt_consumer a=0.015 2",
+            "m a=1 1",
+        ];
+        let (mut h, mut k) = (Head::default(), ListKeys::default());
+        for round in 0..3 {
+            for (i, line) in lines.iter().enumerate() {
+                let m = metric(line);
+                let known = digest(&m, line.as_bytes(), &mut h, &mut k);
+                assert_eq!(known, fresh(&m), "{line} (round {round})");
+                // The same record again, and the one after it, with the head now known.
+                assert_eq!(digest(&m, line.as_bytes(), &mut h, &mut k), fresh(&m));
+                let next = lines[(i + 1) % lines.len()];
+                let n = metric(next);
+                let got = digest(&n, next.as_bytes(), &mut h, &mut k);
+                assert_eq!(got, fresh(&n), "{line} then {next}");
+            }
+        }
+    }
+
     /// A record whose list the parser read apart has the digest it has read into fields, so a
     /// redelivery is found across the moment the processor starts reading lists apart.
     #[test]
@@ -251,8 +351,8 @@ mod tests {
                 "{line}"
             );
             assert_eq!(
-                digest(&plain, &mut keys),
-                digest(&apart, &mut keys),
+                digest(&plain, line.as_bytes(), &mut Head::default(), &mut keys),
+                digest(&apart, line.as_bytes(), &mut Head::default(), &mut keys),
                 "{line}"
             );
         }
@@ -263,17 +363,17 @@ mod tests {
         let mut r = Recent::default();
         let mut k = ListKeys::default();
         let ts = 1_700_000_000_000_000_000;
-        assert!(!r.is_duplicate(ts, &metric("m,topic=t a=1,b=2,s=\"x\" 1"), &mut k));
-        assert!(r.is_duplicate(ts, &metric("m,topic=t b=2,s=\"x\",a=1 1"), &mut k));
+        assert!(!dup(&mut r, ts, "m,topic=t a=1,b=2,s=\"x\" 1", &mut k));
+        assert!(dup(&mut r, ts, "m,topic=t b=2,s=\"x\",a=1 1", &mut k));
         // Another value, another field set, another time, another tag: not a duplicate.
-        assert!(!r.is_duplicate(ts, &metric("m,topic=t a=1,b=3,s=\"x\" 1"), &mut k));
-        assert!(!r.is_duplicate(ts, &metric("m,topic=t a=1,b=2 1"), &mut k));
-        assert!(!r.is_duplicate(ts + 1, &metric("m,topic=t a=1,b=2,s=\"x\" 1"), &mut k));
-        assert!(!r.is_duplicate(ts, &metric("m,topic=u a=1,b=2,s=\"x\" 1"), &mut k));
+        assert!(!dup(&mut r, ts, "m,topic=t a=1,b=3,s=\"x\" 1", &mut k));
+        assert!(!dup(&mut r, ts, "m,topic=t a=1,b=2 1", &mut k));
+        assert!(!dup(&mut r, ts + 1, "m,topic=t a=1,b=2,s=\"x\" 1", &mut k));
+        assert!(!dup(&mut r, ts, "m,topic=u a=1,b=2,s=\"x\" 1", &mut k));
         // Swapped values between keys are different records.
-        assert!(!r.is_duplicate(ts, &metric("m,topic=t a=2,b=1,s=\"x\" 1"), &mut k));
+        assert!(!dup(&mut r, ts, "m,topic=t a=2,b=1,s=\"x\" 1", &mut k));
         // Int 1 and float 1 differ.
-        assert!(!r.is_duplicate(ts, &metric("m,topic=t a=1i,b=2,s=\"x\" 1"), &mut k));
+        assert!(!dup(&mut r, ts, "m,topic=t a=1i,b=2,s=\"x\" 1", &mut k));
     }
 
     /// Records that differ in one key byte (at any length, through the 16-byte chunks), in one
@@ -304,7 +404,7 @@ mod tests {
                             ],
                             ..Default::default()
                         };
-                        seen.insert(digest(&m, &mut ListKeys::default()));
+                        seen.insert(fresh(&m));
                         n += 1;
                     }
                 }
@@ -323,7 +423,7 @@ mod tests {
                 ],
                 ..Default::default()
             };
-            distinct.insert(digest(&m, &mut ListKeys::default()));
+            distinct.insert(fresh(&m));
             total += 1;
         }
         assert_eq!(distinct.len(), total);
@@ -334,13 +434,14 @@ mod tests {
         let mut r = Recent::default();
         let mut k = ListKeys::default();
         let m = metric("m a=1 1");
+        let raw = b"m a=1 1";
         for t in 0..WINDOW as i64 {
-            assert!(!r.is_duplicate(t, &m, &mut k));
+            assert!(!r.is_duplicate(t, &m, raw, &mut k));
         }
-        assert!(r.is_duplicate(0, &m, &mut k));
-        assert!(!r.is_duplicate(WINDOW as i64, &m, &mut k));
+        assert!(r.is_duplicate(0, &m, raw, &mut k));
+        assert!(!r.is_duplicate(WINDOW as i64, &m, raw, &mut k));
         // Record 0 was overwritten by the newest one.
-        assert!(!r.is_duplicate(0, &m, &mut k));
-        assert!(r.is_duplicate(WINDOW as i64 - 1, &m, &mut k));
+        assert!(!r.is_duplicate(0, &m, raw, &mut k));
+        assert!(r.is_duplicate(WINDOW as i64 - 1, &m, raw, &mut k));
     }
 }
