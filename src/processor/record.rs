@@ -130,7 +130,9 @@ impl Processor {
             return;
         };
         if let Some(t) = metric.timestamp
-            && inst.recent.is_duplicate(t, metric, rec.bytes, &mut self.list_keys)
+            && inst
+                .recent
+                .is_duplicate(t, metric, rec.bytes, &mut self.list_keys)
         {
             self.counters.duplicates += 1;
             let by = &self.opts.instance_by;

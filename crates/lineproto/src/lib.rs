@@ -22,8 +22,7 @@ pub use metric::{FieldValue, Metric};
 pub use parse::{ParseError, parse_record, parse_record_into};
 pub use split::{DEFAULT_MAX_RECORD, OVERSIZED_HEAD, Record, RecordRef, RecordSplitter};
 pub use write::{
-    Text,
-    LineWriter, NotFinite, measurement_is_writable, name_is_writable, write_field_key,
+    LineWriter, NotFinite, Text, measurement_is_writable, name_is_writable, write_field_key,
     write_field_value, write_float, write_measurement, write_tag_key, write_tag_value,
     write_timestamp, write_value,
 };
