@@ -48,7 +48,9 @@ impl Metric {
             .map(|(_, v)| v.as_str())
     }
 
-    /// The value of field `key`, if the metric has it.
+    /// The value of field `key`, if the metric has it. (Inline: a binding looks up each
+    /// record's fields by name.)
+    #[inline]
     pub fn field(&self, key: &str) -> Option<&FieldValue> {
         self.fields.iter().find(|(k, _)| k == key).map(|(_, v)| v)
     }
