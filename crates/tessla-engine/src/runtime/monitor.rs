@@ -271,9 +271,11 @@ impl Monitor {
         });
     }
 
+    /// One step: by the program's flat plan when it has one and it has an answer, else by the
+    /// general step. Out of line, as the thread's scratch is borrowed around it.
+    #[inline(never)]
     fn eval<S: FnMut(OutputEvent<'_>)>(&mut self, ts: i64, sc: &mut Scratch, sink: &mut S) {
         let program = &*self.program;
-        let slots = &program.last_slot[..];
         let first = self.last_evaluated.is_none();
         if let Some(plan) = program.step_plan() {
             let st = StepState {
@@ -297,6 +299,21 @@ impl Monitor {
             }
             // No scalar answer for this step: the general step runs it, from the same state.
         }
+        self.general(ts, first, sc, sink);
+    }
+
+    /// The general step (every node's value as an `Option<Value>`), out of line: its code is
+    /// not compiled with the plan's, so a change to one leaves the other's as it was.
+    #[inline(never)]
+    fn general<S: FnMut(OutputEvent<'_>)>(
+        &mut self,
+        ts: i64,
+        first: bool,
+        sc: &mut Scratch,
+        sink: &mut S,
+    ) {
+        let program = &*self.program;
+        let slots = &program.last_slot[..];
         let cur = &mut sc.cur;
         // Every entry is `None` between steps (the commit below empties it).
         if cur.len() != program.nodes.len() {

@@ -4,8 +4,8 @@
 //! nodes without one are handed back (`check --ir` names them).
 
 use super::{
-    Block, CONST, CallMode, FArg, Instr, KArg, Kernel, Kind, LiftOp, NoPlan, Op1, Op2, Opnd, Plan,
-    Ref, Src, Straight, need,
+    Block, CONST, CallMode, FArg, Fused, Instr, KArg, Keep, Kernel, Kind, LiftOp, NoPlan, Op1, Op2,
+    Opnd, Plan, Ref, Src, Straight, need,
 };
 use crate::ir::{self, LiftFn, NO_SLOT, Node, NodeId, SArg};
 use crate::value::Value;
@@ -731,7 +731,11 @@ impl Plan {
             })
             .collect();
         let full = !temp_nodes.is_empty() || !delays.is_empty() || b.forced.iter().any(|f| *f);
-        let block = if full { None } else { block(&all, n + 1) };
+        let block = if full {
+            None
+        } else {
+            block(&all, n + 1, &kept)
+        };
         Ok(Plan {
             block,
             instrs: all,
@@ -756,7 +760,7 @@ impl Plan {
 /// `reduce`, `time`, an alias or a `default` of one). What depends on values or on kept values
 /// (`filter`, `merge`, `last`, an event lift, a lift reading a node that may be silent) stays
 /// the loop's instruction.
-fn block(instrs: &[Instr], slots: usize) -> Option<Block> {
+fn block(instrs: &[Instr], slots: usize, kept: &[(u32, u32, Kind)]) -> Option<Block> {
     let mut sure = vec![false; slots];
     let is = |sure: &[bool], n: u32| sure.get(n as usize).copied().unwrap_or(false);
     let opnd = |sure: &[bool], a: &Src| -> Option<Opnd> {
@@ -896,9 +900,20 @@ fn block(instrs: &[Instr], slots: usize) -> Option<Block> {
             None => code.push(Straight::Other(u32::try_from(i).ok()?)),
         }
     }
+    // The kept nodes the block fires for certain: written back without a presence test, by kind.
+    let mut keep = Keep::default();
+    for &(n, slot, kind) in kept {
+        match kind {
+            Kind::Float if is(&sure, n) => keep.float.push((n, slot)),
+            Kind::Int if is(&sure, n) => keep.int.push((n, slot)),
+            Kind::Bool if is(&sure, n) => keep.bool.push((n, slot)),
+            _ => keep.rest.push((n, slot, kind)),
+        }
+    }
     (!inputs.is_empty() && straight > inputs.len()).then_some(Block {
         inputs,
-        code,
+        keep,
+        code: code.iter().map(Fused::of).collect(),
         straight,
     })
 }

@@ -22,7 +22,10 @@
 //! clock analysis): for the steps where every input has an event (after the first), the nodes
 //! that then fire for certain (operators and signal lifts of such nodes and constants, `fold`s
 //! and `reduce`s of them) run without presence tests or kept-value fallbacks; the rest run as
-//! in the loop. On P2 every node but the `filter` is straight.
+//! in the loop. On P2 every node but the `filter` is straight. The block is compiled once
+//! (`fused`): each node one instruction whose variant names its operator and its operands'
+//! shape, so a node costs one dispatch; after a step of the block, the kept nodes it fires for
+//! certain are written back by kind, without a presence test.
 //!
 //! Every other node has a form too: `delay` (its target read in the step, armed after it), and
 //! a call (`Instr::Call`) of the node's compiled function for what has no typed form (natives,
@@ -669,9 +672,54 @@ enum Straight {
 struct Block {
     /// The inputs that must all have an event (the plan's `Input` instructions').
     inputs: Vec<u32>,
-    code: Vec<Straight>,
+    /// Its nodes, compiled ([`Fused::of`] of each [`Straight`]).
+    code: Vec<Fused>,
     /// How many of the nodes run straight (not [`Straight::Other`]).
     straight: usize,
+    /// The plan's kept nodes of a scalar kind, as a step of the block writes them back.
+    keep: Keep,
+}
+
+/// The kept nodes of a scalar kind ([`Plan::kept`]) after a step of the straight block: those
+/// it fires for certain, by kind (no presence test, no test of the kind), and the rest.
+#[derive(Debug, Default)]
+struct Keep {
+    float: Vec<(u32, u32)>,
+    int: Vec<(u32, u32)>,
+    bool: Vec<(u32, u32)>,
+    rest: Vec<(u32, u32, Kind)>,
+}
+
+impl Keep {
+    /// Keep this step's events (the block ran it) in `last`.
+    #[inline(always)]
+    fn write<S: Cur + ?Sized>(&self, cur: &S, last: &mut [Option<Value>]) {
+        for (list, kind) in [
+            (&self.float, Kind::Float),
+            (&self.int, Kind::Int),
+            (&self.bool, Kind::Bool),
+        ] {
+            for &(n, slot) in list {
+                if let Some(l) = last.get_mut(slot as usize) {
+                    keep(l, kind, cur_of(cur, n).bits);
+                }
+            }
+        }
+        keep_some(&self.rest, cur, last);
+    }
+}
+
+/// Keep the events of `kept` this step has in `last`.
+#[inline(always)]
+fn keep_some<S: Cur + ?Sized>(kept: &[(u32, u32, Kind)], cur: &S, last: &mut [Option<Value>]) {
+    for &(n, slot, kind) in kept {
+        let c = cur_of(cur, n);
+        if c.has
+            && let Some(l) = last.get_mut(slot as usize)
+        {
+            keep(l, kind, c.bits);
+        }
+    }
 }
 
 impl Block {
@@ -815,6 +863,9 @@ fn need<T>(o: Option<T>) -> Result<T, NoPlan> {
 }
 
 mod build;
+mod fused;
+
+use fused::{Flow, Fused};
 
 /// What one step of a plan reads and writes of a monitor.
 pub struct StepState<'a> {
@@ -1042,11 +1093,16 @@ impl Plan {
             temps.clear();
             temps.resize_with(self.slots, || None);
         }
+        // The block that ran the step, if one did.
+        let mut ran = None;
         let done = if self.full {
             self.eval::<S, C, true>(&st, cur, temps, call)
         } else if let Some(b) = self.block.as_ref().filter(|b| b.ticks(&st)) {
             match self.straight(b, &st, cur, temps, call) {
-                Some(true) => Some(()),
+                Some(true) => {
+                    ran = Some(b);
+                    Some(())
+                }
                 // A kept value the block cannot read as it assumed: the loop runs the step.
                 Some(false) => self.eval::<S, C, false>(&st, cur, temps, call),
                 None => None,
@@ -1094,13 +1150,9 @@ impl Plan {
                 }
             }
         }
-        for &(n, slot, kind) in &self.kept {
-            let c = cur_of(cur, n);
-            if c.has
-                && let Some(l) = st.last.get_mut(slot as usize)
-            {
-                keep(l, kind, c.bits);
-            }
+        match ran {
+            Some(b) => b.keep.write(cur, st.last),
+            None => keep_some(&self.kept, cur, st.last),
         }
         if !self.kept_vals.is_empty() {
             self.keep_values(cur, st.inputs, st.last, temps);
@@ -1363,60 +1415,14 @@ impl Plan {
         C: FnMut(usize, &[Option<&Value>]) -> Option<Value>,
     {
         let last = &*st.last;
-        for s in &b.code {
-            let (dst, v) = match *s {
-                Straight::Input { dst, input, kind } => match st.inputs.get(input as usize) {
-                    Some(Some(v)) => (dst, kind.bits(v)?),
-                    _ => return Some(false),
-                },
-                Straight::Op2 { dst, op, a, b } => (dst, op.run(opnd(cur, a), opnd(cur, b))?),
-                Straight::Op1 { dst, op, a } => (dst, op.run(cur_of(cur, a).bits)),
-                Straight::Ite {
-                    dst,
-                    cond,
-                    then,
-                    other,
-                } => (
-                    dst,
-                    if opnd(cur, cond) != 0 {
-                        opnd(cur, then)
-                    } else {
-                        opnd(cur, other)
-                    },
-                ),
-                Straight::Fold {
-                    dst,
-                    stream,
-                    acc,
-                    op,
-                    a,
-                    b,
-                } => match kept_of(last, acc.slot, acc.kind)? {
-                    Some(s) => (dst, op.fold(a, b, s, cur_of(cur, stream).bits)?),
-                    None => return Some(false),
-                },
-                Straight::Reduce {
-                    dst,
-                    stream,
-                    acc,
-                    op,
-                    a,
-                    b,
-                } => {
-                    let x = cur_of(cur, stream).bits;
-                    match kept_of(last, acc.slot, acc.kind)? {
-                        Some(s) => (dst, op.fold(a, b, s, x)?),
-                        None => (dst, x),
-                    }
+        for f in &b.code {
+            match f.run(st, last, cur)? {
+                Flow::Done => {}
+                Flow::Other(i) => {
+                    self.one::<S, C, false>(self.instrs.get(i as usize)?, st, cur, temps, call)?
                 }
-                Straight::Copy { dst, src } => (dst, opnd(cur, src)),
-                Straight::Time { dst } => (dst, st.ts as u64),
-                Straight::Other(i) => {
-                    self.one::<S, C, false>(self.instrs.get(i as usize)?, st, cur, temps, call)?;
-                    continue;
-                }
-            };
-            cur.set(dst, some(v));
+                Flow::Loop => return Some(false),
+            }
         }
         Some(true)
     }
