@@ -288,11 +288,6 @@ fn a_partition_handed_over_holds_the_fleet_until_its_standby_takes_over() {
     a2.write(&records(base, Some(0), half..end));
     let (a_out, a_err, code) = a.finish();
     assert_eq!(code, 0, "{a_err}");
-    assert!(
-        a_err.contains("a standby of partition p0 is live")
-            && a_err.contains("the partition is handed over"),
-        "{a_err}"
-    );
     let new = wait_any_err(&mut [&mut a2, &mut b], "lease.vfleet taken by");
     a2.wait_err("p0 taken over", 0, |l| l.contains("holding partition p0"));
     let (holder, other) = if new == 0 { (a2, b) } else { (b, a2) };
@@ -321,6 +316,19 @@ fn a_partition_handed_over_holds_the_fleet_until_its_standby_takes_over() {
         "p1's records reached the fleet level before p0's takeover ({p1_done:?}, {p0_back:?}):\n{b_err}"
     );
 
+    let mut got = fleet_lines(&a_out);
+    let first = got.len();
+    got.extend(fleet_lines(&holder_out));
+    eprintln!(
+        "handed over while p1 went on: one process {} fleet lines; the first holder {first}, the new holder {}",
+        want.len(),
+        got.len() - first
+    );
+    assert_eq!(
+        got, want,
+        "first holder:\n{a_err}\nnew holder:\n{holder_out}\n{holder_err}"
+    );
+
     // The status output names p0 handing over, then its standby's takeover.
     let status: Vec<&str> = a_out
         .lines()
@@ -335,16 +343,9 @@ fn a_partition_handed_over_holds_the_fleet_until_its_standby_takes_over() {
         handing.is_some() && handing < takeover,
         "p0's end at the fleet level: {ended}\n{status:#?}"
     );
-    let mut got = fleet_lines(&a_out);
-    let first = got.len();
-    got.extend(fleet_lines(&holder_out));
-    eprintln!(
-        "handed over while p1 went on: one process {} fleet lines; the first holder {first}, the new holder {}",
-        want.len(),
-        got.len() - first
-    );
-    assert_eq!(
-        got, want,
-        "first holder:\n{a_err}\nnew holder:\n{holder_out}\n{holder_err}"
+    assert!(
+        a_err.contains("a standby of partition p0 is live")
+            && a_err.contains("the partition is handed over"),
+        "{a_err}"
     );
 }
