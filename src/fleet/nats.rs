@@ -7,8 +7,11 @@
 //! partition lease's generation; and the fleet level itself, run by every process on the same
 //! entries in the bucket's order (a hot standby), written out only by the holder of the `fleet`
 //! lease, which records how far it wrote (`fleet.written`, the stream sequence) so that a
-//! standby taking over writes from there on. The holder also decides drop-outs (a partition
-//! silent past twice the lease TTL) and the end of the fleet's input (a close: stopping, every
+//! standby taking over writes from there on. A holder of a partition that ends while a standby
+//! of it is live says so (the partition is handed over: the fleet holds it until the standby's
+//! first entry). The holder of the fleet lease also decides drop-outs (a partition silent past
+//! twice the lease TTL), the end of a partition handed over whose standbys are gone, and the
+//! end of the fleet's input (a close: stopping, every
 //! partition ended and no partition lease held, so no restart is under way) and puts them in
 //! the stream, so every process applies them at the same point; a process stopping without
 //! the fleet lease takes it to close when it was released, or when it is the last live
@@ -578,7 +581,7 @@ impl FleetNats {
     }
 
     /// As the fleet level's holder: put a drop-out in the stream for each live partition not
-    /// heard for the bound.
+    /// heard for the bound (one handing over: [`Self::end_handed`]).
     fn drop_silent(&mut self) {
         let silent: Vec<(String, u64)> = self
             .table
