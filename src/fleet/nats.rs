@@ -375,7 +375,8 @@ impl FleetNats {
     /// it is live, so that the partition is handed over (it holds the fleet's bound until the
     /// standby's first entry) instead of ended. Not known: ended, as before.
     fn handed_over(&self) -> bool {
-        match self.live_standby(Some(&self.partition)) {
+        // Never its own key (one left live by a renewal overdue for a moment).
+        match self.live_standby(Some(&self.partition), Some(self.standby_key())) {
             Ok(Some(key)) => {
                 log_info!(
                     "fleet: a standby of partition {} is live ({key}): the partition is handed over, and the fleet level holds it until the standby's first entry",
@@ -885,7 +886,10 @@ impl FleetNats {
     /// [`STANDBY_EVERY`]): it will take a partition over, so the fleet's input has not ended.
     /// Logged once (`said`). Not known (the keys cannot be listed): not live, as before.
     fn standby_live(&self, said: &mut bool) -> bool {
-        let live = self.live_standby(None).ok().flatten();
+        let live = self
+            .live_standby(None, self.own_key_unless_standing_by())
+            .ok()
+            .flatten();
         if let Some(key) = &live
             && !*said
         {
@@ -903,11 +907,14 @@ impl FleetNats {
         self.standby_at.is_none().then(|| self.standby_key())
     }
 
-    /// [`live_standby`] of partition `of` (`None`: any), waited for.
-    fn live_standby(&self, of: Option<&str>) -> Result<Option<String>, String> {
+    /// [`live_standby`] of partition `of` (`None`: any) other than key `except`, waited for.
+    fn live_standby(
+        &self,
+        of: Option<&str>,
+        except: Option<String>,
+    ) -> Result<Option<String>, String> {
         let store = self.store.clone();
         let of = of.map(str::to_string);
-        let except = self.own_key_unless_standing_by();
         self.conn
             .call(async move { live_standby(store, of.as_deref(), except.as_deref()).await })
             .unwrap_or_else(|| Err("the fleet's NATS thread stopped".into()))
