@@ -7,8 +7,11 @@
 //! partition lease's generation; and the fleet level itself, run by every process on the same
 //! entries in the bucket's order (a hot standby), written out only by the holder of the `fleet`
 //! lease, which records how far it wrote (`fleet.written`, the stream sequence) so that a
-//! standby taking over writes from there on. The holder also decides drop-outs (a partition
-//! silent past twice the lease TTL) and the end of the fleet's input (a close: stopping, every
+//! standby taking over writes from there on. A holder of a partition that ends while a standby
+//! of it is live says so (the partition is handed over: the fleet holds it until the standby's
+//! first entry). The holder of the fleet lease also decides drop-outs (a partition silent past
+//! twice the lease TTL), the end of a partition handed over whose standbys are gone, and the
+//! end of the fleet's input (a close: stopping, every
 //! partition ended and no partition lease held, so no restart is under way) and puts them in
 //! the stream, so every process applies them at the same point; a process stopping without
 //! the fleet lease takes it to close when it was released, or when it is the last live
@@ -51,6 +54,9 @@ const WAITING_SAID_AFTER: Duration = Duration::from_secs(10);
 /// A standby (a process of a partition whose lease another holds) renews its key
 /// `fleet.standby.<partition>.<pid>` this often; one older than three times this is not live.
 const STANDBY_EVERY: Duration = Duration::from_secs(1);
+/// The holder of the fleet lease looks for the standbys of the partitions handing over at
+/// most this often (only while one is).
+const HANDING_LOOK_EVERY: Duration = Duration::from_millis(200);
 /// How long a process stopping waits to take a fleet lease it found released.
 const TAKE_FREE_WAIT: Duration = Duration::from_secs(2);
 /// A process stopping without the fleet lease, which hears no other live partition for this
@@ -68,6 +74,10 @@ enum Job {
     Checkpoint(Box<Taken>, Duration),
     Flush(std::sync::mpsc::Sender<()>),
 }
+
+/// A look for the standbys of the partitions handing over: per partition and generation, the
+/// key of a live standby of it, none, or why it is not known.
+type Looked = Vec<(String, u64, Result<Option<String>, String>)>;
 
 #[derive(Default)]
 struct Inbox {
@@ -122,6 +132,11 @@ pub struct FleetNats {
     waiting: Option<(u64, Instant, bool)>,
     /// As a standby: when this process last renewed its standby key (`None`: not a standby).
     standby_at: Option<Instant>,
+    /// As the fleet level's holder: when it last looked for the standbys of the partitions
+    /// handing over, and the answer, until it came.
+    look: (Instant, Option<tokio::sync::oneshot::Receiver<Looked>>),
+    /// The ends this process put for partitions handing over whose standbys were gone.
+    ends_sent: HashSet<(String, u64)>,
 }
 
 /// A switch entry: the fleet level runs fleet rollout `fleet_switch`'s version from here on.
@@ -194,7 +209,7 @@ impl FleetNats {
                     level.set_bound(table.bound());
                     written = c.written;
                     applied = c.seq;
-                    for (p, _) in table.live() {
+                    for (p, _) in table.holding_back() {
                         heard.insert(p.to_string(), Instant::now());
                     }
                 }
@@ -243,6 +258,8 @@ impl FleetNats {
             held: VecDeque::new(),
             waiting: None,
             standby_at: None,
+            look: (Instant::now() - HANDING_LOOK_EVERY, None),
+            ends_sent: HashSet::new(),
         })
     }
 
@@ -327,7 +344,9 @@ impl FleetNats {
         // generation they were stepped in (a newer holder's entries make them stale).
         let fresh = generation.is_some();
         self.holds_partition = fresh;
-        self.stand_by(fresh);
+        // A new generation (this process took the partition, at its start or over from
+        // another): its first entry goes out now.
+        let first = fresh && generation != self.generation;
         self.generation = generation.or(self.generation);
         if let Some(g) = self.generation {
             for d in &drained {
@@ -336,14 +355,44 @@ impl FleetNats {
                 }
             }
             let promise = self.front.max(now_ns().saturating_sub(self.silence));
-            let msg = Msg::of(&self.partition, g, promise, end, drained);
-            if msg.is_data() || (fresh && self.last_sent.elapsed() >= HEARTBEAT) {
+            let mut msg = Msg::of(&self.partition, g, promise, end, drained);
+            msg.handed = end && fresh && self.handed_over();
+            if msg.is_data() || first || (fresh && self.last_sent.elapsed() >= HEARTBEAT) {
                 let part = self.partition.clone();
                 self.put(&part, g, "", &msg);
                 self.last_sent = Instant::now();
             }
         }
+        // Only after the entry (the queue puts in order): a standby taking the partition over
+        // marks its key stale once its first entry is in the stream, so the fleet level's
+        // holder, which ends a partition handing over when it sees no standby of it live,
+        // puts that end after the takeover (where it is stale), never before it.
+        self.stand_by(fresh);
         self.follow(out);
+    }
+
+    /// This process's partition ends here (its holder's input ended): whether a standby of
+    /// it is live, so that the partition is handed over (it holds the fleet's bound until the
+    /// standby's first entry) instead of ended. Not known: ended, as before.
+    fn handed_over(&self) -> bool {
+        // Never its own key (one left live by a renewal overdue for a moment).
+        match self.live_standby(Some(&self.partition), Some(self.standby_key())) {
+            Ok(Some(key)) => {
+                log_info!(
+                    "fleet: a standby of partition {} is live ({key}): the partition is handed over, and the fleet level holds it until the standby's first entry",
+                    self.partition
+                );
+                true
+            }
+            Ok(None) => false,
+            Err(e) => {
+                log_warn!(
+                    "fleet: cannot read the standby keys ({e}); partition {} ends without a hand-over",
+                    self.partition
+                );
+                false
+            }
+        }
     }
 
     /// Take in the fleet's messages, write the outputs while holding the fleet lease, and (as
@@ -446,6 +495,7 @@ impl FleetNats {
                 ));
             }
             self.drop_silent();
+            self.end_handed();
             self.checkpoint();
             self.put_switches();
         } else {
@@ -532,7 +582,7 @@ impl FleetNats {
     }
 
     /// As the fleet level's holder: put a drop-out in the stream for each live partition not
-    /// heard for the bound.
+    /// heard for the bound (one handing over: [`Self::end_handed`]).
     fn drop_silent(&mut self) {
         let silent: Vec<(String, u64)> = self
             .table
@@ -550,12 +600,109 @@ impl FleetNats {
                 "fleet: partition {p} (generation {g}) sent nothing for {}; it drops out of the fleet level",
                 humantime::format_duration(self.drop_after)
             );
-            let msg = Msg {
-                drop: true,
-                ..Msg::of(&p, g, 0, false, Vec::new())
-            };
-            self.put(&p, g, "drop", &msg);
-            self.drops_sent.insert((p, g));
+            self.put_drop(p, g);
+        }
+    }
+
+    /// Put a drop-out of partition `p` at generation `g` in the stream.
+    fn put_drop(&mut self, p: String, g: u64) {
+        let msg = Msg {
+            drop: true,
+            ..Msg::of(&p, g, 0, false, Vec::new())
+        };
+        self.put(&p, g, "drop", &msg);
+        self.drops_sent.insert((p, g));
+    }
+
+    /// As the fleet level's holder, while a partition is handing over (its holder ended while
+    /// a standby of it was live), at most every [`HANDING_LOOK_EVERY`]: look for its standbys
+    /// (off the step loop; the answer is taken in at a later call). A standby live: the
+    /// partition counts as heard (its next holder is coming). None live any more (stopped:
+    /// its key deleted; or stale): put an end for the partition at that generation in the
+    /// stream, so every process ends it at the same point (after the standby's first entry,
+    /// where it is stale, if the standby took over: it marks its key stale only after that
+    /// entry). The keys not readable: the drop-out rule (silent past the drop time).
+    fn end_handed(&mut self) {
+        if let Some(rx) = &mut self.look.1 {
+            match rx.try_recv() {
+                Ok(looked) => {
+                    self.look.1 = None;
+                    for (p, g, live) in looked {
+                        self.looked(p, g, live);
+                    }
+                }
+                Err(tokio::sync::oneshot::error::TryRecvError::Empty) => return,
+                Err(tokio::sync::oneshot::error::TryRecvError::Closed) => self.look.1 = None,
+            }
+        }
+        let handing: Vec<(String, u64)> = self
+            .table
+            .handing()
+            // This process took the partition over at a newer generation: its entry comes.
+            .filter(|(p, g)| {
+                !(self.holds_partition
+                    && *p == self.partition
+                    && self.generation.is_some_and(|own| own > *g))
+            })
+            .map(|(p, g)| (p.to_string(), g))
+            .filter(|k| !self.ends_sent.contains(k) && !self.drops_sent.contains(k))
+            .collect();
+        if handing.is_empty() || self.look.0.elapsed() < HANDING_LOOK_EVERY {
+            return;
+        }
+        let (tx, rx) = tokio::sync::oneshot::channel();
+        let store = self.store.clone();
+        let except = self.own_key_unless_standing_by();
+        self.conn.handle.spawn(async move {
+            let mut looked = Vec::new();
+            for (p, g) in handing {
+                let live = live_standby(store.clone(), Some(&p), except.as_deref()).await;
+                looked.push((p, g, live));
+            }
+            let _ = tx.send(looked);
+        });
+        self.look = (Instant::now(), Some(rx));
+    }
+
+    /// The answer of a look for partition `p`'s standbys ([`Self::end_handed`]).
+    fn looked(&mut self, p: String, g: u64, live: Result<Option<String>, String>) {
+        if !self.table.handing().any(|h| h == (p.as_str(), g)) {
+            return;
+        }
+        match live {
+            Ok(Some(_)) => {
+                self.heard.insert(p, Instant::now());
+            }
+            Ok(None) => {
+                if self.ends_sent.contains(&(p.clone(), g)) {
+                    return;
+                }
+                log_info!(
+                    "fleet: partition {p} (generation {g}) was handed over, but no standby of it is live any more: it ends"
+                );
+                let msg = Msg::of(&p, g, 0, true, Vec::new());
+                self.put(&p, g, "end", &msg);
+                self.ends_sent.insert((p, g));
+            }
+            Err(e) => {
+                crate::log::warn_limited("fleet standby keys", || {
+                    format!(
+                        "fleet: cannot read the standby keys of partition {p}, which is handed over ({e}); it drops out if nothing comes from it for {}",
+                        humantime::format_duration(self.drop_after)
+                    )
+                });
+                let silent = self
+                    .heard
+                    .get(&p)
+                    .is_none_or(|at| at.elapsed() > self.drop_after);
+                if silent && !self.drops_sent.contains(&(p.clone(), g)) {
+                    log_warn!(
+                        "fleet: partition {p} (generation {g}) sent nothing for {} while handed over; it drops out of the fleet level",
+                        humantime::format_duration(self.drop_after)
+                    );
+                    self.put_drop(p, g);
+                }
+            }
         }
     }
 
@@ -739,39 +886,9 @@ impl FleetNats {
     /// [`STANDBY_EVERY`]): it will take a partition over, so the fleet's input has not ended.
     /// Logged once (`said`). Not known (the keys cannot be listed): not live, as before.
     fn standby_live(&self, said: &mut bool) -> bool {
-        use futures_util::StreamExt;
-        let store = self.store.clone();
-        let own = self.standby_key();
-        let stale = i64::try_from((STANDBY_EVERY * 3).as_nanos()).unwrap_or(i64::MAX);
-        let now = now_ns();
         let live = self
-            .conn
-            .call(async move {
-                let Ok(keys) = store.keys().await else {
-                    return None;
-                };
-                let keys: Vec<String> = keys
-                    .filter_map(|k| async move { k.ok() })
-                    .filter(|k| {
-                        let k = k.clone();
-                        async move { k.starts_with("fleet.standby.") }
-                    })
-                    .collect()
-                    .await;
-                for key in keys.into_iter().filter(|k| *k != own) {
-                    let Ok(Some(v)) = store.get(&key).await else {
-                        continue;
-                    };
-                    let at = std::str::from_utf8(&v)
-                        .ok()
-                        .and_then(|t| t.trim().parse::<i64>().ok())
-                        .unwrap_or(0);
-                    if now.saturating_sub(at) < stale {
-                        return Some(key);
-                    }
-                }
-                None
-            })
+            .live_standby(None, self.own_key_unless_standing_by())
+            .ok()
             .flatten();
         if let Some(key) = &live
             && !*said
@@ -782,6 +899,25 @@ impl FleetNats {
             );
         }
         live.is_some()
+    }
+
+    /// This process's standby key unless it stands by now (a key it left behind, deleted or
+    /// marked stale, is not a standby).
+    fn own_key_unless_standing_by(&self) -> Option<String> {
+        self.standby_at.is_none().then(|| self.standby_key())
+    }
+
+    /// [`live_standby`] of partition `of` (`None`: any) other than key `except`, waited for.
+    fn live_standby(
+        &self,
+        of: Option<&str>,
+        except: Option<String>,
+    ) -> Result<Option<String>, String> {
+        let store = self.store.clone();
+        let of = of.map(str::to_string);
+        self.conn
+            .call(async move { live_standby(store, of.as_deref(), except.as_deref()).await })
+            .unwrap_or_else(|| Err("the fleet's NATS thread stopped".into()))
     }
 
     /// Whether a process (other than this one, for the partition it holds) holds the lease of
@@ -842,6 +978,52 @@ impl FleetNats {
             let _ = rx.recv_timeout(Duration::from_secs(5));
         }
     }
+}
+
+/// The key of a live standby (its key renewed within three [`STANDBY_EVERY`]) of partition
+/// `of` (`None`: of any partition), other than `except`; `Err` when the keys cannot be read.
+/// Only the standby keys are read: the subjects of the bucket's stream under
+/// `fleet.standby.<partition>.`, not every key of the bucket (which holds every robot's
+/// instance).
+async fn live_standby(
+    store: kv::Store,
+    of: Option<&str>,
+    except: Option<&str>,
+) -> Result<Option<String>, String> {
+    use futures_util::TryStreamExt;
+    let filter = match of {
+        Some(p) => format!("{}fleet.standby.{}.>", store.prefix, kv_key_part_of(p)),
+        None => format!("{}fleet.standby.>", store.prefix),
+    };
+    let subjects: Vec<(String, usize)> = store
+        .stream
+        .info_with_subjects(filter)
+        .await
+        .map_err(|e| e.to_string())?
+        .try_collect()
+        .await
+        .map_err(|e| e.to_string())?;
+    let stale = i64::try_from((STANDBY_EVERY * 3).as_nanos()).unwrap_or(i64::MAX);
+    let now = now_ns();
+    for (subject, _) in subjects {
+        let Some(key) = subject.strip_prefix(store.prefix.as_str()) else {
+            continue;
+        };
+        if except == Some(key) {
+            continue;
+        }
+        let Some(v) = store.get(key).await.map_err(|e| e.to_string())? else {
+            continue;
+        };
+        let at = std::str::from_utf8(&v)
+            .ok()
+            .and_then(|t| t.trim().parse::<i64>().ok())
+            .unwrap_or(0);
+        if now.saturating_sub(at) < stale {
+            return Ok(Some(key.to_string()));
+        }
+    }
+    Ok(None)
 }
 
 /// Put the queued entries in order, one at a time.

@@ -5,11 +5,12 @@
 //!
 //! Owns: each partition's generation (its lease's; messages of an older generation are
 //! dropped, so a fenced-out holder counts nothing), its promise (no change it sends later is
-//! at or before it), whether it is live, ended or dropped out, and each robot's highest clock
-//! reported by any generation: a change at or before it is a repeat (a new holder replaying
-//! what its predecessor already sent) and is not counted twice. The bound is the minimum
-//! promise over live partitions; an ended or dropped-out partition does not hold the fleet
-//! back. Every partition ended is the end of the fleet's input only once a close comes (a
+//! at or before it), whether it is live, handing over (its holder ended while a standby of it
+//! was live: the standby's first entry comes), ended or dropped out, and each robot's highest
+//! clock reported by any generation: a change at or before it is a repeat (a new holder
+//! replaying what its predecessor already sent) and is not counted twice. The bound is the
+//! minimum promise over live and handing-over partitions; an ended or dropped-out partition
+//! does not hold the fleet back. Every partition ended is the end of the fleet's input only once a close comes (a
 //! restarted partition's replacement goes on). Status lines (`tessla_fleet_status`) name each partition's changes of state.
 
 use crate::processor::fleet_tap::{Change, Drained};
@@ -37,6 +38,12 @@ pub struct Msg {
     /// The partition's input ended (its holder stopped).
     #[serde(default)]
     pub end: bool,
+    /// With `end`: a standby of the partition was live when its holder ended, so the
+    /// partition is handed over and holds the fleet's bound at its promise until the
+    /// standby's first entry (a newer generation) or an end without `handed` (the fleet
+    /// level's holder's, once no standby of it is live).
+    #[serde(default)]
+    pub handed: bool,
     /// `true`: the fleet level's holder, stopping, found every partition ended and no
     /// partition lease held (no replacement coming): the fleet's input ended, step everything.
     #[serde(default)]
@@ -61,6 +68,7 @@ impl Msg {
             drop: false,
             promise,
             end,
+            handed: false,
             close: false,
             changes: Vec::new(),
             clocks: Vec::new(),
@@ -94,6 +102,10 @@ pub enum State {
     Live,
     Ended,
     Dropped,
+    /// Its holder ended while a standby of it was live: held at its promise until the
+    /// standby's first entry (`takeover`), or until it ends (no standby live any more) or
+    /// drops out.
+    Handing,
 }
 
 impl State {
@@ -102,7 +114,13 @@ impl State {
             State::Live => "live",
             State::Ended => "ended",
             State::Dropped => "dropped",
+            State::Handing => "handing over",
         }
+    }
+
+    /// Whether a partition in this state holds the fleet's watermark back.
+    fn holds(self) -> bool {
+        matches!(self, State::Live | State::Handing)
     }
 }
 
@@ -119,7 +137,7 @@ pub struct Status {
     pub partition: String,
     pub generation: u64,
     pub state: State,
-    /// What happened: `joined`, `takeover`, `ended`, `dropped`, `rejoined`.
+    /// What happened: `joined`, `takeover`, `handing over`, `ended`, `dropped`, `rejoined`.
     pub event: &'static str,
 }
 
@@ -166,7 +184,7 @@ impl Partitions {
         if m.drop {
             if let Some(p) = self.parts.get_mut(&m.p)
                 && p.generation == m.g
-                && p.state == State::Live
+                && p.state.holds()
             {
                 p.state = State::Dropped;
                 status.push(Status {
@@ -178,6 +196,9 @@ impl Partitions {
             }
             return (None, status);
         }
+        // An end carrying nothing else (the fleet level's holder's for a partition handing
+        // over, or a holder's last entry after a drop-out) brings no partition back.
+        let bare_end = m.end && m.changes.is_empty() && m.clocks.is_empty() && m.left.is_empty();
         let event = match &known {
             Some(p) if m.g < p.generation => {
                 self.counters.stale += 1;
@@ -185,10 +206,19 @@ impl Partitions {
             }
             None => Some("joined"),
             Some(p) if m.g > p.generation => Some("takeover"),
-            Some(p) if p.state != State::Live => Some("rejoined"),
+            Some(p) if p.state != State::Live && !bare_end => Some("rejoined"),
             Some(_) => None,
         };
-        let state = if m.end { State::Ended } else { State::Live };
+        let state = match (m.end, m.handed) {
+            (false, _) => State::Live,
+            (true, true) => State::Handing,
+            (true, false) => State::Ended,
+        };
+        // The state this generation had before (a repeated end says nothing again).
+        let before = known
+            .as_ref()
+            .filter(|p| p.generation == m.g)
+            .map(|p| p.state);
         let promise = known
             .as_ref()
             .filter(|p| p.generation == m.g)
@@ -209,12 +239,12 @@ impl Partitions {
                 event,
             });
         }
-        if m.end {
+        if state != State::Live && (event.is_some() || before != Some(state)) {
             status.push(Status {
                 partition: m.p.clone(),
                 generation: m.g,
-                state: State::Ended,
-                event: "ended",
+                state,
+                event: state.word(),
             });
         }
         let mut d = Drained::default();
@@ -241,21 +271,23 @@ impl Partitions {
         (Some(d), status)
     }
 
-    /// The bound on the fleet's watermark: the least promise of the live partitions.
+    /// The bound on the fleet's watermark: the least promise of the live partitions and of
+    /// those handing over.
     pub fn bound(&self) -> i64 {
         self.parts
             .values()
-            .filter(|p| p.state == State::Live)
+            .filter(|p| p.state.holds())
             .map(|p| p.promise)
             .min()
             .unwrap_or(i64::MAX)
     }
 
-    /// Every partition known has ended or dropped out (and there is one). Not yet the end of
-    /// the fleet's input: a partition's process that stops may be restarted (its replacement
-    /// takes the lease over and goes on), so the fleet waits for [`Self::closed`].
+    /// Every partition known has ended or dropped out (and there is one; one handing over
+    /// has not). Not yet the end of the fleet's input: a partition's process that stops may
+    /// be restarted (its replacement takes the lease over and goes on), so the fleet waits
+    /// for [`Self::closed`].
     pub fn all_done(&self) -> bool {
-        !self.parts.is_empty() && self.parts.values().all(|p| p.state != State::Live)
+        !self.parts.is_empty() && self.parts.values().all(|p| !p.state.holds())
     }
 
     /// The fleet's input ended: a close came while every partition had ended, and none is
@@ -323,6 +355,23 @@ impl Partitions {
             .filter(|(_, p)| p.state == State::Live)
             .map(|(n, p)| (n.as_str(), p.generation))
     }
+
+    /// The partitions holding the fleet back (live or handing over) and their generations:
+    /// the ones that drop out when silent.
+    pub fn holding_back(&self) -> impl Iterator<Item = (&str, u64)> {
+        self.parts
+            .iter()
+            .filter(|(_, p)| p.state.holds())
+            .map(|(n, p)| (n.as_str(), p.generation))
+    }
+
+    /// The partitions handing over and their generations.
+    pub fn handing(&self) -> impl Iterator<Item = (&str, u64)> {
+        self.parts
+            .iter()
+            .filter(|(_, p)| p.state == State::Handing)
+            .map(|(n, p)| (n.as_str(), p.generation))
+    }
 }
 
 /// The start of every fleet status line: `tessla_fleet_status` and its tags, sorted (the
@@ -365,6 +414,7 @@ mod tests {
             drop: false,
             promise,
             end: false,
+            handed: false,
             close: false,
             changes: changes
                 .iter()
@@ -467,6 +517,120 @@ mod tests {
         let (d, _) = ps.apply(msg("p0", 3, 0, &[(9, "r1")], &[("r1", 9)]));
         assert!(d.is_none());
         assert_eq!(ps.counters.stale, 1);
+    }
+
+    fn end(p: &str, g: u64, promise: i64, handed: bool) -> Msg {
+        Msg {
+            end: true,
+            handed,
+            ..msg(p, g, promise, &[], &[])
+        }
+    }
+
+    #[test]
+    fn a_handed_end_holds_the_bound_until_the_standby_takes_over() {
+        let mut ps = Partitions::default();
+        ps.apply(msg("p0", 1, 10, &[], &[]));
+        ps.apply(msg("p1", 1, 7, &[], &[]));
+        let (_, st) = ps.apply(end("p1", 1, 9, true));
+        assert_eq!(
+            st,
+            vec![Status {
+                partition: "p1".into(),
+                generation: 1,
+                state: State::Handing,
+                event: "handing over",
+            }]
+        );
+        // Held at its promise: p0's records do not step the fleet past it.
+        assert_eq!(ps.bound(), 9);
+        assert_eq!(ps.handing().collect::<Vec<_>>(), vec![("p1", 1)]);
+        assert_eq!(ps.holding_back().count(), 2);
+        assert_eq!(ps.live().collect::<Vec<_>>(), vec![("p0", 1)]);
+        // Every other partition ended: not done while one hands over.
+        ps.apply(end("p0", 1, 10, false));
+        assert!(!ps.all_done());
+        assert_eq!(ps.bound(), 9);
+        // The standby's first entry: live again, at its own promise.
+        let (d, st) = ps.apply(msg("p1", 2, 12, &[(11, "r1")], &[("r1", 11)]));
+        assert_eq!(
+            st.first().map(|s| (s.event, s.state)),
+            Some(("takeover", State::Live))
+        );
+        assert_eq!(st.len(), 1);
+        assert_eq!(d.map(|d| d.changes.len()), Some(1));
+        assert_eq!(ps.bound(), 12);
+        assert_eq!(ps.handing().count(), 0);
+    }
+
+    #[test]
+    fn the_holders_end_ends_a_partition_handing_over_and_a_stale_one_is_ignored() {
+        let mut ps = Partitions::default();
+        ps.apply(msg("p0", 1, 10, &[], &[]));
+        ps.apply(msg("p1", 1, 7, &[], &[]));
+        ps.apply(end("p1", 1, 9, true));
+        // No standby of p1 live any more: the fleet level's holder ends it.
+        let (d, st) = ps.apply(end("p1", 1, 0, false));
+        assert_eq!(
+            st.iter().map(|s| (s.event, s.state)).collect::<Vec<_>>(),
+            vec![("ended", State::Ended)],
+            "no `rejoined` for the holder's bare end"
+        );
+        assert!(d.is_some_and(|d| d.changes.is_empty() && d.clocks.is_empty()));
+        assert_eq!(ps.bound(), 10);
+        // Said once: the same end again changes nothing.
+        let (_, st) = ps.apply(end("p1", 1, 0, false));
+        assert!(st.is_empty(), "{st:?}");
+        ps.apply(end("p0", 1, 10, false));
+        assert!(ps.all_done());
+
+        // The takeover came before the holder's end (the standby marked its key stale after
+        // its first entry): the end, of the older generation, is stale.
+        let mut ps = Partitions::default();
+        ps.apply(msg("p0", 1, 10, &[], &[]));
+        ps.apply(end("p0", 1, 10, true));
+        ps.apply(msg("p0", 2, 11, &[], &[]));
+        let (d, st) = ps.apply(end("p0", 1, 0, false));
+        assert!(d.is_none() && st.is_empty());
+        assert_eq!(ps.counters.stale, 1);
+        assert_eq!(ps.live().collect::<Vec<_>>(), vec![("p0", 2)]);
+        assert_eq!(ps.bound(), 11);
+    }
+
+    #[test]
+    fn a_partition_handing_over_still_drops_out_when_silent() {
+        let mut ps = Partitions::default();
+        ps.apply(msg("p0", 1, 10, &[], &[]));
+        ps.apply(msg("p1", 1, 7, &[], &[]));
+        ps.apply(end("p1", 1, 9, true));
+        let (_, st) = ps.apply(Msg {
+            drop: true,
+            ..msg("p1", 1, 0, &[], &[])
+        });
+        assert_eq!(st.first().map(|s| s.event), Some("dropped"));
+        assert_eq!(ps.bound(), 10);
+        assert!(ps.dropped("p1"));
+    }
+
+    #[test]
+    fn a_table_of_an_earlier_version_loads_and_handing_over_goes_through_a_checkpoint() {
+        // `PartsState` as versions without `Handing` wrote it.
+        let old = r#"{"parts":[["p0",3,10,"Live"],["p1",4,7,"Ended"],["p2",5,8,"Dropped"]],"high":[["r1",6]],"closed":false,"counters":{"stale":1,"repeats":2}}"#;
+        let ps = Partitions::from_state(serde_json::from_str(old).unwrap());
+        assert_eq!(ps.bound(), 10);
+        assert_eq!(ps.counters.repeats, 2);
+        assert!(ps.dropped("p2"));
+        // An entry of an earlier version (no `handed`) reads as a plain end.
+        let m: Msg = serde_json::from_str(r#"{"p":"p0","g":3,"promise":11,"end":true}"#).unwrap();
+        assert!(m.end && !m.handed);
+
+        let mut ps = Partitions::default();
+        ps.apply(msg("p0", 1, 10, &[], &[]));
+        ps.apply(end("p1", 2, 7, true));
+        let json = serde_json::to_string(&ps.state()).unwrap();
+        let back = Partitions::from_state(serde_json::from_str(&json).unwrap());
+        assert_eq!(back.handing().collect::<Vec<_>>(), vec![("p1", 2)]);
+        assert_eq!(back.bound(), 7);
     }
 
     #[test]

@@ -380,9 +380,10 @@ fn fleet_entries_stay_bounded_and_a_later_process_starts_from_the_checkpoint() {
 }
 
 /// The holder of the fleet level stops (stdin closed: a clean stop) after every other
-/// partition has ended, while a standby of its own partition is live: it hands the fleet level
-/// over without closing the fleet's input (a close would step everything pending, and the
-/// standby's records after the takeover would come late). The standby takes both leases over
+/// partition has ended, while a standby of its own partition is live: its partition is handed
+/// over (the fleet level holds it until the standby's first entry) and it hands the fleet
+/// level over without closing the fleet's input (a close would step everything pending, and
+/// the standby's records after the takeover would come late). The standby takes both leases over
 /// and goes on; the fleet lines of both holders equal one process's over the same records.
 #[test]
 fn a_stopping_fleet_holder_with_a_live_standby_hands_over_without_a_close() {
@@ -414,11 +415,14 @@ fn a_stopping_fleet_holder_with_a_live_standby_hands_over_without_a_close() {
     a.wait_out("p1 ended", |l| {
         l.starts_with("tessla_fleet_status,partition=p1") && l.contains("event=\"ended\"")
     });
-    // Every other partition has ended; p0's standby is live: no close.
+    // Every other partition has ended; p0's standby is live: p0 is handed over, no close.
     let (a_out, a_err, code) = a.finish();
     assert_eq!(code, 0, "{a_err}");
     assert!(
-        a_err.contains("a standby is live") && !a_err.contains("the fleet's input ends"),
+        a_err.contains("a standby of partition p0 is live")
+            && a_err.contains("fleet: partition p0 (generation")
+            && a_err.contains(") handing over")
+            && !a_err.contains("the fleet's input ends"),
         "{a_err}"
     );
     a2.wait_err("p0 taken over", 0, |l| l.contains("holding partition p0"));

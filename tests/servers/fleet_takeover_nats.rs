@@ -4,10 +4,13 @@
 //! is fed records while it stands by and takes the lease over must send the fleet every change
 //! of the records it replays (its fleet entries, and the fleet's lines, equal one process's);
 //! and a fleet level whose holder was SIGKILLed while every other input ends at once is still
-//! closed by the last process stopping, so the last steps' lines are written.
+//! closed by the last process stopping, so the last steps' lines are written; and a partition
+//! handed over to its standby (its holder stopped with SIGTERM) holds the fleet back until the
+//! standby's first entry, while the other partition's records flow at once.
 
 use super::fleet_level_nats::{base, example_args, fleet_lines, one_process, records};
 use super::fleet_nats_specs::nats_server;
+use crate::support::fleet_partitions::{TwoPartitions, two_partitions, wait_any_err};
 use crate::support::live_child::LiveChild;
 
 /// The lease TTL of every process here (a takeover of a killed holder's lease takes this long).
@@ -234,4 +237,115 @@ fn a_killed_fleet_holder_is_replaced_by_the_last_partition_stopping_which_closes
         after.len()
     );
     assert_eq!(got, want, "the last partition:\n{b_err}");
+}
+
+/// The holder of p0 and of the fleet level is stopped with SIGTERM while p0's standby is live,
+/// and p1's next records (far past the silence) are written as soon as the fleet level has
+/// taken in p0's end, before the standby's first entry. p0 is handed over, not ended: the
+/// fleet holds it at its promise (`handing over`) until the standby's first entry
+/// (`takeover`), so p1's records do not step the fleet on without p0 and none of p0's next
+/// records is late: the first holder's fleet lines followed by the new holder's equal one
+/// process's, line for line. (Before, p0 counted as ended in that window: the fleet stepped
+/// on with p1's records, p0's robots left the maps, and their next changes came late.)
+#[test]
+fn a_partition_handed_over_holds_the_fleet_until_its_standby_takes_over() {
+    let server = nats_server("");
+    let state = format!("nats://127.0.0.1:{}/fleet_handing", server.port);
+    let base = base();
+    // p1's records after the stop go 4 s of event time past p0's last: twice the silence.
+    let (half, end) = (20, 40);
+    let (_, want) = one_process(&records(base, None, 0..end));
+    assert!(!want.is_empty());
+
+    let TwoPartitions {
+        p0: mut a,
+        standby,
+        p1: mut b,
+    } = two_partitions(&|lease| spawn(&state, lease), true);
+    let mut a2 = standby.expect("p0's standby");
+    a.write(&records(base, Some(0), 0..half));
+    a2.write(&records(base, Some(0), 0..half));
+    b.write(&records(base, Some(1), 0..half));
+    // Both partitions' first half is in the fleet's lines.
+    let near_pause = base + (half - 2) * 200_000_000;
+    a.wait_out("a fleet line near the pause", |l| {
+        l.starts_with("tessla_fleet ")
+            && l.rsplit(' ')
+                .next()
+                .and_then(|t| t.trim().parse::<i64>().ok())
+                .is_some_and(|t| t >= near_pause)
+    });
+    a.signal("TERM");
+    // p0's end is in the fleet level (p1's process follows it too): p1's records flow at once,
+    // while the stopping holder still holds p0's lease (it releases it after its fleet end,
+    // so the standby's first entry comes later).
+    let from = b.err.len();
+    let ended = b.wait_err("p0's end at the fleet level", from, |l| {
+        l.contains("fleet: partition p0 (generation")
+            && (l.contains(") handing over") || l.contains(") ended"))
+    });
+    b.write(&records(base, Some(1), half..end));
+    a2.write(&records(base, Some(0), half..end));
+    let (a_out, a_err, code) = a.finish();
+    assert_eq!(code, 0, "{a_err}");
+    let new = wait_any_err(&mut [&mut a2, &mut b], "lease.vfleet taken by");
+    a2.wait_err("p0 taken over", 0, |l| l.contains("holding partition p0"));
+    let (holder, other) = if new == 0 { (a2, b) } else { (b, a2) };
+    let (other_out, other_err, code) = other.finish();
+    assert_eq!(code, 0, "{other_err}");
+    assert!(fleet_lines(&other_out).is_empty(), "{other_out}");
+    let (holder_out, holder_err, code) = holder.finish();
+    assert_eq!(code, 0, "{holder_err}");
+    assert!(
+        holder_err.contains("the fleet's input ends"),
+        "{holder_err}"
+    );
+
+    // The window was hit: p1's process took in p1's last record's entry before p0's
+    // takeover (its log of the entries it follows, in the stream's order).
+    let b_err = if new == 0 { &other_err } else { &holder_err };
+    let last_p1 = base + (end - 1) * 200_000_000;
+    let p1_done = b_err.lines().position(|l| {
+        entry(l).is_some_and(|e| e.partition == "p1" && e.clocks.iter().any(|(_, t)| *t >= last_p1))
+    });
+    let p0_back = b_err
+        .lines()
+        .position(|l| l.contains("fleet: partition p0 (generation") && l.contains(") takeover"));
+    assert!(
+        p1_done.is_some() && p0_back.is_some() && p1_done < p0_back,
+        "p1's records reached the fleet level before p0's takeover ({p1_done:?}, {p0_back:?}):\n{b_err}"
+    );
+
+    let mut got = fleet_lines(&a_out);
+    let first = got.len();
+    got.extend(fleet_lines(&holder_out));
+    eprintln!(
+        "handed over while p1 went on: one process {} fleet lines; the first holder {first}, the new holder {}",
+        want.len(),
+        got.len() - first
+    );
+    assert_eq!(
+        got, want,
+        "first holder:\n{a_err}\nnew holder:\n{holder_out}\n{holder_err}"
+    );
+
+    // The status output names p0 handing over, then its standby's takeover.
+    let status: Vec<&str> = a_out
+        .lines()
+        .chain(holder_out.lines())
+        .filter(|l| l.starts_with("tessla_fleet_status,partition=p0"))
+        .collect();
+    let handing = status
+        .iter()
+        .position(|l| l.contains("state=\"handing over\",event=\"handing over\""));
+    let takeover = status.iter().position(|l| l.contains("event=\"takeover\""));
+    assert!(
+        handing.is_some() && handing < takeover,
+        "p0's end at the fleet level: {ended}\n{status:#?}"
+    );
+    assert!(
+        a_err.contains("a standby of partition p0 is live")
+            && a_err.contains("the partition is handed over"),
+        "{a_err}"
+    );
 }

@@ -48,9 +48,14 @@ pub fn two_partitions(spawn: &dyn Fn(&str) -> LiveChild, standby: bool) -> TwoPa
 
 /// Stop `holder` (p0's holder, holding the fleet level too) with `signal`, then wait until
 /// `successor` or `other` takes the fleet level over (`lease.vfleet taken by`) and `successor`
-/// (p0's standby, or p0's next process) holds p0, and the fleet level's new holder has p0's new
-/// generation. Returns the stopped process's stdout and
+/// (p0's standby, or p0's next process) holds p0. Returns the stopped process's stdout and
 /// stderr, and whether the fleet level's new holder is `successor`.
+///
+/// After SIGTERM with `successor` standing by, p0 is handed over: the fleet level holds it at
+/// its promise until `successor`'s first entry (docs/fleet.md, "Partitions that stop"), so
+/// records may flow at once. After SIGKILL p0 holds the fleet back only until it drops out
+/// (silent for twice the lease TTL), so this waits, as before, until the fleet level's new
+/// holder has p0's new generation (`takeover`).
 pub fn hand_over(
     holder: LiveChild,
     signal: &str,
@@ -61,17 +66,16 @@ pub fn hand_over(
     let (out, err, _) = holder.finish();
     let new = wait_any_err(&mut [&mut *successor, &mut *other], "lease.vfleet taken by");
     successor.wait_err("p0 taken over", 0, |l| l.contains("holding partition p0"));
-    // Until the fleet level's holder has p0's new generation, p0 counts as ended, and records
-    // of the other partition step the fleet on without it (p0's next records would then be
-    // late: docs/fleet.md, "What comes next"); one process has no such window.
-    let fleet_holder = if new == 0 {
-        &mut *successor
-    } else {
-        &mut *other
-    };
-    fleet_holder.wait_err("p0's new generation at the fleet level", 0, |l| {
-        l.contains("fleet: partition p0 (generation") && l.contains("takeover")
-    });
+    if signal == "KILL" {
+        let fleet_holder = if new == 0 {
+            &mut *successor
+        } else {
+            &mut *other
+        };
+        fleet_holder.wait_err("p0's new generation at the fleet level", 0, |l| {
+            l.contains("fleet: partition p0 (generation") && l.contains("takeover")
+        });
+    }
     (out, err, new == 0)
 }
 
