@@ -10,7 +10,9 @@
 
 use super::fleet_level_nats::{base, example_args, fleet_lines, one_process, records};
 use super::fleet_nats_specs::nats_server;
-use crate::support::fleet_partitions::{TwoPartitions, two_partitions, wait_any_err};
+use crate::support::fleet_partitions::{
+    TwoPartitions, two_partitions, wait_any_err, wait_fleet_line_from,
+};
 use crate::support::live_child::LiveChild;
 
 /// The lease TTL of every process here (a takeover of a killed holder's lease takes this long).
@@ -268,13 +270,7 @@ fn a_partition_handed_over_holds_the_fleet_until_its_standby_takes_over() {
     b.write(&records(base, Some(1), 0..half));
     // Both partitions' first half is in the fleet's lines.
     let near_pause = base + (half - 2) * 200_000_000;
-    a.wait_out("a fleet line near the pause", |l| {
-        l.starts_with("tessla_fleet ")
-            && l.rsplit(' ')
-                .next()
-                .and_then(|t| t.trim().parse::<i64>().ok())
-                .is_some_and(|t| t >= near_pause)
-    });
+    wait_fleet_line_from(&mut a, "a fleet line near the pause", near_pause);
     a.signal("TERM");
     // p0's end is in the fleet level (p1's process follows it too): p1's records flow at once,
     // while the stopping holder still holds p0's lease (it releases it after its fleet end,

@@ -290,30 +290,11 @@ fn the_straight_block_sends_what_the_general_step_sends() {
     let plan = flat.step_plan().expect("P2 has a plan");
     // Every node but the `filter` (its event depends on a value).
     assert_eq!(plan.straight_nodes(), flat.nodes.len() - 1);
-    for seed in 1..=20u64 {
-        let run = |program: &Arc<Program>| {
-            let mut rng = Rng(rand::SeedableRng::seed_from_u64(seed));
-            let mut m = Monitor::new(Arc::clone(program));
-            let mut out = Vec::new();
-            let mut sink =
-                |e: OutputEvent<'_>| out.push(format!("{} {} {:?}", e.ts, e.output, e.value));
-            for ts in 1..=400 {
-                // Both inputs in 7 of 8 steps; else one of them.
-                let which = rng.below(16);
-                for i in 0..2 {
-                    if which >= 2 || which == i {
-                        let v = rng.value(&Type::Float);
-                        m.push(ts, i as usize, v, &mut sink).unwrap();
-                    }
-                }
-                m.flush(&mut sink);
-            }
-            out
-        };
-        let want = run(&general);
-        assert!(want.len() > 2000, "too few events: {}", want.len());
-        assert_eq!(run(&flat), want, "seed {seed}");
-    }
+    // Both inputs in 7 of 8 steps; else one of them.
+    sends_alike(&flat, &general, 400, 2000, |rng, n| {
+        let which = rng.below(16);
+        (0..n as u64).map(|i| which >= 2 || which == i).collect()
+    });
 }
 
 /// Every operator the straight block fuses with its operands' shape (`runtime::flat::fused`):
@@ -363,6 +344,23 @@ fn every_fused_operator_sends_what_the_general_step_sends() {
     let plan = flat.step_plan().expect("FUSED has a plan");
     // Every node but `unitIf`'s `filter`.
     assert_eq!(plan.straight_nodes(), flat.nodes.len() - 1);
+    // Every input in 7 of 8 steps; else one is silent.
+    sends_alike(&flat, &general, 200, 10_000, |rng, n| {
+        let silent = rng.below(8 * n as u64);
+        (0..n as u64).map(|i| silent != i).collect()
+    });
+}
+
+/// `flat` and `general` send the same events on 20 seeded random traces of `steps` steps, with
+/// at least `min` events each. `draw(rng, n)` draws, once per step, which of the `n` inputs have
+/// an event in it (each of those gets a random value of its type).
+fn sends_alike(
+    flat: &Arc<Program>,
+    general: &Arc<Program>,
+    steps: i64,
+    min: usize,
+    draw: impl Fn(&mut Rng, usize) -> Vec<bool>,
+) {
     for seed in 1..=20u64 {
         let run = |program: &Arc<Program>| {
             let mut rng = Rng(rand::SeedableRng::seed_from_u64(seed));
@@ -370,11 +368,10 @@ fn every_fused_operator_sends_what_the_general_step_sends() {
             let mut out = Vec::new();
             let mut sink =
                 |e: OutputEvent<'_>| out.push(format!("{} {} {:?}", e.ts, e.output, e.value));
-            for ts in 1..=200 {
-                // Every input in 7 of 8 steps; else one is silent.
-                let silent = rng.below(8 * 6);
+            for ts in 1..=steps {
+                let present = draw(&mut rng, program.inputs.len());
                 for (i, input) in program.inputs.iter().enumerate() {
-                    if silent != i as u64 {
+                    if present[i] {
                         let v = rng.value(&input.ty);
                         m.push(ts, i, v, &mut sink).unwrap();
                     }
@@ -383,9 +380,9 @@ fn every_fused_operator_sends_what_the_general_step_sends() {
             }
             out
         };
-        let want = run(&general);
-        assert!(want.len() > 10_000, "too few events: {}", want.len());
-        assert_eq!(run(&flat), want, "seed {seed}");
+        let want = run(general);
+        assert!(want.len() > min, "too few events: {}", want.len());
+        assert_eq!(run(flat), want, "seed {seed}");
     }
 }
 
