@@ -57,6 +57,10 @@ const STANDBY_EVERY: Duration = Duration::from_secs(1);
 /// The holder of the fleet lease looks for the standbys of the partitions handing over at
 /// most this often (only while one is).
 const HANDING_LOOK_EVERY: Duration = Duration::from_millis(200);
+/// A partition handing over whose standby still renews its key but has not taken it over
+/// this long past the drop time (counted from the holder's first look) drops out, as a silent
+/// one does: a takeover needs the old holder's stop (at most 2 s) and one lease poll.
+const HANDING_AT_MOST_PAST_DROP: Duration = Duration::from_secs(10);
 /// How long a process stopping waits to take a fleet lease it found released.
 const TAKE_FREE_WAIT: Duration = Duration::from_secs(2);
 /// A process stopping without the fleet lease, which hears no other live partition for this
@@ -137,6 +141,8 @@ pub struct FleetNats {
     look: (Instant, Option<tokio::sync::oneshot::Receiver<Looked>>),
     /// The ends this process put for partitions handing over whose standbys were gone.
     ends_sent: HashSet<(String, u64)>,
+    /// As the fleet level's holder: when it first found each partition handing over.
+    handing_since: HashMap<(String, u64), Instant>,
 }
 
 /// A switch entry: the fleet level runs fleet rollout `fleet_switch`'s version from here on.
@@ -260,6 +266,7 @@ impl FleetNats {
             standby_at: None,
             look: (Instant::now() - HANDING_LOOK_EVERY, None),
             ends_sent: HashSet::new(),
+            handing_since: HashMap::new(),
         })
     }
 
@@ -621,7 +628,9 @@ impl FleetNats {
     /// its key deleted; or stale): put an end for the partition at that generation in the
     /// stream, so every process ends it at the same point (after the standby's first entry,
     /// where it is stale, if the standby took over: it marks its key stale only after that
-    /// entry). The keys not readable: the drop-out rule (silent past the drop time).
+    /// entry). The keys not readable: the drop-out rule (silent past the drop time). A standby
+    /// live but not taking over for the drop time and [`HANDING_AT_MOST_PAST_DROP`]: the
+    /// partition drops out.
     fn end_handed(&mut self) {
         if let Some(rx) = &mut self.look.1 {
             match rx.try_recv() {
@@ -669,7 +678,20 @@ impl FleetNats {
         if !self.table.handing().any(|h| h == (p.as_str(), g)) {
             return;
         }
+        let since = *self
+            .handing_since
+            .entry((p.clone(), g))
+            .or_insert_with(Instant::now);
         match live {
+            Ok(Some(key)) if since.elapsed() > self.drop_after + HANDING_AT_MOST_PAST_DROP => {
+                if !self.drops_sent.contains(&(p.clone(), g)) {
+                    log_warn!(
+                        "fleet: partition {p} (generation {g}) was handed over {} ago and its standby ({key}) has not taken it over; it drops out of the fleet level",
+                        humantime::format_duration(Duration::from_secs(since.elapsed().as_secs()))
+                    );
+                    self.put_drop(p, g);
+                }
+            }
             Ok(Some(_)) => {
                 self.heard.insert(p, Instant::now());
             }

@@ -6,13 +6,15 @@
 //! and a fleet level whose holder was SIGKILLed while every other input ends at once is still
 //! closed by the last process stopping, so the last steps' lines are written; and a partition
 //! handed over to its standby (its holder stopped with SIGTERM) holds the fleet back until the
-//! standby's first entry, while the other partition's records flow at once.
+//! standby's first entry, while the other partition's records flow at once, but drops out
+//! when its standby keeps its key live and never takes it over.
 
 use super::fleet_level_nats::{base, example_args, fleet_lines, one_process, records};
 use super::fleet_nats_specs::nats_server;
 use crate::support::fleet_partitions::{
     TwoPartitions, two_partitions, wait_any_err, wait_fleet_line_from,
 };
+use crate::support::kv;
 use crate::support::live_child::LiveChild;
 
 /// The lease TTL of every process here (a takeover of a killed holder's lease takes this long).
@@ -344,4 +346,103 @@ fn a_partition_handed_over_holds_the_fleet_until_its_standby_takes_over() {
             && a_err.contains("the partition is handed over"),
         "{a_err}"
     );
+}
+
+/// A partition handed over whose standby key is renewed but which nobody takes over (here the
+/// test renews a standby key of p0 with no process behind it) holds the fleet back only until
+/// the drop time and 10 s more have passed since the fleet level's holder found it handing
+/// over: then it drops out (`dropped`), and p1's records step the fleet on. Once the key is
+/// gone, p1's process, stopping, closes the fleet's input.
+#[test]
+fn a_hand_over_nobody_takes_drops_out() {
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+    let server = nats_server("");
+    let bucket = "fleet_no_taker";
+    let state = format!("nats://127.0.0.1:{}/{bucket}", server.port);
+    let base = base();
+    // p1's records after the stop go 4 s of event time past p0's last: twice the silence, so
+    // p0's robots, silent, do not hold the fleet back once p0 dropped out.
+    let (half, end) = (10, 30);
+    let TwoPartitions {
+        p0: mut a,
+        p1: mut b,
+        ..
+    } = two_partitions(&|lease| spawn(&state, lease), false);
+    a.write(&records(base, Some(0), 0..half));
+    b.write(&records(base, Some(1), 0..half));
+    wait_fleet_line_from(
+        &mut a,
+        "a fleet line near the pause",
+        base + (half - 2) * 200_000_000,
+    );
+
+    // A standby key of p0, renewed every 500 ms until `stop`, then deleted.
+    let stop = Arc::new(AtomicBool::new(false));
+    let addr = format!("127.0.0.1:{}", server.port);
+    let renewer = {
+        let stop = Arc::clone(&stop);
+        std::thread::spawn(move || {
+            kv::with_bucket(&addr, bucket, async |kv| {
+                let key = "fleet.standby.vp0.pid999999";
+                while !stop.load(Ordering::SeqCst) {
+                    let now = SystemTime::now()
+                        .duration_since(UNIX_EPOCH)
+                        .unwrap()
+                        .as_nanos();
+                    kv.put(key, now.to_string().into()).await.unwrap();
+                    tokio::time::sleep(Duration::from_millis(500)).await;
+                }
+                kv.delete(key).await.unwrap();
+            })
+        })
+    };
+    // The key is there before p0's holder ends.
+    let start = Instant::now();
+    while !kv::with_bucket(&format!("127.0.0.1:{}", server.port), bucket, async |kv| {
+        kv::keys(&kv)
+            .await
+            .iter()
+            .any(|k| k == "fleet.standby.vp0.pid999999")
+    }) {
+        assert!(start.elapsed() < Duration::from_secs(30), "no standby key");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+
+    a.signal("TERM");
+    let (_, a_err, code) = a.finish();
+    assert_eq!(code, 0, "{a_err}");
+    assert!(a_err.contains("the partition is handed over"), "{a_err}");
+    let stopped = Instant::now();
+    b.write(&records(base, Some(1), half..end));
+    let dropped = b.wait_err("p0 dropped out", 0, |l| {
+        l.contains("fleet: partition p0 (generation") && l.contains("has not taken it over")
+    });
+    // The drop time (twice the 2 s TTL) and 10 s, counted from p1's process's first look.
+    assert!(
+        stopped.elapsed() >= Duration::from_secs(14),
+        "dropped after {:?}: {dropped}",
+        stopped.elapsed()
+    );
+    // p1's records step the fleet on: a fleet line past p0's last record.
+    wait_fleet_line_from(
+        &mut b,
+        "a fleet line of p1's records after the drop-out",
+        base + (half + 2) * 200_000_000,
+    );
+    stop.store(true, Ordering::SeqCst);
+    renewer.join().unwrap();
+    b.close_stdin();
+    let (b_out, b_err, code) = b.finish();
+    assert_eq!(code, 0, "{b_err}");
+    assert!(
+        b_out
+            .lines()
+            .any(|l| l.starts_with("tessla_fleet_status,partition=p0")
+                && l.contains("event=\"dropped\"")),
+        "{b_out}"
+    );
+    assert!(b_err.contains("the fleet's input ends"), "{b_err}");
 }
